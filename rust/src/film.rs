@@ -1,0 +1,110 @@
+//! The film: named AOV buffers (color, depth, normal, ...), filled by the render and handed to an
+//! [`crate::image_io::ImageIo`] or to Python as arrays. Non-finite samples never reach it: they
+//! are counted and dropped.
+
+use crate::image_io::{ChannelFormat, ImageBuf};
+
+/// Every AOV the renderer can produce, with its channel count.
+pub const AOVS: &[(&str, usize)] = &[
+    ("color", 3),
+    ("alpha", 1),
+    ("depth", 1),
+    ("normal", 3),
+    ("primId", 1),
+    ("instanceId", 1),
+    ("beamWidth", 1),
+    ("tessRate", 1),
+];
+
+/// The AOV names, for messages.
+pub const AOV_NAMES: &[&str] = &["color", "alpha", "depth", "normal", "primId", "instanceId", "beamWidth", "tessRate"];
+
+/// Channel count of a named AOV, or `None` if the renderer does not know it.
+pub fn aov_channels(name: &str) -> Option<usize> {
+    AOVS.iter().find(|(n, _)| *n == name).map(|(_, c)| *c)
+}
+
+/// Channel names in a file: color → R, G, B; alpha → A; depth → Z; normal → N.x, N.y, N.z;
+/// any other single-channel AOV keeps its name.
+pub fn file_channel_names(aov: &str, channels: usize) -> Vec<String> {
+    match aov {
+        "color" => vec!["R".into(), "G".into(), "B".into()],
+        "alpha" => vec!["A".into()],
+        "depth" => vec!["Z".into()],
+        _ if channels == 1 => vec![aov.to_string()],
+        _ => ["x", "y", "z", "w"].iter().take(channels).map(|c| format!("{aov}.{c}")).collect(),
+    }
+}
+
+/// The natural storage format of an AOV in a file: half for colour-like data, float where
+/// precision matters (depth, positions, ids).
+pub fn default_format(aov: &str) -> ChannelFormat {
+    match aov {
+        "color" | "alpha" | "normal" => ChannelFormat::Half,
+        _ => ChannelFormat::Float,
+    }
+}
+
+/// One AOV: `height × width × channels` f32, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AovBuffer {
+    pub name: String,
+    pub channels: usize,
+    pub data: Vec<f32>,
+}
+
+/// A set of AOV buffers of one resolution.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Film {
+    pub width: usize,
+    pub height: usize,
+    pub aovs: Vec<AovBuffer>,
+}
+
+impl Film {
+    /// A film with zeroed buffers for the named AOVs (unknown names are skipped; validate first).
+    pub fn new(width: usize, height: usize, names: &[String]) -> Self {
+        let aovs = names
+            .iter()
+            .filter_map(|n| aov_channels(n).map(|c| AovBuffer { name: n.clone(), channels: c, data: vec![0.0; width * height * c] }))
+            .collect();
+        Film { width, height, aovs }
+    }
+
+    pub fn aov(&self, name: &str) -> Option<&AovBuffer> {
+        self.aovs.iter().find(|a| a.name == name)
+    }
+
+    pub fn aov_mut(&mut self, name: &str) -> Option<&mut AovBuffer> {
+        self.aovs.iter_mut().find(|a| a.name == name)
+    }
+
+    /// The channels of AOV `name` at pixel (x, y).
+    ///
+    /// # Panics
+    /// If the AOV is not on the film or (x, y) is outside it.
+    pub fn pixel(&self, name: &str, x: usize, y: usize) -> &[f32] {
+        let a = self.aov(name).unwrap_or_else(|| panic!("AOV {name} is not on the film"));
+        let i = (y * self.width + x) * a.channels;
+        &a.data[i..i + a.channels]
+    }
+
+    /// The AOVs `names` interleaved into one image with file channel names.
+    pub fn to_image(&self, names: &[String]) -> ImageBuf {
+        let sel: Vec<&AovBuffer> = names.iter().filter_map(|n| self.aov(n)).collect();
+        let nc: usize = sel.iter().map(|a| a.channels).sum();
+        let mut pixels = Vec::with_capacity(self.width * self.height * nc);
+        for p in 0..self.width * self.height {
+            for a in &sel {
+                pixels.extend_from_slice(&a.data[p * a.channels..(p + 1) * a.channels]);
+            }
+        }
+        ImageBuf {
+            width: self.width,
+            height: self.height,
+            channels: sel.iter().flat_map(|a| file_channel_names(&a.name, a.channels)).collect(),
+            pixels,
+            metadata: Vec::new(),
+        }
+    }
+}

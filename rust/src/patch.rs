@@ -1,0 +1,153 @@
+//! Patches of a limit surface: the trait through which the core evaluates subdivision surfaces
+//! without depending on OpenSubdiv.
+//!
+//! The bridge (`mipray-bridge`) implements [`LimitSurface`] with OpenSubdiv's `Far::PatchTable`;
+//! the core implements it for polygonal meshes ([`crate::bilinear::BilinearSurface`]) so that it
+//! builds and tests with no C++. Every patch is one root subpatch (the paper's §5.1).
+//!
+//! Coordinate conventions: positions and derivatives are in the mesh's **object space**; (u, v)
+//! are the patch's own parameters in [0, 1]², and derivatives are taken with respect to them.
+//! [`PatchParam`] maps them into the face's parameterization for texture lookups.
+
+use glam::Vec3A;
+
+use crate::bounds::Bounds3;
+
+/// The basis a patch is evaluated with (OpenSubdiv's `PatchDescriptor::Type`, plus the core's own).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PatchKind {
+    /// 4 control points, bilinear: polygonal meshes and the bilinear scheme.
+    Bilinear,
+    /// 16 control points, bicubic B-spline: regular Catmull-Clark patches.
+    Regular,
+    /// 20 control points: Gregory basis end caps around extraordinary vertices.
+    GregoryBasis,
+    /// 12 control points, quartic box spline: regular Loop patches (triangular domain).
+    LoopRegular,
+    /// 18 control points: triangular Gregory end caps (Loop).
+    GregoryTriangle,
+    /// Any other basis OpenSubdiv reports.
+    Other,
+}
+
+impl PatchKind {
+    /// True for patches whose domain is the triangle u + v ≤ 1 rather than the unit square.
+    pub const fn is_triangle(self) -> bool {
+        matches!(self, PatchKind::LoopRegular | PatchKind::GregoryTriangle)
+    }
+}
+
+/// Where a patch lies on the control mesh (OpenSubdiv's `Far::PatchParam`, decoded).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PatchParam {
+    /// The control (base) face the patch lies on.
+    pub base_face: u32,
+    /// The face in OpenSubdiv's ptex numbering (`Far::PtexIndices`): equal to `base_face` for a
+    /// mesh of quads; a non-quad face of n sides owns n consecutive sub-face ids.
+    pub ptex_face: u32,
+    /// The patch's domain within the (ptex) face's [0, 1]²: origin (u0, v0) and edge length `size`.
+    pub u0: f32,
+    pub v0: f32,
+    pub size: f32,
+    /// Adaptive refinement level at which the patch was generated.
+    pub depth: u8,
+    /// Bit i set: edge i of the patch is on the mesh boundary (OpenSubdiv's boundary mask).
+    pub boundary_mask: u8,
+    /// Bit i set: edge i borders a patch one level coarser (OpenSubdiv's transition mask).
+    pub transition_mask: u8,
+    pub kind: PatchKind,
+}
+
+impl PatchParam {
+    /// Maps the patch's own (u, v) to the ptex face's (u, v).
+    pub fn to_face_uv(&self, u: f32, v: f32) -> (f32, f32) {
+        (self.u0 + u * self.size, self.v0 + v * self.size)
+    }
+}
+
+/// The limit surface and its derivatives at one (u, v) of one patch. Object space.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SurfacePoint {
+    pub p: Vec3A,
+    pub dpdu: Vec3A,
+    pub dpdv: Vec3A,
+    pub dpduu: Vec3A,
+    pub dpduv: Vec3A,
+    pub dpdvv: Vec3A,
+}
+
+/// A rectangle of a patch's own (u, v) domain: the domain of a subpatch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UvRect {
+    pub u0: f32,
+    pub v0: f32,
+    pub u1: f32,
+    pub v1: f32,
+}
+
+impl UvRect {
+    /// The whole patch, [0, 1]².
+    pub const UNIT: UvRect = UvRect { u0: 0.0, v0: 0.0, u1: 1.0, v1: 1.0 };
+
+    /// (u, v) at grid vertex (i, j) of an n×n vertex grid over the rectangle; i runs along u.
+    #[inline]
+    pub fn grid_uv(&self, i: usize, j: usize, n: usize) -> (f32, f32) {
+        let d = (n.max(2) - 1) as f32;
+        (
+            self.u0 + (self.u1 - self.u0) * (i as f32 / d),
+            self.v0 + (self.v1 - self.v0) * (j as f32 / d),
+        )
+    }
+}
+
+/// Positions (and optionally first derivatives) on an n×n vertex grid, row-major with u fastest:
+/// index `j * n + i`.
+#[derive(Clone, Debug, Default)]
+pub struct GridSamples {
+    pub n: usize,
+    pub p: Vec<[f32; 3]>,
+    /// Empty unless derivatives were asked for.
+    pub dpdu: Vec<[f32; 3]>,
+    pub dpdv: Vec<[f32; 3]>,
+}
+
+/// A set of patches whose union is a mesh's limit surface. Implementations must be cheap to
+/// share between render threads (`Send + Sync`) and must never panic on valid indices.
+pub trait LimitSurface: Send + Sync {
+    /// Number of patches (root subpatches).
+    fn patch_count(&self) -> usize;
+
+    /// The patch's parameterization on the control mesh.
+    fn patch_param(&self, patch: usize) -> PatchParam;
+
+    /// Conservative object-space bounds of the patch's limit surface: the hull of its control
+    /// points (every basis used here is a convex combination of its control points).
+    fn patch_bounds(&self, patch: usize) -> Bounds3;
+
+    /// The limit surface and its first and second derivatives at the patch's own (u, v).
+    fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint;
+
+    /// Evaluates an n×n vertex grid over `rect` of one patch in one call (the bridge crosses into
+    /// C++ once per grid, not once per vertex). Fills `out.p`, and `out.dpdu`/`out.dpdv` when
+    /// `derivatives` is true.
+    fn evaluate_grid(&self, patch: usize, rect: UvRect, n: usize, derivatives: bool, out: &mut GridSamples) {
+        out.n = n;
+        out.p.clear();
+        out.dpdu.clear();
+        out.dpdv.clear();
+        for j in 0..n {
+            for i in 0..n {
+                let (u, v) = rect.grid_uv(i, j, n);
+                let s = self.evaluate(patch, u, v);
+                out.p.push(s.p.into());
+                if derivatives {
+                    out.dpdu.push(s.dpdu.into());
+                    out.dpdv.push(s.dpdv.into());
+                }
+            }
+        }
+    }
+
+    /// Number of control (base) faces of the mesh.
+    fn control_face_count(&self) -> usize;
+}

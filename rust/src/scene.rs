@@ -1,0 +1,98 @@
+//! The scene the core renders: meshes (prototypes with their limit surfaces), instances of them
+//! with transforms, a camera, lights and materials. The render delegate (`hd-mipray`) owns the
+//! Hydra-shaped prims and builds this flat description for a render.
+
+use std::sync::Arc;
+
+use glam::Mat4;
+
+use crate::camera::Camera;
+use crate::light::Light;
+use crate::material::Material;
+use crate::patch::LimitSurface;
+
+/// One mesh prototype: its patches (object space) and what shading needs. Instances share it,
+/// its subpatches and its geometry cache entries.
+#[derive(Clone)]
+pub struct Mesh {
+    /// Prim path, for messages and stats.
+    pub name: String,
+    pub surface: Arc<dyn LimitSurface>,
+    /// Index into [`Scene::materials`]; out of range means the default material.
+    pub material: usize,
+    /// How far displacement may move the surface along its normal, object units. Subpatch
+    /// bounds grow by this much.
+    pub displacement_bound: f32,
+    /// Bumped when the mesh's points change, so old cache entries can never be hit again.
+    pub generation: u32,
+    /// USD `orientation = "leftHanded"`: the front face winds clockwise, so geometric and
+    /// shading normals are negated. Patch sources evaluate the surface as given.
+    pub left_handed: bool,
+}
+
+impl std::fmt::Debug for Mesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Mesh")
+            .field("name", &self.name)
+            .field("patches", &self.surface.patch_count())
+            .field("material", &self.material)
+            .finish()
+    }
+}
+
+impl Mesh {
+    pub fn new(name: impl Into<String>, surface: Arc<dyn LimitSurface>) -> Self {
+        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false }
+    }
+}
+
+/// A placement of a mesh in the scene.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// Index into [`Scene::meshes`].
+    pub mesh: usize,
+    /// Object-to-render (world) transform, column-vector convention.
+    pub render_from_object: Mat4,
+    /// The id the `instanceId` AOV reports.
+    pub id: u32,
+}
+
+/// Everything one render needs. Render space is USD's world space.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    pub meshes: Vec<Mesh>,
+    pub instances: Vec<Instance>,
+    pub camera: Camera,
+    pub lights: Vec<Light>,
+    pub materials: Vec<Material>,
+}
+
+impl Scene {
+    /// Adds a mesh prototype and returns its index.
+    pub fn add_mesh(&mut self, mesh: Mesh) -> usize {
+        self.meshes.push(mesh);
+        self.meshes.len() - 1
+    }
+
+    /// Places mesh `mesh` with transform `render_from_object`; returns the instance index.
+    pub fn add_instance(&mut self, mesh: usize, render_from_object: Mat4) -> usize {
+        let id = self.instances.len() as u32;
+        self.instances.push(Instance { mesh, render_from_object, id });
+        self.instances.len() - 1
+    }
+
+    /// Adds a material and returns its index.
+    pub fn add_material(&mut self, material: Material) -> usize {
+        self.materials.push(material);
+        self.materials.len() - 1
+    }
+
+    /// The material of a mesh (the default material when unbound).
+    pub fn material_of(&self, mesh: usize) -> &Material {
+        static DEFAULT: std::sync::OnceLock<Material> = std::sync::OnceLock::new();
+        self.meshes
+            .get(mesh)
+            .and_then(|m| self.materials.get(m.material))
+            .unwrap_or_else(|| DEFAULT.get_or_init(Material::default))
+    }
+}

@@ -1,0 +1,62 @@
+//! Render statistics, as the paper reports them, under the stable names of DESIGN.md
+//! ("Statistics and stats JSON"): nested JSON objects whose dotted paths are the names.
+
+use serde_json::{json, Value};
+
+use crate::effects::Effect;
+use crate::ray::RayKind;
+use crate::tessellate::Rate;
+use crate::trace::{TraceCounters, Tracer};
+
+/// Peak resident set size of this process in bytes (Linux `VmHWM`), or 0 where unknown.
+pub fn peak_rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1).and_then(|kb| kb.parse::<u64>().ok()))
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// What the render measured beyond the tracer's own counters.
+pub struct RenderFigures {
+    pub wall_s: f64,
+    pub threads: usize,
+    pub dropped_samples: u64,
+    pub width: usize,
+    pub height: usize,
+    pub samples: u32,
+}
+
+/// Builds the stats JSON of one render.
+pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect], figures: &RenderFigures, control_faces: usize, instances: usize) -> Value {
+    let rays: serde_json::Map<String, Value> = RayKind::ALL.iter().enumerate().map(|(i, k)| (k.name().to_string(), json!(counters.rays[i]))).collect();
+    let rates: serde_json::Map<String, Value> = Rate::ALL.iter().map(|r| (r.quads().to_string(), json!(counters.rate_tests[*r as usize]))).collect();
+    let subpatches = tracer.subpatch_count() as u64;
+    let full_verts = subpatches * 17 * 17;
+    json!({
+        "render": {
+            "wall_s": figures.wall_s,
+            "threads": figures.threads,
+            "resolution": [figures.width, figures.height],
+            "samples": figures.samples,
+            "rays": rays,
+            "ray_subpatch_tests": counters.ray_subpatch_tests,
+            "rate_tests": rates,
+            "finer_than_fine_tests": counters.finer_than_fine,
+            "dropped_samples": figures.dropped_samples,
+        },
+        "geometry_cache": serde_json::to_value(tracer.cache.stats()).unwrap_or(Value::Null),
+        "scene": {
+            "control_faces": control_faces,
+            "subpatches": subpatches,
+            "instances": instances,
+            "full_tessellation_vertices": full_verts,
+            "full_tessellation_bytes": full_verts * 12,
+        },
+        "memory": { "peak_rss_bytes": peak_rss_bytes() },
+        "effects": { "enabled": effects },
+    })
+}

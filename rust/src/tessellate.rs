@@ -1,0 +1,164 @@
+//! Tessellation of a subpatch at one of the cache's tier rates (the paper's §5.2), and the choice
+//! of rate from a ray's beam width.
+//!
+//! Three rates are stored — coarse 2×2 vertices (1 quad), medium 5×5 (4×4 quads), fine 17×17
+//! (16×16 quads, with 4×4 sub-bounding boxes) — and two more are used by merging 2×2 quads of the
+//! next finer tier: 2×2 quads from the medium grid, 8×8 from the fine one. Five effective rates
+//! from three stored, as the paper says.
+
+use glam::Vec3A;
+
+use crate::bounds::Bounds3;
+use crate::geometry_cache::{CacheEntry, Tier};
+use crate::patch::{GridSamples, LimitSurface};
+use crate::subpatch::Subpatch;
+
+/// An effective tessellation rate: quads per side of a subpatch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Rate {
+    R1,
+    R2,
+    R4,
+    R8,
+    R16,
+}
+
+impl Rate {
+    pub const ALL: [Rate; 5] = [Rate::R1, Rate::R2, Rate::R4, Rate::R8, Rate::R16];
+
+    /// Quads per side.
+    pub const fn quads(self) -> usize {
+        match self {
+            Rate::R1 => 1,
+            Rate::R2 => 2,
+            Rate::R4 => 4,
+            Rate::R8 => 8,
+            Rate::R16 => 16,
+        }
+    }
+
+    /// The stored tier this rate reads, and the vertex stride within it (2 = merged quads).
+    pub const fn tier_and_stride(self) -> (Tier, usize) {
+        match self {
+            Rate::R1 => (Tier::Coarse, 1),
+            Rate::R2 => (Tier::Medium, 2),
+            Rate::R4 => (Tier::Medium, 1),
+            Rate::R8 => (Tier::Fine, 2),
+            Rate::R16 => (Tier::Fine, 1),
+        }
+    }
+
+    /// The rate whose quads are about as wide as the beam: `size_world` is the subpatch's size
+    /// (world units), `beam_width` the ray's beam width where it reaches the subpatch (world
+    /// units), `tess_factor` scales the quad size (larger is coarser). Returns the finest rate
+    /// needed, rounding up; `None` means even 16×16 quads are too coarse (the subpatch should
+    /// be split). A non-finite or zero width asks for the finest rate.
+    pub fn for_beam(size_world: f32, beam_width: f32, tess_factor: f32) -> Option<Rate> {
+        let quad = beam_width * tess_factor;
+        if !(quad.is_finite() && quad > 0.0 && size_world.is_finite()) {
+            return Some(Rate::R16);
+        }
+        let needed = size_world / quad;
+        Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed)
+    }
+}
+
+/// One cache entry: a subpatch's limit surface on a tier's vertex grid, object space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tessellation {
+    /// Vertices per side.
+    pub n: usize,
+    /// `n × n` vertices, u fastest (index `j * n + i`): 12 bytes each, as in the paper.
+    pub verts: Vec<[f32; 3]>,
+    /// Fine tier only: 4×4 boxes, each over 4×4 quads (row-major, u fastest).
+    pub sub_boxes: Vec<Bounds3>,
+}
+
+impl CacheEntry for Tessellation {
+    fn byte_size(&self) -> usize {
+        self.verts.len() * std::mem::size_of::<[f32; 3]>() + self.sub_boxes.len() * std::mem::size_of::<Bounds3>()
+    }
+
+    fn vertex_count(&self) -> usize {
+        self.verts.len()
+    }
+}
+
+impl Tessellation {
+    /// Vertex (i, j) as a vector.
+    #[inline]
+    pub fn vert(&self, i: usize, j: usize) -> Vec3A {
+        Vec3A::from(self.verts[j * self.n + i])
+    }
+}
+
+/// Tessellates `sub` of `surface` on `tier`'s grid: one grid evaluation, then (for the fine tier)
+/// the 4×4 sub-boxes. `scratch` is reused between calls to avoid allocation.
+pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, scratch: &mut GridSamples) -> Tessellation {
+    let n = tier.verts_per_side() as usize;
+    surface.evaluate_grid(sub.patch as usize, sub.rect, n, false, scratch);
+    let verts = std::mem::take(&mut scratch.p);
+    let mut t = Tessellation { n, verts, sub_boxes: Vec::new() };
+    if tier == Tier::Fine {
+        t.sub_boxes = (0..16)
+            .map(|b| {
+                let (bi, bj) = (b % 4 * 4, b / 4 * 4);
+                let mut bb = Bounds3::EMPTY;
+                for j in bj..=bj + 4 {
+                    for i in bi..=bi + 4 {
+                        bb.grow(t.vert(i, j));
+                    }
+                }
+                bb
+            })
+            .collect();
+    }
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bilinear::BilinearSurface;
+    use crate::patch::UvRect;
+    use crate::topology::{MeshTopology, Scheme};
+
+    #[test]
+    fn rate_boundaries_round_up() {
+        // A 1-unit subpatch hit by a beam 1/4 unit wide wants 4 quads; just wider wants 4, just
+        // narrower wants 8; tessFactor 2 halves the need.
+        assert_eq!(Rate::for_beam(1.0, 0.25, 1.0), Some(Rate::R4));
+        assert_eq!(Rate::for_beam(1.0, 0.2501, 1.0), Some(Rate::R4));
+        assert_eq!(Rate::for_beam(1.0, 0.2499, 1.0), Some(Rate::R8));
+        assert_eq!(Rate::for_beam(1.0, 0.2499, 2.0), Some(Rate::R2));
+        assert_eq!(Rate::for_beam(1.0, 2.0, 1.0), Some(Rate::R1));
+        assert_eq!(Rate::for_beam(1.0, 1.0 / 16.0, 1.0), Some(Rate::R16));
+        assert_eq!(Rate::for_beam(1.0, 0.9 / 16.0, 1.0), None);
+        assert_eq!(Rate::for_beam(1.0, f32::NAN, 1.0), Some(Rate::R16));
+        assert_eq!(Rate::for_beam(1.0, 0.0, 1.0), Some(Rate::R16));
+    }
+
+    #[test]
+    fn merged_rate_vertices_equal_the_coarser_grid() {
+        // Every other vertex of the fine grid is the 9×9 grid of the same surface: the merged
+        // 8×8 rate is exactly a coarser tessellation, not an approximation of one.
+        let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.7]];
+        let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+        let s = BilinearSurface::new(&topo, &pts).unwrap();
+        let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: s.patch_bounds(0) };
+        let mut scratch = GridSamples::default();
+        let fine = tessellate(&s, &sub, Tier::Fine, &mut scratch);
+        let mut nine = GridSamples::default();
+        s.evaluate_grid(0, UvRect::UNIT, 9, false, &mut nine);
+        for j in 0..9 {
+            for i in 0..9 {
+                assert_eq!(fine.verts[2 * j * 17 + 2 * i], nine.p[j * 9 + i]);
+            }
+        }
+        assert_eq!(fine.sub_boxes.len(), 16);
+        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>());
+        let medium = tessellate(&s, &sub, Tier::Medium, &mut scratch);
+        assert_eq!(medium.verts.len(), 25);
+        assert!(medium.sub_boxes.is_empty());
+    }
+}

@@ -1,0 +1,222 @@
+//! Mesh topology as USD's `UsdGeom.Mesh` states it: what the patch source (OpenSubdiv in the bridge,
+//! or [`crate::bilinear::BilinearSurface`] for polygonal meshes) needs to build a limit surface.
+//!
+//! Plain data, no behaviour beyond validation, so the core, the bridge and the Python bindings
+//! agree on one description.
+
+use crate::error::MeshError;
+
+/// Subdivision scheme (`subdivisionScheme`). `None` means a polygonal mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Scheme {
+    #[default]
+    CatmullClark,
+    Loop,
+    Bilinear,
+    /// `subdivisionScheme = "none"`: render the control polygons as they are.
+    None,
+}
+
+/// `interpolateBoundary`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum BoundaryInterpolation {
+    None,
+    EdgeOnly,
+    #[default]
+    EdgeAndCorner,
+}
+
+/// `faceVaryingLinearInterpolation`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum FaceVaryingInterpolation {
+    None,
+    CornersOnly,
+    #[default]
+    CornersPlus1,
+    CornersPlus2,
+    Boundaries,
+    All,
+}
+
+/// `triangleSubdivisionRule`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum TriangleSubdivision {
+    #[default]
+    CatmullClark,
+    Smooth,
+}
+
+/// The topology of one mesh, in USD's terms. Indices refer to the mesh's points.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshTopology {
+    pub scheme: Scheme,
+    /// Vertices per face (`faceVertexCounts`).
+    pub face_vertex_counts: Vec<i32>,
+    /// Point index per face-vertex (`faceVertexIndices`).
+    pub face_vertex_indices: Vec<i32>,
+    /// `creaseIndices`: runs of point indices; each run is one crease chain.
+    pub crease_indices: Vec<i32>,
+    /// `creaseLengths`: the length of each chain in `crease_indices`.
+    pub crease_lengths: Vec<i32>,
+    /// `creaseSharpnesses`: one per chain, or one per edge of all chains.
+    pub crease_sharpnesses: Vec<f32>,
+    pub corner_indices: Vec<i32>,
+    pub corner_sharpnesses: Vec<f32>,
+    /// `holeIndices`: faces that are holes.
+    pub hole_indices: Vec<i32>,
+    pub boundary: BoundaryInterpolation,
+    pub face_varying: FaceVaryingInterpolation,
+    pub triangle_subdivision: TriangleSubdivision,
+    /// `orientation = "leftHanded"`: faces wind clockwise; the core flips geometric normals.
+    pub left_handed: bool,
+}
+
+impl MeshTopology {
+    /// Number of faces.
+    pub fn face_count(&self) -> usize {
+        self.face_vertex_counts.len()
+    }
+
+    /// Checks the counts and indices against `point_count`, and the crease, corner and hole
+    /// arrays against each other, so that nothing downstream (OpenSubdiv included) sees a
+    /// malformed mesh.
+    ///
+    /// # Errors
+    /// The first problem found, as a [`MeshError`] whose message names the offending array.
+    pub fn validate(&self, point_count: usize) -> Result<(), MeshError> {
+        let mut total: usize = 0;
+        for (f, &n) in self.face_vertex_counts.iter().enumerate() {
+            if n < 3 {
+                return Err(MeshError::Invalid(format!(
+                    "faceVertexCounts[{f}] = {n}: a face needs at least 3 vertices"
+                )));
+            }
+            total += n as usize;
+        }
+        if total != self.face_vertex_indices.len() {
+            return Err(MeshError::Invalid(format!(
+                "faceVertexCounts sum to {total} but faceVertexIndices has {} entries",
+                self.face_vertex_indices.len()
+            )));
+        }
+        let check = |name: &str, idx: &[i32], bound: usize| -> Result<(), MeshError> {
+            if let Some((i, &v)) = idx
+                .iter()
+                .enumerate()
+                .find(|(_, &v)| v < 0 || v as usize >= bound)
+            {
+                return Err(MeshError::Invalid(format!(
+                    "{name}[{i}] = {v} is out of range [0, {bound})"
+                )));
+            }
+            Ok(())
+        };
+        check("faceVertexIndices", &self.face_vertex_indices, point_count)?;
+        check("creaseIndices", &self.crease_indices, point_count)?;
+        check("cornerIndices", &self.corner_indices, point_count)?;
+        check("holeIndices", &self.hole_indices, self.face_count())?;
+        let chain_total: i64 = self.crease_lengths.iter().map(|&l| l as i64).sum();
+        if self.crease_lengths.iter().any(|&l| l < 2) || chain_total != self.crease_indices.len() as i64 {
+            return Err(MeshError::Invalid(format!(
+                "creaseLengths (sum {chain_total}) do not describe creaseIndices ({} entries) as chains of 2 or more",
+                self.crease_indices.len()
+            )));
+        }
+        let edges: i64 = self.crease_lengths.iter().map(|&l| l as i64 - 1).sum();
+        let ns = self.crease_sharpnesses.len() as i64;
+        if ns != self.crease_lengths.len() as i64 && ns != edges {
+            return Err(MeshError::Invalid(format!(
+                "creaseSharpnesses has {ns} entries; expected one per chain ({}) or one per edge ({edges})",
+                self.crease_lengths.len()
+            )));
+        }
+        if self.corner_sharpnesses.len() != self.corner_indices.len() {
+            return Err(MeshError::Invalid(format!(
+                "cornerSharpnesses has {} entries but cornerIndices has {}",
+                self.corner_sharpnesses.len(),
+                self.corner_indices.len()
+            )));
+        }
+        if let Some(s) = self
+            .crease_sharpnesses
+            .iter()
+            .chain(&self.corner_sharpnesses)
+            .find(|s| !s.is_finite())
+        {
+            return Err(MeshError::Invalid(format!("sharpness {s} is not finite")));
+        }
+        Ok(())
+    }
+
+    /// Crease edges as (point a, point b, sharpness), expanding chains and per-chain sharpness.
+    pub fn crease_edges(&self) -> Vec<(i32, i32, f32)> {
+        let per_chain = self.crease_sharpnesses.len() == self.crease_lengths.len();
+        let mut out = Vec::new();
+        let (mut start, mut edge) = (0usize, 0usize);
+        for (c, &len) in self.crease_lengths.iter().enumerate() {
+            let len = len.max(0) as usize;
+            for k in 1..len {
+                let s = if per_chain {
+                    self.crease_sharpnesses.get(c)
+                } else {
+                    self.crease_sharpnesses.get(edge)
+                };
+                if let (Some(&a), Some(&b)) =
+                    (self.crease_indices.get(start + k - 1), self.crease_indices.get(start + k))
+                {
+                    out.push((a, b, s.copied().unwrap_or(0.0)));
+                }
+                edge += 1;
+            }
+            start += len;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> MeshTopology {
+        MeshTopology {
+            face_vertex_counts: vec![4],
+            face_vertex_indices: vec![0, 1, 2, 3],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn valid_quad_passes() {
+        assert!(quad().validate(4).is_ok());
+    }
+
+    #[test]
+    fn out_of_range_index_is_named() {
+        let err = quad().validate(3).unwrap_err().to_string();
+        assert!(err.contains("faceVertexIndices[3] = 3"), "{err}");
+    }
+
+    #[test]
+    fn count_mismatch_is_refused() {
+        let mut t = quad();
+        t.face_vertex_counts = vec![5];
+        assert!(t.validate(4).is_err());
+        t.face_vertex_counts = vec![2];
+        assert!(t.validate(4).is_err());
+    }
+
+    #[test]
+    fn crease_chains_expand_per_chain_and_per_edge() {
+        let mut t = quad();
+        t.crease_indices = vec![0, 1, 2];
+        t.crease_lengths = vec![3];
+        t.crease_sharpnesses = vec![2.0];
+        assert!(t.validate(4).is_ok());
+        assert_eq!(t.crease_edges(), vec![(0, 1, 2.0), (1, 2, 2.0)]);
+        t.crease_sharpnesses = vec![1.0, 3.0];
+        assert_eq!(t.crease_edges(), vec![(0, 1, 1.0), (1, 2, 3.0)]);
+        t.crease_sharpnesses = vec![1.0, 3.0, 4.0];
+        assert!(t.validate(4).is_err());
+    }
+}
