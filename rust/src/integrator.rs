@@ -27,7 +27,8 @@ pub struct SampleValue {
     pub instance_id: f32,
     /// World-space beam width of the camera ray at its hit (the paper's figures 2 and 4).
     pub beam_width: f32,
-    /// Effective tessellation rate of the hit: 1, 2, 4, 8 or 16 quads per side.
+    /// Effective tessellation rate of the hit, quads per side of its root subpatch: 1, 2, 4, 8,
+    /// 16, or 16·2^depth where the subpatch was split.
     pub tess_rate: f32,
 }
 
@@ -123,7 +124,7 @@ impl DirectLighting<'_> {
         out.prim_id = hit.patch as f32;
         out.instance_id = hit.instance_id as f32;
         out.beam_width = ray.beam_width(hit.t);
-        out.tess_rate = hit.rate.quads() as f32;
+        out.tess_rate = hit.quads as f32;
         out
     }
 }

@@ -2,7 +2,10 @@
 //! object-space bounds — its control hull grown by the displacement bound — and a bottom-level
 //! BVH over them. Tessellation happens later, on demand, per subpatch.
 
+use std::collections::HashMap;
+
 use obvhs::cwbvh::CwBvh;
+use parking_lot::Mutex;
 
 use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
@@ -20,6 +23,69 @@ pub struct Subpatch {
     pub bounds: Bounds3,
 }
 
+/// Where a split child lies: its root subpatch, split depth, and cell (i along u, j along v) of
+/// the root's 2^depth × 2^depth grid of children.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ChildCell {
+    pub root: u32,
+    pub depth: u8,
+    pub i: u32,
+    pub j: u32,
+}
+
+impl ChildCell {
+    /// The child's domain within its root's domain `root`.
+    pub fn rect(&self, root: &UvRect) -> UvRect {
+        let n = (1u32 << self.depth) as f32;
+        let (du, dv) = ((root.u1 - root.u0) / n, (root.v1 - root.v0) / n);
+        UvRect {
+            u0: root.u0 + du * self.i as f32,
+            v0: root.v0 + dv * self.j as f32,
+            u1: root.u0 + du * (self.i + 1) as f32,
+            v1: root.v0 + dv * (self.j + 1) as f32,
+        }
+    }
+
+    /// The four children one level down, (i, j) order: (0,0), (1,0), (0,1), (1,1).
+    pub fn children(&self) -> [ChildCell; 4] {
+        let c = |di: u32, dj: u32| ChildCell { root: self.root, depth: self.depth + 1, i: self.i * 2 + di, j: self.j * 2 + dj };
+        [c(0, 0), c(1, 0), c(0, 1), c(1, 1)]
+    }
+}
+
+/// Dense ids for split children, made on demand (the paper's §5.1: "we subdivide it into even
+/// smaller subpatches"), so cache keys stay small and the cache's ever-built sets stay dense.
+/// Roots keep their indices; children are numbered after them in order of first use.
+pub struct ChildIds {
+    map: Mutex<HashMap<ChildCell, u32>>,
+    roots: u32,
+}
+
+impl ChildIds {
+    pub fn new(roots: u32) -> Self {
+        ChildIds { map: Mutex::new(HashMap::new()), roots }
+    }
+
+    /// The id of a child (or of the root itself at depth 0).
+    pub fn id(&self, cell: ChildCell) -> u32 {
+        if cell.depth == 0 {
+            return cell.root;
+        }
+        let mut m = self.map.lock();
+        let next = self.roots.saturating_add(m.len() as u32);
+        *m.entry(cell).or_insert(next)
+    }
+
+    /// Children given ids so far.
+    pub fn len(&self) -> usize {
+        self.map.lock().len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 /// A mesh prepared for tracing: its root subpatches and a BVH over them (object space).
 /// Shared by all instances of the mesh.
 pub struct MeshGeometry {
@@ -27,6 +93,8 @@ pub struct MeshGeometry {
     /// `None` when the mesh has no patches (all holes, or empty).
     pub bvh: Option<CwBvh>,
     pub bounds: Bounds3,
+    /// Ids of split children, made as rays ask for them.
+    pub child_ids: ChildIds,
 }
 
 impl MeshGeometry {
@@ -41,6 +109,29 @@ impl MeshGeometry {
         let bounds = subpatches.iter().fold(Bounds3::EMPTY, |b, sp| b.union(&sp.bounds));
         let boxes: Vec<Bounds3> = subpatches.iter().map(|s| s.bounds).collect();
         let bvh = build_bvh(&boxes);
-        MeshGeometry { subpatches, bvh, bounds }
+        let child_ids = ChildIds::new(subpatches.len() as u32);
+        MeshGeometry { subpatches, bvh, bounds, child_ids }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn child_rects_tile_the_root_and_ids_are_dense_and_stable() {
+        let root = UvRect { u0: 0.0, v0: 0.5, u1: 0.5, v1: 1.0 };
+        let c = ChildCell { root: 3, depth: 2, i: 1, j: 3 };
+        assert_eq!(c.rect(&root), UvRect { u0: 0.125, v0: 0.875, u1: 0.25, v1: 1.0 });
+        let kids = ChildCell { root: 3, depth: 0, i: 0, j: 0 }.children();
+        let area: f32 = kids.iter().map(|k| { let r = k.rect(&root); (r.u1 - r.u0) * (r.v1 - r.v0) }).sum();
+        assert!((area - 0.25).abs() < 1e-7);
+        let ids = ChildIds::new(10);
+        assert_eq!(ids.id(ChildCell { root: 4, depth: 0, i: 0, j: 0 }), 4);
+        let a = ids.id(c);
+        let b = ids.id(kids[0]);
+        assert_eq!((a, b), (10, 11));
+        assert_eq!(ids.id(c), 10);
+        assert_eq!(ids.len(), 2);
     }
 }

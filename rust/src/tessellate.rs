@@ -52,15 +52,33 @@ impl Rate {
     /// (world units), `beam_width` the ray's beam width where it reaches the subpatch (world
     /// units), `tess_factor` scales the quad size (larger is coarser). Returns the finest rate
     /// needed, rounding up; `None` means even 16×16 quads are too coarse (the subpatch should
-    /// be split). A non-finite or zero width asks for the finest rate.
+    /// be split, see [`split_depth`]). A non-finite or zero width asks for the finest rate.
     pub fn for_beam(size_world: f32, beam_width: f32, tess_factor: f32) -> Option<Rate> {
-        let quad = beam_width * tess_factor;
-        if !(quad.is_finite() && quad > 0.0 && size_world.is_finite()) {
-            return Some(Rate::R16);
-        }
-        let needed = size_world / quad;
+        let needed = needed_quads(size_world, beam_width, tess_factor);
         Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed)
     }
+}
+
+/// Quads per side a subpatch of `size_world` needs for a beam `beam_width` wide (both world
+/// units); 16 when the width is unusable (zero, negative, NaN), so a bad differential falls back
+/// to the finest stored rate rather than to a split storm or a coarse guess.
+pub fn needed_quads(size_world: f32, beam_width: f32, tess_factor: f32) -> f32 {
+    let quad = beam_width * tess_factor;
+    if !(quad.is_finite() && quad > 0.0 && size_world.is_finite()) {
+        return 16.0;
+    }
+    size_world / quad
+}
+
+/// Deepest subpatch split: 16·2⁶ = 1024 quads per side of a root patch.
+pub const MAX_SPLIT_DEPTH: u32 = 6;
+
+/// How many times to halve a subpatch so 16×16 quads per child meet `needed` quads per side.
+pub fn split_depth(needed: f32) -> u32 {
+    if needed <= 16.0 {
+        return 0;
+    }
+    ((needed / 16.0).log2().ceil() as u32).clamp(1, MAX_SPLIT_DEPTH)
 }
 
 /// One cache entry: a subpatch's limit surface on a tier's vertex grid, object space.
@@ -72,11 +90,15 @@ pub struct Tessellation {
     pub verts: Vec<[f32; 3]>,
     /// Fine tier only: 4×4 boxes, each over 4×4 quads (row-major, u fastest).
     pub sub_boxes: Vec<Bounds3>,
+    /// Fine tier only: an estimate of how far the limit surface strays from the grid's quads
+    /// (object units): twice the largest distance, at 16 probe points, between the surface and
+    /// the bilinear quad under it. Pads the bounds of split children.
+    pub chord_error: f32,
 }
 
 impl CacheEntry for Tessellation {
     fn byte_size(&self) -> usize {
-        self.verts.len() * std::mem::size_of::<[f32; 3]>() + self.sub_boxes.len() * std::mem::size_of::<Bounds3>()
+        self.verts.len() * std::mem::size_of::<[f32; 3]>() + self.sub_boxes.len() * std::mem::size_of::<Bounds3>() + std::mem::size_of::<f32>()
     }
 
     fn vertex_count(&self) -> usize {
@@ -98,7 +120,7 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, scratc
     let n = tier.verts_per_side() as usize;
     surface.evaluate_grid(sub.patch as usize, sub.rect, n, false, scratch);
     let verts = std::mem::take(&mut scratch.p);
-    let mut t = Tessellation { n, verts, sub_boxes: Vec::new() };
+    let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0 };
     if tier == Tier::Fine {
         t.sub_boxes = (0..16)
             .map(|b| {
@@ -112,8 +134,30 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, scratc
                 bb
             })
             .collect();
+        t.chord_error = 2.0 * probe_chord_error(surface, sub, &t);
     }
     t
+}
+
+/// Largest distance between the surface and the bilinear interpolation of the grid, probed at
+/// the centre of one quad in each 4×4 block (16 evaluations: 5% of a fine tessellation).
+fn probe_chord_error(surface: &dyn LimitSurface, sub: &Subpatch, t: &Tessellation) -> f32 {
+    let q = (t.n - 1) as f32;
+    let mut err: f32 = 0.0;
+    for b in 0..16 {
+        let (i, j) = (b % 4 * 4 + 1, b / 4 * 4 + 2);
+        let (lu, lv) = ((i as f32 + 0.5) / q, (j as f32 + 0.5) / q);
+        let u = sub.rect.u0 + (sub.rect.u1 - sub.rect.u0) * lu;
+        let v = sub.rect.v0 + (sub.rect.v1 - sub.rect.v0) * lv;
+        let s = surface.evaluate(sub.patch as usize, u, v).p;
+        let quad = (t.vert(i, j) + t.vert(i + 1, j) + t.vert(i + 1, j + 1) + t.vert(i, j + 1)) * 0.25;
+        err = err.max((s - quad).length());
+    }
+    if err.is_finite() {
+        err
+    } else {
+        0.0
+    }
 }
 
 #[cfg(test)]
@@ -136,6 +180,11 @@ mod tests {
         assert_eq!(Rate::for_beam(1.0, 0.9 / 16.0, 1.0), None);
         assert_eq!(Rate::for_beam(1.0, f32::NAN, 1.0), Some(Rate::R16));
         assert_eq!(Rate::for_beam(1.0, 0.0, 1.0), Some(Rate::R16));
+        assert_eq!(split_depth(16.0), 0);
+        assert_eq!(split_depth(16.1), 1);
+        assert_eq!(split_depth(32.0), 1);
+        assert_eq!(split_depth(33.0), 2);
+        assert_eq!(split_depth(1e9), MAX_SPLIT_DEPTH);
     }
 
     #[test]
@@ -156,7 +205,7 @@ mod tests {
             }
         }
         assert_eq!(fine.sub_boxes.len(), 16);
-        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>());
+        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>() + 4);
         let medium = tessellate(&s, &sub, Tier::Medium, &mut scratch);
         assert_eq!(medium.verts.len(), 25);
         assert!(medium.sub_boxes.is_empty());

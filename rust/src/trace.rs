@@ -10,13 +10,13 @@ use obvhs::ray::{Ray as BvhRay, RayHit};
 
 use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
-use crate::geometry_cache::{CacheConfig, CacheKey, GeometryCache};
+use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
 use crate::intersect::{intersect_tessellation, WatertightRay};
-use crate::patch::GridSamples;
+use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, Ray, RayKind};
 use crate::scene::Scene;
-use crate::subpatch::MeshGeometry;
-use crate::tessellate::{tessellate, Rate, Tessellation};
+use crate::subpatch::{ChildCell, MeshGeometry, Subpatch};
+use crate::tessellate::{needed_quads, split_depth, tessellate, Rate, Tessellation};
 
 /// Replaces −0.0 components by +0.0. obvhs 0.4's CWBVH traversal picks the child order from the
 /// direction's sign bits but its slab test from comparisons, and misses every box when a
@@ -74,8 +74,20 @@ pub struct Hit {
     /// Unit geometric normal of the hit triangle, from its winding (front faces wind counter-
     /// clockwise, as USD's rightHanded orientation).
     pub ng: Vec3A,
-    /// The effective rate the hit was found at.
-    pub rate: Rate,
+    /// The effective rate the hit was found at, in quads per side of the root subpatch: 1, 2, 4,
+    /// 8, 16, or 16·2^depth after splitting.
+    pub quads: u32,
+}
+
+/// A hit within one subpatch: t, (u, v) local to the tested grid's domain `rect`, the object-
+/// space triangle normal, and the effective rate.
+#[derive(Clone, Copy, Debug)]
+struct LocalHit {
+    t: f32,
+    uv: (f32, f32),
+    rect: UvRect,
+    ng: Vec3A,
+    quads: u32,
 }
 
 struct InstanceData {
@@ -98,6 +110,8 @@ pub struct Tracer<'s> {
     tlas: Option<CwBvh>,
     pub cache: Arc<GeometryCache<Tessellation>>,
     tess_factor: f32,
+    /// `single` mode: every lookup at 17×17, as the paper's single-resolution cache.
+    single: bool,
     pub bounds: Bounds3,
 }
 
@@ -128,7 +142,8 @@ impl<'s> Tracer<'s> {
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
-        Tracer { scene, meshes, instances, tlas, cache: Arc::new(GeometryCache::new(cache)), tess_factor, bounds }
+        let single = cache.mode == CacheMode::Single;
+        Tracer { scene, meshes, instances, tlas, cache: Arc::new(GeometryCache::new(cache)), tess_factor, single, bounds }
     }
 
     /// Root subpatches over all meshes (each counted once, however many instances).
@@ -192,7 +207,7 @@ impl<'s> Tracer<'s> {
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         let wray = WatertightRay::new(o, d);
-        let mut best: Option<(crate::intersect::GridHit, u32, Rate)> = None;
+        let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
         let mut rh = RayHit::none();
         let mut done = false;
@@ -207,24 +222,26 @@ impl<'s> Tracer<'s> {
             };
             counters.ray_subpatch_tests += 1;
             let size = sp.bounds.diagonal().max_element() * inst.scale;
-            let rate = match Rate::for_beam(size, ray.beam_width(t_enter), self.tess_factor) {
-                Some(r) => r,
-                None => {
-                    counters.finer_than_fine += 1;
-                    Rate::R16
-                }
+            let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor);
+            let depth = split_depth(needed);
+            let found = if depth > 0 {
+                counters.finer_than_fine += 1;
+                let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
+                let tess = self.lookup(inst.mesh, geom, root, Tier::Fine);
+                let mut found = None;
+                self.hit_split(inst.mesh, geom, root, &tess, depth, &wray, ray.t_min, &mut t_best, &mut found);
+                found
+            } else {
+                let rate = if self.single { Rate::R16 } else { Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16) };
+                counters.rate_tests[rate as usize] += 1;
+                let (tier, stride) = rate.tier_and_stride();
+                let tess = self.lookup(inst.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
+                intersect_tessellation(&wray, &tess, stride, ray.t_min, t_best).map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: sp.rect, ng: h.ng, quads: rate.quads() as u32 })
             };
-            counters.rate_tests[rate as usize] += 1;
-            let (tier, stride) = rate.tier_and_stride();
-            let key = CacheKey { mesh: inst.mesh as u32, generation: mesh.generation, subpatch: si as u32, tier };
-            let tess = self.cache.get_or_build(key, || {
-                let mut scratch = GridSamples::default();
-                tessellate(mesh.surface.as_ref(), sp, tier, &mut scratch)
-            });
-            match intersect_tessellation(&wray, &tess, stride, ray.t_min, t_best) {
+            match found {
                 Some(h) => {
                     t_best = h.t;
-                    best = Some((h, si as u32, rate));
+                    best = Some((h, si as u32));
                     if any_hit {
                         done = true;
                     }
@@ -233,10 +250,10 @@ impl<'s> Tracer<'s> {
                 None => f32::INFINITY,
             }
         });
-        let (h, si, rate) = best?;
+        let (h, si) = best?;
         let sp = &geom.subpatches[si as usize];
-        let u = sp.rect.u0 + (sp.rect.u1 - sp.rect.u0) * h.u;
-        let v = sp.rect.v0 + (sp.rect.v1 - sp.rect.v0) * h.v;
+        let u = h.rect.u0 + (h.rect.u1 - h.rect.u0) * h.uv.0;
+        let v = h.rect.v0 + (h.rect.v1 - h.rect.v0) * h.uv.1;
         let p = ray.at(h.t);
         let mut ng = (inst.normal_from_object * h.ng).normalize_or(Vec3A::Z);
         if mesh.left_handed {
@@ -245,7 +262,50 @@ impl<'s> Tracer<'s> {
         // The hit point came from o + t·d after a transform: its error is bounded by a few ulps
         // of the larger of the origin's and the point's magnitude (pbrt §6.8, loosely).
         let p_error = Vec3A::splat(gamma(12)) * (p.abs() + ray.o.abs() + Vec3A::splat(h.t * ray.d.abs().max_element()));
-        Some(Hit { t: h.t, instance: ii as u32, instance_id: inst.id, mesh: inst.mesh as u32, patch: sp.patch, u, v, p, p_error, ng, rate })
+        Some(Hit { t: h.t, instance: ii as u32, instance_id: inst.id, mesh: inst.mesh as u32, patch: sp.patch, u, v, p, p_error, ng, quads: h.quads })
+    }
+
+    /// The tessellation of a (root or split) subpatch at a tier, from the cache or built now.
+    fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Arc<Tessellation> {
+        let mesh = &self.scene.meshes[mesh_index];
+        let root = &geom.subpatches[cell.root as usize];
+        let key = CacheKey { mesh: mesh_index as u32, generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
+        self.cache.get_or_build(key, || {
+            let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds };
+            let mut scratch = GridSamples::default();
+            tessellate(mesh.surface.as_ref(), &sub, tier, &mut scratch)
+        })
+    }
+
+    /// Descends from `cell` (whose fine tessellation is `tess`) to split children at
+    /// `target_depth`, entering only children whose boxes the ray hits, and tests their fine
+    /// grids. A child's box is the part of its parent's fine grid over it, grown by the parent's
+    /// chord error estimate (and a few ulps), so the descent never skips the surface.
+    #[allow(clippy::too_many_arguments)]
+    fn hit_split(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tess: &Tessellation, target_depth: u32, wray: &WatertightRay, t_min: f32, t_best: &mut f32, best: &mut Option<LocalHit>) {
+        let root_rect = geom.subpatches[cell.root as usize].rect;
+        if u32::from(cell.depth) >= target_depth {
+            if let Some(h) = intersect_tessellation(wray, tess, 1, t_min, *t_best) {
+                *t_best = h.t;
+                *best = Some(LocalHit { t: h.t, uv: (h.u, h.v), rect: cell.rect(&root_rect), ng: h.ng, quads: 16 << cell.depth });
+            }
+            return;
+        }
+        for child in cell.children() {
+            let (ci, cj) = ((child.i - cell.i * 2) as usize * 8, (child.j - cell.j * 2) as usize * 8);
+            let mut bb = Bounds3::EMPTY;
+            for j in cj..=cj + 8 {
+                for i in ci..=ci + 8 {
+                    bb.grow(tess.vert(i, j));
+                }
+            }
+            let pad = tess.chord_error + gamma(8) * bb.max_abs();
+            if wray.hit_box(&bb.expanded(pad), t_min, *t_best).is_none() {
+                continue;
+            }
+            let ct = self.lookup(mesh_index, geom, child, Tier::Fine);
+            self.hit_split(mesh_index, geom, child, &ct, target_depth, wray, t_min, t_best, best);
+        }
     }
 
     /// The normal matrix (inverse transpose of the linear part) of a hit's instance.
