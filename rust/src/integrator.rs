@@ -50,9 +50,28 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
     let to_world = tracer.render_from_object(hit.instance);
     let nm = tracer.normal_matrix(hit.instance);
-    let dpdu = to_world.transform_vector3a(s.dpdu);
-    let dpdv = to_world.transform_vector3a(s.dpdv);
-    let mut ns = (nm * s.dpdu.cross(s.dpdv)).normalize_or_zero();
+    let (mut odpdu, mut odpdv) = (s.dpdu, s.dpdv);
+    if let Some(d) = &mesh.displacement {
+        // Shade the displaced surface: its tangents by central differences over half the
+        // hit's quad, displacement filtered at that quad's spacing as the tessellation was.
+        let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+        let step = 0.5 / hit.quads.max(1) as f32;
+        let spacing = s.dpdu.length().max(s.dpdv.length()) * 2.0 * step;
+        let displaced = |u: f32, v: f32| {
+            let e = mesh.surface.evaluate(hit.patch as usize, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+            e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset(e.p, spacing)
+        };
+        let (u0, u1) = ((hit.u - step).max(0.0), (hit.u + step).min(1.0));
+        let (v0, v1) = ((hit.v - step).max(0.0), (hit.v + step).min(1.0));
+        let du = (displaced(u1, hit.v) - displaced(u0, hit.v)) / (u1 - u0).max(f32::MIN_POSITIVE);
+        let dv = (displaced(hit.u, v1) - displaced(hit.u, v0)) / (v1 - v0).max(f32::MIN_POSITIVE);
+        if du.is_finite() && dv.is_finite() && du.cross(dv).length_squared() > 0.0 {
+            (odpdu, odpdv) = (du, dv);
+        }
+    }
+    let dpdu = to_world.transform_vector3a(odpdu);
+    let dpdv = to_world.transform_vector3a(odpdv);
+    let mut ns = (nm * odpdu.cross(odpdv)).normalize_or_zero();
     if mesh.left_handed {
         ns = -ns;
     }

@@ -32,6 +32,7 @@ pub mod bounds;
 pub mod bvh;
 pub mod camera;
 pub mod differential;
+pub mod displacement;
 pub mod effects;
 pub mod error;
 pub mod film;

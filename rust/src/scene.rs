@@ -7,6 +7,7 @@ use std::sync::Arc;
 use glam::Mat4;
 
 use crate::camera::Camera;
+use crate::displacement::Displacement;
 use crate::light::Light;
 use crate::material::Material;
 use crate::patch::LimitSurface;
@@ -28,6 +29,8 @@ pub struct Mesh {
     /// USD `orientation = "leftHanded"`: the front face winds clockwise, so geometric and
     /// shading normals are negated. Patch sources evaluate the surface as given.
     pub left_handed: bool,
+    /// Displacement along the limit normal, applied when tessellating.
+    pub displacement: Option<Displacement>,
 }
 
 impl std::fmt::Debug for Mesh {
@@ -42,7 +45,7 @@ impl std::fmt::Debug for Mesh {
 
 impl Mesh {
     pub fn new(name: impl Into<String>, surface: Arc<dyn LimitSurface>) -> Self {
-        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false }
+        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false, displacement: None }
     }
 }
 

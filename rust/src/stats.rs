@@ -55,6 +55,8 @@ pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect]
             "instances": instances,
             "full_tessellation_vertices": full_verts,
             "full_tessellation_bytes": full_verts * 12,
+            "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
+            "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
         },
         "memory": { "peak_rss_bytes": peak_rss_bytes() },
         "effects": { "enabled": effects },

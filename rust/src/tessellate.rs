@@ -9,6 +9,7 @@
 use glam::Vec3A;
 
 use crate::bounds::Bounds3;
+use crate::displacement::Displacement;
 use crate::geometry_cache::{CacheEntry, Tier};
 use crate::patch::{GridSamples, LimitSurface};
 use crate::subpatch::Subpatch;
@@ -114,12 +115,36 @@ impl Tessellation {
     }
 }
 
-/// Tessellates `sub` of `surface` on `tier`'s grid: one grid evaluation, then (for the fine tier)
-/// the 4×4 sub-boxes. `scratch` is reused between calls to avoid allocation.
-pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, scratch: &mut GridSamples) -> Tessellation {
+/// How a mesh is displaced: the function, the side its normal points to (−1 for leftHanded
+/// meshes) and the bound its subpatch boxes were grown by.
+#[derive(Clone, Copy, Debug)]
+pub struct DisplaceParams {
+    pub displacement: Displacement,
+    pub normal_sign: f32,
+    pub bound: f32,
+}
+
+/// Tessellates `sub` of `surface` on `tier`'s grid: one grid evaluation, displacement along the
+/// limit normal filtered at the grid's own spacing, then (for the fine tier) the 4×4 sub-boxes.
+/// Returns the tessellation and how many displaced vertices left `sub.bounds` (counted, never
+/// clipped). `scratch` is reused between calls to avoid allocation.
+pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displace: Option<&DisplaceParams>, scratch: &mut GridSamples) -> (Tessellation, u32) {
     let n = tier.verts_per_side() as usize;
-    surface.evaluate_grid(sub.patch as usize, sub.rect, n, false, scratch);
-    let verts = std::mem::take(&mut scratch.p);
+    surface.evaluate_grid(sub.patch as usize, sub.rect, n, displace.is_some(), scratch);
+    let mut verts = std::mem::take(&mut scratch.p);
+    let mut outside = 0;
+    if let Some(d) = displace {
+        let spacing = grid_spacing(&verts, n);
+        for (k, v) in verts.iter_mut().enumerate() {
+            let p = Vec3A::from(*v);
+            let nrm = (Vec3A::from(scratch.dpdu[k]).cross(Vec3A::from(scratch.dpdv[k]))).normalize_or_zero() * d.normal_sign;
+            let q = p + nrm * d.displacement.offset(p, spacing);
+            if !(q.cmpge(sub.bounds.min).all() && q.cmple(sub.bounds.max).all()) {
+                outside += 1;
+            }
+            *v = q.into();
+        }
+    }
     let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0 };
     if tier == Tier::Fine {
         t.sub_boxes = (0..16)
@@ -135,8 +160,25 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, scratc
             })
             .collect();
         t.chord_error = 2.0 * probe_chord_error(surface, sub, &t);
+        if let Some(d) = displace {
+            // The probe measures the undisplaced surface; displacement detail finer than the
+            // grid is filtered out, so what remains strays from the quads by at most its bound.
+            t.chord_error += d.bound.min(2.0 * d.displacement.bound());
+        }
     }
-    t
+    (t, outside)
+}
+
+/// Mean edge length of the grid's middle row and column (object units): the spacing the
+/// displacement is filtered at.
+fn grid_spacing(verts: &[[f32; 3]], n: usize) -> f32 {
+    let m = n / 2;
+    let at = |i: usize, j: usize| Vec3A::from(verts[j * n + i]);
+    let mut len = 0.0;
+    for k in 0..n - 1 {
+        len += (at(k + 1, m) - at(k, m)).length() + (at(m, k + 1) - at(m, k)).length();
+    }
+    len / (2 * (n - 1)) as f32
 }
 
 /// Largest distance between the surface and the bilinear interpolation of the grid, probed at
@@ -196,7 +238,7 @@ mod tests {
         let s = BilinearSurface::new(&topo, &pts).unwrap();
         let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: s.patch_bounds(0) };
         let mut scratch = GridSamples::default();
-        let fine = tessellate(&s, &sub, Tier::Fine, &mut scratch);
+        let (fine, _) = tessellate(&s, &sub, Tier::Fine, None, &mut scratch);
         let mut nine = GridSamples::default();
         s.evaluate_grid(0, UvRect::UNIT, 9, false, &mut nine);
         for j in 0..9 {
@@ -206,7 +248,7 @@ mod tests {
         }
         assert_eq!(fine.sub_boxes.len(), 16);
         assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>() + 4);
-        let medium = tessellate(&s, &sub, Tier::Medium, &mut scratch);
+        let (medium, _) = tessellate(&s, &sub, Tier::Medium, None, &mut scratch);
         assert_eq!(medium.verts.len(), 25);
         assert!(medium.sub_boxes.is_empty());
     }

@@ -2,6 +2,7 @@
 //! on-demand tessellation at the rate the ray's beam width asks for, looked up in the
 //! multiresolution geometry cache (the paper's §5) → watertight quad tests.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use glam::{Mat3A, Mat4, Vec3A};
@@ -16,7 +17,7 @@ use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, Ray, RayKind};
 use crate::scene::Scene;
 use crate::subpatch::{ChildCell, MeshGeometry, Subpatch};
-use crate::tessellate::{needed_quads, split_depth, tessellate, Rate, Tessellation};
+use crate::tessellate::{needed_quads, split_depth, tessellate, DisplaceParams, Rate, Tessellation};
 
 /// Replaces −0.0 components by +0.0. obvhs 0.4's CWBVH traversal picks the child order from the
 /// direction's sign bits but its slab test from comparisons, and misses every box when a
@@ -113,6 +114,8 @@ pub struct Tracer<'s> {
     /// `single` mode: every lookup at 17×17, as the paper's single-resolution cache.
     single: bool,
     pub bounds: Bounds3,
+    /// Displaced vertices found outside their subpatch's bounds (warned about once).
+    pub displaced_outside: AtomicU64,
 }
 
 impl<'s> Tracer<'s> {
@@ -143,7 +146,7 @@ impl<'s> Tracer<'s> {
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
         let single = cache.mode == CacheMode::Single;
-        Tracer { scene, meshes, instances, tlas, cache: Arc::new(GeometryCache::new(cache)), tess_factor, single, bounds }
+        Tracer { scene, meshes, instances, tlas, cache: Arc::new(GeometryCache::new(cache)), tess_factor, single, bounds, displaced_outside: AtomicU64::new(0) }
     }
 
     /// Root subpatches over all meshes (each counted once, however many instances).
@@ -273,7 +276,12 @@ impl<'s> Tracer<'s> {
         self.cache.get_or_build(key, || {
             let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds };
             let mut scratch = GridSamples::default();
-            tessellate(mesh.surface.as_ref(), &sub, tier, &mut scratch)
+            let displace = mesh.displacement.map(|displacement| DisplaceParams { displacement, normal_sign: if mesh.left_handed { -1.0 } else { 1.0 }, bound: mesh.displacement_bound });
+            let (t, outside) = tessellate(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch);
+            if outside > 0 && self.displaced_outside.fetch_add(u64::from(outside), Ordering::Relaxed) == 0 {
+                log::warn!("{}: displaced vertices leave their subpatch bounds; raise primvars:displacementBound (now {})", mesh.name, mesh.displacement_bound);
+            }
+            t
         })
     }
 
