@@ -3,6 +3,7 @@
 
 use serde::Serialize;
 
+use crate::options::RenderOptions;
 use crate::scene::Scene;
 
 /// One enabled effect and the reason for it.
@@ -12,13 +13,24 @@ pub struct Effect {
     pub why: String,
 }
 
-/// The effects `scene` calls for. Camera rays always; shadow rays toward each light that
-/// casts shadows.
-pub fn analyze(scene: &Scene) -> Vec<Effect> {
+/// The effects `scene` rendered with `options` calls for: camera rays always; shadow rays
+/// toward each light that casts shadows; mirror reflection from materials with a mirror layer
+/// (and a maximum depth above 0); ambient occlusion when the settings ask for AO samples.
+pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
     let mut out = vec![Effect { name: "camera".into(), why: "primary visibility".into() }];
     let shadow_lights: Vec<&str> = scene.lights.iter().filter(|l| l.casts_shadows).map(|l| l.name.as_str()).collect();
     if !shadow_lights.is_empty() {
         out.push(Effect { name: "shadows".into(), why: format!("lights casting shadows: {}", shadow_lights.join(", ")) });
+    }
+    let used: std::collections::HashSet<usize> = scene.instances.iter().filter_map(|i| scene.meshes.get(i.mesh)).map(|m| m.material).collect();
+    let mirrors: Vec<&str> = scene.materials.iter().enumerate().filter(|(i, m)| used.contains(i) && m.mirror.max_element() > 0.0).map(|(_, m)| m.name.as_str()).collect();
+    if !mirrors.is_empty() && options.max_depth > 0 {
+        let shown: Vec<&str> = mirrors.iter().take(5).copied().collect();
+        let more = if mirrors.len() > 5 { format!(" and {} more", mirrors.len() - 5) } else { String::new() };
+        out.push(Effect { name: "reflection".into(), why: format!("mirror materials: {}{more}", shown.join(", ")) });
+    }
+    if options.ao_samples > 0 {
+        out.push(Effect { name: "ao".into(), why: format!("render setting aoSamples = {}", options.ao_samples) });
     }
     out
 }

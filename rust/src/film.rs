@@ -14,10 +14,11 @@ pub const AOVS: &[(&str, usize)] = &[
     ("instanceId", 1),
     ("beamWidth", 1),
     ("tessRate", 1),
+    ("ao", 1),
 ];
 
 /// The AOV names, for messages.
-pub const AOV_NAMES: &[&str] = &["color", "alpha", "depth", "normal", "primId", "instanceId", "beamWidth", "tessRate"];
+pub const AOV_NAMES: &[&str] = &["color", "alpha", "depth", "normal", "primId", "instanceId", "beamWidth", "tessRate", "ao"];
 
 /// Channel count of a named AOV, or `None` if the renderer does not know it.
 pub fn aov_channels(name: &str) -> Option<usize> {

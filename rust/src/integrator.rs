@@ -4,8 +4,10 @@
 
 use glam::Vec3A;
 
-use crate::differential::RayDifferential;
+use crate::differential::{dndu_dndv, reflect_direction, RayDifferential, UvDifferentials};
 use crate::effects::{enabled, Effect};
+use crate::options::RenderOptions;
+use crate::sampling::{cosine_hemisphere, frame, Sampler};
 use crate::light::LightShape;
 use crate::ray::{offset_origin, Ray, RayKind};
 use crate::scene::Scene;
@@ -27,6 +29,8 @@ pub struct SampleValue {
     pub instance_id: f32,
     /// World-space beam width of the camera ray at its hit (the paper's figures 2 and 4).
     pub beam_width: f32,
+    /// Unoccluded fraction of the hemisphere (the `ao` AOV; 0 when AO is off).
+    pub ao: f32,
     /// Effective tessellation rate of the hit, quads per side of its root subpatch: 1, 2, 4, 8,
     /// 16, or 16·2^depth where the subpatch was split.
     pub tess_rate: f32,
@@ -91,52 +95,52 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv }
 }
 
-/// The direct-lighting integrator.
+/// The classic distribution ray tracer: direct light with ray-traced shadows, perfect mirror
+/// reflection to a maximum depth, and ambient occlusion by hemisphere rays. Every new ray gets
+/// its differential from the paper's §4 rules, so its tessellation rate follows its width.
 pub struct DirectLighting<'a> {
     pub tracer: &'a Tracer<'a>,
     pub scene: &'a Scene,
-    pub effects: &'a [Effect],
+    shadows: bool,
+    reflection: bool,
+    ao_samples: u32,
+    ao_distance: f32,
+    ao_intensity: f32,
+    max_depth: u32,
 }
 
-impl DirectLighting<'_> {
+/// Radiance along a ray plus, for camera rays, the AO fraction at the first hit.
+struct Shade {
+    color: Vec3A,
+    ao: f32,
+}
+
+impl<'a> DirectLighting<'a> {
+    /// An integrator tracing only the `effects` the scene called for.
+    pub fn new(tracer: &'a Tracer<'a>, scene: &'a Scene, effects: &[Effect], options: &RenderOptions) -> Self {
+        DirectLighting {
+            tracer,
+            scene,
+            shadows: enabled(effects, "shadows"),
+            reflection: enabled(effects, "reflection"),
+            ao_samples: if enabled(effects, "ao") { options.ao_samples } else { 0 },
+            ao_distance: options.ao_distance,
+            ao_intensity: options.ao_intensity,
+            max_depth: options.max_depth,
+        }
+    }
+
     /// Radiance and AOV values along a camera ray.
-    pub fn sample(&self, ray: &Ray, counters: &mut TraceCounters) -> SampleValue {
+    pub fn sample(&self, ray: &Ray, sampler: &mut Sampler, counters: &mut TraceCounters) -> SampleValue {
         let far = self.scene.camera.clipping_range.1;
         let mut out = SampleValue { depth: far, prim_id: -1.0, instance_id: -1.0, ..Default::default() };
         let Some(hit) = self.tracer.intersect(ray, counters) else {
             return out;
         };
+        let shade = self.shade(ray, &hit, 0, sampler, counters);
         let sp = shading_point(self.tracer, self.scene, ray, &hit);
-        let material = self.scene.material_of(hit.mesh as usize);
-        let albedo = material.diffuse_color;
-        let footprint = ray.diff.transfer(ray.d, hit.t, sp.ng);
-        let shadows = enabled(self.effects, "shadows");
-        let mut color = Vec3A::ZERO;
-        for light in &self.scene.lights {
-            let LightShape::Distant { direction, .. } = light.shape;
-            let wi = -direction;
-            let cos_s = sp.ns.dot(wi);
-            if cos_s <= 0.0 || sp.ng.dot(wi) <= 0.0 {
-                continue;
-            }
-            if shadows && light.casts_shadows {
-                // Shadow rays to a distant light are parallel: no directional spread, the
-                // footprint as the origin differential (the paper's §4.3: narrow and coherent).
-                let shadow = Ray {
-                    o: offset_origin(sp.p, hit.p_error, sp.ng, wi),
-                    d: wi,
-                    t_min: 0.0,
-                    t_max: f32::INFINITY,
-                    diff: RayDifferential { dpdx: footprint.dpdx, dpdy: footprint.dpdy, dddx: Vec3A::ZERO, dddy: Vec3A::ZERO },
-                    kind: RayKind::Shadow,
-                };
-                if self.tracer.occluded(&shadow, counters) {
-                    continue;
-                }
-            }
-            color += albedo * light.radiance_scale * (cos_s * std::f32::consts::FRAC_1_PI);
-        }
-        out.color = color;
+        out.color = shade.color;
+        out.ao = shade.ao;
         out.alpha = 1.0;
         out.depth = self.scene.camera.depth(hit.p);
         out.normal = sp.ns;
@@ -145,5 +149,118 @@ impl DirectLighting<'_> {
         out.beam_width = ray.beam_width(hit.t);
         out.tess_rate = hit.quads as f32;
         out
+    }
+
+    fn radiance(&self, ray: &Ray, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Vec3A {
+        match self.tracer.intersect(ray, counters) {
+            Some(hit) => self.shade(ray, &hit, depth, sampler, counters).color,
+            None => Vec3A::ZERO,
+        }
+    }
+
+    fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Shade {
+        let sp = shading_point(self.tracer, self.scene, ray, hit);
+        let material = self.scene.material_of(hit.mesh as usize);
+        let footprint = ray.diff.transfer(ray.d, hit.t, sp.ng);
+        let mut color = Vec3A::ZERO;
+        let mut ao = 0.0;
+        let albedo = material.diffuse_color;
+        if albedo.max_element() > 0.0 {
+            color += albedo * self.direct(&sp, hit, &footprint, counters);
+            if self.ao_samples > 0 {
+                ao = self.occlusion(&sp, hit, &footprint, sampler, counters);
+                color += albedo * (self.ao_intensity * ao);
+            }
+        }
+        if self.reflection && material.mirror.max_element() > 0.0 && depth < self.max_depth {
+            let (dndx, dndy) = self.normal_differentials(hit, &sp, &footprint);
+            let wr = reflect_direction(ray.d, sp.ns);
+            if wr.dot(sp.ng) > 0.0 {
+                let r = Ray {
+                    o: offset_origin(sp.p, hit.p_error, sp.ng, wr),
+                    d: wr,
+                    t_min: 0.0,
+                    t_max: f32::INFINITY,
+                    diff: footprint.reflect(ray.d, sp.ns, dndx, dndy),
+                    kind: RayKind::Reflection,
+                };
+                color += material.mirror * self.radiance(&r, depth + 1, sampler, counters);
+            }
+        }
+        Shade { color, ao }
+    }
+
+    /// dN/dx, dN/dy at the hit from the limit surface's second derivatives (Weingarten) and
+    /// the footprint: what makes convex mirrors widen beams (the paper's §4.2).
+    fn normal_differentials(&self, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> (Vec3A, Vec3A) {
+        let mesh = &self.scene.meshes[hit.mesh as usize];
+        let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
+        let m = self.tracer.render_from_object(hit.instance);
+        let w = |v: Vec3A| m.transform_vector3a(v);
+        let (mut dndu, mut dndv) = dndu_dndv(sp.dpdu, sp.dpdv, w(s.dpduu), w(s.dpduv), w(s.dpdvv));
+        // dndu_dndv belongs to the normal dpdu × dpdv; the shading normal may be its negative.
+        if sp.dpdu.cross(sp.dpdv).dot(sp.ns) < 0.0 {
+            dndu = -dndu;
+            dndv = -dndv;
+        }
+        UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv).chain(dndu, dndv)
+    }
+
+    /// Irradiance-weighted light from every light, with shadow rays toward those that cast them.
+    fn direct(&self, sp: &ShadingPoint, hit: &Hit, footprint: &RayDifferential, counters: &mut TraceCounters) -> Vec3A {
+        let mut sum = Vec3A::ZERO;
+        for light in &self.scene.lights {
+            let LightShape::Distant { direction, .. } = light.shape;
+            let wi = -direction;
+            let cos_s = sp.ns.dot(wi);
+            if cos_s <= 0.0 || sp.ng.dot(wi) <= 0.0 {
+                continue;
+            }
+            if self.shadows && light.casts_shadows {
+                // Shadow rays to a distant light are parallel: no directional spread, the
+                // footprint as the origin differential (the paper's §4.3: narrow and coherent).
+                let shadow = Ray {
+                    o: offset_origin(sp.p, hit.p_error, sp.ng, wi),
+                    d: wi,
+                    t_min: 0.0,
+                    t_max: f32::INFINITY,
+                    diff: RayDifferential::new(footprint.dpdx, footprint.dpdy, Vec3A::ZERO, Vec3A::ZERO),
+                    kind: RayKind::Shadow,
+                };
+                if self.tracer.occluded(&shadow, counters) {
+                    continue;
+                }
+            }
+            sum += light.radiance_scale * (cos_s * std::f32::consts::FRAC_1_PI);
+        }
+        sum
+    }
+
+    /// The unoccluded fraction of the cosine-weighted hemisphere within `ao_distance`, from
+    /// `ao_samples` rays whose spread is √(1/(N·p(ω))) (the paper's §4.6): wide near the
+    /// horizon, narrower at the pole.
+    fn occlusion(&self, sp: &ShadingPoint, hit: &Hit, footprint: &RayDifferential, sampler: &mut Sampler, counters: &mut TraceCounters) -> f32 {
+        let (t, b) = frame(sp.ns);
+        let n = self.ao_samples;
+        let mut open = 0u32;
+        for _ in 0..n {
+            let (local, pdf) = cosine_hemisphere(sampler.next_f32(), sampler.next_f32());
+            let d = t * local.x + b * local.y + sp.ns * local.z;
+            if d.dot(sp.ng) <= 0.0 {
+                continue;
+            }
+            let r = Ray {
+                o: offset_origin(sp.p, hit.p_error, sp.ng, d),
+                d,
+                t_min: 0.0,
+                t_max: self.ao_distance,
+                diff: footprint.hemisphere(d, pdf, n),
+                kind: RayKind::Ao,
+            };
+            if !self.tracer.occluded(&r, counters) {
+                open += 1;
+            }
+        }
+        open as f32 / n as f32
     }
 }

@@ -24,6 +24,14 @@ pub struct RenderOptions {
     pub cache: CacheConfig,
     /// AOVs to produce, by name (see [`crate::film::AOV_NAMES`]).
     pub aovs: Vec<String>,
+    /// Ambient-occlusion rays per shading point (0: no ambient occlusion). AO lights diffuse
+    /// surfaces as a uniform white sky of radiance `ao_intensity`, occluded within `ao_distance`.
+    pub ao_samples: u32,
+    /// World units; infinite by default.
+    pub ao_distance: f32,
+    pub ao_intensity: f32,
+    /// Longest chain of mirror bounces.
+    pub max_depth: u32,
 }
 
 impl Default for RenderOptions {
@@ -37,6 +45,10 @@ impl Default for RenderOptions {
             tess_factor: 1.0,
             cache: CacheConfig::multires(30_000_000),
             aovs: vec!["color".into()],
+            ao_samples: 0,
+            ao_distance: f32::INFINITY,
+            ao_intensity: 1.0,
+            max_depth: 4,
         }
     }
 }
@@ -55,6 +67,12 @@ impl RenderOptions {
         }
         if !(self.tess_factor.is_finite() && self.tess_factor > 0.0) {
             return Err(RenderError::Settings(format!("tessFactor {} must be a positive number", self.tess_factor)));
+        }
+        if !(self.ao_distance > 0.0) || !(self.ao_intensity.is_finite() && self.ao_intensity >= 0.0) {
+            return Err(RenderError::Settings(format!("aoDistance {} must be positive and aoIntensity {} a non-negative number", self.ao_distance, self.ao_intensity)));
+        }
+        if self.ao_samples > 65_536 || self.max_depth > 64 {
+            return Err(RenderError::Settings(format!("aoSamples {} must be at most 65536 and maxDepth {} at most 64", self.ao_samples, self.max_depth)));
         }
         for a in &self.aovs {
             if crate::film::aov_channels(a).is_none() {

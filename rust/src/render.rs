@@ -59,8 +59,8 @@ pub fn render(scene: &Scene, options: &RenderOptions, progress: &dyn Progress) -
     progress.start((w * h) as u64);
     let out = pool.install(|| {
         let tracer = Tracer::new(scene, options.cache.clone(), options.tess_factor);
-        let fx = effects::analyze(scene);
-        let integrator = DirectLighting { tracer: &tracer, scene, effects: &fx };
+        let fx = effects::analyze(scene, options);
+        let integrator = DirectLighting::new(&tracer, scene, &fx, options);
         let results: Vec<Option<TileResult>> = tiles
             .par_iter()
             .map(|&tile| {
@@ -110,6 +110,7 @@ fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: T
             let pixel = (y * options.width + x) as u64;
             let mut acc = glam::Vec3A::ZERO;
             let mut alpha = 0.0;
+            let mut ao = 0.0;
             let mut n_ok = 0u32;
             let mut first = SampleValue::default();
             for s in 0..spp {
@@ -117,13 +118,14 @@ fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: T
                 let (jx, jy) = if s == 0 { (0.5, 0.5) } else { (sampler.next_f32(), sampler.next_f32()) };
                 let mut ray = cam.generate_ray(x as f32 + jx, y as f32 + jy, options.width, options.height);
                 ray.diff.scale(1.0 / (spp as f32).sqrt());
-                let v = integrator.sample(&ray, &mut counters);
+                let v = integrator.sample(&ray, &mut sampler, &mut counters);
                 if s == 0 {
                     first = v;
                 }
                 if v.color.is_finite() && v.alpha.is_finite() {
                     acc += v.color;
                     alpha += v.alpha;
+                    ao += v.ao;
                     n_ok += 1;
                 } else {
                     dropped += 1;
@@ -133,6 +135,7 @@ fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: T
             let inv = if n_ok > 0 { 1.0 / n_ok as f32 } else { 0.0 };
             v.color = acc * inv;
             v.alpha = alpha * inv;
+            v.ao = ao * inv;
             if !(v.depth.is_finite() && v.normal.is_finite() && v.beam_width.is_finite()) {
                 dropped += 1;
                 v.depth = cam.clipping_range.1;
@@ -162,6 +165,7 @@ fn write_tile(film: &mut Film, r: &TileResult) {
                     "primId" => px[0] = v.prim_id,
                     "instanceId" => px[0] = v.instance_id,
                     "beamWidth" => px[0] = v.beam_width,
+                    "ao" => px[0] = v.ao,
                     "tessRate" => px[0] = v.tess_rate,
                     _ => {}
                 }

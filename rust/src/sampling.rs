@@ -43,6 +43,24 @@ impl Sampler {
     }
 }
 
+/// A cosine-weighted direction about +Z from two uniform numbers (Malley's method), and its
+/// density cos θ / π per steradian.
+pub fn cosine_hemisphere(u1: f32, u2: f32) -> (glam::Vec3A, f32) {
+    let r = u1.sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u2;
+    let z = (1.0 - u1).max(0.0).sqrt();
+    (glam::Vec3A::new(r * phi.cos(), r * phi.sin(), z), z * std::f32::consts::FRAC_1_PI)
+}
+
+/// An orthonormal frame (t, b, n) around unit `n` (Duff et al. 2017), for turning local
+/// directions into world ones.
+pub fn frame(n: glam::Vec3A) -> (glam::Vec3A, glam::Vec3A) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (glam::Vec3A::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), glam::Vec3A::new(b, sign + n.y * n.y * a, -n.y))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -58,5 +76,19 @@ mod tests {
         let n = 100_000;
         let mean: f64 = (0..n).map(|_| s.next_f32() as f64).sum::<f64>() / n as f64;
         assert!((mean - 0.5).abs() < 0.01, "{mean}");
+    }
+
+    #[test]
+    fn cosine_samples_have_the_cosine_mean_and_frames_are_orthonormal() {
+        let mut s = Sampler::new(3, 4, 5);
+        let n = 200_000;
+        // E[cos θ] under p = cos θ/π is 2/3.
+        let mean: f64 = (0..n).map(|_| cosine_hemisphere(s.next_f32(), s.next_f32()).0.z as f64).sum::<f64>() / n as f64;
+        assert!((mean - 2.0 / 3.0).abs() < 3e-3, "{mean}");
+        for n in [glam::Vec3A::Z, -glam::Vec3A::Z, glam::Vec3A::new(0.3, -0.5, 0.81).normalize()] {
+            let (t, b) = frame(n);
+            assert!(t.dot(b).abs() < 1e-6 && t.dot(n).abs() < 1e-6 && b.dot(n).abs() < 1e-6);
+            assert!((t.cross(b) - n).length() < 1e-5);
+        }
     }
 }

@@ -1,0 +1,86 @@
+//! Distribution effects against analytic answers: ambient occlusion beside an infinite wall, a
+//! flat mirror, and effects traced only when the scene calls for them.
+
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3, Vec3A};
+use mipray::material::Material;
+use mipray::prelude::*;
+
+fn quad(corners: [[f32; 3]; 4]) -> Arc<BilinearSurface> {
+    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    Arc::new(BilinearSurface::new(&topo, &corners).unwrap())
+}
+
+fn add(scene: &mut Scene, name: &str, surface: Arc<BilinearSurface>, material: Material) {
+    let mat = scene.add_material(material);
+    let mut m = Mesh::new(name, surface);
+    m.material = mat;
+    let i = scene.add_mesh(m);
+    scene.add_instance(i, Mat4::IDENTITY);
+}
+
+#[test]
+fn ambient_occlusion_beside_an_infinite_wall_is_one_half() {
+    // Ground z = 0 facing +z; a wall x = 0 facing +x, both 1e4 wide: "infinite" seen from a
+    // point near the corner. The wall hides exactly the half of the cosine-weighted hemisphere
+    // that leans toward it: AO = 1/2 at every distance; with the wall gone, AO = 1.
+    let big = 1.0e4;
+    let mut scene = Scene::default();
+    add(&mut scene, "/ground", quad([[-big, -big, 0.0], [big, -big, 0.0], [big, big, 0.0], [-big, big, 0.0]]), Material::default());
+    add(&mut scene, "/wall", quad([[0.0, -big, 0.0], [0.0, big, 0.0], [0.0, big, big], [0.0, -big, big]]), Material::default());
+    scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(2.0, 0.0, 10.0), Vec3::new(2.0, 0.0, 0.0), Vec3::Y), 20.0, 20.0);
+    let opts = RenderOptions { width: 16, height: 16, ao_samples: 64, aovs: vec!["ao".into(), "color".into()], ..Default::default() };
+    let out = render(&scene, &opts, &NoProgress).unwrap();
+    let ao = &out.film.aov("ao").unwrap().data;
+    let mean: f32 = ao.iter().sum::<f32>() / ao.len() as f32;
+    // 16·16·64 = 16384 binary samples of p = 1/2: standard error 0.004; allow 4σ.
+    assert!((mean - 0.5).abs() < 0.016, "mean AO {mean}");
+    // Color is albedo × AO for a unit white sky.
+    let c = &out.film.aov("color").unwrap().data;
+    let cmean: f32 = c.iter().step_by(3).sum::<f32>() / ao.len() as f32;
+    assert!((cmean - 0.18 * mean).abs() < 1e-4, "{cmean}");
+    assert!(out.stats["render"]["rays"]["ao"].as_u64().unwrap() >= 16 * 16 * 60);
+    assert!(out.stats["effects"]["enabled"].as_array().unwrap().iter().any(|e| e["name"] == "ao"));
+
+    scene.instances.pop();
+    let open = render(&scene, &opts, &NoProgress).unwrap();
+    assert!(open.film.aov("ao").unwrap().data.iter().all(|a| *a == 1.0));
+}
+
+#[test]
+fn a_flat_mirror_reflects_the_radiance_above_it() {
+    let mut scene = Scene::default();
+    add(&mut scene, "/mirror", quad([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]]), Material::mirror("/chrome", Vec3A::ZERO, Vec3A::splat(0.8)));
+    // A lit white ceiling facing down.
+    add(&mut scene, "/ceiling", quad([[-50.0, -50.0, 10.0], [-50.0, 50.0, 10.0], [50.0, 50.0, 10.0], [50.0, -50.0, 10.0]]), Material::lambertian("/white", Vec3A::ONE).0);
+    let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
+    light.casts_shadows = false;
+    scene.lights.push(light);
+    scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, 40.0);
+    let opts = RenderOptions { width: 8, height: 8, aovs: vec!["color".into(), "beamWidth".into()], ..Default::default() };
+    let out = render(&scene, &opts, &NoProgress).unwrap();
+    let expected = 0.8 * 2.0 / PI;
+    for p in out.film.aov("color").unwrap().data.chunks(3) {
+        assert!((p[0] - expected).abs() < 1e-5, "{} vs {expected}", p[0]);
+    }
+    assert_eq!(out.stats["render"]["rays"]["reflection"].as_u64(), Some(64));
+    assert_eq!(out.stats["render"]["rays"]["shadow"].as_u64(), Some(0), "the light casts no shadows");
+}
+
+#[test]
+fn a_scene_that_calls_for_nothing_traces_camera_and_shadow_rays_only() {
+    let mut scene = Scene::default();
+    add(&mut scene, "/ground", quad([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]]), Material::default());
+    scene.lights.push(Light::distant("/sun", Vec3A::new(0.2, 0.1, -1.0), Vec3A::ONE));
+    scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, -8.0, 6.0), Vec3::ZERO, Vec3::Z), 35.0);
+    let out = render(&scene, &RenderOptions { width: 16, height: 12, ..Default::default() }, &NoProgress).unwrap();
+    let rays = &out.stats["render"]["rays"];
+    for kind in ["reflection", "refraction", "glossy", "diffuse", "ao"] {
+        assert_eq!(rays[kind].as_u64(), Some(0), "{kind}");
+    }
+    assert!(rays["shadow"].as_u64().unwrap() > 0);
+    let names: Vec<&str> = out.stats["effects"]["enabled"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
+    assert_eq!(names, vec!["camera", "shadows"]);
+}
