@@ -216,7 +216,8 @@ mod tests {
         assert_eq!(Rate::for_beam(1.0, 0.25, 1.0), Some(Rate::R4));
         assert_eq!(Rate::for_beam(1.0, 0.2501, 1.0), Some(Rate::R4));
         assert_eq!(Rate::for_beam(1.0, 0.2499, 1.0), Some(Rate::R8));
-        assert_eq!(Rate::for_beam(1.0, 0.2499, 2.0), Some(Rate::R2));
+        assert_eq!(Rate::for_beam(1.0, 0.2501, 2.0), Some(Rate::R2));
+        assert_eq!(Rate::for_beam(1.0, 0.2499, 2.0), Some(Rate::R4));
         assert_eq!(Rate::for_beam(1.0, 2.0, 1.0), Some(Rate::R1));
         assert_eq!(Rate::for_beam(1.0, 1.0 / 16.0, 1.0), Some(Rate::R16));
         assert_eq!(Rate::for_beam(1.0, 0.9 / 16.0, 1.0), None);
