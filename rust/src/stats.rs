@@ -55,6 +55,7 @@ pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect]
             "instances": instances,
             "full_tessellation_vertices": full_verts,
             "full_tessellation_bytes": full_verts * 12,
+            "bvh_bytes": tracer.bvh_bytes(),
             "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
             "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
         },

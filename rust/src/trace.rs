@@ -154,6 +154,11 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().map(|m| m.subpatches.len()).sum()
     }
 
+    /// Bytes of every BVH (both levels), for the stats.
+    pub fn bvh_bytes(&self) -> usize {
+        self.meshes.iter().filter_map(|m| m.bvh.as_ref()).map(crate::bvh::bvh_bytes).sum::<usize>() + self.tlas.as_ref().map_or(0, crate::bvh::bvh_bytes)
+    }
+
     /// The scene's root subpatches and the render-space instance placements, for statistics.
     pub fn mesh_geometry(&self) -> &[MeshGeometry] {
         &self.meshes

@@ -29,7 +29,13 @@ pub(crate) struct LruList<T> {
 
 impl<T> Default for LruList<T> {
     fn default() -> Self {
-        Self { nodes: Vec::new(), head: NIL, tail: NIL, free: NIL, len: 0 }
+        Self {
+            nodes: Vec::new(),
+            head: NIL,
+            tail: NIL,
+            free: NIL,
+            len: 0,
+        }
     }
 }
 
@@ -56,7 +62,11 @@ impl<T> LruList<T> {
                 .ok()
                 .filter(|&i| i != NIL)
                 .expect("LRU list holds more than u32::MAX - 1 entries");
-            self.nodes.push(Node { value: Some(value), prev: NIL, next: NIL });
+            self.nodes.push(Node {
+                value: Some(value),
+                prev: NIL,
+                next: NIL,
+            });
             i
         };
         self.link_front(i);
@@ -69,7 +79,10 @@ impl<T> LruList<T> {
     /// # Panics
     /// If `i` is not a live node.
     pub(crate) fn get(&self, i: u32) -> &T {
-        self.nodes[i as usize].value.as_ref().expect("LRU node is live")
+        self.nodes[i as usize]
+            .value
+            .as_ref()
+            .expect("LRU node is live")
     }
 
     /// Marks node `i` as the most recently used.

@@ -51,9 +51,9 @@
 mod lru;
 mod seen;
 mod stats;
-mod tier;
 #[cfg(test)]
 mod tests;
+mod tier;
 
 use std::collections::HashMap;
 use std::fmt;
@@ -117,7 +117,12 @@ pub struct CacheKey {
 impl CacheKey {
     /// A key from its parts.
     pub const fn new(mesh: u32, generation: u32, subpatch: u32, tier: Tier) -> Self {
-        Self { mesh, generation, subpatch, tier }
+        Self {
+            mesh,
+            generation,
+            subpatch,
+            tier,
+        }
     }
 }
 
@@ -153,7 +158,12 @@ pub enum CacheMode {
 
 impl CacheMode {
     /// Every mode, in the order of the docs.
-    pub const ALL: [CacheMode; 4] = [CacheMode::Multires, CacheMode::Single, CacheMode::Unbounded, CacheMode::None];
+    pub const ALL: [CacheMode; 4] = [
+        CacheMode::Multires,
+        CacheMode::Single,
+        CacheMode::Unbounded,
+        CacheMode::None,
+    ];
 
     /// "multires", "single", "unbounded" or "none": the name in stats and options.
     pub const fn name(self) -> &'static str {
@@ -215,8 +225,11 @@ impl CacheConfig {
     /// The paper's default: multires, 10 MB per tier.
     pub const DEFAULT: CacheConfig = CacheConfig::multires(3 * DEFAULT_TIER_BUDGET_BYTES);
 
-    const NOMINAL_ENTRY_BYTES: [usize; 3] =
-        [Tier::Coarse.vertex_bytes(), Tier::Medium.vertex_bytes(), Tier::Fine.vertex_bytes()];
+    const NOMINAL_ENTRY_BYTES: [usize; 3] = [
+        Tier::Coarse.vertex_bytes(),
+        Tier::Medium.vertex_bytes(),
+        Tier::Fine.vertex_bytes(),
+    ];
 
     /// Three tiers sharing `total_bytes` evenly (the fine tier takes the 0–2 bytes of rounding,
     /// so the budgets add up to `total_bytes`).
@@ -231,17 +244,29 @@ impl CacheConfig {
 
     /// Only the fine tier, with all of `total_bytes`.
     pub const fn single(total_bytes: usize) -> Self {
-        Self { mode: CacheMode::Single, budget_bytes: [0, 0, total_bytes], entry_bytes: Self::NOMINAL_ENTRY_BYTES }
+        Self {
+            mode: CacheMode::Single,
+            budget_bytes: [0, 0, total_bytes],
+            entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+        }
     }
 
     /// Never evicts.
     pub const fn unbounded() -> Self {
-        Self { mode: CacheMode::Unbounded, budget_bytes: [0; 3], entry_bytes: Self::NOMINAL_ENTRY_BYTES }
+        Self {
+            mode: CacheMode::Unbounded,
+            budget_bytes: [0; 3],
+            entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+        }
     }
 
     /// Never stores.
     pub const fn none() -> Self {
-        Self { mode: CacheMode::None, budget_bytes: [0; 3], entry_bytes: Self::NOMINAL_ENTRY_BYTES }
+        Self {
+            mode: CacheMode::None,
+            budget_bytes: [0; 3],
+            entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+        }
     }
 
     /// `mode` with a total budget of `total_bytes` (ignored by `unbounded` and `none`): what a
@@ -260,7 +285,11 @@ impl CacheConfig {
     pub const fn with_entry_bytes(mut self, entry_bytes: [usize; 3]) -> Self {
         let mut i = 0;
         while i < 3 {
-            self.entry_bytes[i] = if entry_bytes[i] == 0 { 1 } else { entry_bytes[i] };
+            self.entry_bytes[i] = if entry_bytes[i] == 0 {
+                1
+            } else {
+                entry_bytes[i]
+            };
             i += 1;
         }
         self
@@ -270,7 +299,11 @@ impl CacheConfig {
     pub const fn tier_budget_bytes(&self, tier: Tier) -> Option<usize> {
         match self.mode {
             CacheMode::Multires => Some(self.budget_bytes[tier.index()]),
-            CacheMode::Single => Some(if matches!(tier, Tier::Fine) { self.budget_bytes[2] } else { 0 }),
+            CacheMode::Single => Some(if matches!(tier, Tier::Fine) {
+                self.budget_bytes[2]
+            } else {
+                0
+            }),
             CacheMode::Unbounded => None,
             CacheMode::None => Some(0),
         }
@@ -298,7 +331,11 @@ impl CacheConfig {
     pub const fn capacity_entries(&self, tier: Tier) -> Option<usize> {
         let entry = self.entry_bytes[tier.index()];
         match self.tier_budget_bytes(tier) {
-            Some(budget) => Some(if entry == 0 { 0 } else { budget / entry }),
+            // A zero entry size (only by setting the field directly) reports 0, not a panic.
+            Some(budget) => match budget.checked_div(entry) {
+                Some(capacity) => Some(capacity),
+                None => Some(0),
+            },
             None => None,
         }
     }
@@ -356,7 +393,11 @@ enum PendingState<E> {
 
 impl<E> Pending<E> {
     fn new() -> Self {
-        Self { builder: thread::current().id(), state: Mutex::new(PendingState::Building), done: Condvar::new() }
+        Self {
+            builder: thread::current().id(),
+            state: Mutex::new(PendingState::Building),
+            done: Condvar::new(),
+        }
     }
 
     fn finish(&self, state: PendingState<E>) {
@@ -420,14 +461,29 @@ impl<E: CacheEntry> TierCache<E> {
     }
 
     fn count_build(&self, cold: bool) {
-        let counter = if cold { &self.counters.cold_tessellations } else { &self.counters.misses };
+        let counter = if cold {
+            &self.counters.cold_tessellations
+        } else {
+            &self.counters.misses
+        };
         TierCounters::add(counter, 1);
     }
 
     /// Builds `key` as the one thread registered to, stores it if it still may, and wakes the
     /// threads waiting for it.
-    fn build_and_store(&self, key: CacheKey, pending: &Arc<Pending<E>>, cold: bool, build: impl FnOnce() -> E) -> Arc<E> {
-        let mut guard = AbandonOnUnwind { tier: self, key, pending, armed: true };
+    fn build_and_store(
+        &self,
+        key: CacheKey,
+        pending: &Arc<Pending<E>>,
+        cold: bool,
+        build: impl FnOnce() -> E,
+    ) -> Arc<E> {
+        let mut guard = AbandonOnUnwind {
+            tier: self,
+            key,
+            pending,
+            armed: true,
+        };
         let entry = Arc::new(build());
         let bytes = entry.byte_size();
         let vertices = entry.vertex_count();
@@ -443,7 +499,13 @@ impl<E: CacheEntry> TierCache<E> {
     /// Makes `entry` resident, evicting least recently used entries until it fits. Does nothing
     /// if the build was unregistered meanwhile (its mesh was invalidated); only unregisters it if
     /// it is larger than the whole budget. Returns the evicted entries.
-    fn store(&self, key: CacheKey, pending: &Arc<Pending<E>>, entry: &Arc<E>, bytes: usize) -> Vec<Arc<E>> {
+    fn store(
+        &self,
+        key: CacheKey,
+        pending: &Arc<Pending<E>>,
+        entry: &Arc<E>,
+        bytes: usize,
+    ) -> Vec<Arc<E>> {
         let mut evicted = Vec::new();
         let mut st = self.state.lock();
         let ours = matches!(st.slots.get(&key), Some(Slot::Building(p)) if Arc::ptr_eq(p, pending));
@@ -461,13 +523,16 @@ impl<E: CacheEntry> TierCache<E> {
             st.resident_bytes -= old.bytes;
             evicted.push(old.entry);
         }
-        let node = st.lru.push_front(Resident { key, entry: Arc::clone(entry), bytes });
+        let node = st.lru.push_front(Resident {
+            key,
+            entry: Arc::clone(entry),
+            bytes,
+        });
         st.slots.insert(key, Slot::Resident(node));
         st.resident_bytes += bytes;
         self.counters.raise_peak(st.resident_bytes);
         evicted
     }
-
 }
 
 impl<E: CacheEntry> GeometryCache<E> {
@@ -491,7 +556,9 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// entry of a tier without budget (coarse and medium in `single` mode).
     ///
     /// `build` runs without any cache lock held. It must not look up `key` itself, nor wait on a
-    /// thread that is looking up `key`: that would wait for itself.
+    /// thread that is looking up `key`: that would wait for itself. For the same reason it should
+    /// not run rayon work: while it waits in a rayon join, its thread may steal a render job that
+    /// looks up `key` (which then panics, see below, rather than hanging).
     ///
     /// # Panics
     /// If `build` panics (the panic is passed on; threads waiting for this build then build the
@@ -501,7 +568,11 @@ impl<E: CacheEntry> GeometryCache<E> {
         TierCounters::add(&tier.counters.lookups, 1);
 
         if self.config.mode == CacheMode::None {
-            let cold = tier.state.lock().seen.insert(key.mesh, key.generation, key.subpatch);
+            let cold = tier
+                .state
+                .lock()
+                .seen
+                .insert(key.mesh, key.generation, key.subpatch);
             tier.count_build(cold);
             let entry = Arc::new(build());
             tier.counters.built(cold, entry.vertex_count());
@@ -557,7 +628,12 @@ impl<E: CacheEntry> GeometryCache<E> {
         for tier in &self.tiers {
             let mut dropped = Vec::new();
             let mut st = tier.state.lock();
-            let TierState { slots, lru, resident_bytes, seen } = &mut *st;
+            let TierState {
+                slots,
+                lru,
+                resident_bytes,
+                seen,
+            } = &mut *st;
             slots.retain(|key, slot| {
                 if key.mesh != mesh {
                     return true;
@@ -621,7 +697,10 @@ impl<E: CacheEntry> fmt::Debug for GeometryCache<E> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("GeometryCache")
             .field("config", &self.config)
-            .field("resident_entries", &Tier::ALL.map(|t| self.resident_entries(t)))
+            .field(
+                "resident_entries",
+                &Tier::ALL.map(|t| self.resident_entries(t)),
+            )
             .field("resident_bytes", &Tier::ALL.map(|t| self.resident_bytes(t)))
             .finish()
     }

@@ -171,7 +171,13 @@ mod tests {
     fn fx_hash_spreads_sequential_keys() {
         // hashbrown takes its control bits from the top 7 bits: sequential ids must not share them.
         let b = FxBuild::default();
-        let tops: HashSet<u64> = (0u32..256).map(|i| b.hash_one((1u32, 0u32, i)) >> 57).collect();
-        assert!(tops.len() > 64, "only {} distinct top-7-bit values", tops.len());
+        let tops: HashSet<u64> = (0u32..256)
+            .map(|i| b.hash_one((1u32, 0u32, i)) >> 57)
+            .collect();
+        assert!(
+            tops.len() > 64,
+            "only {} distinct top-7-bit values",
+            tops.len()
+        );
     }
 }

@@ -25,6 +25,8 @@ pub(crate) struct TierCounters {
     pub(crate) cold_vertices: AtomicU64,
     pub(crate) recomputed_vertices: AtomicU64,
     pub(crate) peak_bytes: AtomicU64,
+    /// The largest `byte_size` of any entry built in this tier, for `capacity_entries`.
+    pub(crate) largest_entry_bytes: AtomicU64,
 }
 
 impl TierCounters {
@@ -33,12 +35,17 @@ impl TierCounters {
         counter.fetch_add(n, Relaxed);
     }
 
-    /// Records the vertices of a finished build: cold ones for a first build, recomputed ones
-    /// (the cache cost) for a rebuild.
+    /// Records a finished build of `bytes` and `vertices`: cold vertices for a first build,
+    /// recomputed ones (the cache cost) for a rebuild.
     #[inline]
-    pub(crate) fn built(&self, cold: bool, vertices: usize) {
-        let counter = if cold { &self.cold_vertices } else { &self.recomputed_vertices };
+    pub(crate) fn built(&self, cold: bool, vertices: usize, bytes: usize) {
+        let counter = if cold {
+            &self.cold_vertices
+        } else {
+            &self.recomputed_vertices
+        };
         Self::add(counter, vertices as u64);
+        self.largest_entry_bytes.fetch_max(bytes as u64, Relaxed);
     }
 
     #[inline]
@@ -57,7 +64,11 @@ impl TierCounters {
             lookups,
             hits,
             misses: self.misses.load(Relaxed),
-            hit_rate: if lookups == 0 { 0.0 } else { hits as f64 / lookups as f64 },
+            hit_rate: if lookups == 0 {
+                0.0
+            } else {
+                hits as f64 / lookups as f64
+            },
             recomputed_vertices: self.recomputed_vertices.load(Relaxed),
             peak_bytes: self.peak_bytes.load(Relaxed),
             cold_vertices: self.cold_vertices.load(Relaxed),
@@ -157,7 +168,9 @@ impl CacheStats {
             if t.capacity_entries == Some(0) && t.lookups == 0 {
                 continue;
             }
-            let capacity = t.capacity_entries.map_or_else(|| "unbounded".to_owned(), |c| c.to_string());
+            let capacity = t
+                .capacity_entries
+                .map_or_else(|| "unbounded".to_owned(), |c| c.to_string());
             let hit_rate = if t.lookups == 0 {
                 "-".to_owned()
             } else {
@@ -200,7 +213,10 @@ fn human_bytes(b: u64) -> String {
     UNITS
         .iter()
         .find(|&&(_, scale)| b as f64 >= scale)
-        .map_or_else(|| format!("{b} B"), |&(unit, scale)| format!("{:.1} {unit}", b as f64 / scale))
+        .map_or_else(
+            || format!("{b} B"),
+            |&(unit, scale)| format!("{:.1} {unit}", b as f64 / scale),
+        )
 }
 
 #[cfg(test)]
@@ -223,12 +239,18 @@ mod tests {
         TierCounters::add(&c.lookups, 4);
         TierCounters::add(&c.hits, 3);
         TierCounters::add(&c.cold_tessellations, 1);
-        c.built(true, 289);
+        c.built(true, 289, 3468);
         c.raise_peak(100);
         c.raise_peak(50);
         let s = c.snapshot(Tier::Fine, Some(3));
         assert_eq!(s.hit_rate, 0.75);
-        assert_eq!((s.cold_vertices, s.recomputed_vertices, s.peak_bytes), (289, 0, 100));
-        assert_eq!((s.name, s.verts_per_side, s.capacity_entries), ("fine", 17, Some(3)));
+        assert_eq!(
+            (s.cold_vertices, s.recomputed_vertices, s.peak_bytes),
+            (289, 0, 100)
+        );
+        assert_eq!(
+            (s.name, s.verts_per_side, s.capacity_entries),
+            ("fine", 17, Some(3))
+        );
     }
 }

@@ -118,7 +118,14 @@ mod tests {
     fn grid_sizes_are_the_papers() {
         let got: Vec<_> = Tier::ALL
             .iter()
-            .map(|t| (t.verts_per_side(), t.quads_per_side(), t.vertex_count(), t.vertex_bytes()))
+            .map(|t| {
+                (
+                    t.verts_per_side(),
+                    t.quads_per_side(),
+                    t.vertex_count(),
+                    t.vertex_bytes(),
+                )
+            })
             .collect();
         assert_eq!(got, [(2, 1, 4, 48), (5, 4, 25, 300), (17, 16, 289, 3468)]);
     }
@@ -137,10 +144,20 @@ mod tests {
         for t in Tier::ALL {
             assert_eq!(t.to_string(), t.name());
             assert_eq!(t.name().parse::<Tier>(), Ok(t));
-            assert_eq!(serde_json::to_string(&t).ok(), Some(format!("\"{}\"", t.name())));
+            assert_eq!(
+                serde_json::to_string(&t).ok(),
+                Some(format!("\"{}\"", t.name()))
+            );
         }
         assert_eq!(["coarse", "medium", "fine"], Tier::ALL.map(Tier::name));
-        let err = "Fine".parse::<Tier>().err().map(|e| e.to_string()).unwrap_or_default();
-        assert!(err.contains("\"Fine\"") && err.contains("coarse, medium, fine"), "{err}");
+        let err = "Fine"
+            .parse::<Tier>()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("\"Fine\"") && err.contains("coarse, medium, fine"),
+            "{err}"
+        );
     }
 }

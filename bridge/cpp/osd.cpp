@@ -1,0 +1,668 @@
+// OpenSubdiv (Far) for mipray: topology refinement, the adaptive patch table with Gregory-basis
+// end caps, control points by stencils, and limit evaluation. See include/osd.h.
+//
+// Error handling: OpenSubdiv reports problems through Far::Error / Far::Warning. Without a
+// callback a FAR_FATAL_ERROR calls exit(), which would kill a Python host, so callbacks are
+// installed once and record messages per thread; a call that saw an error throws
+// std::runtime_error carrying them, and cxx hands that to Rust as an Err.
+
+#include "mipray-bridge/include/osd.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <opensubdiv/far/error.h>
+#include <opensubdiv/far/patchMap.h>
+#include <opensubdiv/far/patchTable.h>
+#include <opensubdiv/far/patchTableFactory.h>
+#include <opensubdiv/far/ptexIndices.h>
+#include <opensubdiv/far/stencilTable.h>
+#include <opensubdiv/far/stencilTableFactory.h>
+#include <opensubdiv/far/topologyDescriptor.h>
+#include <opensubdiv/far/topologyRefinerFactory.h>
+
+#include "mipray-bridge/src/ffi.rs.h"
+
+namespace Far = OpenSubdiv::Far;
+namespace Sdc = OpenSubdiv::Sdc;
+
+namespace mipray_bridge {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// OpenSubdiv's error and warning callbacks.
+
+// Per thread, so that meshes built concurrently on several threads keep their messages apart
+// (OpenSubdiv calls the callback on the thread that hit the problem).
+thread_local std::string t_errors;
+thread_local std::string t_warnings;
+
+void on_far_error(Far::ErrorType type, const char* message) {
+  const char* label = "error";
+  switch (type) {
+    case Far::FAR_FATAL_ERROR: label = "fatal error"; break;
+    case Far::FAR_INTERNAL_CODING_ERROR: label = "internal coding error"; break;
+    case Far::FAR_CODING_ERROR: label = "coding error"; break;
+    case Far::FAR_RUNTIME_ERROR: label = "runtime error"; break;
+    default: break;
+  }
+  if (!t_errors.empty()) t_errors += "; ";
+  t_errors += label;
+  t_errors += ": ";
+  t_errors += message ? message : "(no message)";
+}
+
+void on_far_warning(const char* message) {
+  if (!t_warnings.empty()) t_warnings += "\n";
+  t_warnings += message ? message : "(no message)";
+}
+
+std::once_flag g_callbacks_installed;
+
+// Clears this thread's messages, installs the callbacks (once per process), and turns recorded
+// errors into exceptions at the points where a result is used.
+class FarCapture {
+ public:
+  FarCapture() {
+    std::call_once(g_callbacks_installed, [] {
+      Far::SetErrorCallback(on_far_error);
+      Far::SetWarningCallback(on_far_warning);
+    });
+    t_errors.clear();
+    t_warnings.clear();
+  }
+  // Throws if OpenSubdiv reported an error since construction.
+  void check(const char* stage) const {
+    if (!t_errors.empty()) {
+      std::string msg = std::string(stage) + ": " + t_errors;
+      if (!t_warnings.empty()) msg += " (warnings: " + one_line(t_warnings) + ")";
+      throw std::runtime_error(msg);
+    }
+  }
+  // Throws with the errors and warnings recorded so far (for a null result).
+  [[noreturn]] void fail(const char* stage) const {
+    std::string msg = stage;
+    if (!t_errors.empty()) msg += ": " + t_errors;
+    if (!t_warnings.empty()) msg += ": " + one_line(t_warnings);
+    if (t_errors.empty() && t_warnings.empty()) msg += ": OpenSubdiv gave no reason";
+    throw std::runtime_error(msg);
+  }
+  std::string warnings() const { return t_warnings; }
+
+ private:
+  static std::string one_line(std::string s) {
+    std::replace(s.begin(), s.end(), '\n', ';');
+    return s;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Refiner construction.
+
+using RefinerPtr = std::unique_ptr<Far::TopologyRefiner>;
+
+void check_desc(const OsdMeshDesc& d, std::size_t point_floats) {
+  // The Rust side validates the topology; these checks only keep OpenSubdiv from reading out of
+  // bounds if it did not.
+  if (d.num_vertices < 0 || point_floats != std::size_t(d.num_vertices) * 3)
+    throw std::runtime_error("point array does not hold num_vertices × 3 floats");
+  if (d.crease_pairs.size() != d.crease_weights.size() * 2)
+    throw std::runtime_error("crease pairs and weights disagree");
+  if (d.corner_indices.size() != d.corner_weights.size())
+    throw std::runtime_error("corner indices and weights disagree");
+  std::size_t total = 0;
+  for (int32_t n : d.face_vertex_counts) {
+    if (n < 3) throw std::runtime_error("a face has fewer than 3 vertices");
+    total += std::size_t(n);
+  }
+  if (total != d.face_vertex_indices.size())
+    throw std::runtime_error("face vertex counts and indices disagree");
+  auto in_range = [](const rust::Vec<int32_t>& v, int32_t bound, const char* what) {
+    for (int32_t i : v)
+      if (i < 0 || i >= bound) throw std::runtime_error(std::string(what) + " out of range");
+  };
+  in_range(d.face_vertex_indices, d.num_vertices, "face vertex index");
+  in_range(d.crease_pairs, d.num_vertices, "crease vertex index");
+  in_range(d.corner_indices, d.num_vertices, "corner vertex index");
+  in_range(d.hole_indices, int32_t(d.face_vertex_counts.size()), "hole face index");
+  if (d.isolation_level < 1 || d.isolation_level > 10)
+    throw std::runtime_error("isolation level must be in 1..=10");
+}
+
+Sdc::SchemeType scheme_of(const OsdMeshDesc& d) {
+  switch (d.scheme) {
+    case 0: return Sdc::SCHEME_CATMARK;
+    case 1: return Sdc::SCHEME_LOOP;
+    case 2: return Sdc::SCHEME_BILINEAR;
+    default: throw std::runtime_error("unknown scheme code");
+  }
+}
+
+Sdc::Options sdc_options_of(const OsdMeshDesc& d) {
+  Sdc::Options o;
+  switch (d.boundary) {
+    case 0: o.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_NONE); break;
+    case 1: o.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY); break;
+    case 2: o.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER); break;
+    default: throw std::runtime_error("unknown boundary interpolation code");
+  }
+  switch (d.fvar) {
+    case 0: o.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_NONE); break;
+    case 1: o.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_CORNERS_ONLY); break;
+    case 2: o.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_CORNERS_PLUS1); break;
+    case 3: o.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_CORNERS_PLUS2); break;
+    case 4: o.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_BOUNDARIES); break;
+    case 5: o.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_ALL); break;
+    default: throw std::runtime_error("unknown face-varying interpolation code");
+  }
+  switch (d.triangle_subdivision) {
+    case 0: o.SetTriangleSubdivision(Sdc::Options::TRI_SUB_CATMARK); break;
+    case 1: o.SetTriangleSubdivision(Sdc::Options::TRI_SUB_SMOOTH); break;
+    default: throw std::runtime_error("unknown triangle subdivision code");
+  }
+  // USD has no creasing-method attribute: OpenSubdiv's default, uniform.
+  o.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
+  return o;
+}
+
+RefinerPtr create_refiner(const OsdMeshDesc& d, const FarCapture& capture) {
+  Far::TopologyDescriptor td;
+  td.numVertices = d.num_vertices;
+  td.numFaces = int(d.face_vertex_counts.size());
+  td.numVertsPerFace = d.face_vertex_counts.data();
+  td.vertIndicesPerFace = d.face_vertex_indices.data();
+  td.numCreases = int(d.crease_weights.size());
+  td.creaseVertexIndexPairs = d.crease_pairs.data();
+  td.creaseWeights = d.crease_weights.data();
+  td.numCorners = int(d.corner_indices.size());
+  td.cornerVertexIndices = d.corner_indices.data();
+  td.cornerWeights = d.corner_weights.data();
+  td.numHoles = int(d.hole_indices.size());
+  td.holeIndices = d.hole_indices.data();
+  // Winding stays as given: the core flips normals of left-handed meshes itself, so telling
+  // OpenSubdiv as well would flip them twice.
+  td.isLeftHanded = false;
+
+  using Factory = Far::TopologyRefinerFactory<Far::TopologyDescriptor>;
+  Factory::Options fo(scheme_of(d), sdc_options_of(d));
+  RefinerPtr refiner(Factory::Create(td, fo));
+  if (!refiner) capture.fail("OpenSubdiv refused the topology");
+  capture.check("OpenSubdiv topology");
+  return refiner;
+}
+
+Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d) {
+  Far::PatchTableFactory::Options po(d.isolation_level);
+  po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+  po.useInfSharpPatch = true;
+  // Only vertex data is evaluated: no varying or face-varying tables.
+  po.generateVaryingTables = false;
+  po.generateVaryingLocalPoints = false;
+  return po;
+}
+
+void refine_adaptive(Far::TopologyRefiner& refiner, const OsdMeshDesc& d,
+                     const FarCapture& capture) {
+  Far::TopologyRefiner::AdaptiveOptions ao = patch_options_of(d).GetRefineAdaptiveOptions();
+  ao.SetSecondaryLevel(std::min(d.secondary_level, d.isolation_level));
+  refiner.RefineAdaptive(ao);
+  capture.check("OpenSubdiv adaptive refinement");
+}
+
+// Applies a stencil table (weights over the base points) to `base` (3 floats per point) and
+// writes the results to `dst` (3 floats per stencil). Accumulates in double: stencils around
+// high-valence vertices have many small weights.
+void apply_stencils(const Far::StencilTable& st, const float* base, float* dst) {
+  const std::vector<int>& sizes = st.GetSizes();
+  const std::vector<Far::Index>& idx = st.GetControlIndices();
+  const std::vector<float>& w = st.GetWeights();
+  std::size_t ofs = 0;
+  for (std::size_t s = 0; s < sizes.size(); ++s) {
+    double acc[3] = {0, 0, 0};
+    for (int k = 0; k < sizes[s]; ++k, ++ofs) {
+      const float* p = base + 3 * std::size_t(idx[ofs]);
+      acc[0] += double(w[ofs]) * p[0];
+      acc[1] += double(w[ofs]) * p[1];
+      acc[2] += double(w[ofs]) * p[2];
+    }
+    dst[3 * s + 0] = float(acc[0]);
+    dst[3 * s + 1] = float(acc[1]);
+    dst[3 * s + 2] = float(acc[2]);
+  }
+}
+
+bool is_triangle_type(Far::PatchDescriptor::Type t) {
+  return t == Far::PatchDescriptor::LOOP || t == Far::PatchDescriptor::GREGORY_TRIANGLE ||
+         t == Far::PatchDescriptor::TRIANGLES;
+}
+
+uint8_t kind_code(Far::PatchDescriptor::Type t) {
+  switch (t) {
+    case Far::PatchDescriptor::QUADS: return 0;
+    case Far::PatchDescriptor::REGULAR: return 1;
+    case Far::PatchDescriptor::GREGORY_BASIS: return 2;
+    case Far::PatchDescriptor::LOOP: return 3;
+    case Far::PatchDescriptor::GREGORY_TRIANGLE: return 4;
+    default: return 5;
+  }
+}
+
+constexpr int kMaxPatchPoints = 20;  // Gregory basis; every other type has fewer.
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// OsdMesh
+
+struct OsdMesh::Impl {
+  std::unique_ptr<Far::PatchTable> patch_table;
+  std::unique_ptr<Far::PatchMap> patch_map;
+  // Refined and local points as weights over the mesh's points (mesh points themselves are not in
+  // it: they are copied).
+  std::unique_ptr<const Far::StencilTable> stencils;
+  int num_base_points = 0;
+  // Mesh points, then refined points of every level, then local (end-cap) points: the index
+  // space of the patch table's control vertex indices. 3 floats each.
+  std::vector<float> control_points;
+  // Per patch, in PatchTable order (a handle's patchIndex is its position here).
+  std::vector<Far::PatchTable::PatchHandle> handles;
+  std::vector<Far::PatchDescriptor::Type> types;
+  std::vector<int32_t> ptex_to_base;
+  std::string warnings;
+
+  void set_points(const float* points) {
+    std::copy(points, points + 3 * std::size_t(num_base_points), control_points.begin());
+    if (stencils && stencils->GetNumStencils() > 0)
+      apply_stencils(*stencils, points, control_points.data() + 3 * std::size_t(num_base_points));
+  }
+
+  // Evaluates at the patch's local (s, t). Derivative outputs may be null (then not computed);
+  // second derivatives are computed only when all three are given.
+  void eval(std::size_t patch, float s, float t, float* p, float* du, float* dv, float* duu,
+            float* duv, float* dvv) const noexcept {
+    const Far::PatchTable::PatchHandle& h = handles[patch];
+    const Far::PatchParam param = patch_table->GetPatchParam(h);
+    const bool tri = is_triangle_type(types[patch]);
+    const bool rotated = tri && param.IsTriangleRotated();
+    // EvaluateBasis takes (u, v) in the ptex face's parameterization and normalizes them with
+    // the PatchParam; map the local (s, t) out the same way so it lands back on (s, t). Double
+    // keeps the round trip from eating low bits at deep levels.
+    double fu = s, fv = t;
+    if (tri)
+      param.UnnormalizeTriangle(fu, fv);
+    else
+      param.Unnormalize(fu, fv);
+
+    double w[kMaxPatchPoints], wu[kMaxPatchPoints], wv[kMaxPatchPoints];
+    double wuu[kMaxPatchPoints], wuv[kMaxPatchPoints], wvv[kMaxPatchPoints];
+    const bool d1 = du && dv;
+    const bool d2 = d1 && duu && duv && dvv;
+    patch_table->EvaluateBasis(h, fu, fv, w, d1 ? wu : nullptr, d1 ? wv : nullptr,
+                               d2 ? wuu : nullptr, d2 ? wuv : nullptr, d2 ? wvv : nullptr);
+
+    // OpenSubdiv scales the normalized basis derivatives by 2^depth (negated for rotated
+    // triangles) and the second derivatives by sign × (sign × 2^depth)² (Far's
+    // internal::EvaluatePatchBasis). Dividing by exactly those factors gives derivatives with
+    // respect to the patch's local (s, t), which is what mipray's LimitSurface promises.
+    const double sign = rotated ? -1.0 : 1.0;
+    const double s1 = sign * double(1 << param.GetDepth());
+    const double s2 = sign * s1 * s1;
+
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(h);
+    double acc[6][3] = {};
+    for (int k = 0; k < cvs.size(); ++k) {
+      const float* c = control_points.data() + 3 * std::size_t(cvs[k]);
+      for (int a = 0; a < 3; ++a) {
+        acc[0][a] += w[k] * c[a];
+        if (d1) {
+          acc[1][a] += wu[k] * c[a];
+          acc[2][a] += wv[k] * c[a];
+        }
+        if (d2) {
+          acc[3][a] += wuu[k] * c[a];
+          acc[4][a] += wuv[k] * c[a];
+          acc[5][a] += wvv[k] * c[a];
+        }
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      p[a] = float(acc[0][a]);
+      if (d1) {
+        du[a] = float(acc[1][a] / s1);
+        dv[a] = float(acc[2][a] / s1);
+      }
+      if (d2) {
+        duu[a] = float(acc[3][a] / s2);
+        duv[a] = float(acc[4][a] / s2);
+        dvv[a] = float(acc[5][a] / s2);
+      }
+    }
+  }
+};
+
+OsdMesh::OsdMesh() : impl(new Impl) {}
+OsdMesh::~OsdMesh() = default;
+
+rust::String OsdMesh::warnings() const { return rust::String(impl->warnings); }
+
+std::size_t OsdMesh::ptex_face_count() const {
+  return std::size_t(impl->patch_table->GetNumPtexFaces());
+}
+
+rust::Vec<OsdPatchInfo> OsdMesh::patch_infos() const {
+  rust::Vec<OsdPatchInfo> out;
+  out.reserve(impl->handles.size());
+  for (std::size_t i = 0; i < impl->handles.size(); ++i) {
+    const Far::PatchParam param = impl->patch_table->GetPatchParam(impl->handles[i]);
+    const bool tri = is_triangle_type(impl->types[i]);
+    const float frac = param.GetParamFraction();
+    OsdPatchInfo info{};
+    info.ptex_face = param.GetFaceId();
+    info.base_face =
+        (info.ptex_face >= 0 && std::size_t(info.ptex_face) < impl->ptex_to_base.size())
+            ? impl->ptex_to_base[std::size_t(info.ptex_face)]
+            : -1;
+    if (tri && param.IsTriangleRotated()) {
+      // A rotated triangle runs from its corner ((2^depth − U)·frac, (2^depth − V)·frac) in the
+      // negative directions (PatchParam::UnnormalizeTriangle): a negative size says so, and
+      // keeps u0 + u·size the exact map from local to face (u, v).
+      const int depth_factor = 1 << param.GetDepth();
+      info.u0 = float(depth_factor - param.GetU()) * frac;
+      info.v0 = float(depth_factor - param.GetV()) * frac;
+      info.size = -frac;
+    } else {
+      info.u0 = float(param.GetU()) * frac;
+      info.v0 = float(param.GetV()) * frac;
+      info.size = frac;
+    }
+    info.depth = uint8_t(param.GetDepth());
+    info.boundary = uint8_t(param.GetBoundary());
+    info.transition = uint8_t(param.GetTransition());
+    info.kind = kind_code(impl->types[i]);
+    out.push_back(info);
+  }
+  return out;
+}
+
+rust::Vec<float> OsdMesh::patch_bounds() const {
+  rust::Vec<float> out;
+  out.reserve(impl->handles.size() * 6);
+  for (const auto& h : impl->handles) {
+    float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                   std::numeric_limits<float>::infinity()};
+    float hi[3] = {-lo[0], -lo[1], -lo[2]};
+    Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(h);
+    for (int k = 0; k < cvs.size(); ++k) {
+      const float* c = impl->control_points.data() + 3 * std::size_t(cvs[k]);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], c[a]);
+        hi[a] = std::max(hi[a], c[a]);
+      }
+    }
+    for (float x : lo) out.push_back(x);
+    for (float x : hi) out.push_back(x);
+  }
+  return out;
+}
+
+bool OsdMesh::base_points(rust::Slice<float> out) const noexcept {
+  if (out.size() != 3 * std::size_t(impl->num_base_points)) return false;
+  std::copy(impl->control_points.begin(), impl->control_points.begin() + std::ptrdiff_t(out.size()),
+            out.data());
+  return true;
+}
+
+void OsdMesh::update_points(rust::Slice<const float> points) {
+  if (points.size() != 3 * std::size_t(impl->num_base_points))
+    throw std::runtime_error("update_points: the point count differs from the mesh's");
+  impl->set_points(points.data());
+}
+
+bool OsdMesh::evaluate(std::size_t patch, float u, float v, rust::Slice<float> out) const noexcept {
+  if (patch >= impl->handles.size() || out.size() < 18) return false;
+  float* o = out.data();
+  impl->eval(patch, u, v, o, o + 3, o + 6, o + 9, o + 12, o + 15);
+  return true;
+}
+
+bool OsdMesh::evaluate_grid(std::size_t patch, float u0, float v0, float u1, float v1,
+                            std::size_t n, rust::Slice<float> p, rust::Slice<float> du,
+                            rust::Slice<float> dv) const noexcept {
+  const bool derivs = !du.empty();
+  if (patch >= impl->handles.size() || n == 0 || p.size() != 3 * n * n) return false;
+  if (derivs && (du.size() != p.size() || dv.size() != p.size())) return false;
+  // The same (u, v) as UvRect::grid_uv computes in Rust, in the same f32 arithmetic, so a grid
+  // vertex equals the single evaluation at that vertex.
+  const float d = float((n < 2 ? 2 : n) - 1);
+  for (std::size_t j = 0; j < n; ++j) {
+    const float v = v0 + (v1 - v0) * (float(j) / d);
+    for (std::size_t i = 0; i < n; ++i) {
+      const float u = u0 + (u1 - u0) * (float(i) / d);
+      const std::size_t k = 3 * (j * n + i);
+      impl->eval(patch, u, v, p.data() + k, derivs ? du.data() + k : nullptr,
+                 derivs ? dv.data() + k : nullptr, nullptr, nullptr, nullptr);
+    }
+  }
+  return true;
+}
+
+int64_t OsdMesh::find_patch(int32_t ptex_face, float u, float v,
+                            rust::Slice<float> local_uv) const noexcept {
+  if (local_uv.size() < 2 || ptex_face < 0 || ptex_face >= impl->patch_table->GetNumPtexFaces())
+    return -1;
+  const Far::PatchMap::Handle* h = impl->patch_map->FindPatch(ptex_face, double(u), double(v));
+  if (!h) return -1;
+  const std::size_t patch = std::size_t(h->patchIndex);
+  if (patch >= impl->handles.size()) return -1;
+  const Far::PatchParam param = impl->patch_table->GetPatchParam(*h);
+  double s = u, t = v;
+  if (is_triangle_type(impl->types[patch]))
+    param.NormalizeTriangle(s, t);
+  else
+    param.Normalize(s, t);
+  local_uv[0] = float(s);
+  local_uv[1] = float(t);
+  return int64_t(patch);
+}
+
+std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const float> points) {
+  try {
+    check_desc(desc, points.size());
+    FarCapture capture;
+    RefinerPtr refiner = create_refiner(desc, capture);
+    refine_adaptive(*refiner, desc, capture);
+
+    auto mesh = std::make_unique<OsdMesh>();
+    OsdMesh::Impl& m = *mesh->impl;
+    m.patch_table.reset(Far::PatchTableFactory::Create(*refiner, patch_options_of(desc)));
+    if (!m.patch_table) capture.fail("OpenSubdiv could not build the patch table");
+    capture.check("OpenSubdiv patch table");
+
+    // Stencils for every refined vertex (all levels: adaptive patches index into all of them),
+    // then the end caps' local points, all factorized down to the mesh's own points.
+    Far::StencilTableFactory::Options so;
+    so.generateOffsets = true;
+    so.generateIntermediateLevels = true;
+    so.generateControlVerts = false;
+    m.stencils.reset(Far::StencilTableFactory::Create(*refiner, so));
+    if (const Far::StencilTable* local = m.patch_table->GetLocalPointStencilTable()) {
+      if (local->GetNumStencils() > 0) {
+        const Far::StencilTable* combined =
+            Far::StencilTableFactory::AppendLocalPointStencilTable(*refiner, m.stencils.get(),
+                                                                  local);
+        if (!combined) capture.fail("OpenSubdiv could not append the end-cap stencils");
+        m.stencils.reset(combined);
+      }
+    }
+    capture.check("OpenSubdiv stencils");
+
+    m.num_base_points = desc.num_vertices;
+    const std::size_t total = std::size_t(refiner->GetNumVerticesTotal()) +
+                              std::size_t(m.patch_table->GetNumLocalPoints());
+    const std::size_t stenciled = m.stencils ? std::size_t(m.stencils->GetNumStencils()) : 0;
+    if (stenciled + std::size_t(desc.num_vertices) != total)
+      throw std::runtime_error("stencil count (" + std::to_string(stenciled) +
+                               ") does not cover the refined and local points (" +
+                               std::to_string(total - std::size_t(desc.num_vertices)) + ")");
+    m.control_points.assign(3 * total, 0.0f);
+    m.set_points(points.data());
+
+    for (int a = 0, current = 0; a < m.patch_table->GetNumPatchArrays(); ++a) {
+      const Far::PatchDescriptor pd = m.patch_table->GetPatchArrayDescriptor(a);
+      const int n = m.patch_table->GetNumPatches(a);
+      for (int i = 0; i < n; ++i, ++current) {
+        // The handle PatchMap would give: array, absolute patch index, first CV in the array.
+        Far::PatchTable::PatchHandle h;
+        h.arrayIndex = a;
+        h.patchIndex = current;
+        h.vertIndex = i * pd.GetNumControlVertices();
+        m.handles.push_back(h);
+        m.types.push_back(pd.GetType());
+        if (pd.GetNumControlVertices() > kMaxPatchPoints)
+          throw std::runtime_error("patch type with more control points than supported");
+      }
+    }
+    m.patch_map = std::make_unique<Far::PatchMap>(*m.patch_table);
+
+    // Ptex face -> base face: a base face owns its ptex ids from GetFaceId(f) up to the next's.
+    Far::PtexIndices ptex(*refiner);
+    const int nfaces = refiner->GetLevel(0).GetNumFaces();
+    m.ptex_to_base.assign(std::size_t(ptex.GetNumFaces()), -1);
+    for (int f = 0; f < nfaces; ++f) {
+      const int first = ptex.GetFaceId(f);
+      const int last = (f + 1 < nfaces) ? ptex.GetFaceId(f + 1) : ptex.GetNumFaces();
+      for (int k = first; k < last; ++k) m.ptex_to_base[std::size_t(k)] = f;
+    }
+    m.warnings = capture.warnings();
+    return mesh;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while building OpenSubdiv tables");
+  }
+}
+
+OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
+                                       rust::Slice<const int32_t> ptex_faces,
+                                       rust::Slice<const float> u, rust::Slice<const float> v) {
+  try {
+    check_desc(desc, points.size());
+    if (ptex_faces.size() != u.size() || u.size() != v.size())
+      throw std::runtime_error("location arrays differ in length");
+    FarCapture capture;
+    RefinerPtr refiner = create_refiner(desc, capture);
+    refine_adaptive(*refiner, desc, capture);
+
+    // One LocationArray per run of equal ptex faces keeps the output in the input's order.
+    Far::LimitStencilTableFactory::LocationArrayVec arrays;
+    for (std::size_t i = 0; i < ptex_faces.size();) {
+      std::size_t j = i;
+      while (j < ptex_faces.size() && ptex_faces[j] == ptex_faces[i]) ++j;
+      Far::LimitStencilTableFactory::LocationArray la;
+      la.ptexIdx = ptex_faces[i];
+      la.numLocations = int(j - i);
+      la.s = u.data() + i;
+      la.t = v.data() + i;
+      arrays.push_back(la);
+      i = j;
+    }
+    Far::LimitStencilTableFactory::Options lo;
+    lo.generate1stDerivatives = true;
+    lo.generate2ndDerivatives = false;
+    // No stencil or patch table passed in: the factory builds its own from the refiner, so this
+    // path shares nothing with OsdMesh but the refiner's construction.
+    std::unique_ptr<const Far::LimitStencilTable> lst(
+        Far::LimitStencilTableFactory::Create(*refiner, arrays, nullptr, nullptr, lo));
+    if (!lst) capture.fail("OpenSubdiv could not build the limit stencil table");
+    capture.check("OpenSubdiv limit stencils");
+    const std::size_t n = ptex_faces.size();
+    if (std::size_t(lst->GetNumStencils()) != n)
+      throw std::runtime_error("limit stencil table has " + std::to_string(lst->GetNumStencils()) +
+                               " stencils for " + std::to_string(n) +
+                               " locations (a location fell in a hole or outside its face)");
+
+    const std::vector<int>& sizes = lst->GetSizes();
+    const std::vector<Far::Index>& idx = lst->GetControlIndices();
+    const std::vector<float>& w = lst->GetWeights();
+    const std::vector<float>& wu = lst->GetDuWeights();
+    const std::vector<float>& wv = lst->GetDvWeights();
+    OsdLimitSamples out;
+    out.p.reserve(3 * n);
+    out.dpdu.reserve(3 * n);
+    out.dpdv.reserve(3 * n);
+    std::size_t ofs = 0;
+    for (std::size_t s = 0; s < n; ++s) {
+      double acc[3][3] = {};
+      for (int k = 0; k < sizes[s]; ++k, ++ofs) {
+        const float* c = points.data() + 3 * std::size_t(idx[ofs]);
+        for (int a = 0; a < 3; ++a) {
+          acc[0][a] += double(w[ofs]) * c[a];
+          acc[1][a] += double(wu[ofs]) * c[a];
+          acc[2][a] += double(wv[ofs]) * c[a];
+        }
+      }
+      for (int a = 0; a < 3; ++a) {
+        out.p.push_back(float(acc[0][a]));
+        out.dpdu.push_back(float(acc[1][a]));
+        out.dpdv.push_back(float(acc[2][a]));
+      }
+    }
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception in the limit stencil evaluation");
+  }
+}
+
+OsdUniform osd_uniform_refine(const OsdMeshDesc& desc, rust::Slice<const float> points,
+                              int32_t level) {
+  try {
+    check_desc(desc, points.size());
+    if (level < 0 || level > 10) throw std::runtime_error("uniform level must be in 0..=10");
+    FarCapture capture;
+    RefinerPtr refiner = create_refiner(desc, capture);
+    Far::TopologyRefiner::UniformOptions uo(level);
+    uo.fullTopologyInLastLevel = true;
+    refiner->RefineUniform(uo);
+    capture.check("OpenSubdiv uniform refinement");
+
+    // Stencils of the last level only, in terms of the mesh's points.
+    OsdUniform out;
+    const Far::TopologyLevel& last = refiner->GetLevel(level);
+    const std::size_t nv = std::size_t(last.GetNumVertices());
+    out.points.reserve(3 * nv);
+    if (level == 0) {
+      for (float x : points) out.points.push_back(x);
+    } else {
+      Far::StencilTableFactory::Options so;
+      so.generateIntermediateLevels = false;
+      so.generateOffsets = true;
+      std::unique_ptr<const Far::StencilTable> st(Far::StencilTableFactory::Create(*refiner, so));
+      if (!st || std::size_t(st->GetNumStencils()) != nv)
+        capture.fail("OpenSubdiv could not build the uniform stencils");
+      std::vector<float> refined(3 * nv);
+      apply_stencils(*st, points.data(), refined.data());
+      for (float x : refined) out.points.push_back(x);
+    }
+    for (int f = 0; f < last.GetNumFaces(); ++f) {
+      // Holes stay holes in the refined mesh: leave their children out.
+      if (last.IsFaceHole(f)) continue;
+      Far::ConstIndexArray fv = last.GetFaceVertices(f);
+      out.face_vertex_counts.push_back(fv.size());
+      for (int k = 0; k < fv.size(); ++k) out.face_vertex_indices.push_back(fv[k]);
+    }
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception in uniform refinement");
+  }
+}
+
+}  // namespace mipray_bridge

@@ -1,0 +1,178 @@
+//! The one `#[cxx::bridge]` between mipray and its C++ libraries (OpenSubdiv's Far, OpenImageIO).
+//!
+//! Everything here is raw: flat `f32` arrays, integer codes for enums. The safe wrappers in
+//! [`crate::osd`] and [`crate::oiio`] validate inputs before they cross and turn results into the
+//! core's types. Functions that can throw in C++ return `Result` (cxx turns the exception into an
+//! `Err` carrying `what()`); the C++ side also catches everything itself, so nothing unwinds
+//! across the boundary. Functions without `Result` are written never to throw (no allocation,
+//! bounds checked).
+
+#[cxx::bridge(namespace = "mipray_bridge")]
+#[allow(clippy::too_many_arguments)]
+pub(crate) mod bridge {
+    /// A mesh as OpenSubdiv's `Far::TopologyDescriptor` wants it, plus the refinement options.
+    #[derive(Clone, Debug, Default)]
+    struct OsdMeshDesc {
+        /// 0 Catmull-Clark, 1 Loop, 2 bilinear.
+        scheme: u8,
+        /// `Sdc::Options::VtxBoundaryInterpolation`: 0 none, 1 edge-only, 2 edge-and-corner.
+        boundary: u8,
+        /// `Sdc::Options::FVarLinearInterpolation`: 0 none … 5 all (`FVAR_LINEAR_*` order).
+        fvar: u8,
+        /// `Sdc::Options::TriangleSubdivision`: 0 Catmull-Clark, 1 smooth.
+        triangle_subdivision: u8,
+        /// Adaptive isolation level for sharp features (1..=10).
+        isolation_level: u8,
+        /// Shallower isolation level for smooth extraordinary features (≤ `isolation_level`).
+        secondary_level: u8,
+        num_vertices: i32,
+        face_vertex_counts: Vec<i32>,
+        face_vertex_indices: Vec<i32>,
+        /// Crease edges as vertex pairs, with one sharpness per pair.
+        crease_pairs: Vec<i32>,
+        crease_weights: Vec<f32>,
+        corner_indices: Vec<i32>,
+        corner_weights: Vec<f32>,
+        hole_indices: Vec<i32>,
+    }
+
+    /// One patch of the table, decoded from `Far::PatchParam` and `PatchDescriptor`.
+    #[derive(Clone, Copy, Debug, Default)]
+    struct OsdPatchInfo {
+        ptex_face: i32,
+        base_face: i32,
+        /// Origin and signed edge length of the patch in its ptex face (see `osd.rs`).
+        u0: f32,
+        v0: f32,
+        size: f32,
+        depth: u8,
+        boundary: u8,
+        transition: u8,
+        /// 0 bilinear quad, 1 regular B-spline, 2 Gregory basis, 3 Loop, 4 Gregory triangle,
+        /// 5 anything else.
+        kind: u8,
+    }
+
+    /// Result of OpenSubdiv's uniform refinement.
+    #[derive(Clone, Debug, Default)]
+    struct OsdUniform {
+        points: Vec<f32>,
+        face_vertex_counts: Vec<i32>,
+        face_vertex_indices: Vec<i32>,
+    }
+
+    /// Limit positions and first derivatives from `Far::LimitStencilTable`, 3 floats each.
+    #[derive(Clone, Debug, Default)]
+    struct OsdLimitSamples {
+        p: Vec<f32>,
+        dpdu: Vec<f32>,
+        dpdv: Vec<f32>,
+    }
+
+    /// One metadata attribute to write. `kind`: 0 string, 1 int, 2 float, 3 4×4 matrix.
+    #[derive(Clone, Debug, Default)]
+    struct OiioAttr {
+        name: String,
+        kind: u8,
+        s: String,
+        i: i32,
+        f: f32,
+        /// 16 floats, row-major, for `kind == 3`.
+        m: Vec<f32>,
+    }
+
+    /// One metadata attribute read back, formatted as text by OpenImageIO.
+    #[derive(Clone, Debug, Default)]
+    struct OiioAttrText {
+        name: String,
+        value: String,
+    }
+
+    unsafe extern "C++" {
+        include!("mipray-bridge/include/osd.h");
+        include!("mipray-bridge/include/oiio.h");
+
+        /// Patch table, stencils and refined control points of one mesh.
+        type OsdMesh;
+
+        /// Builds the refiner, adaptive patch table with Gregory-basis end caps, the stencils of
+        /// the refined and local points, and applies them to `points` (3 floats per point).
+        fn osd_mesh_new(desc: &OsdMeshDesc, points: &[f32]) -> Result<UniquePtr<OsdMesh>>;
+        /// Warnings OpenSubdiv reported while building (one per line; empty when none).
+        fn warnings(self: &OsdMesh) -> String;
+        fn ptex_face_count(self: &OsdMesh) -> usize;
+        fn patch_infos(self: &OsdMesh) -> Result<Vec<OsdPatchInfo>>;
+        /// Hull bounds of every patch's control points: 6 floats (min xyz, max xyz) each.
+        fn patch_bounds(self: &OsdMesh) -> Result<Vec<f32>>;
+        /// Copies the mesh's own points (the first control points) into `out`; false if `out` is
+        /// not 3 × the point count long.
+        fn base_points(self: &OsdMesh, out: &mut [f32]) -> bool;
+        /// Recomputes the refined and local control points from new mesh points.
+        fn update_points(self: Pin<&mut OsdMesh>, points: &[f32]) -> Result<()>;
+        /// Position, d/du, d/dv, d²/du², d²/dudv, d²/dv² (18 floats) at the patch's local (u, v).
+        /// Returns false (and leaves `out` alone) for a bad patch index or a short `out`.
+        fn evaluate(self: &OsdMesh, patch: usize, u: f32, v: f32, out: &mut [f32]) -> bool;
+        /// An n×n grid over [u0, u1]×[v0, v1] of the patch's local domain, u fastest. `du`, `dv`
+        /// are filled when non-empty. Returns false for a bad index or wrongly sized outputs.
+        fn evaluate_grid(
+            self: &OsdMesh,
+            patch: usize,
+            u0: f32,
+            v0: f32,
+            u1: f32,
+            v1: f32,
+            n: usize,
+            p: &mut [f32],
+            du: &mut [f32],
+            dv: &mut [f32],
+        ) -> bool;
+        /// `Far::PatchMap`: the patch holding (u, v) of a ptex face (its index, or -1 when there
+        /// is none: a hole, or out of range), and the patch's local (u, v) there in `local_uv`.
+        fn find_patch(self: &OsdMesh, ptex_face: i32, u: f32, v: f32, local_uv: &mut [f32]) -> i64;
+
+        /// Reference path: a fresh refiner and `Far::LimitStencilTableFactory` at the given
+        /// (ptex face, u, v) locations.
+        fn osd_limit_stencil_eval(
+            desc: &OsdMeshDesc,
+            points: &[f32],
+            ptex_faces: &[i32],
+            u: &[f32],
+            v: &[f32],
+        ) -> Result<OsdLimitSamples>;
+        /// Uniform refinement to `level`: the refined points and faces of the last level.
+        fn osd_uniform_refine(desc: &OsdMeshDesc, points: &[f32], level: i32)
+            -> Result<OsdUniform>;
+
+        /// Opened image file for reading.
+        type OiioReader;
+
+        fn oiio_version() -> String;
+        /// Writes interleaved f32 pixels; `formats` has one code per channel (0 half, 1 float,
+        /// 2 uint8).
+        fn oiio_write(
+            path: &str,
+            width: u32,
+            height: u32,
+            channel_names: &Vec<String>,
+            formats: &[u8],
+            pixels: &[f32],
+            attrs: &Vec<OiioAttr>,
+            software: &str,
+        ) -> Result<()>;
+        fn oiio_open(path: &str) -> Result<UniquePtr<OiioReader>>;
+        fn width(self: &OiioReader) -> u32;
+        fn height(self: &OiioReader) -> u32;
+        fn channel_names(self: &OiioReader) -> Result<Vec<String>>;
+        fn metadata(self: &OiioReader) -> Result<Vec<OiioAttrText>>;
+        /// Reads the whole first subimage as f32 into `out` (width × height × channels).
+        fn read_pixels(self: Pin<&mut OiioReader>, out: &mut [f32]) -> Result<()>;
+    }
+}
+
+// SAFETY: an `OsdMesh` owns its OpenSubdiv tables outright (no references to other objects, no
+// thread-affine state). Every `&self` method only reads them: `PatchTable::EvaluateBasis` and
+// `PatchMap::FindPatch` are const and keep no scratch state, and the control points are only
+// written through `Pin<&mut OsdMesh>`, which Rust's borrow rules make exclusive.
+unsafe impl Send for bridge::OsdMesh {}
+// SAFETY: see `Send` above: shared access is read-only.
+unsafe impl Sync for bridge::OsdMesh {}

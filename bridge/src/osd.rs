@@ -1,0 +1,536 @@
+//! Subdivision surfaces through OpenSubdiv's Far: [`OsdSurface`] implements the core's
+//! [`LimitSurface`] with an adaptive `Far::PatchTable` (Gregory-basis end caps), so every patch
+//! is one root subpatch of the paper's §5.1 and evaluation is exact on the limit surface.
+//!
+//! Construction validates the mesh on the Rust side, builds a `Far::TopologyRefiner` (scheme,
+//! boundary and face-varying rules, creases, corners, holes), refines adaptively, builds the patch
+//! table and a stencil table that makes every refined and end-cap ("local") point from the mesh's
+//! points. The resulting control points are kept, so evaluation is a basis evaluation and a
+//! weighted sum; [`OsdSurface::update_points`] re-applies the stencils for animated points without
+//! touching topology.
+//!
+//! Coordinates: positions and derivatives are in the mesh's object space. A patch's own (u, v) is
+//! in [0, 1]² (the triangle u + v ≤ 1 for Loop patches), and [`LimitSurface::evaluate`]'s
+//! derivatives are taken with respect to it. [`PatchParam`] maps it into the ptex face
+//! (`Far::PtexIndices`: one per quad, one per corner of a non-quad in Catmull-Clark and bilinear,
+//! one per triangle in Loop); [`OsdSurface::limit_at`] works in that ptex parameterization.
+//!
+//! Rotated triangles: adaptive Loop refinement makes the middle child of a triangle point the
+//! other way (`Far::PatchParam::IsTriangleRotated`). Its [`PatchParam`] has its origin at the
+//! corner the local (0, 0) maps to and a **negative** `size`, so `to_face_uv` stays the exact map.
+
+use glam::Vec3A;
+use mipray::bounds::Bounds3;
+use mipray::error::MeshError;
+use mipray::patch::{GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
+use mipray::topology::{
+    BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision,
+};
+
+use crate::ffi::bridge as ffi;
+
+/// Refinement settings of an [`OsdSurface`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OsdOptions {
+    /// Adaptive isolation level of sharp features (creases, corners), 1..=10. Deeper isolates
+    /// semi-sharp creases more exactly at the price of more patches.
+    pub isolation_level: u8,
+    /// Isolation level of smooth extraordinary vertices (≤ `isolation_level`): their Gregory end
+    /// caps approximate the limit surface better the deeper they sit.
+    pub secondary_level: u8,
+}
+
+impl OsdOptions {
+    /// Level 4 for both: OpenSubdiv's usual choice for rendering.
+    pub const DEFAULT: OsdOptions = OsdOptions {
+        isolation_level: 4,
+        secondary_level: 4,
+    };
+}
+
+impl Default for OsdOptions {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A uniformly refined mesh: points (object space) and faces (indices into the points).
+pub type UniformMesh = (Vec<[f32; 3]>, Vec<Vec<u32>>);
+
+/// A limit-surface sample from OpenSubdiv's `Far::LimitStencilTable` (the reference path).
+///
+/// Derivatives are as OpenSubdiv's limit stencils give them: with respect to the ptex face's
+/// (u, v) for quads and triangles, and with respect to *half* the ptex sub-face's (u, v) for the
+/// sub-faces of a non-quad (OpenSubdiv scales them by 2^depth, and a sub-face sits at depth 1).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LimitSample {
+    pub p: Vec3A,
+    pub dpdu: Vec3A,
+    pub dpdv: Vec3A,
+}
+
+/// A subdivision mesh's limit surface as OpenSubdiv patches. `Send + Sync`: after construction
+/// the tables are only read (see the `SAFETY` notes in `ffi.rs`).
+pub struct OsdSurface {
+    name: String,
+    mesh: cxx::UniquePtr<ffi::OsdMesh>,
+    /// The topology as OpenSubdiv saw it, for uniform refinement on demand.
+    desc: ffi::OsdMeshDesc,
+    params: Vec<PatchParam>,
+    bounds: Vec<Bounds3>,
+    control_faces: usize,
+    warnings: String,
+}
+
+impl std::fmt::Debug for OsdSurface {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OsdSurface")
+            .field("name", &self.name)
+            .field("patches", &self.params.len())
+            .field("control_faces", &self.control_faces)
+            .finish_non_exhaustive()
+    }
+}
+
+impl OsdSurface {
+    /// Builds the patches of a subdivision mesh with [`OsdOptions::DEFAULT`].
+    ///
+    /// `name` (the prim path, say) prefixes every error message. `Scheme::None` is built as
+    /// bilinear (the control polygons, split into quads). `left_handed` is not passed on: the
+    /// patches keep the given winding and the core flips normals of left-handed meshes itself.
+    /// Face-varying data is not built.
+    ///
+    /// # Errors
+    /// [`MeshError::Invalid`] for topology that [`MeshTopology::validate`] refuses or a Loop mesh
+    /// with non-triangles, [`MeshError::NonFinite`] naming the first non-finite point,
+    /// [`MeshError::Subdivision`] with OpenSubdiv's own messages when it refuses the mesh.
+    pub fn new(
+        name: &str,
+        topology: &MeshTopology,
+        points: &[[f32; 3]],
+    ) -> Result<OsdSurface, MeshError> {
+        Self::with_options(name, topology, points, &OsdOptions::DEFAULT)
+    }
+
+    /// [`OsdSurface::new`] with explicit refinement options.
+    ///
+    /// # Errors
+    /// As [`OsdSurface::new`], and [`MeshError::Invalid`] for out-of-range options.
+    pub fn with_options(
+        name: &str,
+        topology: &MeshTopology,
+        points: &[[f32; 3]],
+        options: &OsdOptions,
+    ) -> Result<OsdSurface, MeshError> {
+        let desc = mesh_desc(name, topology, points, options)?;
+        let mesh = ffi::osd_mesh_new(&desc, points.as_flattened())
+            .map_err(|e| subdivision_error(name, &e))?;
+        let warnings = mesh.warnings();
+        for w in warnings.lines() {
+            log::warn!("{name}: OpenSubdiv: {w}");
+        }
+        let params = mesh
+            .patch_infos()
+            .map_err(|e| subdivision_error(name, &e))?
+            .iter()
+            .map(patch_param_of)
+            .collect();
+        let mut surface = OsdSurface {
+            name: name.to_string(),
+            mesh,
+            desc,
+            params,
+            bounds: Vec::new(),
+            control_faces: topology.face_count(),
+            warnings,
+        };
+        surface.refresh_bounds()?;
+        Ok(surface)
+    }
+
+    fn refresh_bounds(&mut self) -> Result<(), MeshError> {
+        let flat = self
+            .mesh
+            .patch_bounds()
+            .map_err(|e| subdivision_error(&self.name, &e))?;
+        self.bounds = flat
+            .chunks_exact(6)
+            .map(|b| Bounds3 {
+                min: Vec3A::new(b[0], b[1], b[2]),
+                max: Vec3A::new(b[3], b[4], b[5]),
+            })
+            .collect();
+        Ok(())
+    }
+
+    /// The mesh's name, as given at construction.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Warnings OpenSubdiv reported while building (also logged), one per line.
+    pub fn warnings(&self) -> &str {
+        &self.warnings
+    }
+
+    /// Number of ptex faces (`Far::PtexIndices`): the faces [`OsdSurface::limit_at`] takes.
+    pub fn ptex_face_count(&self) -> usize {
+        self.mesh.ptex_face_count()
+    }
+
+    /// New positions for the same topology (animation): re-applies the stored stencils and
+    /// recomputes the patch bounds. Topology is not rebuilt.
+    ///
+    /// # Errors
+    /// [`MeshError::Invalid`] if the point count differs, [`MeshError::NonFinite`] naming the
+    /// first non-finite point; the surface is unchanged then.
+    pub fn update_points(&mut self, points: &[[f32; 3]]) -> Result<(), MeshError> {
+        if points.len() != self.desc.num_vertices as usize {
+            return Err(MeshError::Invalid(format!(
+                "{}: {} points given, the mesh has {}",
+                self.name,
+                points.len(),
+                self.desc.num_vertices
+            )));
+        }
+        check_finite(&self.name, points)?;
+        self.mesh
+            .pin_mut()
+            .update_points(points.as_flattened())
+            .map_err(|e| subdivision_error(&self.name, &e))?;
+        self.refresh_bounds()
+    }
+
+    /// The patch holding (u, v) of a ptex face (`Far::PatchMap`) and the patch's own (u, v)
+    /// there; `None` in a hole or for a face or (u, v) out of range.
+    pub fn find_patch(&self, ptex_face: u32, u: f32, v: f32) -> Option<(usize, f32, f32)> {
+        // PatchMap's quadtree descent assumes (u, v) in the face (it only asserts it).
+        if !((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)) {
+            return None;
+        }
+        let face = i32::try_from(ptex_face).ok()?;
+        let mut local = [0.0f32; 2];
+        let patch = self.mesh.find_patch(face, u, v, &mut local);
+        usize::try_from(patch).ok().map(|p| (p, local[0], local[1]))
+    }
+
+    /// The limit surface at (u, v) ∈ [0, 1]² of a ptex face (equal to the base face for a mesh of
+    /// quads, or of triangles under Loop), with derivatives with respect to the ptex face's
+    /// (u, v). `None` in a hole or out of range.
+    pub fn limit_at(&self, ptex_face: u32, u: f32, v: f32) -> Option<SurfacePoint> {
+        let (patch, s, t) = self.find_patch(ptex_face, u, v)?;
+        let sp = self.evaluate(patch, s, t);
+        // Local (s, t) = (face − u0) / size: chain rule, once per derivative order.
+        let inv = 1.0 / self.params[patch].size;
+        Some(SurfacePoint {
+            p: sp.p,
+            dpdu: sp.dpdu * inv,
+            dpdv: sp.dpdv * inv,
+            dpduu: sp.dpduu * (inv * inv),
+            dpduv: sp.dpduv * (inv * inv),
+            dpdvv: sp.dpdvv * (inv * inv),
+        })
+    }
+
+    /// OpenSubdiv's uniform refinement of the control mesh to `level` (0..=10): the last level's
+    /// points (object space) and faces (point indices; hole faces left out).
+    ///
+    /// # Errors
+    /// [`MeshError::Invalid`] for a level out of range, [`MeshError::Subdivision`] if OpenSubdiv
+    /// fails.
+    pub fn uniform_refinement(&self, level: u32) -> Result<UniformMesh, MeshError> {
+        if level > 10 {
+            return Err(MeshError::Invalid(format!(
+                "{}: uniform level {level} is above 10",
+                self.name
+            )));
+        }
+        let points = self.base_points()?;
+        let r = ffi::osd_uniform_refine(&self.desc, &points, level as i32)
+            .map_err(|e| subdivision_error(&self.name, &e))?;
+        let pts = r
+            .points
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let mut faces = Vec::with_capacity(r.face_vertex_counts.len());
+        let mut start = 0usize;
+        for &n in &r.face_vertex_counts {
+            let n = n.max(0) as usize;
+            let Some(idx) = r.face_vertex_indices.get(start..start + n) else {
+                return Err(subdivision_error(
+                    &self.name,
+                    &"uniform refinement returned short face indices",
+                ));
+            };
+            faces.push(idx.iter().map(|&i| i.max(0) as u32).collect());
+            start += n;
+        }
+        Ok((pts, faces))
+    }
+
+    /// The mesh's current points, read back from the control points (they come first there).
+    fn base_points(&self) -> Result<Vec<f32>, MeshError> {
+        let n = self.desc.num_vertices as usize;
+        let mut out = vec![0.0f32; 3 * n];
+        if !self.mesh.base_points(&mut out) {
+            return Err(subdivision_error(
+                &self.name,
+                &"could not read back the mesh points",
+            ));
+        }
+        Ok(out)
+    }
+}
+
+/// Evaluates OpenSubdiv's `Far::LimitStencilTable` at (ptex face, u, v) locations: the
+/// reference path for tests. It builds its own refiner, patch table and stencils from the same
+/// topology and options (`Far::LimitStencilTableFactory` with `LocationArray`s), sharing none of
+/// [`OsdSurface`]'s tables, parameter decoding or derivative conversion.
+///
+/// # Errors
+/// As [`OsdSurface::new`], and [`MeshError::Subdivision`] if a location has no patch (a hole).
+pub fn limit_stencil_reference(
+    name: &str,
+    topology: &MeshTopology,
+    points: &[[f32; 3]],
+    options: &OsdOptions,
+    locations: &[(u32, f32, f32)],
+) -> Result<Vec<LimitSample>, MeshError> {
+    let desc = mesh_desc(name, topology, points, options)?;
+    let mut faces = Vec::with_capacity(locations.len());
+    for &(f, _, _) in locations {
+        faces.push(
+            i32::try_from(f).map_err(|_| {
+                MeshError::Invalid(format!("{name}: ptex face {f} is out of range"))
+            })?,
+        );
+    }
+    let us: Vec<f32> = locations.iter().map(|l| l.1).collect();
+    let vs: Vec<f32> = locations.iter().map(|l| l.2).collect();
+    let r = ffi::osd_limit_stencil_eval(&desc, points.as_flattened(), &faces, &us, &vs)
+        .map_err(|e| subdivision_error(name, &e))?;
+    let v3 = |a: &[f32], i: usize| Vec3A::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+    Ok((0..locations.len())
+        .map(|i| LimitSample {
+            p: v3(&r.p, i),
+            dpdu: v3(&r.dpdu, i),
+            dpdv: v3(&r.dpdv, i),
+        })
+        .collect())
+}
+
+impl LimitSurface for OsdSurface {
+    fn patch_count(&self) -> usize {
+        self.params.len()
+    }
+
+    /// # Panics
+    /// If `patch >= patch_count()`.
+    fn patch_param(&self, patch: usize) -> PatchParam {
+        self.params[patch]
+    }
+
+    /// # Panics
+    /// If `patch >= patch_count()`.
+    fn patch_bounds(&self, patch: usize) -> Bounds3 {
+        self.bounds[patch]
+    }
+
+    /// # Panics
+    /// If `patch >= patch_count()`.
+    fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
+        let mut o = [0.0f32; 18];
+        let ok = self.mesh.evaluate(patch, u, v, &mut o);
+        assert!(
+            ok,
+            "{}: patch {patch} out of range ({} patches)",
+            self.name,
+            self.params.len()
+        );
+        let v3 = |k: usize| Vec3A::new(o[k], o[k + 1], o[k + 2]);
+        SurfacePoint {
+            p: v3(0),
+            dpdu: v3(3),
+            dpdv: v3(6),
+            dpduu: v3(9),
+            dpduv: v3(12),
+            dpdvv: v3(15),
+        }
+    }
+
+    /// One call into C++ for the whole grid; the vertices equal [`LimitSurface::evaluate`] at
+    /// [`UvRect::grid_uv`].
+    ///
+    /// # Panics
+    /// If `patch >= patch_count()`.
+    fn evaluate_grid(
+        &self,
+        patch: usize,
+        rect: UvRect,
+        n: usize,
+        derivatives: bool,
+        out: &mut GridSamples,
+    ) {
+        out.n = n;
+        out.p.clear();
+        out.dpdu.clear();
+        out.dpdv.clear();
+        if n == 0 {
+            return;
+        }
+        out.p.resize(n * n, [0.0; 3]);
+        if derivatives {
+            out.dpdu.resize(n * n, [0.0; 3]);
+            out.dpdv.resize(n * n, [0.0; 3]);
+        }
+        let ok = self.mesh.evaluate_grid(
+            patch,
+            rect.u0,
+            rect.v0,
+            rect.u1,
+            rect.v1,
+            n,
+            out.p.as_flattened_mut(),
+            out.dpdu.as_flattened_mut(),
+            out.dpdv.as_flattened_mut(),
+        );
+        assert!(
+            ok,
+            "{}: patch {patch} out of range ({} patches)",
+            self.name,
+            self.params.len()
+        );
+    }
+
+    fn control_face_count(&self) -> usize {
+        self.control_faces
+    }
+}
+
+/// The same error with the mesh's name in front of its message.
+fn named(name: &str, e: MeshError) -> MeshError {
+    match e {
+        MeshError::Invalid(m) => MeshError::Invalid(format!("{name}: {m}")),
+        MeshError::NonFinite(m) => MeshError::NonFinite(format!("{name}: {m}")),
+        MeshError::Subdivision(m) => MeshError::Subdivision(format!("{name}: {m}")),
+        MeshError::Unsupported(m) => MeshError::Unsupported(format!("{name}: {m}")),
+    }
+}
+
+fn subdivision_error(name: &str, e: &dyn std::fmt::Display) -> MeshError {
+    MeshError::Subdivision(format!("{name}: {e}"))
+}
+
+fn check_finite(name: &str, points: &[[f32; 3]]) -> Result<(), MeshError> {
+    if let Some((i, p)) = points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| p.iter().any(|c| !c.is_finite()))
+    {
+        return Err(MeshError::NonFinite(format!("{name}: point {i} is {p:?}")));
+    }
+    Ok(())
+}
+
+/// Validates a mesh and translates it into OpenSubdiv's terms.
+fn mesh_desc(
+    name: &str,
+    topology: &MeshTopology,
+    points: &[[f32; 3]],
+    options: &OsdOptions,
+) -> Result<ffi::OsdMeshDesc, MeshError> {
+    let invalid = |m: String| MeshError::Invalid(format!("{name}: {m}"));
+    topology
+        .validate(points.len())
+        .map_err(|e| named(name, e))?;
+    check_finite(name, points)?;
+    let num_vertices = i32::try_from(points.len())
+        .map_err(|_| invalid(format!("{} points is too many", points.len())))?;
+    if topology.face_count() == 0 {
+        return Err(invalid("the mesh has no faces".into()));
+    }
+    if !(1..=10).contains(&options.isolation_level)
+        || options.secondary_level > options.isolation_level
+    {
+        return Err(invalid(format!(
+            "isolation levels {} / {} are not in 1..=10 with secondary ≤ primary",
+            options.isolation_level, options.secondary_level
+        )));
+    }
+    let scheme = match topology.scheme {
+        Scheme::CatmullClark => 0,
+        Scheme::Loop => {
+            if let Some((f, n)) = topology
+                .face_vertex_counts
+                .iter()
+                .enumerate()
+                .find(|(_, &n)| n != 3)
+            {
+                return Err(invalid(format!(
+                    "the Loop scheme needs triangles, but face {f} has {n} vertices"
+                )));
+            }
+            1
+        }
+        // A polygonal mesh through OpenSubdiv: bilinear patches are its control polygons.
+        Scheme::Bilinear | Scheme::None => 2,
+    };
+    let edges = topology.crease_edges();
+    Ok(ffi::OsdMeshDesc {
+        scheme,
+        boundary: match topology.boundary {
+            BoundaryInterpolation::None => 0,
+            BoundaryInterpolation::EdgeOnly => 1,
+            BoundaryInterpolation::EdgeAndCorner => 2,
+        },
+        fvar: match topology.face_varying {
+            FaceVaryingInterpolation::None => 0,
+            FaceVaryingInterpolation::CornersOnly => 1,
+            FaceVaryingInterpolation::CornersPlus1 => 2,
+            FaceVaryingInterpolation::CornersPlus2 => 3,
+            FaceVaryingInterpolation::Boundaries => 4,
+            FaceVaryingInterpolation::All => 5,
+        },
+        triangle_subdivision: match topology.triangle_subdivision {
+            TriangleSubdivision::CatmullClark => 0,
+            TriangleSubdivision::Smooth => 1,
+        },
+        isolation_level: options.isolation_level,
+        secondary_level: options.secondary_level,
+        num_vertices,
+        face_vertex_counts: topology.face_vertex_counts.clone(),
+        face_vertex_indices: topology.face_vertex_indices.clone(),
+        crease_pairs: edges.iter().flat_map(|&(a, b, _)| [a, b]).collect(),
+        // Negative sharpness means smooth, as in OpenSubdiv's own shape reader.
+        crease_weights: edges.iter().map(|&(_, _, s)| s.max(0.0)).collect(),
+        corner_indices: topology.corner_indices.clone(),
+        corner_weights: topology
+            .corner_sharpnesses
+            .iter()
+            .map(|s| s.max(0.0))
+            .collect(),
+        hole_indices: topology.hole_indices.clone(),
+    })
+}
+
+fn patch_param_of(info: &ffi::OsdPatchInfo) -> PatchParam {
+    PatchParam {
+        base_face: info.base_face.max(0) as u32,
+        ptex_face: info.ptex_face.max(0) as u32,
+        u0: info.u0,
+        v0: info.v0,
+        size: info.size,
+        depth: info.depth,
+        boundary_mask: info.boundary,
+        transition_mask: info.transition,
+        kind: match info.kind {
+            0 => PatchKind::Bilinear,
+            1 => PatchKind::Regular,
+            2 => PatchKind::GregoryBasis,
+            3 => PatchKind::LoopRegular,
+            4 => PatchKind::GregoryTriangle,
+            _ => PatchKind::Other,
+        },
+    }
+}

@@ -1,0 +1,144 @@
+//! The geometry-cache benchmark scene (the paper's §6.3.2, made here): many individually
+//! modelled Catmull-Clark objects — no instancing, every one a different shape — half chrome
+//! and half matte with ambient occlusion, some displaced, on a matte ground under a sun. Most
+//! rays are incoherent AO and curved-mirror rays: the case the multiresolution cache is for.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3, Vec3A};
+use mipray::camera::Camera;
+use mipray::displacement::Displacement;
+use mipray::light::Light;
+use mipray::material::Material;
+use mipray::scene::{Mesh, Scene};
+use mipray::topology::{MeshTopology, Scheme};
+use mipray_bridge::OsdSurface;
+
+/// Size of the generated scene.
+#[derive(Clone, Copy, Debug)]
+pub struct BenchSceneSpec {
+    /// Objects along x and along y on the ground.
+    pub grid: (usize, usize),
+    /// Quads per cube-face side of each object's control mesh (6·n² faces).
+    pub face_res: usize,
+    pub seed: u64,
+}
+
+impl Default for BenchSceneSpec {
+    /// 24 × 20 objects of 6·13² = 1014 control faces: about 1.8 GB of vertices if every
+    /// subpatch were tessellated at 17×17.
+    fn default() -> Self {
+        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1 }
+    }
+}
+
+fn hash(mut x: u64) -> u64 {
+    x ^= x >> 33;
+    x = x.wrapping_mul(0xff51_afd7_ed55_8ccd);
+    x ^= x >> 33;
+    x = x.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+    x ^ (x >> 33)
+}
+
+fn rand01(seed: u64, k: u64) -> f32 {
+    (hash(seed.wrapping_mul(0x9E37_79B9).wrapping_add(k)) >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// A lumpy closed control mesh: a cube of `n×n` quads per face pushed onto a sphere, then
+/// dented by a few random smooth lumps so every object is a different shape.
+pub fn blob_mesh(n: usize, seed: u64) -> (MeshTopology, Vec<[f32; 3]>) {
+    let mut pts: Vec<[f32; 3]> = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    let mut idx = Vec::new();
+    let faces: [(Vec3, Vec3, Vec3); 6] = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (-Vec3::X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (-Vec3::Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (-Vec3::Z, Vec3::Y, Vec3::X),
+    ];
+    let lumps: Vec<(Vec3, f32)> = (0..5)
+        .map(|k| {
+            let d = Vec3::new(rand01(seed, 3 * k) - 0.5, rand01(seed, 3 * k + 1) - 0.5, rand01(seed, 3 * k + 2) - 0.5).normalize_or(Vec3::Z);
+            (d, 0.35 * (rand01(seed, 100 + k) - 0.4))
+        })
+        .collect();
+    let mut vid = |p: Vec3| -> i32 {
+        // Shared cube edges produce the same point from two faces: key by rounded position.
+        let key = ((p.x * 4096.0).round() as i64, (p.y * 4096.0).round() as i64, (p.z * 4096.0).round() as i64);
+        *index.entry(key).or_insert_with(|| {
+            let s = p.normalize();
+            let r = 1.0 + lumps.iter().map(|(d, a)| a * (-(1.0 - s.dot(*d)) * 4.0).exp()).sum::<f32>();
+            pts.push((s * r).to_array());
+            (pts.len() - 1) as i32
+        })
+    };
+    for (nrm, a, b) in faces {
+        for j in 0..n {
+            for i in 0..n {
+                let at = |i: usize, j: usize| nrm + a * (2.0 * i as f32 / n as f32 - 1.0) + b * (2.0 * j as f32 / n as f32 - 1.0);
+                let q = [vid(at(i, j)), vid(at(i + 1, j)), vid(at(i + 1, j + 1)), vid(at(i, j + 1))];
+                idx.extend(q);
+            }
+        }
+    }
+    let topo = MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6 * n * n], face_vertex_indices: idx, ..Default::default() };
+    (topo, pts)
+}
+
+/// Builds the scene (OpenSubdiv patch tables for every object). Returns the scene and the
+/// number of control faces.
+///
+/// # Errors
+/// OpenSubdiv refusing a generated mesh (a bug in the generator).
+pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
+    let mut scene = Scene::default();
+    let chrome = scene.add_material(Material::mirror("/materials/chrome", Vec3A::splat(0.05), Vec3A::splat(0.9)));
+    let matte = scene.add_material(Material::lambertian("/materials/matte", Vec3A::new(0.6, 0.55, 0.5)).0);
+    let ground_mat = scene.add_material(Material::lambertian("/materials/ground", Vec3A::splat(0.4)).0);
+    let (gx, gy) = spec.grid;
+    let spacing = 2.6;
+    for j in 0..gy {
+        for i in 0..gx {
+            let k = (j * gx + i) as u64;
+            let seed = hash(spec.seed ^ k);
+            let (topo, pts) = blob_mesh(spec.face_res, seed);
+            let name = format!("/objects/blob_{i}_{j}");
+            let surface = OsdSurface::new(&name, &topo, &pts)?;
+            let mut mesh = Mesh::new(&name, Arc::new(surface));
+            mesh.material = if (i + j) % 2 == 0 { chrome } else { matte };
+            if k % 3 == 0 {
+                mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 });
+                mesh.displacement_bound = 0.06;
+            }
+            let m = scene.add_mesh(mesh);
+            let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * spacing;
+            let y = j as f32 * spacing;
+            let s = 0.8 + 0.4 * rand01(seed, 7);
+            let xf = Mat4::from_translation(Vec3::new(x, y, s)) * Mat4::from_rotation_z(rand01(seed, 8) * 6.28) * Mat4::from_scale(Vec3::splat(s));
+            scene.add_instance(m, xf);
+        }
+    }
+    let half = 200.0;
+    let ground = BilinearGround::new(half)?;
+    let mut gm = Mesh::new("/ground", Arc::new(ground));
+    gm.material = ground_mat;
+    let g = scene.add_mesh(gm);
+    scene.add_instance(g, Mat4::IDENTITY);
+    scene.lights.push(Light::distant("/sun", Vec3A::new(0.4, 0.6, -0.7), Vec3A::splat(2.5)));
+    let eye = Vec3::new(0.0, -9.0, 6.0);
+    scene.camera = Camera { render_from_camera: Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z), focal_length: 24.0, horizontal_aperture: 36.0, vertical_aperture: 24.0, clipping_range: (0.1, 1e5), ..Default::default() };
+    Ok(scene)
+}
+
+/// A ground quad, as bilinear patches.
+struct BilinearGround;
+
+impl BilinearGround {
+    #[allow(clippy::new_ret_no_self)]
+    fn new(half: f32) -> Result<mipray::bilinear::BilinearSurface, mipray::error::MeshError> {
+        let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+        mipray::bilinear::BilinearSurface::new(&topo, &[[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]])
+    }
+}

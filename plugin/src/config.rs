@@ -1,0 +1,173 @@
+//! Render settings the delegate accepts, with defaults and descriptions (Hydra's
+//! `HdRenderSettingDescriptor`), and their translation into the core's `RenderOptions`.
+
+use mipray::geometry_cache::{CacheConfig, CacheMode};
+use mipray::options::RenderOptions;
+use serde_json::Value;
+
+use crate::error::DelegateError;
+
+/// One render setting: its key, default and what it does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SettingDescriptor {
+    pub key: &'static str,
+    pub default: &'static str,
+    pub description: &'static str,
+}
+
+/// Every setting the delegate accepts.
+pub const SETTINGS: &[SettingDescriptor] = &[
+    SettingDescriptor { key: "samples", default: "1", description: "camera samples per pixel" },
+    SettingDescriptor { key: "seed", default: "0", description: "random seed; the image depends on it alone" },
+    SettingDescriptor { key: "threads", default: "0", description: "render threads (0: all cores)" },
+    SettingDescriptor { key: "tessFactor", default: "1", description: "tessellated quad size relative to the ray beam width; larger is coarser" },
+    SettingDescriptor { key: "geometryCacheMb", default: "30", description: "geometry cache budget in MB (10^6 bytes), split evenly over the three tiers in multires mode" },
+    SettingDescriptor { key: "cacheMode", default: "multires", description: "geometry cache mode: multires, single, unbounded or none" },
+    SettingDescriptor { key: "displacementBound", default: "0", description: "displacement bound (object units) for meshes that state none" },
+    SettingDescriptor { key: "aoSamples", default: "0", description: "ambient-occlusion rays per shading point (0: off)" },
+    SettingDescriptor { key: "aoDistance", default: "inf", description: "ambient-occlusion ray length, scene units" },
+    SettingDescriptor { key: "aoIntensity", default: "1", description: "radiance of the white sky ambient occlusion lights with" },
+    SettingDescriptor { key: "maxDepth", default: "4", description: "longest chain of mirror bounces" },
+];
+
+/// The settings a render was asked for, validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    pub samples: u32,
+    pub seed: u64,
+    pub threads: usize,
+    pub tess_factor: f32,
+    pub geometry_cache_mb: f64,
+    pub cache_mode: CacheMode,
+    pub displacement_bound: f32,
+    pub ao_samples: u32,
+    pub ao_distance: f32,
+    pub ao_intensity: f32,
+    pub max_depth: u32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, geometry_cache_mb: 30.0, cache_mode: CacheMode::Multires, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
+    }
+}
+
+fn bad(name: &str, message: impl Into<String>) -> DelegateError {
+    DelegateError::Setting { name: name.to_string(), message: message.into() }
+}
+
+fn as_f64(name: &str, v: &Value) -> Result<f64, DelegateError> {
+    v.as_f64()
+        .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| bad(name, format!("{v} is not a finite number")))
+}
+
+impl RenderSettings {
+    /// Applies `key = value` pairs over the defaults.
+    ///
+    /// # Errors
+    /// An unknown key (the message lists the valid ones) or a value out of range.
+    pub fn from_pairs<'a, I: IntoIterator<Item = (&'a str, &'a Value)>>(pairs: I) -> Result<Self, DelegateError> {
+        let mut s = RenderSettings::default();
+        for (k, v) in pairs {
+            match k {
+                "samples" => {
+                    let x = as_f64(k, v)?;
+                    if !(1.0..=1e6).contains(&x) {
+                        return Err(bad(k, format!("{x} must be within 1..=1000000")));
+                    }
+                    s.samples = x as u32;
+                }
+                "seed" => s.seed = as_f64(k, v)?.max(0.0) as u64,
+                "threads" => s.threads = as_f64(k, v)?.clamp(0.0, 1024.0) as usize,
+                "tessFactor" => {
+                    let x = as_f64(k, v)?;
+                    if x <= 0.0 {
+                        return Err(bad(k, format!("{x} must be positive")));
+                    }
+                    s.tess_factor = x as f32;
+                }
+                "geometryCacheMb" => {
+                    let x = as_f64(k, v)?;
+                    if x < 0.0 {
+                        return Err(bad(k, format!("{x} must not be negative")));
+                    }
+                    s.geometry_cache_mb = x;
+                }
+                "cacheMode" => {
+                    let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
+                    s.cache_mode = name.parse().map_err(|e| bad(k, format!("{e}")))?;
+                }
+                "displacementBound" => s.displacement_bound = as_f64(k, v)?.max(0.0) as f32,
+                "aoSamples" => s.ao_samples = as_f64(k, v)?.clamp(0.0, 65_536.0) as u32,
+                "aoDistance" => {
+                    let x = if v.as_str() == Some("inf") { f64::INFINITY } else { as_f64(k, v)? };
+                    if x <= 0.0 {
+                        return Err(bad(k, format!("{x} must be positive")));
+                    }
+                    s.ao_distance = x as f32;
+                }
+                "aoIntensity" => s.ao_intensity = as_f64(k, v)?.max(0.0) as f32,
+                "maxDepth" => s.max_depth = as_f64(k, v)?.clamp(0.0, 64.0) as u32,
+                _ => {
+                    let keys: Vec<&str> = SETTINGS.iter().map(|d| d.key).collect();
+                    return Err(bad(k, format!("unknown setting; valid settings: {}", keys.join(", "))));
+                }
+            }
+        }
+        Ok(s)
+    }
+
+    /// The core's options for a render of `width`×`height` with `aovs`.
+    pub fn to_options(&self, width: usize, height: usize, aovs: &[String]) -> RenderOptions {
+        let bytes = (self.geometry_cache_mb * 1e6) as usize;
+        let cache = match self.cache_mode {
+            CacheMode::Multires => CacheConfig::multires(bytes),
+            CacheMode::Single => CacheConfig::single(bytes),
+            CacheMode::Unbounded => CacheConfig::unbounded(),
+            CacheMode::None => CacheConfig::none(),
+        };
+        RenderOptions {
+            width,
+            height,
+            samples: self.samples,
+            seed: self.seed,
+            threads: self.threads,
+            tess_factor: self.tess_factor,
+            cache,
+            aovs: aovs.to_vec(),
+            ao_samples: self.ao_samples,
+            ao_distance: self.ao_distance,
+            ao_intensity: self.ao_intensity,
+            max_depth: self.max_depth,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn defaults_and_overrides() {
+        let v = json!({"samples": 4, "cacheMode": "single", "tessFactor": "2"});
+        let s = RenderSettings::from_pairs(v.as_object().unwrap().iter().map(|(k, v)| (k.as_str(), v))).unwrap();
+        assert_eq!(s.samples, 4);
+        assert_eq!(s.cache_mode, CacheMode::Single);
+        assert_eq!(s.tess_factor, 2.0);
+        assert_eq!(s.seed, 0);
+    }
+
+    #[test]
+    fn unknown_key_lists_valid_ones() {
+        let v = json!(1);
+        let e = RenderSettings::from_pairs([("sample", &v)]).unwrap_err().to_string();
+        assert!(e.contains("sample") && e.contains("tessFactor"), "{e}");
+        let bad_mode = json!("lru");
+        assert!(RenderSettings::from_pairs([("cacheMode", &bad_mode)]).is_err());
+        let neg = json!(-1);
+        assert!(RenderSettings::from_pairs([("tessFactor", &neg)]).is_err());
+    }
+}

@@ -1,0 +1,144 @@
+//! The mesh Rprim: a USD mesh's data as the scene delegate gives it, and its synced state —
+//! the limit surface (OpenSubdiv for subdivision schemes, bilinear patches for `none`).
+
+use std::sync::Arc;
+
+use glam::Mat4;
+use mipray::bilinear::BilinearSurface;
+use mipray::patch::LimitSurface;
+use mipray::topology::{MeshTopology, Scheme};
+use mipray_bridge::OsdSurface;
+
+use crate::dirty_bits::DirtyBits;
+use crate::error::DelegateError;
+
+/// What the scene delegate knows about a mesh. Object space; `transform` is object-to-world
+/// (column-vector convention).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshData {
+    pub topology: MeshTopology,
+    pub points: Vec<[f32; 3]>,
+    pub transform: Mat4,
+    pub double_sided: bool,
+    /// Linear RGB diffuse reflectance (the resolved material's diffuseColor or displayColor).
+    pub albedo: [f32; 3],
+    /// Reflectance of a perfect mirror layer (UsdPreviewSurface metallic with roughness 0).
+    pub mirror: [f32; 3],
+    /// Object units; `None` uses the procedural displacement's own bound, else the render
+    /// setting.
+    pub displacement_bound: Option<f32>,
+    /// Built-in procedural displacement (`mipray:displacement:*` attributes).
+    pub displacement: Option<mipray::displacement::Displacement>,
+}
+
+/// The synced surface, kept by kind so new points can update an OpenSubdiv surface in place.
+#[derive(Clone)]
+pub enum Surface {
+    Osd(Arc<OsdSurface>),
+    Bilinear(Arc<BilinearSurface>),
+}
+
+impl Surface {
+    pub fn as_limit_surface(&self) -> Arc<dyn LimitSurface> {
+        match self {
+            Surface::Osd(s) => s.clone(),
+            Surface::Bilinear(s) => s.clone(),
+        }
+    }
+}
+
+/// A mesh prim in the delegate.
+pub struct MeshPrim {
+    pub path: String,
+    pub data: MeshData,
+    pub surface: Option<Surface>,
+    pub dirty: DirtyBits,
+    /// Times this prim's surface was (re)built or updated: tests count these.
+    pub surface_syncs: u64,
+    /// Bumped whenever the surface changes, so the geometry cache never serves old entries.
+    pub generation: u32,
+    /// The last sync's error, if the prim could not be built.
+    pub error: Option<String>,
+}
+
+impl MeshPrim {
+    pub fn new(path: &str, data: MeshData) -> Self {
+        MeshPrim { path: path.to_string(), data, surface: None, dirty: DirtyBits::ALL, surface_syncs: 0, generation: 0, error: None }
+    }
+
+    /// What differs between the current data and `new`.
+    pub fn diff(&self, new: &MeshData) -> DirtyBits {
+        let mut d = DirtyBits::CLEAN;
+        if self.data.topology != new.topology {
+            d = d | DirtyBits::TOPOLOGY;
+        }
+        if self.data.points != new.points {
+            d = d | DirtyBits::POINTS;
+        }
+        if self.data.transform != new.transform {
+            d = d | DirtyBits::TRANSFORM;
+        }
+        if self.data.albedo != new.albedo || self.data.mirror != new.mirror || self.data.double_sided != new.double_sided {
+            d = d | DirtyBits::MATERIAL;
+        }
+        if self.data.displacement != new.displacement || self.data.displacement_bound != new.displacement_bound {
+            // Displacement changes the tessellated shape: new cache generation.
+            d = d | DirtyBits::POINTS;
+        }
+        d
+    }
+
+    /// Brings the surface up to date with the data. Only topology or points changes touch the
+    /// surface; new points on an OpenSubdiv surface re-apply its stencils without rebuilding
+    /// topology when no render holds the surface.
+    ///
+    /// # Errors
+    /// The mesh's data is unusable; the message names the prim.
+    pub fn sync(&mut self) -> Result<(), DelegateError> {
+        let dirty = self.dirty;
+        self.dirty = DirtyBits::CLEAN;
+        if !(dirty.contains(DirtyBits::TOPOLOGY) || dirty.contains(DirtyBits::POINTS)) && self.surface.is_some() {
+            return Ok(());
+        }
+        if !self.data.transform.is_finite() {
+            self.surface = None;
+            let e = DelegateError::prim(&self.path, "transform is not finite");
+            self.error = Some(e.to_string());
+            return Err(e);
+        }
+        let result = self.build(dirty);
+        self.generation = self.generation.wrapping_add(1);
+        self.surface_syncs += 1;
+        match result {
+            Ok(s) => {
+                self.surface = Some(s);
+                self.error = None;
+                Ok(())
+            }
+            Err(e) => {
+                self.surface = None;
+                let e = DelegateError::prim(&self.path, e);
+                self.error = Some(e.to_string());
+                Err(e)
+            }
+        }
+    }
+
+    fn build(&mut self, dirty: DirtyBits) -> Result<Surface, mipray::error::MeshError> {
+        if let Some(d) = &self.data.displacement {
+            d.validate().map_err(mipray::error::MeshError::Invalid)?;
+        }
+        let t = &self.data.topology;
+        let points_only = !dirty.contains(DirtyBits::TOPOLOGY);
+        if let (true, Some(Surface::Osd(s))) = (points_only, self.surface.as_mut()) {
+            if let Some(osd) = Arc::get_mut(s) {
+                osd.update_points(&self.data.points)?;
+                return Ok(Surface::Osd(s.clone()));
+            }
+        }
+        Ok(match t.scheme {
+            Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?)),
+            _ => Surface::Osd(Arc::new(OsdSurface::new(&self.path, t, &self.data.points)?)),
+        })
+    }
+}

@@ -1,0 +1,447 @@
+//! `mipray._mipray`: the render delegate for Python (pyo3). A thin layer: argument conversion,
+//! errors as Python exceptions with the prim path in the message, and the GIL released for the
+//! whole render.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use glam::Mat4;
+use hd_mipray::light::DistantLightData;
+use hd_mipray::mesh::MeshData;
+use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
+use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
+use mipray::camera::{Camera, Projection};
+use mipray::displacement::Displacement;
+use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
+use mipray::progress::Progress;
+use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
+use mipray_bridge::OiioImageIo;
+use numpy::ndarray::Array3;
+use numpy::{IntoPyArray, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+fn value_error(path: &str, msg: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(format!("{path}: {msg}"))
+}
+
+fn matrix(path: &str, m: &PyReadonlyArray2<'_, f64>) -> PyResult<Mat4> {
+    let a = m.as_array();
+    if a.shape() != [4, 4] {
+        return Err(value_error(path, format!("transform must be 4x4, got {:?}", a.shape())));
+    }
+    // USD matrices are row-major for row vectors (p' = p·M); read as columns, the same numbers
+    // are the column-vector matrix glam uses (p' = M·p).
+    let mut cols = [0f32; 16];
+    for (i, v) in a.iter().enumerate() {
+        cols[i] = *v as f32;
+    }
+    Ok(Mat4::from_cols_array(&cols))
+}
+
+fn vec_i32(a: Option<PyReadonlyArray1<'_, i32>>) -> Vec<i32> {
+    a.map(|a| a.as_array().to_vec()).unwrap_or_default()
+}
+
+fn vec_f32(a: Option<PyReadonlyArray1<'_, f32>>) -> Vec<f32> {
+    a.map(|a| a.as_array().to_vec()).unwrap_or_default()
+}
+
+fn parse_scheme(path: &str, s: &str) -> PyResult<Scheme> {
+    Ok(match s {
+        "catmullClark" => Scheme::CatmullClark,
+        "loop" => Scheme::Loop,
+        "bilinear" => Scheme::Bilinear,
+        "none" => Scheme::None,
+        _ => return Err(value_error(path, format!("subdivisionScheme '{s}' is not one of catmullClark, loop, bilinear, none"))),
+    })
+}
+
+fn parse_boundary(path: &str, s: &str) -> PyResult<BoundaryInterpolation> {
+    Ok(match s {
+        "none" => BoundaryInterpolation::None,
+        "edgeOnly" => BoundaryInterpolation::EdgeOnly,
+        "edgeAndCorner" => BoundaryInterpolation::EdgeAndCorner,
+        _ => return Err(value_error(path, format!("interpolateBoundary '{s}' is not one of none, edgeOnly, edgeAndCorner"))),
+    })
+}
+
+fn parse_fvar(path: &str, s: &str) -> PyResult<FaceVaryingInterpolation> {
+    Ok(match s {
+        "none" => FaceVaryingInterpolation::None,
+        "cornersOnly" => FaceVaryingInterpolation::CornersOnly,
+        "cornersPlus1" => FaceVaryingInterpolation::CornersPlus1,
+        "cornersPlus2" => FaceVaryingInterpolation::CornersPlus2,
+        "boundaries" => FaceVaryingInterpolation::Boundaries,
+        "all" => FaceVaryingInterpolation::All,
+        _ => return Err(value_error(path, format!("faceVaryingLinearInterpolation '{s}' is not a USD token"))),
+    })
+}
+
+fn parse_triangle(path: &str, s: &str) -> PyResult<TriangleSubdivision> {
+    Ok(match s {
+        "catmullClark" => TriangleSubdivision::CatmullClark,
+        "smooth" => TriangleSubdivision::Smooth,
+        _ => return Err(value_error(path, format!("triangleSubdivisionRule '{s}' is not one of catmullClark, smooth"))),
+    })
+}
+
+fn py_to_json(v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
+    if let Ok(b) = v.extract::<bool>() {
+        return Ok(b.into());
+    }
+    if let Ok(i) = v.extract::<i64>() {
+        return Ok(i.into());
+    }
+    if let Ok(f) = v.extract::<f64>() {
+        return Ok(f.into());
+    }
+    if let Ok(s) = v.extract::<String>() {
+        return Ok(s.into());
+    }
+    Err(PyValueError::new_err(format!("setting value {v} must be a bool, number or string")))
+}
+
+/// Forwards progress to a Python callable `(done, total)` about every 1%, and turns Ctrl-C
+/// (a pending KeyboardInterrupt) into cancellation.
+struct PyProgress {
+    callback: Option<Py<PyAny>>,
+    total: AtomicU64,
+    done: AtomicU64,
+    last: AtomicU64,
+    cancelled: AtomicBool,
+}
+
+impl Progress for PyProgress {
+    fn start(&self, total: u64) {
+        self.total.store(total, Ordering::Relaxed);
+    }
+
+    fn advance(&self, n: u64) {
+        let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
+        let total = self.total.load(Ordering::Relaxed).max(1);
+        let last = self.last.load(Ordering::Relaxed);
+        if done * 100 / total == last * 100 / total && done < total {
+            return;
+        }
+        self.last.store(done, Ordering::Relaxed);
+        Python::attach(|py| {
+            if py.check_signals().is_err() {
+                self.cancelled.store(true, Ordering::Relaxed);
+                return;
+            }
+            if let Some(cb) = &self.callback {
+                if let Err(e) = cb.call1(py, (done, total)) {
+                    log::warn!("progress callback failed: {e}");
+                }
+            }
+        });
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancelled.load(Ordering::Relaxed)
+    }
+}
+
+/// The render delegate. Prims are inserted or updated with `set_*`, removed with `remove`, and
+/// synced by `render`, which syncs only what changed.
+#[pyclass(module = "mipray._mipray")]
+struct RenderDelegate {
+    inner: Delegate,
+}
+
+#[pymethods]
+impl RenderDelegate {
+    #[new]
+    fn new() -> Self {
+        RenderDelegate { inner: Delegate::new() }
+    }
+
+    /// Inserts or updates a mesh. See the stubs for argument meanings.
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn set_mesh(
+        &mut self,
+        path: &str,
+        points: PyReadonlyArray2<'_, f32>,
+        face_vertex_counts: PyReadonlyArray1<'_, i32>,
+        face_vertex_indices: PyReadonlyArray1<'_, i32>,
+        transform: PyReadonlyArray2<'_, f64>,
+        scheme: &str,
+        interpolate_boundary: &str,
+        face_varying_linear_interpolation: &str,
+        triangle_subdivision_rule: &str,
+        crease_indices: Option<PyReadonlyArray1<'_, i32>>,
+        crease_lengths: Option<PyReadonlyArray1<'_, i32>>,
+        crease_sharpnesses: Option<PyReadonlyArray1<'_, f32>>,
+        corner_indices: Option<PyReadonlyArray1<'_, i32>>,
+        corner_sharpnesses: Option<PyReadonlyArray1<'_, f32>>,
+        hole_indices: Option<PyReadonlyArray1<'_, i32>>,
+        left_handed: bool,
+        double_sided: bool,
+        albedo: (f32, f32, f32),
+        mirror: (f32, f32, f32),
+        displacement_bound: Option<f32>,
+        displacement: Option<(f32, f32, u32, f32)>,
+    ) -> PyResult<()> {
+        let pts = points.as_array();
+        if pts.ncols() != 3 {
+            return Err(value_error(path, format!("points must be N×3, got {:?}", pts.shape())));
+        }
+        let points: Vec<[f32; 3]> = pts.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let topology = MeshTopology {
+            scheme: parse_scheme(path, scheme)?,
+            face_vertex_counts: face_vertex_counts.as_array().to_vec(),
+            face_vertex_indices: face_vertex_indices.as_array().to_vec(),
+            crease_indices: vec_i32(crease_indices),
+            crease_lengths: vec_i32(crease_lengths),
+            crease_sharpnesses: vec_f32(crease_sharpnesses),
+            corner_indices: vec_i32(corner_indices),
+            corner_sharpnesses: vec_f32(corner_sharpnesses),
+            hole_indices: vec_i32(hole_indices),
+            boundary: parse_boundary(path, interpolate_boundary)?,
+            face_varying: parse_fvar(path, face_varying_linear_interpolation)?,
+            triangle_subdivision: parse_triangle(path, triangle_subdivision_rule)?,
+            left_handed,
+        };
+        topology.validate(points.len()).map_err(|e| value_error(path, e))?;
+        if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+            return Err(value_error(path, format!("points[{i}] = {:?} is not finite", points[i])));
+        }
+        let transform = matrix(path, &transform)?;
+        if !transform.is_finite() {
+            return Err(value_error(path, "transform is not finite"));
+        }
+        let displacement = displacement.map(|(amplitude, frequency, octaves, gain)| Displacement { amplitude, frequency, octaves, gain });
+        if let Some(d) = &displacement {
+            d.validate().map_err(|e| value_error(path, e))?;
+        }
+        if let Some(b) = displacement_bound {
+            if !(b.is_finite() && b >= 0.0) {
+                return Err(value_error(path, format!("primvars:displacementBound = {b} must be a non-negative number")));
+            }
+        }
+        self.inner.set_mesh(
+            path,
+            MeshData { topology, points, transform, double_sided, albedo: [albedo.0, albedo.1, albedo.2], mirror: [mirror.0, mirror.1, mirror.2], displacement_bound, displacement },
+        );
+        Ok(())
+    }
+
+    /// Inserts or replaces a camera (USD units; apertures and focal length as authored).
+    #[pyo3(signature = (path, *, transform, projection="perspective", focal_length=50.0, horizontal_aperture=20.955, vertical_aperture=15.2908, horizontal_aperture_offset=0.0, vertical_aperture_offset=0.0, clipping_range=(1.0, 1.0e6), f_stop=0.0, focus_distance=0.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn set_camera(
+        &mut self,
+        path: &str,
+        transform: PyReadonlyArray2<'_, f64>,
+        projection: &str,
+        focal_length: f32,
+        horizontal_aperture: f32,
+        vertical_aperture: f32,
+        horizontal_aperture_offset: f32,
+        vertical_aperture_offset: f32,
+        clipping_range: (f32, f32),
+        f_stop: f32,
+        focus_distance: f32,
+    ) -> PyResult<()> {
+        let projection = match projection {
+            "perspective" => Projection::Perspective,
+            "orthographic" => Projection::Orthographic,
+            _ => return Err(value_error(path, format!("projection '{projection}' is not perspective or orthographic"))),
+        };
+        let camera = Camera {
+            render_from_camera: matrix(path, &transform)?,
+            projection,
+            focal_length,
+            horizontal_aperture,
+            vertical_aperture,
+            horizontal_aperture_offset,
+            vertical_aperture_offset,
+            clipping_range,
+            f_stop,
+            focus_distance,
+        };
+        camera.validate().map_err(|e| value_error(path, e))?;
+        self.inner.set_camera(path, camera);
+        Ok(())
+    }
+
+    /// Inserts or replaces a UsdLux.DistantLight.
+    #[pyo3(signature = (path, *, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), angle=0.53, normalize=false, shadow_enable=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn set_distant_light(
+        &mut self,
+        path: &str,
+        transform: PyReadonlyArray2<'_, f64>,
+        intensity: f32,
+        exposure: f32,
+        color: (f32, f32, f32),
+        angle: f32,
+        normalize: bool,
+        shadow_enable: bool,
+    ) -> PyResult<()> {
+        let vals = [intensity, exposure, color.0, color.1, color.2, angle];
+        if vals.iter().any(|v| !v.is_finite()) {
+            return Err(value_error(path, "light inputs must be finite"));
+        }
+        let transform = matrix(path, &transform)?;
+        self.inner.set_distant_light(path, DistantLightData { transform, intensity, exposure, color: [color.0, color.1, color.2], angle_deg: angle, normalize, shadow_enable });
+        Ok(())
+    }
+
+    /// Removes a prim; returns whether it existed.
+    fn remove(&mut self, path: &str) -> bool {
+        self.inner.remove(path)
+    }
+
+    /// Every prim path held, sorted.
+    fn prim_paths(&self) -> Vec<String> {
+        self.inner.prim_paths()
+    }
+
+    /// How many times the mesh's surface has been (re)built or updated; `None` if unknown.
+    fn mesh_sync_count(&self, path: &str) -> Option<u64> {
+        self.inner.mesh(path).map(|m| m.surface_syncs)
+    }
+
+    /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL.
+    #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None))]
+    fn render<'py>(
+        &mut self,
+        py: Python<'py>,
+        camera: &str,
+        width: usize,
+        height: usize,
+        aovs: Vec<String>,
+        settings: Option<&Bound<'py, PyDict>>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<(Bound<'py, PyDict>, String)> {
+        let mut pairs = Vec::new();
+        if let Some(s) = settings {
+            for (k, v) in s.iter() {
+                pairs.push((k.extract::<String>()?, py_to_json(&v)?));
+            }
+        }
+        let settings = RenderSettings::from_pairs(pairs.iter().map(|(k, v)| (k.as_str(), v))).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let pass = RenderPass { camera: camera.to_string(), width, height, aovs, settings };
+        let prog = PyProgress { callback: progress, total: AtomicU64::new(0), done: AtomicU64::new(0), last: AtomicU64::new(0), cancelled: AtomicBool::new(false) };
+        let inner = &mut self.inner;
+        let result = py.detach(|| pass.execute(inner, &prog));
+        let result = match result {
+            Ok(r) => r,
+            Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Cancelled)) => return Err(PyKeyboardInterrupt::new_err("render cancelled")),
+            Err(e @ hd_mipray::DelegateError::Prim { .. }) => return Err(PyValueError::new_err(e.to_string())),
+            Err(e @ hd_mipray::DelegateError::Setting { .. }) => return Err(PyValueError::new_err(e.to_string())),
+            Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
+        };
+        let dict = PyDict::new(py);
+        for b in result.buffers {
+            let arr = Array3::from_shape_vec((b.height, b.width, b.channels), b.data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+            dict.set_item(b.aov, arr.into_pyarray(py))?;
+        }
+        Ok((dict, result.stats.to_string()))
+    }
+}
+
+fn parse_format(s: &str) -> PyResult<ChannelFormat> {
+    Ok(match s {
+        "half" => ChannelFormat::Half,
+        "float" => ChannelFormat::Float,
+        "uint8" => ChannelFormat::U8,
+        _ => return Err(PyValueError::new_err(format!("format '{s}' is not one of half, float, uint8"))),
+    })
+}
+
+fn meta_value(v: &Bound<'_, PyAny>) -> PyResult<MetaValue> {
+    if let Ok(s) = v.extract::<String>() {
+        return Ok(MetaValue::Str(s));
+    }
+    if let Ok(b) = v.extract::<bool>() {
+        return Ok(MetaValue::Int(b as i64));
+    }
+    if let Ok(i) = v.extract::<i64>() {
+        return Ok(MetaValue::Int(i));
+    }
+    if let Ok(f) = v.extract::<f64>() {
+        return Ok(MetaValue::Float(f as f32));
+    }
+    if let Ok(m) = v.extract::<Vec<f64>>() {
+        if m.len() == 16 {
+            let mut a = [0f32; 16];
+            for (d, s) in a.iter_mut().zip(m) {
+                *d = s as f32;
+            }
+            return Ok(MetaValue::Matrix44(a));
+        }
+    }
+    Err(PyValueError::new_err(format!("metadata value {v} must be a string, number or 16 numbers")))
+}
+
+/// Writes AOV arrays (H×W×C float32) in `order` into one image through OpenImageIO.
+#[pyfunction]
+#[pyo3(signature = (path, aovs, order, formats=None, metadata=None))]
+fn write_image(py: Python<'_>, path: &str, aovs: &Bound<'_, PyDict>, order: Vec<String>, formats: Option<HashMap<String, String>>, metadata: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+    let mut buffers = Vec::new();
+    let mut fmts = Vec::new();
+    for name in &order {
+        let arr = aovs.get_item(name)?.ok_or_else(|| PyValueError::new_err(format!("{path}: AOV '{name}' is not among the arrays given")))?;
+        let arr = arr.cast_into::<PyArray3<f32>>().map_err(|_| PyValueError::new_err(format!("{path}: AOV '{name}' must be an H×W×C float32 array")))?;
+        let ro = arr.readonly();
+        let shape = ro.shape().to_vec();
+        let data: Vec<f32> = ro.as_array().iter().copied().collect();
+        buffers.push(RenderBuffer { aov: name.clone(), width: shape[1], height: shape[0], channels: shape[2], data });
+        fmts.push(match formats.as_ref().and_then(|f| f.get(name)) {
+            Some(f) => Some(parse_format(f)?),
+            None => None,
+        });
+    }
+    let mut meta = Vec::new();
+    if let Some(m) = metadata {
+        for (k, v) in m.iter() {
+            meta.push((k.extract::<String>()?, meta_value(&v)?));
+        }
+    }
+    let refs: Vec<&RenderBuffer> = buffers.iter().collect();
+    py.detach(|| write_buffers(Path::new(path), &refs, &fmts, &meta)).map_err(|e| PyOSError::new_err(e.to_string()))
+}
+
+/// Reads an image: (H×W×C float32 array, channel names).
+#[pyfunction]
+fn read_image<'py>(py: Python<'py>, path: &str) -> PyResult<(Bound<'py, PyArray3<f32>>, Vec<String>)> {
+    let img = py.detach(|| OiioImageIo::default().read(Path::new(path))).map_err(|e| PyOSError::new_err(e.to_string()))?;
+    let nc = img.channels.len();
+    let arr = Array3::from_shape_vec((img.height, img.width, nc), img.pixels).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok((arr.into_pyarray(py), img.channels))
+}
+
+/// The render settings the delegate accepts: [(key, default, description)].
+#[pyfunction]
+fn render_settings() -> Vec<(&'static str, &'static str, &'static str)> {
+    hd_mipray::config::SETTINGS.iter().map(|s| (s.key, s.default, s.description)).collect()
+}
+
+/// The AOVs the delegate can render.
+#[pyfunction]
+fn aov_names(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
+    PyList::new(py, mipray::film::AOV_NAMES)
+}
+
+/// The package version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<RenderDelegate>()?;
+    m.add_function(wrap_pyfunction!(write_image, m)?)?;
+    m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(render_settings, m)?)?;
+    m.add_function(wrap_pyfunction!(aov_names, m)?)?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    Ok(())
+}
