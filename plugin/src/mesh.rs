@@ -59,11 +59,13 @@ pub struct MeshPrim {
     pub generation: u32,
     /// The last sync's error, if the prim could not be built.
     pub error: Option<String>,
+    /// The mesh's key in the delegate's geometry cache, fixed for the prim's life.
+    pub cache_id: u32,
 }
 
 impl MeshPrim {
-    pub fn new(path: &str, data: MeshData) -> Self {
-        MeshPrim { path: path.to_string(), data, surface: None, dirty: DirtyBits::ALL, surface_syncs: 0, generation: 0, error: None }
+    pub fn new(path: &str, data: MeshData, cache_id: u32) -> Self {
+        MeshPrim { path: path.to_string(), data, surface: None, dirty: DirtyBits::ALL, surface_syncs: 0, generation: 0, error: None, cache_id }
     }
 
     /// What differs between the current data and `new`.
@@ -92,13 +94,15 @@ impl MeshPrim {
     /// surface; new points on an OpenSubdiv surface re-apply its stencils without rebuilding
     /// topology when no render holds the surface.
     ///
+    /// Returns whether the surface changed (so its cache entries are stale).
+    ///
     /// # Errors
     /// The mesh's data is unusable; the message names the prim.
-    pub fn sync(&mut self) -> Result<(), DelegateError> {
+    pub fn sync(&mut self) -> Result<bool, DelegateError> {
         let dirty = self.dirty;
         self.dirty = DirtyBits::CLEAN;
         if !(dirty.contains(DirtyBits::TOPOLOGY) || dirty.contains(DirtyBits::POINTS)) && self.surface.is_some() {
-            return Ok(());
+            return Ok(false);
         }
         if !self.data.transform.is_finite() {
             self.surface = None;
@@ -113,7 +117,7 @@ impl MeshPrim {
             Ok(s) => {
                 self.surface = Some(s);
                 self.error = None;
-                Ok(())
+                Ok(true)
             }
             Err(e) => {
                 self.surface = None;

@@ -2,6 +2,10 @@
 //! scene a render pass hands to the core.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use mipray::geometry_cache::{CacheConfig, GeometryCache};
+use mipray::tessellate::Tessellation;
 
 use mipray::scene::{Mesh, Scene};
 
@@ -18,12 +22,16 @@ pub const SPRIM_TYPES: &[&str] = &["camera", "distantLight"];
 /// Bprim types.
 pub const BPRIM_TYPES: &[&str] = &["renderBuffer"];
 
-/// Holds the synced prims of one scene.
+/// Holds the synced prims of one scene, and the geometry cache they share across renders.
 #[derive(Default)]
 pub struct RenderDelegate {
     meshes: BTreeMap<String, MeshPrim>,
     cameras: BTreeMap<String, CameraPrim>,
     lights: BTreeMap<String, LightPrim>,
+    next_cache_id: u32,
+    /// Kept between renders while the cache settings stay the same, so an edit to one prim
+    /// costs only that prim's tessellations.
+    cache: Option<(CacheConfig, Arc<GeometryCache<Tessellation>>)>,
 }
 
 impl RenderDelegate {
@@ -40,7 +48,9 @@ impl RenderDelegate {
                 m.data = data;
             }
             None => {
-                self.meshes.insert(path.to_string(), MeshPrim::new(path, data));
+                let id = self.next_cache_id;
+                self.next_cache_id += 1;
+                self.meshes.insert(path.to_string(), MeshPrim::new(path, data, id));
             }
         }
     }
@@ -57,7 +67,24 @@ impl RenderDelegate {
 
     /// Removes a prim of any type; returns whether it existed.
     pub fn remove(&mut self, path: &str) -> bool {
-        self.meshes.remove(path).is_some() | self.cameras.remove(path).is_some() | self.lights.remove(path).is_some()
+        let mesh = self.meshes.remove(path);
+        if let (Some(m), Some((_, cache))) = (&mesh, &self.cache) {
+            cache.invalidate_mesh(m.cache_id);
+        }
+        mesh.is_some() | self.cameras.remove(path).is_some() | self.lights.remove(path).is_some()
+    }
+
+    /// The geometry cache for `config`: the one kept from earlier renders if its settings are
+    /// the same, else a new one.
+    pub fn geometry_cache(&mut self, config: CacheConfig) -> Arc<GeometryCache<Tessellation>> {
+        match &self.cache {
+            Some((c, cache)) if *c == config => cache.clone(),
+            _ => {
+                let cache = Arc::new(GeometryCache::new(config));
+                self.cache = Some((config, cache.clone()));
+                cache
+            }
+        }
     }
 
     /// Every prim path held, sorted.
@@ -78,9 +105,18 @@ impl RenderDelegate {
             if m.dirty.is_clean() {
                 continue;
             }
-            if let Err(e) = m.sync() {
-                log::error!("{e}");
-                errors.push(e);
+            match m.sync() {
+                Ok(true) => {
+                    // New points or topology: this mesh's tessellations are stale, nobody else's.
+                    if let Some((_, cache)) = &self.cache {
+                        cache.invalidate_mesh(m.cache_id);
+                    }
+                }
+                Ok(false) => {}
+                Err(e) => {
+                    log::error!("{e}");
+                    errors.push(e);
+                }
             }
         }
         errors
@@ -104,6 +140,7 @@ impl RenderDelegate {
             let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
             mesh.material = mat;
             mesh.generation = m.generation;
+            mesh.cache_id = Some(m.cache_id);
             mesh.left_handed = m.data.topology.left_handed;
             mesh.displacement = m.data.displacement;
             // The authored bound, else the procedural displacement's exact one, else the setting.

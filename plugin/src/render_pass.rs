@@ -2,7 +2,7 @@
 //! progress and cancel.
 
 use mipray::progress::Progress;
-use mipray::render::render;
+use mipray::render::render_with_cache;
 use serde_json::Value;
 
 use crate::config::RenderSettings;
@@ -38,7 +38,8 @@ impl RenderPass {
         let prim_errors = delegate.sync();
         let scene = delegate.build_scene(&self.camera, self.settings.displacement_bound)?;
         let options = self.settings.to_options(self.width, self.height, &self.aovs);
-        let out = render(&scene, &options, progress)?;
+        let cache = delegate.geometry_cache(options.cache);
+        let out = render_with_cache(&scene, &options, Some(cache), progress)?;
         let mut stats = out.stats;
         if let Some(obj) = stats.as_object_mut() {
             obj.insert("prim_errors".into(), Value::from(prim_errors.iter().map(|e| e.to_string()).collect::<Vec<_>>()));

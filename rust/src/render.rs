@@ -2,6 +2,7 @@
 //! parallel (rayon); every random number depends only on (seed, pixel, sample), so the image is
 //! the same with any thread count.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -10,6 +11,8 @@ use serde_json::Value;
 use crate::effects;
 use crate::error::RenderError;
 use crate::film::Film;
+use crate::geometry_cache::{CacheMode, GeometryCache};
+use crate::tessellate::Tessellation;
 use crate::integrator::{DirectLighting, SampleValue};
 use crate::options::RenderOptions;
 use crate::progress::Progress;
@@ -41,6 +44,16 @@ struct TileResult {
 /// # Errors
 /// Invalid settings or camera, or cancellation through `progress`.
 pub fn render(scene: &Scene, options: &RenderOptions, progress: &dyn Progress) -> Result<RenderOutput, RenderError> {
+    render_with_cache(scene, options, None, progress)
+}
+
+/// As [`render`], with a geometry cache that outlives the render (a render delegate keeps one
+/// so unchanged meshes keep their tessellations between renders). `options.cache` must match
+/// the cache's configuration; its statistics are cumulative over the cache's life.
+///
+/// # Errors
+/// As [`render`].
+pub fn render_with_cache(scene: &Scene, options: &RenderOptions, cache: Option<Arc<GeometryCache<Tessellation>>>, progress: &dyn Progress) -> Result<RenderOutput, RenderError> {
     options.validate()?;
     scene.camera.validate().map_err(RenderError::Camera)?;
     let start = Instant::now();
@@ -58,7 +71,11 @@ pub fn render(scene: &Scene, options: &RenderOptions, progress: &dyn Progress) -
     }
     progress.start((w * h) as u64);
     let out = pool.install(|| {
-        let tracer = Tracer::new(scene, options.cache.clone(), options.tess_factor);
+        let single = options.cache.mode == CacheMode::Single;
+        let tracer = match cache {
+            Some(c) => Tracer::with_cache(scene, c, single, options.tess_factor),
+            None => Tracer::new(scene, options.cache, options.tess_factor),
+        };
         let fx = effects::analyze(scene, options);
         let integrator = DirectLighting::new(&tracer, scene, &fx, options);
         let results: Vec<Option<TileResult>> = tiles

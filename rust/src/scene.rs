@@ -31,6 +31,9 @@ pub struct Mesh {
     pub left_handed: bool,
     /// Displacement along the limit normal, applied when tessellating.
     pub displacement: Option<Displacement>,
+    /// The mesh's key in a geometry cache that outlives one render (the delegate's): stable
+    /// across edits of other prims. `None`: its index in [`Scene::meshes`].
+    pub cache_id: Option<u32>,
 }
 
 impl std::fmt::Debug for Mesh {
@@ -45,7 +48,7 @@ impl std::fmt::Debug for Mesh {
 
 impl Mesh {
     pub fn new(name: impl Into<String>, surface: Arc<dyn LimitSurface>) -> Self {
-        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false, displacement: None }
+        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false, displacement: None, cache_id: None }
     }
 }
 

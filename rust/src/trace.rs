@@ -122,6 +122,14 @@ impl<'s> Tracer<'s> {
     /// Builds subpatches and BVHs for `scene`. Meshes are prepared once and shared by their
     /// instances.
     pub fn new(scene: &'s Scene, cache: CacheConfig, tess_factor: f32) -> Self {
+        let single = cache.mode == CacheMode::Single;
+        Self::with_cache(scene, Arc::new(GeometryCache::new(cache)), single, tess_factor)
+    }
+
+    /// As [`Tracer::new`], with a cache that outlives this render (a render delegate's): meshes
+    /// are keyed by their [`crate::scene::Mesh::cache_id`], so entries of unchanged meshes are
+    /// hit again by the next render.
+    pub fn with_cache(scene: &'s Scene, cache: Arc<GeometryCache<Tessellation>>, single: bool, tess_factor: f32) -> Self {
         use rayon::prelude::*;
         let meshes: Vec<MeshGeometry> = scene.meshes.par_iter().map(MeshGeometry::build).collect();
         let mut boxes = Vec::new();
@@ -145,8 +153,7 @@ impl<'s> Tracer<'s> {
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
-        let single = cache.mode == CacheMode::Single;
-        Tracer { scene, meshes, instances, tlas, cache: Arc::new(GeometryCache::new(cache)), tess_factor, single, bounds, displaced_outside: AtomicU64::new(0) }
+        Tracer { scene, meshes, instances, tlas, cache, tess_factor, single, bounds, displaced_outside: AtomicU64::new(0) }
     }
 
     /// Root subpatches over all meshes (each counted once, however many instances).
@@ -277,7 +284,7 @@ impl<'s> Tracer<'s> {
     fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Arc<Tessellation> {
         let mesh = &self.scene.meshes[mesh_index];
         let root = &geom.subpatches[cell.root as usize];
-        let key = CacheKey { mesh: mesh_index as u32, generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
+        let key = CacheKey { mesh: mesh.cache_id.unwrap_or(mesh_index as u32), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
         self.cache.get_or_build(key, || {
             let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds };
             let mut scratch = GridSamples::default();

@@ -31,3 +31,15 @@ fn negative_zero_direction_components_still_hit() {
         assert!(tracer.intersect(&r, &mut c).is_some(), "{d:?}");
     }
 }
+
+#[test]
+fn left_handed_orientation_flips_the_geometric_normal() {
+    let mut scene = Scene::default();
+    let m = scene.add_mesh(Mesh::new("/q", Arc::new(quad(1.0, 0.0))));
+    scene.add_instance(m, Mat4::IDENTITY);
+    let ray = Ray { o: Vec3A::new(0.2, 0.1, 3.0), d: Vec3A::NEG_Z, t_min: 0.0, t_max: f32::INFINITY, diff: RayDifferential::default(), kind: RayKind::Camera };
+    let ng = |scene: &Scene| Tracer::new(scene, CacheConfig::unbounded(), 1.0).intersect(&ray, &mut TraceCounters::default()).unwrap().ng;
+    assert!(ng(&scene).z > 0.99, "counter-clockwise faces +z");
+    scene.meshes[0].left_handed = true;
+    assert!(ng(&scene).z < -0.99, "leftHanded: the same winding faces −z");
+}

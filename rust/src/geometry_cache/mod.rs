@@ -25,24 +25,25 @@
 //! ```
 //!
 //! # Threads
-//! One [`GeometryCache`] is shared by all render threads. Each tier has one mutex, held only for
-//! a hash lookup and an O(1) LRU splice, never while building. A lookup of a key that another
-//! thread is building waits for that build (on a per-build condition variable) instead of
-//! building it twice, and counts as a hit. Counters are relaxed atomics, so [`GeometryCache::stats`]
-//! never stops the renderer. (Sharding each tier by key hash would cut contention further, but
-//! would turn one exact LRU into several approximate ones and change the hit rates the paper's
-//! tables are compared with; with a lock held for well under a microsecond it is not needed yet.)
+//! One [`GeometryCache`] is shared by all render threads. Each tier is split by key into shards
+//! ([`CacheConfig::shard_count`]), each with a mutex held only for a hash lookup and an O(1) LRU
+//! splice, never while building. A lookup of a key that another thread is building waits for
+//! that build (on a per-build condition variable) instead of building it twice, and counts as a
+//! hit. Counters are relaxed atomics, one set per shard on its own cache line, so lookups do not
+//! contend on them and [`GeometryCache::stats`] never stops the renderer. Sharding makes eviction
+//! LRU per shard rather than per tier, so it is used only where each shard still holds hundreds
+//! of entries; small caches keep one exact LRU, as the paper's hit-rate tables assume.
 //!
 //! # What the budget counts
 //! A tier's budget is compared with the sum of its resident entries' [`CacheEntry::byte_size`]:
 //! the tessellation payload, as the paper counts it (12 bytes a vertex, §5.2), so capacities and
 //! hit rates compare with its tables. Bookkeeping is not counted: per resident entry about 36–73
 //! bytes of hash-table slot, 40 bytes of LRU node and 16 bytes of `Arc` header, plus the entry's
-//! own headers (a `Vec` is 24 bytes). Next to a fine entry (3,468 bytes) that is noise; next to
-//! a coarse one (48 bytes) it more than doubles the real memory, so a full 10 MB coarse tier
-//! takes about 30 MB. An entry type that must bound real memory can count its overhead in
-//! `byte_size` (and in [`CacheConfig::entry_bytes`]). Entries handed out stay alive, uncounted,
-//! until the last ray holding one drops it.
+//! own headers (a `Vec` is 24 bytes) and the allocator's rounding. Next to a fine entry (3,468
+//! bytes) that is noise; next to a coarse one (48 bytes) it triples the real memory: a full
+//! 10 MB coarse tier of bare grids (208,333 entries) takes 35–40 MB. An entry type that must
+//! bound real memory can count its overhead in `byte_size`. Entries handed out stay alive,
+//! uncounted, until the last ray holding one drops it.
 //!
 //! To tell cold tessellations from misses, each tier remembers every key it ever built: one bit
 //! per subpatch id per (mesh, generation) — 121 KB per tier for the paper's 970,000-subpatch
@@ -54,21 +55,17 @@ mod stats;
 #[cfg(test)]
 mod tests;
 mod tier;
+mod tier_cache;
 
-use std::collections::HashMap;
 use std::fmt;
 use std::hash::{Hash, Hasher};
 use std::str::FromStr;
 use std::sync::Arc;
-use std::thread::{self, ThreadId};
 
-use parking_lot::{Condvar, Mutex};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use lru::LruList;
-use seen::{FxBuild, SeenSet};
-use stats::TierCounters;
+use tier_cache::{TierCache, MAX_FORCED_SHARDS, MAX_SHARDS, MIN_ENTRIES_PER_SHARD};
 
 pub use stats::{CacheStats, TierStats};
 pub use tier::{ParseTierError, Tier, VERTEX_BYTES};
@@ -82,8 +79,8 @@ pub const DEFAULT_TIER_BUDGET_BYTES: usize = 10_000_000;
 pub trait CacheEntry: Send + Sync + 'static {
     /// Bytes this entry counts against its tier's budget: its tessellation payload (12 bytes a
     /// vertex, plus e.g. the fine tier's sub-bounding boxes if it holds them). Called once, when
-    /// the entry is built; it must not change afterwards. For `capacity_entries` to be exact it
-    /// should equal [`CacheConfig::entry_bytes`] for the entry's tier.
+    /// the entry is built; it must not change afterwards. Every entry of a tier should report the
+    /// same size (a tier is one fixed grid): its `capacity_entries` is the budget over the largest.
     fn byte_size(&self) -> usize;
 
     /// Vertices computed to build this entry (counted as cold or recomputed vertices).
@@ -211,8 +208,12 @@ pub struct CacheConfig {
     /// ignore it.
     pub budget_bytes: [usize; 3],
     /// Bytes one entry of each tier is expected to report as its [`CacheEntry::byte_size`]; used
-    /// only to report `capacity_entries`. Default [`Tier::vertex_bytes`]: 48, 300, 3,468.
+    /// only to report `capacity_entries` until the tier has built an entry, whose real size is
+    /// used from then on. Default [`Tier::vertex_bytes`]: 48, 300, 3,468.
     pub entry_bytes: [usize; 3],
+    /// Shards per tier: 0 (the default) chooses automatically, see
+    /// [`shard_count`](Self::shard_count).
+    pub shards: usize,
 }
 
 impl Default for CacheConfig {
@@ -239,6 +240,7 @@ impl CacheConfig {
             mode: CacheMode::Multires,
             budget_bytes: [third, third, total_bytes - 2 * third],
             entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+            shards: 0,
         }
     }
 
@@ -248,6 +250,7 @@ impl CacheConfig {
             mode: CacheMode::Single,
             budget_bytes: [0, 0, total_bytes],
             entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+            shards: 0,
         }
     }
 
@@ -257,6 +260,7 @@ impl CacheConfig {
             mode: CacheMode::Unbounded,
             budget_bytes: [0; 3],
             entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+            shards: 0,
         }
     }
 
@@ -266,6 +270,7 @@ impl CacheConfig {
             mode: CacheMode::None,
             budget_bytes: [0; 3],
             entry_bytes: Self::NOMINAL_ENTRY_BYTES,
+            shards: 0,
         }
     }
 
@@ -280,8 +285,46 @@ impl CacheConfig {
         }
     }
 
+    /// The same config with each tier split into `shards` shards (rounded up to a power of two,
+    /// at most 64; 0 restores the automatic choice). One shard gives one exact LRU per tier.
+    pub const fn with_shards(mut self, shards: usize) -> Self {
+        self.shards = shards;
+        self
+    }
+
+    /// Shards `tier` is split into. Each shard has its own lock, LRU, counters and an equal
+    /// share of the budget, so threads rarely wait for each other; but eviction is then LRU per
+    /// shard, not over the whole tier. So, unless [`shards`](Self::shards) says otherwise, a
+    /// budgeted tier is halved only while each shard keeps at least 256 entries of
+    /// [`entry_bytes`](Self::entry_bytes), up to 16 shards: at the default 10 MB, 16 coarse, 16
+    /// medium and 8 fine shards (of 360 fine entries each); a tier of fewer than 512 entries
+    /// stays one exact LRU. `unbounded` and `none` tiers never evict, so sharding changes nothing
+    /// there but contention: 16.
+    pub const fn shard_count(&self, tier: Tier) -> usize {
+        if self.shards > 0 {
+            let n = self.shards.next_power_of_two();
+            return if n < MAX_FORCED_SHARDS {
+                n
+            } else {
+                MAX_FORCED_SHARDS
+            };
+        }
+        let capacity = match self.mode {
+            CacheMode::Unbounded | CacheMode::None => return MAX_SHARDS,
+            CacheMode::Multires | CacheMode::Single => match self.capacity_entries(tier) {
+                Some(c) => c,
+                None => return MAX_SHARDS,
+            },
+        };
+        let mut n = 1;
+        while n < MAX_SHARDS && capacity / (2 * n) >= MIN_ENTRIES_PER_SHARD {
+            n *= 2;
+        }
+        n
+    }
+
     /// The same config with other per-entry sizes (each at least 1 byte), e.g. when fine entries
-    /// also count their 16 sub-bounding boxes (`[48, 300, 3468 + 16 * 24]`).
+    /// also count their 16 sub-bounding boxes (`[48, 300, 3468 + 16 * 32]` for `Vec3A` boxes).
     pub const fn with_entry_bytes(mut self, entry_bytes: [usize; 3]) -> Self {
         let mut i = 0;
         while i < 3 {
@@ -322,7 +365,8 @@ impl CacheConfig {
     }
 
     /// How many entries of [`entry_bytes`](Self::entry_bytes) `tier`'s budget holds; `None`
-    /// when unbounded.
+    /// when unbounded. A cache's stats use [`GeometryCache::capacity_entries`] instead, which
+    /// knows the real entry size once the tier has built one.
     ///
     /// At the default 10 MB (10,000,000 bytes) and 12-byte vertices: 208,333 coarse, 33,333
     /// medium and 2,883 fine entries. The paper (§5.2) says 220,000, 35,000 and 3,000, and 9,100
@@ -347,198 +391,16 @@ pub struct GeometryCache<E: CacheEntry> {
     config: CacheConfig,
     tiers: [TierCache<E>; 3],
 }
-
-struct TierCache<E> {
-    /// Bytes this tier may hold; `usize::MAX` when unbounded.
-    budget_bytes: usize,
-    state: Mutex<TierState<E>>,
-    counters: TierCounters,
-}
-
-struct TierState<E> {
-    slots: HashMap<CacheKey, Slot<E>, FxBuild>,
-    lru: LruList<Resident<E>>,
-    /// Sum of the resident entries' `bytes`; never above the tier's budget.
-    resident_bytes: usize,
-    seen: SeenSet,
-}
-
-enum Slot<E> {
-    /// In the LRU list at this node.
-    Resident(u32),
-    /// Being built by one thread; others wait on it.
-    Building(Arc<Pending<E>>),
-}
-
-struct Resident<E> {
-    key: CacheKey,
-    entry: Arc<E>,
-    /// `entry.byte_size()` when it was stored: exactly what evicting it frees.
-    bytes: usize,
-}
-
-/// One build in flight, which other lookups of the same key wait for.
-struct Pending<E> {
-    builder: ThreadId,
-    state: Mutex<PendingState<E>>,
-    done: Condvar,
-}
-
-enum PendingState<E> {
-    Building,
-    Built(Arc<E>),
-    /// The build panicked; waiters look up again and one of them builds.
-    Abandoned,
-}
-
-impl<E> Pending<E> {
-    fn new() -> Self {
-        Self {
-            builder: thread::current().id(),
-            state: Mutex::new(PendingState::Building),
-            done: Condvar::new(),
-        }
-    }
-
-    fn finish(&self, state: PendingState<E>) {
-        *self.state.lock() = state;
-        self.done.notify_all();
-    }
-
-    /// The built entry, or `None` if the build was abandoned.
-    fn wait(&self) -> Option<Arc<E>> {
-        let mut state = self.state.lock();
-        loop {
-            match &*state {
-                PendingState::Building => self.done.wait(&mut state),
-                PendingState::Built(entry) => return Some(Arc::clone(entry)),
-                PendingState::Abandoned => return None,
-            }
-        }
-    }
-}
-
-/// Unregisters a build if its closure panics, so waiters do not wait forever and the key can be
-/// built again.
-struct AbandonOnUnwind<'a, E> {
-    tier: &'a TierCache<E>,
-    key: CacheKey,
-    pending: &'a Arc<Pending<E>>,
-    armed: bool,
-}
-
-impl<E> Drop for AbandonOnUnwind<'_, E> {
-    fn drop(&mut self) {
-        if self.armed {
-            self.tier.unregister(self.key, self.pending);
-            self.pending.finish(PendingState::Abandoned);
-        }
-    }
-}
-
-impl<E> TierCache<E> {
-    /// Forgets the build `pending` of `key`, if it is still the registered one.
-    fn unregister(&self, key: CacheKey, pending: &Arc<Pending<E>>) {
-        let mut st = self.state.lock();
-        if matches!(st.slots.get(&key), Some(Slot::Building(p)) if Arc::ptr_eq(p, pending)) {
-            st.slots.remove(&key);
-        }
-    }
-}
-
-impl<E: CacheEntry> TierCache<E> {
-    fn new(budget_bytes: Option<usize>) -> Self {
-        Self {
-            budget_bytes: budget_bytes.unwrap_or(usize::MAX),
-            state: Mutex::new(TierState {
-                slots: HashMap::default(),
-                lru: LruList::default(),
-                resident_bytes: 0,
-                seen: SeenSet::default(),
-            }),
-            counters: TierCounters::default(),
-        }
-    }
-
-    fn count_build(&self, cold: bool) {
-        let counter = if cold {
-            &self.counters.cold_tessellations
-        } else {
-            &self.counters.misses
-        };
-        TierCounters::add(counter, 1);
-    }
-
-    /// Builds `key` as the one thread registered to, stores it if it still may, and wakes the
-    /// threads waiting for it.
-    fn build_and_store(
-        &self,
-        key: CacheKey,
-        pending: &Arc<Pending<E>>,
-        cold: bool,
-        build: impl FnOnce() -> E,
-    ) -> Arc<E> {
-        let mut guard = AbandonOnUnwind {
-            tier: self,
-            key,
-            pending,
-            armed: true,
-        };
-        let entry = Arc::new(build());
-        let bytes = entry.byte_size();
-        let vertices = entry.vertex_count();
-        guard.armed = false;
-        self.counters.built(cold, vertices);
-        let evicted = self.store(key, pending, &entry, bytes);
-        pending.finish(PendingState::Built(Arc::clone(&entry)));
-        // Evicted entries are freed here, outside the tier lock (unless a ray still holds them).
-        drop(evicted);
-        entry
-    }
-
-    /// Makes `entry` resident, evicting least recently used entries until it fits. Does nothing
-    /// if the build was unregistered meanwhile (its mesh was invalidated); only unregisters it if
-    /// it is larger than the whole budget. Returns the evicted entries.
-    fn store(
-        &self,
-        key: CacheKey,
-        pending: &Arc<Pending<E>>,
-        entry: &Arc<E>,
-        bytes: usize,
-    ) -> Vec<Arc<E>> {
-        let mut evicted = Vec::new();
-        let mut st = self.state.lock();
-        let ours = matches!(st.slots.get(&key), Some(Slot::Building(p)) if Arc::ptr_eq(p, pending));
-        if !ours {
-            return evicted;
-        }
-        if bytes > self.budget_bytes {
-            // Too large to ever fit: returned to the caller, not stored, nothing evicted for it.
-            st.slots.remove(&key);
-            return evicted;
-        }
-        while st.resident_bytes.saturating_add(bytes) > self.budget_bytes {
-            let Some(old) = st.lru.pop_back() else { break };
-            st.slots.remove(&old.key);
-            st.resident_bytes -= old.bytes;
-            evicted.push(old.entry);
-        }
-        let node = st.lru.push_front(Resident {
-            key,
-            entry: Arc::clone(entry),
-            bytes,
-        });
-        st.slots.insert(key, Slot::Resident(node));
-        st.resident_bytes += bytes;
-        self.counters.raise_peak(st.resident_bytes);
-        evicted
-    }
-}
-
 impl<E: CacheEntry> GeometryCache<E> {
     /// An empty cache.
     pub fn new(config: CacheConfig) -> Self {
-        let tiers = Tier::ALL.map(|t| TierCache::new(config.tier_budget_bytes(t)));
+        let tiers = Tier::ALL.map(|t| {
+            TierCache::new(
+                config.shard_count(t),
+                config.tier_budget_bytes(t),
+                config.mode != CacheMode::None,
+            )
+        });
         Self { config, tiers }
     }
 
@@ -549,11 +411,13 @@ impl<E: CacheEntry> GeometryCache<E> {
 
     /// The tessellation of `key`: the resident one, or the one another thread is building (this
     /// thread waits for it), or else `build()`'s, which is then stored in `key.tier`'s LRU,
-    /// evicting least recently used entries of that tier to keep within its budget.
+    /// evicting least recently used entries (of the key's shard) to keep within the budget.
     ///
-    /// An entry whose [`byte_size`](CacheEntry::byte_size) exceeds its tier's whole budget is
-    /// returned but not stored (and evicts nothing); so is every entry in `none` mode, and any
-    /// entry of a tier without budget (coarse and medium in `single` mode).
+    /// An entry whose [`byte_size`](CacheEntry::byte_size) exceeds its shard's whole budget
+    /// (the tier's budget over [`CacheConfig::shard_count`], which leaves room for at least 256
+    /// entries of the configured size) is returned but not stored, and evicts nothing; so is
+    /// every entry in `none` mode, and any entry of a tier without budget (coarse and medium in
+    /// `single` mode).
     ///
     /// `build` runs without any cache lock held. It must not look up `key` itself, nor wait on a
     /// thread that is looking up `key`: that would wait for itself. For the same reason it should
@@ -564,59 +428,7 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// If `build` panics (the panic is passed on; threads waiting for this build then build the
     /// entry themselves), or if `build` looks up `key` (instead of deadlocking).
     pub fn get_or_build(&self, key: CacheKey, build: impl FnOnce() -> E) -> Arc<E> {
-        let tier = &self.tiers[key.tier.index()];
-        TierCounters::add(&tier.counters.lookups, 1);
-
-        if self.config.mode == CacheMode::None {
-            let cold = tier
-                .state
-                .lock()
-                .seen
-                .insert(key.mesh, key.generation, key.subpatch);
-            tier.count_build(cold);
-            let entry = Arc::new(build());
-            tier.counters.built(cold, entry.vertex_count());
-            return entry;
-        }
-
-        loop {
-            let found = {
-                let mut st = tier.state.lock();
-                match st.slots.get(&key) {
-                    Some(&Slot::Resident(node)) => {
-                        st.lru.touch(node);
-                        let entry = Arc::clone(&st.lru.get(node).entry);
-                        drop(st);
-                        TierCounters::add(&tier.counters.hits, 1);
-                        return entry;
-                    }
-                    Some(Slot::Building(pending)) => Err(Arc::clone(pending)),
-                    None => {
-                        let cold = st.seen.insert(key.mesh, key.generation, key.subpatch);
-                        let pending = Arc::new(Pending::new());
-                        st.slots.insert(key, Slot::Building(Arc::clone(&pending)));
-                        Ok((pending, cold))
-                    }
-                }
-            };
-            match found {
-                Ok((pending, cold)) => {
-                    tier.count_build(cold);
-                    return tier.build_and_store(key, &pending, cold, build);
-                }
-                Err(pending) => {
-                    assert!(
-                        pending.builder != thread::current().id(),
-                        "geometry cache: the build of {key:?} looked up the same key; it would wait for itself"
-                    );
-                    if let Some(entry) = pending.wait() {
-                        TierCounters::add(&tier.counters.hits, 1);
-                        return entry;
-                    }
-                    // The builder panicked and unregistered the key: look it up again.
-                }
-            }
-        }
+        self.tiers[key.tier.index()].get_or_build(key, build)
     }
 
     /// Drops every entry of `mesh` (all generations, all tiers) and frees their bytes; builds of
@@ -626,57 +438,53 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// proportion to the resident entries: meant for edits, not for every frame.
     pub fn invalidate_mesh(&self, mesh: u32) {
         for tier in &self.tiers {
-            let mut dropped = Vec::new();
-            let mut st = tier.state.lock();
-            let TierState {
-                slots,
-                lru,
-                resident_bytes,
-                seen,
-            } = &mut *st;
-            slots.retain(|key, slot| {
-                if key.mesh != mesh {
-                    return true;
-                }
-                if let Slot::Resident(node) = *slot {
-                    let old = lru.remove(node);
-                    *resident_bytes -= old.bytes;
-                    dropped.push(old.entry);
-                }
-                false
-            });
-            seen.forget_mesh(mesh);
-            drop(st);
-            drop(dropped);
+            tier.invalidate_mesh(mesh);
         }
     }
 
     /// Whether `key` is resident now. Does not count as a lookup nor refresh its recency.
     pub fn contains(&self, key: CacheKey) -> bool {
-        let st = self.tiers[key.tier.index()].state.lock();
-        matches!(st.slots.get(&key), Some(Slot::Resident(_)))
+        self.tiers[key.tier.index()].contains(&key)
     }
 
     /// Entries resident in `tier` now.
     pub fn resident_entries(&self, tier: Tier) -> usize {
-        self.tiers[tier.index()].state.lock().lru.len()
+        self.tiers[tier.index()].resident_entries()
     }
 
     /// Bytes (as entries report them) resident in `tier` now; never more than its budget.
     pub fn resident_bytes(&self, tier: Tier) -> usize {
-        self.tiers[tier.index()].state.lock().resident_bytes
+        self.tiers[tier.index()].resident_bytes()
+    }
+
+    /// Shards `tier` is split into (see [`CacheConfig::shard_count`]).
+    pub fn shard_count(&self, tier: Tier) -> usize {
+        self.tiers[tier.index()].shard_count()
     }
 
     /// Heap bytes of `tier`'s set of ever-built keys (bookkeeping, not counted in any budget).
     pub fn seen_set_bytes(&self, tier: Tier) -> usize {
-        self.tiers[tier.index()].state.lock().seen.heap_bytes()
+        self.tiers[tier.index()].seen_set_bytes()
+    }
+
+    /// How many entries `tier`'s budget holds: the budget over the largest entry built in the
+    /// tier so far. A tier is one fixed grid, so its entries are normally all one size, counting
+    /// whatever the entry type stores beyond its vertices (the fine tier's sub-bounding boxes, for
+    /// one): 3,984-byte fine entries give 2,510 at 10 MB, not the 2,883 of bare vertices. Before
+    /// the tier's first build, [`CacheConfig::capacity_entries`]. `None` when unbounded.
+    pub fn capacity_entries(&self, tier: Tier) -> Option<usize> {
+        let largest = self.tiers[tier.index()].largest_entry_bytes();
+        match self.config.tier_budget_bytes(tier) {
+            Some(budget) if largest > 0 => Some(budget / largest),
+            _ => self.config.capacity_entries(tier),
+        }
     }
 
     /// A snapshot of the statistics, without locking (see the `stats` module on consistency).
     pub fn stats(&self) -> CacheStats {
         let tiers = Tier::ALL.map(|t| {
-            let capacity = self.config.capacity_entries(t).map(|c| c as u64);
-            self.tiers[t.index()].counters.snapshot(t, capacity)
+            let capacity = self.capacity_entries(t).map(|c| c as u64);
+            self.tiers[t.index()].stats(t, capacity)
         });
         CacheStats {
             mode: self.config.mode,

@@ -2,10 +2,11 @@
 //! a key) from a *cache miss* (a rebuild after eviction), the paper's §6.1 terms.
 //!
 //! Memory: subpatch ids are dense per mesh (patch index, then split children), so each
-//! (mesh, generation) gets a bitset of one bit per id up to the highest id seen: 970,000
-//! subpatches (the paper's city street, §6.4) cost 121 KB per tier, against 10 MB of entries.
-//! Ids at or above [`DENSE_LIMIT`] go to a hash set instead (about 8 bytes each), so a stray
-//! huge id cannot allocate a 512 MB bitset.
+//! (mesh, generation) gets a bitset of one bit per id up to the highest id seen, behind a
+//! 33-byte hash-map slot: 970,000 subpatches (the paper's city street, §6.4) cost 121 KB per
+//! tier against its 10 MB of entries, and even 46,000 one-subpatch meshes cost about 3.5 MB. Ids
+//! at or above [`DENSE_LIMIT`] go to a hash set instead (about 14 bytes each), so a stray huge
+//! id cannot allocate a 512 MB bitset.
 
 use std::collections::{HashMap, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
@@ -65,52 +66,51 @@ impl Hasher for FxHasher {
 /// `BuildHasher` for [`FxHasher`].
 pub(crate) type FxBuild = BuildHasherDefault<FxHasher>;
 
-/// Ever-built subpatch ids of one (mesh, generation).
-#[derive(Default)]
-struct MeshSeen {
-    /// Bit `id % 64` of word `id / 64` is set once subpatch `id < DENSE_LIMIT` was built.
-    dense: Vec<u64>,
-    sparse: HashSet<u32, FxBuild>,
-}
-
 /// Ever-built keys of one tier.
 #[derive(Default)]
 pub(crate) struct SeenSet {
-    meshes: HashMap<(u32, u32), MeshSeen, FxBuild>,
+    /// Per (mesh, generation): bit `id % 64` of word `id / 64` is set once subpatch
+    /// `id < DENSE_LIMIT` was built.
+    dense: HashMap<(u32, u32), Vec<u64>, FxBuild>,
+    /// (mesh, generation, subpatch) of ids at or above `DENSE_LIMIT`.
+    sparse: HashSet<(u32, u32, u32), FxBuild>,
 }
 
 impl SeenSet {
     /// Records that (`mesh`, `generation`, `subpatch`) was built; true if it never was before.
     pub(crate) fn insert(&mut self, mesh: u32, generation: u32, subpatch: u32) -> bool {
-        let seen = self.meshes.entry((mesh, generation)).or_default();
         if subpatch >= DENSE_LIMIT {
-            return seen.sparse.insert(subpatch);
+            return self.sparse.insert((mesh, generation, subpatch));
         }
+        let bits = self.dense.entry((mesh, generation)).or_default();
         let word = (subpatch / 64) as usize;
         let bit = 1u64 << (subpatch % 64);
-        if word >= seen.dense.len() {
+        if word >= bits.len() {
             // `resize` reserves with amortised doubling, so growing id by id stays linear.
-            seen.dense.resize(word + 1, 0);
+            bits.resize(word + 1, 0);
         }
-        let first = seen.dense[word] & bit == 0;
-        seen.dense[word] |= bit;
+        let first = bits[word] & bit == 0;
+        bits[word] |= bit;
         first
     }
 
     /// Forgets every generation of `mesh`: its next builds count as cold tessellations.
     pub(crate) fn forget_mesh(&mut self, mesh: u32) {
-        self.meshes.retain(|&(m, _), _| m != mesh);
+        self.dense.retain(|&(m, _), _| m != mesh);
+        self.sparse.retain(|&(m, _, _)| m != mesh);
     }
 
     /// Heap bytes the set holds, roughly (bitset words plus hash set slots).
     pub(crate) fn heap_bytes(&self) -> usize {
-        let per_mesh = std::mem::size_of::<((u32, u32), MeshSeen)>() + 1;
-        self.meshes.capacity() * per_mesh
+        let slot = std::mem::size_of::<((u32, u32), Vec<u64>)>() + 1;
+        let sparse_slot = std::mem::size_of::<(u32, u32, u32)>() + 1;
+        self.dense.capacity() * slot
             + self
-                .meshes
+                .dense
                 .values()
-                .map(|s| s.dense.capacity() * 8 + s.sparse.capacity() * 5)
+                .map(|bits| bits.capacity() * 8)
                 .sum::<usize>()
+            + self.sparse.capacity() * sparse_slot
     }
 }
 
@@ -158,13 +158,28 @@ mod tests {
     #[test]
     fn forget_mesh_forgets_only_that_mesh() {
         let mut s = SeenSet::default();
-        s.insert(1, 0, 3);
-        s.insert(1, 7, 3);
-        s.insert(2, 0, 3);
+        for id in [3, u32::MAX] {
+            s.insert(1, 0, id);
+            s.insert(1, 7, id);
+            s.insert(2, 0, id);
+        }
         s.forget_mesh(1);
-        assert!(s.insert(1, 0, 3));
-        assert!(s.insert(1, 7, 3));
-        assert!(!s.insert(2, 0, 3));
+        for id in [3, u32::MAX] {
+            assert!(s.insert(1, 0, id));
+            assert!(s.insert(1, 7, id));
+            assert!(!s.insert(2, 0, id));
+        }
+    }
+
+    #[test]
+    fn many_small_meshes_stay_small() {
+        let mut s = SeenSet::default();
+        for mesh in 0..46_000 {
+            assert!(s.insert(mesh, 0, 0));
+        }
+        // A 33-byte slot (at hashbrown's load factor) plus one 8-byte word per mesh.
+        let per_mesh = s.heap_bytes() as f64 / 46_000.0;
+        assert!(per_mesh < 90.0, "{per_mesh} bytes per mesh");
     }
 
     #[test]

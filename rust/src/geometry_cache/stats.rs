@@ -15,65 +15,80 @@ use serde::Serialize;
 
 use super::{CacheMode, Tier};
 
-/// The live counters of one tier.
+/// The live lookup counters of one shard of a tier; a tier's figures are their sums. Each shard
+/// has its own, so threads looking up different shards do not fight over one cache line.
 #[derive(Default, Debug)]
-pub(crate) struct TierCounters {
+pub(crate) struct LookupCounters {
     pub(crate) lookups: AtomicU64,
     pub(crate) hits: AtomicU64,
     pub(crate) misses: AtomicU64,
     pub(crate) cold_tessellations: AtomicU64,
     pub(crate) cold_vertices: AtomicU64,
     pub(crate) recomputed_vertices: AtomicU64,
-    pub(crate) peak_bytes: AtomicU64,
-    /// The largest `byte_size` of any entry built in this tier, for `capacity_entries`.
-    pub(crate) largest_entry_bytes: AtomicU64,
 }
 
-impl TierCounters {
+impl LookupCounters {
     #[inline]
     pub(crate) fn add(counter: &AtomicU64, n: u64) {
         counter.fetch_add(n, Relaxed);
     }
 
-    /// Records a finished build of `bytes` and `vertices`: cold vertices for a first build,
-    /// recomputed ones (the cache cost) for a rebuild.
+    /// Counts a lookup that builds: a cold tessellation, or a miss.
     #[inline]
-    pub(crate) fn built(&self, cold: bool, vertices: usize, bytes: usize) {
+    pub(crate) fn count_build(&self, cold: bool) {
+        let counter = if cold {
+            &self.cold_tessellations
+        } else {
+            &self.misses
+        };
+        Self::add(counter, 1);
+    }
+
+    /// Records a finished build's vertices: cold vertices for a first build, recomputed ones
+    /// (the cache cost) for a rebuild.
+    #[inline]
+    pub(crate) fn built(&self, cold: bool, vertices: usize) {
         let counter = if cold {
             &self.cold_vertices
         } else {
             &self.recomputed_vertices
         };
         Self::add(counter, vertices as u64);
-        self.largest_entry_bytes.fetch_max(bytes as u64, Relaxed);
     }
+}
 
-    #[inline]
-    pub(crate) fn raise_peak(&self, resident_bytes: usize) {
-        self.peak_bytes.fetch_max(resident_bytes as u64, Relaxed);
+/// One tier's row from its shards' counters.
+pub(crate) fn tier_stats<'a>(
+    tier: Tier,
+    capacity_entries: Option<u64>,
+    peak_bytes: u64,
+    shards: impl Iterator<Item = &'a LookupCounters>,
+) -> TierStats {
+    let mut t = TierStats {
+        name: tier.name(),
+        verts_per_side: tier.verts_per_side(),
+        capacity_entries,
+        cold_tessellations: 0,
+        lookups: 0,
+        hits: 0,
+        misses: 0,
+        hit_rate: 0.0,
+        recomputed_vertices: 0,
+        peak_bytes,
+        cold_vertices: 0,
+    };
+    for c in shards {
+        t.lookups += c.lookups.load(Relaxed);
+        t.hits += c.hits.load(Relaxed);
+        t.misses += c.misses.load(Relaxed);
+        t.cold_tessellations += c.cold_tessellations.load(Relaxed);
+        t.cold_vertices += c.cold_vertices.load(Relaxed);
+        t.recomputed_vertices += c.recomputed_vertices.load(Relaxed);
     }
-
-    pub(crate) fn snapshot(&self, tier: Tier, capacity_entries: Option<u64>) -> TierStats {
-        let lookups = self.lookups.load(Relaxed);
-        let hits = self.hits.load(Relaxed);
-        TierStats {
-            name: tier.name(),
-            verts_per_side: tier.verts_per_side(),
-            capacity_entries,
-            cold_tessellations: self.cold_tessellations.load(Relaxed),
-            lookups,
-            hits,
-            misses: self.misses.load(Relaxed),
-            hit_rate: if lookups == 0 {
-                0.0
-            } else {
-                hits as f64 / lookups as f64
-            },
-            recomputed_vertices: self.recomputed_vertices.load(Relaxed),
-            peak_bytes: self.peak_bytes.load(Relaxed),
-            cold_vertices: self.cold_vertices.load(Relaxed),
-        }
+    if t.lookups > 0 {
+        t.hit_rate = t.hits as f64 / t.lookups as f64;
     }
+    t
 }
 
 /// One tier's figures, one row of the paper's tables.
@@ -83,9 +98,10 @@ pub struct TierStats {
     pub name: &'static str,
     /// 2, 5 or 17.
     pub verts_per_side: u32,
-    /// Entries of this tier's nominal size the budget holds; `null` (None) when unbounded, 0
-    /// when the tier stores nothing (`none` mode; coarse and medium in `single` mode). See
-    /// [`CacheConfig::capacity_entries`](super::CacheConfig::capacity_entries).
+    /// Entries the tier's budget holds, of the size its entries really are: see
+    /// [`GeometryCache::capacity_entries`](super::GeometryCache::capacity_entries). `null`
+    /// (None) when unbounded, 0 when the tier stores nothing (`none` mode; coarse and medium in
+    /// `single` mode).
     pub capacity_entries: Option<u64>,
     /// First builds ever of a key in this tier.
     pub cold_tessellations: u64,
@@ -233,20 +249,28 @@ mod tests {
     }
 
     #[test]
-    fn snapshot_computes_hit_rate() {
-        let c = TierCounters::default();
-        assert_eq!(c.snapshot(Tier::Fine, Some(3)).hit_rate, 0.0);
-        TierCounters::add(&c.lookups, 4);
-        TierCounters::add(&c.hits, 3);
-        TierCounters::add(&c.cold_tessellations, 1);
-        c.built(true, 289, 3468);
-        c.raise_peak(100);
-        c.raise_peak(50);
-        let s = c.snapshot(Tier::Fine, Some(3));
+    fn tier_stats_sum_the_shards() {
+        let shards: [LookupCounters; 2] = Default::default();
+        let empty = tier_stats(Tier::Fine, Some(3), 0, shards.iter());
+        assert_eq!((empty.lookups, empty.hit_rate), (0, 0.0));
+        for c in &shards {
+            LookupCounters::add(&c.lookups, 2);
+        }
+        LookupCounters::add(&shards[0].hits, 2);
+        LookupCounters::add(&shards[1].hits, 1);
+        shards[1].count_build(true);
+        shards[1].built(true, 289);
+        shards[0].count_build(false);
+        shards[0].built(false, 289);
+        let s = tier_stats(Tier::Fine, Some(3), 100, shards.iter());
+        assert_eq!(
+            (s.lookups, s.hits, s.misses, s.cold_tessellations),
+            (4, 3, 1, 1)
+        );
         assert_eq!(s.hit_rate, 0.75);
         assert_eq!(
             (s.cold_vertices, s.recomputed_vertices, s.peak_bytes),
-            (289, 0, 100)
+            (289, 289, 100)
         );
         assert_eq!(
             (s.name, s.verts_per_side, s.capacity_entries),

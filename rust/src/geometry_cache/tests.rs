@@ -7,6 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering::SeqCst};
 use std::sync::{mpsc, Arc, Barrier};
 use std::time::Duration;
 
+use super::tier_cache::{Resident, Slot};
 use super::*;
 
 /// A stand-in tessellation: an id to check which build a caller got, and sizes.
@@ -62,6 +63,7 @@ fn check_invariant(stats: &CacheStats) {
 fn lru_evicts_the_least_recently_used_and_a_get_refreshes_it() {
     let f = Tier::Fine;
     let cache = GeometryCache::new(budgets(0, 0, 3 * f.vertex_bytes()));
+    assert_eq!(cache.shard_count(f), 1, "a small tier is one exact LRU");
     for s in 0..3 {
         cache.get_or_build(key(0, s, f), || grid(f, s.into())); // recency, newest first: 2 1 0
     }
@@ -203,6 +205,93 @@ fn capacity_entries_at_the_default_budget_match_the_paper() {
     let with_boxes = default.with_entry_bytes([48, 300, 3468 + 16 * 24]);
     assert_eq!(with_boxes.capacity_entries(Tier::Fine), Some(2_596));
     assert_eq!(with_boxes.capacity_entries(Tier::Coarse), Some(208_333));
+}
+
+#[test]
+fn capacity_entries_follow_the_real_entry_size() {
+    let f = Tier::Fine;
+    let cache = GeometryCache::new(CacheConfig::default());
+    assert_eq!(cache.capacity_entries(f), Some(2_883));
+    // A fine tessellation that also holds 16 sub-boxes (two `Vec3A`, 32 bytes, each) and a
+    // 4-byte chord error: 3,984 bytes.
+    cache.get_or_build(key(0, 0, f), || Grid {
+        id: 0,
+        bytes: 3468 + 16 * 32 + 4,
+        verts: 289,
+    });
+    assert_eq!(cache.capacity_entries(f), Some(2_510));
+    assert_eq!(cache.stats().tier(f).capacity_entries, Some(2_510));
+    assert_eq!(
+        cache.capacity_entries(Tier::Coarse),
+        Some(208_333),
+        "other tiers keep theirs"
+    );
+    // Building does not give a budget to tiers without one.
+    let none = GeometryCache::new(CacheConfig::none());
+    none.get_or_build(key(0, 0, f), || grid(f, 0));
+    assert_eq!(none.capacity_entries(f), Some(0));
+    let unbounded = GeometryCache::new(CacheConfig::unbounded());
+    unbounded.get_or_build(key(0, 0, f), || grid(f, 0));
+    assert_eq!(unbounded.capacity_entries(f), None);
+}
+
+#[test]
+fn shard_counts_are_chosen_so_each_shard_keeps_hundreds_of_entries() {
+    let shards = |c: CacheConfig| Tier::ALL.map(|t| c.shard_count(t));
+    // 208,333 / 16, 33,333 / 16 and 2,883 / 8 entries per shard.
+    assert_eq!(shards(CacheConfig::DEFAULT), [16, 16, 8]);
+    // 722 coarse entries: 2 shards of 361 (4 would leave 180); 115 medium, 10 fine: 1.
+    assert_eq!(shards(CacheConfig::multires(3 * 10 * 3468)), [2, 1, 1]);
+    assert_eq!(shards(CacheConfig::single(30_000_000)), [1, 1, 16]);
+    assert_eq!(shards(CacheConfig::unbounded()), [16; 3]);
+    assert_eq!(shards(CacheConfig::none()), [16; 3]);
+    assert_eq!(shards(CacheConfig::DEFAULT.with_shards(3)), [4; 3]);
+    assert_eq!(shards(CacheConfig::DEFAULT.with_shards(1000)), [64; 3]);
+    assert_eq!(shards(CacheConfig::DEFAULT.with_shards(5).with_shards(0)), [16, 16, 8]);
+    let cache = GeometryCache::<Grid>::new(CacheConfig::DEFAULT);
+    assert_eq!(Tier::ALL.map(|t| cache.shard_count(t)), [16, 16, 8]);
+}
+
+#[test]
+fn shards_spread_many_meshes_and_many_subpatches() {
+    let f = Tier::Fine;
+    // 8 fine shards of 360 entries each. 2,000 one-subpatch meshes fit only if they spread
+    // (every mesh's subpatch 0 in one shard would keep 360).
+    let cache = GeometryCache::new(CacheConfig::DEFAULT);
+    for mesh in 0..2000 {
+        cache.get_or_build(key(mesh, 0, f), || grid(f, mesh.into()));
+    }
+    assert_eq!(cache.resident_entries(f), 2000);
+    let cache = GeometryCache::new(CacheConfig::DEFAULT);
+    for s in 0..2000 {
+        cache.get_or_build(key(7, s, f), || grid(f, s.into()));
+    }
+    assert_eq!(cache.resident_entries(f), 2000);
+    assert_eq!(cache.stats().tier(f).misses, 0);
+}
+
+#[test]
+fn sharded_tiers_account_bytes_and_peak_over_all_shards() {
+    let m = Tier::Medium;
+    let budget = 4 * 1000;
+    let cache = GeometryCache::new(budgets(0, budget, 0).with_shards(4));
+    assert_eq!(cache.shard_count(m), 4);
+    let mut peak = 0;
+    let mut total_built = 0;
+    for s in 0..200u32 {
+        let bytes = 100 + (s as usize * 37) % 300;
+        total_built += bytes;
+        cache.get_or_build(key(s % 3, s, m), || Grid { id: 0, bytes, verts: 25 });
+        let now = cache.resident_bytes(m);
+        assert!(now <= budget, "{now} > {budget}");
+        peak = peak.max(now);
+        assert_eq!(cache.stats().tier(m).peak_bytes, peak as u64);
+    }
+    assert!(peak > budget / 2 && total_built > budget);
+    cache.invalidate_mesh(0);
+    cache.invalidate_mesh(1);
+    cache.invalidate_mesh(2);
+    assert_eq!((cache.resident_bytes(m), cache.resident_entries(m)), (0, 0));
 }
 
 #[test]
@@ -372,6 +461,7 @@ fn lookups_are_hits_plus_misses_plus_cold_in_every_mode() {
     const SUBPATCHES: u64 = 40;
     for config in [
         budgets(10 * 48, 10 * 300, 10 * 3468),
+        budgets(40 * 48, 40 * 300, 40 * 3468).with_shards(4),
         CacheConfig::single(10 * 3468),
         CacheConfig::unbounded(),
         CacheConfig::none(),

@@ -1,0 +1,130 @@
+//! The render delegate end to end in Rust: sync costs in proportion to the edit, and the
+//! attributes a renderer must honour change the picture.
+
+use glam::{Mat4, Vec3};
+use hd_mipray::camera::Camera;
+use hd_mipray::light::DistantLightData;
+use hd_mipray::mesh::MeshData;
+use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
+use mipray::progress::NoProgress;
+use mipray::topology::{MeshTopology, Scheme};
+use serde_json::Value;
+
+/// A 3×3 grid of unit quads in z = 0 centred on the origin, as a subdivision or polygon mesh.
+fn grid(scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
+    let mut pts = Vec::new();
+    for j in 0..4 {
+        for i in 0..4 {
+            pts.push([i as f32 - 1.5, j as f32 - 1.5, 0.0]);
+        }
+    }
+    let mut idx = Vec::new();
+    for j in 0..3 {
+        for i in 0..3 {
+            let v = |a: i32, b: i32| b * 4 + a;
+            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
+        }
+    }
+    (MeshTopology { scheme, face_vertex_counts: vec![4; 9], face_vertex_indices: idx, ..Default::default() }, pts)
+}
+
+fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
+    let pts = vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]];
+    let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
+    (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() }, pts)
+}
+
+fn data(topology: MeshTopology, points: Vec<[f32; 3]>, transform: Mat4) -> MeshData {
+    MeshData { topology, points, transform, double_sided: false, albedo: [0.5; 3], mirror: [0.0; 3], displacement_bound: None, displacement: None }
+}
+
+fn delegate_with_camera(eye: Vec3, target: Vec3) -> RenderDelegate {
+    let mut d = RenderDelegate::new();
+    d.set_camera("/cam", Camera { render_from_camera: Camera::look_at(eye, target, Vec3::Y), horizontal_aperture: 20.0, vertical_aperture: 20.0, focal_length: 35.0, clipping_range: (0.1, 1000.0), ..Default::default() });
+    d.set_distant_light("/sun", DistantLightData { transform: Mat4::IDENTITY, intensity: 1.0, exposure: 0.0, color: [1.0; 3], angle_deg: 0.5, normalize: false, shadow_enable: true });
+    d
+}
+
+fn pass(aovs: &[&str]) -> RenderPass {
+    RenderPass { camera: "/cam".into(), width: 32, height: 32, aovs: aovs.iter().map(|s| s.to_string()).collect(), settings: RenderSettings::default() }
+}
+
+fn cold(stats: &Value) -> u64 {
+    stats["geometry_cache"]["tiers"].as_array().unwrap().iter().map(|t| t["cold_tessellations"].as_u64().unwrap()).sum()
+}
+
+#[test]
+fn moving_one_prim_rebuilds_no_other_mesh_and_keeps_its_cache_entries() {
+    let mut d = delegate_with_camera(Vec3::new(0.0, 0.0, 8.0), Vec3::ZERO);
+    let (t, p) = cube();
+    d.set_mesh("/a", data(t.clone(), p.clone(), Mat4::from_translation(Vec3::new(-1.5, 0.0, 0.0))));
+    d.set_mesh("/b", data(t.clone(), p.clone(), Mat4::from_translation(Vec3::new(1.5, 0.0, 0.0))));
+    let first = pass(&["color"]).execute(&mut d, &NoProgress).unwrap();
+    assert_eq!((d.mesh("/a").unwrap().surface_syncs, d.mesh("/b").unwrap().surface_syncs), (1, 1));
+    // Move /b out of view: nothing is rebuilt, and /a's tessellations are all still cached.
+    d.set_mesh("/b", data(t.clone(), p.clone(), Mat4::from_translation(Vec3::new(100.0, 0.0, 0.0))));
+    let second = pass(&["color"]).execute(&mut d, &NoProgress).unwrap();
+    assert_eq!((d.mesh("/a").unwrap().surface_syncs, d.mesh("/b").unwrap().surface_syncs), (1, 1));
+    assert_eq!(cold(&second.stats), cold(&first.stats), "no new tessellation for the unchanged mesh");
+    // New points on /a: only /a is rebuilt, and its entries are invalidated.
+    let moved: Vec<[f32; 3]> = p.iter().map(|q| [q[0] * 1.1, q[1], q[2]]).collect();
+    d.set_mesh("/a", data(t, moved, Mat4::from_translation(Vec3::new(-1.5, 0.0, 0.0))));
+    let third = pass(&["color"]).execute(&mut d, &NoProgress).unwrap();
+    assert_eq!((d.mesh("/a").unwrap().surface_syncs, d.mesh("/b").unwrap().surface_syncs), (2, 1));
+    assert!(cold(&third.stats) > cold(&second.stats), "the edited mesh is tessellated anew");
+}
+
+#[test]
+fn a_hole_removes_pixels() {
+    let mut d = delegate_with_camera(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO);
+    let (mut t, p) = grid(Scheme::CatmullClark);
+    d.set_mesh("/g", data(t.clone(), p.clone(), Mat4::IDENTITY));
+    let full = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    t.hole_indices = vec![4];
+    d.set_mesh("/g", data(t, p, Mat4::IDENTITY));
+    let holed = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    let centre = |r: &hd_mipray::render_pass::PassResult| r.buffers[0].data[16 * 32 + 16];
+    assert_eq!(centre(&full), 1.0);
+    assert_eq!(centre(&holed), 0.0);
+    let covered = |r: &hd_mipray::render_pass::PassResult| r.buffers[0].data.iter().filter(|a| **a > 0.5).count();
+    assert!(covered(&holed) < covered(&full));
+}
+
+#[test]
+fn an_infinitely_sharp_crease_changes_the_limit_surface() {
+    // Seen edge-on from the side, a smooth subdivided cube is a rounded blob; with every edge
+    // creased infinitely sharp it is the cube itself, so it covers more pixels.
+    let mut d = delegate_with_camera(Vec3::new(0.0, 0.0, 9.0), Vec3::ZERO);
+    let (mut t, p) = cube();
+    d.set_mesh("/c", data(t.clone(), p.clone(), Mat4::IDENTITY));
+    let smooth = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    let edges = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
+    for (a, b) in edges {
+        t.crease_indices.extend([a, b]);
+        t.crease_lengths.push(2);
+        t.crease_sharpnesses.push(10.0);
+    }
+    d.set_mesh("/c", data(t, p, Mat4::IDENTITY));
+    let sharp = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    let covered = |r: &hd_mipray::render_pass::PassResult| r.buffers[0].data.iter().filter(|a| **a > 0.5).count();
+    assert!(covered(&sharp) > covered(&smooth) + 20, "{} vs {}", covered(&sharp), covered(&smooth));
+}
+
+#[test]
+fn a_broken_prim_is_reported_and_the_others_render() {
+    let mut d = delegate_with_camera(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO);
+    let (t, p) = grid(Scheme::None);
+    d.set_mesh("/good", data(t.clone(), p.clone(), Mat4::IDENTITY));
+    let mut bad = t;
+    bad.scheme = Scheme::Loop; // Loop needs triangles: OpenSubdiv refuses quads
+    d.set_mesh("/bad", data(bad, p, Mat4::from_translation(Vec3::new(0.0, 0.0, 1.0))));
+    let r = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    assert_eq!(r.prim_errors.len(), 1);
+    let msg = r.prim_errors[0].to_string();
+    assert!(msg.starts_with("/bad: "), "{msg}");
+    assert!(r.buffers[0].data.iter().any(|a| *a > 0.5), "the good mesh still renders");
+    assert!(pass(&["alpha"]).execute(&mut d, &NoProgress).is_ok());
+    let missing = RenderPass { camera: "/nope".into(), ..pass(&["alpha"]) };
+    let e = missing.execute(&mut d, &NoProgress).err().unwrap().to_string();
+    assert!(e.contains("/nope") && e.contains("/cam"), "{e}");
+}
