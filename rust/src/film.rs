@@ -32,6 +32,7 @@ pub fn file_channel_names(aov: &str, channels: usize) -> Vec<String> {
         "color" => vec!["R".into(), "G".into(), "B".into()],
         "alpha" => vec!["A".into()],
         "depth" => vec!["Z".into()],
+        "normal" => vec!["N.x".into(), "N.y".into(), "N.z".into()],
         _ if channels == 1 => vec![aov.to_string()],
         _ => ["x", "y", "z", "w"].iter().take(channels).map(|c| format!("{aov}.{c}")).collect(),
     }

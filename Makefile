@@ -1,0 +1,86 @@
+# mipray: the whole set-up and the everyday commands.
+#
+#   make render   set up, then render examples/$(EXAMPLE).usda to out/ and print the image paths
+#   make test     set up, then cargo tests (core, bridge, plugin) and the pytest suites
+#
+# Both start with scripts/setup.sh, which installs what is missing (Debian
+# packages, .venv, Python packages) and builds the extension into .venv.
+
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+export PATH := $(HOME)/.cargo/bin:$(PATH)
+
+VENV    ?= .venv
+PY      := $(VENV)/bin/python
+RECORD  := $(VENV)/bin/mipray-record
+EXAMPLE ?= subdiv_showcase
+WIDTH   ?= 320
+OUT     ?= out
+EXAMPLE_FILES := examples/subdiv_showcase.usda
+# pyo3's build script finds Python through this when cargo checks mipray-py.
+ifneq ($(wildcard $(PY)),)
+export PYO3_PYTHON ?= $(abspath $(PY))
+endif
+
+.PHONY: help setup build examples render test test-rust test-python fmt lint clean
+
+help: ## List the targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
+
+setup: ## Install what is missing and build the extension into .venv
+	@bash scripts/setup.sh
+
+build: setup ## Build the Rust workspace and the extension
+	cargo build --workspace --exclude mipray-py
+
+$(EXAMPLE_FILES):
+	@[ -f $@ ] || $(PY) examples/make_examples.py
+
+examples: setup $(EXAMPLE_FILES) ## Write the example scenes if missing
+
+render: setup $(EXAMPLE_FILES) ## Render examples/$(EXAMPLE).usda to $(OUT)/$(EXAMPLE).exr and .png
+	@mkdir -p $(OUT)
+	@$(RECORD) --imageWidth $(WIDTH) --aovs color,depth,normal \
+		--stats $(OUT)/$(EXAMPLE).stats.json examples/$(EXAMPLE).usda $(OUT)/$(EXAMPLE).exr
+	@if command -v oiiotool >/dev/null 2>&1 && oiiotool $(OUT)/$(EXAMPLE).exr --ch R,G,B \
+		--colorconvert linear sRGB -d uint8 -o $(OUT)/$(EXAMPLE).png 2>/dev/null; then \
+		echo $(OUT)/$(EXAMPLE).png; \
+	else \
+		$(RECORD) --imageWidth $(WIDTH) examples/$(EXAMPLE).usda $(OUT)/$(EXAMPLE).png; \
+	fi
+
+test: setup $(EXAMPLE_FILES) ## Run every test (both suites run; fails if either fails)
+	@status=0; \
+	$(MAKE) --no-print-directory test-rust || status=1; \
+	$(MAKE) --no-print-directory test-python || status=1; \
+	exit $$status
+
+test-rust:
+	cargo test --workspace --exclude mipray-py
+
+test-python:
+	$(PY) -m pytest tests -q
+
+fmt: ## Format Rust and Python sources
+	cargo fmt --all
+	@if [ -x $(VENV)/bin/ruff ] || command -v ruff >/dev/null; then \
+		$$( [ -x $(VENV)/bin/ruff ] && echo $(VENV)/bin/ruff || echo ruff ) format \
+			--config python/pyproject.toml python/mipray tests examples; \
+	else echo "ruff not installed (pip install ruff): Python not formatted"; fi
+
+lint: ## cargo fmt --check, clippy -D warnings, ruff and mypy if installed
+	cargo fmt --all --check
+	cargo clippy --workspace --all-targets -- -D warnings
+	@RUFF=$$( [ -x $(VENV)/bin/ruff ] && echo $(VENV)/bin/ruff || command -v ruff || true ); \
+	if [ -n "$$RUFF" ]; then \
+		$$RUFF check --config python/pyproject.toml python/mipray tests examples && \
+		$$RUFF format --check --config python/pyproject.toml python/mipray tests examples; \
+	else echo "ruff not installed (pip install ruff): Python not linted"; fi
+	@if [ -x $(VENV)/bin/mypy ]; then cd python && ../$(VENV)/bin/mypy; \
+	else echo "mypy not installed in $(VENV): Python not type-checked"; fi
+
+clean: ## Remove build outputs and renders (keeps .venv)
+	cargo clean
+	rm -rf $(OUT) .pytest_cache tests/.pytest_cache python/.pytest_cache .ruff_cache python/.mypy_cache
+	rm -f python/mipray/_mipray*.so
+	find python tests examples -name __pycache__ -type d -prune -exec rm -rf {} +

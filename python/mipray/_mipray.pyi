@@ -1,0 +1,220 @@
+"""Typed stubs of ``mipray._mipray``, the compiled render delegate (pyo3).
+
+Hand-written: this file is the contract between the Rust bindings
+(``python/src``) and the Python scene delegate (``mipray.usd``). Keep it in step
+with the bindings; ``tests/test_protocol.py`` compares the two signatures, and
+``python -m mypy.stubtest mipray._mipray`` checks them when mypy is installed.
+
+Conventions
+-----------
+* Matrices are ``float64`` arrays of shape (4, 4) in USD's row-vector layout,
+  exactly as ``numpy.array(Gf.Matrix4d)`` gives them: ``p_world = p @ m`` with
+  the translation in the last row.
+* Prim paths are USD path strings (``"/World/Geo/Cube"``); a ``set_*`` call with
+  a path already present replaces that prim.
+* Methods that take array data raise ``ValueError`` naming the prim path when
+  the data is inconsistent (index out of range, counts that do not add up,
+  non-finite values).
+"""
+
+from collections.abc import Callable
+from typing import final
+
+import numpy as np
+from numpy.typing import NDArray
+
+@final
+class RenderDelegate:
+    """The Hydra-style render delegate: holds synced prims and renders them.
+
+    One delegate holds one scene. Prims are added or replaced with the
+    ``set_*`` methods and removed with :meth:`remove`; :meth:`render` traces
+    the scene as it is at that moment.
+    """
+
+    def __init__(self) -> None:
+        """Create an empty scene."""
+
+    def set_mesh(
+        self,
+        path: str,
+        *,
+        points: NDArray[np.float32],
+        face_vertex_counts: NDArray[np.int32],
+        face_vertex_indices: NDArray[np.int32],
+        transform: NDArray[np.float64],
+        scheme: str = "catmullClark",
+        interpolate_boundary: str = "edgeAndCorner",
+        face_varying_linear_interpolation: str = "cornersPlus1",
+        triangle_subdivision_rule: str = "catmullClark",
+        crease_indices: NDArray[np.int32] | None = None,
+        crease_lengths: NDArray[np.int32] | None = None,
+        crease_sharpnesses: NDArray[np.float32] | None = None,
+        corner_indices: NDArray[np.int32] | None = None,
+        corner_sharpnesses: NDArray[np.float32] | None = None,
+        hole_indices: NDArray[np.int32] | None = None,
+        left_handed: bool = False,
+        double_sided: bool = False,
+        albedo: tuple[float, float, float] = (0.18, 0.18, 0.18),
+    ) -> None:
+        """Add or replace a mesh (an Rprim).
+
+        Args:
+            path: the prim path; names the mesh in errors and stats.
+            points: (N, 3) float32 object-space control points.
+            face_vertex_counts: (F,) int32 vertices per face.
+            face_vertex_indices: (sum of counts,) int32 indices into ``points``.
+            transform: (4, 4) float64 local-to-world, row-vector convention.
+            scheme: USD ``subdivisionScheme``; ``"none"`` is a polygonal mesh.
+            interpolate_boundary: USD ``interpolateBoundary``.
+            face_varying_linear_interpolation: USD
+                ``faceVaryingLinearInterpolation``.
+            triangle_subdivision_rule: USD ``triangleSubdivisionRule``.
+            crease_indices: int32 vertex indices of all creases, concatenated.
+            crease_lengths: int32 number of vertices of each crease.
+            crease_sharpnesses: float32, one per crease or one per crease edge.
+            corner_indices: int32 vertex indices of sharp corners.
+            corner_sharpnesses: float32, one per corner.
+            hole_indices: int32 indices of faces that are holes.
+            left_handed: True when USD ``orientation`` is ``leftHanded``.
+            double_sided: USD ``doubleSided``.
+            albedo: linear diffuse reflectance, each in [0, 1].
+
+        Raises:
+            ValueError: the data is inconsistent; the message names ``path``.
+        """
+
+    def set_camera(
+        self,
+        path: str,
+        *,
+        transform: NDArray[np.float64],
+        projection: str = "perspective",
+        focal_length: float = 50.0,
+        horizontal_aperture: float = 20.955,
+        vertical_aperture: float = 15.2908,
+        horizontal_aperture_offset: float = 0.0,
+        vertical_aperture_offset: float = 0.0,
+        clipping_range: tuple[float, float] = (1.0, 1e6),
+        f_stop: float = 0.0,
+        focus_distance: float = 0.0,
+    ) -> None:
+        """Add or replace a camera (an Sprim), with USD ``UsdGeomCamera`` units.
+
+        The camera looks down its local -Z axis with +Y up. Focal length and
+        apertures are in tenths of a scene unit (USD's convention, millimetres
+        when the scene is in centimetres); ``f_stop`` 0 disables depth of field.
+
+        Raises:
+            ValueError: a value is out of range; the message names ``path``.
+        """
+
+    def set_distant_light(
+        self,
+        path: str,
+        *,
+        transform: NDArray[np.float64],
+        intensity: float = 1.0,
+        exposure: float = 0.0,
+        color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        angle: float = 0.53,
+        normalize: bool = False,
+        shadow_enable: bool = True,
+    ) -> None:
+        """Add or replace a ``UsdLuxDistantLight`` (an Sprim).
+
+        The light shines along its local -Z axis; ``angle`` is the angular
+        diameter in degrees; the emitted radiance is
+        ``color * intensity * 2**exposure`` as UsdLux defines it.
+
+        Raises:
+            ValueError: a value is out of range; the message names ``path``.
+        """
+
+    def remove(self, path: str) -> None:
+        """Remove the prim at ``path``; nothing happens if there is none."""
+
+    def prim_paths(self) -> list[str]:
+        """The paths of every prim the delegate holds, sorted."""
+
+    def render(
+        self,
+        camera: str,
+        width: int,
+        height: int,
+        aovs: list[str],
+        settings: dict[str, object],
+        progress: Callable[[int, int], object] | None = None,
+    ) -> tuple[dict[str, NDArray[np.float32]], str]:
+        """Render the scene through ``camera`` and return its AOVs.
+
+        Releases the GIL for the whole render (re-taking it only to call
+        ``progress``).
+
+        Args:
+            camera: path of a camera set with :meth:`set_camera`.
+            width: image width in pixels.
+            height: image height in pixels.
+            aovs: names of the AOVs to produce: ``"color"`` (3 channels,
+                linear), ``"depth"`` (1 channel, camera-space distance along
+                the view axis in scene units, ``inf`` where nothing is hit),
+                ``"normal"`` (3 channels, world space).
+            settings: renderer settings, all optional: ``"samples"`` (int,
+                per pixel, default 1), ``"seed"`` (int), ``"threads"`` (int,
+                0 for all cores), ``"tessFactor"`` (float, the paper's tess
+                factor: larger is coarser), ``"geometryCacheMb"`` (float),
+                ``"cacheMode"`` (``"multires"``, ``"single"``,
+                ``"unbounded"`` or ``"none"``), ``"displacementBound"``
+                (float, scene units). The module may know more; it
+                rejects unknown keys with ``ValueError``.
+            progress: called as ``progress(done, total)`` about every 1% of
+                the work; a pending ``KeyboardInterrupt`` cancels the render.
+
+        Returns:
+            ``(aovs, stats_json)``: each AOV an H×W×C float32 array, and the
+            render statistics as a JSON string (names in DESIGN.md).
+
+        Raises:
+            ValueError: unknown camera or AOV, or an invalid setting.
+            KeyboardInterrupt: the render was interrupted (Ctrl-C).
+        """
+
+def write_image(
+    path: str,
+    aovs: dict[str, NDArray[np.float32]],
+    order: list[str],
+    formats: dict[str, str] | None = None,
+    metadata: dict[str, object] | None = None,
+) -> None:
+    """Write AOVs as the channels of one image through OpenImageIO.
+
+    The file type comes from the extension (``exr``, ``png``, ``tif``, ...).
+    Channel names: color → ``R,G,B``; depth → ``Z``; normal → ``N.x,N.y,N.z``;
+    any other AOV ``name.c`` for each channel c.
+
+    Args:
+        path: output file.
+        aovs: H×W×C float32 arrays, all of the same H and W.
+        order: which AOVs to write, in channel order.
+        formats: per-AOV pixel format, ``"half"``, ``"float"`` or ``"uint8"``;
+            the file type's default for an AOV not named.
+        metadata: extra image attributes: ``str``, ``int`` and ``float`` values,
+            and 4×4 matrices given as 16 floats, row by row (``matrix44``).
+
+    Raises:
+        OSError: the file cannot be written.
+        ValueError: an AOV in ``order`` is missing or shapes disagree.
+    """
+
+def read_image(path: str) -> tuple[NDArray[np.float32], list[str]]:
+    """Read an image through OpenImageIO.
+
+    Returns:
+        ``(pixels, channel_names)`` with pixels an H×W×C float32 array.
+
+    Raises:
+        OSError: the file cannot be read.
+    """
+
+def version() -> str:
+    """The version of the compiled module, e.g. ``"0.1.0"``."""

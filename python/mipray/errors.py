@@ -1,0 +1,52 @@
+"""Exceptions raised by mipray.
+
+Every message is one line and names the prim path or file it is about, so a
+pipeline log shows what to fix without a traceback.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "MiprayError",
+    "OutputError",
+    "PrimError",
+    "RenderSettingsError",
+    "StageError",
+]
+
+
+class MiprayError(Exception):
+    """Base class of every error mipray raises on purpose."""
+
+
+class StageError(MiprayError):
+    """A USD stage could not be opened or has nothing mipray can render."""
+
+    def __init__(self, message: str, *, path: str | None = None) -> None:
+        super().__init__(message)
+        #: The USD file the error is about, if any.
+        self.path = path
+
+
+class PrimError(MiprayError):
+    """A prim is missing, of the wrong type, or holds data mipray cannot use."""
+
+    def __init__(self, prim_path: str, message: str) -> None:
+        super().__init__(f"{prim_path}: {message}")
+        #: The USD path of the prim the error is about.
+        self.prim_path = prim_path
+        #: The problem, without the path.
+        self.reason = message
+
+
+class RenderSettingsError(MiprayError):
+    """A render setting (image size, AOV, sample count, ...) is invalid."""
+
+
+class OutputError(MiprayError):
+    """An output image or statistics file could not be written."""
+
+    def __init__(self, message: str, *, path: str | None = None) -> None:
+        super().__init__(message)
+        #: The file the error is about, if any.
+        self.path = path

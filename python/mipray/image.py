@@ -1,0 +1,160 @@
+"""Writing AOVs to image files: channel layout, pixel formats, color correction.
+
+The pixels stay linear in floating-point files (EXR, TIFF). 8-bit files (PNG,
+JPEG, ...) hold the color AOV only, encoded with the sRGB transfer curve unless
+color correction is disabled, as usdrecord's ``--colorCorrectionMode sRGB``
+does. The file itself is written by ``mipray._mipray.write_image``
+(OpenImageIO).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import OutputError
+
+__all__ = [
+    "COLOR_CORRECTION_MODES",
+    "EIGHT_BIT_EXTENSIONS",
+    "is_eight_bit",
+    "output_plan",
+    "srgb_encode",
+    "write_aovs",
+]
+
+_log = logging.getLogger(__name__)
+
+#: usdrecord's ``--colorCorrectionMode`` values that mipray supports.
+COLOR_CORRECTION_MODES = ("sRGB", "disabled")
+#: File extensions whose images hold 8 bits per channel.
+EIGHT_BIT_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tga", ".ppm", ".webp"})
+_FLOAT_EXTENSIONS = frozenset({".exr", ".tif", ".tiff", ".hdr", ".pfm"})
+# Per-AOV pixel formats for EXR: half is plenty for color and normals, depth
+# needs float to keep precision far from the camera.
+_EXR_FORMATS = {"color": "half", "normal": "half", "depth": "float"}
+
+
+def is_eight_bit(path: str) -> bool:
+    """Whether ``path``'s extension names an 8-bit image format."""
+    return os.path.splitext(path)[1].lower() in EIGHT_BIT_EXTENSIONS
+
+
+def srgb_encode(linear: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Apply the sRGB transfer curve (IEC 61966-2-1) to linear values, clamped to [0, 1]."""
+    x = np.clip(np.nan_to_num(linear, nan=0.0), 0.0, 1.0).astype(np.float32)
+    low = x * np.float32(12.92)
+    high = np.float32(1.055) * np.power(x, np.float32(1.0 / 2.4)) - np.float32(0.055)
+    return np.where(x <= np.float32(0.0031308), low, high).astype(np.float32)
+
+
+def output_plan(
+    path: str,
+    aov_names: Sequence[str],
+    color_correction: str = "sRGB",
+) -> tuple[list[str], dict[str, str] | None, bool]:
+    """How to write ``aov_names`` to ``path``: ``(order, formats, encode_srgb)``.
+
+    Raises:
+        OutputError: the extension names no image type, or an 8-bit file is
+            asked for without a color AOV.
+
+    """
+    if color_correction not in COLOR_CORRECTION_MODES:
+        raise OutputError(
+            f"unknown color correction mode '{color_correction}'; "
+            f"use {' or '.join(COLOR_CORRECTION_MODES)}",
+            path=path,
+        )
+    ext = os.path.splitext(path)[1].lower()
+    if not ext:
+        raise OutputError(
+            f"{path}: no file extension to choose the image type (use .exr, .png, .tif...)",
+            path=path,
+        )
+    if ext in EIGHT_BIT_EXTENSIONS:
+        if "color" not in aov_names:
+            raise OutputError(f"{path}: an 8-bit image needs the color AOV", path=path)
+        others = [a for a in aov_names if a != "color"]
+        if others:
+            _log.warning(
+                "mipray: %s holds only the color AOV; write an EXR to keep %s",
+                path,
+                ", ".join(others),
+            )
+        return ["color"], {"color": "uint8"}, color_correction == "sRGB"
+    order = list(aov_names)
+    if ext == ".exr":
+        return order, {a: _EXR_FORMATS.get(a, "float") for a in order}, False
+    if ext in _FLOAT_EXTENSIONS:
+        return order, {a: "float" for a in order}, False
+    return order, None, False
+
+
+def _scalar_metadata(metadata: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in metadata.items() if isinstance(v, (str, int, float))}
+
+
+def write_aovs(
+    path: str,
+    aovs: Mapping[str, NDArray[np.float32]],
+    order: Sequence[str] | None = None,
+    *,
+    formats: Mapping[str, str] | None = None,
+    color_correction: str = "sRGB",
+    metadata: Mapping[str, Any] | None = None,
+) -> None:
+    """Write AOVs to one image file, creating its directory if needed.
+
+    Args:
+        path: output file; its extension chooses the type (see the module doc).
+        aovs: name → H×W×C float32 array, linear.
+        order: AOVs to write, in channel order (default: all, as given).
+        formats: per-AOV ``"half"``/``"float"``/``"uint8"``, overriding the
+            defaults for the file type.
+        color_correction: ``"sRGB"`` or ``"disabled"``; affects 8-bit files only.
+        metadata: extra image attributes (strings, numbers, 4×4 matrices as 16
+            floats).
+
+    Raises:
+        OutputError: the file cannot be written; the message names it.
+
+    """
+    from . import _mipray
+
+    names = list(order) if order is not None else list(aovs)
+    missing = [n for n in names if n not in aovs]
+    if missing:
+        raise OutputError(f"{path}: no AOV named {missing[0]!r} was rendered", path=path)
+    order_out, default_formats, encode = output_plan(path, names, color_correction)
+    pixels = dict(aovs)
+    if encode:
+        pixels["color"] = srgb_encode(pixels["color"])
+    chosen = dict(default_formats or {})
+    chosen.update(formats or {})
+    directory = os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(directory, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot create directory: {exc.strerror}", path=path) from exc
+    extra = dict(metadata or {})
+    try:
+        try:
+            _mipray.write_image(path, pixels, order_out, chosen or None, extra or None)
+        except TypeError:
+            # A binding that takes only scalar attributes: keep what it can store.
+            scalars = _scalar_metadata(extra)
+            if scalars == extra:
+                raise
+            _log.debug("mipray: %s: writing without matrix metadata", path)
+            _mipray.write_image(path, pixels, order_out, chosen or None, scalars or None)
+    except (OSError, ValueError, TypeError, RuntimeError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if path not in reason:
+            reason = f"{path}: {reason}"
+        raise OutputError(f"cannot write image {reason}", path=path) from exc

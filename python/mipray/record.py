@@ -1,0 +1,497 @@
+"""``mipray-record``: render a USD file to images, with usdrecord's interface.
+
+    mipray-record scene.usda out.exr
+    mipray-record --frames 1:24 --imageWidth 640 --aovs color,depth shot.usda out.####.exr
+
+Where usdrecord's options apply they are spelled and behave the same
+(positional ``usdFilePath outputImagePath``, ``--camera``, ``--frames`` with
+``#`` placeholders, ``--imageWidth``, ``--complexity``, ``--purposes``,
+``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``, ...); renderer
+options are mipray's own. Output paths go to stdout, one per line; warnings
+and one-line errors (``mipray-record: ...``) to stderr. Exit status: 0 when
+every image was written (even if some prims were skipped with errors), 1 on
+failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import sys
+from collections.abc import Sequence
+from typing import Any, NoReturn, TextIO
+
+from pxr import Usd
+
+from .errors import MiprayError
+from .frames import (
+    FrameSpecError,
+    format_frame_path,
+    frame_placeholder,
+    frames_precision,
+    parse_frame_spec,
+)
+from .image import COLOR_CORRECTION_MODES, is_eight_bit
+from .session import DEFAULT_WIDTH, RenderSession, open_stage
+from .stats import format_stats_table
+from .usd.scene_delegate import PURPOSES
+
+__all__ = ["COMPLEXITY_TESS_FACTOR", "build_parser", "main", "render_settings"]
+
+PROG = "mipray-record"
+
+#: usdrecord's ``--complexity`` levels as tess factors (a subpatch edge this
+#: many ray beam widths long; smaller is finer).
+COMPLEXITY_TESS_FACTOR = {"low": 4.0, "medium": 2.0, "high": 1.0, "veryhigh": 0.5}
+CACHE_MODES = ("multires", "single", "unbounded", "none")
+
+_log = logging.getLogger("mipray")
+
+
+class _UsageError(Exception):
+    """A bad command line; reported in one line, exit status 1."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(f"{message} (see --help)")
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+_positive_int.__name__ = "integer >= 1"
+_non_negative_int.__name__ = "integer >= 0"
+_positive_float.__name__ = "positive number"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line parser of ``mipray-record`` (documented by ``--help``)."""
+    parser = _Parser(
+        prog=PROG,
+        description=(
+            "Render a USD file to images with mipray, a ray tracer with\n"
+            "multiresolution geometry caching. Options follow usdrecord's where they apply."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=(
+            "examples:\n"
+            "  mipray-record scene.usda out.exr\n"
+            "  mipray-record --camera /World/cam -w 640 --aovs color,depth scene.usda out.exr\n"
+            "  mipray-record --frames 1:24 scene.usda out.####.exr\n"
+            "  mipray-record --stats - --cache-mode unbounded scene.usda out.png\n"
+            "\n"
+            "Prints each output image path on stdout. Exit status 0 when every image\n"
+            "was written, even if some prims were skipped (each is reported on\n"
+            "stderr); 1 on failure."
+        ),
+    )
+    parser.add_argument("usdFilePath", help="USD file to render")
+    parser.add_argument(
+        "outputImagePath",
+        help=(
+            "output image; the extension chooses the type (.exr keeps every AOV "
+            "linear; .png/.jpg hold the color AOV in 8 bits; .tif float). With "
+            "--frames it needs one frame placeholder such as out.####.exr or "
+            "out.###.##.exr (the number of # is the zero-padded width)"
+        ),
+    )
+    usd = parser.add_argument_group("usdrecord options")
+    usd.add_argument(
+        "--camera",
+        "-cam",
+        metavar="CAMERA",
+        help=(
+            "camera prim path, or the name of a camera prim (default: the camera "
+            "named main_cam, else the first camera on the stage, else one framing "
+            "the stage's bounds from the front)"
+        ),
+    )
+    time = usd.add_mutually_exclusive_group()
+    time.add_argument(
+        "--frames",
+        "-f",
+        metavar="FRAMESPEC[,FRAMESPEC...]",
+        help=(
+            "time codes to render: F, F:L or F:LxS (start, end, stride), several "
+            "joined by commas, e.g. 101:109x2,120; one image per time code "
+            "(default: the stage's startTimeCode)"
+        ),
+    )
+    time.add_argument(
+        "--defaultTime",
+        "-d",
+        action="store_true",
+        help="render at the Default time code instead of the stage's startTimeCode",
+    )
+    usd.add_argument(
+        "--imageWidth",
+        "-w",
+        type=_positive_int,
+        default=DEFAULT_WIDTH,
+        metavar="PIXELS",
+        help=(
+            "image width; the height follows the camera's aperture aspect ratio, "
+            "rounded (default: %(default)s)"
+        ),
+    )
+    usd.add_argument(
+        "--complexity",
+        "-c",
+        choices=tuple(COMPLEXITY_TESS_FACTOR),
+        default="high",
+        help=(
+            "refinement level, as a tess factor: low 4, medium 2, high 1, veryhigh 0.5 "
+            "(default: %(default)s; --tess-factor overrides it)"
+        ),
+    )
+    usd.add_argument(
+        "--purposes",
+        default="render",
+        metavar="PURPOSE[,PURPOSE...]",
+        help=(
+            "purposes to render besides 'default' (always rendered): render, proxy, "
+            "guide (default: %(default)s; usdrecord's is proxy)"
+        ),
+    )
+    usd.add_argument(
+        "--colorCorrectionMode",
+        "-color",
+        choices=COLOR_CORRECTION_MODES,
+        default="sRGB",
+        help=(
+            "sRGB encodes 8-bit outputs (PNG, JPEG) with the sRGB curve; EXR and "
+            "TIFF stay linear either way (default: %(default)s)"
+        ),
+    )
+    usd.add_argument(
+        "--renderSettingsPrimPath",
+        "-rs",
+        metavar="PRIMPATH",
+        help="RenderSettings prim to use (accepted; not implemented yet: flags are used)",
+    )
+    usd.add_argument(
+        "--mask",
+        metavar="PRIMPATH[,PRIMPATH...]",
+        help="limit the stage to these prims, their ancestors and descendants",
+    )
+    usd.add_argument(
+        "--sessionLayer",
+        metavar="SESSIONLAYER",
+        help="open the stage with this layer as its session layer",
+    )
+    usd.add_argument(
+        "--disableCameraLight",
+        action="store_true",
+        help="do not light a stage that has no lights from the camera",
+    )
+    usd.add_argument(
+        "--disableGpu",
+        action="store_true",
+        help="accepted for usdrecord compatibility; mipray never uses a GPU",
+    )
+    ren = parser.add_argument_group("mipray options")
+    ren.add_argument(
+        "--aovs",
+        default="color",
+        metavar="AOV[,AOV...]",
+        help=(
+            "AOVs to render and write: color, depth, normal, or another the renderer "
+            "offers (default: %(default)s)"
+        ),
+    )
+    ren.add_argument(
+        "--samples",
+        type=_positive_int,
+        metavar="N",
+        help="camera rays per pixel (default: 1)",
+    )
+    ren.add_argument(
+        "--tess-factor",
+        type=_positive_float,
+        metavar="F",
+        help=(
+            "tess factor: subpatch edges are tessellated to about F ray beam widths "
+            "(default: from --complexity)"
+        ),
+    )
+    ren.add_argument(
+        "--geometry-cache-mb",
+        type=_positive_float,
+        metavar="MB",
+        help="geometry cache budget in MB, split over the tiers (default: the renderer's, 30)",
+    )
+    ren.add_argument(
+        "--cache-mode",
+        choices=CACHE_MODES,
+        help=(
+            "geometry cache: multires (three tiers, the paper's), single (17x17 "
+            "only), unbounded (never evicts), none (retessellate every test) "
+            "(default: multires)"
+        ),
+    )
+    ren.add_argument(
+        "--threads",
+        type=_non_negative_int,
+        metavar="N",
+        help="render threads; 0 uses every core (default: 0)",
+    )
+    ren.add_argument(
+        "--seed",
+        type=_non_negative_int,
+        metavar="N",
+        help="random seed; the image is the same for any thread count (default: 0)",
+    )
+    ren.add_argument(
+        "--stats",
+        metavar="FILE",
+        help=(
+            "write render statistics: JSON to FILE (with --frames, FILE needs a "
+            "# placeholder), or a table to stdout with -"
+        ),
+    )
+    ren.add_argument("--verbose", "-v", action="store_true", help="log every prim synced")
+    ren.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    return parser
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
+def _split(text: str) -> list[str]:
+    return [t for t in text.replace(",", " ").split() if t]
+
+
+def render_settings(args: argparse.Namespace) -> dict[str, object]:
+    """The renderer settings a parsed command line asks for."""
+    settings: dict[str, object] = {
+        "tessFactor": args.tess_factor
+        if args.tess_factor is not None
+        else COMPLEXITY_TESS_FACTOR[args.complexity]
+    }
+    for key, value in (
+        ("samples", args.samples),
+        ("seed", args.seed),
+        ("threads", args.threads),
+        ("geometryCacheMb", args.geometry_cache_mb),
+        ("cacheMode", args.cache_mode),
+    ):
+        if value is not None:
+            settings[key] = value
+    return settings
+
+
+class _Formatter(logging.Formatter):
+    """``mipray-record: warning: ...`` without the library's own ``mipray:`` prefix."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        message = record.getMessage()
+        message = message.removeprefix("mipray: ")
+        return f"{PROG}: {record.levelname.lower()}: {message}"
+
+
+def _install_logging(verbose: bool, stream: TextIO) -> tuple[logging.Handler, int]:
+    """Send the library's log to ``stream``; return the handler and the old level."""
+    handler = logging.StreamHandler(stream)
+    handler.setFormatter(_Formatter())
+    old_level = _log.level
+    _log.addHandler(handler)
+    _log.setLevel(logging.DEBUG if verbose else logging.WARNING)
+    return handler, old_level
+
+
+def _validate(args: argparse.Namespace) -> list[Any]:
+    """Check the command line against itself; return the frames to render.
+
+    Returns a list of time-code values, or ``[None]`` when the stage's start
+    time code is to be used (known only once the stage is open).
+    """
+    args.aov_list = list(dict.fromkeys(_split(args.aovs)))
+    if not args.aov_list:
+        raise _UsageError("--aovs needs at least one AOV, e.g. color")
+    args.purpose_list = _split(args.purposes)
+    unknown = [p for p in args.purpose_list if p not in PURPOSES]
+    if unknown:
+        raise _UsageError(
+            f"unknown purpose '{unknown[0]}' in --purposes; use {', '.join(PURPOSES)}"
+        )
+    if is_eight_bit(args.outputImagePath) and "color" not in args.aov_list:
+        raise _UsageError(f"{args.outputImagePath}: an 8-bit image needs the color AOV in --aovs")
+    try:
+        placeholder = frame_placeholder(args.outputImagePath)
+        stats_placeholder = frame_placeholder(args.stats) if args.stats else None
+        frames: list[Any] = parse_frame_spec(args.frames) if args.frames else []
+    except FrameSpecError as exc:
+        raise _UsageError(str(exc)) from exc
+    if not args.frames:
+        if placeholder or stats_placeholder:
+            raise _UsageError(
+                f"'{args.outputImagePath if placeholder else args.stats}' has a frame "
+                "placeholder; give --frames to render a frame range"
+            )
+        return [Usd.TimeCode.Default()] if args.defaultTime else [None]
+    if len(frames) > 1 and not placeholder:
+        raise _UsageError(
+            f"outputImagePath '{args.outputImagePath}' needs one frame placeholder such as "
+            "out.####.exr to render several frames"
+        )
+    precision = frames_precision(frames)
+    for path, mark in ((args.outputImagePath, placeholder), (args.stats, stats_placeholder)):
+        if mark is not None:
+            written = len(mark.split(".")[1]) if "." in mark else 0
+            if written < precision:
+                raise _UsageError(
+                    f"the frames need {precision} decimal place(s) but '{path}' has "
+                    f"placeholder '{mark}'; use e.g. ####.{'#' * precision}"
+                )
+    if args.stats and args.stats != "-" and len(frames) > 1 and not stats_placeholder:
+        raise _UsageError(
+            f"--stats '{args.stats}' needs a frame placeholder (e.g. stats.####.json) "
+            "to hold several frames"
+        )
+    return frames
+
+
+class _Progress:
+    """Progress on stderr, only when stderr is a terminal: frame, and percent within it."""
+
+    def __init__(self, stream: TextIO, total: int) -> None:
+        self.stream = stream
+        self.total = total
+        self.enabled = stream.isatty()
+        self.prefix = ""
+
+    def start(self, index: int, time: Usd.TimeCode) -> None:
+        if self.enabled:
+            when = "default time" if time.IsDefault() else f"time {time.GetValue():g}"
+            self.prefix = f"{PROG}: rendering frame {index}/{self.total} ({when})"
+            self.stream.write(f"\r\033[K{self.prefix}...")
+            self.stream.flush()
+
+    def update(self, done: int, total: int) -> None:
+        """The renderer's callback: ``done`` of ``total`` units of work."""
+        if self.enabled and total > 0:
+            self.stream.write(f"\r\033[K{self.prefix} {100 * done // total:3d}%")
+            self.stream.flush()
+
+    def clear(self) -> None:
+        if self.enabled:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+
+
+def _write_stats(target: str, frame: float, stats: dict[str, Any], title: str, out: TextIO) -> None:
+    if target == "-":
+        out.write(format_stats_table(stats, title) + "\n")
+        return
+    path = format_frame_path(target, frame)
+    directory = os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(directory, exist_ok=True)
+        with open(path, "w", encoding="utf-8") as handle:
+            json.dump(stats, handle, indent=2, sort_keys=True)
+            handle.write("\n")
+    except OSError as exc:
+        raise MiprayError(f"cannot write stats {path}: {exc.strerror}") from exc
+
+
+def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) -> int:
+    if args.renderSettingsPrimPath:
+        _log.warning(
+            "mipray: --renderSettingsPrimPath %s is not implemented yet; "
+            "using the command-line settings",
+            args.renderSettingsPrimPath,
+        )
+    stage = open_stage(
+        args.usdFilePath,
+        population_mask=_split(args.mask) if args.mask else None,
+        session_layer=args.sessionLayer,
+    )
+    times = [
+        Usd.TimeCode(stage.GetStartTimeCode())
+        if f is None
+        else f
+        if isinstance(f, Usd.TimeCode)
+        else Usd.TimeCode(f)
+        for f in frames
+    ]
+    settings = render_settings(args)
+    progress = _Progress(err, len(times))
+    with RenderSession(stage, purposes=args.purpose_list, time=times[0]) as session:
+        for index, time in enumerate(times, start=1):
+            progress.start(index, time)
+            try:
+                result = session.render(
+                    args.camera,
+                    args.imageWidth,
+                    args.aov_list,
+                    settings,
+                    time=time,
+                    camera_light=not args.disableCameraLight,
+                    progress=progress.update if progress.enabled else None,
+                )
+                value = 0.0 if time.IsDefault() else time.GetValue()
+                path = format_frame_path(args.outputImagePath, value)
+                result.write(path, args.aov_list, color_correction=args.colorCorrectionMode)
+            finally:
+                progress.clear()
+            out.write(path + "\n")
+            out.flush()
+            if args.stats:
+                title = f"mipray stats: {path}"
+                _write_stats(args.stats, value, result.stats, title, out)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``mipray-record`` with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    out, err = sys.stdout, sys.stderr
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        frames = _validate(args)
+    except _UsageError as exc:
+        err.write(f"{PROG}: {exc}\n")
+        return 1
+    except SystemExit as exc:  # --help, --version
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 1
+    handler, old_level = _install_logging(args.verbose, err)
+    try:
+        return _run(args, frames, out, err)
+    except MiprayError as exc:
+        err.write(f"{PROG}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}\n")
+        return 1
+    except KeyboardInterrupt:
+        err.write(f"{PROG}: interrupted\n")
+        return 130
+    finally:
+        _log.removeHandler(handler)
+        _log.setLevel(old_level)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

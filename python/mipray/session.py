@@ -1,0 +1,369 @@
+"""Rendering a USD stage from Python: one call, or a session that follows edits.
+
+``render()`` is the one-shot form; :class:`RenderSession` keeps the render
+delegate and the scene delegate alive between renders, so edits to a live
+stage (``Usd.Notice.ObjectsChanged``) and time changes re-sync only the prims
+they touch. ``mipray-record`` renders its frames through one session.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Sdf, Tf, Usd
+
+from .errors import MiprayError, RenderSettingsError, StageError
+from .image import write_aovs
+from .usd.camera import camera_matrices, image_height
+from .usd.scene_delegate import SyncError, UsdSceneDelegate
+
+if TYPE_CHECKING:
+    from .usd.protocol import RenderDelegateLike
+
+__all__ = [
+    "DEFAULT_WIDTH",
+    "SETTINGS",
+    "RenderResult",
+    "RenderSession",
+    "open_stage",
+    "render",
+]
+
+_log = logging.getLogger(__name__)
+
+#: Image width when none is given (usdrecord's default).
+DEFAULT_WIDTH = 960
+#: The render settings every renderer build takes (the compiled module may take
+#: more, e.g. ambient occlusion; it rejects unknown keys).
+SETTINGS: dict[str, str] = {
+    "samples": "camera rays per pixel (int, default 1)",
+    "seed": "random seed (int, default 0); the image depends on it alone",
+    "threads": "render threads (int, 0 = all cores)",
+    "tessFactor": "tess factor: tessellated quad size in ray beam widths (larger is coarser)",
+    "geometryCacheMb": "geometry cache budget in MB, split over the tiers in multires mode",
+    "cacheMode": "multires | single | unbounded | none",
+    "displacementBound": "displacement bound in scene units (float)",
+}
+
+
+def open_stage(
+    path: str | os.PathLike[str],
+    *,
+    population_mask: Iterable[str] | None = None,
+    session_layer: str | None = None,
+) -> Usd.Stage:
+    """Open a USD file as usdrecord does, with one-line errors.
+
+    Args:
+        path: the USD file.
+        population_mask: prim paths to limit the stage to (with their
+            ancestors and descendants), as ``--mask``.
+        session_layer: a layer to use as the session layer.
+
+    Raises:
+        StageError: the file or the session layer is missing or unreadable.
+
+    """
+    file_path = os.fspath(path)
+    if not os.path.exists(file_path):
+        raise StageError(f"{file_path}: no such file", path=file_path)
+    try:
+        root = Sdf.Layer.FindOrOpen(file_path)
+        if not root:
+            raise StageError(f"{file_path}: cannot open as a USD layer", path=file_path)
+        session = (
+            Sdf.Layer.FindOrOpen(session_layer) if session_layer else Sdf.Layer.CreateAnonymous()
+        )
+        if not session:
+            raise StageError(f"{session_layer}: cannot open session layer", path=session_layer)
+        if population_mask:
+            mask = Usd.StagePopulationMask()
+            for prim_path in population_mask:
+                mask.Add(Sdf.Path(prim_path))
+            stage = Usd.Stage.OpenMasked(root, session, mask)
+        else:
+            stage = Usd.Stage.Open(root, session)
+    except Tf.ErrorException as exc:
+        raise StageError(f"{file_path}: {_tf_reason(exc)}", path=file_path) from exc
+    if not stage:
+        raise StageError(f"{file_path}: cannot open USD stage", path=file_path)
+    return stage
+
+
+def _tf_reason(exc: Exception) -> str:
+    """The useful line of a ``Tf.ErrorException`` (its message is multi-line)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    for line in lines:
+        if line.startswith("Error in"):
+            continue
+        return line.strip("'")
+    return lines[-1] if lines else type(exc).__name__
+
+
+@dataclass
+class RenderResult:
+    """What one render produced."""
+
+    #: AOV name → H×W×C float32 array, linear.
+    aovs: dict[str, NDArray[np.float32]]
+    #: Render statistics (names as in DESIGN.md, "Statistics and stats JSON").
+    stats: dict[str, Any]
+    #: Path of the camera rendered through.
+    camera: str
+    #: Time code rendered (``nan`` for the default time).
+    time: float
+    #: Prims skipped because their data was bad, each naming its path.
+    errors: list[SyncError] = field(default_factory=list)
+    _camera_args: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def width(self) -> int:
+        """Image width in pixels."""
+        return int(next(iter(self.aovs.values())).shape[1]) if self.aovs else 0
+
+    @property
+    def height(self) -> int:
+        """Image height in pixels."""
+        return int(next(iter(self.aovs.values())).shape[0]) if self.aovs else 0
+
+    def metadata(self) -> dict[str, Any]:
+        """Image attributes written with the pixels.
+
+        ``software``, ``mipray:stats`` (the stats as JSON), ``mipray:camera``,
+        and the camera's ``worldtocamera`` / ``worldtoscreen`` matrices (USD
+        conventions, 16 floats each, row by row).
+        """
+        from . import __version__
+
+        data: dict[str, Any] = {
+            "software": f"mipray {__version__}",
+            "mipray:stats": json.dumps(self.stats, sort_keys=True),
+            "mipray:camera": self.camera,
+        }
+        if not math.isnan(self.time):
+            data["mipray:timeCode"] = float(self.time)
+        if self._camera_args:
+            world_to_camera, world_to_screen = camera_matrices(self._camera_args)
+            data["worldtocamera"] = [float(v) for v in world_to_camera.ravel()]
+            data["worldtoscreen"] = [float(v) for v in world_to_screen.ravel()]
+        return data
+
+    def write(
+        self,
+        path: str | os.PathLike[str],
+        aovs: Sequence[str] | None = None,
+        *,
+        formats: Mapping[str, str] | None = None,
+        color_correction: str = "sRGB",
+        metadata: Mapping[str, Any] | None = None,
+    ) -> None:
+        """Write AOVs to an image file through OpenImageIO.
+
+        Args:
+            path: output file; ``.exr`` keeps every AOV linear (color and
+                normal half, depth float); 8-bit types (``.png``, ``.jpg``)
+                hold the color AOV only, sRGB-encoded unless
+                ``color_correction="disabled"``.
+            aovs: which AOVs, in channel order (default: all rendered).
+            formats: per-AOV pixel format overrides.
+            color_correction: ``"sRGB"`` or ``"disabled"``.
+            metadata: extra attributes, added to :meth:`metadata`.
+
+        Raises:
+            OutputError: the file cannot be written.
+
+        """
+        data = self.metadata()
+        data.update(metadata or {})
+        write_aovs(
+            os.fspath(path),
+            self.aovs,
+            aovs,
+            formats=formats,
+            color_correction=color_correction,
+            metadata=data,
+        )
+
+
+def _new_delegate() -> RenderDelegateLike:
+    try:
+        from . import _mipray
+    except ImportError as exc:
+        raise MiprayError(
+            f"the compiled module mipray._mipray is not installed ({exc}); "
+            "build it with `make build` or `maturin develop -m python/Cargo.toml`"
+        ) from exc
+    return _mipray.RenderDelegate()
+
+
+class RenderSession:
+    """A render delegate kept in step with a live ``Usd.Stage``.
+
+    Args:
+        stage: the stage to render; edits to it are followed.
+        purposes: purposes to render besides ``"default"`` (default:
+            ``("render",)``).
+        time: initial time code (default: the stage's start time code).
+        delegate: a render delegate to sync into (default: a new
+            ``mipray._mipray.RenderDelegate``).
+
+    Use as a context manager, or call :meth:`close`, to stop listening.
+
+    """
+
+    def __init__(
+        self,
+        stage: Usd.Stage,
+        *,
+        purposes: Sequence[str] | None = None,
+        time: Usd.TimeCode | float | None = None,
+        delegate: RenderDelegateLike | None = None,
+    ) -> None:
+        if not isinstance(stage, Usd.Stage):
+            raise StageError(f"expected a Usd.Stage, got {type(stage).__name__}")
+        self.delegate: Any = delegate if delegate is not None else _new_delegate()
+        chosen = ("default", *(purposes if purposes is not None else ("render",)))
+        self.scene = UsdSceneDelegate(
+            stage,
+            self.delegate,
+            time=time if time is not None else stage.GetStartTimeCode(),
+            purposes=chosen,
+        )
+        self.scene.watch()
+
+    def close(self) -> None:
+        """Stop following edits to the stage."""
+        self.scene.close()
+
+    def __enter__(self) -> RenderSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def render(
+        self,
+        camera: str | None = None,
+        width: int | None = None,
+        aovs: Sequence[str] = ("color",),
+        settings: Mapping[str, object] | None = None,
+        time: Usd.TimeCode | float | None = None,
+        *,
+        camera_light: bool = True,
+        height: int | None = None,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> RenderResult:
+        """Sync what changed and render one image.
+
+        Args:
+            camera: camera prim path or name; default: ``main_cam``, else the
+                first camera, else one framing the stage.
+            width: image width (default 960); the height follows the camera's
+                aperture aspect ratio unless ``height`` is given.
+            aovs: AOV names: ``"color"``, ``"depth"``, ``"normal"``.
+            settings: render settings (see :data:`SETTINGS`); checked by the
+                renderer, which rejects unknown keys.
+            time: time code to render at (default: the session's current one).
+            camera_light: light the stage from the camera if it has no light.
+            height: image height, overriding the aspect ratio.
+            progress: called as ``progress(done, total)`` while rendering.
+
+        Raises:
+            PrimError: the camera is missing or unusable.
+            RenderSettingsError: a bad size, AOV list or setting.
+
+        """
+        width = DEFAULT_WIDTH if width is None else int(width)
+        if width < 1 or (height is not None and int(height) < 1):
+            raise RenderSettingsError(f"image size must be at least 1 pixel, got width {width}")
+        aov_list = list(dict.fromkeys(aovs))
+        if not aov_list:
+            raise RenderSettingsError("no AOV to render; ask for at least 'color'")
+        if time is not None:
+            self.scene.set_time(time)
+        self.scene.sync()
+        camera_path = self.scene.resolve_camera(camera)
+        camera_args = self.scene.cameras[camera_path]
+        self.scene.update_camera_light(camera_path, camera_light)
+        h = int(height) if height is not None else image_height(width, camera_args)
+        try:
+            if progress is None:
+                pixels, stats_json = self.delegate.render(
+                    camera_path, width, h, aov_list, dict(settings or {})
+                )
+            else:
+                pixels, stats_json = self.delegate.render(
+                    camera_path, width, h, aov_list, dict(settings or {}), progress=progress
+                )
+        except ValueError as exc:
+            raise RenderSettingsError(str(exc).splitlines()[0]) from exc
+        try:
+            stats = json.loads(stats_json) if stats_json else {}
+        except json.JSONDecodeError:
+            _log.warning("mipray: the renderer returned stats that are not JSON")
+            stats = {}
+        scene_time = self.scene.time
+        return RenderResult(
+            aovs=dict(pixels),
+            stats=stats,
+            camera=camera_path,
+            time=math.nan if scene_time.IsDefault() else float(scene_time.GetValue()),
+            errors=self.scene.delegate_errors,
+            _camera_args=camera_args,
+        )
+
+
+def render(
+    path_or_stage: str | os.PathLike[str] | Usd.Stage,
+    camera: str | None = None,
+    width: int | None = None,
+    aovs: Sequence[str] = ("color",),
+    settings: Mapping[str, object] | None = None,
+    time: Usd.TimeCode | float | None = None,
+    purposes: Sequence[str] | None = None,
+) -> RenderResult:
+    """Render a USD file or a live ``Usd.Stage`` once.
+
+    Args:
+        path_or_stage: a USD file path, or an open stage (left as it is).
+        camera: camera prim path or name; default: ``main_cam``, else the
+            first camera on the stage, else a camera framing the stage.
+        width: image width in pixels (default 960); the height follows the
+            camera's aperture aspect ratio.
+        aovs: AOVs to render: ``"color"`` (linear RGB), ``"depth"`` (distance
+            along the view axis, scene units, ``inf`` on misses), ``"normal"``
+            (world space).
+        settings: render settings, e.g. ``{"samples": 4, "tessFactor": 1.0}``
+            (keys in :data:`SETTINGS`).
+        time: time code (default: the stage's start time code).
+        purposes: purposes to render besides ``"default"`` (default
+            ``("render",)``).
+
+    Returns:
+        A :class:`RenderResult` with ``.aovs`` (name → H×W×C float32),
+        ``.stats`` (dict) and ``.write(path)``.
+
+    Raises:
+        StageError, PrimError, RenderSettingsError: see :mod:`mipray.errors`.
+
+    Example::
+
+        import mipray
+        result = mipray.render("shot.usda", width=320, aovs=("color", "depth"))
+        result.write("shot.exr")
+
+    """
+    if isinstance(path_or_stage, Usd.Stage):
+        stage = path_or_stage
+    else:
+        stage = open_stage(path_or_stage)
+    with RenderSession(stage, purposes=purposes, time=time) as session:
+        return session.render(camera, width, aovs, settings)

@@ -1,0 +1,22 @@
+"""Reading USD stages into the render delegate (the scene delegate).
+
+The entry point is :class:`UsdSceneDelegate`; the modules beside it each read
+one kind of prim (``mesh``, ``camera``, ``light``) or one concern
+(``material`` for albedo, ``transform`` for world matrices).
+"""
+
+from .camera import DEFAULT_CAMERA_PATH, find_camera_prim, image_height
+from .light import CAMERA_LIGHT_PATH
+from .protocol import RenderDelegateLike
+from .scene_delegate import PURPOSES, SyncError, UsdSceneDelegate
+
+__all__ = [
+    "CAMERA_LIGHT_PATH",
+    "DEFAULT_CAMERA_PATH",
+    "PURPOSES",
+    "RenderDelegateLike",
+    "SyncError",
+    "UsdSceneDelegate",
+    "find_camera_prim",
+    "image_height",
+]

@@ -1,0 +1,200 @@
+"""Cameras: reading ``UsdGeom.Camera``, choosing one, and framing a stage without one.
+
+``UsdGeom.Camera`` goes into ``RenderDelegate.set_camera``; when a stage has no
+camera, a camera framing its bounds is made, as usdrecord does.
+
+Units are USD's: focal length and apertures in tenths of a scene unit,
+clipping range in scene units, the camera looking down its local -Z axis.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Gf, Usd, UsdGeom
+
+from ..errors import PrimError
+from .transform import matrix_to_numpy
+
+__all__ = [
+    "DEFAULT_CAMERA_PATH",
+    "camera_arguments",
+    "camera_matrices",
+    "find_camera_prim",
+    "framing_camera_arguments",
+    "image_height",
+]
+
+#: Path of the camera mipray makes when a stage has none (as usdrecord does).
+DEFAULT_CAMERA_PATH = "/__mipray_default_camera"
+
+# UsdGeom.Camera's fallback values, used for the framing camera.
+_FOCAL_LENGTH = 50.0
+_H_APERTURE = 20.955
+_V_APERTURE = 15.2908
+
+
+def camera_arguments(
+    camera: UsdGeom.Camera, time: Usd.TimeCode, transform: NDArray[np.float64]
+) -> dict[str, Any]:
+    """The keyword arguments of ``RenderDelegate.set_camera`` for ``camera``.
+
+    Raises:
+        PrimError: a value the camera model cannot use (non-positive focal
+            length or aperture, an empty clipping range, a non-finite
+            transform).
+
+    """
+    path = str(camera.GetPath())
+
+    def get(attr: Usd.Attribute, default: Any) -> Any:
+        value = attr.Get(time)
+        return default if value is None else value
+
+    near, far = get(camera.GetClippingRangeAttr(), (1.0, 1e6))
+    args: dict[str, Any] = {
+        "transform": transform,
+        "projection": str(get(camera.GetProjectionAttr(), "perspective")),
+        "focal_length": float(get(camera.GetFocalLengthAttr(), _FOCAL_LENGTH)),
+        "horizontal_aperture": float(get(camera.GetHorizontalApertureAttr(), _H_APERTURE)),
+        "vertical_aperture": float(get(camera.GetVerticalApertureAttr(), _V_APERTURE)),
+        "horizontal_aperture_offset": float(get(camera.GetHorizontalApertureOffsetAttr(), 0.0)),
+        "vertical_aperture_offset": float(get(camera.GetVerticalApertureOffsetAttr(), 0.0)),
+        "clipping_range": (float(near), float(far)),
+        "f_stop": float(get(camera.GetFStopAttr(), 0.0)),
+        "focus_distance": float(get(camera.GetFocusDistanceAttr(), 0.0)),
+    }
+    problem = _check_camera(args)
+    if problem:
+        raise PrimError(path, problem)
+    return args
+
+
+def _check_camera(args: dict[str, Any]) -> str | None:
+    if args["projection"] not in ("perspective", "orthographic"):
+        return f"unknown projection '{args['projection']}'"
+    for key, name in (
+        ("focal_length", "focalLength"),
+        ("horizontal_aperture", "horizontalAperture"),
+        ("vertical_aperture", "verticalAperture"),
+    ):
+        value = args[key]
+        if not (math.isfinite(value) and value > 0.0):
+            return f"{name} is {value}; it must be positive"
+    near, far = args["clipping_range"]
+    if not (math.isfinite(near) and near >= 0.0 and far > near):
+        return f"clippingRange ({near}, {far}) is empty or negative"
+    if not (math.isfinite(args["f_stop"]) and args["f_stop"] >= 0.0):
+        return f"fStop is {args['f_stop']}; it must be 0 (no depth of field) or positive"
+    if not np.isfinite(args["transform"]).all():
+        return "the world transform is not finite"
+    return None
+
+
+def find_camera_prim(stage: Usd.Stage, requested: str) -> Usd.Prim:
+    """The camera prim a user named, as usdrecord's ``--camera`` resolves it.
+
+    ``requested`` is a prim path, or a bare name matched against the names of
+    the stage's camera prims (the first in traversal order wins).
+
+    Raises:
+        PrimError: there is no such prim, or it is not a ``UsdGeom.Camera``.
+
+    """
+    if requested.startswith("/"):
+        prim = stage.GetPrimAtPath(requested)
+        if not prim:
+            raise PrimError(requested, "no such camera prim on the stage")
+        if not prim.IsA(UsdGeom.Camera):
+            raise PrimError(
+                requested, f"is a {prim.GetTypeName() or 'typeless prim'}, not a Camera"
+            )
+        return prim
+    predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+    for prim in Usd.PrimRange.Stage(stage, predicate):
+        if prim.GetName() == requested and prim.IsA(UsdGeom.Camera):
+            return prim
+    raise PrimError(requested, "no camera prim of that name on the stage")
+
+
+def framing_camera_arguments(
+    stage: Usd.Stage, time: Usd.TimeCode, purposes: tuple[str, ...]
+) -> dict[str, Any]:
+    """A perspective camera that frames the stage's world bounds from the front.
+
+    "Front" looks down -Z when the stage's up axis is Y and down +Y when it
+    is Z. The bounds are computed with ``UsdGeom.BBoxCache`` for the included
+    purposes; an empty stage frames the unit cube at the origin.
+    """
+    cache = UsdGeom.BBoxCache(time, list(purposes), useExtentsHint=True)
+    box = cache.ComputeWorldBound(stage.GetPseudoRoot()).ComputeAlignedRange()
+    if box.IsEmpty():
+        box = Gf.Range3d(Gf.Vec3d(-1, -1, -1), Gf.Vec3d(1, 1, 1))
+    center = box.GetMidpoint()
+    radius = 0.5 * box.GetSize().GetLength() or 1.0
+
+    half_fov = min(
+        math.atan(0.5 * _H_APERTURE / _FOCAL_LENGTH), math.atan(0.5 * _V_APERTURE / _FOCAL_LENGTH)
+    )
+    distance = radius / math.sin(half_fov)
+    if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z:
+        up = Gf.Vec3d(0, 0, 1)
+        eye = center - Gf.Vec3d(0, distance, 0)
+    else:
+        up = Gf.Vec3d(0, 1, 0)
+        eye = center + Gf.Vec3d(0, 0, distance)
+    camera_to_world = Gf.Matrix4d().SetLookAt(eye, center, up).GetInverse()
+    near = max(distance - radius, 0.0) * 0.5 or distance * 1e-4
+    far = (distance + radius) * 2.0
+    return {
+        "transform": matrix_to_numpy(camera_to_world),
+        "projection": "perspective",
+        "focal_length": _FOCAL_LENGTH,
+        "horizontal_aperture": _H_APERTURE,
+        "vertical_aperture": _V_APERTURE,
+        "horizontal_aperture_offset": 0.0,
+        "vertical_aperture_offset": 0.0,
+        "clipping_range": (max(near, distance * 1e-4), far),
+        "f_stop": 0.0,
+        "focus_distance": 0.0,
+    }
+
+
+def image_height(width: int, camera_args: dict[str, Any]) -> int:
+    """Image height for ``width`` pixels from the camera's aperture aspect ratio.
+
+    Rounded to the nearest pixel, at least 1.
+    """
+    aspect = float(camera_args["horizontal_aperture"]) / float(camera_args["vertical_aperture"])
+    return max(1, round(width / aspect))
+
+
+def camera_matrices(
+    camera_args: dict[str, Any],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(world_to_camera, world_to_screen)`` of a camera, row-vector convention.
+
+    Both follow USD/OpenGL conventions (the camera looks down -Z; the screen
+    is the projection's normalized device coordinates, -1..1 across the
+    aperture), as ``Gf.Frustum`` computes them. They go into image metadata
+    as OpenImageIO's ``worldtocamera`` and ``worldtoscreen``.
+    """
+    gf_camera = Gf.Camera(
+        Gf.Matrix4d(camera_args["transform"].tolist()),
+        Gf.Camera.Perspective
+        if camera_args["projection"] == "perspective"
+        else Gf.Camera.Orthographic,
+        camera_args["horizontal_aperture"],
+        camera_args["vertical_aperture"],
+        camera_args["horizontal_aperture_offset"],
+        camera_args["vertical_aperture_offset"],
+        camera_args["focal_length"],
+        Gf.Range1f(*camera_args["clipping_range"]),
+    )
+    frustum = gf_camera.frustum
+    view = frustum.ComputeViewMatrix()
+    projection = frustum.ComputeProjectionMatrix()
+    return matrix_to_numpy(view), matrix_to_numpy(view * projection)

@@ -1,0 +1,111 @@
+"""The diffuse albedo of a gprim, from its bound material or its display color.
+
+For now a mesh carries one constant albedo. It comes from, in order:
+
+1. the ``diffuseColor`` of the ``UsdPreviewSurface`` that the prim's bound
+   material (purpose ``full``, falling back to all-purpose, as Hydra resolves
+   it) uses as its surface, when that input is a constant — authored, or
+   inherited through a material interface input; unauthored it is the
+   shader's own default, 0.18 grey;
+2. else ``primvars:displayColor`` when it is constant or has one value;
+3. else 0.18 grey.
+
+A ``diffuseColor`` connected to a texture is not a constant: such a mesh
+falls through to its display color until textures are supported.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+from pxr import Usd, UsdGeom, UsdShade
+
+__all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo"]
+
+_log = logging.getLogger(__name__)
+
+#: Albedo of a prim with neither a usable material nor a display color.
+DEFAULT_ALBEDO: tuple[float, float, float] = (0.18, 0.18, 0.18)
+
+
+@dataclass(frozen=True)
+class Albedo:
+    """A resolved albedo and where it came from."""
+
+    #: Linear RGB, each clamped to [0, 1].
+    rgb: tuple[float, float, float]
+    #: Path of the bound material, if any (the scene delegate re-syncs the
+    #: prim when something under this path changes).
+    material_path: str | None
+    #: Whether the value might change over time (time-sampled input).
+    might_vary: bool
+    #: "material", "displayColor" or "default".
+    source: str
+
+
+def _rgb(value: object) -> tuple[float, float, float] | None:
+    try:
+        r, g, b = (float(c) for c in value)  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        return None
+    if not all(math.isfinite(c) for c in (r, g, b)):
+        return None
+    return (min(max(r, 0.0), 1.0), min(max(g, 0.0), 1.0), min(max(b, 0.0), 1.0))
+
+
+def _preview_surface_diffuse(
+    material: UsdShade.Material, time: Usd.TimeCode
+) -> tuple[tuple[float, float, float] | None, bool]:
+    """``(rgb or None, might_vary)`` of a material's constant PreviewSurface diffuseColor."""
+    shader, _, _ = material.ComputeSurfaceSource()
+    if not shader or shader.GetShaderId() != "UsdPreviewSurface":
+        return None, False
+    diffuse = shader.GetInput("diffuseColor")
+    if not diffuse:
+        return DEFAULT_ALBEDO, False
+    producers = diffuse.GetValueProducingAttributes()
+    if not producers:
+        return DEFAULT_ALBEDO, False
+    attr = producers[0]
+    if UsdShade.Utils.GetType(attr.GetName()) == UsdShade.AttributeType.Output:
+        return None, False  # connected to a texture or another node: not a constant
+    value = attr.Get(time)
+    if value is None:
+        return DEFAULT_ALBEDO, False
+    rgb = _rgb(value)
+    if rgb is None:
+        _log.warning(
+            "mipray: %s: diffuseColor %r is not a finite color; using 0.18 grey",
+            attr.GetPath(),
+            value,
+        )
+        return DEFAULT_ALBEDO, False
+    return rgb, bool(attr.ValueMightBeTimeVarying())
+
+
+def _display_color(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float, float] | None:
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+    if not primvar or not primvar.HasValue():
+        return None
+    values = primvar.ComputeFlattened(time)
+    if not values:
+        return None
+    if primvar.GetInterpolation() != UsdGeom.Tokens.constant and len(values) != 1:
+        return None
+    return _rgb(values[0])
+
+
+def compute_albedo(prim: Usd.Prim, time: Usd.TimeCode) -> Albedo:
+    """Resolve the albedo of ``prim`` at ``time`` (see the module doc for the order)."""
+    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
+    material_path = str(material.GetPath()) if material else None
+    if material:
+        rgb, might_vary = _preview_surface_diffuse(material, time)
+        if rgb is not None:
+            return Albedo(rgb, material_path, might_vary, "material")
+    display = _display_color(prim, time)
+    if display is not None:
+        return Albedo(display, material_path, False, "displayColor")
+    return Albedo(DEFAULT_ALBEDO, material_path, False, "default")

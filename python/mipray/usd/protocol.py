@@ -1,0 +1,78 @@
+"""The render-delegate interface the scene delegate writes to.
+
+``mipray._mipray.RenderDelegate`` implements it; so does the recording fake in
+``tests/fake_delegate.py``. Spelled out as a :class:`typing.Protocol` so the
+scene delegate is typed without importing the compiled module (it must import
+without it, for tests and for tools that only read USD).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["RenderDelegateLike"]
+
+
+class RenderDelegateLike(Protocol):
+    """The ``set_*``/``remove`` half of ``mipray._mipray.RenderDelegate``."""
+
+    def set_mesh(
+        self,
+        path: str,
+        *,
+        points: NDArray[np.float32],
+        face_vertex_counts: NDArray[np.int32],
+        face_vertex_indices: NDArray[np.int32],
+        transform: NDArray[np.float64],
+        scheme: str = ...,
+        interpolate_boundary: str = ...,
+        face_varying_linear_interpolation: str = ...,
+        triangle_subdivision_rule: str = ...,
+        crease_indices: NDArray[np.int32] | None = ...,
+        crease_lengths: NDArray[np.int32] | None = ...,
+        crease_sharpnesses: NDArray[np.float32] | None = ...,
+        corner_indices: NDArray[np.int32] | None = ...,
+        corner_sharpnesses: NDArray[np.float32] | None = ...,
+        hole_indices: NDArray[np.int32] | None = ...,
+        left_handed: bool = ...,
+        double_sided: bool = ...,
+        albedo: tuple[float, float, float] = ...,
+    ) -> None:
+        """Add or replace a mesh."""
+
+    def set_camera(
+        self,
+        path: str,
+        *,
+        transform: NDArray[np.float64],
+        projection: str = ...,
+        focal_length: float = ...,
+        horizontal_aperture: float = ...,
+        vertical_aperture: float = ...,
+        horizontal_aperture_offset: float = ...,
+        vertical_aperture_offset: float = ...,
+        clipping_range: tuple[float, float] = ...,
+        f_stop: float = ...,
+        focus_distance: float = ...,
+    ) -> None:
+        """Add or replace a camera."""
+
+    def set_distant_light(
+        self,
+        path: str,
+        *,
+        transform: NDArray[np.float64],
+        intensity: float = ...,
+        exposure: float = ...,
+        color: tuple[float, float, float] = ...,
+        angle: float = ...,
+        normalize: bool = ...,
+        shadow_enable: bool = ...,
+    ) -> None:
+        """Add or replace a distant light."""
+
+    def remove(self, path: str) -> None:
+        """Remove a prim."""

@@ -1,0 +1,227 @@
+"""A recording stand-in for ``mipray._mipray`` so the Python side tests without Rust.
+
+``FakeRenderDelegate`` has exactly the methods and signatures of
+``mipray._mipray.RenderDelegate`` (``test_protocol.py`` checks it against the
+stubs); it validates the basics the real one does (array dtypes and shapes)
+and records every call. ``fake_module()`` builds a module object with the
+delegate, ``write_image``, ``read_image`` and ``version``, to stand in for
+``mipray._mipray`` in tests of ``mipray.render`` and ``mipray-record``.
+"""
+
+from __future__ import annotations
+
+import json
+import types
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass
+class Call:
+    """One recorded delegate call."""
+
+    method: str
+    path: str
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+def _check_array(path: str, name: str, value: Any, dtype: type, ndim: int) -> None:
+    if not isinstance(value, np.ndarray):
+        raise TypeError(f"{path}: {name} must be a numpy array, got {type(value).__name__}")
+    if value.dtype != dtype:
+        raise TypeError(f"{path}: {name} must be {np.dtype(dtype).name}, got {value.dtype}")
+    if value.ndim != ndim:
+        raise ValueError(f"{path}: {name} must have {ndim} dimension(s), got {value.ndim}")
+
+
+class FakeRenderDelegate:
+    """Records ``set_*``/``remove`` calls; ``render`` returns flat AOVs."""
+
+    def __init__(self) -> None:
+        self.calls: list[Call] = []
+        self.prims: dict[str, Call] = {}
+        #: Paths whose ``set_mesh`` should raise ValueError, as the real one does on bad data.
+        self.reject: set[str] = set()
+        self.renders: list[dict[str, Any]] = []
+
+    def _set(self, method: str, path: str, kwargs: dict[str, Any]) -> None:
+        transform = kwargs["transform"]
+        _check_array(path, "transform", transform, np.float64, 2)
+        if transform.shape != (4, 4):
+            raise ValueError(f"{path}: transform must be 4x4")
+        call = Call(method, path, kwargs)
+        self.calls.append(call)
+        self.prims[path] = call
+
+    def set_mesh(
+        self,
+        path: str,
+        *,
+        points: NDArray[np.float32],
+        face_vertex_counts: NDArray[np.int32],
+        face_vertex_indices: NDArray[np.int32],
+        transform: NDArray[np.float64],
+        scheme: str = "catmullClark",
+        interpolate_boundary: str = "edgeAndCorner",
+        face_varying_linear_interpolation: str = "cornersPlus1",
+        triangle_subdivision_rule: str = "catmullClark",
+        crease_indices: NDArray[np.int32] | None = None,
+        crease_lengths: NDArray[np.int32] | None = None,
+        crease_sharpnesses: NDArray[np.float32] | None = None,
+        corner_indices: NDArray[np.int32] | None = None,
+        corner_sharpnesses: NDArray[np.float32] | None = None,
+        hole_indices: NDArray[np.int32] | None = None,
+        left_handed: bool = False,
+        double_sided: bool = False,
+        albedo: tuple[float, float, float] = (0.18, 0.18, 0.18),
+    ) -> None:
+        kwargs = locals_without_self(locals())
+        if path in self.reject:
+            raise ValueError(f"{path}: rejected by the fake delegate")
+        _check_array(path, "points", points, np.float32, 2)
+        _check_array(path, "face_vertex_counts", face_vertex_counts, np.int32, 1)
+        _check_array(path, "face_vertex_indices", face_vertex_indices, np.int32, 1)
+        for name, value, dtype in (
+            ("crease_indices", crease_indices, np.int32),
+            ("crease_lengths", crease_lengths, np.int32),
+            ("crease_sharpnesses", crease_sharpnesses, np.float32),
+            ("corner_indices", corner_indices, np.int32),
+            ("corner_sharpnesses", corner_sharpnesses, np.float32),
+            ("hole_indices", hole_indices, np.int32),
+        ):
+            if value is not None:
+                _check_array(path, name, value, dtype, 1)
+        self._set("set_mesh", path, kwargs)
+
+    def set_camera(
+        self,
+        path: str,
+        *,
+        transform: NDArray[np.float64],
+        projection: str = "perspective",
+        focal_length: float = 50.0,
+        horizontal_aperture: float = 20.955,
+        vertical_aperture: float = 15.2908,
+        horizontal_aperture_offset: float = 0.0,
+        vertical_aperture_offset: float = 0.0,
+        clipping_range: tuple[float, float] = (1.0, 1e6),
+        f_stop: float = 0.0,
+        focus_distance: float = 0.0,
+    ) -> None:
+        self._set("set_camera", path, dict(locals_without_self(locals())))
+
+    def set_distant_light(
+        self,
+        path: str,
+        *,
+        transform: NDArray[np.float64],
+        intensity: float = 1.0,
+        exposure: float = 0.0,
+        color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        angle: float = 0.53,
+        normalize: bool = False,
+        shadow_enable: bool = True,
+    ) -> None:
+        self._set("set_distant_light", path, dict(locals_without_self(locals())))
+
+    def remove(self, path: str) -> None:
+        self.calls.append(Call("remove", path))
+        self.prims.pop(path, None)
+
+    def prim_paths(self) -> list[str]:
+        return sorted(self.prims)
+
+    def render(
+        self,
+        camera: str,
+        width: int,
+        height: int,
+        aovs: list[str],
+        settings: dict[str, object],
+        progress: Callable[[int, int], object] | None = None,
+    ) -> tuple[dict[str, NDArray[np.float32]], str]:
+        if camera not in self.prims or self.prims[camera].method != "set_camera":
+            raise ValueError(f"unknown camera {camera}")
+        channels = {"color": 3, "depth": 1, "normal": 3}
+        out: dict[str, NDArray[np.float32]] = {}
+        for aov in aovs:
+            if aov not in channels:
+                raise ValueError(f"unknown AOV {aov}")
+            # A horizontal ramp 0..2 so tone curves and clamping show in tests.
+            ramp = np.linspace(0.0, 2.0, width, dtype=np.float32)
+            out[aov] = np.broadcast_to(ramp[None, :, None], (height, width, channels[aov])).copy()
+        if progress is not None:
+            for done in (0, height // 2, height):
+                progress(done, height)
+        self.renders.append(
+            {
+                "camera": camera,
+                "width": width,
+                "height": height,
+                "aovs": list(aovs),
+                "settings": dict(settings),
+            }
+        )
+        stats = {
+            "render": {"wall_s": 0.01, "rays": {"camera": width * height}},
+            "geometry_cache": {"mode": settings.get("cacheMode", "multires")},
+        }
+        return out, json.dumps(stats)
+
+    # Helpers for tests ---------------------------------------------------
+
+    def calls_for(self, path: str) -> list[Call]:
+        """Every recorded call about ``path``."""
+        return [c for c in self.calls if c.path == path]
+
+    def meshes(self) -> dict[str, dict[str, Any]]:
+        """Current meshes, path → set_mesh kwargs."""
+        return {p: c.kwargs for p, c in self.prims.items() if c.method == "set_mesh"}
+
+
+def locals_without_self(values: dict[str, Any]) -> dict[str, Any]:
+    """A method's ``locals()`` as the kwargs it was called with (no self, no path)."""
+    return {k: v for k, v in values.items() if k not in ("self", "path")}
+
+
+def fake_module() -> types.ModuleType:
+    """A module object standing in for ``mipray._mipray``.
+
+    ``write_image`` records its arguments in ``module.written`` (path → dict)
+    and writes a small JSON file at the path so tests can see it exists.
+    """
+    module = types.ModuleType("mipray._mipray")
+    written: dict[str, dict[str, Any]] = {}
+
+    def write_image(
+        path: str,
+        aovs: dict[str, NDArray[np.float32]],
+        order: list[str],
+        formats: dict[str, str] | None = None,
+        metadata: dict[str, object] | None = None,
+    ) -> None:
+        for name in order:
+            if name not in aovs:
+                raise ValueError(f"no AOV {name}")
+        written[path] = {
+            "aovs": aovs,
+            "order": list(order),
+            "formats": formats,
+            "metadata": metadata,
+        }
+        with open(path, "w", encoding="utf-8") as handle:
+            json.dump({"order": list(order), "formats": formats}, handle)
+
+    def read_image(path: str) -> tuple[NDArray[np.float32], list[str]]:
+        raise OSError(f"{path}: the fake module cannot read images")
+
+    module.RenderDelegate = FakeRenderDelegate  # type: ignore[attr-defined]
+    module.write_image = write_image  # type: ignore[attr-defined]
+    module.read_image = read_image  # type: ignore[attr-defined]
+    module.version = lambda: "0.0.0-fake"  # type: ignore[attr-defined]
+    module.written = written  # type: ignore[attr-defined]
+    return module

@@ -1,0 +1,88 @@
+"""Small in-memory USD stages for tests (built with usd-core, never on disk)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
+
+#: A unit cube: 8 points, 6 quads, outward-facing with right-handed winding.
+CUBE_POINTS = [
+    (-0.5, -0.5, 0.5),
+    (0.5, -0.5, 0.5),
+    (-0.5, 0.5, 0.5),
+    (0.5, 0.5, 0.5),
+    (-0.5, 0.5, -0.5),
+    (0.5, 0.5, -0.5),
+    (-0.5, -0.5, -0.5),
+    (0.5, -0.5, -0.5),
+]
+CUBE_COUNTS = [4, 4, 4, 4, 4, 4]
+CUBE_INDICES = [0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4]
+
+
+def new_stage() -> Usd.Stage:
+    """An empty in-memory stage, Y up."""
+    stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    return stage
+
+
+def add_cube(
+    stage: Usd.Stage,
+    path: str,
+    *,
+    points: Sequence[tuple[float, float, float]] = CUBE_POINTS,
+    counts: Sequence[int] = CUBE_COUNTS,
+    indices: Sequence[int] = CUBE_INDICES,
+    translate: tuple[float, float, float] | None = None,
+    scheme: str | None = None,
+) -> UsdGeom.Mesh:
+    """A cube mesh at ``path`` (parents are defined as Xforms)."""
+    parent = Sdf.Path(path).GetParentPath()
+    if parent != Sdf.Path.absoluteRootPath and not stage.GetPrimAtPath(parent):
+        UsdGeom.Xform.Define(stage, parent)
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr(points)
+    mesh.CreateFaceVertexCountsAttr(counts)
+    mesh.CreateFaceVertexIndicesAttr(indices)
+    if scheme is not None:
+        mesh.CreateSubdivisionSchemeAttr(scheme)
+    if translate is not None:
+        mesh.AddTranslateOp().Set(Gf.Vec3d(*translate))
+    return mesh
+
+
+def add_camera(
+    stage: Usd.Stage, path: str, eye: tuple[float, float, float] = (0, 0, 10)
+) -> UsdGeom.Camera:
+    """A camera at ``eye`` looking down -Z."""
+    camera = UsdGeom.Camera.Define(stage, path)
+    camera.AddTranslateOp().Set(Gf.Vec3d(*eye))
+    return camera
+
+
+def add_distant_light(stage: Usd.Stage, path: str, intensity: float = 2.0) -> UsdLux.DistantLight:
+    """A distant light tilted 45° down."""
+    light = UsdLux.DistantLight.Define(stage, path)
+    light.CreateIntensityAttr(intensity)
+    light.AddRotateXOp().Set(-45.0)
+    return light
+
+
+def add_preview_material(
+    stage: Usd.Stage, path: str, diffuse: tuple[float, float, float] | None
+) -> UsdShade.Material:
+    """A material whose surface is a UsdPreviewSurface with ``diffuse`` (None: unauthored)."""
+    material = UsdShade.Material.Define(stage, path)
+    shader = UsdShade.Shader.Define(stage, f"{path}/PreviewSurface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    if diffuse is not None:
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*diffuse))
+    material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    return material
+
+
+def bind(prim: Usd.Prim, material: UsdShade.Material) -> None:
+    """Bind ``material`` to ``prim`` (applying MaterialBindingAPI, as USD requires)."""
+    UsdShade.MaterialBindingAPI.Apply(prim).Bind(material)
