@@ -32,7 +32,8 @@
 //! hit. Counters are relaxed atomics, one set per shard on its own cache line, so lookups do not
 //! contend on them and [`GeometryCache::stats`] never stops the renderer. Sharding makes eviction
 //! LRU per shard rather than per tier, so it is used only where each shard still holds hundreds
-//! of entries; small caches keep one exact LRU, as the paper's hit-rate tables assume.
+//! of entries; small caches, whose hit rates depend most on the replacement order, keep one
+//! exact LRU.
 //!
 //! # What the budget counts
 //! A tier's budget is compared with the sum of its resident entries' [`CacheEntry::byte_size`]:
@@ -40,9 +41,9 @@
 //! hit rates compare with its tables. Bookkeeping is not counted: per resident entry about 36–73
 //! bytes of hash-table slot, 40 bytes of LRU node and 16 bytes of `Arc` header, plus the entry's
 //! own headers (a `Vec` is 24 bytes) and the allocator's rounding. Next to a fine entry (3,468
-//! bytes) that is noise; next to a coarse one (48 bytes) it triples the real memory: a full
-//! 10 MB coarse tier of bare grids (208,333 entries) takes 35–40 MB. An entry type that must
-//! bound real memory can count its overhead in `byte_size`. Entries handed out stay alive,
+//! bytes) that is noise; next to a coarse one (48 bytes) it more than triples the real memory:
+//! a full 10 MB coarse tier of bare grids (208,333 entries) takes 35–40 MB. An entry type that
+//! must bound real memory can count its overhead in `byte_size`. Entries handed out stay alive,
 //! uncounted, until the last ray holding one drops it.
 //!
 //! To tell cold tessellations from misses, each tier remembers every key it ever built: one bit

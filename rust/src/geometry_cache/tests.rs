@@ -1,5 +1,6 @@
 //! Tests of the cache as a whole: LRU order, byte accounting, capacities against the paper's,
-//! single-flight builds under threads, the four modes, invalidation, and the stats JSON.
+//! sharding, single-flight builds under threads, the four modes, invalidation, and the stats
+//! JSON.
 
 use std::collections::{HashSet, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -247,7 +248,10 @@ fn shard_counts_are_chosen_so_each_shard_keeps_hundreds_of_entries() {
     assert_eq!(shards(CacheConfig::none()), [16; 3]);
     assert_eq!(shards(CacheConfig::DEFAULT.with_shards(3)), [4; 3]);
     assert_eq!(shards(CacheConfig::DEFAULT.with_shards(1000)), [64; 3]);
-    assert_eq!(shards(CacheConfig::DEFAULT.with_shards(5).with_shards(0)), [16, 16, 8]);
+    assert_eq!(
+        shards(CacheConfig::DEFAULT.with_shards(5).with_shards(0)),
+        [16, 16, 8]
+    );
     let cache = GeometryCache::<Grid>::new(CacheConfig::DEFAULT);
     assert_eq!(Tier::ALL.map(|t| cache.shard_count(t)), [16, 16, 8]);
 }
@@ -281,7 +285,11 @@ fn sharded_tiers_account_bytes_and_peak_over_all_shards() {
     for s in 0..200u32 {
         let bytes = 100 + (s as usize * 37) % 300;
         total_built += bytes;
-        cache.get_or_build(key(s % 3, s, m), || Grid { id: 0, bytes, verts: 25 });
+        cache.get_or_build(key(s % 3, s, m), || Grid {
+            id: 0,
+            bytes,
+            verts: 25,
+        });
         let now = cache.resident_bytes(m);
         assert!(now <= budget, "{now} > {budget}");
         peak = peak.max(now);
@@ -883,7 +891,7 @@ fn table_reads_like_the_papers() {
         .copied()
         .unwrap_or_default();
     assert!(
-        coarse.contains("2x2") && coarse.contains("208333") && coarse.contains("75.00%"),
+        coarse.contains("2x2") && coarse.contains("208333") && coarse.contains("100.00%"),
         "{coarse}"
     );
     assert!(

@@ -122,6 +122,12 @@ impl<E> Pending<E> {
     }
 }
 
+/// Whether `slot` is still the registration of the build `pending` (invalidation or a panic may
+/// have removed it, and a new build may have taken its place).
+fn is_build<E>(slot: Option<&Slot<E>>, pending: &Arc<Pending<E>>) -> bool {
+    matches!(slot, Some(Slot::Building(p)) if Arc::ptr_eq(p, pending))
+}
+
 /// Unregisters a build if its closure panics, so waiters do not wait forever and the key can be
 /// built again.
 struct AbandonOnUnwind<'a, E> {
@@ -135,8 +141,7 @@ impl<E> Drop for AbandonOnUnwind<'_, E> {
     fn drop(&mut self) {
         if self.armed {
             let mut st = self.shard.state.lock();
-            if matches!(st.slots.get(&self.key), Some(Slot::Building(p)) if Arc::ptr_eq(p, self.pending))
-            {
+            if is_build(st.slots.get(&self.key), self.pending) {
                 st.slots.remove(&self.key);
             }
             drop(st);
@@ -230,7 +235,8 @@ impl<E: CacheEntry> TierCache<E> {
                 Err(pending) => {
                     assert!(
                         pending.builder != thread::current().id(),
-                        "geometry cache: the build of {key:?} looked up the same key; it would wait for itself"
+                        "geometry cache: the build of {key:?} looked up the same key; \
+                         it would wait for itself"
                     );
                     if let Some(entry) = pending.wait() {
                         LookupCounters::add(&shard.counters.hits, 1);
@@ -289,8 +295,7 @@ impl<E: CacheEntry> TierCache<E> {
     ) -> Vec<Arc<E>> {
         let mut evicted = Vec::new();
         let mut st = shard.state.lock();
-        let ours = matches!(st.slots.get(&key), Some(Slot::Building(p)) if Arc::ptr_eq(p, pending));
-        if !ours {
+        if !is_build(st.slots.get(&key), pending) {
             return evicted;
         }
         if bytes > self.shard_budget_bytes {
