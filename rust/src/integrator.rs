@@ -161,7 +161,8 @@ impl<'a> DirectLighting<'a> {
     fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Shade {
         let sp = shading_point(self.tracer, self.scene, ray, hit);
         let material = self.scene.material_of(hit.mesh as usize);
-        let footprint = ray.diff.transfer(ray.d, hit.t, sp.ng);
+        let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
+        counters.differential_clamps += u64::from(clamped);
         let mut color = Vec3A::ZERO;
         let mut ao = 0.0;
         let albedo = material.diffuse_color;
@@ -176,14 +177,9 @@ impl<'a> DirectLighting<'a> {
             let (dndx, dndy) = self.normal_differentials(hit, &sp, &footprint);
             let wr = reflect_direction(ray.d, sp.ns);
             if wr.dot(sp.ng) > 0.0 {
-                let r = Ray {
-                    o: offset_origin(sp.p, hit.p_error, sp.ng, wr),
-                    d: wr,
-                    t_min: 0.0,
-                    t_max: f32::INFINITY,
-                    diff: footprint.reflect(ray.d, sp.ns, dndx, dndy),
-                    kind: RayKind::Reflection,
-                };
+                let (diff, clamped) = footprint.reflect_checked(ray.d, sp.ns, dndx, dndy);
+                counters.differential_clamps += u64::from(clamped);
+                let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, wr), d: wr, t_min: 0.0, t_max: f32::INFINITY, diff, kind: RayKind::Reflection };
                 color += material.mirror * self.radiance(&r, depth + 1, sampler, counters);
             }
         }
@@ -249,14 +245,9 @@ impl<'a> DirectLighting<'a> {
             if d.dot(sp.ng) <= 0.0 {
                 continue;
             }
-            let r = Ray {
-                o: offset_origin(sp.p, hit.p_error, sp.ng, d),
-                d,
-                t_min: 0.0,
-                t_max: self.ao_distance,
-                diff: footprint.hemisphere(d, pdf, n),
-                kind: RayKind::Ao,
-            };
+            let (diff, clamped) = footprint.hemisphere_checked(d, pdf, n);
+            counters.differential_clamps += u64::from(clamped);
+            let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, d), d, t_min: 0.0, t_max: self.ao_distance, diff, kind: RayKind::Ao };
             if !self.tracer.occluded(&r, counters) {
                 open += 1;
             }

@@ -46,6 +46,7 @@ pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect]
             "ray_subpatch_tests": counters.ray_subpatch_tests,
             "rate_tests": rates,
             "finer_than_fine_tests": counters.finer_than_fine,
+            "differential_clamps": counters.differential_clamps,
             "dropped_samples": figures.dropped_samples,
         },
         "geometry_cache": serde_json::to_value(tracer.cache.stats()).unwrap_or(Value::Null),

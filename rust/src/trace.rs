@@ -38,8 +38,11 @@ pub struct TraceCounters {
     pub ray_subpatch_tests: u64,
     /// Subpatch tests per effective rate (1, 2, 4, 8, 16 quads per side).
     pub rate_tests: [u64; 5],
-    /// Tests whose beam asked for more than 16×16 quads (served at 16×16 until splitting).
+    /// Tests whose beam asked for more than 16×16 quads (served by split subpatches).
     pub finer_than_fine: u64,
+    /// Ray differentials clamped to finite values (grazing hits, degenerate footprints, total
+    /// internal reflection, zero densities): see [`crate::differential`].
+    pub differential_clamps: u64,
 }
 
 impl TraceCounters {
@@ -52,6 +55,7 @@ impl TraceCounters {
         }
         self.ray_subpatch_tests += o.ray_subpatch_tests;
         self.finer_than_fine += o.finer_than_fine;
+        self.differential_clamps += o.differential_clamps;
     }
 }
 

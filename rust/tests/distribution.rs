@@ -84,3 +84,21 @@ fn a_scene_that_calls_for_nothing_traces_camera_and_shadow_rays_only() {
     let names: Vec<&str> = out.stats["effects"]["enabled"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
     assert_eq!(names, vec!["camera", "shadows"]);
 }
+
+#[test]
+fn grazing_hits_clamp_differentials_count_them_and_stay_finite() {
+    // A huge plane seen within a hundredth of a degree of edge-on: footprints explode, the
+    // differentials are clamped, counted, and nothing non-finite reaches the film.
+    let big = 1.0e5;
+    let mut scene = Scene::default();
+    add(&mut scene, "/ground", quad([[-big, -big, 0.0], [big, -big, 0.0], [big, big, 0.0], [-big, big, 0.0]]), Material::default());
+    scene.lights.push(Light::distant("/sun", Vec3A::new(0.0, 0.3, -1.0), Vec3A::ONE));
+    let eye = Vec3::new(0.0, 0.0, 1.0);
+    scene.camera = Camera { render_from_camera: Camera::look_at(eye, Vec3::new(0.0, 1.0e4, 0.99), Vec3::Z), focal_length: 50.0, clipping_range: (0.1, 1.0e7), ..Default::default() };
+    let opts = RenderOptions { width: 32, height: 32, ao_samples: 4, aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()], ..Default::default() };
+    let out = render(&scene, &opts, &NoProgress).unwrap();
+    assert!(out.stats["render"]["differential_clamps"].as_u64().unwrap() > 0);
+    for a in ["color", "beamWidth", "tessRate"] {
+        assert!(out.film.aov(a).unwrap().data.iter().all(|v| v.is_finite()), "{a}");
+    }
+}
