@@ -22,7 +22,7 @@ ifneq ($(wildcard $(PY)),)
 export PYO3_PYTHON ?= $(abspath $(PY))
 endif
 
-.PHONY: help setup build examples render test test-rust test-python fmt lint clean
+.PHONY: help setup build examples render test test-rust test-python fmt lint clean figures bench-cache
 
 help: ## List the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
@@ -84,3 +84,11 @@ clean: ## Remove build outputs and renders (keeps .venv)
 	rm -rf $(OUT) .pytest_cache tests/.pytest_cache python/.pytest_cache .ruff_cache python/.mypy_cache
 	rm -f python/mipray/_mipray*.so
 	find python tests examples -name __pycache__ -type d -prune -exec rm -rf {} +
+
+figures: ## Re-make the pictures of docs/ray-differentials.md
+	cargo run --release -p hd-mipray --bin mipray-figures -- docs/images
+
+bench-cache: setup ## The paper's §6.3.2 cache tables: docs/cache-benchmark.{md,json,png}
+	cargo run --release -p hd-mipray --bin mipray-bench-cache -- --out docs/cache-benchmark
+	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
+	$(VENV)/bin/python scripts/plot_cache_bench.py docs/cache-benchmark.json docs/cache-benchmark.png

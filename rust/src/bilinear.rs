@@ -11,6 +11,7 @@ use glam::Vec3A;
 use crate::bounds::Bounds3;
 use crate::error::MeshError;
 use crate::patch::{GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
+use crate::texture::{BaseFacePrimvar, Primvar2};
 use crate::topology::MeshTopology;
 
 /// A polygonal mesh's bilinear patches. Object space.
@@ -20,6 +21,8 @@ pub struct BilinearSurface {
     corners: Vec<[Vec3A; 4]>,
     params: Vec<PatchParam>,
     faces: usize,
+    /// 2-float primvar channels, by ptex face (see [`BilinearSurface::with_primvars`]).
+    primvars: Vec<BaseFacePrimvar>,
 }
 
 impl BilinearSurface {
@@ -60,7 +63,22 @@ impl BilinearSurface {
             }
             ptex += sub_faces as u32;
         }
-        Ok(Self { corners, params, faces: topology.face_count() })
+        Ok(Self { corners, params, faces: topology.face_count(), primvars: Vec::new() })
+    }
+
+    /// Adds 2-float primvars (texture coordinates `st`, …): channel i of
+    /// [`LimitSurface::face_varying`] is `primvars[i]`. On a polygonal mesh every interpolation
+    /// is linear over each face (split as the patches are), so all five are exact here.
+    /// `topology` and `point_count` are the ones the surface was built from.
+    ///
+    /// # Errors
+    /// As [`BaseFacePrimvar::new`]: a count or index that does not fit the topology, naming the
+    /// primvar.
+    pub fn with_primvars(mut self, topology: &MeshTopology, point_count: usize, primvars: &[Primvar2]) -> Result<Self, MeshError> {
+        for p in primvars {
+            self.primvars.push(BaseFacePrimvar::new(topology, point_count, p)?);
+        }
+        Ok(self)
     }
 }
 
@@ -121,6 +139,18 @@ impl LimitSurface for BilinearSurface {
     fn control_face_count(&self) -> usize {
         self.faces
     }
+
+    fn face_varying(&self, channel: usize, patch: usize, u: f32, v: f32) -> Option<([f32; 2], [f32; 2], [f32; 2])> {
+        self.primvars.get(channel)?.at_patch(self.params.get(patch)?, u, v)
+    }
+
+    fn patch_is_affine(&self, patch: usize) -> bool {
+        // A bilinear patch is affine exactly when its corners form a parallelogram:
+        // p0 + p2 = p1 + p3 (then the twist term dpduv vanishes).
+        let [p0, p1, p2, p3] = self.corners[patch];
+        let scale = p0.abs().max(p1.abs()).max(p2.abs()).max(p3.abs()).max_element().max(f32::MIN_POSITIVE);
+        ((p0 + p2) - (p1 + p3)).abs().max_element() <= 4.0 * f32::EPSILON * scale
+    }
 }
 
 #[cfg(test)]
@@ -169,6 +199,17 @@ mod tests {
         let s = BilinearSurface::new(&t, &pts).unwrap();
         assert_eq!(s.patch_count(), 1);
         assert_eq!(s.patch_param(0).base_face, 1);
+    }
+
+    #[test]
+    fn parallelograms_are_affine_and_twisted_quads_are_not() {
+        let topo = topo(vec![4], vec![0, 1, 2, 3]);
+        let para = BilinearSurface::new(&topo, &[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 1.0, 0.0], [1.0, 1.0, 0.0]]).unwrap();
+        assert!(para.patch_is_affine(0));
+        let twisted = BilinearSurface::new(&topo, &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.3], [0.0, 1.0, 0.0]]).unwrap();
+        assert!(!twisted.patch_is_affine(0));
+        let trapezoid = BilinearSurface::new(&topo, &[[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 1.0, 0.0]]).unwrap();
+        assert!(!trapezoid.patch_is_affine(0), "flat but with a non-linear parameterization");
     }
 
     #[test]

@@ -2,6 +2,12 @@
 //! ability to cache displaced tessellations ensures that we rarely need to run the displacement
 //! shader repeatedly").
 //!
+//! Two shaders ([`DisplacementShader`]): the built-in procedural [`Displacement`], and
+//! [`TextureDisplacement`] — UsdPreviewSurface `displacement` fed by a UsdUVTexture — which reads
+//! the texture at each grid vertex's `st` with filter widths of one grid step in `st`, so a
+//! coarse tier reads a coarse MIP level (few tiles) and a fine tier a fine one: the texture
+//! counterpart of the tessellation MIP map (the paper's §2.6).
+//!
 //! The built-in procedural displacement is fBm of gradient noise over object-space position, so
 //! tests and benchmarks need no image files. It is filtered at the grid's own spacing: octaves
 //! whose wavelength is shorter than two grid spacings are faded out, so a coarse tier reads a
@@ -9,7 +15,13 @@
 //! than taken from a noise crate because the band limit per octave is the point, and it must be
 //! bit-reproducible across platforms and thread counts.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
 use glam::Vec3A;
+
+use crate::patch::{LimitSurface, UvRect};
+use crate::texture::{Lookup, TextureError, TextureHandle, TextureSampler};
 
 /// fBm displacement: `amplitude · Σ gainⁱ · noise(2ⁱ · frequency · p)`, i < octaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,6 +81,213 @@ impl Displacement {
         }
         sum
     }
+}
+
+/// UsdPreviewSurface `displacement` fed by a UsdUVTexture: at each vertex,
+/// `texel[channel] · scale + bias` object units along the limit normal, the texel filtered over one
+/// grid step in `st` (see [`TextureDisplacement::grid_offsets`]).
+pub struct TextureDisplacement {
+    sampler: Arc<dyn TextureSampler>,
+    texture: TextureHandle,
+    path: String,
+    /// The surface's 2-float primvar channel holding `st` ([`LimitSurface::face_varying`]).
+    pub st_channel: usize,
+    /// Channel (UsdUVTexture output `r` = 0, `g` = 1, …) and wrap modes.
+    pub lookup: Lookup,
+    /// UsdUVTexture `scale` and `bias` of that channel: object units per texel unit, and object
+    /// units.
+    pub scale: f32,
+    pub bias: f32,
+    /// Displacement (object units, not scaled) where a lookup fails: UsdUVTexture `fallback`.
+    pub fallback: f32,
+    /// `st` where the surface has no `st` channel: UsdPrimvarReader_float2's `fallback`.
+    pub st_fallback: [f32; 2],
+    /// The range texel values lie in, for [`TextureDisplacement::bound`]: [0, 1] (the default)
+    /// for integer images; a float image's own range if it strays outside.
+    pub value_range: [f32; 2],
+    failed: AtomicU64,
+}
+
+impl std::fmt::Debug for TextureDisplacement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TextureDisplacement")
+            .field("path", &self.path)
+            .field("texture", &self.texture)
+            .field("st_channel", &self.st_channel)
+            .field("lookup", &self.lookup)
+            .field("scale", &self.scale)
+            .field("bias", &self.bias)
+            .field("fallback", &self.fallback)
+            .field("value_range", &self.value_range)
+            .finish_non_exhaustive()
+    }
+}
+
+impl TextureDisplacement {
+    /// Opens `path` through `sampler`; `st` comes from the surface's primvar channel
+    /// `st_channel`. Scale 1, bias 0, channel 0, fallback 0, values in [0, 1]: set the public
+    /// fields to match the UsdUVTexture.
+    ///
+    /// # Errors
+    /// The sampler's [`TextureError`] (naming the path) when the texture cannot be read: the
+    /// caller drops the displacement (or uses `fallback` as a constant) and warns.
+    pub fn new(sampler: Arc<dyn TextureSampler>, path: &str, st_channel: usize) -> Result<Self, TextureError> {
+        let texture = sampler.handle(path)?;
+        Ok(TextureDisplacement {
+            sampler,
+            texture,
+            path: path.to_string(),
+            st_channel,
+            lookup: Lookup::DEFAULT,
+            scale: 1.0,
+            bias: 0.0,
+            fallback: 0.0,
+            st_fallback: [0.0; 2],
+            value_range: [0.0, 1.0],
+            failed: AtomicU64::new(0),
+        })
+    }
+
+    /// The texture's path, as given.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// Checks values a user can get wrong.
+    ///
+    /// # Errors
+    /// A one-line description naming the texture and the input.
+    pub fn validate(&self) -> Result<(), String> {
+        let p = &self.path;
+        for (name, v) in [("scale", self.scale), ("bias", self.bias), ("fallback", self.fallback)] {
+            if !v.is_finite() {
+                return Err(format!("displacement texture {p}: {name} = {v} is not finite"));
+            }
+        }
+        let [lo, hi] = self.value_range;
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(format!("displacement texture {p}: value range [{lo}, {hi}] is not an interval"));
+        }
+        Ok(())
+    }
+
+    /// The largest displacement this can produce (object units), given texel values within
+    /// `value_range`.
+    pub fn bound(&self) -> f32 {
+        let [lo, hi] = self.value_range;
+        (lo * self.scale + self.bias).abs().max((hi * self.scale + self.bias).abs()).max(self.fallback.abs())
+    }
+
+    /// Lookups that failed so far (each displaced by `fallback`).
+    pub fn failed_lookups(&self) -> u64 {
+        self.failed.load(Ordering::Relaxed)
+    }
+
+    /// Displacement (object units) at `st`, the texel filtered over the footprint spanned by
+    /// `dst_dx`, `dst_dy` (texture units per step; see [`crate::texture`]).
+    pub fn offset_at(&self, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2]) -> f32 {
+        let mut texel = [0.0f32; 1];
+        if self.sampler.sample(self.texture, st, dst_dx, dst_dy, &self.lookup, &mut texel) && texel[0].is_finite() {
+            texel[0] * self.scale + self.bias
+        } else {
+            self.failed.fetch_add(1, Ordering::Relaxed);
+            self.fallback
+        }
+    }
+
+    /// Displacements (object units) of an n×n vertex grid over `rect` of `patch`, u fastest, into
+    /// `out` (cleared first). Each vertex reads the texture at its `st` with filter widths of one
+    /// grid step: `dst_dx = ∂st/∂u · Δu`, `dst_dy = ∂st/∂v · Δv`, where Δu, Δv are the grid's
+    /// spacing in the patch's (u, v). A vertex where the surface has no `st` reads
+    /// `st_fallback` with zero widths.
+    pub fn grid_offsets(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, n: usize, out: &mut Vec<f32>) {
+        out.clear();
+        let steps = (n.max(2) - 1) as f32;
+        let (du, dv) = ((rect.u1 - rect.u0) / steps, (rect.v1 - rect.v0) / steps);
+        for j in 0..n {
+            for i in 0..n {
+                let (u, v) = rect.grid_uv(i, j, n);
+                let (st, dx, dy) = match surface.face_varying(self.st_channel, patch, u, v) {
+                    Some((st, dsdu, dsdv)) => (st, [dsdu[0] * du, dsdu[1] * du], [dsdv[0] * dv, dsdv[1] * dv]),
+                    None => (self.st_fallback, [0.0; 2], [0.0; 2]),
+                };
+                out.push(self.offset_at(st, dx, dy));
+            }
+        }
+    }
+}
+
+/// What a mesh is displaced by.
+#[derive(Clone, Debug)]
+pub enum DisplacementShader {
+    /// The built-in fBm.
+    Procedural(Displacement),
+    /// A displacement texture (shared: one per material, many meshes).
+    Texture(Arc<TextureDisplacement>),
+}
+
+impl From<Displacement> for DisplacementShader {
+    fn from(d: Displacement) -> Self {
+        DisplacementShader::Procedural(d)
+    }
+}
+
+impl From<TextureDisplacement> for DisplacementShader {
+    fn from(d: TextureDisplacement) -> Self {
+        DisplacementShader::Texture(Arc::new(d))
+    }
+}
+
+impl DisplacementShader {
+    /// Checks values a user can get wrong.
+    ///
+    /// # Errors
+    /// A one-line description naming the attribute or texture.
+    pub fn validate(&self) -> Result<(), String> {
+        match self {
+            DisplacementShader::Procedural(d) => d.validate(),
+            DisplacementShader::Texture(t) => t.validate(),
+        }
+    }
+
+    /// The largest displacement this can produce (object units).
+    pub fn bound(&self) -> f32 {
+        match self {
+            DisplacementShader::Procedural(d) => d.bound(),
+            DisplacementShader::Texture(t) => t.bound(),
+        }
+    }
+
+    /// Displacements (object units, along the limit normal) of the n×n grid `verts` (object
+    /// space, undisplaced, u fastest) over `rect` of `patch`, filtered at the grid's own spacing,
+    /// into `out` (cleared first; `verts.len()` values). The procedural shader filters at
+    /// [`grid_spacing`] in object space, exactly as tessellation always did; the texture shader at
+    /// one grid step in `st` ([`TextureDisplacement::grid_offsets`]).
+    pub fn grid_offsets(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize, out: &mut Vec<f32>) {
+        match self {
+            DisplacementShader::Procedural(d) => {
+                out.clear();
+                let spacing = grid_spacing(verts, n);
+                out.extend(verts.iter().map(|v| d.offset(Vec3A::from(*v), spacing)));
+            }
+            DisplacementShader::Texture(t) => t.grid_offsets(surface, patch, rect, n, out),
+        }
+    }
+}
+
+/// Mean edge length of an n×n grid's middle row and column (object units): the spacing the
+/// procedural displacement is filtered at. 0 for n < 2.
+pub fn grid_spacing(verts: &[[f32; 3]], n: usize) -> f32 {
+    if n < 2 || verts.len() < n * n {
+        return 0.0;
+    }
+    let m = n / 2;
+    let at = |i: usize, j: usize| Vec3A::from(verts[j * n + i]);
+    let mut len = 0.0;
+    for k in 0..n - 1 {
+        len += (at(k + 1, m) - at(k, m)).length() + (at(m, k + 1) - at(m, k)).length();
+    }
+    len / (2 * (n - 1)) as f32
 }
 
 fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {

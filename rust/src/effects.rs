@@ -22,7 +22,13 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
     if !shadow_lights.is_empty() {
         out.push(Effect { name: "shadows".into(), why: format!("lights casting shadows: {}", shadow_lights.join(", ")) });
     }
-    let used: std::collections::HashSet<usize> = scene.instances.iter().filter_map(|i| scene.meshes.get(i.mesh)).map(|m| m.material).collect();
+    // Materials of placed meshes, per-face ones (GeomSubsets) included; each mesh looked at once.
+    let placed: std::collections::HashSet<usize> = scene.instances.iter().map(|i| i.mesh).collect();
+    let mut used = std::collections::HashSet::new();
+    for m in placed.iter().filter_map(|&i| scene.meshes.get(i)) {
+        used.insert(m.material);
+        used.extend(m.face_materials.iter().flat_map(|t| t.iter().map(|&f| f as usize)));
+    }
     let mirrors: Vec<&str> = scene.materials.iter().enumerate().filter(|(i, m)| used.contains(i) && m.mirror.max_element() > 0.0).map(|(_, m)| m.name.as_str()).collect();
     if !mirrors.is_empty() && options.max_depth > 0 {
         let shown: Vec<&str> = mirrors.iter().take(5).copied().collect();

@@ -27,12 +27,14 @@ pub struct SampleValue {
     /// Patch index within the mesh (−1 for none).
     pub prim_id: f32,
     pub instance_id: f32,
-    /// World-space beam width of the camera ray at its hit (the paper's figures 2 and 4).
+    /// World-space beam width at the hit that ends the camera ray's specular chain: the camera
+    /// ray's own hit on a matte surface, the reflected ray's hit seen in a mirror (the paper's
+    /// figure 2).
     pub beam_width: f32,
     /// Unoccluded fraction of the hemisphere (the `ao` AOV; 0 when AO is off).
     pub ao: f32,
-    /// Effective tessellation rate of the hit, quads per side of its root subpatch: 1, 2, 4, 8,
-    /// 16, or 16·2^depth where the subpatch was split.
+    /// Effective tessellation rate of that same hit, quads per side of its root subpatch: 1, 2,
+    /// 4, 8, 16, or 16·2^depth where the subpatch was split.
     pub tess_rate: f32,
 }
 
@@ -109,10 +111,13 @@ pub struct DirectLighting<'a> {
     max_depth: u32,
 }
 
-/// Radiance along a ray plus, for camera rays, the AO fraction at the first hit.
+/// Radiance along a ray, the AO fraction at its hit, and the beam width and rate at the end of
+/// its specular chain (the debug AOVs follow mirrors, as the paper's figure 2 does).
 struct Shade {
     color: Vec3A,
     ao: f32,
+    beam_width: f32,
+    quads: u32,
 }
 
 impl<'a> DirectLighting<'a> {
@@ -146,25 +151,24 @@ impl<'a> DirectLighting<'a> {
         out.normal = sp.ns;
         out.prim_id = hit.patch as f32;
         out.instance_id = hit.instance_id as f32;
-        out.beam_width = ray.beam_width(hit.t);
-        out.tess_rate = hit.quads as f32;
+        out.beam_width = shade.beam_width;
+        out.tess_rate = shade.quads as f32;
         out
     }
 
-    fn radiance(&self, ray: &Ray, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Vec3A {
-        match self.tracer.intersect(ray, counters) {
-            Some(hit) => self.shade(ray, &hit, depth, sampler, counters).color,
-            None => Vec3A::ZERO,
-        }
+    fn radiance(&self, ray: &Ray, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Option<Shade> {
+        let hit = self.tracer.intersect(ray, counters)?;
+        Some(self.shade(ray, &hit, depth, sampler, counters))
     }
 
     fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Shade {
         let sp = shading_point(self.tracer, self.scene, ray, hit);
-        let material = self.scene.material_of(hit.mesh as usize);
+        let material = self.scene.material_at(hit.mesh as usize, hit.patch as usize);
         let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
         counters.differential_clamps += u64::from(clamped);
         let mut color = Vec3A::ZERO;
         let mut ao = 0.0;
+        let (mut beam_width, mut quads) = (ray.beam_width(hit.t), hit.quads);
         let albedo = material.diffuse_color;
         if albedo.max_element() > 0.0 {
             color += albedo * self.direct(&sp, hit, &footprint, counters);
@@ -180,10 +184,13 @@ impl<'a> DirectLighting<'a> {
                 let (diff, clamped) = footprint.reflect_checked(ray.d, sp.ns, dndx, dndy);
                 counters.differential_clamps += u64::from(clamped);
                 let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, wr), d: wr, t_min: 0.0, t_max: f32::INFINITY, diff, kind: RayKind::Reflection };
-                color += material.mirror * self.radiance(&r, depth + 1, sampler, counters);
+                if let Some(reflected) = self.radiance(&r, depth + 1, sampler, counters) {
+                    color += material.mirror * reflected.color;
+                    (beam_width, quads) = (reflected.beam_width, reflected.quads);
+                }
             }
         }
-        Shade { color, ao }
+        Shade { color, ao, beam_width, quads }
     }
 
     /// dN/dx, dN/dy at the hit from the limit surface's second derivatives (Weingarten) and

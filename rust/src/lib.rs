@@ -53,6 +53,7 @@ pub mod scene;
 pub mod stats;
 pub mod subpatch;
 pub mod tessellate;
+pub mod texture;
 pub mod topology;
 pub mod trace;
 

@@ -150,4 +150,19 @@ pub trait LimitSurface: Send + Sync {
 
     /// Number of control (base) faces of the mesh.
     fn control_face_count(&self) -> usize;
+
+    /// True when the patch is an affine image of the unit square (a flat parallelogram with
+    /// its parameterization linear): one quad represents it exactly, so the tracer tests it at
+    /// rate 1 whatever the beam width. `false` (the safe answer) unless an implementation knows.
+    fn patch_is_affine(&self, _patch: usize) -> bool {
+        false
+    }
+
+    /// A 2-float primvar channel (texture coordinates `st`, say) at the patch's own (u, v): its
+    /// value and its derivatives with respect to u and v. Channels are numbered in the order the
+    /// surface was built with them; any USD interpolation is held as a face-varying channel (see
+    /// [`crate::texture::Primvar2`]). `None` when the surface has no such channel — the default.
+    fn face_varying(&self, _channel: usize, _patch: usize, _u: f32, _v: f32) -> Option<([f32; 2], [f32; 2], [f32; 2])> {
+        None
+    }
 }

@@ -34,6 +34,10 @@ pub struct Mesh {
     /// The mesh's key in a geometry cache that outlives one render (the delegate's): stable
     /// across edits of other prims. `None`: its index in [`Scene::meshes`].
     pub cache_id: Option<u32>,
+    /// Per control (base) face, an index into [`Scene::materials`] overriding [`Mesh::material`]
+    /// (USD GeomSubsets with their own material bindings, uniform `displayColor`). `None`, a
+    /// face past the end, or an index out of range: the mesh's material.
+    pub face_materials: Option<Arc<[u32]>>,
 }
 
 impl std::fmt::Debug for Mesh {
@@ -48,7 +52,7 @@ impl std::fmt::Debug for Mesh {
 
 impl Mesh {
     pub fn new(name: impl Into<String>, surface: Arc<dyn LimitSurface>) -> Self {
-        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false, displacement: None, cache_id: None }
+        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false, displacement: None, cache_id: None, face_materials: None }
     }
 }
 
@@ -100,5 +104,16 @@ impl Scene {
             .get(mesh)
             .and_then(|m| self.materials.get(m.material))
             .unwrap_or_else(|| DEFAULT.get_or_init(Material::default))
+    }
+
+    /// The material at patch `patch` of mesh `mesh`: its base face's entry in
+    /// [`Mesh::face_materials`] if there is one, else [`Scene::material_of`].
+    pub fn material_at(&self, mesh: usize, patch: usize) -> &Material {
+        let face_material = self.meshes.get(mesh).and_then(|m| {
+            let table = m.face_materials.as_ref()?;
+            let face = m.surface.patch_param(patch).base_face as usize;
+            self.materials.get(*table.get(face)? as usize)
+        });
+        face_material.unwrap_or_else(|| self.material_of(mesh))
     }
 }

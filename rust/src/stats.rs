@@ -34,6 +34,14 @@ pub struct RenderFigures {
 pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect], figures: &RenderFigures, control_faces: usize, instances: usize) -> Value {
     let rays: serde_json::Map<String, Value> = RayKind::ALL.iter().enumerate().map(|(i, k)| (k.name().to_string(), json!(counters.rays[i]))).collect();
     let rates: serde_json::Map<String, Value> = Rate::ALL.iter().map(|r| (r.quads().to_string(), json!(counters.rate_tests[*r as usize]))).collect();
+    let by_kind: serde_json::Map<String, Value> = RayKind::ALL
+        .iter()
+        .enumerate()
+        .map(|(i, k)| {
+            let h = counters.rate_tests_by_kind[i];
+            (k.name().to_string(), json!({"1": h[0], "2": h[1], "4": h[2], "8": h[3], "16": h[4], "split": h[5]}))
+        })
+        .collect();
     let subpatches = tracer.subpatch_count() as u64;
     let full_verts = subpatches * 17 * 17;
     json!({
@@ -45,6 +53,7 @@ pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect]
             "rays": rays,
             "ray_subpatch_tests": counters.ray_subpatch_tests,
             "rate_tests": rates,
+            "rate_tests_by_ray": by_kind,
             "finer_than_fine_tests": counters.finer_than_fine,
             "differential_clamps": counters.differential_clamps,
             "dropped_samples": figures.dropped_samples,
@@ -57,6 +66,7 @@ pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect]
             "full_tessellation_vertices": full_verts,
             "full_tessellation_bytes": full_verts * 12,
             "bvh_bytes": tracer.bvh_bytes(),
+            "subpatch_bytes": tracer.subpatch_bytes(),
             "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
             "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
         },

@@ -21,6 +21,9 @@ pub struct Subpatch {
     pub rect: UvRect,
     /// Object space, grown by the mesh's displacement bound.
     pub bounds: Bounds3,
+    /// An undisplaced parallelogram: exact at one quad, never split (beyond the paper: the
+    /// beam width bounds the error a rate may make; a flat affine patch makes none).
+    pub affine: bool,
 }
 
 /// Where a split child lies: its root subpatch, split depth, and cell (i along u, j along v) of
@@ -102,10 +105,12 @@ impl MeshGeometry {
     pub fn build(mesh: &Mesh) -> Self {
         let s = &mesh.surface;
         let grow = mesh.displacement_bound.max(0.0);
-        let subpatches: Vec<Subpatch> = (0..s.patch_count())
-            .map(|i| Subpatch { patch: i as u32, rect: UvRect::UNIT, bounds: s.patch_bounds(i).expanded(grow) })
+        let mut subpatches: Vec<Subpatch> = (0..s.patch_count())
+            .map(|i| Subpatch { patch: i as u32, rect: UvRect::UNIT, bounds: s.patch_bounds(i).expanded(grow), affine: mesh.displacement.is_none() && s.patch_is_affine(i) })
             .filter(|sp| !sp.bounds.is_empty())
             .collect();
+        // Collected through a filter, the vector may hold twice its length: give it back.
+        subpatches.shrink_to_fit();
         let bounds = subpatches.iter().fold(Bounds3::EMPTY, |b, sp| b.union(&sp.bounds));
         let boxes: Vec<Bounds3> = subpatches.iter().map(|s| s.bounds).collect();
         let bvh = build_bvh(&boxes);

@@ -237,7 +237,7 @@ mod tests {
         let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.7]];
         let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
         let s = BilinearSurface::new(&topo, &pts).unwrap();
-        let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: s.patch_bounds(0) };
+        let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: s.patch_bounds(0), affine: false };
         let mut scratch = GridSamples::default();
         let (fine, _) = tessellate(&s, &sub, Tier::Fine, None, &mut scratch);
         let mut nine = GridSamples::default();

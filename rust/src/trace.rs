@@ -40,6 +40,9 @@ pub struct TraceCounters {
     pub rate_tests: [u64; 5],
     /// Tests whose beam asked for more than 16×16 quads (served by split subpatches).
     pub finer_than_fine: u64,
+    /// Subpatch tests by ray kind (index as `rays`) and effective rate (1, 2, 4, 8, 16, split):
+    /// which rays ask for which accuracy — the paper's §4 in numbers.
+    pub rate_tests_by_kind: [[u64; 6]; 7],
     /// Ray differentials clamped to finite values (grazing hits, degenerate footprints, total
     /// internal reflection, zero densities): see [`crate::differential`].
     pub differential_clamps: u64,
@@ -56,6 +59,11 @@ impl TraceCounters {
         self.ray_subpatch_tests += o.ray_subpatch_tests;
         self.finer_than_fine += o.finer_than_fine;
         self.differential_clamps += o.differential_clamps;
+        for (a, b) in self.rate_tests_by_kind.iter_mut().zip(o.rate_tests_by_kind) {
+            for (x, y) in a.iter_mut().zip(b) {
+                *x += y;
+            }
+        }
     }
 }
 
@@ -165,6 +173,11 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().map(|m| m.subpatches.len()).sum()
     }
 
+    /// Bytes of the root subpatches (their bounds are the bottom-level BVHs' primitives).
+    pub fn subpatch_bytes(&self) -> usize {
+        self.meshes.iter().map(|m| m.subpatches.len() * std::mem::size_of::<crate::subpatch::Subpatch>()).sum()
+    }
+
     /// Bytes of every BVH (both levels), for the stats.
     pub fn bvh_bytes(&self) -> usize {
         self.meshes.iter().filter_map(|m| m.bvh.as_ref()).map(crate::bvh::bvh_bytes).sum::<usize>() + self.tlas.as_ref().map_or(0, crate::bvh::bvh_bytes)
@@ -242,17 +255,26 @@ impl<'s> Tracer<'s> {
             counters.ray_subpatch_tests += 1;
             let size = sp.bounds.diagonal().max_element() * inst.scale;
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor);
-            let depth = split_depth(needed);
+            let depth = if sp.affine { 0 } else { split_depth(needed) };
+            let kind = Self::kind_index(ray.kind);
             let found = if depth > 0 {
                 counters.finer_than_fine += 1;
+                counters.rate_tests_by_kind[kind][5] += 1;
                 let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(inst.mesh, geom, root, Tier::Fine);
                 let mut found = None;
                 self.hit_split(inst.mesh, geom, root, &tess, depth, &wray, ray.t_min, &mut t_best, &mut found);
                 found
             } else {
-                let rate = if self.single { Rate::R16 } else { Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16) };
+                let rate = if self.single {
+                    Rate::R16
+                } else if sp.affine {
+                    Rate::R1
+                } else {
+                    Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
+                };
                 counters.rate_tests[rate as usize] += 1;
+                counters.rate_tests_by_kind[kind][rate as usize] += 1;
                 let (tier, stride) = rate.tier_and_stride();
                 let tess = self.lookup(inst.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
                 intersect_tessellation(&wray, &tess, stride, ray.t_min, t_best).map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: sp.rect, ng: h.ng, quads: rate.quads() as u32 })
@@ -290,7 +312,7 @@ impl<'s> Tracer<'s> {
         let root = &geom.subpatches[cell.root as usize];
         let key = CacheKey { mesh: mesh.cache_id.unwrap_or(mesh_index as u32), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
         self.cache.get_or_build(key, || {
-            let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds };
+            let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds, affine: root.affine };
             let mut scratch = GridSamples::default();
             let displace = mesh.displacement.map(|displacement| DisplaceParams { displacement, normal_sign: if mesh.left_handed { -1.0 } else { 1.0 }, bound: mesh.displacement_bound });
             let (t, outside) = tessellate(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch);

@@ -1,0 +1,641 @@
+//! Texture lookups and texture coordinates.
+//!
+//! **Lookups.** [`TextureSampler`] is how the core reads filtered texture values without depending
+//! on OpenImageIO: the bridge implements it with OpenImageIO's `TextureSystem` (tiled MIP maps
+//! behind a bounded tile cache), and [`CheckerSampler`] is a procedural stand-in so core tests need
+//! no C++ and no files. Filter widths come from ray differentials (DESIGN.md: "differentials also
+//! choose texture filter widths") or, for displacement, from the tessellation grid's own spacing.
+//! This is what makes a small texture cache work for ray tracing (the paper's §2.6): incoherent
+//! rays are wide, so their lookups read coarse MIP levels, few tiles. [`FilterMode::Finest`]
+//! ignores the widths and reads the finest level everywhere: the paper's §6.3.3 experiment, in
+//! which the same 10 MB cache thrashed.
+//!
+//! **Texture coordinates.** [`Primvar2`] is a 2-float primvar as USD authors it (`st`, any
+//! interpolation, optionally indexed). Every interpolation resolves to one value per face-vertex
+//! ([`Primvar2::face_varying_indices`]), which is exactly a face-varying channel: the bridge hands
+//! those to OpenSubdiv, which interpolates them smoothly with the mesh's
+//! `faceVaryingLinearInterpolation`. [`BaseFacePrimvar`] interpolates them linearly over each base
+//! face in the core: exact for constant, uniform and varying primvars on any mesh and for every
+//! interpolation on polygonal meshes. Surfaces expose them through
+//! [`crate::patch::LimitSurface::face_varying`].
+//!
+//! Conventions: `st` is in texture space, [0, 1]² over the image, **s to the right and t up**
+//! (USD's and OpenGL's: (0, 0) is the image's bottom-left corner; a sampler whose images start at
+//! the top, as OpenImageIO's do, flips t). Values outside [0, 1] wrap as the lookup says.
+//! Derivatives `dst_dx = (ds/dx, dt/dx)` and `dst_dy = (ds/dy, dt/dy)` are texture-space units per
+//! step of two independent screen or parameter directions x and y — a pixel for a camera ray, a
+//! grid step for tessellation — as OpenImageIO takes them; the footprint is the parallelogram they
+//! span.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use serde_json::{json, Value};
+use thiserror::Error;
+
+use crate::error::MeshError;
+use crate::patch::PatchParam;
+use crate::topology::{MeshTopology, Scheme};
+
+/// An opened texture of one [`TextureSampler`]: cheap to copy, valid only with the sampler that
+/// made it (another sampler reads whatever texture has the same index, or fails the lookup).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TextureHandle(u32);
+
+impl TextureHandle {
+    /// For implementations: the handle of their `index`-th texture.
+    pub const fn new(index: u32) -> Self {
+        TextureHandle(index)
+    }
+
+    /// The index the implementation gave it.
+    pub const fn index(self) -> u32 {
+        self.0
+    }
+}
+
+/// A texture that cannot be used: the path and why, on one line. The caller falls back (to the
+/// UsdUVTexture's `fallback` value, say) and warns once.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[error("texture {path}: {message}")]
+pub struct TextureError {
+    pub path: String,
+    pub message: String,
+}
+
+/// How lookups outside [0, 1] wrap (UsdUVTexture's `wrapS` / `wrapT`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Wrap {
+    /// What the file says (`useMetadata`); periodic when it says nothing.
+    #[default]
+    FromFile,
+    /// Zero outside.
+    Black,
+    /// The edge texel continues.
+    Clamp,
+    /// `repeat`.
+    Periodic,
+    Mirror,
+}
+
+impl Wrap {
+    /// UsdUVTexture's token: `black`, `clamp`, `repeat`, `mirror`, `useMetadata`.
+    pub fn from_usd(token: &str) -> Option<Wrap> {
+        match token {
+            "black" => Some(Wrap::Black),
+            "clamp" => Some(Wrap::Clamp),
+            "repeat" => Some(Wrap::Periodic),
+            "mirror" => Some(Wrap::Mirror),
+            "useMetadata" => Some(Wrap::FromFile),
+            _ => None,
+        }
+    }
+}
+
+/// Which MIP level a lookup reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum FilterMode {
+    /// The filter footprint is the one the derivatives span, so the level is the one whose texels
+    /// are about that wide (anisotropic where the implementation can). The default.
+    #[default]
+    Differentials,
+    /// Derivatives ignored: every lookup reads the finest level, interpolated bilinearly. Aliases
+    /// and thrashes the cache; it exists to measure that (the paper's §6.3.3).
+    Finest,
+}
+
+impl FilterMode {
+    /// The name used in render settings and stats: `differentials`, `finest`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            FilterMode::Differentials => "differentials",
+            FilterMode::Finest => "finest",
+        }
+    }
+
+    /// Parses [`FilterMode::name`].
+    pub fn from_name(name: &str) -> Option<FilterMode> {
+        match name {
+            "differentials" => Some(FilterMode::Differentials),
+            "finest" => Some(FilterMode::Finest),
+            _ => None,
+        }
+    }
+
+    /// The derivatives a lookup in this mode filters with: zero for [`FilterMode::Finest`], and
+    /// for [`FilterMode::Differentials`] the given ones with non-finite components set to zero (a
+    /// broken differential reads the finest level rather than poisoning the filter).
+    pub fn widths(self, dst_dx: [f32; 2], dst_dy: [f32; 2]) -> ([f32; 2], [f32; 2]) {
+        match self {
+            FilterMode::Finest => ([0.0; 2], [0.0; 2]),
+            FilterMode::Differentials => {
+                let clean = |d: [f32; 2]| d.map(|c| if c.is_finite() { c } else { 0.0 });
+                (clean(dst_dx), clean(dst_dy))
+            }
+        }
+    }
+}
+
+/// Per-lookup options (UsdUVTexture's inputs other than `st`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lookup {
+    /// First channel read (r = 0, g = 1, b = 2, a = 3); `out.len()` channels from there.
+    pub first_channel: u32,
+    pub wrap_s: Wrap,
+    pub wrap_t: Wrap,
+    /// Value of requested channels the file does not have.
+    pub fill: f32,
+}
+
+impl Lookup {
+    /// Channel 0, wrap as the file says, fill 0.
+    pub const DEFAULT: Lookup = Lookup { first_channel: 0, wrap_s: Wrap::FromFile, wrap_t: Wrap::FromFile, fill: 0.0 };
+}
+
+impl Default for Lookup {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Filtered texture lookups, shared by every render thread.
+///
+/// Implementations keep whatever per-thread state they need themselves (OpenImageIO's
+/// `Perthread`), so a `&self` lookup from any thread is all a caller does. Lookups never panic
+/// and never block on another thread's file I/O longer than the tile they need.
+pub trait TextureSampler: Send + Sync {
+    /// Opens (or finds already open) the texture at `path` (a file path or whatever the
+    /// implementation resolves; UTF-8).
+    ///
+    /// # Errors
+    /// [`TextureError`] naming the path when the texture cannot be read (missing, unreadable, not
+    /// an image). The caller falls back and warns; it should not retry per lookup.
+    fn handle(&self, path: &str) -> Result<TextureHandle, TextureError>;
+
+    /// Filtered value of `out.len()` channels (from `lookup.first_channel`) at `st`, over the
+    /// footprint spanned by `dst_dx = (ds/dx, dt/dx)` and `dst_dy = (ds/dy, dt/dy)` (texture-space
+    /// units per step; see the module doc), as the sampler's [`FilterMode`] says. Returns false,
+    /// leaving `out` unspecified, for an unknown handle or a read failure; the failure is counted
+    /// in [`TextureSampler::stats`].
+    fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool;
+
+    /// The finest level's resolution in texels (width, height), if known.
+    fn resolution(&self, _handle: TextureHandle) -> Option<[u32; 2]> {
+        None
+    }
+
+    /// The filter mode every lookup uses.
+    fn filter_mode(&self) -> FilterMode;
+
+    /// Counters for the stats JSON's `texture_cache` object: plain JSON numbers (and a few
+    /// strings), names documented by the implementation.
+    fn stats(&self) -> Value;
+}
+
+/// Width of the lookup footprint in texels of the finest level: the longer side of the
+/// parallelogram spanned by the derivatives, measured in texels (`resolution` = finest width,
+/// height). 0 for zero derivatives.
+pub fn footprint_texels(dst_dx: [f32; 2], dst_dy: [f32; 2], resolution: [u32; 2]) -> f32 {
+    let (w, h) = (resolution[0] as f32, resolution[1] as f32);
+    let len = |d: [f32; 2]| ((d[0] * w).powi(2) + (d[1] * h).powi(2)).sqrt();
+    len(dst_dx).max(len(dst_dy))
+}
+
+/// The MIP level (0 = finest) whose texels are as wide as the footprint: log₂ of
+/// [`footprint_texels`], clamped to [0, `max_level`]. The isotropic choice (major axis), as a
+/// trilinear lookup makes it; an anisotropic filter reads up to log₂(anisotropy) levels finer.
+pub fn mip_level(dst_dx: [f32; 2], dst_dy: [f32; 2], resolution: [u32; 2], max_level: u32) -> f32 {
+    let texels = footprint_texels(dst_dx, dst_dy, resolution);
+    if !(texels > 1.0) {
+        return 0.0;
+    }
+    texels.log2().min(max_level as f32)
+}
+
+/// Levels the [`CheckerSampler`] histograms (level ≥ this goes in the last bin).
+pub const CHECKER_LEVELS: usize = 16;
+
+/// A procedural black-and-white checker standing in for an image texture in core tests.
+///
+/// It serves one texture, named at construction: a `resolution`² image of `squares`² squares,
+/// value 0 where the square's column + row is even (the bottom-left square is 0) and 1 elsewhere,
+/// in every channel, repeating outside [0, 1]² (wrap modes are ignored). A lookup returns the
+/// exact average of the checker over the footprint's bounding box in (s, t) — the ideal box filter
+/// a MIP map approximates — so a lookup that covers many squares returns 0.5. It records the MIP
+/// level ([`mip_level`]) each lookup would read from a `resolution`² MIP map, so tests can check
+/// which levels a computation asks for.
+#[derive(Debug)]
+pub struct CheckerSampler {
+    name: String,
+    resolution: u32,
+    squares: u32,
+    filter: FilterMode,
+    lookups: AtomicU64,
+    failed: AtomicU64,
+    /// Lookups per MIP level (`floor` of the fractional level).
+    levels: [AtomicU64; CHECKER_LEVELS],
+    /// Sum of fractional levels × 1024, for the mean.
+    level_sum_milli: AtomicU64,
+}
+
+impl CheckerSampler {
+    /// A checker served under `name`.
+    ///
+    /// # Panics
+    /// If `resolution` or `squares` is 0 (a test's mistake).
+    pub fn new(name: &str, resolution: u32, squares: u32, filter: FilterMode) -> Self {
+        assert!(resolution > 0 && squares > 0, "checker needs a positive resolution and square count");
+        CheckerSampler {
+            name: name.to_string(),
+            resolution,
+            squares,
+            filter,
+            lookups: AtomicU64::new(0),
+            failed: AtomicU64::new(0),
+            levels: Default::default(),
+            level_sum_milli: AtomicU64::new(0),
+        }
+    }
+
+    /// The coarsest MIP level: log₂ of the resolution, rounded down.
+    pub fn max_level(&self) -> u32 {
+        31 - self.resolution.leading_zeros()
+    }
+
+    /// Lookups per MIP level so far (index = level, the last bin holds deeper ones).
+    pub fn level_histogram(&self) -> Vec<u64> {
+        self.levels.iter().map(|a| a.load(Ordering::Relaxed)).collect()
+    }
+
+    /// Mean fractional MIP level of the lookups so far (0 when there were none).
+    pub fn mean_level(&self) -> f64 {
+        let n = self.lookups.load(Ordering::Relaxed);
+        if n == 0 {
+            return 0.0;
+        }
+        self.level_sum_milli.load(Ordering::Relaxed) as f64 / 1024.0 / n as f64
+    }
+
+    /// Zeroes the counters.
+    pub fn reset(&self) {
+        self.lookups.store(0, Ordering::Relaxed);
+        self.failed.store(0, Ordering::Relaxed);
+        self.level_sum_milli.store(0, Ordering::Relaxed);
+        for a in &self.levels {
+            a.store(0, Ordering::Relaxed);
+        }
+    }
+
+    /// The checker's exact average over [s0, s1] × [t0, t1] (a degenerate interval is a point).
+    pub fn box_average(&self, s0: f32, s1: f32, t0: f32, t1: f32) -> f32 {
+        // checker = (1 − q(s)·q(t)) / 2 with q = ±1 the square wave, so the box average factors.
+        let n = self.squares as f64;
+        let qs = square_wave_mean(s0 as f64 * n, s1 as f64 * n);
+        let qt = square_wave_mean(t0 as f64 * n, t1 as f64 * n);
+        (0.5 * (1.0 - qs * qt)) as f32
+    }
+}
+
+/// Mean over [a, b] of the square wave that is +1 on [0, 1) and −1 on [1, 2), period 2.
+fn square_wave_mean(a: f64, b: f64) -> f64 {
+    // Its integral from 0 is the triangle wave r ↦ r on [0, 1], 2 − r on [1, 2] (r = y mod 2).
+    let tri = |y: f64| {
+        let r = y.rem_euclid(2.0);
+        if r < 1.0 {
+            r
+        } else {
+            2.0 - r
+        }
+    };
+    if b - a > 1e-9 {
+        (tri(b) - tri(a)) / (b - a)
+    } else if a.rem_euclid(2.0) < 1.0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+impl TextureSampler for CheckerSampler {
+    fn handle(&self, path: &str) -> Result<TextureHandle, TextureError> {
+        if path == self.name {
+            Ok(TextureHandle::new(0))
+        } else {
+            Err(TextureError { path: path.to_string(), message: format!("no such texture (the checker serves only {:?})", self.name) })
+        }
+    }
+
+    fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], _lookup: &Lookup, out: &mut [f32]) -> bool {
+        if handle.index() != 0 || !(st[0].is_finite() && st[1].is_finite()) {
+            self.failed.fetch_add(1, Ordering::Relaxed);
+            return false;
+        }
+        let (dx, dy) = self.filter.widths(dst_dx, dst_dy);
+        let res = [self.resolution; 2];
+        let level = mip_level(dx, dy, res, self.max_level());
+        self.lookups.fetch_add(1, Ordering::Relaxed);
+        self.levels[(level as usize).min(CHECKER_LEVELS - 1)].fetch_add(1, Ordering::Relaxed);
+        self.level_sum_milli.fetch_add((level * 1024.0) as u64, Ordering::Relaxed);
+        let ws = 0.5 * dx[0].abs().max(dy[0].abs());
+        let wt = 0.5 * dx[1].abs().max(dy[1].abs());
+        let v = self.box_average(st[0] - ws, st[0] + ws, st[1] - wt, st[1] + wt);
+        out.fill(v);
+        true
+    }
+
+    fn resolution(&self, handle: TextureHandle) -> Option<[u32; 2]> {
+        (handle.index() == 0).then_some([self.resolution; 2])
+    }
+
+    fn filter_mode(&self) -> FilterMode {
+        self.filter
+    }
+
+    /// `kind` ("checker"), `filter_mode`, `lookups`, `failed_lookups`, `lookups_by_level` (one
+    /// count per MIP level, finest first), `mean_level`.
+    fn stats(&self) -> Value {
+        json!({
+            "kind": "checker",
+            "filter_mode": self.filter.name(),
+            "lookups": self.lookups.load(Ordering::Relaxed),
+            "failed_lookups": self.failed.load(Ordering::Relaxed),
+            "lookups_by_level": self.level_histogram(),
+            "mean_level": self.mean_level(),
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Texture coordinates
+
+/// USD's primvar interpolation: how many values a primvar has and how they spread over a face.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Interpolation {
+    /// One value for the whole mesh.
+    Constant,
+    /// One value per face.
+    Uniform,
+    /// One value per point, interpolated linearly over each face.
+    Varying,
+    /// One value per point, interpolated like the points (the subdivision basis).
+    Vertex,
+    /// One value per face-vertex, discontinuous across faces where the values differ (UV seams).
+    #[default]
+    FaceVarying,
+}
+
+impl Interpolation {
+    /// USD's token: `constant`, `uniform`, `varying`, `vertex`, `faceVarying`.
+    pub fn from_usd(token: &str) -> Option<Interpolation> {
+        match token {
+            "constant" => Some(Interpolation::Constant),
+            "uniform" => Some(Interpolation::Uniform),
+            "varying" => Some(Interpolation::Varying),
+            "vertex" => Some(Interpolation::Vertex),
+            "faceVarying" => Some(Interpolation::FaceVarying),
+            _ => None,
+        }
+    }
+
+    /// How many elements a primvar of this interpolation has on `topology` with `points` points.
+    pub fn element_count(self, topology: &MeshTopology, points: usize) -> usize {
+        match self {
+            Interpolation::Constant => 1,
+            Interpolation::Uniform => topology.face_count(),
+            Interpolation::Varying | Interpolation::Vertex => points,
+            Interpolation::FaceVarying => topology.face_vertex_indices.len(),
+        }
+    }
+}
+
+/// A 2-float primvar (`st`) as USD authors it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Primvar2 {
+    /// The primvar's name (`st`), for messages.
+    pub name: String,
+    pub interpolation: Interpolation,
+    pub values: Vec<[f32; 2]>,
+    /// USD's `indices`: element i takes `values[indices[i]]`. Empty: element i takes `values[i]`.
+    pub indices: Vec<i32>,
+}
+
+impl Primvar2 {
+    /// Resolves the primvar to one index into `values` per face-vertex (in `faceVertexIndices`
+    /// order): the face-varying channel that represents it exactly. `points` is the mesh's point
+    /// count.
+    ///
+    /// # Errors
+    /// [`MeshError::Invalid`] naming the primvar when the element count (or index count) does not
+    /// match the interpolation, or an index is out of range; [`MeshError::NonFinite`] for a NaN
+    /// or infinite value.
+    pub fn face_varying_indices(&self, topology: &MeshTopology, points: usize) -> Result<Vec<i32>, MeshError> {
+        let name = &self.name;
+        let elements = self.interpolation.element_count(topology, points);
+        if let Some((i, v)) = self.values.iter().enumerate().find(|(_, v)| !(v[0].is_finite() && v[1].is_finite())) {
+            return Err(MeshError::NonFinite(format!("primvar {name}: value [{i}] = {v:?}")));
+        }
+        let element_source = if self.indices.is_empty() { self.values.len() } else { self.indices.len() };
+        if element_source != elements {
+            let what = if self.indices.is_empty() { "values" } else { "indices" };
+            return Err(MeshError::Invalid(format!(
+                "primvar {name}: {element_source} {what} for {:?} interpolation, which needs {elements}",
+                self.interpolation
+            )));
+        }
+        if let Some((i, &bad)) = self.indices.iter().enumerate().find(|(_, &k)| k < 0 || k as usize >= self.values.len()) {
+            return Err(MeshError::Invalid(format!("primvar {name}: indices[{i}] = {bad} is out of range [0, {})", self.values.len())));
+        }
+        let value_of = |element: usize| if self.indices.is_empty() { element as i32 } else { self.indices[element] };
+        let mut out = Vec::with_capacity(topology.face_vertex_indices.len());
+        let mut fv = 0usize;
+        for (face, &n) in topology.face_vertex_counts.iter().enumerate() {
+            for _ in 0..n.max(0) {
+                let element = match self.interpolation {
+                    Interpolation::Constant => 0,
+                    Interpolation::Uniform => face,
+                    Interpolation::Varying | Interpolation::Vertex => topology.face_vertex_indices.get(fv).map_or(0, |&p| p.max(0) as usize),
+                    Interpolation::FaceVarying => fv,
+                };
+                out.push(value_of(element));
+                fv += 1;
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A value with its derivatives with respect to a patch's own (u, v).
+pub type Value2 = ([f32; 2], [f32; 2], [f32; 2]);
+
+/// A 2-float primvar interpolated linearly over each base face, by ptex face: bilinearly over a
+/// quad, over each quad sub-face of an n-gon (corner, next edge midpoint, centroid, previous edge
+/// midpoint — OpenSubdiv's split, as [`crate::bilinear::BilinearSurface`] makes it), and
+/// barycentrically over a Loop mesh's triangles. Exact for constant, uniform and varying
+/// primvars on any scheme, and for every interpolation on a polygonal (`none` or bilinear) mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BaseFacePrimvar {
+    /// Per ptex face: its corner values at (0,0), (1,0), (1,1), (0,1); a triangle's are at
+    /// (0,0), (1,0), (0,1) and the fourth repeats the third.
+    corners: Vec<[[f32; 2]; 4]>,
+    triangles: bool,
+}
+
+impl BaseFacePrimvar {
+    /// Builds the per-ptex-face corners of `primvar` on `topology` (with `points` points).
+    ///
+    /// # Errors
+    /// As [`Primvar2::face_varying_indices`], and [`MeshError::Invalid`] for a Loop mesh with a
+    /// non-triangle.
+    pub fn new(topology: &MeshTopology, points: usize, primvar: &Primvar2) -> Result<Self, MeshError> {
+        let idx = primvar.face_varying_indices(topology, points)?;
+        let triangles = topology.scheme == Scheme::Loop;
+        let mut corners = Vec::with_capacity(topology.face_count());
+        let mut start = 0usize;
+        for (face, &n) in topology.face_vertex_counts.iter().enumerate() {
+            let n = n.max(0) as usize;
+            let fv: Vec<[f32; 2]> = idx[start..start + n].iter().map(|&k| primvar.values[k as usize]).collect();
+            start += n;
+            if triangles {
+                if n != 3 {
+                    return Err(MeshError::Invalid(format!("primvar {}: Loop face {face} has {n} vertices", primvar.name)));
+                }
+                corners.push([fv[0], fv[1], fv[2], fv[2]]);
+            } else if n == 4 {
+                corners.push([fv[0], fv[1], fv[2], fv[3]]);
+            } else {
+                let mid = |a: [f32; 2], b: [f32; 2]| [(a[0] + b[0]) * 0.5, (a[1] + b[1]) * 0.5];
+                let inv = 1.0 / n as f32;
+                let centroid = fv.iter().fold([0.0f32; 2], |c, v| [c[0] + v[0] * inv, c[1] + v[1] * inv]);
+                for i in 0..n {
+                    corners.push([fv[i], mid(fv[i], fv[(i + 1) % n]), centroid, mid(fv[i], fv[(i + n - 1) % n])]);
+                }
+            }
+        }
+        Ok(BaseFacePrimvar { corners, triangles })
+    }
+
+    /// Number of ptex faces it covers.
+    pub fn ptex_face_count(&self) -> usize {
+        self.corners.len()
+    }
+
+    /// The value at (face u, face v) of a ptex face, with derivatives with respect to them.
+    pub fn at_face(&self, ptex_face: u32, u: f32, v: f32) -> Option<Value2> {
+        let [c0, c1, c2, c3] = *self.corners.get(ptex_face as usize)?;
+        let mut val = [0.0; 2];
+        let mut du = [0.0; 2];
+        let mut dv = [0.0; 2];
+        for k in 0..2 {
+            if self.triangles {
+                val[k] = (1.0 - u - v) * c0[k] + u * c1[k] + v * c2[k];
+                du[k] = c1[k] - c0[k];
+                dv[k] = c2[k] - c0[k];
+            } else {
+                val[k] = (1.0 - u) * (1.0 - v) * c0[k] + u * (1.0 - v) * c1[k] + u * v * c2[k] + (1.0 - u) * v * c3[k];
+                du[k] = (1.0 - v) * (c1[k] - c0[k]) + v * (c2[k] - c3[k]);
+                dv[k] = (1.0 - u) * (c3[k] - c0[k]) + u * (c2[k] - c1[k]);
+            }
+        }
+        Some((val, du, dv))
+    }
+
+    /// The value at a patch's own (u, v), with derivatives with respect to them (the chain rule
+    /// through [`PatchParam::to_face_uv`]). `None` for a ptex face it does not cover.
+    pub fn at_patch(&self, param: &PatchParam, u: f32, v: f32) -> Option<Value2> {
+        let (fu, fv) = param.to_face_uv(u, v);
+        let (val, du, dv) = self.at_face(param.ptex_face, fu, fv)?;
+        let s = param.size;
+        Some((val, [du[0] * s, du[1] * s], [dv[0] * s, dv[1] * s]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn checker_box_average_is_exact() {
+        let c = CheckerSampler::new("c", 1024, 8, FilterMode::Differentials);
+        // Points: the bottom-left square is 0, its right neighbour 1.
+        assert_eq!(c.box_average(0.06, 0.06, 0.06, 0.06), 0.0);
+        assert_eq!(c.box_average(0.19, 0.19, 0.06, 0.06), 1.0);
+        // A box over exactly two squares side by side, or over whole periods: 0.5.
+        assert!((c.box_average(0.0, 0.25, 0.0, 0.125) - 0.5).abs() < 1e-6);
+        assert!((c.box_average(0.1, 0.85, 0.2, 0.7) - 0.5).abs() < 0.07);
+        // 1¼ squares wide, one square high: 1/5 of the box is over the neighbouring 1-square.
+        assert!((c.box_average(0.0, 0.15625, 0.0, 0.125) - 0.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn checker_lookups_record_levels_and_finest_ignores_widths() {
+        let c = CheckerSampler::new("c", 1024, 8, FilterMode::Differentials);
+        let h = c.handle("c").unwrap();
+        assert!(c.handle("other").unwrap_err().to_string().contains("other"));
+        let mut out = [0.0f32; 3];
+        // One texel wide: level 0. 64 texels: level 6. The whole texture: level 10, value 0.5.
+        assert!(c.sample(h, [0.06, 0.06], [1.0 / 1024.0, 0.0], [0.0, 1.0 / 1024.0], &Lookup::DEFAULT, &mut out));
+        assert_eq!(out, [0.0; 3]);
+        c.sample(h, [0.5, 0.5], [64.0 / 1024.0, 0.0], [0.0, 64.0 / 1024.0], &Lookup::DEFAULT, &mut out);
+        c.sample(h, [0.3, 0.7], [1.0, 0.0], [0.0, 1.0], &Lookup::DEFAULT, &mut out);
+        assert!((out[0] - 0.5).abs() < 1e-6, "{out:?}");
+        let hist = c.level_histogram();
+        assert_eq!((hist[0], hist[6], hist[10]), (1, 1, 1));
+        let f = CheckerSampler::new("c", 1024, 8, FilterMode::Finest);
+        f.sample(h, [0.3, 0.7], [1.0, 0.0], [0.0, 1.0], &Lookup::DEFAULT, &mut out);
+        assert_eq!(f.level_histogram()[0], 1);
+        assert!(out[0] == 0.0 || out[0] == 1.0);
+        assert_eq!(c.stats()["lookups"], 3);
+        assert!(!c.sample(TextureHandle::new(7), [0.5, 0.5], [0.0; 2], [0.0; 2], &Lookup::DEFAULT, &mut out));
+        assert_eq!(c.stats()["failed_lookups"], 1);
+    }
+
+    #[test]
+    fn non_finite_widths_read_the_finest_level() {
+        let (dx, dy) = FilterMode::Differentials.widths([f32::NAN, 0.5], [f32::INFINITY, 0.25]);
+        assert_eq!((dx, dy), ([0.0, 0.5], [0.0, 0.25]));
+        assert_eq!(mip_level([0.0; 2], [0.0; 2], [512, 512], 9), 0.0);
+        assert!((mip_level([0.25, 0.0], [0.0, 0.0], [512, 256], 9) - 7.0).abs() < 1e-6);
+    }
+
+    fn two_quads_and_a_triangle() -> MeshTopology {
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4, 4, 3], face_vertex_indices: vec![0, 1, 4, 3, 1, 2, 5, 4, 3, 4, 6], ..Default::default() }
+    }
+
+    #[test]
+    fn every_interpolation_resolves_to_face_vertex_indices() {
+        let t = two_quads_and_a_triangle();
+        let pv = |interpolation, values: Vec<[f32; 2]>, indices: Vec<i32>| Primvar2 { name: "st".into(), interpolation, values, indices };
+        let c = pv(Interpolation::Constant, vec![[0.5, 0.5]], vec![]);
+        assert_eq!(c.face_varying_indices(&t, 7).unwrap(), vec![0; 11]);
+        let u = pv(Interpolation::Uniform, vec![[0.0; 2]; 3], vec![]);
+        assert_eq!(u.face_varying_indices(&t, 7).unwrap(), vec![0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2]);
+        let v = pv(Interpolation::Vertex, vec![[0.0; 2]; 7], vec![]);
+        assert_eq!(v.face_varying_indices(&t, 7).unwrap(), t.face_vertex_indices);
+        let fv = pv(Interpolation::FaceVarying, vec![[0.0; 2], [1.0; 2]], vec![0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1]);
+        assert_eq!(fv.face_varying_indices(&t, 7).unwrap(), fv.indices);
+        let short = pv(Interpolation::Vertex, vec![[0.0; 2]; 6], vec![]);
+        assert!(short.face_varying_indices(&t, 7).unwrap_err().to_string().contains("primvar st: 6 values"));
+        let bad = pv(Interpolation::Uniform, vec![[0.0; 2]], vec![0, 0, 3]);
+        assert!(bad.face_varying_indices(&t, 7).unwrap_err().to_string().contains("indices[2] = 3"));
+        let nan = pv(Interpolation::Constant, vec![[f32::NAN, 0.0]], vec![]);
+        assert!(matches!(nan.face_varying_indices(&t, 7), Err(MeshError::NonFinite(_))));
+    }
+
+    #[test]
+    fn base_face_primvar_is_bilinear_per_ptex_face() {
+        let t = two_quads_and_a_triangle();
+        let st: Vec<[f32; 2]> = vec![[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 1.0], [1.0, 1.0], [0.25, 2.0]];
+        let p = BaseFacePrimvar::new(&t, 7, &Primvar2 { name: "st".into(), interpolation: Interpolation::Vertex, values: st, indices: vec![] }).unwrap();
+        // Two quads and a triangle split into three: five ptex faces.
+        assert_eq!(p.ptex_face_count(), 5);
+        let (v, du, dv) = p.at_face(1, 0.5, 0.25).unwrap();
+        assert_eq!((v, du, dv), ([0.75, 0.25], [0.5, 0.0], [0.0, 1.0]));
+        // The triangle's first sub-face: corner 3 at (0,0), the centroid at (1,1).
+        let (v, _, _) = p.at_face(2, 1.0, 1.0).unwrap();
+        assert!((v[0] - 0.25).abs() < 1e-6 && (v[1] - 4.0 / 3.0).abs() < 1e-6, "{v:?}");
+        // Through a patch param: a quarter-size patch at (0.5, 0.5) of face 0.
+        let param = PatchParam { base_face: 0, ptex_face: 0, u0: 0.5, v0: 0.5, size: 0.25, depth: 2, boundary_mask: 0, transition_mask: 0, kind: crate::patch::PatchKind::Regular };
+        let (v, du, _) = p.at_patch(&param, 1.0, 0.0).unwrap();
+        assert_eq!((v, du), ([0.375, 0.5], [0.125, 0.0]));
+        assert!(p.at_face(9, 0.0, 0.0).is_none());
+    }
+}
