@@ -15,10 +15,11 @@ pub const AOVS: &[(&str, usize)] = &[
     ("beamWidth", 1),
     ("tessRate", 1),
     ("ao", 1),
+    ("tessError", 2),
 ];
 
 /// The AOV names, for messages.
-pub const AOV_NAMES: &[&str] = &["color", "alpha", "depth", "normal", "primId", "instanceId", "beamWidth", "tessRate", "ao"];
+pub const AOV_NAMES: &[&str] = &["color", "alpha", "depth", "normal", "primId", "instanceId", "beamWidth", "tessRate", "ao", "tessError"];
 
 /// Channel count of a named AOV, or `None` if the renderer does not know it.
 pub fn aov_channels(name: &str) -> Option<usize> {
@@ -33,6 +34,7 @@ pub fn file_channel_names(aov: &str, channels: usize) -> Vec<String> {
         "alpha" => vec!["A".into()],
         "depth" => vec!["Z".into()],
         "normal" => vec!["N.x".into(), "N.y".into(), "N.z".into()],
+        "tessError" => vec!["tessError.world".into(), "tessError.beam".into()],
         _ if channels == 1 => vec![aov.to_string()],
         _ => ["x", "y", "z", "w"].iter().take(channels).map(|c| format!("{aov}.{c}")).collect(),
     }

@@ -31,6 +31,9 @@ pub struct SampleValue {
     /// ray's own hit on a matte surface, the reflected ray's hit seen in a mirror (the paper's
     /// figure 2).
     pub beam_width: f32,
+    /// `tessError`: distance along the camera ray between its hit on the tessellation and the
+    /// exact (displaced) limit surface, world units; and the same over the beam width there.
+    pub tess_error: [f32; 2],
     /// Unoccluded fraction of the hemisphere (the `ao` AOV; 0 when AO is off).
     pub ao: f32,
     /// Effective tessellation rate of that same hit, quads per side of its root subpatch: 1, 2,
@@ -97,6 +100,60 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv }
 }
 
+/// How far the tessellation hit is from the exact limit surface along the ray (world units):
+/// Newton's method on S(u, v) = o + t·d from the hit's (u, v, t), with the displaced surface
+/// where the mesh is displaced (unfiltered: the truth the tessellation approximates). Where
+/// Newton leaves the patch or does not converge, the distance from the hit point to S(u, v)
+/// stands in (an upper bound of the same order).
+pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> f32 {
+    let mesh = &scene.meshes[hit.mesh as usize];
+    let m = tracer.render_from_object(hit.instance);
+    let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+    let surf = |u: f32, v: f32| -> (Vec3A, Vec3A, Vec3A) {
+        let e = mesh.surface.evaluate(hit.patch as usize, u, v);
+        match &mesh.displacement {
+            None => (e.p, e.dpdu, e.dpdv),
+            Some(d) => {
+                let at = |u: f32, v: f32| {
+                    let e = mesh.surface.evaluate(hit.patch as usize, u, v);
+                    e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset(e.p, 0.0)
+                };
+                let h = 1e-3;
+                (at(u, v), (at(u + h, v) - at(u - h, v)) / (2.0 * h), (at(u, v + h) - at(u, v - h)) / (2.0 * h))
+            }
+        }
+    };
+    let (mut u, mut v, mut t) = (hit.u, hit.v, hit.t);
+    let (p0, _, _) = surf(u, v);
+    let fallback = (m.transform_point3a(p0) - hit.p).length();
+    for _ in 0..8 {
+        let (p, du, dv) = surf(u, v);
+        let f = m.transform_point3a(p) - ray.at(t);
+        let scale = hit.p.abs().max_element().max(1.0);
+        if f.length() <= 4.0 * f32::EPSILON * scale {
+            return if (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v) { (t - hit.t).abs() } else { fallback };
+        }
+        let j = glam::Mat3A::from_cols(m.transform_vector3a(du), m.transform_vector3a(dv), -ray.d);
+        if j.determinant().abs() < 1e-20 {
+            break;
+        }
+        let step = j.inverse() * -f;
+        u += step.x;
+        v += step.y;
+        t += step.z;
+        if !(u.is_finite() && v.is_finite() && t.is_finite()) || !(-0.25..=1.25).contains(&u) || !(-0.25..=1.25).contains(&v) {
+            break;
+        }
+    }
+    let (p, _, _) = surf(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    let f = m.transform_point3a(p) - ray.at(t);
+    if (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v) && f.length() < fallback {
+        (t - hit.t).abs()
+    } else {
+        fallback
+    }
+}
+
 /// The classic distribution ray tracer: direct light with ray-traced shadows, perfect mirror
 /// reflection to a maximum depth, and ambient occlusion by hemisphere rays. Every new ray gets
 /// its differential from the paper's §4 rules, so its tessellation rate follows its width.
@@ -153,6 +210,9 @@ impl<'a> DirectLighting<'a> {
         out.instance_id = hit.instance_id as f32;
         out.beam_width = shade.beam_width;
         out.tess_rate = shade.quads as f32;
+        let err = tessellation_error(self.tracer, self.scene, ray, &hit);
+        let width = ray.beam_width(hit.t);
+        out.tess_error = [err, if width > 0.0 { err / width } else { 0.0 }];
         out
     }
 

@@ -153,7 +153,8 @@ fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: T
             v.color = acc * inv;
             v.alpha = alpha * inv;
             v.ao = ao * inv;
-            if !(v.depth.is_finite() && v.normal.is_finite() && v.beam_width.is_finite()) {
+            if !(v.depth.is_finite() && v.normal.is_finite() && v.beam_width.is_finite() && v.tess_error.iter().all(|e| e.is_finite())) {
+                v.tess_error = [0.0; 2];
                 dropped += 1;
                 v.depth = cam.clipping_range.1;
                 v.normal = glam::Vec3A::ZERO;
@@ -183,6 +184,7 @@ fn write_tile(film: &mut Film, r: &TileResult) {
                     "instanceId" => px[0] = v.instance_id,
                     "beamWidth" => px[0] = v.beam_width,
                     "ao" => px[0] = v.ao,
+                    "tessError" => px.copy_from_slice(&v.tess_error),
                     "tessRate" => px[0] = v.tess_rate,
                     _ => {}
                 }

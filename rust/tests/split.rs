@@ -9,6 +9,7 @@ use glam::{Mat4, Vec3, Vec3A};
 use mipray::bounds::Bounds3;
 use mipray::patch::{LimitSurface, PatchKind, PatchParam, SurfacePoint};
 use mipray::prelude::*;
+use mipray::topology::{MeshTopology, Scheme};
 
 /// A sphere of radius `r` as 8 patches: 4 in longitude × 2 in latitude.
 struct Sphere {
@@ -82,4 +83,60 @@ fn magnified_silhouette_is_within_half_a_pixel_of_the_true_sphere() {
     let max_rate = out.film.aov("tessRate").unwrap().data.iter().cloned().fold(0.0, f32::max);
     assert!(max_rate >= 256.0, "the view needs split subpatches, got rate {max_rate}");
     assert!(out.stats["render"]["finer_than_fine_tests"].as_u64().unwrap() > 0);
+}
+
+/// Ray–triangle distance (Möller–Trumbore), for an independent reference.
+fn tri_t(o: Vec3A, d: Vec3A, a: Vec3A, b: Vec3A, c: Vec3A) -> Option<f32> {
+    let (e1, e2) = (b - a, c - a);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    let s = o - a;
+    let u = s.dot(p) / det;
+    let q = s.cross(e1);
+    let v = d.dot(q) / det;
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0).then(|| e2.dot(q) / det)
+}
+
+#[test]
+fn tess_error_aov_is_the_chord_distance_to_the_true_sphere() {
+    // Single mode tests everything at 16×16. Aim straight at the centre of quad (7, 11) of
+    // patch 0: the true sphere is 4 units away; the tessellation's two triangles are a little
+    // further. The AOV must report that gap, computed here independently.
+    let sphere = Sphere { r: 1.0 };
+    let (i, j) = (7.0f32, 11.0f32);
+    let c = sphere.evaluate(0, (i + 0.5) / 16.0, (j + 0.5) / 16.0).p.normalize();
+    let mut scene = Scene::default();
+    let m = scene.add_mesh(Mesh::new("/sphere", Arc::new(Sphere { r: 1.0 })));
+    scene.add_instance(m, Mat4::IDENTITY);
+    let eye = Vec3::from(c * 5.0);
+    scene.camera = Camera::orthographic(Camera::look_at(eye, Vec3::ZERO, if c.z.abs() < 0.9 { Vec3::Z } else { Vec3::X }), 10.0, 10.0);
+    let opts = RenderOptions { width: 5, height: 5, cache: mipray::geometry_cache::CacheConfig::single(30_000_000), aovs: vec!["tessError".into(), "tessRate".into()], ..Default::default() };
+    let out = render(&scene, &opts, &NoProgress).unwrap();
+    assert_eq!(out.film.pixel("tessRate", 2, 2)[0], 16.0);
+    let corner = |a: f32, b: f32| sphere.evaluate(0, a / 16.0, b / 16.0).p;
+    let (p00, p10, p11, p01) = (corner(i, j), corner(i + 1.0, j), corner(i + 1.0, j + 1.0), corner(i, j + 1.0));
+    let (o, d) = (c * 5.0, -c);
+    let t_tri = tri_t(o, d, p00, p10, p11).or_else(|| tri_t(o, d, p00, p11, p01)).unwrap();
+    let expected = t_tri - 4.0;
+    let got = out.film.pixel("tessError", 2, 2);
+    assert!(expected > 1e-4, "the chord is measurably inside the sphere: {expected}");
+    assert!((got[0] - expected).abs() < 2e-3 * expected + 2e-6, "tessError {} vs chord {expected}", got[0]);
+    assert!(got[1] > 0.0 && (got[1] - got[0] / 0.2).abs() < 1e-3 * got[1], "relative to the 0.2-unit beam: {got:?}");
+}
+
+#[test]
+fn a_flat_patch_has_zero_tessellation_error_at_every_rate() {
+    // A trapezoid: flat but not affine, so it is tessellated at the beam's rate like any patch.
+    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let s = BilinearSurface::new(&topo, &[[-3.0, -1.0, 0.0], [3.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]]).unwrap();
+    let mut scene = Scene::default();
+    let m = scene.add_mesh(Mesh::new("/flat", Arc::new(s)));
+    scene.add_instance(m, Mat4::IDENTITY);
+    for tess_factor in [0.05f32, 0.5, 4.0, 40.0] {
+        scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.3, -2.0, 3.0), Vec3::ZERO, Vec3::Z), 35.0);
+        let out = render(&scene, &RenderOptions { width: 24, height: 16, tess_factor, aovs: vec!["tessError".into(), "alpha".into()], ..Default::default() }, &NoProgress).unwrap();
+        let e = &out.film.aov("tessError").unwrap().data;
+        assert!(e.iter().all(|x| x.abs() < 1e-4), "tessFactor {tess_factor}: {:?}", e.iter().cloned().fold(0.0f32, f32::max));
+        assert!(out.film.aov("alpha").unwrap().data.iter().any(|a| *a > 0.0));
+    }
 }
