@@ -22,6 +22,9 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "threads", default: "0", description: "render threads (0: all cores)" },
     SettingDescriptor { key: "tessFactor", default: "1", description: "tessellated quad size relative to the ray beam width; larger is coarser" },
     SettingDescriptor { key: "geometryCacheMb", default: "30", description: "geometry cache budget in MB (10^6 bytes), split evenly over the three tiers in multires mode" },
+    SettingDescriptor { key: "geometryCacheCoarseMb", default: "", description: "multires only: the coarse (2×2) tier's budget in MB, overriding its third of geometryCacheMb" },
+    SettingDescriptor { key: "geometryCacheMediumMb", default: "", description: "multires only: the medium (5×5) tier's budget in MB" },
+    SettingDescriptor { key: "geometryCacheFineMb", default: "", description: "multires only: the fine (17×17) tier's budget in MB" },
     SettingDescriptor { key: "cacheMode", default: "multires", description: "geometry cache mode: multires, single, unbounded or none" },
     SettingDescriptor { key: "displacementBound", default: "0", description: "displacement bound (object units) for meshes that state none" },
     SettingDescriptor { key: "aoSamples", default: "0", description: "ambient-occlusion rays per shading point (0: off)" },
@@ -38,6 +41,8 @@ pub struct RenderSettings {
     pub threads: usize,
     pub tess_factor: f32,
     pub geometry_cache_mb: f64,
+    /// Per-tier overrides (coarse, medium, fine) in MB, multires mode.
+    pub tier_mb: [Option<f64>; 3],
     pub cache_mode: CacheMode,
     pub displacement_bound: f32,
     pub ao_samples: u32,
@@ -48,7 +53,7 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, geometry_cache_mb: 30.0, cache_mode: CacheMode::Multires, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
+        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
     }
 }
 
@@ -95,6 +100,18 @@ impl RenderSettings {
                     }
                     s.geometry_cache_mb = x;
                 }
+                "geometryCacheCoarseMb" | "geometryCacheMediumMb" | "geometryCacheFineMb" => {
+                    let x = as_f64(k, v)?;
+                    if x < 0.0 {
+                        return Err(bad(k, format!("{x} must not be negative")));
+                    }
+                    let tier = match k {
+                        "geometryCacheCoarseMb" => 0,
+                        "geometryCacheMediumMb" => 1,
+                        _ => 2,
+                    };
+                    s.tier_mb[tier] = Some(x);
+                }
                 "cacheMode" => {
                     let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
                     s.cache_mode = name.parse().map_err(|e| bad(k, format!("{e}")))?;
@@ -123,7 +140,15 @@ impl RenderSettings {
     pub fn to_options(&self, width: usize, height: usize, aovs: &[String]) -> RenderOptions {
         let bytes = (self.geometry_cache_mb * 1e6) as usize;
         let cache = match self.cache_mode {
-            CacheMode::Multires => CacheConfig::multires(bytes),
+            CacheMode::Multires => {
+                let mut c = CacheConfig::multires(bytes);
+                for (budget, mb) in c.budget_bytes.iter_mut().zip(self.tier_mb) {
+                    if let Some(mb) = mb {
+                        *budget = (mb * 1e6) as usize;
+                    }
+                }
+                c
+            }
             CacheMode::Single => CacheConfig::single(bytes),
             CacheMode::Unbounded => CacheConfig::unbounded(),
             CacheMode::None => CacheConfig::none(),
@@ -158,6 +183,13 @@ mod tests {
         assert_eq!(s.cache_mode, CacheMode::Single);
         assert_eq!(s.tess_factor, 2.0);
         assert_eq!(s.seed, 0);
+    }
+
+    #[test]
+    fn per_tier_budgets_override_their_third() {
+        let v = json!({"geometryCacheMb": 30, "geometryCacheFineMb": 20});
+        let s = RenderSettings::from_pairs(v.as_object().unwrap().iter().map(|(k, v)| (k.as_str(), v))).unwrap();
+        assert_eq!(s.to_options(1, 1, &[]).cache.budget_bytes, [10_000_000, 10_000_000, 20_000_000]);
     }
 
     #[test]
