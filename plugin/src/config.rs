@@ -21,6 +21,7 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "seed", default: "0", description: "random seed; the image depends on it alone" },
     SettingDescriptor { key: "threads", default: "0", description: "render threads (0: all cores)" },
     SettingDescriptor { key: "tessFactor", default: "1", description: "tessellated quad size relative to the ray beam width; larger is coarser" },
+    SettingDescriptor { key: "tessFactorIncoherent", default: "1", description: "extra tessFactor for incoherent rays (ambient occlusion, diffuse, glossy): the paper's claim is that coarsening them costs little" },
     SettingDescriptor { key: "geometryCacheMb", default: "30", description: "geometry cache budget in MB (10^6 bytes), split evenly over the three tiers in multires mode" },
     SettingDescriptor { key: "geometryCacheCoarseMb", default: "", description: "multires only: the coarse (2×2) tier's budget in MB, overriding its third of geometryCacheMb" },
     SettingDescriptor { key: "geometryCacheMediumMb", default: "", description: "multires only: the medium (5×5) tier's budget in MB" },
@@ -40,6 +41,7 @@ pub struct RenderSettings {
     pub seed: u64,
     pub threads: usize,
     pub tess_factor: f32,
+    pub tess_factor_incoherent: f32,
     pub geometry_cache_mb: f64,
     /// Per-tier overrides (coarse, medium, fine) in MB, multires mode.
     pub tier_mb: [Option<f64>; 3],
@@ -53,7 +55,7 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
+        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, tess_factor_incoherent: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
     }
 }
 
@@ -92,6 +94,13 @@ impl RenderSettings {
                         return Err(bad(k, format!("{x} must be positive")));
                     }
                     s.tess_factor = x as f32;
+                }
+                "tessFactorIncoherent" => {
+                    let x = as_f64(k, v)?;
+                    if x <= 0.0 {
+                        return Err(bad(k, format!("{x} must be positive")));
+                    }
+                    s.tess_factor_incoherent = x as f32;
                 }
                 "geometryCacheMb" => {
                     let x = as_f64(k, v)?;
@@ -160,6 +169,7 @@ impl RenderSettings {
             seed: self.seed,
             threads: self.threads,
             tess_factor: self.tess_factor,
+            tess_factor_incoherent: self.tess_factor_incoherent,
             cache,
             aovs: aovs.to_vec(),
             ao_samples: self.ao_samples,

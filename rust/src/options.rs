@@ -19,6 +19,10 @@ pub struct RenderOptions {
     /// Quad size relative to the beam width (the paper's tessellation factor): larger is
     /// coarser. Default 1.
     pub tess_factor: f32,
+    /// Extra factor on `tess_factor` for incoherent rays — ambient occlusion, diffuse and glossy
+    /// — so the paper's claim can be tested: coarsening wide rays costs little image error.
+    /// Default 1.
+    pub tess_factor_incoherent: f32,
     /// The geometry cache: mode and per-tier budgets. Default: multires, 30 MB (10 MB a tier,
     /// the paper's).
     pub cache: CacheConfig,
@@ -43,6 +47,7 @@ impl Default for RenderOptions {
             seed: 0,
             threads: 0,
             tess_factor: 1.0,
+            tess_factor_incoherent: 1.0,
             cache: CacheConfig::multires(30_000_000),
             aovs: vec!["color".into()],
             ao_samples: 0,
@@ -67,6 +72,9 @@ impl RenderOptions {
         }
         if !(self.tess_factor.is_finite() && self.tess_factor > 0.0) {
             return Err(RenderError::Settings(format!("tessFactor {} must be a positive number", self.tess_factor)));
+        }
+        if !(self.tess_factor_incoherent.is_finite() && self.tess_factor_incoherent > 0.0) {
+            return Err(RenderError::Settings(format!("tessFactorIncoherent {} must be a positive number", self.tess_factor_incoherent)));
         }
         if !(self.ao_distance > 0.0) || !(self.ao_intensity.is_finite() && self.ao_intensity >= 0.0) {
             return Err(RenderError::Settings(format!("aoDistance {} must be positive and aoIntensity {} a non-negative number", self.ao_distance, self.ao_intensity)));

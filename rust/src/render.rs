@@ -72,10 +72,11 @@ pub fn render_with_cache(scene: &Scene, options: &RenderOptions, cache: Option<A
     progress.start((w * h) as u64);
     let out = pool.install(|| {
         let single = options.cache.mode == CacheMode::Single;
-        let tracer = match cache {
+        let mut tracer = match cache {
             Some(c) => Tracer::with_cache(scene, c, single, options.tess_factor),
             None => Tracer::new(scene, options.cache, options.tess_factor),
         };
+        tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
         let fx = effects::analyze(scene, options);
         let integrator = DirectLighting::new(&tracer, scene, &fx, options);
         let results: Vec<Option<TileResult>> = tiles

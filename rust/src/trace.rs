@@ -123,6 +123,8 @@ pub struct Tracer<'s> {
     tlas: Option<CwBvh>,
     pub cache: Arc<GeometryCache<Tessellation>>,
     tess_factor: f32,
+    /// Multiplier on `tess_factor` per ray kind (index as [`RayKind::ALL`]).
+    kind_factor: [f32; 7],
     /// `single` mode: every lookup at 17×17, as the paper's single-resolution cache.
     single: bool,
     pub bounds: Bounds3,
@@ -165,7 +167,17 @@ impl<'s> Tracer<'s> {
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
-        Tracer { scene, meshes, instances, tlas, cache, tess_factor, single, bounds, displaced_outside: AtomicU64::new(0) }
+        Tracer { scene, meshes, instances, tlas, cache, tess_factor, kind_factor: [1.0; 7], single, bounds, displaced_outside: AtomicU64::new(0) }
+    }
+
+    /// Coarsens (factor > 1) or refines the tessellation for incoherent rays (ambient
+    /// occlusion, diffuse, glossy) relative to the others.
+    pub fn set_incoherent_tess_factor(&mut self, factor: f32) {
+        for (k, f) in RayKind::ALL.iter().zip(self.kind_factor.iter_mut()) {
+            if matches!(k, RayKind::Ao | RayKind::Diffuse | RayKind::Glossy) {
+                *f = factor;
+            }
+        }
     }
 
     /// Root subpatches over all meshes (each counted once, however many instances).
@@ -254,7 +266,7 @@ impl<'s> Tracer<'s> {
             };
             counters.ray_subpatch_tests += 1;
             let size = sp.bounds.diagonal().max_element() * inst.scale;
-            let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor);
+            let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
             let kind = Self::kind_index(ray.kind);
             let found = if depth > 0 {

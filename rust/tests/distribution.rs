@@ -7,6 +7,7 @@ use std::sync::Arc;
 use glam::{Mat4, Vec3, Vec3A};
 use mipray::material::Material;
 use mipray::prelude::*;
+use mipray::topology::{MeshTopology, Scheme};
 
 fn quad(corners: [[f32; 3]; 4]) -> Arc<BilinearSurface> {
     let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
@@ -101,4 +102,44 @@ fn grazing_hits_clamp_differentials_count_them_and_stay_finite() {
     for a in ["color", "beamWidth", "tessRate"] {
         assert!(out.film.aov(a).unwrap().data.iter().all(|v| v.is_finite()), "{a}");
     }
+}
+
+#[test]
+fn incoherent_tess_factor_coarsens_ao_rays_only() {
+    // Bumpy (non-affine) ground so rates follow beams; AO rays at factor 16 must use coarser
+    // rates than at factor 1, camera rays the same ones.
+    let n = 16;
+    let mut pts = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (i as f32 - 8.0, j as f32 - 8.0);
+            pts.push([x, y, 0.2 * (x * 0.7).sin() * (y * 0.9).cos()]);
+        }
+    }
+    let mut idx = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let v = |a: i32, b: i32| b * (n + 1) + a;
+            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
+        }
+    }
+    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4; (n * n) as usize], face_vertex_indices: idx, ..Default::default() };
+    let mut scene = Scene::default();
+    add(&mut scene, "/bumps", Arc::new(BilinearSurface::new(&topo, &pts).unwrap()), Material::default());
+    scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, -9.0, 5.0), Vec3::ZERO, Vec3::Z), 35.0);
+    let mean_rate = |out: &mipray::render::RenderOutput, kind: &str| {
+        let h = &out.stats["render"]["rate_tests_by_ray"][kind];
+        let (mut n, mut sum) = (0.0, 0.0);
+        for (q, w) in [("1", 1.0), ("2", 2.0), ("4", 4.0), ("8", 8.0), ("16", 16.0), ("split", 32.0)] {
+            let c = h[q].as_f64().unwrap();
+            n += c;
+            sum += c * w;
+        }
+        sum / n
+    };
+    let base = RenderOptions { width: 24, height: 16, ao_samples: 8, ..Default::default() };
+    let fine = render(&scene, &base, &NoProgress).unwrap();
+    let coarse = render(&scene, &RenderOptions { tess_factor_incoherent: 16.0, ..base.clone() }, &NoProgress).unwrap();
+    assert!(mean_rate(&coarse, "ao") < 0.5 * mean_rate(&fine, "ao"), "{} vs {}", mean_rate(&coarse, "ao"), mean_rate(&fine, "ao"));
+    assert_eq!(mean_rate(&coarse, "camera"), mean_rate(&fine, "camera"));
 }
