@@ -165,14 +165,14 @@ impl Camera {
                 let ddx = m.transform_vector3a(Vec3A::new(sx, 0.0, 0.0));
                 let ddy = m.transform_vector3a(Vec3A::new(0.0, -sy, 0.0));
                 let len = d.length();
-                // The clipping range is along the view axis; t is along the unit direction. The
-                // scale of the axis under the transform is folded in through |m·(0,0,-1)|.
-                let axis = m.transform_vector3a(Vec3A::NEG_Z).length();
+                // The clipping range is camera-space depth: the camera-space ray s·(x, y, −1) is
+                // at depth s, and s camera units are s·|d| render units along it (any scale in
+                // the camera's transform included).
                 Ray {
                     o,
                     d: d / len,
-                    t_min: near * len / axis,
-                    t_max: far * len / axis,
+                    t_min: near * len,
+                    t_max: far * len,
                     diff: RayDifferential::from_pinhole(d, ddx, ddy),
                     kind: RayKind::Camera,
                 }
@@ -192,6 +192,56 @@ impl Camera {
                     kind: RayKind::Camera,
                 }
             }
+        }
+    }
+
+    /// True when the camera asks for depth of field: an f-stop and a focus distance, both
+    /// positive, on a perspective camera.
+    pub fn has_depth_of_field(&self) -> bool {
+        self.projection == Projection::Perspective && self.f_stop > 0.0 && self.focus_distance > 0.0 && self.f_stop.is_finite() && self.focus_distance.is_finite()
+    }
+
+    /// Lens radius in camera-space units: focal length (tenths of a scene unit, as USD stores
+    /// it) over twice the f-number.
+    pub fn lens_radius(&self) -> f32 {
+        if self.has_depth_of_field() {
+            self.focal_length * APERTURE_UNIT / (2.0 * self.f_stop)
+        } else {
+            0.0
+        }
+    }
+
+    /// As [`Camera::generate_ray`], through the lens point `lens` (uniform in [0, 1)²) when the
+    /// camera has depth of field: a thin lens focused `focus_distance` along the view axis.
+    /// The differentials are those of the rays from the same lens point through the
+    /// neighbouring pixels' points on the focal plane (pbrt's thin-lens differentials).
+    pub fn generate_ray_lens(&self, px: f32, py: f32, width: usize, height: usize, lens: (f32, f32)) -> Ray {
+        let r = self.lens_radius();
+        if r <= 0.0 {
+            return self.generate_ray(px, py, width, height);
+        }
+        let w = self.window(width, height);
+        let sx = (w.x1 - w.x0) / width as f32;
+        let sy = (w.y1 - w.y0) / height as f32;
+        let (x, y) = (w.x0 + px * sx, w.y1 - py * sy);
+        let fd = self.focus_distance;
+        let (lx, ly) = concentric_disk(lens.0, lens.1);
+        let lens_p = Vec3A::new(lx * r, ly * r, 0.0);
+        let focus_p = Vec3A::new(x, y, -1.0) * fd;
+        let m = &self.render_from_camera;
+        let d = m.transform_vector3a(focus_p - lens_p);
+        let ddx = m.transform_vector3a(Vec3A::new(sx * fd, 0.0, 0.0));
+        let ddy = m.transform_vector3a(Vec3A::new(0.0, -sy * fd, 0.0));
+        let len = d.length();
+        // The camera-space ray lens + s·(focus − lens) is at depth s·fd; render distance s·|d|.
+        let (near, far) = self.clipping_range;
+        Ray {
+            o: m.transform_point3a(lens_p),
+            d: d / len,
+            t_min: near / fd * len,
+            t_max: far / fd * len,
+            diff: RayDifferential::from_pinhole(d, ddx, ddy),
+            kind: RayKind::Camera,
         }
     }
 
@@ -217,6 +267,16 @@ impl Camera {
         let w = self.window(width, height);
         Some(((x - w.x0) / (w.x1 - w.x0) * width as f32, (w.y1 - y) / (w.y1 - w.y0) * height as f32))
     }
+}
+
+/// Shirley–Chiu concentric mapping of the unit square to the unit disk.
+fn concentric_disk(u: f32, v: f32) -> (f32, f32) {
+    let (a, b) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+    if a == 0.0 && b == 0.0 {
+        return (0.0, 0.0);
+    }
+    let (r, phi) = if a.abs() > b.abs() { (a, std::f32::consts::FRAC_PI_4 * (b / a)) } else { (b, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (a / b)) };
+    (r * phi.cos(), r * phi.sin())
 }
 
 #[cfg(test)]
@@ -274,6 +334,27 @@ mod tests {
         let near_pt = r.at(r.t_min);
         let far_pt = r.at(r.t_max);
         assert!((near_pt.z + 2.0).abs() < 1e-4 && (far_pt.z + 10.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn thin_lens_rays_meet_at_the_focus_distance_and_spread_elsewhere() {
+        let mut cam = Camera { render_from_camera: look_from(0.0), f_stop: 2.0, focus_distance: 10.0, ..Default::default() };
+        assert!(cam.has_depth_of_field());
+        // 50 (tenths) focal length at f/2: a lens of radius 1.25 scene units.
+        assert!((cam.lens_radius() - 1.25).abs() < 1e-6);
+        let pin = cam.generate_ray(40.0, 30.0, 64, 48);
+        let focus = pin.at(10.0 / -pin.d.z);
+        for lens in [(0.1, 0.2), (0.9, 0.5), (0.5, 0.95)] {
+            let r = cam.generate_ray_lens(40.0, 30.0, 64, 48, lens);
+            assert!(r.o.length() > 0.01, "the origin moves over the lens");
+            let t = (focus.z - r.o.z) / r.d.z;
+            assert!((r.at(t) - focus).length() < 1e-4, "every lens point sees the same focused point");
+            let near = r.at((-2.0 - r.o.z) / r.d.z);
+            assert!((near - pin.at(-2.0 / pin.d.z)).length() > 0.05, "out of focus elsewhere");
+        }
+        cam.f_stop = 0.0;
+        assert!(!cam.has_depth_of_field());
+        assert_eq!(cam.generate_ray_lens(40.0, 30.0, 64, 48, (0.1, 0.2)).o, Vec3A::ZERO);
     }
 
     #[test]

@@ -35,6 +35,10 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
         let more = if mirrors.len() > 5 { format!(" and {} more", mirrors.len() - 5) } else { String::new() };
         out.push(Effect { name: "reflection".into(), why: format!("mirror materials: {}{more}", shown.join(", ")) });
     }
+    let cam = &scene.camera;
+    if cam.has_depth_of_field() {
+        out.push(Effect { name: "depth_of_field".into(), why: format!("camera fStop {} focused at {}", cam.f_stop, cam.focus_distance) });
+    }
     if options.ao_samples > 0 {
         out.push(Effect { name: "ao".into(), why: format!("render setting aoSamples = {}", options.ao_samples) });
     }

@@ -160,6 +160,8 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
 pub struct DirectLighting<'a> {
     pub tracer: &'a Tracer<'a>,
     pub scene: &'a Scene,
+    /// Camera rays through a thin lens (the scene's camera has an f-stop).
+    pub depth_of_field: bool,
     shadows: bool,
     reflection: bool,
     ao_samples: u32,
@@ -183,6 +185,7 @@ impl<'a> DirectLighting<'a> {
         DirectLighting {
             tracer,
             scene,
+            depth_of_field: enabled(effects, "depth_of_field"),
             shadows: enabled(effects, "shadows"),
             reflection: enabled(effects, "reflection"),
             ao_samples: if enabled(effects, "ao") { options.ao_samples } else { 0 },

@@ -50,6 +50,7 @@ pub mod ray;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod seam;
 pub mod stats;
 pub mod subpatch;
 pub mod tessellate;

@@ -123,6 +123,7 @@ fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: T
     let mut dropped = 0;
     let spp = options.samples;
     let cam = &integrator.scene.camera;
+    let dof = integrator.depth_of_field;
     for y in y0..y0 + th {
         for x in x0..x0 + tw {
             let pixel = (y * options.width + x) as u64;
@@ -134,7 +135,12 @@ fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: T
             for s in 0..spp {
                 let mut sampler = Sampler::new(options.seed, pixel, s as u64);
                 let (jx, jy) = if s == 0 { (0.5, 0.5) } else { (sampler.next_f32(), sampler.next_f32()) };
-                let mut ray = cam.generate_ray(x as f32 + jx, y as f32 + jy, options.width, options.height);
+                let mut ray = if dof {
+                    let lens = (sampler.next_f32(), sampler.next_f32());
+                    cam.generate_ray_lens(x as f32 + jx, y as f32 + jy, options.width, options.height, lens)
+                } else {
+                    cam.generate_ray(x as f32 + jx, y as f32 + jy, options.width, options.height)
+                };
                 ray.diff.scale(1.0 / (spp as f32).sqrt());
                 let v = integrator.sample(&ray, &mut sampler, &mut counters);
                 if s == 0 {

@@ -95,11 +95,15 @@ pub struct Tessellation {
     /// (object units): twice the largest distance, at 16 probe points, between the surface and
     /// the bilinear quad under it. Pads the bounds of split children.
     pub chord_error: f32,
+    /// How far the limit surface's edge curves stray from the grid's boundary chords, plus a
+    /// rounding margin (object units): the half-width of the seam boxes that close cracks
+    /// between neighbours tessellated at different rates (see [`crate::seam`]).
+    pub seam_radius: f32,
 }
 
 impl CacheEntry for Tessellation {
     fn byte_size(&self) -> usize {
-        self.verts.len() * std::mem::size_of::<[f32; 3]>() + self.sub_boxes.len() * std::mem::size_of::<Bounds3>() + std::mem::size_of::<f32>()
+        self.verts.len() * std::mem::size_of::<[f32; 3]>() + self.sub_boxes.len() * std::mem::size_of::<Bounds3>() + 2 * std::mem::size_of::<f32>()
     }
 
     fn vertex_count(&self) -> usize {
@@ -131,6 +135,8 @@ pub struct DisplaceParams {
 pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displace: Option<&DisplaceParams>, scratch: &mut GridSamples) -> (Tessellation, u32) {
     let n = tier.verts_per_side() as usize;
     surface.evaluate_grid(sub.patch as usize, sub.rect, n, displace.is_some(), scratch);
+    // Measured on the undisplaced grid: seams follow the limit surface's edges.
+    let seam_radius = crate::seam::seam_radius(surface, sub.patch as usize, sub.rect, &scratch.p, n);
     let mut verts = std::mem::take(&mut scratch.p);
     let mut outside = 0;
     if let Some(d) = displace {
@@ -145,7 +151,7 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displa
             *v = q.into();
         }
     }
-    let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0 };
+    let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius };
     if tier == Tier::Fine {
         t.sub_boxes = (0..16)
             .map(|b| {
@@ -248,7 +254,7 @@ mod tests {
             }
         }
         assert_eq!(fine.sub_boxes.len(), 16);
-        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>() + 4);
+        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>() + 8);
         let (medium, _) = tessellate(&s, &sub, Tier::Medium, None, &mut scratch);
         assert_eq!(medium.verts.len(), 25);
         assert!(medium.sub_boxes.is_empty());

@@ -29,6 +29,9 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+/// The JSON crate of [`TextureSampler::stats`], re-exported so implementations (the bridge) build
+/// their stats with the very version the trait names.
+pub use serde_json;
 use serde_json::{json, Value};
 use thiserror::Error;
 

@@ -12,10 +12,11 @@ use obvhs::ray::{Ray as BvhRay, RayHit};
 use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
 use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
-use crate::intersect::{intersect_tessellation, WatertightRay};
+use crate::intersect::WatertightRay;
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, Ray, RayKind};
 use crate::scene::Scene;
+use crate::seam::{intersect_with_seams, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, Subpatch};
 use crate::tessellate::{needed_quads, split_depth, tessellate, DisplaceParams, Rate, Tessellation};
 
@@ -127,6 +128,9 @@ pub struct Tracer<'s> {
     kind_factor: [f32; 7],
     /// `single` mode: every lookup at 17×17, as the paper's single-resolution cache.
     single: bool,
+    /// Seam boxes close cracks between subpatches tested at different rates (see
+    /// [`crate::seam`]); on unless [`Tracer::set_seams`] turned them off (to measure cracks).
+    seams: bool,
     pub bounds: Bounds3,
     /// Displaced vertices found outside their subpatch's bounds (warned about once).
     pub displaced_outside: AtomicU64,
@@ -167,7 +171,7 @@ impl<'s> Tracer<'s> {
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
-        Tracer { scene, meshes, instances, tlas, cache, tess_factor, kind_factor: [1.0; 7], single, bounds, displaced_outside: AtomicU64::new(0) }
+        Tracer { scene, meshes, instances, tlas, cache, tess_factor, kind_factor: [1.0; 7], single, seams: true, bounds, displaced_outside: AtomicU64::new(0) }
     }
 
     /// Coarsens (factor > 1) or refines the tessellation for incoherent rays (ambient
@@ -177,6 +181,20 @@ impl<'s> Tracer<'s> {
             if matches!(k, RayKind::Ao | RayKind::Diffuse | RayKind::Glossy) {
                 *f = factor;
             }
+        }
+    }
+
+    /// Turns the seam boxes that close cracks between rates on (the default) or off.
+    pub fn set_seams(&mut self, on: bool) {
+        self.seams = on;
+    }
+
+    /// The root-boundary edges of a (split) subpatch that get seam boxes.
+    fn seam_edges(&self, cell: ChildCell) -> SeamEdges {
+        if self.seams {
+            SeamEdges::of_child(cell.depth, cell.i, cell.j)
+        } else {
+            SeamEdges::NONE
         }
     }
 
@@ -288,8 +306,9 @@ impl<'s> Tracer<'s> {
                 counters.rate_tests[rate as usize] += 1;
                 counters.rate_tests_by_kind[kind][rate as usize] += 1;
                 let (tier, stride) = rate.tier_and_stride();
-                let tess = self.lookup(inst.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
-                intersect_tessellation(&wray, &tess, stride, ray.t_min, t_best).map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: sp.rect, ng: h.ng, quads: rate.quads() as u32 })
+                let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
+                let tess = self.lookup(inst.mesh, geom, cell, tier);
+                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), ray.t_min, t_best).map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: sp.rect, ng: h.ng, quads: rate.quads() as u32 })
             };
             match found {
                 Some(h) => {
@@ -343,7 +362,7 @@ impl<'s> Tracer<'s> {
     fn hit_split(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tess: &Tessellation, target_depth: u32, wray: &WatertightRay, t_min: f32, t_best: &mut f32, best: &mut Option<LocalHit>) {
         let root_rect = geom.subpatches[cell.root as usize].rect;
         if u32::from(cell.depth) >= target_depth {
-            if let Some(h) = intersect_tessellation(wray, tess, 1, t_min, *t_best) {
+            if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best) {
                 *t_best = h.t;
                 *best = Some(LocalHit { t: h.t, uv: (h.u, h.v), rect: cell.rect(&root_rect), ng: h.ng, quads: 16 << cell.depth });
             }
@@ -357,7 +376,8 @@ impl<'s> Tracer<'s> {
                     bb.grow(tess.vert(i, j));
                 }
             }
-            let pad = tess.chord_error + gamma(8) * bb.max_abs();
+            // Seam boxes reach past a child's grid by about their radius, finer than the parent's.
+            let pad = tess.chord_error + 2.0 * tess.seam_radius + gamma(8) * bb.max_abs();
             if wray.hit_box(&bb.expanded(pad), t_min, *t_best).is_none() {
                 continue;
             }

@@ -143,3 +143,29 @@ fn incoherent_tess_factor_coarsens_ao_rays_only() {
     assert!(mean_rate(&coarse, "ao") < 0.5 * mean_rate(&fine, "ao"), "{} vs {}", mean_rate(&coarse, "ao"), mean_rate(&fine, "ao"));
     assert_eq!(mean_rate(&coarse, "camera"), mean_rate(&fine, "camera"));
 }
+
+#[test]
+fn depth_of_field_blurs_only_what_is_out_of_focus() {
+    // Two thin bars across the view: one at the focus distance stays sharp (a pixel is fully
+    // covered or empty), the other, far behind, is blurred into partial coverage.
+    let mut scene = Scene::default();
+    add(&mut scene, "/near_bar", quad([[-0.05, -5.0, -10.0], [0.05, -5.0, -10.0], [0.05, 5.0, -10.0], [-0.05, 5.0, -10.0]]), Material::default());
+    add(&mut scene, "/far_bar", quad([[0.9, -20.0, -40.0], [1.3, -20.0, -40.0], [1.3, 20.0, -40.0], [0.9, 20.0, -40.0]]), Material::default());
+    scene.camera = Camera { render_from_camera: Mat4::IDENTITY, focal_length: 50.0, horizontal_aperture: 20.0, vertical_aperture: 2.0, f_stop: 1.4, focus_distance: 10.0, ..Default::default() };
+    let opts = RenderOptions { width: 40, height: 4, samples: 64, aovs: vec!["alpha".into()], ..Default::default() };
+    let out = render(&scene, &opts, &NoProgress).unwrap();
+    let names: Vec<&str> = out.stats["effects"]["enabled"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
+    assert!(names.contains(&"depth_of_field"), "{names:?}");
+    let row: Vec<f32> = (0..40).map(|x| out.film.pixel("alpha", x, 2)[0]).collect();
+    let partial = |r: std::ops::Range<usize>| row[r].iter().filter(|a| **a > 0.02 && **a < 0.98).count();
+    // The view is 4 units wide at depth 10 (0.1 per pixel): the focused bar (x ±0.05) covers
+    // half of pixels 19 and 20 and nothing else; at depth 40 the far bar is 1 pixel wide
+    // in a pinhole view (pixels 22–23) and blurred over a dozen with the lens.
+    assert!((row[19] - 0.5).abs() < 0.15 && (row[20] - 0.5).abs() < 0.15, "the focused bar stays sharp: {row:?}");
+    assert!(partial(24..40) >= 4, "the far bar is spread over several partly covered pixels: {row:?}");
+    scene.camera.f_stop = 0.0;
+    let pin = render(&scene, &opts, &NoProgress).unwrap();
+    let pin_row: Vec<f32> = (0..40).map(|x| pin.film.pixel("alpha", x, 2)[0]).collect();
+    let pin_partial = pin_row[24..40].iter().filter(|a| **a > 0.02 && **a < 0.98).count();
+    assert!(pin_partial <= 2, "without an f-stop only edge pixels are partial: {pin_row:?}");
+}
