@@ -16,8 +16,10 @@ fn main() {
         "src/ffi.rs",
         "cpp/osd.cpp",
         "cpp/oiio.cpp",
+        "cpp/texture.cpp",
         "include/osd.h",
         "include/oiio.h",
+        "include/texture.h",
     ] {
         println!("cargo:rerun-if-changed={f}");
     }
@@ -41,6 +43,7 @@ fn main() {
     build
         .file("cpp/osd.cpp")
         .file("cpp/oiio.cpp")
+        .file("cpp/texture.cpp")
         .std("c++17")
         // OpenSubdiv's and OpenImageIO's headers are not warning-clean; ours should be.
         .flag_if_supported("-Wno-unused-parameter")

@@ -20,6 +20,7 @@
 #include <opensubdiv/far/patchMap.h>
 #include <opensubdiv/far/patchTable.h>
 #include <opensubdiv/far/patchTableFactory.h>
+#include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
 #include <opensubdiv/far/stencilTable.h>
 #include <opensubdiv/far/stencilTableFactory.h>
@@ -132,6 +133,23 @@ void check_desc(const OsdMeshDesc& d, std::size_t point_floats) {
   in_range(d.hole_indices, int32_t(d.face_vertex_counts.size()), "hole face index");
   if (d.isolation_level < 1 || d.isolation_level > 10)
     throw std::runtime_error("isolation level must be in 1..=10");
+  // Face-varying channels: one index per face-vertex per channel, 2 floats per value.
+  const std::size_t nfv = d.face_vertex_indices.size();
+  if (d.fvar_indices.size() != d.fvar_value_counts.size() * nfv)
+    throw std::runtime_error("face-varying indices do not hold one per face-vertex per channel");
+  std::size_t fvar_total = 0;
+  for (std::size_t c = 0; c < d.fvar_value_counts.size(); ++c) {
+    const int32_t count = d.fvar_value_counts[c];
+    if (count < 1) throw std::runtime_error("a face-varying channel has no values");
+    for (std::size_t k = c * nfv; k < (c + 1) * nfv; ++k)
+      if (d.fvar_indices[k] < 0 || d.fvar_indices[k] >= count)
+        throw std::runtime_error("face-varying index out of range");
+    fvar_total += std::size_t(count);
+  }
+  if (d.fvar_values.size() != 2 * fvar_total)
+    throw std::runtime_error("face-varying values do not hold 2 floats per value");
+  if (d.num_vertices > 0 && d.vertex_primvars.size() % (2 * std::size_t(d.num_vertices)) != 0)
+    throw std::runtime_error("vertex primvars do not hold 2 floats per point per channel");
 }
 
 Sdc::SchemeType scheme_of(const OsdMeshDesc& d) {
@@ -184,6 +202,15 @@ RefinerPtr create_refiner(const OsdMeshDesc& d, const FarCapture& capture) {
   td.cornerWeights = d.corner_weights.data();
   td.numHoles = int(d.hole_indices.size());
   td.holeIndices = d.hole_indices.data();
+  // Face-varying topology: the indices say which faces share a value across an edge (a seam
+  // where they do not). Must outlive Create, which copies it.
+  std::vector<Far::TopologyDescriptor::FVarChannel> fvar(d.fvar_value_counts.size());
+  for (std::size_t c = 0; c < fvar.size(); ++c) {
+    fvar[c].numValues = d.fvar_value_counts[c];
+    fvar[c].valueIndices = d.fvar_indices.data() + c * d.face_vertex_indices.size();
+  }
+  td.numFVarChannels = int(fvar.size());
+  td.fvarChannels = fvar.empty() ? nullptr : fvar.data();
   // Winding stays as given: the core flips normals of left-handed meshes itself, so telling
   // OpenSubdiv as well would flip them twice.
   td.isLeftHanded = false;
@@ -200,9 +227,17 @@ Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d) {
   Far::PatchTableFactory::Options po(d.isolation_level);
   po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
   po.useInfSharpPatch = true;
-  // Only vertex data is evaluated: no varying or face-varying tables.
+  // Vertex data and face-varying channels are evaluated; varying primvars are interpolated over
+  // the base faces in the core, so no varying tables.
   po.generateVaryingTables = false;
   po.generateVaryingLocalPoints = false;
+  if (!d.fvar_value_counts.empty()) {
+    // Smooth face-varying patches (not the legacy all-linear ones), so faceVaryingLinear-
+    // Interpolation decides; this also makes adaptive refinement isolate face-varying features.
+    po.generateFVarTables = true;
+    po.generateFVarLegacyLinearPatches = false;
+    po.numFVarChannels = -1;  // every channel
+  }
   return po;
 }
 
@@ -235,6 +270,34 @@ void apply_stencils(const Far::StencilTable& st, const float* base, float* dst) 
     dst[3 * s + 2] = float(acc[2]);
   }
 }
+
+// The same for 2-float values (vertex primvars).
+void apply_stencils2(const Far::StencilTable& st, const float* base, float* dst) {
+  const std::vector<int>& sizes = st.GetSizes();
+  const std::vector<Far::Index>& idx = st.GetControlIndices();
+  const std::vector<float>& w = st.GetWeights();
+  std::size_t ofs = 0;
+  for (std::size_t s = 0; s < sizes.size(); ++s) {
+    double acc[2] = {0, 0};
+    for (int k = 0; k < sizes[s]; ++k, ++ofs) {
+      const float* p = base + 2 * std::size_t(idx[ofs]);
+      acc[0] += double(w[ofs]) * p[0];
+      acc[1] += double(w[ofs]) * p[1];
+    }
+    dst[2 * s + 0] = float(acc[0]);
+    dst[2 * s + 1] = float(acc[1]);
+  }
+}
+
+// A 2-float value as Far::PrimvarRefiner and StencilTable::UpdateValues want it.
+struct Value2 {
+  float v[2];
+  void Clear(void* = nullptr) { v[0] = v[1] = 0.0f; }
+  void AddWithWeight(const Value2& src, float weight) {
+    v[0] += weight * src.v[0];
+    v[1] += weight * src.v[1];
+  }
+};
 
 bool is_triangle_type(Far::PatchDescriptor::Type t) {
   return t == Far::PatchDescriptor::LOOP || t == Far::PatchDescriptor::GREGORY_TRIANGLE ||
@@ -274,6 +337,11 @@ struct OsdMesh::Impl {
   std::vector<Far::PatchDescriptor::Type> types;
   std::vector<int32_t> ptex_to_base;
   std::string warnings;
+  // Face-varying channels: the values of every refinement level, then the end caps' local
+  // values — the index space of GetPatchFVarValues. 2 floats each.
+  std::vector<std::vector<float>> fvar_values;
+  // Vertex primvars: one value per control point (the index space of GetPatchVertices).
+  std::vector<std::vector<float>> vertex_primvars;
 
   void set_points(const float* points) {
     std::copy(points, points + 3 * std::size_t(num_base_points), control_points.begin());
@@ -344,6 +412,53 @@ struct OsdMesh::Impl {
     }
   }
 };
+
+// Primvar channel `channel` (face-varying, or vertex when `vertex`) at the patch's local (s, t):
+// value, d/ds, d/dt (2 floats each) into out[0..6]. False if an index falls outside the values.
+static bool eval_primvar(const OsdMesh::Impl& m, bool vertex, std::size_t channel, std::size_t patch,
+                  float s, float t, float* out) noexcept {
+  const std::vector<float>& values =
+      vertex ? m.vertex_primvars[channel] : m.fvar_values[channel];
+  const Far::PatchTable::PatchHandle& h = m.handles[patch];
+  const Far::PatchParam param = m.patch_table->GetPatchParam(h);
+  const bool tri = is_triangle_type(m.types[patch]);
+  // As in eval: out to the ptex face through the vertex patch's parameterization (the
+  // face-varying patch covers the same part of the face), and derivatives back by its factor.
+  double fu = s, fv = t;
+  if (tri)
+    param.UnnormalizeTriangle(fu, fv);
+  else
+    param.Unnormalize(fu, fv);
+  double w[kMaxPatchPoints], wu[kMaxPatchPoints], wv[kMaxPatchPoints];
+  Far::ConstIndexArray cvs;
+  if (vertex) {
+    m.patch_table->EvaluateBasis(h, fu, fv, w, wu, wv);
+    cvs = m.patch_table->GetPatchVertices(h);
+  } else {
+    m.patch_table->EvaluateBasisFaceVarying(h, fu, fv, w, wu, wv, nullptr, nullptr, nullptr,
+                                            int(channel));
+    cvs = m.patch_table->GetPatchFVarValues(h, int(channel));
+  }
+  if (cvs.size() > kMaxPatchPoints) return false;
+  const double sign = (tri && param.IsTriangleRotated()) ? -1.0 : 1.0;
+  const double s1 = sign * double(1 << param.GetDepth());
+  double acc[3][2] = {};
+  for (int k = 0; k < cvs.size(); ++k) {
+    const std::size_t i = 2 * std::size_t(cvs[k]);
+    if (cvs[k] < 0 || i + 1 >= values.size()) return false;
+    for (int a = 0; a < 2; ++a) {
+      acc[0][a] += w[k] * values[i + a];
+      acc[1][a] += wu[k] * values[i + a];
+      acc[2][a] += wv[k] * values[i + a];
+    }
+  }
+  for (int a = 0; a < 2; ++a) {
+    out[a] = float(acc[0][a]);
+    out[2 + a] = float(acc[1][a] / s1);
+    out[4 + a] = float(acc[2][a] / s1);
+  }
+  return true;
+}
 
 OsdMesh::OsdMesh() : impl(new Impl) {}
 OsdMesh::~OsdMesh() = default;
@@ -470,6 +585,54 @@ int64_t OsdMesh::find_patch(int32_t ptex_face, float u, float v,
   return int64_t(patch);
 }
 
+std::size_t OsdMesh::fvar_channel_count() const noexcept { return impl->fvar_values.size(); }
+
+std::size_t OsdMesh::vertex_primvar_count() const noexcept { return impl->vertex_primvars.size(); }
+
+bool OsdMesh::evaluate_primvar(bool vertex, std::size_t channel, std::size_t patch, float u,
+                               float v, rust::Slice<float> out) const noexcept {
+  const std::size_t channels = vertex ? impl->vertex_primvars.size() : impl->fvar_values.size();
+  if (channel >= channels || patch >= impl->handles.size() || out.size() < 6) return false;
+  return eval_primvar(*impl, vertex, channel, patch, u, v, out.data());
+}
+
+namespace {
+
+// Refines face-varying channel `c` through every level of the (adaptively refined) refiner and
+// computes the end caps' local values: the values GetPatchFVarValues indexes.
+std::vector<float> refine_fvar_channel(const Far::TopologyRefiner& refiner,
+                                       const Far::PatchTable& table, const OsdMeshDesc& d,
+                                       std::size_t c, std::size_t first_value) {
+  const int total = refiner.GetNumFVarValuesTotal(int(c));
+  const int local = table.GetNumLocalPointsFaceVarying(int(c));
+  const int base = refiner.GetLevel(0).GetNumFVarValues(int(c));
+  if (base != d.fvar_value_counts[c])
+    throw std::runtime_error("OpenSubdiv kept " + std::to_string(base) + " of " +
+                             std::to_string(d.fvar_value_counts[c]) +
+                             " face-varying values of channel " + std::to_string(c));
+  std::vector<Value2> buf(std::size_t(total) + std::size_t(std::max(local, 0)));
+  for (int i = 0; i < base; ++i) {
+    buf[std::size_t(i)].v[0] = d.fvar_values[2 * (first_value + std::size_t(i))];
+    buf[std::size_t(i)].v[1] = d.fvar_values[2 * (first_value + std::size_t(i)) + 1];
+  }
+  Far::PrimvarRefiner primvar(refiner);
+  Value2* src = buf.data();
+  for (int level = 1; level <= refiner.GetMaxLevel(); ++level) {
+    Value2* dst = src + refiner.GetLevel(level - 1).GetNumFVarValues(int(c));
+    primvar.InterpolateFaceVarying(level, src, dst, int(c));
+    src = dst;
+  }
+  if (local > 0) table.ComputeLocalPointValuesFaceVarying(buf.data(), buf.data() + total, int(c));
+  std::vector<float> out(2 * buf.size());
+  for (std::size_t i = 0; i < buf.size(); ++i) {
+    out[2 * i] = buf[i].v[0];
+    out[2 * i + 1] = buf[i].v[1];
+  }
+  return out;
+}
+
+}  // namespace
+
 std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const float> points) {
   try {
     check_desc(desc, points.size());
@@ -511,6 +674,31 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
                                std::to_string(total - std::size_t(desc.num_vertices)) + ")");
     m.control_points.assign(3 * total, 0.0f);
     m.set_points(points.data());
+
+    // Vertex primvars go through the same stencils as the points.
+    const std::size_t nv = std::size_t(desc.num_vertices);
+    for (std::size_t ofs = 0; nv > 0 && ofs < desc.vertex_primvars.size(); ofs += 2 * nv) {
+      std::vector<float> values(2 * total, 0.0f);
+      std::copy(desc.vertex_primvars.begin() + std::ptrdiff_t(ofs),
+                desc.vertex_primvars.begin() + std::ptrdiff_t(ofs + 2 * nv), values.begin());
+      if (m.stencils && m.stencils->GetNumStencils() > 0)
+        apply_stencils2(*m.stencils, values.data(), values.data() + 2 * nv);
+      m.vertex_primvars.push_back(std::move(values));
+    }
+    if (!desc.fvar_value_counts.empty()) {
+      if (m.patch_table->GetNumFVarChannels() != int(desc.fvar_value_counts.size()))
+        throw std::runtime_error("OpenSubdiv built " +
+                                 std::to_string(m.patch_table->GetNumFVarChannels()) +
+                                 " face-varying patch channels for " +
+                                 std::to_string(desc.fvar_value_counts.size()));
+      std::size_t first_value = 0;
+      for (std::size_t c = 0; c < desc.fvar_value_counts.size(); ++c) {
+        m.fvar_values.push_back(
+            refine_fvar_channel(*refiner, *m.patch_table, desc, c, first_value));
+        first_value += std::size_t(desc.fvar_value_counts[c]);
+      }
+      capture.check("OpenSubdiv face-varying refinement");
+    }
 
     for (int a = 0, current = 0; a < m.patch_table->GetNumPatchArrays(); ++a) {
       const Far::PatchDescriptor pd = m.patch_table->GetPatchArrayDescriptor(a);
@@ -617,6 +805,85 @@ OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<cons
     throw;
   } catch (...) {
     throw std::runtime_error("unknown C++ exception in the limit stencil evaluation");
+  }
+}
+
+OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
+                                            rust::Slice<const int32_t> ptex_faces,
+                                            rust::Slice<const float> u,
+                                            rust::Slice<const float> v) {
+  try {
+    check_desc(desc, std::size_t(desc.num_vertices) * 3);
+    if (channel >= desc.fvar_value_counts.size())
+      throw std::runtime_error("no face-varying channel " + std::to_string(channel));
+    if (ptex_faces.size() != u.size() || u.size() != v.size())
+      throw std::runtime_error("location arrays differ in length");
+    FarCapture capture;
+    RefinerPtr refiner = create_refiner(desc, capture);
+    refine_adaptive(*refiner, desc, capture);
+
+    Far::LimitStencilTableFactory::LocationArrayVec arrays;
+    for (std::size_t i = 0; i < ptex_faces.size();) {
+      std::size_t j = i;
+      while (j < ptex_faces.size() && ptex_faces[j] == ptex_faces[i]) ++j;
+      Far::LimitStencilTableFactory::LocationArray la;
+      la.ptexIdx = ptex_faces[i];
+      la.numLocations = int(j - i);
+      la.s = u.data() + i;
+      la.t = v.data() + i;
+      arrays.push_back(la);
+      i = j;
+    }
+    // OpenSubdiv's own face-varying path: stencils of the channel's refined values (from
+    // StencilTableFactory, not PrimvarRefiner) and its own patch table.
+    Far::LimitStencilTableFactory::Options lo;
+    lo.interpolationMode = Far::LimitStencilTableFactory::INTERPOLATE_FACE_VARYING;
+    lo.fvarChannel = unsigned(channel);
+    lo.generate1stDerivatives = true;
+    lo.generate2ndDerivatives = false;
+    std::unique_ptr<const Far::LimitStencilTable> lst(
+        Far::LimitStencilTableFactory::Create(*refiner, arrays, nullptr, nullptr, lo));
+    if (!lst) capture.fail("OpenSubdiv could not build the face-varying limit stencil table");
+    capture.check("OpenSubdiv face-varying limit stencils");
+    const std::size_t n = ptex_faces.size();
+    if (std::size_t(lst->GetNumStencils()) != n)
+      throw std::runtime_error("face-varying limit stencil table has " +
+                               std::to_string(lst->GetNumStencils()) + " stencils for " +
+                               std::to_string(n) + " locations");
+    std::size_t first = 0;
+    for (std::size_t c = 0; c < channel; ++c) first += std::size_t(desc.fvar_value_counts[c]);
+    const std::size_t count = std::size_t(desc.fvar_value_counts[channel]);
+    const std::vector<int>& sizes = lst->GetSizes();
+    const std::vector<Far::Index>& idx = lst->GetControlIndices();
+    const std::vector<float>& w = lst->GetWeights();
+    const std::vector<float>& wu = lst->GetDuWeights();
+    const std::vector<float>& wv = lst->GetDvWeights();
+    OsdLimitSamples out;
+    std::size_t ofs = 0;
+    for (std::size_t s = 0; s < n; ++s) {
+      double acc[3][2] = {};
+      for (int k = 0; k < sizes[s]; ++k, ++ofs) {
+        if (idx[ofs] < 0 || std::size_t(idx[ofs]) >= count)
+          throw std::runtime_error("face-varying limit stencil index out of range");
+        const float* c = desc.fvar_values.data() + 2 * (first + std::size_t(idx[ofs]));
+        for (int a = 0; a < 2; ++a) {
+          acc[0][a] += double(w[ofs]) * c[a];
+          acc[1][a] += double(wu[ofs]) * c[a];
+          acc[2][a] += double(wv[ofs]) * c[a];
+        }
+      }
+      // 3 floats per sample, as OsdLimitSamples holds them; the third is 0.
+      for (int a = 0; a < 3; ++a) {
+        out.p.push_back(a < 2 ? float(acc[0][a]) : 0.0f);
+        out.dpdu.push_back(a < 2 ? float(acc[1][a]) : 0.0f);
+        out.dpdv.push_back(a < 2 ? float(acc[2][a]) : 0.0f);
+      }
+    }
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception in the face-varying limit stencil evaluation");
   }
 }
 

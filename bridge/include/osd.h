@@ -40,6 +40,10 @@ class OsdMesh {
                      rust::Slice<float> p, rust::Slice<float> du,
                      rust::Slice<float> dv) const noexcept;
   int64_t find_patch(int32_t ptex_face, float u, float v, rust::Slice<float> local_uv) const noexcept;
+  std::size_t fvar_channel_count() const noexcept;
+  std::size_t vertex_primvar_count() const noexcept;
+  bool evaluate_primvar(bool vertex, std::size_t channel, std::size_t patch, float u, float v,
+                        rust::Slice<float> out) const noexcept;
 
   struct Impl;
   std::unique_ptr<Impl> impl;
@@ -50,6 +54,11 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
 OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
                                        rust::Slice<const int32_t> ptex_faces,
                                        rust::Slice<const float> u, rust::Slice<const float> v);
+
+OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
+                                            rust::Slice<const int32_t> ptex_faces,
+                                            rust::Slice<const float> u,
+                                            rust::Slice<const float> v);
 
 OsdUniform osd_uniform_refine(const OsdMeshDesc& desc, rust::Slice<const float> points,
                               int32_t level);

@@ -1,7 +1,7 @@
 //! The one `#[cxx::bridge]` between mipray and its C++ libraries (OpenSubdiv's Far, OpenImageIO).
 //!
 //! Everything here is raw: flat `f32` arrays, integer codes for enums. The safe wrappers in
-//! [`crate::osd`] and [`crate::oiio`] validate inputs before they cross and turn results into the
+//! [`crate::osd`], [`crate::oiio`] and [`crate::texture`] validate inputs before they cross and turn results into the
 //! core's types. Functions that can throw in C++ return `Result` (cxx turns the exception into an
 //! `Err` carrying `what()`); the C++ side also catches everything itself, so nothing unwinds
 //! across the boundary. Functions without `Result` are written never to throw (no allocation,
@@ -34,6 +34,14 @@ pub(crate) mod bridge {
         corner_indices: Vec<i32>,
         corner_weights: Vec<f32>,
         hole_indices: Vec<i32>,
+        /// Face-varying channels: the number of values of each channel; their values, 2 floats
+        /// each, channel after channel; and per channel one index per face-vertex (into that
+        /// channel's values), channel after channel.
+        fvar_value_counts: Vec<i32>,
+        fvar_values: Vec<f32>,
+        fvar_indices: Vec<i32>,
+        /// Vertex-interpolated 2-float primvars: 2 × `num_vertices` floats per channel.
+        vertex_primvars: Vec<f32>,
     }
 
     /// One patch of the table, decoded from `Far::PatchParam` and `PatchDescriptor`.
@@ -81,6 +89,42 @@ pub(crate) mod bridge {
         m: Vec<f32>,
     }
 
+    /// Settings of an `OiioTexSys` (see `crate::texture::OiioTextureOptions`).
+    #[derive(Clone, Copy, Debug, Default)]
+    struct OiioTexOptions {
+        max_memory_mb: f32,
+        max_open_files: i32,
+        autotile: i32,
+        automip: bool,
+        max_textures: u32,
+        /// Finest MIP level only, bilinear (the caller also zeroes the derivatives).
+        finest: bool,
+    }
+
+    /// One texture lookup: handle, (s, t) with t up, and its derivatives; wrap codes 0 from the
+    /// file, 1 black, 2 clamp, 3 periodic, 4 mirror.
+    #[derive(Clone, Copy, Debug, Default)]
+    struct OiioLookup {
+        handle: u32,
+        s: f32,
+        t: f32,
+        dsdx: f32,
+        dtdx: f32,
+        dsdy: f32,
+        dtdy: f32,
+        first_channel: i32,
+        wrap_s: u8,
+        wrap_t: u8,
+        fill: f32,
+    }
+
+    /// One named statistic.
+    #[derive(Clone, Debug, Default)]
+    struct OiioStat {
+        name: String,
+        value: f64,
+    }
+
     /// One metadata attribute read back, formatted as text by OpenImageIO.
     #[derive(Clone, Debug, Default)]
     struct OiioAttrText {
@@ -91,6 +135,7 @@ pub(crate) mod bridge {
     unsafe extern "C++" {
         include!("mipray-bridge/include/osd.h");
         include!("mipray-bridge/include/oiio.h");
+        include!("mipray-bridge/include/texture.h");
 
         /// Patch table, stencils and refined control points of one mesh.
         type OsdMesh;
@@ -129,12 +174,38 @@ pub(crate) mod bridge {
         /// `Far::PatchMap`: the patch holding (u, v) of a ptex face (its index, or -1 when there
         /// is none: a hole, or out of range), and the patch's local (u, v) there in `local_uv`.
         fn find_patch(self: &OsdMesh, ptex_face: i32, u: f32, v: f32, local_uv: &mut [f32]) -> i64;
+        /// Face-varying channels built (as given in the descriptor).
+        fn fvar_channel_count(self: &OsdMesh) -> usize;
+        /// Vertex primvars built.
+        fn vertex_primvar_count(self: &OsdMesh) -> usize;
+        /// A 2-float primvar (face-varying channel, or vertex primvar when `vertex`) at the
+        /// patch's local (u, v): value, d/du, d/dv into `out[0..6]`. False for a bad index or a
+        /// short `out`.
+        fn evaluate_primvar(
+            self: &OsdMesh,
+            vertex: bool,
+            channel: usize,
+            patch: usize,
+            u: f32,
+            v: f32,
+            out: &mut [f32],
+        ) -> bool;
 
         /// Reference path: a fresh refiner and `Far::LimitStencilTableFactory` at the given
         /// (ptex face, u, v) locations.
         fn osd_limit_stencil_eval(
             desc: &OsdMeshDesc,
             points: &[f32],
+            ptex_faces: &[i32],
+            u: &[f32],
+            v: &[f32],
+        ) -> Result<OsdLimitSamples>;
+        /// Reference path for face-varying channel `channel`: a fresh refiner and
+        /// `Far::LimitStencilTableFactory` in face-varying mode at (ptex face, u, v) locations.
+        /// Values and derivatives come back as 3 floats each, the third 0.
+        fn osd_limit_stencil_fvar_eval(
+            desc: &OsdMeshDesc,
+            channel: usize,
             ptex_faces: &[i32],
             u: &[f32],
             v: &[f32],
@@ -166,6 +237,23 @@ pub(crate) mod bridge {
         fn metadata(self: &OiioReader) -> Result<Vec<OiioAttrText>>;
         /// Reads the whole first subimage as f32 into `out` (width × height × channels).
         fn read_pixels(self: Pin<&mut OiioReader>, out: &mut [f32]) -> Result<()>;
+
+        /// A TextureSystem over a private ImageCache.
+        type OiioTexSys;
+
+        fn oiio_texsys_new(options: &OiioTexOptions) -> Result<UniquePtr<OiioTexSys>>;
+        /// Opens a texture: its index in the handle table.
+        fn open(self: &OiioTexSys, path: &str) -> Result<u32>;
+        /// One filtered lookup of `out.len()` channels; false on failure.
+        fn sample(self: &OiioTexSys, lookup: &OiioLookup, out: &mut [f32]) -> bool;
+        /// Finest-level resolution into `out[0..2]`; false if unknown.
+        fn resolution(self: &OiioTexSys, handle: u32, out: &mut [i32]) -> bool;
+        fn cache_stats(self: &OiioTexSys) -> Result<Vec<OiioStat>>;
+        fn file_stats(self: &OiioTexSys, handle: u32) -> Result<Vec<OiioStat>>;
+        /// OpenImageIO's statistics report (level 1..=5), for logs.
+        fn report(self: &OiioTexSys, level: i32) -> Result<String>;
+        /// This thread's pending OpenImageIO error, cleared.
+        fn take_error(self: &OiioTexSys) -> Result<String>;
     }
 }
 
@@ -176,3 +264,12 @@ pub(crate) mod bridge {
 unsafe impl Send for bridge::OsdMesh {}
 // SAFETY: see `Send` above: shared access is read-only.
 unsafe impl Sync for bridge::OsdMesh {}
+
+// SAFETY: an `OiioTexSys` owns its ImageCache and TextureSystem (created unshared) and a handle
+// table; nothing in it is tied to the creating thread. OpenImageIO's TextureSystem is documented
+// thread safe for concurrent lookups; its per-thread state is fetched per calling thread (cached
+// in a C++ `thread_local` keyed by a never-reused system id); the handle table is written under a
+// mutex and read through atomics.
+unsafe impl Send for bridge::OiioTexSys {}
+// SAFETY: see `Send` above: every `&self` method is safe to call from many threads at once.
+unsafe impl Sync for bridge::OiioTexSys {}

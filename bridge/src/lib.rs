@@ -1,9 +1,11 @@
 //! # mipray-bridge — OpenSubdiv and OpenImageIO for mipray
 //!
 //! The C++ shim (through `cxx`) that implements the core's traits: [`OsdSurface`] is a
-//! [`mipray::patch::LimitSurface`] made of OpenSubdiv's adaptive patches, [`OiioImageIo`] is a
-//! [`mipray::image_io::ImageIo`] by OpenImageIO. Nothing in C++ can abort or unwind into Rust:
-//! failures come back as the core's `MeshError` / `ImageError`, naming the mesh or the path.
+//! [`mipray::patch::LimitSurface`] made of OpenSubdiv's adaptive patches (with face-varying
+//! primvars), [`OiioImageIo`] is a [`mipray::image_io::ImageIo`] by OpenImageIO, and
+//! [`OiioTextureSystem`] is a [`mipray::texture::TextureSampler`] by OpenImageIO's
+//! `TextureSystem`. Nothing in C++ can abort or unwind into Rust: failures come back as the
+//! core's `MeshError` / `ImageError` / `TextureError`, naming the mesh or the path.
 //!
 //! ```
 //! use mipray::patch::LimitSurface;
@@ -32,6 +34,11 @@
 mod ffi;
 pub mod oiio;
 pub mod osd;
+pub mod texture;
 
 pub use oiio::{oiio_version, OiioImageIo};
-pub use osd::{limit_stencil_reference, LimitSample, OsdOptions, OsdSurface, UniformMesh};
+pub use osd::{
+    limit_stencil_fvar_reference, limit_stencil_reference, LimitSample, OsdOptions, OsdSurface,
+    UniformMesh,
+};
+pub use texture::{OiioTextureOptions, OiioTextureSystem};

@@ -15,6 +15,15 @@
 //! (`Far::PtexIndices`: one per quad, one per corner of a non-quad in Catmull-Clark and bilinear,
 //! one per triangle in Loop); [`OsdSurface::limit_at`] works in that ptex parameterization.
 //!
+//! Primvars: [`OsdSurface::with_primvars`] takes 2-float primvars (`st`) of any interpolation.
+//! Face-varying ones become OpenSubdiv face-varying channels — refined through every level with
+//! `Far::PrimvarRefiner`, end caps by the patch table's face-varying local-point stencils,
+//! evaluated on its face-varying patches (`EvaluateBasisFaceVarying` / `GetPatchFVarValues`), so
+//! the mesh's `faceVaryingLinearInterpolation` decides how they smooth and where seams stay
+//! sharp. Vertex ones go through the points' own stencils and patches; constant, uniform and
+//! varying ones are interpolated over the base faces in the core
+//! ([`mipray::texture::BaseFacePrimvar`]). All are read through [`LimitSurface::face_varying`].
+//!
 //! Rotated triangles: adaptive Loop refinement makes the middle child of a triangle point the
 //! other way (`Far::PatchParam::IsTriangleRotated`). Its [`PatchParam`] has its origin at the
 //! corner the local (0, 0) maps to and a **negative** `size`, so `to_face_uv` stays the exact map.
@@ -23,6 +32,7 @@ use glam::Vec3A;
 use mipray::bounds::Bounds3;
 use mipray::error::MeshError;
 use mipray::patch::{GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
+use mipray::texture::{BaseFacePrimvar, Interpolation, Primvar2, Value2};
 use mipray::topology::{
     BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision,
 };
@@ -69,6 +79,17 @@ pub struct LimitSample {
     pub dpdv: Vec3A,
 }
 
+/// Where a primvar channel of an [`OsdSurface`] is evaluated.
+#[derive(Clone, Debug)]
+enum PrimvarSource {
+    /// OpenSubdiv face-varying channel k.
+    FaceVarying(usize),
+    /// OpenSubdiv vertex primvar k (through the points' stencils and patches).
+    Vertex(usize),
+    /// Linear over the base faces, in the core.
+    BaseFace(BaseFacePrimvar),
+}
+
 /// A subdivision mesh's limit surface as OpenSubdiv patches. `Send + Sync`: after construction
 /// the tables are only read (see the `SAFETY` notes in `ffi.rs`).
 pub struct OsdSurface {
@@ -80,6 +101,8 @@ pub struct OsdSurface {
     bounds: Vec<Bounds3>,
     control_faces: usize,
     warnings: String,
+    /// Primvar channels, in the order given to [`OsdSurface::with_primvars`].
+    primvars: Vec<PrimvarSource>,
 }
 
 impl std::fmt::Debug for OsdSurface {
@@ -98,7 +121,7 @@ impl OsdSurface {
     /// `name` (the prim path, say) prefixes every error message. `Scheme::None` is built as
     /// bilinear (the control polygons, split into quads). `left_handed` is not passed on: the
     /// patches keep the given winding and the core flips normals of left-handed meshes itself.
-    /// Face-varying data is not built.
+    /// No primvars are built (see [`OsdSurface::with_primvars`]).
     ///
     /// # Errors
     /// [`MeshError::Invalid`] for topology that [`MeshTopology::validate`] refuses or a Loop mesh
@@ -122,9 +145,76 @@ impl OsdSurface {
         points: &[[f32; 3]],
         options: &OsdOptions,
     ) -> Result<OsdSurface, MeshError> {
-        let desc = mesh_desc(name, topology, points, options)?;
+        Self::with_primvars(name, topology, points, options, &[])
+    }
+
+    /// [`OsdSurface::with_options`] with 2-float primvars (texture coordinates `st`, …): channel
+    /// i of [`LimitSurface::face_varying`] is `primvars[i]`. Face-varying primvars are smoothed
+    /// by OpenSubdiv under `topology.face_varying` (`faceVaryingLinearInterpolation`: `all`
+    /// keeps them linear, `none` smooths them everywhere, the others keep seams and corners as
+    /// USD says); vertex primvars follow the points; constant, uniform and varying ones are
+    /// linear over each base face. Face-varying channels make OpenSubdiv isolate their features
+    /// too, so the patch count can grow.
+    ///
+    /// # Errors
+    /// As [`OsdSurface::with_options`], and [`MeshError::Invalid`] / [`MeshError::NonFinite`]
+    /// naming the mesh and the primvar when its values or indices do not fit the topology.
+    pub fn with_primvars(
+        name: &str,
+        topology: &MeshTopology,
+        points: &[[f32; 3]],
+        options: &OsdOptions,
+        primvars: &[Primvar2],
+    ) -> Result<OsdSurface, MeshError> {
+        let mut desc = mesh_desc(name, topology, points, options)?;
+        let mut sources = Vec::with_capacity(primvars.len());
+        let (mut fvar, mut vertex) = (0usize, 0usize);
+        for p in primvars {
+            let indices = p
+                .face_varying_indices(topology, points.len())
+                .map_err(|e| named(name, e))?;
+            match p.interpolation {
+                Interpolation::FaceVarying => {
+                    let count = i32::try_from(p.values.len()).map_err(|_| {
+                        MeshError::Invalid(format!(
+                            "{name}: primvar {} has too many values",
+                            p.name
+                        ))
+                    })?;
+                    desc.fvar_value_counts.push(count);
+                    desc.fvar_values.extend(p.values.iter().flatten());
+                    desc.fvar_indices.extend(indices);
+                    sources.push(PrimvarSource::FaceVarying(fvar));
+                    fvar += 1;
+                }
+                Interpolation::Vertex => {
+                    // One value per point: the point's element, through USD's indices.
+                    desc.vertex_primvars.extend((0..points.len()).flat_map(|i| {
+                        let k = if p.indices.is_empty() {
+                            i
+                        } else {
+                            p.indices[i] as usize
+                        };
+                        p.values[k]
+                    }));
+                    sources.push(PrimvarSource::Vertex(vertex));
+                    vertex += 1;
+                }
+                Interpolation::Constant | Interpolation::Uniform | Interpolation::Varying => {
+                    let b = BaseFacePrimvar::new(topology, points.len(), p)
+                        .map_err(|e| named(name, e))?;
+                    sources.push(PrimvarSource::BaseFace(b));
+                }
+            }
+        }
         let mesh = ffi::osd_mesh_new(&desc, points.as_flattened())
             .map_err(|e| subdivision_error(name, &e))?;
+        if mesh.fvar_channel_count() != fvar || mesh.vertex_primvar_count() != vertex {
+            return Err(subdivision_error(
+                name,
+                &"OpenSubdiv did not build every primvar channel",
+            ));
+        }
         let warnings = mesh.warnings();
         for w in warnings.lines() {
             log::warn!("{name}: OpenSubdiv: {w}");
@@ -143,6 +233,7 @@ impl OsdSurface {
             bounds: Vec::new(),
             control_faces: topology.face_count(),
             warnings,
+            primvars: sources,
         };
         surface.refresh_bounds()?;
         Ok(surface)
@@ -320,6 +411,59 @@ pub fn limit_stencil_reference(
         .collect())
 }
 
+/// A face-varying primvar's value and first derivatives from OpenSubdiv's
+/// `Far::LimitStencilTableFactory` in face-varying mode (the reference path for tests), at
+/// (ptex face, u, v) locations; derivatives as [`LimitSample`]'s. The primvar must be
+/// face-varying; `topology.face_varying` sets its linear interpolation.
+///
+/// # Errors
+/// As [`limit_stencil_reference`], and [`MeshError::Invalid`] for a primvar that is not
+/// face-varying or does not fit the topology.
+pub fn limit_stencil_fvar_reference(
+    name: &str,
+    topology: &MeshTopology,
+    points: &[[f32; 3]],
+    options: &OsdOptions,
+    primvar: &Primvar2,
+    locations: &[(u32, f32, f32)],
+) -> Result<Vec<Value2>, MeshError> {
+    if primvar.interpolation != Interpolation::FaceVarying {
+        return Err(MeshError::Invalid(format!(
+            "{name}: primvar {} is not face-varying",
+            primvar.name
+        )));
+    }
+    let mut desc = mesh_desc(name, topology, points, options)?;
+    let indices = primvar
+        .face_varying_indices(topology, points.len())
+        .map_err(|e| named(name, e))?;
+    desc.fvar_value_counts
+        .push(i32::try_from(primvar.values.len()).map_err(|_| {
+            MeshError::Invalid(format!(
+                "{name}: primvar {} has too many values",
+                primvar.name
+            ))
+        })?);
+    desc.fvar_values.extend(primvar.values.iter().flatten());
+    desc.fvar_indices.extend(indices);
+    let mut faces = Vec::with_capacity(locations.len());
+    for &(f, _, _) in locations {
+        faces.push(
+            i32::try_from(f).map_err(|_| {
+                MeshError::Invalid(format!("{name}: ptex face {f} is out of range"))
+            })?,
+        );
+    }
+    let us: Vec<f32> = locations.iter().map(|l| l.1).collect();
+    let vs: Vec<f32> = locations.iter().map(|l| l.2).collect();
+    let r = ffi::osd_limit_stencil_fvar_eval(&desc, 0, &faces, &us, &vs)
+        .map_err(|e| subdivision_error(name, &e))?;
+    let v2 = |a: &[f32], i: usize| [a[3 * i], a[3 * i + 1]];
+    Ok((0..locations.len())
+        .map(|i| (v2(&r.p, i), v2(&r.dpdu, i), v2(&r.dpdv, i)))
+        .collect())
+}
+
 impl LimitSurface for OsdSurface {
     fn patch_count(&self) -> usize {
         self.params.len()
@@ -405,6 +549,20 @@ impl LimitSurface for OsdSurface {
 
     fn control_face_count(&self) -> usize {
         self.control_faces
+    }
+
+    /// Primvar channel `channel` (in [`OsdSurface::with_primvars`] order) at the patch's own
+    /// (u, v), with derivatives with respect to them. `None` for an unknown channel or patch.
+    fn face_varying(&self, channel: usize, patch: usize, u: f32, v: f32) -> Option<Value2> {
+        let (vertex, k) = match self.primvars.get(channel)? {
+            PrimvarSource::BaseFace(b) => return b.at_patch(self.params.get(patch)?, u, v),
+            PrimvarSource::FaceVarying(k) => (false, *k),
+            PrimvarSource::Vertex(k) => (true, *k),
+        };
+        let mut o = [0.0f32; 6];
+        self.mesh
+            .evaluate_primvar(vertex, k, patch, u, v, &mut o)
+            .then_some(([o[0], o[1]], [o[2], o[3]], [o[4], o[5]]))
     }
 }
 
@@ -511,6 +669,10 @@ fn mesh_desc(
             .map(|s| s.max(0.0))
             .collect(),
         hole_indices: topology.hole_indices.clone(),
+        fvar_value_counts: Vec::new(),
+        fvar_values: Vec::new(),
+        fvar_indices: Vec::new(),
+        vertex_primvars: Vec::new(),
     })
 }
 

@@ -109,7 +109,7 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
             let mut mesh = Mesh::new(&name, Arc::new(surface));
             mesh.material = if (i + j) % 2 == 0 { chrome } else { matte };
             if k % 3 == 0 {
-                mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 });
+                mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 }.into());
                 mesh.displacement_bound = 0.06;
             }
             let m = scene.add_mesh(mesh);

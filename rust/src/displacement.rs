@@ -185,7 +185,7 @@ impl TextureDisplacement {
 
     /// Displacement (object units) at `st`, the texel filtered over the footprint spanned by
     /// `dst_dx`, `dst_dy` (texture units per step; see [`crate::texture`]).
-    pub fn offset_at(&self, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2]) -> f32 {
+    pub fn offset_st(&self, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2]) -> f32 {
         let mut texel = [0.0f32; 1];
         if self.sampler.sample(self.texture, st, dst_dx, dst_dy, &self.lookup, &mut texel) && texel[0].is_finite() {
             texel[0] * self.scale + self.bias
@@ -193,6 +193,17 @@ impl TextureDisplacement {
             self.failed.fetch_add(1, Ordering::Relaxed);
             self.fallback
         }
+    }
+
+    /// Displacement (object units) at (u, v) of `patch`, filtered over a step of `uv_step` in
+    /// the patch's u and v (0: the finest level, unfiltered), `st` and its derivatives from the
+    /// surface as in [`TextureDisplacement::grid_offsets`].
+    pub fn offset_on_patch(&self, surface: &dyn LimitSurface, patch: usize, u: f32, v: f32, uv_step: f32) -> f32 {
+        let (st, dx, dy) = match surface.face_varying(self.st_channel, patch, u, v) {
+            Some((st, dsdu, dsdv)) => (st, [dsdu[0] * uv_step, dsdu[1] * uv_step], [dsdv[0] * uv_step, dsdv[1] * uv_step]),
+            None => (self.st_fallback, [0.0; 2], [0.0; 2]),
+        };
+        self.offset_st(st, dx, dy)
     }
 
     /// Displacements (object units) of an n×n vertex grid over `rect` of `patch`, u fastest, into
@@ -211,7 +222,7 @@ impl TextureDisplacement {
                     Some((st, dsdu, dsdv)) => (st, [dsdu[0] * du, dsdu[1] * du], [dsdv[0] * dv, dsdv[1] * dv]),
                     None => (self.st_fallback, [0.0; 2], [0.0; 2]),
                 };
-                out.push(self.offset_at(st, dx, dy));
+                out.push(self.offset_st(st, dx, dy));
             }
         }
     }
@@ -224,6 +235,18 @@ pub enum DisplacementShader {
     Procedural(Displacement),
     /// A displacement texture (shared: one per material, many meshes).
     Texture(Arc<TextureDisplacement>),
+}
+
+/// Procedural shaders are equal when their parameters are; texture shaders when they are the same
+/// shared value (what a dirty check needs: a new texture shader is a change).
+impl PartialEq for DisplacementShader {
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (DisplacementShader::Procedural(a), DisplacementShader::Procedural(b)) => a == b,
+            (DisplacementShader::Texture(a), DisplacementShader::Texture(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
+    }
 }
 
 impl From<Displacement> for DisplacementShader {
@@ -255,6 +278,18 @@ impl DisplacementShader {
         match self {
             DisplacementShader::Procedural(d) => d.bound(),
             DisplacementShader::Texture(t) => t.bound(),
+        }
+    }
+
+    /// Displacement (object units, along the limit normal) at one point: (u, v) of `patch`, where
+    /// the undisplaced surface is at `p` (object space), filtered as a grid whose steps are
+    /// `spacing` object units and `uv_step` in the patch's (u, v) would be (both 0: unfiltered).
+    /// For shading and error measurement at a hit; [`DisplacementShader::grid_offsets`] at the
+    /// same spacing gives the same values at grid vertices.
+    pub fn offset_at(&self, surface: &dyn LimitSurface, patch: usize, uv: (f32, f32), p: Vec3A, spacing: f32, uv_step: f32) -> f32 {
+        match self {
+            DisplacementShader::Procedural(d) => d.offset(p, spacing),
+            DisplacementShader::Texture(t) => t.offset_on_patch(surface, patch, uv.0, uv.1, uv_step),
         }
     }
 

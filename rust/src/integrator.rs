@@ -68,7 +68,7 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
         let spacing = s.dpdu.length().max(s.dpdv.length()) * 2.0 * step;
         let displaced = |u: f32, v: f32| {
             let e = mesh.surface.evaluate(hit.patch as usize, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
-            e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset(e.p, spacing)
+            e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, spacing, 2.0 * step)
         };
         let (u0, u1) = ((hit.u - step).max(0.0), (hit.u + step).min(1.0));
         let (v0, v1) = ((hit.v - step).max(0.0), (hit.v + step).min(1.0));
@@ -116,7 +116,7 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
             Some(d) => {
                 let at = |u: f32, v: f32| {
                     let e = mesh.surface.evaluate(hit.patch as usize, u, v);
-                    e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset(e.p, 0.0)
+                    e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, 0.0, 0.0)
                 };
                 let h = 1e-3;
                 (at(u, v), (at(u + h, v) - at(u - h, v)) / (2.0 * h), (at(u, v + h) - at(u, v - h)) / (2.0 * h))

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use glam::Mat4;
 
 use crate::camera::Camera;
-use crate::displacement::Displacement;
+use crate::displacement::DisplacementShader;
 use crate::light::Light;
 use crate::material::Material;
 use crate::patch::LimitSurface;
@@ -30,7 +30,7 @@ pub struct Mesh {
     /// shading normals are negated. Patch sources evaluate the surface as given.
     pub left_handed: bool,
     /// Displacement along the limit normal, applied when tessellating.
-    pub displacement: Option<Displacement>,
+    pub displacement: Option<DisplacementShader>,
     /// The mesh's key in a geometry cache that outlives one render (the delegate's): stable
     /// across edits of other prims. `None`: its index in [`Scene::meshes`].
     pub cache_id: Option<u32>,

@@ -9,7 +9,7 @@
 use glam::Vec3A;
 
 use crate::bounds::Bounds3;
-use crate::displacement::Displacement;
+use crate::displacement::DisplacementShader;
 use crate::geometry_cache::{CacheEntry, Tier};
 use crate::patch::{GridSamples, LimitSurface};
 use crate::subpatch::Subpatch;
@@ -121,9 +121,9 @@ impl Tessellation {
 
 /// How a mesh is displaced: the function, the side its normal points to (−1 for leftHanded
 /// meshes) and the bound its subpatch boxes were grown by.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct DisplaceParams {
-    pub displacement: Displacement,
+    pub displacement: DisplacementShader,
     pub normal_sign: f32,
     pub bound: f32,
 }
@@ -140,11 +140,12 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displa
     let mut verts = std::mem::take(&mut scratch.p);
     let mut outside = 0;
     if let Some(d) = displace {
-        let spacing = grid_spacing(&verts, n);
+        let mut offsets = Vec::with_capacity(n * n);
+        d.displacement.grid_offsets(surface, sub.patch as usize, sub.rect, &verts, n, &mut offsets);
         for (k, v) in verts.iter_mut().enumerate() {
             let p = Vec3A::from(*v);
             let nrm = (Vec3A::from(scratch.dpdu[k]).cross(Vec3A::from(scratch.dpdv[k]))).normalize_or_zero() * d.normal_sign;
-            let q = p + nrm * d.displacement.offset(p, spacing);
+            let q = p + nrm * offsets[k];
             if !(q.cmpge(sub.bounds.min).all() && q.cmple(sub.bounds.max).all()) {
                 outside += 1;
             }
@@ -173,18 +174,6 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displa
         }
     }
     (t, outside)
-}
-
-/// Mean edge length of the grid's middle row and column (object units): the spacing the
-/// displacement is filtered at.
-fn grid_spacing(verts: &[[f32; 3]], n: usize) -> f32 {
-    let m = n / 2;
-    let at = |i: usize, j: usize| Vec3A::from(verts[j * n + i]);
-    let mut len = 0.0;
-    for k in 0..n - 1 {
-        len += (at(k + 1, m) - at(k, m)).length() + (at(m, k + 1) - at(m, k)).length();
-    }
-    len / (2 * (n - 1)) as f32
 }
 
 /// Largest distance between the surface and the bilinear interpolation of the grid, probed at

@@ -345,7 +345,7 @@ impl<'s> Tracer<'s> {
         self.cache.get_or_build(key, || {
             let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds, affine: root.affine };
             let mut scratch = GridSamples::default();
-            let displace = mesh.displacement.map(|displacement| DisplaceParams { displacement, normal_sign: if mesh.left_handed { -1.0 } else { 1.0 }, bound: mesh.displacement_bound });
+            let displace = mesh.displacement.clone().map(|displacement| DisplaceParams { displacement, normal_sign: if mesh.left_handed { -1.0 } else { 1.0 }, bound: mesh.displacement_bound });
             let (t, outside) = tessellate(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch);
             if outside > 0 && self.displaced_outside.fetch_add(u64::from(outside), Ordering::Relaxed) == 0 {
                 log::warn!("{}: displaced vertices leave their subpatch bounds; raise primvars:displacementBound (now {})", mesh.name, mesh.displacement_bound);

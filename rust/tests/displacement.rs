@@ -28,7 +28,7 @@ fn plane(half: f32, n: i32) -> BilinearSurface {
 fn scene(displacement: Option<Displacement>, bound: f32) -> Scene {
     let mut scene = Scene::default();
     let mut mesh = Mesh::new("/ground", Arc::new(plane(2.0, 8)));
-    mesh.displacement = displacement;
+    mesh.displacement = displacement.map(Into::into);
     mesh.displacement_bound = bound;
     let m = scene.add_mesh(mesh);
     scene.add_instance(m, Mat4::IDENTITY);

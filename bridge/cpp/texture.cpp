@@ -1,0 +1,288 @@
+// OpenImageIO TextureSystem for mipray: MIP-mapped, filtered lookups through a private tile cache.
+// See include/texture.h.
+
+#include "mipray-bridge/include/texture.h"
+
+#include <algorithm>
+#include <atomic>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+
+#include <OpenImageIO/imagecache.h>
+#include <OpenImageIO/texture.h>
+#include <OpenImageIO/typedesc.h>
+#include <OpenImageIO/ustring.h>
+
+#include "mipray-bridge/src/ffi.rs.h"
+
+namespace mipray_bridge {
+namespace {
+
+using OIIO::TextureOpt;
+using OIIO::TextureSystem;
+
+// Every OiioTexSys gets an id never reused, so a thread's cached Perthread pointer can never be
+// taken for one of a later system allocated at the same address.
+std::atomic<uint64_t> g_next_id{1};
+
+// This thread's Perthread for the system it used last. The pointer is OpenImageIO's own
+// (get_perthread_info(nullptr)), which it frees when the thread or the cache ends; caching it only
+// spares the thread-specific-pointer lookup on every texture call.
+struct PerthreadCache {
+  uint64_t id = 0;
+  TextureSystem::Perthread* info = nullptr;
+};
+thread_local PerthreadCache t_perthread;
+
+std::string one_line(std::string s) {
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  std::replace(s.begin(), s.end(), '\n', ' ');
+  return s;
+}
+
+TextureOpt::Wrap wrap_of(uint8_t code) {
+  switch (code) {
+    case 1: return TextureOpt::WrapBlack;
+    case 2: return TextureOpt::WrapClamp;
+    case 3: return TextureOpt::WrapPeriodic;
+    case 4: return TextureOpt::WrapMirror;
+    default: return TextureOpt::WrapDefault;
+  }
+}
+
+// ImageCache statistics (imagecache.h, "Read-only attributes") under mipray's stats names, with
+// units where they could be mistaken. `type`: 0 int, 1 int64, 2 float.
+struct StatName {
+  const char* oiio;
+  const char* mipray;
+  int type;
+};
+constexpr StatName kCacheStats[] = {
+    {"stat:bytes_read", "bytes_read", 1},
+    {"stat:tiles_created", "tiles_read", 0},
+    {"stat:tiles_current", "tiles_current", 0},
+    {"stat:tiles_peak", "tiles_peak", 0},
+    {"stat:cache_memory_used", "cache_memory_used_bytes", 1},
+    {"stat:open_files_created", "open_files_created", 0},
+    {"stat:open_files_current", "open_files_current", 0},
+    {"stat:open_files_peak", "open_files_peak", 0},
+    {"stat:find_tile_calls", "find_tile_calls", 0},
+    {"stat:unique_files", "unique_files", 0},
+    {"stat:image_size", "image_size_bytes", 1},
+    {"stat:file_size", "file_size_bytes", 1},
+    {"stat:fileio_time", "fileio_time_s", 2},
+    {"stat:fileopen_time", "fileopen_time_s", 2},
+    {"stat:file_locking_time", "file_locking_time_s", 2},
+    {"stat:tile_locking_time", "tile_locking_time_s", 2},
+    {"stat:find_file_time", "find_file_time_s", 2},
+    {"stat:find_tile_time", "find_tile_time_s", 2},
+};
+
+// Per-file statistics (texture.h, get_texture_info).
+constexpr StatName kFileStats[] = {
+    {"stat:tilesread", "tiles_read", 1},
+    {"stat:bytesread", "bytes_read", 1},
+    {"stat:redundant_tiles", "redundant_tiles", 1},
+    {"stat:redundant_bytesread", "redundant_bytes_read", 1},
+    {"stat:timesopened", "times_opened", 0},
+    {"stat:iotime", "io_time_s", 2},
+};
+
+// Reads one statistic as a double, trying the documented type first and then the others (the
+// documentation and the implementation have disagreed on int vs int64 across releases).
+template <class Get>
+bool read_stat(int type, Get get, double& out) {
+  const int order[3][3] = {{0, 1, 2}, {1, 0, 2}, {2, 1, 0}};
+  for (int t : order[std::clamp(type, 0, 2)]) {
+    if (t == 0) {
+      int v = 0;
+      if (get(OIIO::TypeInt, &v)) {
+        out = double(v);
+        return true;
+      }
+    } else if (t == 1) {
+      int64_t v = 0;
+      if (get(OIIO::TypeInt64, &v)) {
+        out = double(v);
+        return true;
+      }
+    } else {
+      float v = 0;
+      if (get(OIIO::TypeFloat, &v)) {
+        out = double(v);
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+struct OiioTexSys::Impl {
+  OIIO::ImageCache* cache = nullptr;
+  TextureSystem* ts = nullptr;
+  uint64_t id = 0;
+  bool finest = false;
+  // Handle table: written under `open_mutex`, read lock-free. Slots never change once set.
+  std::unique_ptr<std::atomic<TextureSystem::TextureHandle*>[]> table;
+  uint32_t capacity = 0;
+  std::atomic<uint32_t> count{0};
+  std::mutex open_mutex;
+
+  ~Impl() {
+    if (ts) TextureSystem::destroy(ts);
+    if (cache) OIIO::ImageCache::destroy(cache);
+  }
+
+  TextureSystem::Perthread* perthread() const noexcept {
+    if (t_perthread.id != id) {
+      t_perthread.info = ts->get_perthread_info(nullptr);
+      t_perthread.id = id;
+    }
+    return t_perthread.info;
+  }
+
+  TextureSystem::TextureHandle* get(uint32_t handle) const noexcept {
+    if (handle >= count.load(std::memory_order_acquire)) return nullptr;
+    return table[handle].load(std::memory_order_acquire);
+  }
+};
+
+OiioTexSys::OiioTexSys() : impl(new Impl) {}
+OiioTexSys::~OiioTexSys() = default;
+
+std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& o) {
+  try {
+    if (!(o.max_memory_mb > 0.0f)) throw std::runtime_error("max_memory_mb must be positive");
+    if (o.max_textures == 0 || o.max_textures > (1u << 24))
+      throw std::runtime_error("max_textures must be within 1..=16777216");
+    auto sys = std::make_unique<OiioTexSys>();
+    OiioTexSys::Impl& m = *sys->impl;
+    m.id = g_next_id.fetch_add(1);
+    m.finest = o.finest;
+    // A private cache (shared = false), so this system's budget and statistics are its own.
+    m.cache = OIIO::ImageCache::create(false);
+    if (!m.cache) throw std::runtime_error("OpenImageIO could not create an ImageCache");
+    m.cache->attribute("max_memory_MB", o.max_memory_mb);
+    m.cache->attribute("max_open_files", std::max(o.max_open_files, 1));
+    // Untiled, un-MIP-mapped images still work (tiles and levels emulated), just less well than
+    // `maketx` output.
+    m.cache->attribute("autotile", std::max(o.autotile, 0));
+    m.cache->attribute("automip", o.automip ? 1 : 0);
+    m.ts = TextureSystem::create(false, m.cache);
+    if (!m.ts) throw std::runtime_error("OpenImageIO could not create a TextureSystem");
+    m.capacity = o.max_textures;
+    m.table.reset(new std::atomic<TextureSystem::TextureHandle*>[m.capacity]);
+    for (uint32_t i = 0; i < m.capacity; ++i) m.table[i].store(nullptr, std::memory_order_relaxed);
+    return sys;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while creating the texture system");
+  }
+}
+
+uint32_t OiioTexSys::open(rust::Str path_in) const {
+  try {
+    Impl& m = *impl;
+    const std::string path(path_in.data(), path_in.size());
+    std::lock_guard<std::mutex> lock(m.open_mutex);
+    const uint32_t n = m.count.load(std::memory_order_relaxed);
+    if (n >= m.capacity)
+      throw std::runtime_error("too many textures (max_textures = " + std::to_string(m.capacity) +
+                               ")");
+    TextureSystem::Perthread* pt = m.perthread();
+    TextureSystem::TextureHandle* h = m.ts->get_texture_handle(OIIO::ustring(path), pt);
+    // Reading the resolution opens the file and its header: a missing or unreadable file fails
+    // here, once, rather than on every lookup.
+    int res[2] = {0, 0};
+    if (!h || !m.ts->good(h) ||
+        !m.ts->get_texture_info(h, pt, 0, OIIO::ustring("resolution"),
+                                OIIO::TypeDesc(OIIO::TypeDesc::INT, 2), res)) {
+      std::string err = one_line(m.ts->geterror());
+      throw std::runtime_error(err.empty() ? "cannot be opened as a texture" : err);
+    }
+    m.table[n].store(h, std::memory_order_release);
+    m.count.store(n + 1, std::memory_order_release);
+    return n;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while opening the texture");
+  }
+}
+
+bool OiioTexSys::sample(const OiioLookup& l, rust::Slice<float> out) const noexcept {
+  try {
+    const Impl& m = *impl;
+    TextureSystem::TextureHandle* h = m.get(l.handle);
+    if (!h || out.empty() || out.size() > 64) return false;
+    TextureOpt opt;
+    opt.firstchannel = l.first_channel;
+    opt.swrap = wrap_of(l.wrap_s);
+    opt.twrap = wrap_of(l.wrap_t);
+    opt.fill = l.fill;
+    if (m.finest) {
+      // The §6.3.3 experiment: the finest level only (the Rust side zeroes the derivatives).
+      opt.mipmode = TextureOpt::MipModeNoMIP;
+      opt.interpmode = TextureOpt::InterpBilinear;
+    }
+    // mipray's t runs up the image (USD); OpenImageIO's runs down from the first scanline.
+    return m.ts->texture(h, m.perthread(), opt, l.s, 1.0f - l.t, l.dsdx, -l.dtdx, l.dsdy, -l.dtdy,
+                         int(out.size()), out.data());
+  } catch (...) {
+    return false;
+  }
+}
+
+bool OiioTexSys::resolution(uint32_t handle, rust::Slice<int32_t> out) const noexcept {
+  try {
+    const Impl& m = *impl;
+    TextureSystem::TextureHandle* h = m.get(handle);
+    if (!h || out.size() < 2) return false;
+    int res[2] = {0, 0};
+    if (!m.ts->get_texture_info(h, m.perthread(), 0, OIIO::ustring("resolution"),
+                                OIIO::TypeDesc(OIIO::TypeDesc::INT, 2), res))
+      return false;
+    out[0] = res[0];
+    out[1] = res[1];
+    return true;
+  } catch (...) {
+    return false;
+  }
+}
+
+rust::Vec<OiioStat> OiioTexSys::cache_stats() const {
+  rust::Vec<OiioStat> out;
+  for (const StatName& s : kCacheStats) {
+    double v = 0;
+    auto get = [&](OIIO::TypeDesc t, void* p) { return impl->cache->getattribute(s.oiio, t, p); };
+    if (read_stat(s.type, get, v)) out.push_back(OiioStat{rust::String(s.mipray), v});
+  }
+  return out;
+}
+
+rust::Vec<OiioStat> OiioTexSys::file_stats(uint32_t handle) const {
+  rust::Vec<OiioStat> out;
+  TextureSystem::TextureHandle* h = impl->get(handle);
+  if (!h) return out;
+  TextureSystem::Perthread* pt = impl->perthread();
+  for (const StatName& s : kFileStats) {
+    double v = 0;
+    auto get = [&](OIIO::TypeDesc t, void* p) {
+      return impl->ts->get_texture_info(h, pt, 0, OIIO::ustring(s.oiio), t, p);
+    };
+    if (read_stat(s.type, get, v)) out.push_back(OiioStat{rust::String(s.mipray), v});
+  }
+  return out;
+}
+
+rust::String OiioTexSys::report(int32_t level) const {
+  return rust::String(impl->ts->getstats(std::clamp(level, 1, 5), true));
+}
+
+rust::String OiioTexSys::take_error() const { return rust::String(one_line(impl->ts->geterror())); }
+
+}  // namespace mipray_bridge

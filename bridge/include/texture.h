@@ -1,0 +1,53 @@
+// OpenImageIO TextureSystem side of mipray's bridge: filtered MIP-map lookups behind a private,
+// bounded tile cache, for texture displacement and texture shading.
+//
+// One OiioTexSys owns one ImageCache and one TextureSystem built on it (neither is OpenImageIO's
+// process-wide shared one), so two samplers never share tiles or statistics. Lookups are `const`
+// and `noexcept` and may run on any number of threads at once: OpenImageIO's TextureSystem is
+// thread safe, its per-thread state is fetched once per thread and cached, and the handle table
+// is read lock-free. Functions that can fail throw std::runtime_error, which the cxx shim turns
+// into a Rust `Err`; nothing else escapes.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+
+#include "rust/cxx.h"
+
+namespace mipray_bridge {
+
+struct OiioTexOptions;
+struct OiioLookup;
+struct OiioStat;
+
+// Opaque to Rust.
+class OiioTexSys {
+ public:
+  OiioTexSys();
+  ~OiioTexSys();
+  OiioTexSys(const OiioTexSys&) = delete;
+  OiioTexSys& operator=(const OiioTexSys&) = delete;
+
+  // Opens the texture and returns its index in the handle table. Throws naming the reason when
+  // the file cannot be read or the table is full.
+  uint32_t open(rust::Str path) const;
+  // One filtered lookup; false (with `out` unspecified) for a bad handle or a failed read.
+  bool sample(const OiioLookup& lookup, rust::Slice<float> out) const noexcept;
+  // Resolution of the finest level into out[0..2]; false if unknown.
+  bool resolution(uint32_t handle, rust::Slice<int32_t> out) const noexcept;
+  // The ImageCache's statistics, under mipray's names (see texture.cpp).
+  rust::Vec<OiioStat> cache_stats() const;
+  // One file's statistics (tiles and bytes read, re-reads, I/O time).
+  rust::Vec<OiioStat> file_stats(uint32_t handle) const;
+  // OpenImageIO's own statistics report, for logs.
+  rust::String report(int32_t level) const;
+  // The calling thread's pending OpenImageIO error message (and clears it); empty if none.
+  rust::String take_error() const;
+
+  struct Impl;
+  std::unique_ptr<Impl> impl;
+};
+
+std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& options);
+
+}  // namespace mipray_bridge
