@@ -28,15 +28,17 @@ struct Args {
     runs: usize,
     grid: (usize, usize),
     face_res: usize,
+    /// Only these configurations, e.g. `unbounded,multires:30` (default: all eleven).
+    configs: Option<Vec<(String, f64)>>,
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--grid X,Y] [--face-res N]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)");
+    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--grid X,Y] [--face-res N] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)");
     std::process::exit(2)
 }
 
 fn parse(args: &[String]) -> Args {
-    let mut a = Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 1, grid: (24, 20), face_res: 13 };
+    let mut a = Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 1, grid: (24, 20), face_res: 13, configs: None };
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
@@ -47,6 +49,18 @@ fn parse(args: &[String]) -> Args {
             "--ao" => a.ao = v().parse().unwrap_or_else(|_| usage()),
             "--runs" => a.runs = v().parse().unwrap_or_else(|_| usage()),
             "--face-res" => a.face_res = v().parse().unwrap_or_else(|_| usage()),
+            "--configs" => {
+                let list = v()
+                    .split(',')
+                    .map(|c| {
+                        let mut it = c.splitn(2, ':');
+                        let mode = it.next().unwrap_or_default().to_string();
+                        let mb = it.next().map_or(Ok(0.0), str::parse::<f64>).unwrap_or_else(|_| usage());
+                        (mode, mb)
+                    })
+                    .collect();
+                a.configs = Some(list);
+            }
             "--grid" => {
                 let s = v();
                 let mut p = s.split(',').map(|x| x.parse::<usize>().unwrap_or_else(|_| usage()));
@@ -145,6 +159,10 @@ fn main() {
     for mb in BUDGETS_MB {
         configs.push(("single".into(), mb));
         configs.push(("multires".into(), mb));
+    }
+    if let Some(only) = a.configs.clone() {
+        // The image comparison needs the unbounded reference first.
+        configs = std::iter::once(("unbounded".to_string(), 0.0)).chain(only.into_iter().filter(|(m, _)| m != "unbounded")).collect();
     }
     let mut rows: Vec<Value> = Vec::new();
     let t_all = Instant::now();
