@@ -11,6 +11,19 @@ frames 1–24; a sphere-like cage with a hole — on a polygonal ground plane
 casts shadows at an angle plus a shadowless fill, shaded with
 UsdPreviewSurface ``diffuseColor``. It renders at 320 pixels in seconds.
 
+``forest.usda``: a PointInstancer forest — 3,000 instances of three
+subdivision prototypes (a conifer, a broadleaf tree, a rock), as 50 groves of
+60 placed by an outer PointInstancer (nested instancing keeps the file
+small). The renderer holds each prototype's geometry once: the stats report
+3,000 instances and three prototypes' subpatches.
+
+``render_settings.usda``: a scene that says how to render itself — a
+UsdRender.Settings prim (the stage's ``renderSettingsPrimPath``) with its
+resolution, a camera other than ``main_cam``, and two products whose
+RenderVars ask for the color, alpha, depth, normal, primId and instanceId
+AOVs. Its objects show GeomSubsets bound to their own materials, per-face and
+per-vertex ``displayColor``, and native instances of one prototype.
+
 The output is deterministic (coordinates rounded to 6 decimals), so the
 committed .usda files are exactly what this script writes.
 """
@@ -18,10 +31,11 @@ committed .usda files are exactly what this script writes.
 from __future__ import annotations
 
 import math
+import random
 import sys
 from pathlib import Path
 
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade, Vt
 
 HERE = Path(__file__).resolve().parent
 
@@ -45,6 +59,7 @@ def _round(points: list[tuple[float, float, float]]) -> list[Gf.Vec3f]:
 
 
 def _material(stage: Usd.Stage, name: str, rgb: tuple[float, float, float]) -> UsdShade.Material:
+    UsdGeom.Scope.Define(stage, "/World/Looks")
     material = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
     shader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/PreviewSurface")
     shader.CreateIdAttr("UsdPreviewSurface")
@@ -60,7 +75,7 @@ def _mesh(
     points: list[tuple[float, float, float]],
     counts: list[int],
     indices: list[int],
-    material: UsdShade.Material,
+    material: UsdShade.Material | None,
     scheme: str = "catmullClark",
 ) -> UsdGeom.Mesh:
     mesh = UsdGeom.Mesh.Define(stage, path)
@@ -71,7 +86,8 @@ def _mesh(
     xs, ys, zs = zip(*points, strict=True)
     lo, hi = Gf.Vec3f(min(xs), min(ys), min(zs)), Gf.Vec3f(max(xs), max(ys), max(zs))
     mesh.CreateExtentAttr([lo, hi])
-    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+    if material is not None:
+        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
     return mesh
 
 
@@ -190,7 +206,249 @@ def subdiv_showcase(path: Path) -> None:
     stage.GetRootLayer().Save()
 
 
-EXAMPLES = {"subdiv_showcase.usda": subdiv_showcase}
+def _new_stage(path: Path, documentation: str) -> Usd.Stage:
+    """A new Y-up, metre stage with /World as its default prim."""
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.GetRootLayer().documentation = documentation
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    return stage
+
+
+def _look_at_camera(
+    stage: Usd.Stage,
+    path: str,
+    eye: tuple[float, float, float],
+    target: tuple[float, float, float],
+    focal_length: float = 35.0,
+) -> UsdGeom.Camera:
+    """A 36×24 mm camera at ``eye`` looking at ``target``, Y up."""
+    camera = UsdGeom.Camera.Define(stage, path)
+    camera.CreateFocalLengthAttr(focal_length)
+    camera.CreateHorizontalApertureAttr(36.0)
+    camera.CreateVerticalApertureAttr(24.0)
+    camera.CreateClippingRangeAttr(Gf.Vec2f(0.1, 500.0))
+    view = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*eye), Gf.Vec3d(*target), Gf.Vec3d(0, 1, 0))
+    rounded = [[round(v, 6) + 0.0 for v in row] for row in view.GetInverse()]
+    camera.AddTransformOp().Set(Gf.Matrix4d(rounded))
+    return camera
+
+
+def _sun_and_fill(stage: Usd.Stage, key: float = 3.0) -> None:
+    """A shadow-casting key light from the upper left and a shadowless fill."""
+    sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
+    sun.CreateIntensityAttr(key)
+    sun.CreateAngleAttr(1.0)
+    sun.CreateColorAttr(Gf.Vec3f(1.0, 0.96, 0.9))
+    UsdLux.ShadowAPI.Apply(sun.GetPrim()).CreateShadowEnableAttr(True)
+    sun.AddRotateXYZOp().Set(Gf.Vec3f(-50.0, -35.0, 0.0))
+    fill = UsdLux.DistantLight.Define(stage, "/World/Lights/Fill")
+    fill.CreateIntensityAttr(0.6)
+    fill.CreateColorAttr(Gf.Vec3f(0.85, 0.9, 1.0))
+    UsdLux.ShadowAPI.Apply(fill.GetPrim()).CreateShadowEnableAttr(False)
+    fill.AddRotateXYZOp().Set(Gf.Vec3f(-20.0, 60.0, 0.0))
+
+
+def _box(sx: float, sy: float, sz: float, y0: float = 0.0, top: float = 1.0) -> list:
+    """A cube cage from y0 to y0 + sy, sx × sz at the bottom, its top face scaled by ``top``."""
+    points = []
+    for x, y, z in CUBE_POINTS:
+        k = top if y > 0 else 1.0
+        points.append((x * sx / 2 * k, y0 + (y + 1) / 2 * sy, z * sz / 2 * k))
+    return points
+
+
+def _forest_prototypes(stage: Usd.Stage, root: str) -> list[str]:
+    """Conifer, broadleaf tree and rock prototypes under ``root``: subdivision surfaces."""
+    bark = _material(stage, "Bark", (0.3, 0.2, 0.12))
+    needles = _material(stage, "Needles", (0.08, 0.3, 0.12))
+    leaves = _material(stage, "Leaves", (0.25, 0.5, 0.12))
+    stone = _material(stage, "Stone", (0.45, 0.44, 0.42))
+    UsdGeom.Scope.Define(stage, root)
+    conifer = UsdGeom.Xform.Define(stage, f"{root}/Conifer")
+    _mesh(stage, f"{root}/Conifer/Trunk", _box(0.3, 1.0, 0.3), CUBE_COUNTS, CUBE_INDICES, bark)
+    crown = _box(2.0, 3.4, 2.0, y0=0.6, top=0.08)
+    _mesh(stage, f"{root}/Conifer/Crown", crown, CUBE_COUNTS, CUBE_INDICES, needles)
+    broadleaf = UsdGeom.Xform.Define(stage, f"{root}/Broadleaf")
+    trunk = _box(0.35, 1.6, 0.35, top=0.7)
+    _mesh(stage, f"{root}/Broadleaf/Trunk", trunk, CUBE_COUNTS, CUBE_INDICES, bark)
+    ball = _box(2.4, 2.2, 2.4, y0=1.2)
+    _mesh(stage, f"{root}/Broadleaf/Crown", ball, CUBE_COUNTS, CUBE_INDICES, leaves)
+    rock = _mesh(
+        stage,
+        f"{root}/Rock",
+        _box(1.0, 0.6, 0.8, y0=-0.1, top=0.7),
+        CUBE_COUNTS,
+        CUBE_INDICES,
+        stone,
+    )
+    rock.CreateCreaseIndicesAttr([0, 1, 7, 6, 0])
+    rock.CreateCreaseLengthsAttr([5])
+    rock.CreateCreaseSharpnessesAttr([2.0])
+    return [str(p.GetPath()) for p in (conifer, broadleaf)] + [str(rock.GetPath())]
+
+
+def _scatter(
+    rng: random.Random, count: int, half: float, scale: tuple[float, float]
+) -> tuple[list, list, list]:
+    """``count`` positions on y = 0 in [-half, half]², turns about Y and uniform scales."""
+    positions, orientations, scales = [], [], []
+    for _ in range(count):
+        x, z = (round(rng.uniform(-half, half), 3) + 0.0 for _ in range(2))
+        turn = rng.uniform(0.0, math.pi)
+        s = round(rng.uniform(*scale), 3)
+        positions.append(Gf.Vec3f(x, 0.0, z))
+        orientations.append(Gf.Quath(round(math.cos(turn), 3), 0.0, round(math.sin(turn), 3), 0.0))
+        scales.append(Gf.Vec3f(s, s, s))
+    return positions, orientations, scales
+
+
+def forest(path: Path) -> None:
+    """Write examples/forest.usda: 50 groves × 60 instances of three prototypes."""
+    stage = _new_stage(
+        path,
+        "mipray example: a PointInstancer forest, 3,000 instances of three subdivision "
+        "prototypes (nested: 50 groves of 60). Generated by examples/make_examples.py; "
+        "render with `make render EXAMPLE=forest`.",
+    )
+    rng = random.Random(2003)
+    ground = _material(stage, "Ground", (0.3, 0.28, 0.2))
+    UsdGeom.Scope.Define(stage, "/World/Geo")
+    _mesh(
+        stage,
+        "/World/Geo/Ground",
+        [(-60, 0, -60), (-60, 0, 60), (60, 0, 60), (60, 0, -60)],
+        [4],
+        [0, 1, 2, 3],
+        ground,
+        scheme="none",
+    )
+    outer = UsdGeom.PointInstancer.Define(stage, "/World/Geo/Forest")
+    grove = UsdGeom.PointInstancer.Define(stage, "/World/Geo/Forest/Prototypes/Grove")
+    kinds = _forest_prototypes(stage, "/World/Geo/Forest/Prototypes/Grove/Prototypes")
+    grove.CreatePrototypesRel().SetTargets([Sdf.Path(k) for k in kinds])
+    positions, orientations, scales = _scatter(rng, 60, 4.5, (0.6, 1.2))
+    grove.CreateProtoIndicesAttr([rng.choice((0, 0, 1, 1, 2)) for _ in range(60)])
+    grove.CreatePositionsAttr(positions)
+    grove.CreateOrientationsAttr(orientations)
+    grove.CreateScalesAttr(scales)
+    # Groves on a jittered 10 × 5 grid, each turned and scaled: 3,000 instances.
+    outer.CreatePrototypesRel().SetTargets([grove.GetPath()])
+    cells = [(i, j) for j in range(5) for i in range(10)]
+    outer.CreateProtoIndicesAttr([0] * len(cells))
+    outer.CreatePositionsAttr(
+        [
+            Gf.Vec3f(
+                round((i - 4.5) * 10 + rng.uniform(-1, 1), 3),
+                0.0,
+                round(-j * 10 + rng.uniform(-1, 1), 3),
+            )
+            for i, j in cells
+        ]
+    )
+    _, turns, sizes = _scatter(rng, len(cells), 0.0, (0.9, 1.1))
+    outer.CreateOrientationsAttr(turns)
+    outer.CreateScalesAttr(sizes)
+
+    _look_at_camera(stage, "/World/main_cam", (0.0, 9.0, 16.0), (0.0, 0.0, -14.0), 28.0)
+    _sun_and_fill(stage)
+    stage.GetRootLayer().Save()
+
+
+def _gem(stage: Usd.Stage, path: str, body: UsdShade.Material, top: UsdShade.Material) -> None:
+    """A subdivided cube whose top face is a GeomSubset bound to its own material."""
+    mesh = _mesh(stage, path, CUBE_POINTS, CUBE_COUNTS, CUBE_INDICES, body)
+    subset = UsdShade.MaterialBindingAPI(mesh.GetPrim()).CreateMaterialBindSubset(
+        "Top", Vt.IntArray([1])
+    )
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(top)
+
+
+def render_settings(path: Path) -> None:
+    """Write examples/render_settings.usda: UsdRender settings, several AOVs, subsets."""
+    stage = _new_stage(
+        path,
+        "mipray example: the stage says how to render itself (UsdRender.Settings: "
+        "resolution, camera, AOVs). Generated by examples/make_examples.py; render with "
+        "`mipray-record examples/render_settings.usda out/render_settings.exr`.",
+    )
+    grey = _material(stage, "Grey", (0.5, 0.5, 0.5))
+    blue = _material(stage, "Blue", (0.1, 0.25, 0.7))
+    red = _material(stage, "Red", (0.75, 0.1, 0.06))
+    gold = _material(stage, "Gold", (0.85, 0.62, 0.18))
+    UsdGeom.Scope.Define(stage, "/World/Geo")
+    _mesh(
+        stage,
+        "/World/Geo/Ground",
+        [(-10, 0, -10), (-10, 0, 10), (10, 0, 10), (10, 0, -10)],
+        [4],
+        [0, 1, 2, 3],
+        grey,
+        scheme="none",
+    )
+    # A block whose top is red and sides blue: a GeomSubset with its own material.
+    block = _mesh(stage, "/World/Geo/Block", CUBE_POINTS, CUBE_COUNTS, CUBE_INDICES, blue)
+    subset = UsdShade.MaterialBindingAPI(block.GetPrim()).CreateMaterialBindSubset(
+        "Top", Vt.IntArray([1])
+    )
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(red)
+    block.CreateCreaseIndicesAttr([2, 3, 5, 4, 2])
+    block.CreateCreaseLengthsAttr([5])
+    block.CreateCreaseSharpnessesAttr([10.0])
+    block.AddTranslateOp().Set(Gf.Vec3d(-2.4, 1.0, 0.0))
+    # A torus with no material: its displayColor, one colour per face (uniform).
+    points, counts, indices = torus_cage(0.9, 0.4, 12, 6)
+    torus = _mesh(stage, "/World/Geo/Torus", points, counts, indices, None)
+    palette = [(0.9, 0.3, 0.1), (0.95, 0.8, 0.2), (0.2, 0.6, 0.3), (0.2, 0.4, 0.9)]
+    colors = [palette[(i // 6 + i % 6) % 4] for i in range(len(counts))]
+    torus.CreateDisplayColorPrimvar(UsdGeom.Tokens.uniform).Set(colors)
+    torus.AddTranslateOp().Set(Gf.Vec3d(0.4, 0.9, 0.2))
+    torus.AddRotateXOp().Set(70.0)
+    # Native instances of one prototype (a gem with a gold top), in a row at the back.
+    UsdGeom.Xform.Define(stage, "/World/Prototypes/Gem")
+    stage.GetPrimAtPath("/World/Prototypes").SetSpecifier(Sdf.SpecifierClass)
+    _gem(stage, "/World/Prototypes/Gem/Body", blue, gold)
+    UsdGeom.Xform.Define(stage, "/World/Geo/Gems")
+    for i in range(5):
+        gem = UsdGeom.Xform.Define(stage, f"/World/Geo/Gems/Gem{i}")
+        gem.GetPrim().GetInherits().AddInherit("/World/Prototypes/Gem")
+        gem.GetPrim().SetInstanceable(True)
+        gem.AddTranslateOp().Set(Gf.Vec3d(-3.0 + 1.5 * i, 0.35, -3.0))
+        gem.AddRotateYOp().Set(15.0 * i)
+        gem.AddScaleOp().Set(Gf.Vec3f(0.35, 0.35, 0.35))
+
+    _look_at_camera(stage, "/World/main_cam", (0.0, 6.0, 12.0), (0.0, 0.6, -1.0))
+    _look_at_camera(stage, "/World/Cameras/Closeup", (1.5, 3.2, 6.0), (-0.6, 0.8, -1.0))
+    _sun_and_fill(stage)
+
+    # How to render: 480×270 through the close-up, beauty and data AOVs.
+    settings = UsdRender.Settings.Define(stage, "/Render/Settings")
+    settings.CreateResolutionAttr(Gf.Vec2i(480, 270))
+    settings.CreateCameraRel().SetTargets(["/World/Cameras/Closeup"])
+    settings.CreateIncludedPurposesAttr(["default", "render"])
+    products = {"Beauty": ["color", "alpha"], "Data": ["depth", "normal", "primId", "instanceId"]}
+    for name, sources in products.items():
+        product = UsdRender.Product.Define(stage, f"/Render/{name}")
+        product.CreateProductNameAttr(f"render_settings.{name.lower()}.exr")
+        targets = []
+        for source in sources:
+            var = UsdRender.Var.Define(stage, f"/Render/Vars/{source}")
+            var.CreateSourceNameAttr(source)
+            var.CreateDataTypeAttr("color3f" if source in ("color", "normal") else "float")
+            targets.append(var.GetPath())
+        product.CreateOrderedVarsRel().SetTargets(targets)
+        settings.GetProductsRel().AddTarget(product.GetPath())
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    stage.GetRootLayer().Save()
+
+
+EXAMPLES = {
+    "subdiv_showcase.usda": subdiv_showcase,
+    "forest.usda": forest,
+    "render_settings.usda": render_settings,
+}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -78,10 +78,20 @@ class FakeRenderDelegate:
         left_handed: bool = False,
         double_sided: bool = False,
         albedo: tuple[float, float, float] = (0.18, 0.18, 0.18),
+        prototype: bool = False,
+        face_albedos: NDArray[np.float32] | None = None,
+        face_albedo_indices: NDArray[np.int32] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
         if path in self.reject:
             raise ValueError(f"{path}: rejected by the fake delegate")
+        if (face_albedos is None) != (face_albedo_indices is None):
+            raise ValueError(f"{path}: face_albedos and face_albedo_indices go together")
+        if face_albedos is not None:
+            _check_array(path, "face_albedos", face_albedos, np.float32, 2)
+            _check_array(path, "face_albedo_indices", face_albedo_indices, np.int32, 1)
+            if len(face_albedo_indices) != len(face_vertex_counts):
+                raise ValueError(f"{path}: face_albedo_indices has the wrong length")
         _check_array(path, "points", points, np.float32, 2)
         _check_array(path, "face_vertex_counts", face_vertex_counts, np.int32, 1)
         _check_array(path, "face_vertex_indices", face_vertex_indices, np.int32, 1)
@@ -127,6 +137,36 @@ class FakeRenderDelegate:
         shadow_enable: bool = True,
     ) -> None:
         self._set("set_distant_light", path, dict(locals_without_self(locals())))
+
+    def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
+        call = self.prims.get(path)
+        if call is None or call.method != "set_mesh":
+            raise ValueError(f"{path}: set_transform: no mesh at this path")
+        _check_array(path, "transform", transform, np.float64, 2)
+        self.calls.append(Call("set_transform", path, {"transform": transform}))
+        call.kwargs = {**call.kwargs, "transform": transform}
+
+    def set_instancer(
+        self,
+        path: str,
+        *,
+        prototypes: list[str],
+        proto_indices: NDArray[np.int32],
+        transforms: NDArray[np.float64],
+        prototype: bool = False,
+    ) -> None:
+        _check_array(path, "proto_indices", proto_indices, np.int32, 1)
+        _check_array(path, "transforms", transforms, np.float64, 3)
+        if transforms.shape[1:] != (4, 4) or len(transforms) != len(proto_indices):
+            raise ValueError(f"{path}: transforms must be N×4×4 with N = len(proto_indices)")
+        if len(proto_indices) and (
+            proto_indices.min() < 0 or proto_indices.max() >= len(prototypes)
+        ):
+            raise ValueError(f"{path}: proto_indices out of range")
+        kwargs = dict(locals_without_self(locals()))
+        call = Call("set_instancer", path, kwargs)
+        self.calls.append(call)
+        self.prims[path] = call
 
     def remove(self, path: str) -> None:
         self.calls.append(Call("remove", path))
@@ -179,8 +219,46 @@ class FakeRenderDelegate:
         return [c for c in self.calls if c.path == path]
 
     def meshes(self) -> dict[str, dict[str, Any]]:
-        """Current meshes, path → set_mesh kwargs."""
-        return {p: c.kwargs for p, c in self.prims.items() if c.method == "set_mesh"}
+        """Current meshes rendered in place (not prototypes), path → set_mesh kwargs."""
+        return {
+            p: c.kwargs
+            for p, c in self.prims.items()
+            if c.method == "set_mesh" and not c.kwargs.get("prototype")
+        }
+
+    def prototypes(self) -> dict[str, dict[str, Any]]:
+        """Current prototype meshes, path → set_mesh kwargs."""
+        return {
+            p: c.kwargs
+            for p, c in self.prims.items()
+            if c.method == "set_mesh" and c.kwargs.get("prototype")
+        }
+
+    def instancers(self) -> dict[str, dict[str, Any]]:
+        """Current instancers, path → set_instancer kwargs."""
+        return {p: c.kwargs for p, c in self.prims.items() if c.method == "set_instancer"}
+
+    def placements(self) -> list[tuple[str, NDArray[np.float64]]]:
+        """Every mesh placement the scene makes, as the render delegate flattens it:
+        (mesh path, USD row-layout object-to-world matrix), nested instancers followed."""
+        out: list[tuple[str, NDArray[np.float64]]] = [
+            (p, kw["transform"]) for p, kw in self.meshes().items()
+        ]
+        instancers = self.instancers()
+
+        def expand(kw: dict[str, Any], parent: NDArray[np.float64], depth: int) -> None:
+            for index, matrix in zip(kw["proto_indices"], kw["transforms"], strict=True):
+                proto = kw["prototypes"][index]
+                world = matrix @ parent
+                if proto in instancers and depth < 8:
+                    expand(instancers[proto], world, depth + 1)
+                elif proto in self.prims and self.prims[proto].method == "set_mesh":
+                    out.append((proto, self.prims[proto].kwargs["transform"] @ world))
+
+        for kw in instancers.values():
+            if not kw["prototype"]:
+                expand(kw, np.eye(4), 0)
+        return out
 
 
 def locals_without_self(values: dict[str, Any]) -> dict[str, Any]:

@@ -6,10 +6,12 @@ import importlib.util
 import logging
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pxr import Usd, UsdGeom, UsdLux
 
-from mipray.usd import UsdSceneDelegate
+import mipray
+from mipray.usd import UsdSceneDelegate, read_render_settings
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -70,3 +72,59 @@ def test_subdiv_showcase_has_what_it_promises(fake, caplog) -> None:
     assert direction[1] < -0.5 and abs(direction[0]) > 0.1  # down, at an angle
     assert UsdLux.DistantLight(stage.GetPrimAtPath("/World/Lights/Sun"))
     assert UsdGeom.GetStageUpAxis(stage) == "Y"
+
+
+def test_forest_is_thousands_of_instances_of_a_few_prototypes(fake, caplog) -> None:
+    stage = Usd.Stage.Open(str(EXAMPLES / "forest.usda"))
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    assert scene.delegate_errors == []
+    assert not caplog.records
+    assert set(fake.meshes()) == {"/World/Geo/Ground"}
+    assert len(fake.prototypes()) == 5  # two trees of two meshes, and a rock
+    grove = fake.instancers()["/World/Geo/Forest/Prototypes/Grove"]
+    forest = fake.instancers()["/World/Geo/Forest"]
+    assert grove["prototype"] and not forest["prototype"]
+    trees_and_rocks = 50 * 60
+    assert len(forest["proto_indices"]) == 50
+    placements = fake.placements()
+    assert len(placements) > trees_and_rocks  # a tree is two mesh placements
+    assert {p for p, _ in placements} == {"/World/Geo/Ground", *fake.prototypes()}
+
+
+def test_forest_renders_with_shared_prototypes(native) -> None:
+    result = mipray.render(EXAMPLES / "forest.usda", width=64, aovs=("alpha",))
+    assert result.errors == []
+    scene = result.stats["scene"]
+    assert scene["instances"] > 5000
+    assert scene["control_faces"] == 5 * 6 + 1  # five prototype cages and the ground
+    assert result.aovs["alpha"].mean() > 0.5
+
+
+def test_render_settings_example_says_how_to_render_itself(fake, caplog) -> None:
+    stage = Usd.Stage.Open(str(EXAMPLES / "render_settings.usda"))
+    spec = read_render_settings(stage)
+    assert spec is not None and spec.path == "/Render/Settings"
+    assert spec.resolution == (480, 270)
+    assert spec.camera == "/World/Cameras/Closeup"
+    assert spec.aovs == ["color", "alpha", "depth", "normal", "primId", "instanceId"]
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    assert scene.delegate_errors == [] and not caplog.records
+    block = fake.meshes()["/World/Geo/Block"]
+    assert len(block["face_albedos"]) == 2  # blue sides, a red top (a GeomSubset)
+    assert len(fake.meshes()["/World/Geo/Torus"]["face_albedos"]) == 4  # uniform displayColor
+    assert len([p for p, _ in fake.placements() if "Gem" in p or "Prototype" in p]) == 5
+
+
+def test_render_settings_example_renders_its_aovs(native, tmp_path: Path) -> None:
+    from mipray import record
+
+    out = tmp_path / "rs.exr"
+    assert record.main([str(EXAMPLES / "render_settings.usda"), str(out), "-w", "120"]) == 0
+    pixels, names = native.read_image(str(out))
+    assert pixels.shape[:2] == (68, 120)  # the settings' 16:9, 120 wide
+    assert {"R", "A", "Z", "N.x", "primId", "instanceId"} <= set(names)
+    assert np.isfinite(pixels).all()

@@ -66,6 +66,8 @@ def test_stub_declares_the_protocol() -> None:
     sigs = stub_signatures()
     assert set(sigs) == {
         "RenderDelegate.set_mesh",
+        "RenderDelegate.set_transform",
+        "RenderDelegate.set_instancer",
         "RenderDelegate.set_camera",
         "RenderDelegate.set_distant_light",
         "RenderDelegate.remove",

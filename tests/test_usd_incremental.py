@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from pxr import Gf, Sdf, UsdGeom
 
 from mipray.usd import UsdSceneDelegate
@@ -136,3 +137,33 @@ def test_unwatch_stops_tracking(fake) -> None:
     cubes["A"].GetOrderedXformOps()[0].Set(Gf.Vec3d(9, 9, 9))
     scene.sync()
     assert scene.sync_counts["/World/A"] == 1
+
+
+def test_transform_edit_sends_only_the_transform(fake) -> None:
+    stage, cubes, scene = scene_with_three_cubes(fake)
+    cubes["B"].GetOrderedXformOps()[0].Set(Gf.Vec3d(7, 0, 0))
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World")).AddRotateYOp().Set(10.0)
+    scene.sync()
+    # Points and topology are not read or sent again for a move.
+    for name in ("A", "B", "C"):
+        assert [c.method for c in fake.calls_for(f"/World/{name}")] == ["set_mesh", "set_transform"]
+    # A move and a data edit together: the data wins, with the new transform.
+    cubes["A"].GetOrderedXformOps()[0].Set(Gf.Vec3d(0, 3, 0))
+    cubes["A"].GetPointsAttr().Set([(2 * x, y, z) for x, y, z in cubes["A"].GetPointsAttr().Get()])
+    scene.sync()
+    assert fake.calls_for("/World/A")[-1].method == "set_mesh"
+    assert fake.meshes()["/World/A"]["transform"][3, 1] == pytest.approx(3.0)
+
+
+def test_animated_transform_sends_only_the_transform(fake) -> None:
+    stage = new_stage()
+    moving = add_cube(stage, "/Moving")
+    op = moving.AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 0), 1.0)
+    op.Set(Gf.Vec3d(10, 0, 0), 11.0)
+    scene = UsdSceneDelegate(stage, fake, time=1.0)
+    scene.sync()
+    scene.set_time(6.0)
+    scene.sync()
+    assert [c.method for c in fake.calls_for("/Moving")] == ["set_mesh", "set_transform"]
+    assert fake.meshes()["/Moving"]["transform"][3, 0] == pytest.approx(5.0)

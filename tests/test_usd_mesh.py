@@ -180,15 +180,19 @@ def test_diffuse_through_a_material_interface_input_is_constant(fake) -> None:
     assert fake.meshes()["/Cube"]["albedo"] == pytest.approx((0.3, 0.4, 0.5))
 
 
-def test_albedo_from_constant_display_color_else_grey(fake) -> None:
+def test_albedo_from_display_color_else_grey(fake) -> None:
     stage = new_stage()
     one = add_cube(stage, "/One")
     one.CreateDisplayColorAttr([(0.9, 0.5, 0.1)])
     many = add_cube(stage, "/Many")
     many.CreateDisplayColorPrimvar(UsdGeom.Tokens.uniform).Set([(1, 0, 0)] * 6)
+    add_cube(stage, "/None")
     sync(stage, fake)
     assert fake.meshes()["/One"]["albedo"] == pytest.approx((0.9, 0.5, 0.1))
-    assert fake.meshes()["/Many"]["albedo"] == pytest.approx((0.18, 0.18, 0.18))
+    # The same colour on every face is one albedo, no per-face table.
+    assert fake.meshes()["/Many"]["albedo"] == pytest.approx((1.0, 0.0, 0.0))
+    assert fake.meshes()["/Many"]["face_albedos"] is None
+    assert fake.meshes()["/None"]["albedo"] == pytest.approx((0.18, 0.18, 0.18))
 
 
 def test_time_sampled_points_are_read_at_the_time_code(fake) -> None:

@@ -77,7 +77,7 @@ def test_walk_agrees_with_compute_visibility_and_purpose(fake) -> None:
     assert "/A/B/C/D/Mesh" in expected and "/A/B/C/Mesh" not in expected
 
 
-def test_native_instances_render_as_instance_proxies(fake) -> None:
+def test_native_instances_share_their_prototype(fake) -> None:
     stage = new_stage()
     proto = UsdGeom.Xform.Define(stage, "/Prototypes/Thing")
     stage.GetPrimAtPath("/Prototypes").SetSpecifier(Sdf.SpecifierClass)
@@ -89,7 +89,10 @@ def test_native_instances_render_as_instance_proxies(fake) -> None:
         inst.GetPrim().SetInstanceable(True)
     assert stage.GetPrimAtPath("/World/Thing0").IsInstance()
     UsdSceneDelegate(stage, fake).sync()
-    meshes = fake.meshes()
-    assert set(meshes) == {f"/World/Thing{i}/Body" for i in range(3)}
-    xs = sorted(m["transform"][3, 0] for m in meshes.values())
+    assert fake.meshes() == {}  # nothing renders in place
+    prototype = str(stage.GetPrimAtPath("/World/Thing0").GetPrototype().GetPath())
+    assert set(fake.prototypes()) == {f"{prototype}/Body"}  # one mesh for three instances
+    placements = fake.placements()
+    assert {p for p, _ in placements} == {f"{prototype}/Body"}
+    xs = sorted(m[3, 0] for _, m in placements)
     np.testing.assert_allclose(xs, [0.0, 3.0, 6.0])

@@ -12,12 +12,14 @@ pub mod camera;
 pub mod config;
 pub mod dirty_bits;
 pub mod error;
+pub mod instancer;
 pub mod light;
 pub mod material;
 pub mod mesh;
 pub mod render_buffer;
 pub mod render_delegate;
 pub mod render_pass;
+pub mod subdiv_compare;
 
 pub use config::RenderSettings;
 pub use error::DelegateError;

@@ -14,3 +14,34 @@ pub fn mesh_material(path: &str, albedo: [f32; 3], mirror: [f32; 3]) -> Material
     }
     mat
 }
+
+/// Per-face diffuse colours of a mesh: faces of GeomSubsets bound to their own materials, or a
+/// `displayColor` with uniform (or per-vertex, averaged per face) interpolation.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FaceAlbedo {
+    /// The distinct colours, linear RGB in [0, 1].
+    pub albedos: Vec<[f32; 3]>,
+    /// Per control face (USD face order, holes included): an index into `albedos`, or −1 for
+    /// the mesh's own albedo.
+    pub indices: Vec<i32>,
+}
+
+impl FaceAlbedo {
+    /// Checks the table against a mesh of `face_count` faces.
+    ///
+    /// # Errors
+    /// A one-line reason: the wrong number of indices, an index out of range, or a colour
+    /// that is not finite.
+    pub fn validate(&self, face_count: usize) -> Result<(), String> {
+        if self.indices.len() != face_count {
+            return Err(format!("face_albedo_indices has {} entries for {face_count} faces", self.indices.len()));
+        }
+        if let Some((i, v)) = self.indices.iter().enumerate().find(|(_, v)| **v < -1 || **v as i64 >= self.albedos.len() as i64) {
+            return Err(format!("face_albedo_indices[{i}] = {v} is out of range for {} face albedos", self.albedos.len()));
+        }
+        if let Some((i, c)) = self.albedos.iter().enumerate().find(|(_, c)| !c.iter().all(|x| x.is_finite())) {
+            return Err(format!("face_albedos[{i}] = {c:?} is not finite"));
+        }
+        Ok(())
+    }
+}

@@ -1,8 +1,11 @@
 //! The render delegate: the prims it supports, insert / mark dirty / sync / remove, and the flat
-//! scene a render pass hands to the core.
+//! scene a render pass hands to the core. Instancers ([`crate::instancer`]) are flattened there:
+//! one core mesh per prototype, one core instance per placement.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
+
+use glam::Mat4;
 
 use mipray::geometry_cache::{CacheConfig, GeometryCache};
 use mipray::tessellate::Tessellation;
@@ -10,13 +13,17 @@ use mipray::tessellate::Tessellation;
 use mipray::scene::{Mesh, Scene};
 
 use crate::camera::{Camera, CameraPrim};
+use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
+use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
 use crate::light::{DistantLightData, LightPrim};
 use crate::material::mesh_material;
 use crate::mesh::{MeshData, MeshPrim};
 
 /// Rprim types the delegate renders.
 pub const RPRIM_TYPES: &[&str] = &["mesh"];
+/// Instancer types (Hydra keeps instancers beside the prim types).
+pub const INSTANCER_TYPES: &[&str] = &["instancer"];
 /// Sprim types the delegate understands.
 pub const SPRIM_TYPES: &[&str] = &["camera", "distantLight"];
 /// Bprim types.
@@ -28,6 +35,7 @@ pub struct RenderDelegate {
     meshes: BTreeMap<String, MeshPrim>,
     cameras: BTreeMap<String, CameraPrim>,
     lights: BTreeMap<String, LightPrim>,
+    instancers: BTreeMap<String, InstancerPrim>,
     next_cache_id: u32,
     /// Kept between renders while the cache settings stay the same, so an edit to one prim
     /// costs only that prim's tessellations.
@@ -55,6 +63,35 @@ impl RenderDelegate {
         }
     }
 
+    /// Moves a mesh: a new object-to-world transform (for a prototype mesh: to its prototype's
+    /// root) without resending its points. Rebuilds nothing and keeps its cache entries.
+    ///
+    /// # Errors
+    /// No mesh at `path`, or a transform that is not finite.
+    pub fn set_transform(&mut self, path: &str, transform: Mat4) -> Result<(), DelegateError> {
+        let m = self.meshes.get_mut(path).ok_or_else(|| DelegateError::prim(path, "set_transform: no mesh at this path"))?;
+        if !transform.is_finite() {
+            return Err(DelegateError::prim(path, "transform is not finite"));
+        }
+        if m.data.transform != transform {
+            m.data.transform = transform;
+            m.dirty = m.dirty | DirtyBits::TRANSFORM;
+        }
+        Ok(())
+    }
+
+    /// Inserts or replaces an instancer. Its prototypes need not exist yet: they are looked up
+    /// when a render pass syncs.
+    pub fn set_instancer(&mut self, path: &str, data: InstancerData) {
+        let updates = self.instancers.get(path).map_or(0, |i| i.updates) + 1;
+        self.instancers.insert(path.to_string(), InstancerPrim { path: path.to_string(), data, updates });
+    }
+
+    /// The instancer at `path`, if any.
+    pub fn instancer(&self, path: &str) -> Option<&InstancerPrim> {
+        self.instancers.get(path)
+    }
+
     /// Inserts or replaces a camera.
     pub fn set_camera(&mut self, path: &str, camera: Camera) {
         self.cameras.insert(path.to_string(), CameraPrim { path: path.to_string(), camera });
@@ -71,7 +108,7 @@ impl RenderDelegate {
         if let (Some(m), Some((_, cache))) = (&mesh, &self.cache) {
             cache.invalidate_mesh(m.cache_id);
         }
-        mesh.is_some() | self.cameras.remove(path).is_some() | self.lights.remove(path).is_some()
+        mesh.is_some() | self.cameras.remove(path).is_some() | self.lights.remove(path).is_some() | self.instancers.remove(path).is_some()
     }
 
     /// The geometry cache for `config`: the one kept from earlier renders if its settings are
@@ -89,7 +126,7 @@ impl RenderDelegate {
 
     /// Every prim path held, sorted.
     pub fn prim_paths(&self) -> Vec<String> {
-        let mut v: Vec<String> = self.meshes.keys().chain(self.cameras.keys()).chain(self.lights.keys()).cloned().collect();
+        let mut v: Vec<String> = self.meshes.keys().chain(self.cameras.keys()).chain(self.lights.keys()).chain(self.instancers.keys()).cloned().collect();
         v.sort();
         v
     }
@@ -99,6 +136,8 @@ impl RenderDelegate {
     }
 
     /// Syncs every dirty prim. A prim that fails is skipped (and reported); the rest sync.
+    /// Instancers whose prototypes are missing are reported on every sync, as they stay broken
+    /// until a prototype appears.
     pub fn sync(&mut self) -> Vec<DelegateError> {
         let mut errors = Vec::new();
         for m in self.meshes.values_mut() {
@@ -119,6 +158,11 @@ impl RenderDelegate {
                 }
             }
         }
+        let meshes = &self.meshes;
+        for e in check_references(&self.instancers, &|p| meshes.contains_key(p)) {
+            log::error!("{e}");
+            errors.push(e);
+        }
         errors
     }
 
@@ -133,22 +177,50 @@ impl RenderDelegate {
             DelegateError::prim(camera_path, format!("no such camera (cameras: {})", if known.is_empty() { "none".into() } else { known.join(", ") }))
         })?;
         let mut scene = Scene { camera: cam.camera.clone(), ..Default::default() };
-        for m in self.meshes.values() {
-            // A mesh without a surface failed to sync (or was never synced): left out.
-            let Some(surface) = &m.surface else { continue };
-            let mat = scene.add_material(mesh_material(&m.path, m.data.albedo, m.data.mirror));
-            let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
-            mesh.material = mat;
-            mesh.generation = m.generation;
-            mesh.cache_id = Some(m.cache_id);
-            mesh.left_handed = m.data.topology.left_handed;
-            mesh.displacement = m.data.displacement;
-            // The authored bound, else the procedural displacement's exact one, else the setting.
-            mesh.displacement_bound = m.data.displacement_bound.or(m.data.displacement.map(|d| d.bound())).unwrap_or(default_displacement_bound);
-            let idx = scene.add_mesh(mesh);
-            scene.add_instance(idx, m.data.transform);
+        // Core mesh index per prim path, added on first placement: a prototype nobody places
+        // costs nothing, and one placed 10,000 times is one core mesh.
+        let mut index: HashMap<&str, Option<usize>> = HashMap::new();
+        let mut place = |scene: &mut Scene, path: &str, transform: Mat4| {
+            let Some((path, m)) = self.meshes.get_key_value(path) else { return };
+            let slot = *index.entry(path.as_str()).or_insert_with(|| self.core_mesh(m, default_displacement_bound, scene));
+            if let Some(idx) = slot {
+                // Prototype meshes sit in their prototype's space: instance × mesh transform.
+                scene.add_instance(idx, transform * m.data.transform);
+            }
+        };
+        for m in self.meshes.values().filter(|m| !m.data.prototype) {
+            place(&mut scene, &m.path, Mat4::IDENTITY);
+        }
+        let is_mesh = |p: &str| self.meshes.contains_key(p);
+        for inst in self.instancers.values().filter(|i| !i.data.prototype) {
+            expand(&self.instancers, inst, Mat4::IDENTITY, &is_mesh, &mut |p, t| place(&mut scene, p, t));
         }
         scene.lights = self.lights.values().map(LightPrim::to_light).collect();
         Ok(scene)
+    }
+
+    /// Adds mesh prim `m` (its materials too) to `scene` as a core mesh; `None` when it has no
+    /// synced surface (it failed to sync, or was never synced) and is left out.
+    fn core_mesh(&self, m: &MeshPrim, default_displacement_bound: f32, scene: &mut Scene) -> Option<usize> {
+        let surface = m.surface.as_ref()?;
+        let mat = scene.add_material(mesh_material(&m.path, m.data.albedo, m.data.mirror));
+        let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
+        mesh.material = mat;
+        if let Some(fa) = &m.data.face_albedo {
+            let first = scene.materials.len();
+            for (k, albedo) in fa.albedos.iter().enumerate() {
+                // Face materials are lambertian: a subset's material does not inherit the mesh's mirror.
+                scene.add_material(mesh_material(&format!("{}[{k}]", m.path), *albedo, [0.0; 3]));
+            }
+            let table: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
+            mesh.face_materials = Some(table.into());
+        }
+        mesh.generation = m.generation;
+        mesh.cache_id = Some(m.cache_id);
+        mesh.left_handed = m.data.topology.left_handed;
+        mesh.displacement = m.data.displacement.map(Into::into);
+        // The authored bound, else the procedural displacement's exact one, else the setting.
+        mesh.displacement_bound = m.data.displacement_bound.or(m.data.displacement.map(|d| d.bound())).unwrap_or(default_displacement_bound);
+        Some(scene.add_mesh(mesh))
     }
 }

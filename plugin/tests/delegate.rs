@@ -35,7 +35,7 @@ fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
 }
 
 fn data(topology: MeshTopology, points: Vec<[f32; 3]>, transform: Mat4) -> MeshData {
-    MeshData { topology, points, transform, double_sided: false, albedo: [0.5; 3], mirror: [0.0; 3], displacement_bound: None, displacement: None }
+    MeshData { topology, points, transform, albedo: [0.5; 3], ..Default::default() }
 }
 
 fn delegate_with_camera(eye: Vec3, target: Vec3) -> RenderDelegate {

@@ -56,6 +56,9 @@ class RenderDelegate:
         left_handed: bool = False,
         double_sided: bool = False,
         albedo: tuple[float, float, float] = (0.18, 0.18, 0.18),
+        prototype: bool = False,
+        face_albedos: NDArray[np.float32] | None = None,
+        face_albedo_indices: NDArray[np.int32] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -79,9 +82,68 @@ class RenderDelegate:
             left_handed: True when USD ``orientation`` is ``leftHanded``.
             double_sided: USD ``doubleSided``.
             albedo: linear diffuse reflectance, each in [0, 1].
+            prototype: a prototype of instancers (:meth:`set_instancer`): it
+                renders only where an instancer places it, and ``transform``
+                is then relative to its prototype's root.
+            face_albedos: (M, 3) float32 per-face diffuse colours (GeomSubsets
+                bound to their own materials, per-face ``displayColor``).
+            face_albedo_indices: (F,) int32, one per face in USD face order
+                (holes included): an index into ``face_albedos``, or -1 for
+                ``albedo``. Given together with ``face_albedos``.
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.
+        """
+
+    def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
+        """Move the mesh at ``path`` without resending its data.
+
+        The mesh is not rebuilt and keeps its geometry cache entries: the
+        cheap path for a transform-only edit.
+
+        Args:
+            path: a mesh set with :meth:`set_mesh`.
+            transform: (4, 4) float64 local-to-world (for a prototype mesh:
+                to its prototype's root), row-vector convention.
+
+        Raises:
+            ValueError: no mesh at ``path``, or the transform is not finite.
+        """
+
+    def set_instancer(
+        self,
+        path: str,
+        *,
+        prototypes: list[str],
+        proto_indices: NDArray[np.int32],
+        transforms: NDArray[np.float64],
+        prototype: bool = False,
+    ) -> None:
+        """Add or replace an instancer: ``prototypes[proto_indices[i]]`` placed at
+        ``transforms[i]`` for every instance ``i``.
+
+        A prototype is a mesh (usually set with ``prototype=True``) or another
+        instancer; it is stored once however many instances place it, and its
+        instances share its tessellations in the geometry cache. A placed mesh's
+        object-to-world transform is its own ``transform`` followed by the
+        instance's (and by the parents' for nested instancers). Prototypes
+        may be set before or after the instancer; one that is missing when a
+        render syncs is reported and its instances are left out.
+
+        Args:
+            path: the instancer's path (a PointInstancer's prim path, or a
+                native prototype's).
+            prototypes: paths of meshes or instancers.
+            proto_indices: (N,) int32 index into ``prototypes`` per instance.
+            transforms: (N, 4, 4) float64 prototype-root-to-world per instance
+                (for a prototype instancer: to its parent prototype's root),
+                row-vector convention.
+            prototype: a prototype of other instancers: it places nothing by
+                itself.
+
+        Raises:
+            ValueError: sizes that disagree, an index out of range, or a
+                transform that is not finite; the message names ``path``.
         """
 
     def set_camera(

@@ -6,8 +6,11 @@
 Where usdrecord's options apply they are spelled and behave the same
 (positional ``usdFilePath outputImagePath``, ``--camera``, ``--frames`` with
 ``#`` placeholders, ``--imageWidth``, ``--complexity``, ``--purposes``,
-``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``, ...); renderer
-options are mipray's own. Output paths go to stdout, one per line; warnings
+``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``,
+``--renderSettingsPrimPath``, ...); renderer options are mipray's own. A
+UsdRender.Settings prim (the one named, else the stage's
+``renderSettingsPrimPath``) supplies the resolution, camera, purposes and AOVs
+that the command line does not give explicitly. Output paths go to stdout, one per line; warnings
 and one-line errors (``mipray-record: ...``) to stderr. Exit status: 0 when
 every image was written (even if some prims were skipped with errors), 1 on
 failure.
@@ -22,11 +25,12 @@ import math
 import os
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, NoReturn, TextIO
 
 from pxr import Usd
 
-from .errors import MiprayError
+from .errors import MiprayError, RenderSettingsError
 from .frames import (
     FrameSpecError,
     format_frame_path,
@@ -37,6 +41,7 @@ from .frames import (
 from .image import COLOR_CORRECTION_MODES, is_eight_bit
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
 from .stats import format_stats_table
+from .usd.render_settings import read_render_settings
 from .usd.scene_delegate import PURPOSES
 
 __all__ = ["COMPLEXITY_TESS_FACTOR", "build_parser", "main", "render_settings"]
@@ -149,11 +154,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--imageWidth",
         "-w",
         type=_positive_int,
-        default=DEFAULT_WIDTH,
         metavar="PIXELS",
         help=(
-            "image width; the height follows the camera's aperture aspect ratio, "
-            "rounded (default: %(default)s)"
+            "image width; the height follows the render settings' aspect ratio, else "
+            f"the camera's aperture's, rounded (default: {DEFAULT_WIDTH}, or the render "
+            "settings' resolution)"
         ),
     )
     usd.add_argument(
@@ -168,11 +173,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     usd.add_argument(
         "--purposes",
-        default="render",
         metavar="PURPOSE[,PURPOSE...]",
         help=(
             "purposes to render besides 'default' (always rendered): render, proxy, "
-            "guide (default: %(default)s; usdrecord's is proxy)"
+            "guide (default: the render settings' includedPurposes, else render; "
+            "usdrecord's is proxy)"
         ),
     )
     usd.add_argument(
@@ -189,7 +194,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--renderSettingsPrimPath",
         "-rs",
         metavar="PRIMPATH",
-        help="RenderSettings prim to use (accepted; not implemented yet: flags are used)",
+        help=(
+            "UsdRender.Settings prim for the resolution, camera, purposes and AOVs "
+            "(its products' orderedVars); flags given explicitly win (default: the "
+            "stage's renderSettingsPrimPath metadata, if any)"
+        ),
     )
     usd.add_argument(
         "--mask",
@@ -214,11 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
     ren = parser.add_argument_group("mipray options")
     ren.add_argument(
         "--aovs",
-        default="color",
         metavar="AOV[,AOV...]",
         help=(
             "AOVs to render and write: color, depth, normal, or another the renderer "
-            "offers (default: %(default)s)"
+            "offers (default: the render settings' RenderVars, else color)"
         ),
     )
     ren.add_argument(
@@ -330,17 +338,20 @@ def _validate(args: argparse.Namespace) -> list[Any]:
     Returns a list of time-code values, or ``[None]`` when the stage's start
     time code is to be used (known only once the stage is open).
     """
-    args.aov_list = list(dict.fromkeys(_split(args.aovs)))
-    if not args.aov_list:
+    args.aov_list = None if args.aovs is None else list(dict.fromkeys(_split(args.aovs)))
+    if args.aov_list is not None and not args.aov_list:
         raise _UsageError("--aovs needs at least one AOV, e.g. color")
-    args.purpose_list = _split(args.purposes)
-    unknown = [p for p in args.purpose_list if p not in PURPOSES]
+    args.purpose_list = None if args.purposes is None else _split(args.purposes)
+    unknown = [p for p in args.purpose_list or () if p not in PURPOSES]
     if unknown:
         raise _UsageError(
             f"unknown purpose '{unknown[0]}' in --purposes; use {', '.join(PURPOSES)}"
         )
-    if is_eight_bit(args.outputImagePath) and "color" not in args.aov_list:
-        raise _UsageError(f"{args.outputImagePath}: an 8-bit image needs the color AOV in --aovs")
+    if args.aov_list is not None and is_eight_bit(args.outputImagePath):
+        if "color" not in args.aov_list:
+            raise _UsageError(
+                f"{args.outputImagePath}: an 8-bit image needs the color AOV in --aovs"
+            )
     try:
         placeholder = frame_placeholder(args.outputImagePath)
         stats_placeholder = frame_placeholder(args.stats) if args.stats else None
@@ -419,13 +430,70 @@ def _write_stats(target: str, frame: float, stats: dict[str, Any], title: str, o
         raise MiprayError(f"cannot write stats {path}: {exc.strerror}") from exc
 
 
-def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) -> int:
-    if args.renderSettingsPrimPath:
-        _log.warning(
-            "mipray: --renderSettingsPrimPath %s is not implemented yet; "
-            "using the command-line settings",
-            args.renderSettingsPrimPath,
+@dataclass
+class _Plan:
+    """What to render, once flags and render settings are merged."""
+
+    camera: str | None
+    width: int
+    height: int | None
+    aovs: list[str]
+    purposes: list[str]
+    settings_path: str | None
+
+
+def _plan(args: argparse.Namespace, stage: Usd.Stage, time: Usd.TimeCode) -> _Plan:
+    """Merge the command line with the stage's render settings; explicit flags win.
+
+    Raises:
+        RenderSettingsError: the named render settings are unusable, or the
+            resulting AOVs cannot go to the output file.
+
+    """
+    try:
+        spec = read_render_settings(stage, args.renderSettingsPrimPath, time)
+    except RenderSettingsError as exc:
+        if args.renderSettingsPrimPath:
+            raise
+        # Settings the user did not ask for are not worth failing over.
+        _log.warning("mipray: ignoring the stage's render settings: %s", exc)
+        spec = None
+    width, height = DEFAULT_WIDTH, None
+    if spec is not None:
+        width, height = spec.resolution
+        if args.imageWidth is not None:
+            height = max(1, round(args.imageWidth * spec.resolution[1] / spec.resolution[0]))
+    if args.imageWidth is not None:
+        width = args.imageWidth
+    aovs = args.aov_list or (spec.aovs if spec is not None and spec.aovs else ["color"])
+    if args.purpose_list is not None:
+        purposes = args.purpose_list
+    elif spec is not None:
+        unknown = [p for p in spec.purposes if p not in PURPOSES]
+        if unknown:
+            raise RenderSettingsError(f"{spec.path}: unknown includedPurposes '{unknown[0]}'")
+        purposes = [p for p in spec.purposes if p != "default"]
+    else:
+        purposes = ["render"]
+    if is_eight_bit(args.outputImagePath) and "color" not in aovs:
+        raise RenderSettingsError(
+            f"{args.outputImagePath}: an 8-bit image needs the color AOV, but "
+            f"{spec.path if spec else '--aovs'} asks for {', '.join(aovs)}"
         )
+    camera = args.camera or (spec.camera if spec is not None else None)
+    if spec is not None:
+        _log.info(
+            "mipray: render settings %s: %dx%d, camera %s, AOVs %s",
+            spec.path,
+            width,
+            height,
+            camera or "(default)",
+            ", ".join(aovs),
+        )
+    return _Plan(camera, width, height, aovs, purposes, spec.path if spec else None)
+
+
+def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) -> int:
     stage = open_stage(
         args.usdFilePath,
         population_mask=_split(args.mask) if args.mask else None,
@@ -440,23 +508,31 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
         for f in frames
     ]
     settings = render_settings(args)
+    plan = _plan(args, stage, times[0])
+    extra = {"mipray:renderSettings": plan.settings_path} if plan.settings_path else None
     progress = _Progress(err, len(times))
-    with RenderSession(stage, purposes=args.purpose_list, time=times[0]) as session:
+    with RenderSession(stage, purposes=plan.purposes, time=times[0]) as session:
         for index, time in enumerate(times, start=1):
             progress.start(index, time)
             try:
                 result = session.render(
-                    args.camera,
-                    args.imageWidth,
-                    args.aov_list,
+                    plan.camera,
+                    plan.width,
+                    plan.aovs,
                     settings,
                     time=time,
                     camera_light=not args.disableCameraLight,
+                    height=plan.height,
                     progress=progress.update if progress.enabled else None,
                 )
                 value = 0.0 if time.IsDefault() else time.GetValue()
                 path = format_frame_path(args.outputImagePath, value)
-                result.write(path, args.aov_list, color_correction=args.colorCorrectionMode)
+                result.write(
+                    path,
+                    plan.aovs,
+                    color_correction=args.colorCorrectionMode,
+                    metadata=extra,
+                )
             finally:
                 progress.clear()
             out.write(path + "\n")

@@ -7,7 +7,9 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use glam::Mat4;
+use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::DistantLightData;
+use hd_mipray::material::FaceAlbedo;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
@@ -18,7 +20,7 @@ use mipray::progress::Progress;
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 use mipray_bridge::OiioImageIo;
 use numpy::ndarray::Array3;
-use numpy::{IntoPyArray, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -39,6 +41,39 @@ fn matrix(path: &str, m: &PyReadonlyArray2<'_, f64>) -> PyResult<Mat4> {
         cols[i] = *v as f32;
     }
     Ok(Mat4::from_cols_array(&cols))
+}
+
+/// (N, 4, 4) USD-layout matrices as glam matrices (see [`matrix`]).
+fn matrices(path: &str, m: &PyReadonlyArray3<'_, f64>) -> PyResult<Vec<Mat4>> {
+    let a = m.as_array();
+    if a.shape()[1..] != [4, 4] {
+        return Err(value_error(path, format!("transforms must be N×4×4, got {:?}", a.shape())));
+    }
+    let mut out = Vec::with_capacity(a.shape()[0]);
+    for m in a.outer_iter() {
+        let mut cols = [0f32; 16];
+        for (c, v) in cols.iter_mut().zip(m.iter()) {
+            *c = *v as f32;
+        }
+        out.push(Mat4::from_cols_array(&cols));
+    }
+    Ok(out)
+}
+
+/// The per-face albedo table of `set_mesh`: both arrays or neither.
+fn face_albedo(path: &str, albedos: Option<PyReadonlyArray2<'_, f32>>, indices: Option<PyReadonlyArray1<'_, i32>>, face_count: usize) -> PyResult<Option<FaceAlbedo>> {
+    let (albedos, indices) = match (albedos, indices) {
+        (None, None) => return Ok(None),
+        (Some(a), Some(i)) => (a, i),
+        _ => return Err(value_error(path, "face_albedos and face_albedo_indices go together")),
+    };
+    let a = albedos.as_array();
+    if a.ncols() != 3 {
+        return Err(value_error(path, format!("face_albedos must be M×3, got {:?}", a.shape())));
+    }
+    let table = FaceAlbedo { albedos: a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect(), indices: indices.as_array().to_vec() };
+    table.validate(face_count).map_err(|e| value_error(path, e))?;
+    Ok(Some(table))
 }
 
 fn vec_i32(a: Option<PyReadonlyArray1<'_, i32>>) -> Vec<i32> {
@@ -160,7 +195,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -185,6 +220,9 @@ impl RenderDelegate {
         mirror: (f32, f32, f32),
         displacement_bound: Option<f32>,
         displacement: Option<(f32, f32, u32, f32)>,
+        prototype: bool,
+        face_albedos: Option<PyReadonlyArray2<'_, f32>>,
+        face_albedo_indices: Option<PyReadonlyArray1<'_, i32>>,
     ) -> PyResult<()> {
         let pts = points.as_array();
         if pts.ncols() != 3 {
@@ -207,6 +245,7 @@ impl RenderDelegate {
             left_handed,
         };
         topology.validate(points.len()).map_err(|e| value_error(path, e))?;
+        let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, topology.face_vertex_counts.len())?;
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(value_error(path, format!("points[{i}] = {:?} is not finite", points[i])));
         }
@@ -225,8 +264,39 @@ impl RenderDelegate {
         }
         self.inner.set_mesh(
             path,
-            MeshData { topology, points, transform, double_sided, albedo: [albedo.0, albedo.1, albedo.2], mirror: [mirror.0, mirror.1, mirror.2], displacement_bound, displacement },
+            MeshData {
+                topology,
+                points,
+                transform,
+                double_sided,
+                albedo: [albedo.0, albedo.1, albedo.2],
+                mirror: [mirror.0, mirror.1, mirror.2],
+                displacement_bound,
+                displacement,
+                prototype,
+                face_albedo,
+            },
         );
+        Ok(())
+    }
+
+    /// Moves a mesh without resending its points (a transform-only edit). See the stubs.
+    fn set_transform(&mut self, path: &str, transform: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        let transform = matrix(path, &transform)?;
+        self.inner.set_transform(path, transform).map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// Inserts or replaces an instancer: `prototypes[proto_indices[i]]` placed at
+    /// `transforms[i]`. See the stubs.
+    #[pyo3(signature = (path, *, prototypes, proto_indices, transforms, prototype=false))]
+    fn set_instancer(&mut self, path: &str, prototypes: Vec<String>, proto_indices: PyReadonlyArray1<'_, i32>, transforms: PyReadonlyArray3<'_, f64>, prototype: bool) -> PyResult<()> {
+        let transforms = matrices(path, &transforms)?;
+        let indices = proto_indices.as_array();
+        let data = match indices.as_slice() {
+            Some(s) => InstancerData::new(path, prototypes, s, transforms, prototype),
+            None => InstancerData::new(path, prototypes, &indices.to_vec(), transforms, prototype),
+        };
+        self.inner.set_instancer(path, data.map_err(|e| PyValueError::new_err(e.to_string()))?);
         Ok(())
     }
 
@@ -307,8 +377,14 @@ impl RenderDelegate {
         self.inner.mesh(path).map(|m| m.surface_syncs)
     }
 
+    /// How many times the instancer has been set; `None` if there is none.
+    fn instancer_update_count(&self, path: &str) -> Option<u64> {
+        self.inner.instancer(path).map(|i| i.updates)
+    }
+
     /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL.
     #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None))]
+    #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &mut self,
         py: Python<'py>,
@@ -411,7 +487,7 @@ fn write_image(py: Python<'_>, path: &str, aovs: &Bound<'_, PyDict>, order: Vec<
 /// Reads an image: (H×W×C float32 array, channel names).
 #[pyfunction]
 fn read_image<'py>(py: Python<'py>, path: &str) -> PyResult<(Bound<'py, PyArray3<f32>>, Vec<String>)> {
-    let img = py.detach(|| OiioImageIo::default().read(Path::new(path))).map_err(|e| PyOSError::new_err(e.to_string()))?;
+    let img = py.detach(|| OiioImageIo.read(Path::new(path))).map_err(|e| PyOSError::new_err(e.to_string()))?;
     let nc = img.channels.len();
     let arr = Array3::from_shape_vec((img.height, img.width, nc), img.pixels).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok((arr.into_pyarray(py), img.channels))

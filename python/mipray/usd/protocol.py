@@ -40,8 +40,25 @@ class RenderDelegateLike(Protocol):
         left_handed: bool = ...,
         double_sided: bool = ...,
         albedo: tuple[float, float, float] = ...,
+        prototype: bool = ...,
+        face_albedos: NDArray[np.float32] | None = ...,
+        face_albedo_indices: NDArray[np.int32] | None = ...,
     ) -> None:
         """Add or replace a mesh."""
+
+    def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
+        """Move a mesh without resending its data."""
+
+    def set_instancer(
+        self,
+        path: str,
+        *,
+        prototypes: list[str],
+        proto_indices: NDArray[np.int32],
+        transforms: NDArray[np.float64],
+        prototype: bool = ...,
+    ) -> None:
+        """Add or replace an instancer."""
 
     def set_camera(
         self,

@@ -5,10 +5,14 @@ with usd-core's Python API because usd-core ships no Hydra: the stage is read
 here, prims cross into the render delegate as numpy arrays through ``set_*``
 calls, and later edits re-sync only what they touched.
 
-* Rprims: ``UsdGeom.Mesh``. Sprims: ``UsdGeom.Camera``, ``UsdLux.DistantLight``.
-  Other gprims and lights are skipped with one warning per type.
-* Native instances render: the walk follows instance proxies, so each
-  instance is synced as its own prims (sharing prototypes comes later).
+* Rprims: ``UsdGeom.Mesh`` (GeomSubset materials and display primvars per
+  face, :mod:`mipray.usd.face_albedo`). Sprims: ``UsdGeom.Camera``,
+  ``UsdLux.DistantLight``. Other gprims and lights are skipped with one
+  warning per type.
+* Instancing shares prototypes (:mod:`mipray.usd.instancing`): a
+  ``UsdGeom.PointInstancer`` becomes an instancer of its prototypes' meshes,
+  and every native prototype one instancer placing its meshes at each
+  instance prim. Prototype meshes are sent once, however many instances.
 * Visibility and purpose are inherited down the walk exactly as
   ``ComputeVisibility`` / ``ComputePurpose`` compute them; invisible subtrees
   are pruned, prims whose purpose is not included are skipped.
@@ -16,7 +20,10 @@ calls, and later edits re-sync only what they touched.
   :attr:`UsdSceneDelegate.delegate_errors`; the rest of the stage syncs.
 * :meth:`UsdSceneDelegate.watch` listens to ``Usd.Notice.ObjectsChanged``;
   the next :meth:`~UsdSceneDelegate.sync` re-walks resynced subtrees and
-  re-sends only prims whose data, transform or material changed.
+  re-sends only prims whose data, transform or material changed. A mesh whose
+  transform alone changed is moved with ``set_transform`` (its points are not
+  sent again); a moved instance or a PointInstancer whose instances changed
+  re-sends only its instancer.
 """
 
 from __future__ import annotations
@@ -35,9 +42,9 @@ from .camera import (
     find_camera_prim,
     framing_camera_arguments,
 )
+from .instancing import InstancerState, Instancing
 from .light import CAMERA_LIGHT_PATH, camera_light_arguments, distant_light_arguments
-from .material import compute_albedo
-from .mesh import mesh_arguments
+from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .transform import ancestors_might_vary, world_transform
 
@@ -48,10 +55,14 @@ _log = logging.getLogger(__name__)
 #: Every purpose token UsdGeom defines.
 PURPOSES = ("default", "render", "proxy", "guide")
 
-# Property names whose change affects the prim and everything below it.
-_SUBTREE_DATA_PREFIXES = ("xformOp", "material:binding")
-# Property names whose change can add or remove prims from the render.
-_TRAVERSAL_PROPERTIES = frozenset({"visibility", "purpose"})
+# Property names whose change affects the prim and everything below it (xform
+# ops too, tracked apart: they only move things).
+_SUBTREE_DATA_PREFIXES = ("material:binding",)
+# Property names whose change can add or remove prims from the render (a
+# PointInstancer's prototypes: its members).
+_TRAVERSAL_PROPERTIES = frozenset({"visibility", "purpose", "prototypes"})
+# Where USD puts native-instance prototypes.
+_PROTOTYPE_PREFIX = "/__Prototype"
 
 
 @dataclass(frozen=True)
@@ -73,12 +84,30 @@ class SyncError:
 class _Record:
     """What the scene delegate remembers about one synced (or failed) prim."""
 
-    kind: str  # "mesh", "camera" or "light"
+    kind: str  # "mesh", "camera", "light", "instancer" (PointInstancer) or "instance"
     order: int  # traversal order, to pick "the first camera"
-    in_delegate: bool = True  # False for a mesh with no faces
+    in_delegate: bool = True  # False for a mesh with no faces, and for instance prims
     might_vary: bool = False  # re-sync when the time changes
-    material_path: str | None = None
+    xform_varies: bool = False  # its world transform might change with the time
+    material_paths: tuple[str, ...] = ()
     args: dict[str, Any] = field(default_factory=dict)  # kept for cameras only
+    instancer: InstancerState | None = None  # a PointInstancer's prototypes
+
+
+_NO_RECORD = _Record("none", -1, in_delegate=False)
+
+
+def _kind(prim: Usd.Prim) -> str:
+    """The :class:`_Record` kind ``prim`` is synced as."""
+    if prim.IsInstance():
+        return "instance"
+    if prim.IsA(UsdGeom.Mesh):
+        return "mesh"
+    if prim.IsA(UsdGeom.PointInstancer):
+        return "instancer"
+    if prim.IsA(UsdGeom.Camera):
+        return "camera"
+    return "light"
 
 
 def _under(path: str, root: str) -> bool:
@@ -167,13 +196,22 @@ class UsdSceneDelegate:
         self._warned_types: set[str] = set()
         self._default_camera: dict[str, Any] | None = None
         self._camera_light = False
+        self._xform_roots: set[str] = set()  # where xform ops changed
+        self._xform_only: set[str] = set()  # records whose transform alone changed in time
+        self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
+        self._prototype_edits: set[str] = set()  # native prototypes edited inside
+        self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
 
     # ------------------------------------------------------------------ state
 
     @property
     def delegate_errors(self) -> list[SyncError]:
-        """The prims that currently fail to sync, in the order they failed."""
-        return list(self._errors.values())
+        """The prims that currently fail to sync, in the order they failed.
+
+        Prims inside instancing prototypes come last.
+        """
+        inside = [SyncError(p, m) for p, m in self._instancing.errors.items()]
+        return [*self._errors.values(), *inside]
 
     @property
     def synced_paths(self) -> list[str]:
@@ -199,7 +237,15 @@ class UsdSceneDelegate:
     @property
     def is_dirty(self) -> bool:
         """Whether the next :meth:`sync` has anything to do."""
-        return bool(self._full or self._resync or self._subtree_dirty or self._prim_dirty)
+        return bool(
+            self._full
+            or self._resync
+            or self._subtree_dirty
+            or self._prim_dirty
+            or self._xform_roots
+            or self._xform_only
+            or self._prototype_edits
+        )
 
     # ---------------------------------------------------------- change tracking
 
@@ -238,15 +284,24 @@ class UsdSceneDelegate:
     def _mark(self, path: Sdf.Path, *, resynced: bool) -> None:
         """Record one changed path from a notice."""
         prim_path = str(path.GetPrimPath())
-        if prim_path.startswith("/__Prototype"):
-            # An edit inside a native-instance prototype: every instance of it
-            # may change. Rare enough to just walk the stage again.
-            self._full = True
+        if prim_path.startswith(_PROTOTYPE_PREFIX):
+            if resynced:
+                # Prototypes may be renumbered: walk the stage again.
+                self._full = True
+            else:
+                # A value inside a native prototype: re-send that prototype's meshes.
+                self._prototype_edits.add("/" + prim_path.split("/")[1])
             return
+        parent = str(path.GetPrimPath().GetParentPath())
+        if self._records.get(parent, _NO_RECORD).kind == "mesh":
+            # A GeomSubset (its indices or its material binding) belongs to its mesh.
+            self._prim_dirty.add(parent)
         if path.IsPropertyPath():
             name = path.name
             if name in _TRAVERSAL_PROPERTIES:
                 self._resync.add(prim_path)
+            elif name.startswith("xformOp"):
+                self._xform_roots.add(prim_path)
             elif name.startswith(_SUBTREE_DATA_PREFIXES):
                 self._subtree_dirty.add(prim_path)
             else:
@@ -276,8 +331,21 @@ class UsdSceneDelegate:
         for path, record in self._records.items():
             if record.might_vary:
                 self._prim_dirty.add(path)
+            elif record.xform_varies:
+                self._xform_only.add(path)
+            if record.instancer is not None and record.instancer.members_might_vary:
+                self._prim_dirty.add(path)
+                self._instancer_full.add(path)
         for path in self._errors:
             self._prim_dirty.add(path)
+        self._prototype_edits.update(self._instancing.varying_prototypes())
+        for path, record in self._records.items():
+            # Prototype meshes that failed may read fine at another time.
+            if record.instancer is not None and record.instancer.member_prims & set(
+                self._instancing.errors
+            ):
+                self._prim_dirty.add(path)
+                self._instancer_full.add(path)
 
     # --------------------------------------------------------------------- sync
 
@@ -292,9 +360,17 @@ class UsdSceneDelegate:
         xform_cache = UsdGeom.XformCache(self.time)
         unsupported: Counter[str] = Counter()
         synced_now: set[str] = set()
-        changed = self._full or bool(self._resync or self._subtree_dirty or self._prim_dirty)
+        changed = self.is_dirty
+        if any(not self.stage.GetPrimAtPath(p) for p in self._prototype_edits):
+            self._full = True
+        full = self._full
+        self._instancing.begin_sync(self.time, xform_cache, unsupported, full=full)
+        if not full:
+            for prototype in sorted(self._prototype_edits):
+                self._instancing.resend_native_prototype(self.stage, prototype)
+        self._prototype_edits.clear()
 
-        if self._full:
+        if full:
             self._order = 0
             roots = ["/"]
         else:
@@ -306,25 +382,7 @@ class UsdSceneDelegate:
         for root in roots:
             self._resync_subtree(root, xform_cache, unsupported, synced_now)
 
-        dirty: set[str] = set()
-        for root in self._subtree_dirty:
-            dirty.update(p for p in (*self._records, *self._errors) if _under(p, root))
-        elsewhere: list[str] = []  # changed prims that are not synced ones
-        for path in self._prim_dirty:
-            if path in self._records or path in self._errors:
-                dirty.add(path)
-            else:
-                elsewhere.append(path)
-        if elsewhere:
-            # A changed material (or a shader under it) re-syncs the meshes bound to it.
-            dirty.update(
-                p
-                for p, r in self._records.items()
-                if r.material_path is not None
-                and any(_under(r.material_path, q) or _under(q, r.material_path) for q in elsewhere)
-            )
-        self._subtree_dirty.clear()
-        self._prim_dirty.clear()
+        dirty, transform_only = self._dirty_records()
         memo: dict[str, bool] = {}
         for path in sorted(dirty - synced_now):
             prim = self.stage.GetPrimAtPath(path)
@@ -333,11 +391,75 @@ class UsdSceneDelegate:
                 continue
             record = self._records.get(path)
             order = record.order if record else self._next_order()
-            self._sync_prim(prim, xform_cache, memo, order, unsupported)
+            members = path in self._instancer_full or record is None
+            self._sync_prim(prim, xform_cache, memo, order, unsupported, members=members)
+        for path in sorted(transform_only - dirty - synced_now):
+            self._sync_transform(path, xform_cache)
+        self._instancer_full.clear()
+        self._instancing.end_sync(full=full)
 
         self._warn_unsupported(unsupported)
         if changed and self._default_camera is not None:
             self._sync_default_camera()
+
+    def _dirty_records(self) -> tuple[set[str], set[str]]:
+        """Consume the recorded changes: (paths to re-read, paths whose transform alone changed).
+
+        PointInstancers whose prototypes hold a changed prim (or use a changed
+        material) are re-read with their prototypes (``_instancer_full``).
+        """
+        known = (*self._records, *self._errors)
+        dirty: set[str] = set()
+        moved: set[str] = set()
+        for root in self._subtree_dirty:
+            dirty.update(p for p in known if _under(p, root))
+        for root in self._xform_roots:
+            moved.update(p for p in known if _under(p, root))
+        elsewhere: list[str] = []  # changed prims that are not synced ones
+        for path in self._prim_dirty:
+            if path in self._records or path in self._errors:
+                dirty.add(path)
+            else:
+                elsewhere.append(path)
+        instancers = {p: r.instancer for p, r in self._records.items() if r.instancer is not None}
+        for path in (*elsewhere, *self._subtree_dirty, *self._xform_roots):
+            # An edit inside a PointInstancer's prototype: re-send it, prototypes too.
+            owners = self._instancing.owner_of(path, instancers)
+            dirty.update(owners)
+            self._instancer_full.update(owners)
+        if elsewhere:
+            # A changed material (or a shader under it) re-syncs the meshes bound to it.
+            for p, r in self._records.items():
+                if any(_under(m, q) or _under(q, m) for m in r.material_paths for q in elsewhere):
+                    dirty.add(p)
+                    if r.instancer is not None:
+                        self._instancer_full.add(p)
+        # Meshes only moved: set_transform; other moved prims are cheap to re-read.
+        transform_only = {p for p in moved | self._xform_only if self._is_mesh_record(p)}
+        dirty.update((moved | self._xform_only) - transform_only)
+        self._subtree_dirty.clear()
+        self._prim_dirty.clear()
+        self._xform_roots.clear()
+        self._xform_only.clear()
+        return dirty, transform_only
+
+    def _is_mesh_record(self, path: str) -> bool:
+        record = self._records.get(path)
+        return record is not None and record.kind == "mesh" and record.in_delegate
+
+    def _sync_transform(self, path: str, xform_cache: UsdGeom.XformCache) -> None:
+        """Move a synced mesh: only its world transform is sent (``set_transform``)."""
+        prim = self.stage.GetPrimAtPath(path)
+        if not prim:
+            self._forget(path)
+            return
+        try:
+            self.delegate.set_transform(path, world_transform(xform_cache, prim))
+        except (ValueError, TypeError, OverflowError) as exc:
+            self._fail(path, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+            return
+        self.sync_counts[path] = self.sync_counts.get(path, 0) + 1
+        _log.debug("mipray: moved mesh %s", path)
 
     def _next_order(self) -> int:
         self._order += 1
@@ -353,16 +475,40 @@ class UsdSceneDelegate:
         """Walk the subtree at ``root`` and sync it; drop what is no longer there."""
         seen: set[str] = set()
         prim = self.stage.GetPrimAtPath(root)
-        if prim and (prim.IsActive() or prim.IsPseudoRoot()):
-            self._walk(prim, xform_cache, seen, unsupported)
+        owner = self._point_instancer_above(root)
+        if owner is not None:
+            # Inside a PointInstancer: its prims render only through it.
+            if owner in self._records or owner in self._errors:
+                self._prim_dirty.add(owner)
+                self._instancer_full.add(owner)
+            return
+        if prim and (prim.IsPseudoRoot() or Usd.PrimDefaultPredicate(prim)):
+            # Not below a class, an over or an inactive prim, nor inside an instance.
+            if not prim.IsInstanceProxy():
+                self._walk(prim, xform_cache, seen, unsupported)
         for path in [p for p in (*self._records, *self._errors) if _under(p, root)]:
             if path not in seen:
                 self._forget(path)
         # Materials under the resynced root may have changed: their meshes too.
         for path, record in list(self._records.items()):
-            if path not in seen and record.material_path and _under(record.material_path, root):
+            if path not in seen and any(_under(m, root) for m in record.material_paths):
                 self._prim_dirty.add(path)
+                if record.instancer is not None:
+                    self._instancer_full.add(path)
         synced_now.update(seen)
+
+    def _point_instancer_above(self, path: str) -> str | None:
+        """The nearest PointInstancer strictly above prim path ``path``, if any.
+
+        ``path`` itself may be gone from the stage (a removed prim).
+        """
+        parent = Sdf.Path(path).GetParentPath()
+        while not parent.isEmpty and parent != Sdf.Path.absoluteRootPath:
+            prim = self.stage.GetPrimAtPath(parent)
+            if prim and prim.IsA(UsdGeom.PointInstancer):
+                return str(parent)
+            parent = parent.GetParentPath()
+        return None
 
     def _walk(
         self,
@@ -371,8 +517,12 @@ class UsdSceneDelegate:
         seen: set[str],
         unsupported: Counter[str],
     ) -> None:
-        """Depth-first walk from ``root``, inheriting visibility and purpose."""
-        predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+        """Depth-first walk from ``root``, inheriting visibility and purpose.
+
+        Instance prims and PointInstancers are synced as instancers; the walk
+        does not go below them (their prototypes render through them).
+        """
+        predicate = Usd.PrimDefaultPredicate
         memo: dict[str, bool] = {}
         time = self.time
         if root.IsPseudoRoot():
@@ -393,23 +543,32 @@ class UsdSceneDelegate:
                 if visibility.Get(time) == UsdGeom.Tokens.invisible:
                     continue  # invisibility is inherited: prune the subtree
                 info = imageable.ComputePurposeInfo(parent_info)
-                if info.purpose in self.purposes:
-                    path = str(prim.GetPath())
-                    if self._is_supported(prim, unsupported):
-                        seen.add(path)
-                        self._sync_prim(prim, xform_cache, memo, self._next_order(), unsupported)
+            included = info.purpose in self.purposes
+            if prim.IsInstance():
+                # Its prototype's purposes start from the default: an instance whose
+                # own purpose is not rendered is left out whole.
+                if included:
+                    seen.add(str(prim.GetPath()))
+                    self._sync_prim(prim, xform_cache, memo, self._next_order(), unsupported)
+                continue
+            if imageable and included and self._is_supported(prim, unsupported):
+                seen.add(str(prim.GetPath()))
+                self._sync_prim(prim, xform_cache, memo, self._next_order(), unsupported)
+            if prim.IsA(UsdGeom.PointInstancer):
+                continue  # its children render only through it
             children = prim.GetFilteredChildren(predicate)
             stack.extend((c, info) for c in reversed(children))
 
     def _is_supported(self, prim: Usd.Prim, unsupported: Counter[str]) -> bool:
         """Whether ``prim`` is synced; counts renderable prims of unsupported types."""
-        if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdGeom.Camera) or prim.IsA(UsdLux.DistantLight):
-            return True
         if (
-            prim.IsA(UsdGeom.Gprim)
+            prim.IsA(UsdGeom.Mesh)
+            or prim.IsA(UsdGeom.Camera)
+            or prim.IsA(UsdLux.DistantLight)
             or prim.IsA(UsdGeom.PointInstancer)
-            or prim.HasAPI(UsdLux.LightAPI)
         ):
+            return True
+        if prim.IsA(UsdGeom.Gprim) or prim.HasAPI(UsdLux.LightAPI):
             unsupported[prim.GetTypeName() or "untyped"] += 1
         return False
 
@@ -420,30 +579,62 @@ class UsdSceneDelegate:
         memo: dict[str, bool],
         order: int,
         unsupported: Counter[str],
+        *,
+        members: bool = True,
     ) -> None:
-        """Read one prim and send it to the delegate; record a failure instead of raising."""
+        """Read one prim and send it to the delegate; record a failure instead of raising.
+
+        For a PointInstancer synced before, ``members=False`` re-sends only its
+        instances, not its prototypes.
+        """
         path = str(prim.GetPath())
         time = self.time
         try:
             transform = world_transform(xform_cache, prim)
-            might_vary = ancestors_might_vary(prim, memo) or any(
-                a.ValueMightBeTimeVarying() for a in prim.GetAuthoredAttributes()
+            xform_varies = ancestors_might_vary(prim, memo)
+            data_varies = any(
+                a.ValueMightBeTimeVarying()
+                for a in prim.GetAuthoredAttributes()
+                if not a.GetName().startswith("xformOp")
             )
-            if prim.IsA(UsdGeom.Mesh):
-                albedo = compute_albedo(prim, time)
-                args = mesh_arguments(UsdGeom.Mesh(prim), time, transform, albedo.rgb)
+            might_vary = xform_varies or data_varies
+            previous = self._records.get(path)
+            if previous is not None and previous.kind != _kind(prim):
+                self._forget(path)  # its type changed: drop what the old kind sent
+                previous = None
+            if prim.IsInstance():
+                self._instancing.add_instance(path, prim.GetPrototype(), transform)
+                record = _Record("instance", order, in_delegate=False, xform_varies=xform_varies)
+            elif prim.IsA(UsdGeom.Mesh):
+                read = read_mesh(prim, time, transform)
                 record = _Record(
                     "mesh",
                     order,
-                    might_vary=might_vary or albedo.might_vary,
-                    material_path=albedo.material_path,
+                    might_vary=read.might_vary,
+                    xform_varies=xform_varies,
+                    material_paths=read.material_paths,
                 )
-                if args is None:  # no faces: valid USD that renders nothing
+                if read.args is None:  # no faces: valid USD that renders nothing
                     self._forget(path)
                     record.in_delegate = False
                     self._records[path] = record
                     return
-                self.delegate.set_mesh(path, **args)
+                self.delegate.set_mesh(path, **read.args)
+            elif prim.IsA(UsdGeom.PointInstancer):
+                state, own_varies = self._instancing.sync_point_instancer(
+                    prim,
+                    transform,
+                    previous.instancer if previous is not None else None,
+                    members=members,
+                )
+                record = _Record(
+                    "instancer",
+                    order,
+                    might_vary=own_varies,
+                    xform_varies=xform_varies,
+                    material_paths=state.material_paths,
+                    instancer=state,
+                )
             elif prim.IsA(UsdGeom.Camera):
                 args = camera_arguments(UsdGeom.Camera(prim), time, transform)
                 record = _Record("camera", order, might_vary=might_vary, args=args)
@@ -458,7 +649,8 @@ class UsdSceneDelegate:
                 self._forget(path)
                 return
         except PrimError as exc:
-            self._fail(path, exc.reason)
+            # A GeomSubset's problem names the subset, not the mesh.
+            self._fail(path, exc.reason if exc.prim_path == path else str(exc))
             return
         except (ValueError, TypeError, OverflowError) as exc:
             # The delegate refused the data (its message names the path).
@@ -478,7 +670,11 @@ class UsdSceneDelegate:
     def _forget(self, path: str) -> None:
         """Remove a prim from the delegate and from the books."""
         record = self._records.pop(path, None)
-        if record is not None and record.in_delegate:
+        if record is not None and record.kind == "instance":
+            self._instancing.remove_instance(path)
+        elif record is not None and record.instancer is not None:
+            self._instancing.forget_point_instancer(path, record.instancer)
+        elif record is not None and record.in_delegate:
             self.delegate.remove(path)
         self._errors.pop(path, None)
 

@@ -1,0 +1,144 @@
+"""A mesh's diffuse colour per face: its material, its GeomSubsets' materials, displayColor.
+
+Each control face gets, in order:
+
+1. the constant ``diffuseColor`` of the material bound to a GeomSubset
+   (``familyName = "materialBind"``) that holds the face, resolved as USD
+   resolves bindings (the subset's own binding, else its ancestors');
+2. else that of the mesh's bound material (see :mod:`mipray.usd.material`);
+3. else ``primvars:displayColor`` — uniform per face, vertex, varying and
+   faceVarying averaged over the face's corners, constant everywhere;
+4. else 0.18 grey.
+
+A material whose diffuse colour is not a constant (a texture) falls through to
+step 3 for its faces. When every face ends up with the same colour the mesh
+gets one ``albedo``; otherwise the distinct colours and a per-face index
+table (``face_albedos``, ``face_albedo_indices``) go to the delegate, which
+turns them into per-face materials of the core.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd, UsdGeom, UsdShade
+
+from ..errors import PrimError
+from .material import DEFAULT_ALBEDO, compute_albedo
+from .primvars import per_face, read_display_primvar
+
+__all__ = ["SurfaceAlbedo", "compute_surface_albedo"]
+
+
+@dataclass(frozen=True)
+class SurfaceAlbedo:
+    """A mesh's resolved diffuse colours, as ``set_mesh`` takes them."""
+
+    #: Linear RGB for faces without an entry of their own (all faces when the
+    #: table is None).
+    albedo: tuple[float, float, float]
+    #: (M, 3) float32 distinct per-face colours, or None.
+    face_albedos: NDArray[np.float32] | None
+    #: (F,) int32 per face: an index into ``face_albedos``; None with it.
+    face_albedo_indices: NDArray[np.int32] | None
+    #: Paths of every material involved (the mesh's and its subsets'); the
+    #: scene delegate re-syncs the mesh when one of them changes.
+    material_paths: tuple[str, ...]
+    #: Whether anything read might change over time.
+    might_vary: bool
+
+    def arguments(self) -> dict[str, Any]:
+        """The ``set_mesh`` keyword arguments: ``albedo``, and the face table if any."""
+        args: dict[str, Any] = {"albedo": self.albedo}
+        if self.face_albedos is not None:
+            args["face_albedos"] = self.face_albedos
+            args["face_albedo_indices"] = self.face_albedo_indices
+        return args
+
+
+def _face_indices(subset: UsdGeom.Subset, time: Usd.TimeCode, n_faces: int) -> NDArray[np.int64]:
+    """A materialBind subset's face indices, checked; errors name the subset."""
+    path = str(subset.GetPath())
+    element = subset.GetElementTypeAttr().Get(time) or UsdGeom.Tokens.face
+    if element != UsdGeom.Tokens.face:
+        raise PrimError(path, f"elementType '{element}' cannot carry a material; use 'face'")
+    indices = np.asarray(subset.GetIndicesAttr().Get(time) or [], dtype=np.int64)
+    bad = (indices < 0) | (indices >= n_faces)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise PrimError(
+            path, f"indices[{i}] = {int(indices[i])} is out of range for {n_faces} faces"
+        )
+    return indices
+
+
+def compute_surface_albedo(
+    mesh: UsdGeom.Mesh,
+    time: Usd.TimeCode,
+    counts: NDArray[np.int32],
+    face_vertex_indices: NDArray[np.int32],
+    n_points: int,
+) -> SurfaceAlbedo:
+    """Resolve the per-face diffuse colour of ``mesh`` at ``time`` (see the module doc).
+
+    ``counts``, ``face_vertex_indices`` and ``n_points`` are the mesh's
+    checked topology (:func:`mipray.usd.mesh.mesh_arguments`).
+
+    Raises:
+        PrimError: a display primvar of the wrong size or with bad values, or
+            a materialBind subset with face indices out of range (the message
+            names the subset).
+
+    """
+    prim = mesh.GetPrim()
+    n_faces = len(counts)
+    own = compute_albedo(prim, time)
+    paths = [own.material_path] if own.material_path else []
+    might_vary = own.might_vary
+
+    color = read_display_primvar(mesh, "displayColor", time, counts, n_points)
+    opacity = read_display_primvar(mesh, "displayOpacity", time, counts, n_points)
+    might_vary = might_vary or any(p.might_vary for p in (color, opacity) if p is not None)
+    display: NDArray[np.float64] | None = None
+    if color is not None:
+        display = np.clip(per_face(color, counts, face_vertex_indices).astype(np.float64), 0, 1)
+
+    if own.source == "material":
+        faces = np.tile(np.asarray(own.rgb, np.float64), (n_faces, 1))
+    elif display is not None:
+        faces = display.copy()
+    else:
+        faces = np.tile(np.asarray(DEFAULT_ALBEDO, np.float64), (n_faces, 1))
+    fallback = display if display is not None else np.asarray(DEFAULT_ALBEDO, np.float64)
+
+    for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
+        indices = _face_indices(subset, time, n_faces)
+        bound = compute_albedo(subset.GetPrim(), time)
+        if bound.material_path and bound.material_path not in paths:
+            paths.append(bound.material_path)
+        might_vary = (
+            might_vary or bound.might_vary or subset.GetIndicesAttr().ValueMightBeTimeVarying()
+        )
+        if bound.source == "material":
+            faces[indices] = bound.rgb
+        else:  # a textured (or no) material: the display colour, as for the mesh
+            faces[indices] = fallback[indices] if fallback.ndim == 2 else fallback
+
+    if n_faces == 0 or (faces == faces[0]).all():
+        rgb = (
+            own.rgb
+            if n_faces == 0
+            else (float(faces[0, 0]), float(faces[0, 1]), float(faces[0, 2]))
+        )
+        return SurfaceAlbedo(rgb, None, None, tuple(paths), might_vary)
+    unique, inverse = np.unique(faces, axis=0, return_inverse=True)
+    return SurfaceAlbedo(
+        own.rgb,
+        np.ascontiguousarray(unique, dtype=np.float32),
+        np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
+        tuple(paths),
+        might_vary,
+    )

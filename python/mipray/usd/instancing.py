@@ -1,0 +1,565 @@
+"""Instancing: ``UsdGeom.PointInstancer`` and native instances, prototypes shared.
+
+A prototype's meshes are sent to the render delegate once, with
+``prototype=True`` and transforms relative to the prototype's root; an
+instancer (``set_instancer``) then places them. The delegate keeps one core
+mesh per prototype mesh however many instances there are, so instances share
+the prototype's subpatches and its geometry cache entries (DESIGN.md, "Data
+flow", step 4).
+
+* **PointInstancer** ``/PI``: an instancer at ``/PI`` whose prototypes are the
+  meshes under each prototype root (``prototypes`` targets), each placed at
+  ``protoIndices``, ``positions``, ``orientations`` and ``scales`` (the root's
+  own transform included, as ``ComputeInstanceTransformsAtTime`` does),
+  ``invisibleIds`` and inactive ids masked out. Meshes under a root below the
+  PointInstancer keep their paths; a root elsewhere on the stage (it may also
+  render in place) is sent under ``/PI.proto<i>`` so the two never collide.
+  Children of a PointInstancer never render in place (as in UsdImaging).
+* **Native instances**: one instancer per prototype, at the prototype's path
+  (``/__Prototype_1``), placing its meshes at every instance prim's world
+  transform.
+* **Nesting**: a PointInstancer or an instance inside a prototype becomes an
+  instancer with ``prototype=True`` inside its parent prototype.
+
+Visibility and purpose are applied inside prototypes, starting from the
+prototype root. A mesh inside a prototype that cannot be read is reported
+(naming it) and left out; the rest of the prototype renders.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd, UsdGeom
+
+from ..errors import PrimError
+from .mesh_sync import read_mesh
+from .protocol import RenderDelegateLike
+from .transform import matrix_to_numpy
+
+__all__ = [
+    "InstancerState",
+    "Instancing",
+    "PointInstancerArrays",
+    "read_point_instancer",
+]
+
+_log = logging.getLogger(__name__)
+
+_EMPTY_XFORMS = np.zeros((0, 4, 4), np.float64)
+
+
+@dataclass(frozen=True)
+class PointInstancerArrays:
+    """A PointInstancer's instances at one time code, masked and checked."""
+
+    #: The prototype root prims, in ``prototypes`` order.
+    roots: list[Usd.Prim]
+    #: (N,) int32 index into ``roots`` per visible instance.
+    proto_indices: NDArray[np.int32]
+    #: (N, 4, 4) float64 prototype-root-to-instancer transforms (USD row-vector
+    #: layout), the root's own transform included.
+    transforms: NDArray[np.float64]
+    #: Whether any of the instancer's own attributes might change over time.
+    might_vary: bool
+
+
+def _check_per_instance(
+    path: str, name: str, value: Any, n: int, *, required: bool
+) -> NDArray[np.float64] | None:
+    """A per-instance array attribute, checked for size and finiteness."""
+    if value is None or len(value) == 0:
+        if required and n:
+            raise PrimError(path, f"{name} is empty but protoIndices has {n} entries")
+        return None
+    array = np.asarray(value, dtype=np.float64).reshape(len(value), -1)
+    if len(array) != n:
+        raise PrimError(path, f"{name} has {len(array)} entries but protoIndices has {n}")
+    finite = np.isfinite(array).all(axis=1)
+    if not finite.all():
+        i = int(np.flatnonzero(~finite)[0])
+        raise PrimError(path, f"{name}[{i}] = {tuple(array[i].tolist())} is not finite")
+    return array
+
+
+def read_point_instancer(pi: UsdGeom.PointInstancer, time: Usd.TimeCode) -> PointInstancerArrays:
+    """Read and check a PointInstancer's instances at ``time``.
+
+    Raises:
+        PrimError: a prototype target that is not a prim, a protoIndex out of
+            range, per-instance arrays whose sizes disagree, or values that
+            are not finite; the message names the PointInstancer.
+
+    """
+    path = str(pi.GetPath())
+    stage = pi.GetPrim().GetStage()
+    targets = pi.GetPrototypesRel().GetForwardedTargets()
+    roots = []
+    for i, target in enumerate(targets):
+        root = stage.GetPrimAtPath(target)
+        if not root:
+            raise PrimError(path, f"prototypes[{i}] <{target}> is not a prim on the stage")
+        roots.append(root)
+    indices = np.asarray(pi.GetProtoIndicesAttr().Get(time) or [], dtype=np.int64)
+    n = len(indices)
+    bad = (indices < 0) | (indices >= len(roots))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise PrimError(
+            path,
+            f"protoIndices[{i}] = {int(indices[i])} is out of range for {len(roots)} prototypes",
+        )
+    _check_per_instance(path, "positions", pi.GetPositionsAttr().Get(time), n, required=True)
+    _check_per_instance(path, "orientations", pi.GetOrientationsAttr().Get(time), n, required=False)
+    _check_per_instance(
+        path, "orientationsf", pi.GetOrientationsfAttr().Get(time), n, required=False
+    )
+    _check_per_instance(path, "scales", pi.GetScalesAttr().Get(time), n, required=False)
+    might_vary = any(a.ValueMightBeTimeVarying() for a in pi.GetPrim().GetAuthoredAttributes())
+    if n == 0:
+        return PointInstancerArrays(roots, np.zeros(0, np.int32), _EMPTY_XFORMS, might_vary)
+    xforms = pi.ComputeInstanceTransformsAtTime(time, time)
+    mask = pi.ComputeMaskAtTime(time)
+    if mask:
+        indices = indices[np.asarray(mask, dtype=bool)]
+    if len(xforms) != len(indices):
+        raise PrimError(path, "the instance transforms cannot be computed (see USD's warning)")
+    transforms = np.asarray(xforms, dtype=np.float64).reshape(-1, 4, 4)
+    return PointInstancerArrays(roots, indices.astype(np.int32), transforms, might_vary)
+
+
+@dataclass
+class InstancerState:
+    """What the scene delegate keeps about one synced PointInstancer."""
+
+    #: Prototype root paths (USD), to route edits below them to this instancer.
+    roots: tuple[str, ...] = ()
+    #: Per root, the delegate paths of its members (meshes, nested instancers).
+    groups: list[list[str]] = field(default_factory=list)
+    #: Every delegate path this instancer registered, its own included.
+    owned: set[str] = field(default_factory=set)
+    #: Materials bound to member meshes.
+    material_paths: tuple[str, ...] = ()
+    #: Whether member meshes might change over time (then a time change
+    #: re-sends them, not only the instances).
+    members_might_vary: bool = False
+    #: USD paths of member prims that were read (for the scene delegate's books).
+    member_prims: set[str] = field(default_factory=set)
+
+
+@dataclass
+class _Walk:
+    """What collecting one instancer's prototypes gathers."""
+
+    owner: str
+    time: Usd.TimeCode
+    xform_cache: UsdGeom.XformCache
+    unsupported: Counter[str]
+    owned: set[str] = field(default_factory=set)
+    material_paths: set[str] = field(default_factory=set)
+    might_vary: bool = False
+    member_prims: set[str] = field(default_factory=set)
+
+
+def _expand(
+    groups: list[list[str]], proto_indices: NDArray[np.int32], transforms: NDArray[np.float64]
+) -> tuple[list[str], NDArray[np.int32], NDArray[np.float64]]:
+    """Per-root instances → per-member instances: root r with k members becomes k placements."""
+    flat: list[str] = []
+    first: list[int] = []
+    for members in groups:
+        first.append(len(flat))
+        flat.extend(members)
+    sizes = np.array([len(m) for m in groups], dtype=np.int64)
+    if not flat or len(proto_indices) == 0:
+        return flat, np.zeros(0, np.int32), _EMPTY_XFORMS
+    per_instance = sizes[proto_indices]
+    keep = per_instance > 0
+    proto_indices, transforms, per_instance = (
+        proto_indices[keep],
+        transforms[keep],
+        per_instance[keep],
+    )
+    starts = np.asarray(first, dtype=np.int64)[proto_indices]
+    # Instance i contributes members starts[i], starts[i] + 1, ..., starts[i] + per_instance[i] - 1.
+    offsets = np.arange(int(per_instance.sum())) - np.repeat(
+        np.cumsum(per_instance) - per_instance, per_instance
+    )
+    indices = np.repeat(starts, per_instance) + offsets
+    return flat, indices.astype(np.int32), np.repeat(transforms, per_instance, axis=0)
+
+
+class Instancing:
+    """Sends instancers and their prototypes to a render delegate, and keeps the books.
+
+    Owned by :class:`~mipray.usd.scene_delegate.UsdSceneDelegate`, which calls
+    it for every PointInstancer and instance prim it walks.
+
+    Args:
+        delegate: the render delegate.
+        purposes: the purposes rendered.
+        sync_counts: the scene delegate's counts, path → sends.
+
+    """
+
+    def __init__(
+        self,
+        delegate: RenderDelegateLike,
+        purposes: tuple[str, ...],
+        sync_counts: dict[str, int],
+    ) -> None:
+        self.delegate = delegate
+        self.purposes = purposes
+        self.sync_counts = sync_counts
+        #: Member prims that could not be read: USD path → message.
+        self.errors: dict[str, str] = {}
+        self._holders: dict[str, set[str]] = {}  # delegate path → owners holding it
+        self._native_members: dict[str, list[str]] = {}  # prototype path → member paths
+        self._native_owned: dict[str, set[str]] = {}
+        self._native_vary: set[str] = set()  # prototypes whose members might change in time
+        self._groups: dict[str, dict[str, NDArray[np.float64]]] = {}  # prototype → instances
+        self._instance_of: dict[str, str] = {}  # instance prim path → prototype path
+        self._dirty_groups: set[str] = set()
+        self._referenced: set[str] = set()
+        self._context: tuple[Usd.TimeCode, UsdGeom.XformCache, Counter[str]] | None = None
+
+    # ------------------------------------------------------------ bookkeeping
+
+    def _hold(self, owner: str, path: str, owned: set[str]) -> None:
+        self._holders.setdefault(path, set()).add(owner)
+        owned.add(path)
+
+    def _release(self, owner: str, paths: set[str]) -> None:
+        for path in paths:
+            holders = self._holders.get(path)
+            if holders is None:
+                continue
+            holders.discard(owner)
+            if not holders:
+                del self._holders[path]
+                self.delegate.remove(path)
+
+    def _count(self, path: str) -> None:
+        self.sync_counts[path] = self.sync_counts.get(path, 0) + 1
+
+    def _fail(self, prim_path: str, exc: Exception) -> None:
+        """Record why a prim inside a prototype was left out (one line, naming it)."""
+        if isinstance(exc, PrimError) and exc.prim_path == prim_path:
+            message = exc.reason
+        else:
+            text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            message = text.removeprefix(f"{prim_path}: ")
+        self.errors[prim_path] = message
+        _log.error("mipray: skipping %s: %s", prim_path, message)
+
+    # ------------------------------------------------------------- prototypes
+
+    def _collect(self, root: Usd.Prim, prefix: str, walk: _Walk) -> list[str]:
+        """Send the renderable prims of the prototype at ``root``; return their delegate paths."""
+        root_path = str(root.GetPath())
+        members: list[str] = []
+        time = walk.time
+        # The purpose the root inherits: its nearest imageable ancestor's.
+        start = UsdGeom.Imageable.PurposeInfo()
+        parent = root.GetParent()
+        while parent and not parent.IsPseudoRoot():
+            if UsdGeom.Imageable(parent):
+                start = UsdGeom.Imageable(parent).ComputePurposeInfo()
+                break
+            parent = parent.GetParent()
+        stack: list[tuple[Usd.Prim, Any]] = [(root, start)]
+        while stack:
+            prim, info = stack.pop()
+            path = str(prim.GetPath())
+            dpath = prefix + path[len(root_path) :]
+            imageable = UsdGeom.Imageable(prim)
+            if imageable:
+                if imageable.GetVisibilityAttr().Get(time) == UsdGeom.Tokens.invisible:
+                    continue  # invisibility is inherited: prune the subtree
+                info = imageable.ComputePurposeInfo(info)
+            # Purpose is not pruning: a descendant may author one that is rendered.
+            included = info.purpose in self.purposes
+            if prim.IsInstance():
+                if included and self._nested_native(prim, root, dpath, walk):
+                    members.append(dpath)
+                continue
+            if prim.IsA(UsdGeom.PointInstancer):
+                if included and self._nested_point_instancer(prim, root, dpath, walk):
+                    members.append(dpath)
+                continue  # its children render only through it
+            if included and prim.IsA(UsdGeom.Mesh):
+                if self._prototype_mesh(prim, root, dpath, walk):
+                    members.append(dpath)
+            elif included and prim.IsA(UsdGeom.Gprim):
+                walk.unsupported[prim.GetTypeName() or "untyped"] += 1
+            children = prim.GetFilteredChildren(Usd.PrimDefaultPredicate)
+            stack.extend((c, info) for c in reversed(children))
+        return members
+
+    def _relative(self, prim: Usd.Prim, root: Usd.Prim, walk: _Walk) -> NDArray[np.float64]:
+        matrix, _ = walk.xform_cache.ComputeRelativeTransform(prim, root)
+        return matrix_to_numpy(matrix)
+
+    def _prototype_mesh(self, prim: Usd.Prim, root: Usd.Prim, dpath: str, walk: _Walk) -> bool:
+        path = str(prim.GetPath())
+        walk.member_prims.add(path)
+        try:
+            read = read_mesh(prim, walk.time, self._relative(prim, root, walk), prototype=True)
+            if read.args is None:
+                return False
+            self.delegate.set_mesh(dpath, **read.args)
+        except (PrimError, ValueError, TypeError, OverflowError) as exc:
+            self._fail(path, exc)
+            return False
+        self.errors.pop(path, None)
+        walk.material_paths.update(read.material_paths)
+        walk.might_vary = walk.might_vary or read.might_vary
+        self._hold(walk.owner, dpath, walk.owned)
+        self._count(dpath)
+        return True
+
+    def _nested_point_instancer(
+        self, prim: Usd.Prim, root: Usd.Prim, dpath: str, walk: _Walk
+    ) -> bool:
+        path = str(prim.GetPath())
+        walk.member_prims.add(path)
+        try:
+            arrays = read_point_instancer(UsdGeom.PointInstancer(prim), walk.time)
+            groups = [
+                self._collect(r, self._root_prefix(path, dpath, i, r), walk)
+                for i, r in enumerate(arrays.roots)
+            ]
+            flat, indices, transforms = _expand(
+                groups, arrays.proto_indices, arrays.transforms @ self._relative(prim, root, walk)
+            )
+            self.delegate.set_instancer(
+                dpath, prototypes=flat, proto_indices=indices, transforms=transforms, prototype=True
+            )
+        except (PrimError, ValueError, TypeError, OverflowError) as exc:
+            self._fail(path, exc)
+            return False
+        self.errors.pop(path, None)
+        walk.might_vary = walk.might_vary or arrays.might_vary
+        self._hold(walk.owner, dpath, walk.owned)
+        self._count(dpath)
+        return True
+
+    def _nested_native(self, prim: Usd.Prim, root: Usd.Prim, dpath: str, walk: _Walk) -> bool:
+        members = self._native(prim.GetPrototype())
+        if not members:
+            return False
+        k = len(members)
+        placement = self._relative(prim, root, walk)
+        self.delegate.set_instancer(
+            dpath,
+            prototypes=members,
+            proto_indices=np.arange(k, dtype=np.int32),
+            transforms=np.repeat(placement[None], k, axis=0),
+            prototype=True,
+        )
+        self._hold(walk.owner, dpath, walk.owned)
+        self._count(dpath)
+        return True
+
+    @staticmethod
+    def _root_prefix(pi_path: str, pi_dpath: str, index: int, root: Usd.Prim) -> str:
+        """Delegate path prefix of prototype root ``root`` of the PointInstancer at ``pi_path``."""
+        root_path = str(root.GetPath())
+        if root_path.startswith(pi_path + "/"):
+            return pi_dpath + root_path[len(pi_path) :]
+        return f"{pi_dpath}.proto{index}"
+
+    def _native(self, prototype: Usd.Prim) -> list[str]:
+        """The members of native prototype ``prototype``, sent on first use."""
+        path = str(prototype.GetPath())
+        self._referenced.add(path)
+        if path not in self._native_members:
+            self._resend_native(prototype)
+        return self._native_members[path]
+
+    def _resend_native(self, prototype: Usd.Prim) -> None:
+        assert self._context is not None, "begin_sync() first"
+        time, xform_cache, unsupported = self._context
+        path = str(prototype.GetPath())
+        walk = _Walk(path, time, xform_cache, unsupported)
+        self._native_members[path] = []  # guards against re-entry
+        members = self._collect(prototype, path, walk)
+        old = self._native_owned.get(path, set())
+        if path in old:  # the instancer itself stays held
+            self._hold(path, path, walk.owned)
+        self._release(path, old - walk.owned)
+        self._native_members[path] = members
+        self._native_owned[path] = walk.owned
+        if walk.might_vary:
+            self._native_vary.add(path)
+        else:
+            self._native_vary.discard(path)
+        self._dirty_groups.add(path)
+
+    # ------------------------------------------------------------ entry points
+
+    def begin_sync(
+        self,
+        time: Usd.TimeCode,
+        xform_cache: UsdGeom.XformCache,
+        unsupported: Counter[str],
+        *,
+        full: bool,
+    ) -> None:
+        """Start a sync.
+
+        ``full`` when the whole stage is walked again: prototype paths may
+        have changed, so native prototypes are collected anew.
+        """
+        self._context = (time, xform_cache, unsupported)
+        if full:
+            self._native_members.clear()
+            self._referenced = set()
+            self._dirty_groups.update(self._groups)
+
+    def end_sync(self, *, full: bool) -> None:
+        """Finish a sync: send the native instancers whose instances changed.
+
+        After a full walk, drop the prototypes nothing uses any more.
+        """
+        for proto in sorted(self._dirty_groups):
+            instances = self._groups.get(proto, {})
+            members = self._native_members.get(proto, [])
+            owned = self._native_owned.setdefault(proto, set())
+            if instances and members:
+                k, n = len(members), len(instances)
+                transforms = np.stack(list(instances.values()))
+                self.delegate.set_instancer(
+                    proto,
+                    prototypes=members,
+                    proto_indices=np.tile(np.arange(k, dtype=np.int32), n),
+                    transforms=np.repeat(transforms, k, axis=0),
+                )
+                self._hold(proto, proto, owned)
+                self._count(proto)
+            elif proto in owned:
+                owned.discard(proto)
+                self._release(proto, {proto})
+        self._dirty_groups.clear()
+        if full:
+            for proto in [p for p in self._native_owned if p not in self._referenced]:
+                self._release(proto, self._native_owned.pop(proto))
+                self._groups.pop(proto, None)
+                self._native_vary.discard(proto)
+        self._context = None
+
+    def varying_prototypes(self) -> set[str]:
+        """Native prototypes whose meshes might change over time.
+
+        The scene delegate re-sends them when the time changes.
+        """
+        return set(self._native_vary)
+
+    def resend_native_prototype(self, stage: Usd.Stage, path: str) -> bool:
+        """Re-send the members of native prototype ``path`` after an edit inside it.
+
+        Returns False when there is no such prototype any more (walk the stage again).
+        """
+        prototype = stage.GetPrimAtPath(path)
+        if not prototype or not prototype.IsPrototype():
+            return False
+        if path in self._native_members:
+            self._resend_native(prototype)
+        return True
+
+    def add_instance(
+        self, instance_path: str, prototype: Usd.Prim, world: NDArray[np.float64]
+    ) -> bool:
+        """Place native prototype ``prototype`` at ``world`` for instance prim ``instance_path``.
+
+        Returns whether the prototype has anything to render.
+        """
+        proto = str(prototype.GetPath())
+        members = self._native(prototype)
+        old = self._instance_of.get(instance_path)
+        if old is not None and old != proto:
+            self.remove_instance(instance_path)
+        self._groups.setdefault(proto, {})[instance_path] = world
+        self._instance_of[instance_path] = proto
+        self._dirty_groups.add(proto)
+        return bool(members)
+
+    def remove_instance(self, instance_path: str) -> None:
+        """Take instance prim ``instance_path`` out of its prototype's instancer."""
+        proto = self._instance_of.pop(instance_path, None)
+        if proto is not None:
+            self._groups.get(proto, {}).pop(instance_path, None)
+            self._dirty_groups.add(proto)
+
+    def sync_point_instancer(
+        self,
+        prim: Usd.Prim,
+        world: NDArray[np.float64],
+        previous: InstancerState | None,
+        *,
+        members: bool,
+    ) -> tuple[InstancerState, bool]:
+        """Send the PointInstancer ``prim``, and its prototypes when ``members`` is set.
+
+        ``previous`` is its state from the last sync, if any: without
+        ``members`` only the instances are re-sent (the prototypes are those of
+        ``previous``); with it, prototype meshes that are gone are removed.
+
+        Returns:
+            The new state, and whether the instancer's own data might vary in time.
+
+        Raises:
+            PrimError: the PointInstancer's data is inconsistent.
+
+        """
+        assert self._context is not None, "begin_sync() first"
+        time, xform_cache, unsupported = self._context
+        path = str(prim.GetPath())
+        arrays = read_point_instancer(UsdGeom.PointInstancer(prim), time)
+        roots = tuple(str(r.GetPath()) for r in arrays.roots)
+        state = previous
+        if members or state is None or roots != state.roots:
+            walk = _Walk(path, time, xform_cache, unsupported)
+            groups = [
+                self._collect(r, self._root_prefix(path, path, i, r), walk)
+                for i, r in enumerate(arrays.roots)
+            ]
+            old = previous.owned if previous is not None else set()
+            if path in old:
+                self._hold(path, path, walk.owned)
+            self._release(path, old - walk.owned)
+            state = InstancerState(
+                roots=roots,
+                groups=groups,
+                owned=walk.owned,
+                material_paths=tuple(sorted(walk.material_paths)),
+                members_might_vary=walk.might_vary,
+                member_prims=walk.member_prims,
+            )
+        flat, indices, transforms = _expand(
+            state.groups, arrays.proto_indices, arrays.transforms @ world
+        )
+        self.delegate.set_instancer(
+            path, prototypes=flat, proto_indices=indices, transforms=transforms
+        )
+        self._hold(path, path, state.owned)
+        return state, arrays.might_vary
+
+    def forget_point_instancer(self, path: str, state: InstancerState) -> None:
+        """Remove the PointInstancer at ``path`` and whatever only it held."""
+        self._release(path, state.owned | {path})
+        for prim_path in state.member_prims:
+            self.errors.pop(prim_path, None)
+
+    def owner_of(self, changed: str, states: dict[str, InstancerState]) -> list[str]:
+        """PointInstancers (path → state) whose prototypes hold the prim path ``changed``."""
+        return [
+            p
+            for p, s in states.items()
+            if any(changed == r or changed.startswith(r + "/") for r in s.roots)
+        ]

@@ -1,0 +1,64 @@
+"""Everything ``set_mesh`` needs for one ``UsdGeom.Mesh``, read in one place.
+
+The topology and subdivision tags (:func:`mipray.usd.mesh.mesh_arguments`),
+then the per-face diffuse colours (:func:`mipray.usd.face_albedo.compute_surface_albedo`).
+Both the scene delegate (meshes rendered in place) and the instancing code
+(prototype meshes) read meshes through :func:`read_mesh`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd, UsdGeom
+
+from .face_albedo import compute_surface_albedo
+from .mesh import mesh_arguments
+
+__all__ = ["MeshRead", "read_mesh"]
+
+
+@dataclass(frozen=True)
+class MeshRead:
+    """One mesh read at one time code."""
+
+    #: ``set_mesh`` keyword arguments (without the path), or None for a mesh
+    #: without faces (valid USD that renders nothing).
+    args: dict[str, Any] | None
+    #: Materials bound to the mesh and its GeomSubsets.
+    material_paths: tuple[str, ...]
+    #: Whether the mesh's data (not its transform) might change over time.
+    might_vary: bool
+
+
+def read_mesh(
+    prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64], *, prototype: bool = False
+) -> MeshRead:
+    """Read the mesh ``prim`` at ``time``.
+
+    ``transform`` is object-to-world, or for a prototype object-to-prototype-root.
+
+    Raises:
+        PrimError: the mesh's data is inconsistent (the message names the
+            prim, or the GeomSubset at fault).
+
+    """
+    mesh = UsdGeom.Mesh(prim)
+    data_varies = any(
+        a.ValueMightBeTimeVarying()
+        for a in prim.GetAuthoredAttributes()
+        if not a.GetName().startswith("xformOp")
+    )
+    args = mesh_arguments(mesh, time, transform, (0.18, 0.18, 0.18))
+    if args is None:
+        return MeshRead(None, (), data_varies)
+    surface = compute_surface_albedo(
+        mesh, time, args["face_vertex_counts"], args["face_vertex_indices"], len(args["points"])
+    )
+    args.update(surface.arguments())
+    if prototype:
+        args["prototype"] = True
+    return MeshRead(args, surface.material_paths, data_varies or surface.might_vary)
