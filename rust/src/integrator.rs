@@ -232,7 +232,10 @@ impl<'a> DirectLighting<'a> {
         let mut color = Vec3A::ZERO;
         let mut ao = 0.0;
         let (mut beam_width, mut quads) = (ray.beam_width(hit.t), hit.quads);
-        let albedo = material.diffuse_color;
+        let albedo = match &material.diffuse_texture {
+            None => material.diffuse_color,
+            Some(tex) => self.texture_color(tex, hit, &sp, &footprint),
+        };
         if albedo.max_element() > 0.0 {
             color += albedo * self.direct(&sp, hit, &footprint, counters);
             if self.ao_samples > 0 {
@@ -254,6 +257,20 @@ impl<'a> DirectLighting<'a> {
             }
         }
         Shade { color, ao, beam_width, quads }
+    }
+
+    /// A textured colour at the hit, filtered over the footprint the ray differential gives:
+    /// (du, dv)/(dx, dy) by least squares on the tangent plane, chained through the surface's
+    /// d(st)/du, d(st)/dv (the paper's §2.6 and §6.3.3: wide rays read coarse MIP levels).
+    fn texture_color(&self, tex: &crate::material::TexturedColor, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> Vec3A {
+        let mesh = &self.scene.meshes[hit.mesh as usize];
+        let Some((st, dst_du, dst_dv)) = mesh.surface.face_varying(tex.st_channel, hit.patch as usize, hit.u, hit.v) else {
+            return tex.eval(None, [0.0; 2], [0.0; 2]);
+        };
+        let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
+        let dx = [dst_du[0] * uv.dudx + dst_dv[0] * uv.dvdx, dst_du[1] * uv.dudx + dst_dv[1] * uv.dvdx];
+        let dy = [dst_du[0] * uv.dudy + dst_dv[0] * uv.dvdy, dst_du[1] * uv.dudy + dst_dv[1] * uv.dvdy];
+        tex.eval(Some(st), dx, dy)
     }
 
     /// dN/dx, dN/dy at the hit from the limit surface's second derivatives (Weingarten) and

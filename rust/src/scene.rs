@@ -75,6 +75,9 @@ pub struct Scene {
     pub camera: Camera,
     pub lights: Vec<Light>,
     pub materials: Vec<Material>,
+    /// The texture system materials and displacement read through, for the stats'
+    /// `texture_cache` object.
+    pub textures: Option<std::sync::Arc<dyn crate::texture::TextureSampler>>,
 }
 
 impl Scene {

@@ -70,6 +70,7 @@ pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect]
             "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
             "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
         },
+        "texture_cache": tracer.scene().textures.as_ref().map_or(Value::Null, |t| t.stats()),
         "memory": { "peak_rss_bytes": peak_rss_bytes() },
         "effects": { "enabled": effects },
     })

@@ -828,3 +828,9 @@ mod tests {
         assert!(p.at_face(9, 0.0, 0.0).is_none());
     }
 }
+
+impl std::fmt::Debug for dyn TextureSampler {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TextureSampler({:?})", self.filter_mode())
+    }
+}

@@ -203,6 +203,11 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().map(|m| m.subpatches.len()).sum()
     }
 
+    /// The scene being traced.
+    pub fn scene(&self) -> &'s Scene {
+        self.scene
+    }
+
     /// Bytes of the root subpatches (their bounds are the bottom-level BVHs' primitives).
     pub fn subpatch_bytes(&self) -> usize {
         self.meshes.iter().map(|m| m.subpatches.len() * std::mem::size_of::<crate::subpatch::Subpatch>()).sum()
