@@ -16,7 +16,9 @@ RECORD  := $(VENV)/bin/mipray-record
 EXAMPLE ?= subdiv_showcase
 WIDTH   ?= 320
 OUT     ?= out
-EXAMPLE_FILES := examples/subdiv_showcase.usda
+EXAMPLE_FILES := examples/subdiv_showcase.usda examples/forest.usda examples/render_settings.usda examples/textured.usda
+# Textures of examples/textured.usda: drawn by a script, made into tiled MIP maps by maketx.
+TEXTURES := examples/textures/bricks_color.tx examples/textures/bricks_height.tx
 # pyo3's build script finds Python through this when cargo checks mipray-py.
 ifneq ($(wildcard $(PY)),)
 export PYO3_PYTHON ?= $(abspath $(PY))
@@ -36,9 +38,12 @@ build: setup ## Build the Rust workspace and the extension
 $(EXAMPLE_FILES):
 	@[ -f $@ ] || $(PY) examples/make_examples.py
 
-examples: setup $(EXAMPLE_FILES) ## Write the example scenes if missing
+$(TEXTURES): examples/make_textures.py
+	@$(PY) examples/make_textures.py >/dev/null
 
-render: setup $(EXAMPLE_FILES) ## Render examples/$(EXAMPLE).usda to $(OUT)/$(EXAMPLE).exr and .png
+examples: setup $(EXAMPLE_FILES) $(TEXTURES) ## Write the example scenes and textures if missing
+
+render: setup $(EXAMPLE_FILES) $(TEXTURES) ## Render examples/$(EXAMPLE).usda to $(OUT)/$(EXAMPLE).exr and .png
 	@mkdir -p $(OUT)
 	@$(RECORD) --imageWidth $(WIDTH) --aovs color,depth,normal \
 		--stats $(OUT)/$(EXAMPLE).stats.json examples/$(EXAMPLE).usda $(OUT)/$(EXAMPLE).exr
@@ -49,7 +54,7 @@ render: setup $(EXAMPLE_FILES) ## Render examples/$(EXAMPLE).usda to $(OUT)/$(EX
 		$(RECORD) --imageWidth $(WIDTH) examples/$(EXAMPLE).usda $(OUT)/$(EXAMPLE).png; \
 	fi
 
-test: setup $(EXAMPLE_FILES) ## Run every test (both suites run; fails if either fails)
+test: setup $(EXAMPLE_FILES) $(TEXTURES) ## Run every test (both suites run; fails if either fails)
 	@status=0; \
 	$(MAKE) --no-print-directory test-rust || status=1; \
 	$(MAKE) --no-print-directory test-python || status=1; \
@@ -92,3 +97,8 @@ bench-cache: setup ## The paper's §6.3.2 cache tables: docs/cache-benchmark.{md
 	cargo run --release -p hd-mipray --bin mipray-bench-cache -- --out docs/cache-benchmark
 	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
 	$(VENV)/bin/python scripts/plot_cache_bench.py docs/cache-benchmark.json docs/cache-benchmark.png
+
+.PHONY: accuracy
+accuracy: setup ## Accuracy against time (mipray-sweep): docs/accuracy-vs-time.{md,json}, docs/images/accuracy-*.png
+	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
+	$(PY) examples/accuracy_report.py

@@ -444,10 +444,103 @@ def render_settings(path: Path) -> None:
     stage.GetRootLayer().Save()
 
 
+def _textured_material(stage: Usd.Stage, name: str, displacement: float) -> UsdShade.Material:
+    """UsdPreviewSurface with diffuseColor and displacement from maketx'd brick textures."""
+    root = f"/World/Looks/{name}"
+    UsdGeom.Scope.Define(stage, "/World/Looks")
+    material = UsdShade.Material.Define(stage, root)
+    surface = UsdShade.Shader.Define(stage, f"{root}/PreviewSurface")
+    surface.CreateIdAttr("UsdPreviewSurface")
+    surface.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.8)
+    reader = UsdShade.Shader.Define(stage, f"{root}/StReader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    st = reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    color = UsdShade.Shader.Define(stage, f"{root}/ColorTexture")
+    color.CreateIdAttr("UsdUVTexture")
+    color.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("textures/bricks_color.tx")
+    color.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
+    color.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("repeat")
+    color.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("repeat")
+    color.CreateInput("fallback", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(0.5, 0.2, 0.15, 1.0))
+    surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+        color.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    )
+    material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    if displacement > 0.0:
+        height = UsdShade.Shader.Define(stage, f"{root}/HeightTexture")
+        height.CreateIdAttr("UsdUVTexture")
+        height.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("textures/bricks_height.tx")
+        height.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
+        height.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("repeat")
+        height.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("repeat")
+        height.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(displacement))
+        height.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-displacement))
+        surface.CreateInput("displacement", Sdf.ValueTypeNames.Float).ConnectToSource(
+            height.CreateOutput("r", Sdf.ValueTypeNames.Float)
+        )
+        material.CreateDisplacementOutput().ConnectToSource(surface.ConnectableAPI(), "displacement")
+    return material
+
+
+def textured(path: Path) -> None:
+    """Write examples/textured.usda: a brick wall and a brick-wrapped cube, textures by
+    examples/make_textures.py (made into tiled MIP maps with maketx)."""
+    stage = _new_stage(
+        path,
+        "mipray example: UsdUVTexture on diffuseColor (filtered by the ray differentials) and on "
+        "displacement (applied when tessellating, filtered at each tier's grid spacing). Make the "
+        "textures first: .venv/bin/python examples/make_textures.py",
+    )
+    wall_mat = _textured_material(stage, "BrickWall", 0.04)
+    cube_mat = _textured_material(stage, "BrickCube", 0.0)
+    n = 8
+    points, st, indices = [], [], []
+    for j in range(n + 1):
+        for i in range(n + 1):
+            points.append((-3.0 + 6.0 * i / n, 6.0 * j / n, 0.0))
+            st.append((2.0 * i / n, 2.0 * j / n))
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            indices += [a, a + 1, a + n + 2, a + n + 1]
+    wall = _mesh(stage, "/World/Geo/Wall", points, [4] * (n * n), indices, wall_mat)
+    wall.GetPrim().CreateAttribute("primvars:displacementBound", Sdf.ValueTypeNames.Float).Set(0.05)
+    pv = UsdGeom.PrimvarsAPI(wall.GetPrim()).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    )
+    pv.Set([Gf.Vec2f(*uv) for uv in st])
+    wall.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, -2.0))
+    cube = _mesh(stage, "/World/Geo/Cube", CUBE_POINTS, CUBE_COUNTS, CUBE_INDICES, cube_mat)
+    face_st = [(0, 0), (1, 0), (1, 1), (0, 1)] * 6
+    cpv = UsdGeom.PrimvarsAPI(cube.GetPrim()).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
+    )
+    cpv.Set([Gf.Vec2f(*uv) for uv in face_st])
+    cube.CreateFaceVaryingLinearInterpolationAttr(UsdGeom.Tokens.all)
+    cube.AddTranslateOp().Set(Gf.Vec3d(1.2, 0.9, 0.5))
+    cube.AddRotateYOp().Set(30.0)
+    cube.AddScaleOp().Set(Gf.Vec3f(0.9))
+    ground = _mesh(
+        stage,
+        "/World/Geo/Ground",
+        [(-20, 0, -20), (20, 0, -20), (20, 0, 20), (-20, 0, 20)],
+        [4],
+        [0, 3, 2, 1],
+        _material(stage, "Ground", (0.35, 0.35, 0.33)),
+        scheme="none",
+    )
+    del ground
+    _look_at_camera(stage, "/World/Cam", (1.0, 2.5, 7.0), (0.0, 2.0, -2.0), 30.0)
+    _sun_and_fill(stage)
+    stage.GetRootLayer().Save()
+
+
 EXAMPLES = {
     "subdiv_showcase.usda": subdiv_showcase,
     "forest.usda": forest,
     "render_settings.usda": render_settings,
+    "textured.usda": textured,
 }
 
 

@@ -81,8 +81,21 @@ class FakeRenderDelegate:
         prototype: bool = False,
         face_albedos: NDArray[np.float32] | None = None,
         face_albedo_indices: NDArray[np.int32] | None = None,
+        mirror: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        displacement_bound: float | None = None,
+        displacement: tuple[float, float, int, float] | None = None,
+        st_values: NDArray[np.float32] | None = None,
+        st_indices: NDArray[np.int32] | None = None,
+        st_interpolation: str = "faceVarying",
+        diffuse_texture: dict[str, object] | None = None,
+        displacement_texture: dict[str, object] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
+        if st_values is not None:
+            _check_array(path, "st_values", st_values, np.float32, 2)
+        for tex in (diffuse_texture, displacement_texture):
+            if tex is not None and "file" not in tex:
+                raise ValueError(f"{path}: a texture needs a file")
         if path in self.reject:
             raise ValueError(f"{path}: rejected by the fake delegate")
         if (face_albedos is None) != (face_albedo_indices is None):

@@ -164,7 +164,12 @@ def test_textured_diffuse_falls_back_to_display_color(fake) -> None:
     surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(out)
     bind(cube.GetPrim(), material)
     sync(stage, fake)
-    assert fake.meshes()["/Cube"]["albedo"] == pytest.approx((0.1, 0.2, 0.3))
+    mesh = fake.meshes()["/Cube"]
+    # The constant albedo falls back to displayColor; the texture travels separately (the
+    # renderer uses the texture's own fallback if the file cannot be read).
+    assert mesh["albedo"] == pytest.approx((0.1, 0.2, 0.3))
+    assert mesh["diffuse_texture"]["file"].endswith("wood.png")
+    assert mesh["diffuse_texture"]["channel"] == 0
 
 
 def test_diffuse_through_a_material_interface_input_is_constant(fake) -> None:

@@ -26,6 +26,8 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "geometryCacheCoarseMb", default: "", description: "multires only: the coarse (2×2) tier's budget in MB, overriding its third of geometryCacheMb" },
     SettingDescriptor { key: "geometryCacheMediumMb", default: "", description: "multires only: the medium (5×5) tier's budget in MB" },
     SettingDescriptor { key: "geometryCacheFineMb", default: "", description: "multires only: the fine (17×17) tier's budget in MB" },
+    SettingDescriptor { key: "textureFilter", default: "differentials", description: "texture MIP level choice: differentials (filter widths from the ray differentials) or finest (the paper's 6.3.3 experiment)" },
+    SettingDescriptor { key: "textureCacheMb", default: "10", description: "OpenImageIO texture cache budget in MB" },
     SettingDescriptor { key: "cacheMode", default: "multires", description: "geometry cache mode: multires, single, unbounded or none" },
     SettingDescriptor { key: "displacementBound", default: "0", description: "displacement bound (object units) for meshes that state none" },
     SettingDescriptor { key: "aoSamples", default: "0", description: "ambient-occlusion rays per shading point (0: off)" },
@@ -46,6 +48,8 @@ pub struct RenderSettings {
     /// Per-tier overrides (coarse, medium, fine) in MB, multires mode.
     pub tier_mb: [Option<f64>; 3],
     pub cache_mode: CacheMode,
+    pub texture_filter: mipray::texture::FilterMode,
+    pub texture_cache_mb: f32,
     pub displacement_bound: f32,
     pub ao_samples: u32,
     pub ao_distance: f32,
@@ -55,7 +59,7 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, tess_factor_incoherent: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
+        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, tess_factor_incoherent: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, texture_filter: mipray::texture::FilterMode::Differentials, texture_cache_mb: 10.0, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
     }
 }
 
@@ -121,6 +125,17 @@ impl RenderSettings {
                     };
                     s.tier_mb[tier] = Some(x);
                 }
+                "textureFilter" => {
+                    let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
+                    s.texture_filter = mipray::texture::FilterMode::from_name(name).ok_or_else(|| bad(k, format!("'{name}' is not differentials or finest")))?;
+                }
+                "textureCacheMb" => {
+                    let x = as_f64(k, v)?;
+                    if x <= 0.0 {
+                        return Err(bad(k, format!("{x} must be positive")));
+                    }
+                    s.texture_cache_mb = x as f32;
+                }
                 "cacheMode" => {
                     let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
                     s.cache_mode = name.parse().map_err(|e| bad(k, format!("{e}")))?;
@@ -143,6 +158,11 @@ impl RenderSettings {
             }
         }
         Ok(s)
+    }
+
+    /// OpenImageIO texture-system options for these settings.
+    pub fn texture_options(&self) -> mipray_bridge::OiioTextureOptions {
+        mipray_bridge::OiioTextureOptions { max_memory_mb: self.texture_cache_mb, filter: self.texture_filter, ..Default::default() }
     }
 
     /// The core's options for a render of `width`×`height` with `aovs`.

@@ -45,3 +45,25 @@ impl FaceAlbedo {
         Ok(())
     }
 }
+
+/// A UsdUVTexture feeding a UsdPreviewSurface input, as the scene delegate resolved it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureInput {
+    /// Resolved file path.
+    pub file: String,
+    /// UsdUVTexture `scale`, `bias` and `fallback` (RGBA).
+    pub scale: [f32; 4],
+    pub bias: [f32; 4],
+    pub fallback: [f32; 4],
+    pub wrap_s: mipray::texture::Wrap,
+    pub wrap_t: mipray::texture::Wrap,
+    /// The output connected: 0 = r (or rgb), 1 = g, 2 = b, 3 = a.
+    pub channel: u32,
+}
+
+impl TextureInput {
+    /// The texture lookup options.
+    pub fn lookup(&self) -> mipray::texture::Lookup {
+        mipray::texture::Lookup { first_channel: self.channel, wrap_s: self.wrap_s, wrap_t: self.wrap_t, fill: 0.0 }
+    }
+}

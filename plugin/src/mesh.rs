@@ -11,7 +11,8 @@ use mipray_bridge::OsdSurface;
 
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
-use crate::material::FaceAlbedo;
+use crate::material::{FaceAlbedo, TextureInput};
+use mipray::texture::Primvar2;
 
 /// What the scene delegate knows about a mesh. Object space; `transform` is object-to-world
 /// (column-vector convention).
@@ -36,6 +37,12 @@ pub struct MeshData {
     /// Per-face diffuse colours overriding `albedo` on some faces (GeomSubsets bound to their
     /// own materials, uniform `displayColor`).
     pub face_albedo: Option<FaceAlbedo>,
+    /// The `st` primvar the textures read (face-varying through OpenSubdiv).
+    pub st: Option<Primvar2>,
+    /// `diffuseColor` from a texture (replaces `albedo`).
+    pub diffuse_texture: Option<TextureInput>,
+    /// `displacement` from a texture (replaces the procedural displacement).
+    pub displacement_texture: Option<TextureInput>,
 }
 
 impl Default for MeshData {
@@ -52,6 +59,9 @@ impl Default for MeshData {
             displacement: None,
             prototype: false,
             face_albedo: None,
+            st: None,
+            diffuse_texture: None,
+            displacement_texture: None,
         }
     }
 }
@@ -96,7 +106,7 @@ impl MeshPrim {
     /// What differs between the current data and `new`.
     pub fn diff(&self, new: &MeshData) -> DirtyBits {
         let mut d = DirtyBits::CLEAN;
-        if self.data.topology != new.topology {
+        if self.data.topology != new.topology || self.data.st != new.st {
             d = d | DirtyBits::TOPOLOGY;
         }
         if self.data.points != new.points {
@@ -105,13 +115,13 @@ impl MeshPrim {
         if self.data.transform != new.transform {
             d = d | DirtyBits::TRANSFORM;
         }
-        if self.data.albedo != new.albedo || self.data.mirror != new.mirror || self.data.double_sided != new.double_sided || self.data.face_albedo != new.face_albedo {
+        if self.data.albedo != new.albedo || self.data.mirror != new.mirror || self.data.double_sided != new.double_sided || self.data.face_albedo != new.face_albedo || self.data.diffuse_texture != new.diffuse_texture {
             d = d | DirtyBits::MATERIAL;
         }
         if self.data.prototype != new.prototype {
             d = d | DirtyBits::VISIBILITY;
         }
-        if self.data.displacement != new.displacement || self.data.displacement_bound != new.displacement_bound {
+        if self.data.displacement != new.displacement || self.data.displacement_bound != new.displacement_bound || self.data.displacement_texture != new.displacement_texture {
             // Displacement changes the tessellated shape: new cache generation.
             d = d | DirtyBits::POINTS;
         }
@@ -171,16 +181,19 @@ impl MeshPrim {
             d.validate().map_err(mipray::error::MeshError::Invalid)?;
         }
         let t = &self.data.topology;
-        let points_only = !dirty.contains(DirtyBits::TOPOLOGY);
+        let points_only = !dirty.contains(DirtyBits::TOPOLOGY) && self.data.st.is_none();
         if let (true, Some(Surface::Osd(s))) = (points_only, self.surface.as_mut()) {
             if let Some(osd) = Arc::get_mut(s) {
                 osd.update_points(&self.data.points)?;
                 return Ok(Surface::Osd(s.clone()));
             }
         }
+        // Textures read `st` as the surface's primvar channel 0.
+        let primvars: Vec<Primvar2> = self.data.st.iter().cloned().collect();
         Ok(match t.scheme {
-            Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?)),
-            _ => Surface::Osd(Arc::new(OsdSurface::new(&self.path, t, &self.data.points)?)),
+            Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?.with_primvars(t, self.data.points.len(), &primvars)?)),
+            _ if primvars.is_empty() => Surface::Osd(Arc::new(OsdSurface::new(&self.path, t, &self.data.points)?)),
+            _ => Surface::Osd(Arc::new(OsdSurface::with_primvars(&self.path, t, &self.data.points, &mipray_bridge::OsdOptions::default(), &primvars)?)),
         })
     }
 }

@@ -2,8 +2,13 @@
 //! scene a render pass hands to the core. Instancers ([`crate::instancer`]) are flattened there:
 //! one core mesh per prototype, one core instance per placement.
 
-use std::collections::{BTreeMap, HashMap};
-use std::sync::Arc;
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::{Arc, Mutex};
+
+use mipray::displacement::{DisplacementShader, TextureDisplacement};
+use mipray::material::TexturedColor;
+use mipray::texture::TextureSampler;
+use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
 use glam::Mat4;
 
@@ -40,6 +45,11 @@ pub struct RenderDelegate {
     /// Kept between renders while the cache settings stay the same, so an edit to one prim
     /// costs only that prim's tessellations.
     cache: Option<(CacheConfig, Arc<GeometryCache<Tessellation>>)>,
+    /// OpenImageIO's texture system, made on the first render that needs one, remade when the
+    /// texture settings change.
+    textures: Option<(OiioTextureOptions, Arc<OiioTextureSystem>)>,
+    /// Texture problems already reported, so each is said once, not once per render.
+    warned: Mutex<HashSet<String>>,
 }
 
 impl RenderDelegate {
@@ -109,6 +119,44 @@ impl RenderDelegate {
             cache.invalidate_mesh(m.cache_id);
         }
         mesh.is_some() | self.cameras.remove(path).is_some() | self.lights.remove(path).is_some() | self.instancers.remove(path).is_some()
+    }
+
+    /// Makes (or keeps) the texture system for `options` when some mesh uses textures. A change
+    /// of options (say, forcing the finest MIP level) changes what textured displacement
+    /// tessellates to, so those meshes' cache entries are dropped.
+    ///
+    /// # Errors
+    /// OpenImageIO could not start a texture system.
+    pub fn prepare_textures(&mut self, options: OiioTextureOptions) -> Result<(), DelegateError> {
+        let needed = self.meshes.values().any(|m| m.data.diffuse_texture.is_some() || m.data.displacement_texture.is_some());
+        if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
+            return Ok(());
+        }
+        let had = self.textures.is_some();
+        let system = OiioTextureSystem::new(options).map_err(|e| DelegateError::prim("textures", e))?;
+        self.textures = Some((options, Arc::new(system)));
+        if had {
+            for m in self.meshes.values_mut().filter(|m| m.data.displacement_texture.is_some()) {
+                m.generation = m.generation.wrapping_add(1);
+                if let Some((_, cache)) = &self.cache {
+                    cache.invalidate_mesh(m.cache_id);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Logs `message` the first time `key` (prim and file) comes up.
+    fn warn_once(&self, key: String, message: String) {
+        let mut w = self.warned.lock().unwrap_or_else(|e| e.into_inner());
+        if w.insert(key) {
+            log::warn!("{message}");
+        }
+    }
+
+    /// The texture system as the core's trait, if one was prepared.
+    fn sampler(&self) -> Option<Arc<dyn TextureSampler>> {
+        self.textures.as_ref().map(|(_, t)| t.clone() as Arc<dyn TextureSampler>)
     }
 
     /// The geometry cache for `config`: the one kept from earlier renders if its settings are
@@ -196,14 +244,64 @@ impl RenderDelegate {
             expand(&self.instancers, inst, Mat4::IDENTITY, &is_mesh, &mut |p, t| place(&mut scene, p, t));
         }
         scene.lights = self.lights.values().map(LightPrim::to_light).collect();
+        scene.textures = self.sampler();
         Ok(scene)
+    }
+
+    /// A textured colour for `input`, or `None` (warned once, naming prim and file) when the
+    /// texture cannot be read.
+    fn textured_color(&self, path: &str, input: &crate::material::TextureInput) -> Option<TexturedColor> {
+        let sampler = self.sampler()?;
+        match sampler.handle(&input.file) {
+            Ok(texture) => Some(TexturedColor {
+                sampler,
+                texture,
+                path: input.file.clone(),
+                lookup: input.lookup(),
+                scale: glam::Vec3A::new(input.scale[0], input.scale[1], input.scale[2]),
+                bias: glam::Vec3A::new(input.bias[0], input.bias[1], input.bias[2]),
+                fallback: glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]),
+                st_channel: 0,
+            }),
+            Err(e) => {
+                self.warn_once(format!("{path} {}", input.file), format!("{path}: cannot read diffuseColor texture {}: {}; using its fallback", input.file, e.message));
+                None
+            }
+        }
+    }
+
+    /// A texture displacement for `input`, or `None` (warned once) when unreadable.
+    fn texture_displacement(&self, path: &str, input: &crate::material::TextureInput) -> Option<DisplacementShader> {
+        let sampler = self.sampler()?;
+        match TextureDisplacement::new(sampler, &input.file, 0) {
+            Ok(mut d) => {
+                let c = (input.channel as usize).min(3);
+                d.lookup = input.lookup();
+                d.scale = input.scale[c];
+                d.bias = input.bias[c];
+                d.fallback = input.fallback[c];
+                Some(DisplacementShader::Texture(Arc::new(d)))
+            }
+            Err(e) => {
+                self.warn_once(format!("{path} {}", input.file), format!("{path}: cannot read displacement texture {}: {}; not displaced", input.file, e.message));
+                None
+            }
+        }
     }
 
     /// Adds mesh prim `m` (its materials too) to `scene` as a core mesh; `None` when it has no
     /// synced surface (it failed to sync, or was never synced) and is left out.
     fn core_mesh(&self, m: &MeshPrim, default_displacement_bound: f32, scene: &mut Scene) -> Option<usize> {
         let surface = m.surface.as_ref()?;
-        let mat = scene.add_material(mesh_material(&m.path, m.data.albedo, m.data.mirror));
+        let mut material = mesh_material(&m.path, m.data.albedo, m.data.mirror);
+        if let Some(input) = &m.data.diffuse_texture {
+            material.diffuse_texture = self.textured_color(&m.path, input);
+            if material.diffuse_texture.is_none() {
+                // Unreadable: the input's fallback value, as UsdUVTexture says.
+                material.diffuse_color = glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]).clamp(glam::Vec3A::ZERO, glam::Vec3A::ONE);
+            }
+        }
+        let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
         mesh.material = mat;
         if let Some(fa) = &m.data.face_albedo {
@@ -219,8 +317,13 @@ impl RenderDelegate {
         mesh.cache_id = Some(m.cache_id);
         mesh.left_handed = m.data.topology.left_handed;
         mesh.displacement = m.data.displacement.map(Into::into);
-        // The authored bound, else the procedural displacement's exact one, else the setting.
-        mesh.displacement_bound = m.data.displacement_bound.or(m.data.displacement.map(|d| d.bound())).unwrap_or(default_displacement_bound);
+        if let Some(input) = &m.data.displacement_texture {
+            if let Some(d) = self.texture_displacement(&m.path, input) {
+                mesh.displacement = Some(d);
+            }
+        }
+        // The authored bound, else the displacement's own (exact) one, else the setting.
+        mesh.displacement_bound = m.data.displacement_bound.or(mesh.displacement.as_ref().map(DisplacementShader::bound)).unwrap_or(default_displacement_bound);
         Some(scene.add_mesh(mesh))
     }
 }

@@ -59,6 +59,14 @@ class RenderDelegate:
         prototype: bool = False,
         face_albedos: NDArray[np.float32] | None = None,
         face_albedo_indices: NDArray[np.int32] | None = None,
+        mirror: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        displacement_bound: float | None = None,
+        displacement: tuple[float, float, int, float] | None = None,
+        st_values: NDArray[np.float32] | None = None,
+        st_indices: NDArray[np.int32] | None = None,
+        st_interpolation: str = "faceVarying",
+        diffuse_texture: dict[str, object] | None = None,
+        displacement_texture: dict[str, object] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -90,6 +98,21 @@ class RenderDelegate:
             face_albedo_indices: (F,) int32, one per face in USD face order
                 (holes included): an index into ``face_albedos``, or -1 for
                 ``albedo``. Given together with ``face_albedos``.
+            mirror: reflectance of a perfect mirror layer (UsdPreviewSurface
+                metallic with roughness 0), linear RGB.
+            displacement_bound: ``primvars:displacementBound``, object units;
+                None: the displacement's own bound, else the render setting.
+            displacement: built-in fBm displacement ``(amplitude, frequency,
+                octaves, gain)`` from ``mipray:displacement:*``.
+            st_values: (K, 2) float32 values of the ``st`` primvar textures read.
+            st_indices: int32 USD indices of an indexed ``st``, or None.
+            st_interpolation: the primvar's USD interpolation.
+            diffuse_texture: a UsdUVTexture feeding ``diffuseColor``: ``{"file",
+                "scale", "bias", "fallback" (4 floats each), "wrapS", "wrapT",
+                "channel" (0-3)}``; filtered by the ray differentials.
+            displacement_texture: the same for ``displacement``, along the
+                limit normal at tessellation time, filtered at the grid's
+                spacing (coarse tiers read coarse MIP levels).
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.

@@ -13,7 +13,9 @@ use hd_mipray::material::FaceAlbedo;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
+use hd_mipray::material::TextureInput;
 use mipray::camera::{Camera, Projection};
+use mipray::texture::{Interpolation, Primvar2, Wrap};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
 use mipray::progress::Progress;
@@ -24,6 +26,48 @@ use numpy::{IntoPyArray, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyA
 use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+
+/// Collects the Rust side's `log` records while native code runs (render threads included, no
+/// GIL needed), so they can be replayed into Python's `logging` ("mipray" logger) once the call
+/// returns. Warnings and errors only: they are what a user must see.
+struct Collector(std::sync::Mutex<Vec<(log::Level, String)>>);
+
+impl log::Log for Collector {
+    fn enabled(&self, m: &log::Metadata<'_>) -> bool {
+        m.level() <= log::Level::Warn
+    }
+
+    fn log(&self, r: &log::Record<'_>) {
+        if self.enabled(r.metadata()) {
+            if let Ok(mut v) = self.0.lock() {
+                // A runaway producer must not grow this without bound.
+                if v.len() < 10_000 {
+                    v.push((r.level(), r.args().to_string()));
+                }
+            }
+        }
+    }
+
+    fn flush(&self) {}
+}
+
+static COLLECTOR: Collector = Collector(std::sync::Mutex::new(Vec::new()));
+
+/// Replays collected records into `logging.getLogger("mipray")`.
+fn forward_logs(py: Python<'_>) {
+    let records: Vec<(log::Level, String)> = match COLLECTOR.0.lock() {
+        Ok(mut v) => std::mem::take(&mut *v),
+        Err(_) => return,
+    };
+    if records.is_empty() {
+        return;
+    }
+    let Ok(logger) = py.import("logging").and_then(|m| m.call_method1("getLogger", ("mipray",))) else { return };
+    for (level, msg) in records {
+        let method = if level == log::Level::Error { "error" } else { "warning" };
+        let _ = logger.call_method1(method, (msg,));
+    }
+}
 
 fn value_error(path: &str, msg: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(format!("{path}: {msg}"))
@@ -195,7 +239,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -223,6 +267,11 @@ impl RenderDelegate {
         prototype: bool,
         face_albedos: Option<PyReadonlyArray2<'_, f32>>,
         face_albedo_indices: Option<PyReadonlyArray1<'_, i32>>,
+        st_values: Option<PyReadonlyArray2<'_, f32>>,
+        st_indices: Option<PyReadonlyArray1<'_, i32>>,
+        st_interpolation: &str,
+        diffuse_texture: Option<&Bound<'_, PyDict>>,
+        displacement_texture: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<()> {
         let pts = points.as_array();
         if pts.ncols() != 3 {
@@ -246,6 +295,22 @@ impl RenderDelegate {
         };
         topology.validate(points.len()).map_err(|e| value_error(path, e))?;
         let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, topology.face_vertex_counts.len())?;
+        let st = match st_values {
+            None => None,
+            Some(v) => {
+                let a = v.as_array();
+                if a.ncols() != 2 {
+                    return Err(value_error(path, format!("primvars:st must be N×2, got {:?}", a.shape())));
+                }
+                let interpolation = Interpolation::from_usd(st_interpolation).ok_or_else(|| value_error(path, format!("primvars:st interpolation '{st_interpolation}' is not a USD interpolation")))?;
+                let pv = Primvar2 { name: "st".into(), interpolation, values: a.rows().into_iter().map(|r| [r[0], r[1]]).collect(), indices: vec_i32(st_indices) };
+                // Check now, so a bad primvar names the prim at once rather than at sync.
+                pv.face_varying_indices(&topology, points.len()).map_err(|e| value_error(path, e))?;
+                Some(pv)
+            }
+        };
+        let diffuse_texture = diffuse_texture.map(|d| texture_input(path, "diffuseColor", d)).transpose()?;
+        let displacement_texture = displacement_texture.map(|d| texture_input(path, "displacement", d)).transpose()?;
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(value_error(path, format!("points[{i}] = {:?} is not finite", points[i])));
         }
@@ -275,6 +340,9 @@ impl RenderDelegate {
                 displacement,
                 prototype,
                 face_albedo,
+                st,
+                diffuse_texture,
+                displacement_texture,
             },
         );
         Ok(())
@@ -406,6 +474,7 @@ impl RenderDelegate {
         let prog = PyProgress { callback: progress, total: AtomicU64::new(0), done: AtomicU64::new(0), last: AtomicU64::new(0), cancelled: AtomicBool::new(false) };
         let inner = &mut self.inner;
         let result = py.detach(|| pass.execute(inner, &prog));
+        forward_logs(py);
         let result = match result {
             Ok(r) => r,
             Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Cancelled)) => return Err(PyKeyboardInterrupt::new_err("render cancelled")),
@@ -420,6 +489,45 @@ impl RenderDelegate {
         }
         Ok((dict, result.stats.to_string()))
     }
+}
+
+/// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats
+/// each, optional), "wrapS", "wrapT" (USD tokens), "channel" (0–3)}`.
+fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<TextureInput> {
+    let file: String = d.get_item("file")?.ok_or_else(|| value_error(path, format!("{input} texture has no file")))?.extract()?;
+    let four = |key: &str, default: [f32; 4]| -> PyResult<[f32; 4]> {
+        match d.get_item(key)? {
+            None => Ok(default),
+            Some(v) => {
+                let v: Vec<f32> = v.extract()?;
+                let mut out = default;
+                for (o, x) in out.iter_mut().zip(v) {
+                    if !x.is_finite() {
+                        return Err(value_error(path, format!("{input} texture {key} is not finite")));
+                    }
+                    *o = x;
+                }
+                Ok(out)
+            }
+        }
+    };
+    let wrap = |key: &str| -> PyResult<Wrap> {
+        match d.get_item(key)? {
+            None => Ok(Wrap::FromFile),
+            Some(v) => {
+                let t: String = v.extract()?;
+                Wrap::from_usd(&t).ok_or_else(|| value_error(path, format!("{input} texture {key} '{t}' is not black, clamp, repeat, mirror or useMetadata")))
+            }
+        }
+    };
+    let channel: u32 = match d.get_item("channel")? {
+        None => 0,
+        Some(v) => v.extract()?,
+    };
+    if channel > 3 {
+        return Err(value_error(path, format!("{input} texture channel {channel} is not 0–3")));
+    }
+    Ok(TextureInput { file, scale: four("scale", [1.0; 4])?, bias: four("bias", [0.0; 4])?, fallback: four("fallback", [0.0, 0.0, 0.0, 1.0])?, wrap_s: wrap("wrapS")?, wrap_t: wrap("wrapT")?, channel })
 }
 
 fn parse_format(s: &str) -> PyResult<ChannelFormat> {
@@ -513,6 +621,10 @@ fn version() -> &'static str {
 
 #[pymodule]
 fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // Another extension may have installed a logger already; then ours is not needed.
+    if log::set_logger(&COLLECTOR).is_ok() {
+        log::set_max_level(log::LevelFilter::Warn);
+    }
     m.add_class::<RenderDelegate>()?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;

@@ -17,6 +17,7 @@ from pxr import Usd, UsdGeom
 
 from .face_albedo import compute_surface_albedo
 from .mesh import mesh_arguments
+from .shading import shading_arguments
 
 __all__ = ["MeshRead", "read_mesh"]
 
@@ -59,6 +60,7 @@ def read_mesh(
         mesh, time, args["face_vertex_counts"], args["face_vertex_indices"], len(args["points"])
     )
     args.update(surface.arguments())
+    args.update(shading_arguments(prim, time))
     if prototype:
         args["prototype"] = True
     return MeshRead(args, surface.material_paths, data_varies or surface.might_vary)
