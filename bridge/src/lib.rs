@@ -31,6 +31,9 @@
 //! assert!(center.p.length() < 1.0 && center.dpdu.cross(center.dpdv).length() > 0.0);
 //! ```
 
+// No unwrap across the FFI boundary: a panic here would abort a render host (STYLE.md).
+#![cfg_attr(not(test), warn(clippy::unwrap_used))]
+
 mod ffi;
 pub mod oiio;
 pub mod osd;

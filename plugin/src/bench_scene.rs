@@ -116,7 +116,7 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
             let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * spacing;
             let y = j as f32 * spacing;
             let s = 0.8 + 0.4 * rand01(seed, 7);
-            let xf = Mat4::from_translation(Vec3::new(x, y, s)) * Mat4::from_rotation_z(rand01(seed, 8) * 6.28) * Mat4::from_scale(Vec3::splat(s));
+            let xf = Mat4::from_translation(Vec3::new(x, y, s)) * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU) * Mat4::from_scale(Vec3::splat(s));
             scene.add_instance(m, xf);
         }
     }

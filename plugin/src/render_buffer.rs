@@ -43,7 +43,7 @@ pub fn write_buffers(path: &Path, buffers: &[&RenderBuffer], formats: &[Option<C
         let desc = default_aov_descriptor(&b.aov);
         let names = desc.as_ref().map(|d| d.file_channels.clone()).unwrap_or_else(|| mipray::film::file_channel_names(&b.aov, b.channels));
         let fmt = formats.get(i).copied().flatten().or(desc.map(|d| d.format)).unwrap_or(ChannelFormat::Float);
-        chan_formats.extend(std::iter::repeat(fmt).take(b.channels));
+        chan_formats.extend(std::iter::repeat_n(fmt, b.channels));
         channels.extend(names.into_iter().take(b.channels));
     }
     let nc = channels.len();
@@ -54,5 +54,5 @@ pub fn write_buffers(path: &Path, buffers: &[&RenderBuffer], formats: &[Option<C
         }
     }
     let image = ImageBuf { width: w, height: h, channels, pixels, metadata: Vec::new() };
-    OiioImageIo::default().write(path, &image, &chan_formats, metadata)
+    OiioImageIo.write(path, &image, &chan_formats, metadata)
 }

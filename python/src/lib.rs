@@ -2,6 +2,9 @@
 //! errors as Python exceptions with the prim path in the message, and the GIL released for the
 //! whole render.
 
+// No unwrap across the FFI boundary: a panic here would abort a render host (STYLE.md).
+#![cfg_attr(not(test), warn(clippy::unwrap_used))]
+
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

@@ -207,6 +207,12 @@ pub trait TextureSampler: Send + Sync {
     fn stats(&self) -> Value;
 }
 
+impl std::fmt::Debug for dyn TextureSampler {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TextureSampler({:?})", self.filter_mode())
+    }
+}
+
 /// Width of the lookup footprint in texels of the finest level: the longer side of the
 /// parallelogram spanned by the derivatives, measured in texels (`resolution` = finest width,
 /// height). 0 for zero derivatives.
@@ -826,11 +832,5 @@ mod tests {
         let (v, du, _) = p.at_patch(&param, 1.0, 0.0).unwrap();
         assert_eq!((v, du), ([0.375, 0.5], [0.125, 0.0]));
         assert!(p.at_face(9, 0.0, 0.0).is_none());
-    }
-}
-
-impl std::fmt::Debug for dyn TextureSampler {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "TextureSampler({:?})", self.filter_mode())
     }
 }
