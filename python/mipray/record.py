@@ -24,6 +24,7 @@ import logging
 import math
 import os
 import sys
+import time as time_module
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NoReturn, TextIO
@@ -388,25 +389,36 @@ def _validate(args: argparse.Namespace) -> list[Any]:
 
 
 class _Progress:
-    """Progress on stderr, only when stderr is a terminal: frame, and percent within it."""
+    """A progress bar on stderr, only when stderr is a terminal: frame, bar, percent, ETA."""
+
+    WIDTH = 24
 
     def __init__(self, stream: TextIO, total: int) -> None:
         self.stream = stream
         self.total = total
         self.enabled = stream.isatty()
         self.prefix = ""
+        self.started = time_module.monotonic()
 
     def start(self, index: int, time: Usd.TimeCode) -> None:
         if self.enabled:
             when = "default time" if time.IsDefault() else f"time {time.GetValue():g}"
-            self.prefix = f"{PROG}: rendering frame {index}/{self.total} ({when})"
+            self.prefix = f"{PROG}: frame {index}/{self.total} ({when})"
+            self.started = time_module.monotonic()
             self.stream.write(f"\r\033[K{self.prefix}...")
             self.stream.flush()
 
     def update(self, done: int, total: int) -> None:
         """The renderer's callback: ``done`` of ``total`` units of work."""
         if self.enabled and total > 0:
-            self.stream.write(f"\r\033[K{self.prefix} {100 * done // total:3d}%")
+            filled = self.WIDTH * done // total
+            bar = "#" * filled + "." * (self.WIDTH - filled)
+            elapsed = time_module.monotonic() - self.started
+            eta = ""
+            if 0 < done < total:
+                left = int(elapsed * (total - done) / done)
+                eta = f" ETA {left // 60}:{left % 60:02d}"
+            self.stream.write(f"\r\033[K{self.prefix} [{bar}] {100 * done // total:3d}%{eta}")
             self.stream.flush()
 
     def clear(self) -> None:
