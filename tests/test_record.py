@@ -277,7 +277,8 @@ def test_progress_is_drawn_on_a_terminal_only() -> None:
     progress.start(1, Usd.TimeCode(101.0))
     progress.update(50, 100)
     progress.clear()
-    assert "rendering frame 1/2 (time 101)" in term.text and " 50%" in term.text
+    assert "frame 1/2 (time 101)" in term.text and " 50%" in term.text
+    assert "[############............]" in term.text and "ETA" in term.text
     assert term.text.endswith("\r\033[K")
 
     class _Pipe(_Terminal):
