@@ -24,6 +24,10 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
     }
     // Materials of placed meshes, per-face ones (GeomSubsets) included; each mesh looked at once.
     let placed: std::collections::HashSet<usize> = scene.instances.iter().map(|i| i.mesh).collect();
+    let wide: Vec<&str> = scene.lights.iter().filter(|l| l.casts_shadows && !l.is_delta()).map(|l| l.name.as_str()).collect();
+    if !wide.is_empty() {
+        out.push(Effect { name: "soft_shadows".into(), why: format!("area, dome or angular lights: {}", wide.join(", ")) });
+    }
     let mut used = std::collections::HashSet::new();
     for m in placed.iter().filter_map(|&i| scene.meshes.get(i)) {
         used.insert(m.material);

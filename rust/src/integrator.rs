@@ -8,7 +8,6 @@ use crate::differential::{dndu_dndv, reflect_direction, RayDifferential, UvDiffe
 use crate::effects::{enabled, Effect};
 use crate::options::RenderOptions;
 use crate::sampling::{cosine_hemisphere, frame, Sampler};
-use crate::light::LightShape;
 use crate::ray::{offset_origin, Ray, RayKind};
 use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
@@ -168,6 +167,8 @@ pub struct DirectLighting<'a> {
     ao_distance: f32,
     ao_intensity: f32,
     max_depth: u32,
+    /// Shadow rays per shading point toward each wide light.
+    shadow_samples: u32,
 }
 
 /// Radiance along a ray, the AO fraction at its hit, and the beam width and rate at the end of
@@ -192,6 +193,7 @@ impl<'a> DirectLighting<'a> {
             ao_distance: options.ao_distance,
             ao_intensity: options.ao_intensity,
             max_depth: options.max_depth,
+            shadow_samples: options.shadow_samples,
         }
     }
 
@@ -237,7 +239,7 @@ impl<'a> DirectLighting<'a> {
             Some(tex) => self.texture_color(tex, hit, &sp, &footprint),
         };
         if albedo.max_element() > 0.0 {
-            color += albedo * self.direct(&sp, hit, &footprint, counters);
+            color += albedo * self.direct(&sp, hit, &footprint, sampler, counters);
             if self.ao_samples > 0 {
                 ao = self.occlusion(&sp, hit, &footprint, sampler, counters);
                 color += albedo * (self.ao_intensity * ao);
@@ -289,32 +291,44 @@ impl<'a> DirectLighting<'a> {
         UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv).chain(dndu, dndv)
     }
 
-    /// Irradiance-weighted light from every light, with shadow rays toward those that cast them.
-    fn direct(&self, sp: &ShadingPoint, hit: &Hit, footprint: &RayDifferential, counters: &mut TraceCounters) -> Vec3A {
+    /// Light from every light (irradiance-weighted, over π for the lambertian BRDF), with shadow
+    /// rays toward those that cast them. A point-like light takes one ray; area and dome lights
+    /// and distant lights with an angle take `shadow_samples`, each with the §4.5 spread.
+    fn direct(&self, sp: &ShadingPoint, hit: &Hit, footprint: &RayDifferential, sampler: &mut Sampler, counters: &mut TraceCounters) -> Vec3A {
         let mut sum = Vec3A::ZERO;
         for light in &self.scene.lights {
-            let LightShape::Distant { direction, .. } = light.shape;
-            let wi = -direction;
-            let cos_s = sp.ns.dot(wi);
-            if cos_s <= 0.0 || sp.ng.dot(wi) <= 0.0 {
-                continue;
-            }
-            if self.shadows && light.casts_shadows {
-                // Shadow rays to a distant light are parallel: no directional spread, the
-                // footprint as the origin differential (the paper's §4.3: narrow and coherent).
-                let shadow = Ray {
-                    o: offset_origin(sp.p, hit.p_error, sp.ng, wi),
-                    d: wi,
-                    t_min: 0.0,
-                    t_max: f32::INFINITY,
-                    diff: RayDifferential::new(footprint.dpdx, footprint.dpdy, Vec3A::ZERO, Vec3A::ZERO),
-                    kind: RayKind::Shadow,
-                };
-                if self.tracer.occluded(&shadow, counters) {
+            let n = if light.is_delta() { 1 } else { self.shadow_samples.max(1) };
+            let mut acc = Vec3A::ZERO;
+            for _ in 0..n {
+                let (u1, u2) = if light.is_delta() { (0.5, 0.5) } else { (sampler.next_f32(), sampler.next_f32()) };
+                let Some(ls) = light.sample(sp.p, sp.ns, u1, u2) else { continue };
+                let cos_s = sp.ns.dot(ls.wi);
+                if cos_s <= 0.0 || sp.ng.dot(ls.wi) <= 0.0 {
                     continue;
                 }
+                if self.shadows && light.casts_shadows {
+                    // Point-like lights: parallel shadow rays, the footprint as origin
+                    // differential (§4.3: narrow and coherent). Wide lights: the light's
+                    // solid angle over the number of rays (§4.5: wide and incoherent).
+                    let diff = if light.is_delta() {
+                        RayDifferential::new(footprint.dpdx, footprint.dpdy, Vec3A::ZERO, Vec3A::ZERO)
+                    } else {
+                        let (d, clamped) = footprint.area_light_shadow_checked(ls.wi, ls.solid_angle_sr, n);
+                        counters.differential_clamps += u64::from(clamped);
+                        d
+                    };
+                    let o = offset_origin(sp.p, hit.p_error, sp.ng, ls.wi);
+                    // Stop short of an area light's own surface (it is not geometry here, but a
+                    // mesh can coincide with it).
+                    let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
+                    let shadow = Ray { o, d: ls.wi, t_min: 0.0, t_max, diff, kind: RayKind::Shadow };
+                    if self.tracer.occluded(&shadow, counters) {
+                        continue;
+                    }
+                }
+                acc += ls.weight * (cos_s * std::f32::consts::FRAC_1_PI);
             }
-            sum += light.radiance_scale * (cos_s * std::f32::consts::FRAC_1_PI);
+            sum += acc / n as f32;
         }
         sum
     }

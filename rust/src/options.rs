@@ -36,6 +36,8 @@ pub struct RenderOptions {
     pub ao_intensity: f32,
     /// Longest chain of mirror bounces.
     pub max_depth: u32,
+    /// Shadow rays per shading point toward each area, dome or wide distant light.
+    pub shadow_samples: u32,
 }
 
 impl Default for RenderOptions {
@@ -54,6 +56,7 @@ impl Default for RenderOptions {
             ao_distance: f32::INFINITY,
             ao_intensity: 1.0,
             max_depth: 4,
+            shadow_samples: 4,
         }
     }
 }

@@ -169,3 +169,30 @@ fn depth_of_field_blurs_only_what_is_out_of_focus() {
     let pin_partial = pin_row[24..40].iter().filter(|a| **a > 0.02 && **a < 0.98).count();
     assert!(pin_partial <= 2, "without an f-stop only edge pixels are partial: {pin_row:?}");
 }
+
+#[test]
+fn a_disk_light_lights_a_plane_as_the_formula_says_and_casts_soft_shadows() {
+    use mipray::light::LightShape;
+    // E = π L r² / (h² + r²) under a disk of radiance L, radius r, height h; radiance ρ E / π.
+    let mut scene = Scene::default();
+    add(&mut scene, "/ground", quad([[-20.0, -20.0, 0.0], [20.0, -20.0, 0.0], [20.0, 20.0, 0.0], [-20.0, 20.0, 0.0]]), Material::lambertian("/white", Vec3A::ONE).0);
+    let disk = LightShape::Disk { center: Vec3A::new(0.0, 0.0, 2.0), u: Vec3A::X, v: Vec3A::Y, normal: Vec3A::NEG_Z };
+    scene.lights.push(Light::usd_area("/disk", disk, 1.0, 0.0, Vec3A::ONE, false));
+    scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y), 1.0, 1.0);
+    let opts = RenderOptions { width: 4, height: 4, samples: 16, shadow_samples: 64, ..Default::default() };
+    let out = render(&scene, &opts, &NoProgress).unwrap();
+    let expected = 1.0 / (4.0 + 1.0);
+    let c = &out.film.aov("color").unwrap().data;
+    let mean = c.iter().step_by(3).sum::<f32>() / 16.0;
+    assert!((mean - expected).abs() < 0.03 * expected, "{mean} vs {expected}");
+    let names: Vec<&str> = out.stats["effects"]["enabled"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
+    assert!(names.contains(&"soft_shadows"), "{names:?}");
+    // A small occluder halfway up: its shadow has a penumbra of partly lit pixels.
+    add(&mut scene, "/blocker", quad([[-0.3, -0.3, 1.0], [0.3, -0.3, 1.0], [0.3, 0.3, 1.0], [-0.3, 0.3, 1.0]]), Material::default());
+    scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 0.5), Vec3::ZERO, Vec3::Y), 60.0, 1.25);
+    let out = render(&scene, &RenderOptions { width: 48, height: 1, samples: 4, shadow_samples: 32, ..Default::default() }, &NoProgress).unwrap();
+    let row: Vec<f32> = (0..48).map(|x| out.film.pixel("color", x, 0)[0]).collect();
+    let peak = row.iter().cloned().fold(0.0, f32::max);
+    let partial = row.iter().filter(|v| **v > 0.1 * peak && **v < 0.9 * peak).count();
+    assert!(partial >= 6, "a soft penumbra: {row:?}");
+}
