@@ -151,6 +151,24 @@ class FakeRenderDelegate:
     ) -> None:
         self._set("set_distant_light", path, dict(locals_without_self(locals())))
 
+    def set_light(
+        self,
+        path: str,
+        *,
+        kind: str,
+        transform: NDArray[np.float64],
+        intensity: float = 1.0,
+        exposure: float = 0.0,
+        color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        normalize: bool = False,
+        shadow_enable: bool = True,
+        angle: float = 0.53,
+        radius: float = 0.5,
+        width: float = 1.0,
+        height: float = 1.0,
+    ) -> None:
+        self._set("set_light", path, dict(locals_without_self(locals())))
+
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
         call = self.prims.get(path)
         if call is None or call.method != "set_mesh":

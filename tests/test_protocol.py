@@ -70,6 +70,7 @@ def test_stub_declares_the_protocol() -> None:
         "RenderDelegate.set_instancer",
         "RenderDelegate.set_camera",
         "RenderDelegate.set_distant_light",
+        "RenderDelegate.set_light",
         "RenderDelegate.remove",
         "RenderDelegate.prim_paths",
         "RenderDelegate.render",

@@ -33,6 +33,7 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "aoSamples", default: "0", description: "ambient-occlusion rays per shading point (0: off)" },
     SettingDescriptor { key: "aoDistance", default: "inf", description: "ambient-occlusion ray length, scene units" },
     SettingDescriptor { key: "aoIntensity", default: "1", description: "radiance of the white sky ambient occlusion lights with" },
+    SettingDescriptor { key: "shadowSamples", default: "4", description: "shadow rays per shading point toward each area, dome or angular light" },
     SettingDescriptor { key: "maxDepth", default: "4", description: "longest chain of mirror bounces" },
 ];
 
@@ -55,11 +56,12 @@ pub struct RenderSettings {
     pub ao_distance: f32,
     pub ao_intensity: f32,
     pub max_depth: u32,
+    pub shadow_samples: u32,
 }
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, tess_factor_incoherent: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, texture_filter: mipray::texture::FilterMode::Differentials, texture_cache_mb: 10.0, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4 }
+        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, tess_factor_incoherent: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, texture_filter: mipray::texture::FilterMode::Differentials, texture_cache_mb: 10.0, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4, shadow_samples: 4 }
     }
 }
 
@@ -151,6 +153,13 @@ impl RenderSettings {
                 }
                 "aoIntensity" => s.ao_intensity = as_f64(k, v)?.max(0.0) as f32,
                 "maxDepth" => s.max_depth = as_f64(k, v)?.clamp(0.0, 64.0) as u32,
+                "shadowSamples" => {
+                    let x = as_f64(k, v)?;
+                    if !(1.0..=4096.0).contains(&x) {
+                        return Err(bad(k, format!("{x} must be within 1..=4096")));
+                    }
+                    s.shadow_samples = x as u32;
+                }
                 _ => {
                     let keys: Vec<&str> = SETTINGS.iter().map(|d| d.key).collect();
                     return Err(bad(k, format!("unknown setting; valid settings: {}", keys.join(", "))));
@@ -196,6 +205,7 @@ impl RenderSettings {
             ao_distance: self.ao_distance,
             ao_intensity: self.ao_intensity,
             max_depth: self.max_depth,
+            shadow_samples: self.shadow_samples,
         }
     }
 }

@@ -1,9 +1,9 @@
-//! Light Sprims (UsdLux). Distant lights for now.
+//! Light Sprims (UsdLux): distant, sphere, rect, disk and dome lights.
 
 use glam::{Mat4, Vec3A};
-use mipray::light::Light;
+use mipray::light::{Light, LightShape};
 
-/// A UsdLux.DistantLight's inputs.
+/// The inputs every UsdLux light has (for a distant light, all of them).
 #[derive(Clone, Debug, PartialEq)]
 pub struct DistantLightData {
     /// Light-to-world (column-vector convention); the light travels along its local −Z.
@@ -16,11 +16,24 @@ pub struct DistantLightData {
     pub shadow_enable: bool,
 }
 
+/// The shape of a non-distant light, in the light's own space (UsdLux: sizes in the light's
+/// units, emission along −Z for rect and disk lights).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AreaKind {
+    Sphere { radius: f32 },
+    Rect { width: f32, height: f32 },
+    Disk { radius: f32 },
+    /// An environment of constant radiance (a dome texture is not read yet).
+    Dome,
+}
+
 /// A light prim.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightPrim {
     pub path: String,
     pub data: DistantLightData,
+    /// `None`: a distant light.
+    pub area: Option<AreaKind>,
 }
 
 impl LightPrim {
@@ -29,7 +42,31 @@ impl LightPrim {
     pub fn to_light(&self) -> Light {
         let d = &self.data;
         let f = |x: f32| if x.is_finite() { x } else { 0.0 };
-        let mut l = Light::usd_distant(&self.path, &d.transform, f(d.intensity), f(d.exposure), Vec3A::from(d.color.map(f)), f(d.angle_deg));
+        let color = Vec3A::from(d.color.map(f));
+        let m = &d.transform;
+        let mut l = match self.area {
+            None => Light::usd_distant(&self.path, m, f(d.intensity), f(d.exposure), color, f(d.angle_deg)),
+            Some(kind) => {
+                let center = m.transform_point3a(Vec3A::ZERO);
+                let normal = m.transform_vector3a(Vec3A::NEG_Z).normalize_or(Vec3A::NEG_Z);
+                let shape = match kind {
+                    AreaKind::Sphere { radius } => {
+                        // A sphere stays a sphere under the light's mean scale.
+                        let s = (m.transform_vector3a(Vec3A::X).length() + m.transform_vector3a(Vec3A::Y).length() + m.transform_vector3a(Vec3A::Z).length()) / 3.0;
+                        LightShape::Sphere { center, radius: f(radius) * s }
+                    }
+                    AreaKind::Rect { width, height } => LightShape::Rect {
+                        center,
+                        u: m.transform_vector3a(Vec3A::X * (f(width) * 0.5)),
+                        v: m.transform_vector3a(Vec3A::Y * (f(height) * 0.5)),
+                        normal,
+                    },
+                    AreaKind::Disk { radius } => LightShape::Disk { center, u: m.transform_vector3a(Vec3A::X * f(radius)), v: m.transform_vector3a(Vec3A::Y * f(radius)), normal },
+                    AreaKind::Dome => LightShape::Dome,
+                };
+                Light::usd_area(&self.path, shape, f(d.intensity), f(d.exposure), color, d.normalize)
+            }
+        };
         l.casts_shadows = d.shadow_enable;
         l
     }

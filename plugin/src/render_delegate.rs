@@ -21,7 +21,7 @@ use crate::camera::{Camera, CameraPrim};
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
-use crate::light::{DistantLightData, LightPrim};
+use crate::light::{AreaKind, DistantLightData, LightPrim};
 use crate::material::mesh_material;
 use crate::mesh::{MeshData, MeshPrim};
 
@@ -30,7 +30,7 @@ pub const RPRIM_TYPES: &[&str] = &["mesh"];
 /// Instancer types (Hydra keeps instancers beside the prim types).
 pub const INSTANCER_TYPES: &[&str] = &["instancer"];
 /// Sprim types the delegate understands.
-pub const SPRIM_TYPES: &[&str] = &["camera", "distantLight"];
+pub const SPRIM_TYPES: &[&str] = &["camera", "distantLight", "sphereLight", "rectLight", "diskLight", "domeLight"];
 /// Bprim types.
 pub const BPRIM_TYPES: &[&str] = &["renderBuffer"];
 
@@ -109,7 +109,12 @@ impl RenderDelegate {
 
     /// Inserts or replaces a distant light.
     pub fn set_distant_light(&mut self, path: &str, data: DistantLightData) {
-        self.lights.insert(path.to_string(), LightPrim { path: path.to_string(), data });
+        self.lights.insert(path.to_string(), LightPrim { path: path.to_string(), data, area: None });
+    }
+
+    /// Inserts or replaces a sphere, rect, disk or dome light: the shared inputs and its shape.
+    pub fn set_area_light(&mut self, path: &str, data: DistantLightData, area: AreaKind) {
+        self.lights.insert(path.to_string(), LightPrim { path: path.to_string(), data, area: Some(area) });
     }
 
     /// Removes a prim of any type; returns whether it existed.

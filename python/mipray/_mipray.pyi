@@ -194,6 +194,36 @@ class RenderDelegate:
             ValueError: a value is out of range; the message names ``path``.
         """
 
+    def set_light(
+        self,
+        path: str,
+        *,
+        kind: str,
+        transform: NDArray[np.float64],
+        intensity: float = 1.0,
+        exposure: float = 0.0,
+        color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        normalize: bool = False,
+        shadow_enable: bool = True,
+        angle: float = 0.53,
+        radius: float = 0.5,
+        width: float = 1.0,
+        height: float = 1.0,
+    ) -> None:
+        """Add or replace a UsdLux light of any kind (an Sprim).
+
+        ``kind`` is ``distant`` (as :meth:`set_distant_light`), ``sphere``
+        (``radius``), ``rect`` (``width`` × ``height``, emitting along local
+        -Z), ``disk`` (``radius``, along -Z) or ``dome`` (constant radiance
+        from every direction). Area lights emit radiance ``color * intensity
+        * 2**exposure``, divided by their area with ``normalize``; they cast
+        soft shadows with ``shadowSamples`` rays each.
+
+        Raises:
+            ValueError: a non-finite value or a non-positive size; the message
+                names ``path``.
+        """
+
     def set_distant_light(
         self,
         path: str,
@@ -303,3 +333,45 @@ def read_image(path: str) -> tuple[NDArray[np.float32], list[str]]:
 
 def version() -> str:
     """The version of the compiled module, e.g. ``"0.1.0"``."""
+
+def subdiv_compare(
+    name: str,
+    *,
+    obj_text: str | None = None,
+    points: NDArray[np.float32] | None = None,
+    face_vertex_counts: NDArray[np.int32] | None = None,
+    face_vertex_indices: NDArray[np.int32] | None = None,
+    scheme: str = "catmullClark",
+    interpolate_boundary: str = "edgeAndCorner",
+    face_varying_linear_interpolation: str = "cornersPlus1",
+    triangle_subdivision_rule: str = "catmullClark",
+    crease_indices: NDArray[np.int32] | None = None,
+    crease_lengths: NDArray[np.int32] | None = None,
+    crease_sharpnesses: NDArray[np.float32] | None = None,
+    corner_indices: NDArray[np.int32] | None = None,
+    corner_sharpnesses: NDArray[np.float32] | None = None,
+    hole_indices: NDArray[np.int32] | None = None,
+    left_handed: bool = False,
+    uniform_level: int = 2,
+    samples_per_side: int = 5,
+    tessellation_patches: int = 512,
+    split_depth: int = 2,
+    split_patches: int = 64,
+    quick: bool = False,
+    table: bool = False,
+    heatmap: str | None = None,
+    heatmap_rate: int = 4,
+) -> str:
+    """Compare a mesh's subdivision surface with OpenSubdiv's.
+
+    The mesh is an OBJ in OpenSubdiv's regression-shape format (``obj_text``)
+    or USD's mesh attributes, as ``RenderDelegate.set_mesh`` takes them.
+
+    Returns:
+        The report as one JSON object (see docs/subdivision-compare.md), or a
+        readable table with ``table=True``.
+
+    Raises:
+        ValueError: the mesh is refused, naming it ("not supported" for
+            hierarchical edits), or the heatmap cannot be written.
+    """

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
-use hd_mipray::light::DistantLightData;
+use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
@@ -433,6 +433,46 @@ impl RenderDelegate {
         Ok(())
     }
 
+    /// Inserts or replaces a UsdLux light of any kind: ``distant`` (as `set_distant_light`),
+    /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius) or ``dome``.
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn set_light(
+        &mut self,
+        path: &str,
+        kind: &str,
+        transform: PyReadonlyArray2<'_, f64>,
+        intensity: f32,
+        exposure: f32,
+        color: (f32, f32, f32),
+        normalize: bool,
+        shadow_enable: bool,
+        angle: f32,
+        radius: f32,
+        width: f32,
+        height: f32,
+    ) -> PyResult<()> {
+        let vals = [intensity, exposure, color.0, color.1, color.2, angle, radius, width, height];
+        if vals.iter().any(|v| !v.is_finite()) {
+            return Err(value_error(path, "light inputs must be finite"));
+        }
+        let data = DistantLightData { transform: matrix(path, &transform)?, intensity, exposure, color: [color.0, color.1, color.2], angle_deg: angle, normalize, shadow_enable };
+        let size = |name: &str, v: f32| if v > 0.0 { Ok(v) } else { Err(value_error(path, format!("inputs:{name} = {v} must be positive"))) };
+        let area = match kind {
+            "distant" => {
+                self.inner.set_distant_light(path, data);
+                return Ok(());
+            }
+            "sphere" => AreaKind::Sphere { radius: size("radius", radius)? },
+            "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)? },
+            "disk" => AreaKind::Disk { radius: size("radius", radius)? },
+            "dome" => AreaKind::Dome,
+            _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk or dome"))),
+        };
+        self.inner.set_area_light(path, data, area);
+        Ok(())
+    }
+
     /// Removes a prim; returns whether it existed.
     fn remove(&mut self, path: &str) -> bool {
         self.inner.remove(path)
@@ -622,6 +662,106 @@ fn version() -> &'static str {
     env!("CARGO_PKG_VERSION")
 }
 
+/// Compares a mesh's subdivision surface with OpenSubdiv's (limit evaluation against its
+/// LimitStencilTable, tessellations per tier, rate and split, seams, uniform refinement): the
+/// report as one JSON object, or as a readable table with `table=True`. The mesh is an OBJ in
+/// OpenSubdiv's regression-shape format (`obj_text`) or USD's mesh attributes (as `set_mesh`
+/// takes them). `heatmap` writes a picture of the tessellation error at `heatmap_rate` quads a
+/// side. The GIL is released while comparing.
+#[pyfunction]
+#[pyo3(signature = (name, *, obj_text=None, points=None, face_vertex_counts=None, face_vertex_indices=None, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, uniform_level=2, samples_per_side=5, tessellation_patches=512, split_depth=2, split_patches=64, quick=false, table=false, heatmap=None, heatmap_rate=4))]
+#[allow(clippy::too_many_arguments)]
+fn subdiv_compare(
+    py: Python<'_>,
+    name: &str,
+    obj_text: Option<String>,
+    points: Option<PyReadonlyArray2<'_, f32>>,
+    face_vertex_counts: Option<PyReadonlyArray1<'_, i32>>,
+    face_vertex_indices: Option<PyReadonlyArray1<'_, i32>>,
+    scheme: &str,
+    interpolate_boundary: &str,
+    face_varying_linear_interpolation: &str,
+    triangle_subdivision_rule: &str,
+    crease_indices: Option<PyReadonlyArray1<'_, i32>>,
+    crease_lengths: Option<PyReadonlyArray1<'_, i32>>,
+    crease_sharpnesses: Option<PyReadonlyArray1<'_, f32>>,
+    corner_indices: Option<PyReadonlyArray1<'_, i32>>,
+    corner_sharpnesses: Option<PyReadonlyArray1<'_, f32>>,
+    hole_indices: Option<PyReadonlyArray1<'_, i32>>,
+    left_handed: bool,
+    uniform_level: u32,
+    samples_per_side: usize,
+    tessellation_patches: usize,
+    split_depth: u32,
+    split_patches: usize,
+    quick: bool,
+    table: bool,
+    heatmap: Option<String>,
+    heatmap_rate: usize,
+) -> PyResult<String> {
+    use hd_mipray::subdiv_compare::{compare, compare_obj, heatmap as hm, CompareOptions};
+    let mut options = if quick { CompareOptions::quick() } else { CompareOptions::default() };
+    if !quick {
+        options.uniform_level = uniform_level.min(10);
+        options.samples_per_side = samples_per_side.clamp(2, 65);
+        options.tessellation_patches = tessellation_patches;
+        options.split_depth = split_depth.min(6);
+        options.split_patches = split_patches;
+    }
+    let rate = mipray::tessellate::Rate::ALL
+        .into_iter()
+        .find(|r| r.quads() == heatmap_rate)
+        .ok_or_else(|| value_error(name, format!("heatmap_rate {heatmap_rate} is not one of 1, 2, 4, 8, 16")))?;
+    let (topology, pts) = match (&obj_text, &points) {
+        (Some(text), None) => {
+            let shape = mipray::obj_shape::parse_obj_shape(name, text).map_err(|e| value_error(name, e))?;
+            (shape.topology, shape.points)
+        }
+        (None, Some(p)) => {
+            let a = p.as_array();
+            if a.ncols() != 3 {
+                return Err(value_error(name, format!("points must be N×3, got {:?}", a.shape())));
+            }
+            let pts: Vec<[f32; 3]> = a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+            let topology = MeshTopology {
+                scheme: parse_scheme(name, scheme)?,
+                face_vertex_counts: vec_i32(face_vertex_counts),
+                face_vertex_indices: vec_i32(face_vertex_indices),
+                crease_indices: vec_i32(crease_indices),
+                crease_lengths: vec_i32(crease_lengths),
+                crease_sharpnesses: vec_f32(crease_sharpnesses),
+                corner_indices: vec_i32(corner_indices),
+                corner_sharpnesses: vec_f32(corner_sharpnesses),
+                hole_indices: vec_i32(hole_indices),
+                boundary: parse_boundary(name, interpolate_boundary)?,
+                face_varying: parse_fvar(name, face_varying_linear_interpolation)?,
+                triangle_subdivision: parse_triangle(name, triangle_subdivision_rule)?,
+                left_handed,
+            };
+            (topology, pts)
+        }
+        _ => return Err(value_error(name, "give either obj_text or points (with the topology), not both")),
+    };
+    py.detach(|| -> Result<String, String> {
+        let report = match &obj_text {
+            Some(text) => compare_obj(name, text, &options),
+            None => compare(name, &topology, &pts, &options),
+        }
+        .map_err(|e| e.to_string())?;
+        if let Some(out) = &heatmap {
+            let surface = mipray_bridge::OsdSurface::with_options(name, &topology, &pts, &options.osd).map_err(|e| e.to_string())?;
+            let img = hm::render(&surface, report.bbox_diagonal, &hm::HeatmapOptions { rate, ..Default::default() });
+            OiioImageIo.write(Path::new(out), &img, &[ChannelFormat::U8], &[]).map_err(|e| e.to_string())?;
+        }
+        if table {
+            Ok(report.table())
+        } else {
+            serde_json::to_string(&report).map_err(|e| format!("{name}: {e}"))
+        }
+    })
+    .map_err(PyValueError::new_err)
+}
+
 #[pymodule]
 fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // Another extension may have installed a logger already; then ours is not needed.
@@ -634,5 +774,6 @@ fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render_settings, m)?)?;
     m.add_function(wrap_pyfunction!(aov_names, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(subdiv_compare, m)?)?;
     Ok(())
 }

@@ -1,7 +1,8 @@
-"""Lights: ``UsdLux.DistantLight``, and the camera light for a stage without lights.
+"""Lights: ``UsdLux`` distant, sphere, rect, disk and dome lights, and the camera light.
 
-``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; a stage
-with no light at all is lit from the camera, as usdrecord does by default.
+``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
+others into ``RenderDelegate.set_light`` with their shape; a stage with no
+light at all is lit from the camera, as usdrecord does by default.
 """
 
 from __future__ import annotations
@@ -15,7 +16,22 @@ from pxr import Usd, UsdLux
 
 from ..errors import PrimError
 
-__all__ = ["CAMERA_LIGHT_PATH", "camera_light_arguments", "distant_light_arguments"]
+__all__ = [
+    "AREA_LIGHT_TYPES",
+    "CAMERA_LIGHT_PATH",
+    "area_light_arguments",
+    "camera_light_arguments",
+    "distant_light_arguments",
+]
+
+#: The non-distant UsdLux light types mipray renders, and their ``set_light`` kind.
+AREA_LIGHT_TYPES: tuple[tuple[type, str], ...] = (
+    (UsdLux.SphereLight, "sphere"),
+    (UsdLux.RectLight, "rect"),
+    (UsdLux.DiskLight, "disk"),
+    (UsdLux.DomeLight, "dome"),
+)
+_warned: set[str] = set()
 
 #: Path of the light mipray adds at the camera when a stage has no light.
 CAMERA_LIGHT_PATH = "/__mipray_camera_light"
@@ -81,3 +97,72 @@ def camera_light_arguments(camera_transform: NDArray[np.float64]) -> dict[str, A
         "normalize": False,
         "shadow_enable": False,
     }
+
+
+def area_light_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
+) -> dict[str, Any] | None:
+    """``RenderDelegate.set_light`` keyword arguments for a sphere, rect, disk or dome light.
+
+    Returns None when ``prim`` is none of those. Sizes are UsdLux's (``radius``,
+    ``width``, ``height``, in the light's units). A dome light's texture is not
+    read yet: it lights with its constant colour, and says so once.
+
+    Raises:
+        PrimError: a non-finite, negative or zero value, or a non-finite transform.
+
+    """
+    kind = next((k for t, k in AREA_LIGHT_TYPES if prim.IsA(t)), None)
+    if kind is None:
+        return None
+    path = str(prim.GetPath())
+    light = UsdLux.LightAPI(prim)
+
+    def get(name: str, default: Any) -> Any:
+        attr = prim.GetAttribute(f"inputs:{name}")
+        value = attr.Get(time) if attr else None
+        return default if value is None else value
+
+    color = tuple(float(c) for c in get("color", (1.0, 1.0, 1.0)))
+    args: dict[str, Any] = {
+        "kind": kind,
+        "transform": transform,
+        "intensity": float(get("intensity", 1.0)),
+        "exposure": float(get("exposure", 0.0)),
+        "color": color,
+        "normalize": bool(get("normalize", False)),
+        "shadow_enable": bool(get("shadow:enable", True)),
+    }
+    del light
+    if kind in ("sphere", "disk"):
+        args["radius"] = float(get("radius", 0.5))
+        if kind == "sphere" and bool(get("treatAsPoint", False)):
+            raise PrimError(path, "treatAsPoint point lights are not supported yet; give the sphere a radius")
+    if kind == "rect":
+        args["width"] = float(get("width", 1.0))
+        args["height"] = float(get("height", 1.0))
+        if get("texture:file", None):
+            _warn_once(f"{path}: rect light textures are not supported yet; lighting with its colour")
+    if kind == "dome" and get("texture:file", None):
+        _warn_once(f"{path}: dome light textures are not supported yet; lighting with its colour")
+    for key in ("intensity", "exposure", "radius", "width", "height"):
+        if key in args and not math.isfinite(args[key]):
+            raise PrimError(path, f"inputs:{key} is not finite")
+    for key in ("radius", "width", "height"):
+        if key in args and args[key] <= 0.0:
+            raise PrimError(path, f"inputs:{key} is {args[key]}; it must be > 0")
+    if args["intensity"] < 0.0:
+        raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
+    if len(color) != 3 or not all(math.isfinite(c) and c >= 0.0 for c in color):
+        raise PrimError(path, f"inputs:color {color} is not a finite non-negative color")
+    if not np.isfinite(transform).all():
+        raise PrimError(path, "the world transform is not finite")
+    return args
+
+
+def _warn_once(message: str) -> None:
+    import logging
+
+    if message not in _warned:
+        _warned.add(message)
+        logging.getLogger(__name__).warning("mipray: %s", message)

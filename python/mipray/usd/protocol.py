@@ -91,5 +91,23 @@ class RenderDelegateLike(Protocol):
     ) -> None:
         """Add or replace a distant light."""
 
+    def set_light(
+        self,
+        path: str,
+        *,
+        kind: str,
+        transform: NDArray[np.float64],
+        intensity: float = ...,
+        exposure: float = ...,
+        color: tuple[float, float, float] = ...,
+        normalize: bool = ...,
+        shadow_enable: bool = ...,
+        angle: float = ...,
+        radius: float = ...,
+        width: float = ...,
+        height: float = ...,
+    ) -> None:
+        """Add or replace a sphere, rect, disk or dome light (``kind``)."""
+
     def remove(self, path: str) -> None:
         """Remove a prim."""

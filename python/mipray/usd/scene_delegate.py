@@ -43,7 +43,13 @@ from .camera import (
     framing_camera_arguments,
 )
 from .instancing import InstancerState, Instancing
-from .light import CAMERA_LIGHT_PATH, camera_light_arguments, distant_light_arguments
+from .light import (
+    AREA_LIGHT_TYPES,
+    CAMERA_LIGHT_PATH,
+    area_light_arguments,
+    camera_light_arguments,
+    distant_light_arguments,
+)
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .transform import ancestors_might_vary, world_transform
@@ -565,6 +571,7 @@ class UsdSceneDelegate:
             prim.IsA(UsdGeom.Mesh)
             or prim.IsA(UsdGeom.Camera)
             or prim.IsA(UsdLux.DistantLight)
+            or any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES)
             or prim.IsA(UsdGeom.PointInstancer)
         ):
             return True
@@ -643,6 +650,10 @@ class UsdSceneDelegate:
                 args = distant_light_arguments(UsdLux.DistantLight(prim), time, transform)
                 record = _Record("light", order, might_vary=might_vary)
                 self.delegate.set_distant_light(path, **args)
+            elif any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES):
+                args = area_light_arguments(prim, time, transform) or {}
+                record = _Record("light", order, might_vary=might_vary)
+                self.delegate.set_light(path, **args)
             else:
                 # Its type changed to one we do not render.
                 self._is_supported(prim, unsupported)
