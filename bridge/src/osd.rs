@@ -608,6 +608,12 @@ fn mesh_desc(
     if topology.face_count() == 0 {
         return Err(invalid("the mesh has no faces".into()));
     }
+    if let Some((f, v)) = repeated_vertex_opensubdiv_cannot_take(topology) {
+        return Err(invalid(format!(
+            "face {f} is pinched at vertex {v} (visits it twice, apart) where the other faces \
+             do not make a fan: not supported (OpenSubdiv would abort); split the face"
+        )));
+    }
     if !(1..=10).contains(&options.isolation_level)
         || options.secondary_level > options.isolation_level
     {
@@ -674,6 +680,74 @@ fn mesh_desc(
         fvar_indices: Vec::new(),
         vertex_primvars: Vec::new(),
     })
+}
+
+/// A face pinched at a vertex — visiting it twice, apart, with four different neighbours — at a
+/// vertex whose face corners and edges do not pair up (a fan has as many of each): OpenSubdiv
+/// 3.5 can take such a vertex for a smooth interior one and abort on its own assertion
+/// (`Sdc::Scheme::assignSmoothMaskForVertex`), so it must never see one. Returns (face, vertex).
+/// Faces visiting a vertex twice in a row (a collapsed edge) or coming back along an edge (a
+/// fold), and pinched vertices that still pair up, are left to OpenSubdiv, which takes them (its
+/// regression shapes have them). Found by tests/fuzz_topology.rs.
+fn repeated_vertex_opensubdiv_cannot_take(topology: &MeshTopology) -> Option<(usize, i32)> {
+    use std::collections::{HashMap, HashSet};
+    let mut suspects = Vec::new();
+    let mut start = 0usize;
+    for (f, &n) in topology.face_vertex_counts.iter().enumerate() {
+        let n = n.max(0) as usize;
+        // The face with runs of one vertex (collapsed edges, wrapping round) merged.
+        let face = &topology.face_vertex_indices[start..start + n];
+        let mut runs: Vec<i32> = Vec::with_capacity(n);
+        for &v in face {
+            if runs.last() != Some(&v) {
+                runs.push(v);
+            }
+        }
+        while runs.len() > 1 && runs.first() == runs.last() {
+            runs.pop();
+        }
+        // Two visits whose four neighbours all differ pinch the face at the vertex; a face
+        // that comes back along one of its edges instead is a fold OpenSubdiv tags as
+        // non-manifold, and takes.
+        let m = runs.len();
+        let around = |k: usize| [runs[(k + m - 1) % m], runs[(k + 1) % m]];
+        for k in 0..m {
+            for j in 0..k {
+                if runs[j] == runs[k] {
+                    let (a, b) = (around(j), around(k));
+                    if a.iter().all(|x| !b.contains(x)) {
+                        suspects.push((f, runs[k]));
+                    }
+                }
+            }
+        }
+        start += n;
+    }
+    if suspects.is_empty() {
+        return None;
+    }
+    let watch: HashSet<i32> = suspects.iter().map(|&(_, v)| v).collect();
+    let mut corners: HashMap<i32, usize> = HashMap::new();
+    let mut edges: HashMap<i32, HashSet<i32>> = HashMap::new();
+    let mut start = 0usize;
+    for &n in &topology.face_vertex_counts {
+        let n = n.max(0) as usize;
+        let face = &topology.face_vertex_indices[start..start + n];
+        for k in 0..n {
+            let (v, next) = (face[k], face[(k + 1) % n]);
+            if watch.contains(&v) {
+                *corners.entry(v).or_default() += 1;
+                edges.entry(v).or_default().insert(next);
+            }
+            if watch.contains(&next) {
+                edges.entry(next).or_default().insert(v);
+            }
+        }
+        start += n;
+    }
+    suspects
+        .into_iter()
+        .find(|(_, v)| corners.get(v).copied().unwrap_or(0) != edges.get(v).map_or(0, HashSet::len))
 }
 
 fn patch_param_of(info: &ffi::OsdPatchInfo) -> PatchParam {

@@ -59,14 +59,30 @@ pub struct CompareOptions {
 
 impl Default for CompareOptions {
     fn default() -> Self {
-        CompareOptions { osd: OsdOptions::DEFAULT, samples_per_side: 5, tessellation_patches: 512, split_depth: 2, split_patches: 64, uniform_level: 2, uniform_points: 20_000 }
+        CompareOptions {
+            osd: OsdOptions::DEFAULT,
+            samples_per_side: 5,
+            tessellation_patches: 512,
+            split_depth: 2,
+            split_patches: 64,
+            uniform_level: 2,
+            uniform_points: 20_000,
+        }
     }
 }
 
 impl CompareOptions {
     /// Options small enough to run every shape of OpenSubdiv's corpus in a debug test.
     pub fn quick() -> Self {
-        CompareOptions { osd: OsdOptions::DEFAULT, samples_per_side: 3, tessellation_patches: 24, split_depth: 1, split_patches: 4, uniform_level: 1, uniform_points: 2_000 }
+        CompareOptions {
+            osd: OsdOptions::DEFAULT,
+            samples_per_side: 3,
+            tessellation_patches: 24,
+            split_depth: 1,
+            split_patches: 4,
+            uniform_level: 1,
+            uniform_points: 2_000,
+        }
     }
 }
 
@@ -94,6 +110,9 @@ pub struct CompareReport {
     /// Largest angle between our normal (∂P/∂u × ∂P/∂v) and OpenSubdiv's, in degrees, over the
     /// samples inside patches where both are well defined.
     pub max_normal_angle_deg: f64,
+    /// The largest angle beyond what rounding explains at its sample (16 ulps of the position's
+    /// magnitude over the shorter derivative, in degrees): what is left for a real difference.
+    pub max_normal_angle_beyond_rounding_deg: f64,
     /// Interior samples left out of the normal comparison: the derivatives are within 0.06° of
     /// parallel (next to a valence-2 vertex) or one is 1e4 times shorter than the other (a
     /// collapsed patch). Normals are compared inside patches only.
@@ -161,7 +180,9 @@ pub fn compare_obj(name: &str, text: &str, options: &CompareOptions) -> Result<C
     shape.check_supported()?;
     let mut report = compare(name, &shape.topology, &shape.points, options)?;
     if shape.crease_method == CreaseMethod::Chaikin {
-        report.notes.push("the shape asks for Chaikin creasing, which USD cannot express: evaluated with uniform creasing on both sides".into());
+        report
+            .notes
+            .push("the shape asks for Chaikin creasing, which USD cannot express: evaluated with uniform creasing on both sides".into());
     }
     if !shape.ignored_tags.is_empty() {
         report.notes.push(format!("tags without effect here: {}", shape.ignored_tags.join(", ")));
@@ -199,7 +220,11 @@ pub fn compare(name: &str, topology: &MeshTopology, points: &[[f32; 3]], options
     let limit = limit_errors(name, topology, points, &surface, options)?;
     let tess = tessellation::measure(&surface, options);
     let wt = watertight::check(&surface, topology, diag, options);
-    let uniform = if options.uniform_level > 0 { Some(uniform::measure(&surface, options.uniform_level, options.uniform_points, diag)?) } else { None };
+    let uniform = if options.uniform_level > 0 {
+        Some(uniform::measure(&surface, options.uniform_level, options.uniform_points, diag)?)
+    } else {
+        None
+    };
     let rel = |e: f64| e / f64::from(diag);
     let relmap = |m: &BTreeMap<String, f64>| m.iter().map(|(k, v)| (k.clone(), rel(*v))).collect::<BTreeMap<_, _>>();
     Ok(CompareReport {
@@ -214,6 +239,7 @@ pub fn compare(name: &str, topology: &MeshTopology, points: &[[f32; 3]], options
         max_rel_position_error: rel(limit.max_pos),
         rms_rel_position_error: rel(limit.rms_pos),
         max_normal_angle_deg: limit.max_angle_deg,
+        max_normal_angle_beyond_rounding_deg: limit.angle_beyond_rounding_deg,
         degenerate_normals: limit.degenerate,
         max_rel_tessellation_error: relmap(&tess.by_tier),
         max_rel_tessellation_error_by_rate: relmap(&tess.by_rate),
@@ -232,10 +258,17 @@ struct LimitErrors {
     max_pos: f64,
     rms_pos: f64,
     max_angle_deg: f64,
+    angle_beyond_rounding_deg: f64,
     degenerate: usize,
 }
 
-fn limit_errors(name: &str, topology: &MeshTopology, points: &[[f32; 3]], surface: &OsdSurface, options: &CompareOptions) -> Result<LimitErrors, MeshError> {
+fn limit_errors(
+    name: &str,
+    topology: &MeshTopology,
+    points: &[[f32; 3]],
+    surface: &OsdSurface,
+    options: &CompareOptions,
+) -> Result<LimitErrors, MeshError> {
     let side = options.samples_per_side.max(2);
     let mut ours = Vec::new();
     let mut locations = Vec::new();
@@ -247,7 +280,10 @@ fn limit_errors(name: &str, topology: &MeshTopology, points: &[[f32; 3]], surfac
                 if !in_domain(pp.kind, u, v) {
                     continue;
                 }
-                ours.push((surface.evaluate(patch, u, v), u > 0.0 && v > 0.0 && u < 1.0 && v < 1.0 && (!pp.kind.is_triangle() || u + v < 1.0)));
+                ours.push((
+                    surface.evaluate(patch, u, v),
+                    u > 0.0 && v > 0.0 && u < 1.0 && v < 1.0 && (!pp.kind.is_triangle() || u + v < 1.0),
+                ));
                 let (fu, fv) = pp.to_face_uv(u, v);
                 locations.push((pp.ptex_face, fu, fv));
             }
@@ -255,6 +291,7 @@ fn limit_errors(name: &str, topology: &MeshTopology, points: &[[f32; 3]], surfac
     }
     let reference = limit_stencil_reference(name, topology, points, &options.osd, &locations)?;
     let (mut max_pos, mut sum2, mut max_angle, mut degenerate) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    let mut max_excess = 0.0f64;
     for ((s, interior), r) in ours.iter().zip(&reference) {
         let d = f64::from((s.p - r.p).length());
         max_pos = max_pos.max(if d.is_nan() { f64::INFINITY } else { d });
@@ -277,17 +314,28 @@ fn limit_errors(name: &str, topology: &MeshTopology, points: &[[f32; 3]], surfac
             degenerate += 1;
             continue;
         }
+        // What rounding alone leaves of the direction: positions carry ~16 ulps of their
+        // magnitude, and derivatives on a small patch far from the origin are differences of
+        // such positions, so the normal's direction is uncertain by that over the shorter one.
+        let shortest = s.dpdu.length().min(s.dpdv.length()).min(r.dpdu.length()).min(r.dpdv.length());
+        let floor_deg = f64::from(16.0 * f32::EPSILON * s.p.abs().max_element().max(1e-30) / shortest).to_degrees();
         let cos = f64::from(a.normalize().dot(b.normalize())).clamp(-1.0, 1.0);
         // acos loses precision near 1: use the cross product's length for small angles.
         let sin = f64::from(a.normalize().cross(b.normalize()).length()).min(1.0);
         let angle = sin.atan2(cos).to_degrees();
-        if std::env::var_os("MIPRAY_DEBUG_NORMALS").is_some() && angle > 0.05 {
-            eprintln!("normal {angle:.3} ours du={:?} dv={:?} ref du={:?} dv={:?} p={:?}", s.dpdu, s.dpdv, r.dpdu, r.dpdv, s.p);
-        }
+
         max_angle = max_angle.max(angle);
+        max_excess = max_excess.max(angle - floor_deg);
     }
     let n = ours.len().max(1) as f64;
-    Ok(LimitErrors { samples: ours.len(), max_pos, rms_pos: (sum2 / n).sqrt(), max_angle_deg: max_angle, degenerate })
+    Ok(LimitErrors {
+        samples: ours.len(),
+        max_pos,
+        rms_pos: (sum2 / n).sqrt(),
+        max_angle_deg: max_angle,
+        angle_beyond_rounding_deg: max_excess.max(0.0),
+        degenerate,
+    })
 }
 
 fn fmt_e(x: f64) -> String {
@@ -307,8 +355,19 @@ impl CompareReport {
         line("patch kinds", self.patch_kinds.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "));
         line("bounding-box diagonal", format!("{:.6}", self.bbox_diagonal));
         line("limit samples vs LimitStencilTable", self.samples.to_string());
-        line("  max / rms position error (rel. diag)", format!("{} / {}", fmt_e(self.max_rel_position_error), fmt_e(self.rms_rel_position_error)));
-        line("  max normal angle (deg)", format!("{} ({} degenerate left out)", fmt_e(self.max_normal_angle_deg), self.degenerate_normals));
+        line(
+            "  max / rms position error (rel. diag)",
+            format!("{} / {}", fmt_e(self.max_rel_position_error), fmt_e(self.rms_rel_position_error)),
+        );
+        line(
+            "  max normal angle (deg)",
+            format!(
+                "{} ({} beyond rounding; {} degenerate left out)",
+                fmt_e(self.max_normal_angle_deg),
+                fmt_e(self.max_normal_angle_beyond_rounding_deg),
+                self.degenerate_normals
+            ),
+        );
         line("tessellation error by tier (rel. diag)", String::new());
         for t in ["coarse", "medium", "fine"] {
             if let Some(e) = self.max_rel_tessellation_error.get(t) {
@@ -332,7 +391,10 @@ impl CompareReport {
         line("  T-junction gap without seams (rel.)", fmt_e(w.max_rel_rate_gap));
         line("  seam chords checked / worst coverage", format!("{} / {:.3}", w.seam_chords_checked, w.max_seam_coverage_ratio));
         if let Some(u) = &self.uniform {
-            line(&format!("uniform refinement level {} vs limit", u.level), format!("{} points: max {} rms {}", u.points_measured, fmt_e(u.max_rel_distance), fmt_e(u.rms_rel_distance)));
+            line(
+                &format!("uniform refinement level {} vs limit", u.level),
+                format!("{} points: max {} rms {}", u.points_measured, fmt_e(u.max_rel_distance), fmt_e(u.rms_rel_distance)),
+            );
         }
         for n in &self.notes {
             line("note", n.clone());

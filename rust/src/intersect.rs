@@ -9,7 +9,7 @@
 use glam::Vec3A;
 
 use crate::bounds::Bounds3;
-use crate::tessellate::Tessellation;
+use crate::tessellate::{GridDomain, Tessellation};
 
 /// A ray prepared for the watertight test: the axis permutation and shear of Woop et al.
 #[derive(Clone, Copy, Debug)]
@@ -108,12 +108,27 @@ fn hit_quads(ray: &WatertightRay, tess: &Tessellation, stride: usize, range: (us
     let q = (tess.n - 1) / stride;
     let inv_q = 1.0 / q as f32;
     let (i0, i1, j0, j1) = range;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
     for j in j0..j1 {
         for i in i0..i1 {
+            if triangle && i + j + 1 > q {
+                // Beyond a triangle patch's diagonal its basis only extrapolates.
+                continue;
+            }
             let p00 = tess.vert(i * stride, j * stride);
             let p10 = tess.vert((i + 1) * stride, j * stride);
             let p11 = tess.vert((i + 1) * stride, (j + 1) * stride);
             let p01 = tess.vert(i * stride, (j + 1) * stride);
+            if triangle && i + j + 1 == q {
+                // On the diagonal: the half (p00, p10, p01), corners (0,0), (1,0), (0,1).
+                if let Some((t, _b0, b1, b2)) = ray.hit_triangle(p00, p10, p01, *t_max) {
+                    if t > t_min {
+                        *t_max = t;
+                        *best = Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng: (p10 - p00).cross(p01 - p00) });
+                    }
+                }
+                continue;
+            }
             // Triangles (p00, p10, p11) and (p00, p11, p01): in (u, v) the corners are
             // (0,0), (1,0), (1,1) and (0,0), (1,1), (0,1).
             if let Some((t, _b0, b1, b2)) = ray.hit_triangle(p00, p10, p11, *t_max) {
@@ -137,6 +152,9 @@ fn hit_quads(ray: &WatertightRay, tess: &Tessellation, stride: usize, range: (us
 /// The closest hit of `ray` with `tess` read at vertex `stride` (1, or 2 for merged quads), in
 /// (`t_min`, `t_max`). Fine grids are entered through their sub-boxes.
 pub fn intersect_tessellation(ray: &WatertightRay, tess: &Tessellation, stride: usize, t_min: f32, t_max: f32) -> Option<GridHit> {
+    if tess.domain == GridDomain::Empty {
+        return None;
+    }
     let mut best = None;
     let mut t_best = t_max;
     if tess.sub_boxes.len() == 16 {
@@ -166,7 +184,7 @@ mod tests {
                 verts.push([i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32, 0.0]);
             }
         }
-        Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius: 0.0 }
+        Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius: 0.0, domain: GridDomain::Square }
     }
 
     #[test]
@@ -196,6 +214,24 @@ mod tests {
                 assert_eq!(h.is_some(), inside, "({x}, {y})");
             }
         }
+    }
+
+    #[test]
+    fn triangle_domains_are_hit_below_their_diagonal_only() {
+        let mut t = flat_grid(5);
+        t.domain = GridDomain::LowerTriangle;
+        for &(x, y, inside) in &[(0.1f32, 0.2f32, true), (0.45, 0.45, true), (0.2, 0.77, true), (0.55, 0.5, false), (0.9, 0.9, false), (0.3, 0.74, false)] {
+            for stride in [1, 2] {
+                let r = WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
+                let h = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY);
+                assert_eq!(h.is_some(), inside, "({x}, {y}) at stride {stride}");
+                if let Some(h) = h {
+                    assert!((h.u - x).abs() < 1e-5 && (h.v - y).abs() < 1e-5 && h.ng.z > 0.0, "{h:?}");
+                }
+            }
+        }
+        t.domain = GridDomain::Empty;
+        assert!(intersect_tessellation(&WatertightRay::new(Vec3A::new(0.1, 0.1, 1.0), Vec3A::NEG_Z), &t, 1, 0.0, f32::INFINITY).is_none());
     }
 
     #[test]

@@ -18,8 +18,8 @@
 //! where it leaves it (so grid hits inside the box always win); a ray that starts inside a box
 //! ignores it (rays leaving a surface near a seam do not hit their own seam).
 //!
-//! What it costs: one point evaluation per boundary chord when tessellating (4 for a coarse
-//! grid, 16 medium, 64 fine), one float per cache entry, and a few slab tests for rays that pass
+//! What it costs: three point evaluations per boundary chord when tessellating (12 for a coarse
+//! grid, 48 medium, 192 fine), one float per cache entry, and a few slab tests for rays that pass
 //! within `R` of a subpatch's edge. What it changes: near seams a ray may stop up to about `R`
 //! (the tessellation's own chord error at that rate, below the ray's beam width) before the
 //! tessellated surface; flat patches have `R` at the rounding level only.
@@ -28,22 +28,35 @@ use glam::Vec3A;
 
 use crate::intersect::{intersect_tessellation, GridHit, WatertightRay};
 use crate::patch::{LimitSurface, UvRect};
-use crate::tessellate::Tessellation;
+use crate::tessellate::{GridDomain, Tessellation};
+
+/// Probes per boundary chord, at t = ¼, ½, ¾ of it: three catch S-shaped chords (an edge curve
+/// with an inflection in the chord's middle crosses it there).
+pub const SEAM_PROBES: usize = 3;
 
 /// The largest deviation of an edge curve from its chord is taken as this many times the
-/// deviation at the chord's middle (exact for parabolic arcs; the factor covers lopsided ones).
-pub const SEAM_SAFETY: f32 = 1.5;
+/// largest deviation at the probes (the maximum of a smooth arc lies within a quarter chord of a
+/// probe, where it exceeds the probe's by a small fraction).
+pub const SEAM_SAFETY: f32 = 1.25;
 
 /// The floating-point margin of a seam box, relative to the largest coordinate of its grid: two
-/// patches evaluating the same edge point agree to within a few ulps; this is 16 of them.
-pub const SEAM_MARGIN_REL: f32 = 16.0 * f32::EPSILON;
+/// patches evaluating the same edge point agree to within 2.8ε of the coordinates' magnitude
+/// (the largest over OpenSubdiv's regression corpus, `loop_tetrahedron`: see
+/// `mipray-subdiv-compare`'s `max_edge_mismatch_over_margin`); this is about twice that. It is
+/// also how far seams can thicken a silhouette: nothing near the origin, a few ulps of the
+/// position far from it.
+pub const SEAM_MARGIN_REL: f32 = 6.0 * f32::EPSILON;
 
-/// Grid edges, in the order of [`SeamEdges`]' bits: v = 0, u = 1, v = 1, u = 0.
+/// Square grid edges, in the order of [`SeamEdges`]' bits: v = 0, u = 1, v = 1, u = 0.
 pub const EDGE_COUNT: usize = 4;
 
+/// The diagonal u + v = 1 of a triangle patch's grid, from (1, 0) to (0, 1): edge index 4.
+pub const DIAGONAL: usize = 4;
+
 /// Which edges of a grid lie on its root subpatch's boundary (bit e for edge e: 0 is v = 0,
-/// 1 is u = 1, 2 is v = 1, 3 is u = 0). Interior edges of split children are shared with
-/// siblings evaluated on the same patch at the same (u, v), so they need no seam.
+/// 1 is u = 1, 2 is v = 1, 3 is u = 0, 4 the diagonal of a triangle patch). Interior edges of
+/// split children are shared with siblings evaluated on the same patch at the same (u, v), so
+/// they need no seam.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SeamEdges(pub u8);
 
@@ -60,17 +73,28 @@ impl SeamEdges {
     pub fn contains(self, edge: usize) -> bool {
         self.0 >> edge & 1 == 1
     }
+
+    /// The edges that bound the surface of a grid with `domain`: a triangle's are v = 0, u = 0
+    /// and its diagonal (u = 1 and v = 1 only touch it at a corner).
+    pub fn within(self, domain: GridDomain) -> SeamEdges {
+        match domain {
+            GridDomain::Square => self,
+            GridDomain::LowerTriangle => SeamEdges((self.0 & 0b1001) | 1 << DIAGONAL),
+            GridDomain::Empty => SeamEdges::NONE,
+        }
+    }
 }
 
 /// Grid index (i, j) of vertex `k` along edge `e` of an n×n grid, edges running with u (edges 0
-/// and 2) or with v (edges 1 and 3).
+/// and 2), with v (edges 1 and 3), or from (1, 0) to (0, 1) ([`DIAGONAL`]).
 #[inline]
 pub fn edge_vertex(e: usize, k: usize, n: usize) -> (usize, usize) {
     match e {
         0 => (k, 0),
         1 => (n - 1, k),
         2 => (k, n - 1),
-        _ => (0, k),
+        3 => (0, k),
+        _ => (n - 1 - k, k),
     }
 }
 
@@ -81,7 +105,8 @@ pub fn edge_uv(e: usize, t: f32) -> (f32, f32) {
         0 => (t, 0.0),
         1 => (1.0, t),
         2 => (t, 1.0),
-        _ => (0.0, t),
+        3 => (0.0, t),
+        _ => (1.0 - t, t),
     }
 }
 
@@ -101,9 +126,9 @@ pub fn seam_margin(max_abs: f32) -> f32 {
 }
 
 /// The seam radius of an n×n grid `verts` (undisplaced, u fastest) over `rect` of `patch`:
-/// [`SEAM_SAFETY`] times the largest distance between the limit surface at the middle of a
-/// boundary chord (at stride 1) and that chord, plus [`seam_margin`]. Object units. One
-/// evaluation per boundary chord. A non-finite result (a degenerate patch) becomes the margin.
+/// [`SEAM_SAFETY`] times the largest distance between the limit surface at [`SEAM_PROBES`]
+/// points inside a boundary chord (at stride 1) and that chord, plus [`seam_margin`]. Object
+/// units. Non-finite distances (a degenerate patch) are left out.
 pub fn seam_radius(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize) -> f32 {
     if n < 2 || verts.len() < n * n {
         return 0.0;
@@ -112,17 +137,21 @@ pub fn seam_radius(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let max_abs = verts.iter().fold(0.0f32, |m, v| m.max(v[0].abs()).max(v[1].abs()).max(v[2].abs()));
     let q = (n - 1) as f32;
     let mut dev: f32 = 0.0;
-    for e in 0..EDGE_COUNT {
+    let edges = SeamEdges::ALL.within(GridDomain::of(surface.patch_param(patch).kind, &rect));
+    for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
         for k in 0..n - 1 {
             let (ia, ja) = edge_vertex(e, k, n);
             let (ib, jb) = edge_vertex(e, k + 1, n);
-            let (lu, lv) = edge_uv(e, (k as f32 + 0.5) / q);
-            let u = rect.u0 + (rect.u1 - rect.u0) * lu;
-            let v = rect.v0 + (rect.v1 - rect.v0) * lv;
-            let mid = surface.evaluate(patch, u, v).p;
-            let d = point_segment_distance(mid, at(ia, ja), at(ib, jb));
-            if d.is_finite() {
-                dev = dev.max(d);
+            for probe in 1..=SEAM_PROBES {
+                let t = (k as f32 + probe as f32 / (SEAM_PROBES + 1) as f32) / q;
+                let (lu, lv) = edge_uv(e, t);
+                let u = rect.u0 + (rect.u1 - rect.u0) * lu;
+                let v = rect.v0 + (rect.v1 - rect.v0) * lv;
+                let c = surface.evaluate(patch, u, v).p;
+                let d = point_segment_distance(c, at(ia, ja), at(ib, jb));
+                if d.is_finite() {
+                    dev = dev.max(d);
+                }
             }
         }
     }
@@ -190,7 +219,14 @@ impl SeamBox {
 /// (`t_min`, `t_max`): where the ray leaves the first box it passes through from outside. The
 /// hit's (u, v) is the nearest point of the chord, in the grid's [0, 1]²; its normal is the
 /// boundary quad's (the winding of [`crate::intersect`]'s triangles).
-pub fn intersect_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, edges: SeamEdges, t_min: f32, t_max: f32) -> Option<GridHit> {
+pub fn intersect_seams(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    edges: SeamEdges,
+    t_min: f32,
+    t_max: f32,
+) -> Option<GridHit> {
     let n = tess.n;
     if n < 2 || stride == 0 || (n - 1) % stride != 0 || edges == SeamEdges::NONE {
         return None;
@@ -200,13 +236,14 @@ pub fn intersect_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, 
     if q > 16 {
         return None;
     }
+    let edges = edges.within(tess.domain);
     let base = tess.seam_radius;
     if !(base >= 0.0 && base.is_finite()) {
         return None;
     }
     let mut best: Option<GridHit> = None;
     let mut t_best = t_max;
-    for e in (0..EDGE_COUNT).filter(|&e| edges.contains(e)) {
+    for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
         let vert = |k: usize| {
             let (i, j) = edge_vertex(e, k, n);
             tess.vert(i, j)
@@ -244,18 +281,21 @@ pub fn intersect_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, 
             let p = ray.o + ray.d * far;
             let lambda = ((p - sb.a).dot(sb.axis) / sb.len).clamp(0.0, 1.0);
             let (u, v) = edge_uv(e, (k as f32 + lambda) / q as f32);
-            // The boundary quad at this chord, as intersect's hit_quads winds it.
+            // The boundary quad at this chord, as intersect's hit_quads winds it (on the
+            // diagonal, its lower-left half).
             let (qi, qj) = match e {
                 0 => (k, 0),
                 1 => (q - 1, k),
                 2 => (k, q - 1),
-                _ => (0, k),
+                3 => (0, k),
+                _ => (q - 1 - k, k),
             };
             let p00 = tess.vert(qi * stride, qj * stride);
             let p10 = tess.vert((qi + 1) * stride, qj * stride);
-            let p11 = tess.vert((qi + 1) * stride, (qj + 1) * stride);
+            let far_corner =
+                if e == DIAGONAL { tess.vert(qi * stride, (qj + 1) * stride) } else { tess.vert((qi + 1) * stride, (qj + 1) * stride) };
             t_best = far;
-            best = Some(GridHit { t: far, u, v, ng: (p10 - p00).cross(p11 - p00) });
+            best = Some(GridHit { t: far, u, v, ng: (p10 - p00).cross(far_corner - p00) });
         }
     }
     best
@@ -263,7 +303,14 @@ pub fn intersect_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, 
 
 /// The closest hit of `ray` with the grid `tess` read at `stride` and with the seam boxes of
 /// its `edges` ([`SeamEdges::NONE`]: the grid alone, as without seams), in (`t_min`, `t_max`).
-pub fn intersect_with_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, edges: SeamEdges, t_min: f32, t_max: f32) -> Option<GridHit> {
+pub fn intersect_with_seams(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    edges: SeamEdges,
+    t_min: f32,
+    t_max: f32,
+) -> Option<GridHit> {
     let grid = intersect_tessellation(ray, tess, stride, t_min, t_max);
     let limit = grid.map_or(t_max, |h| h.t);
     intersect_seams(ray, tess, stride, edges, t_min, limit).or(grid)
@@ -280,7 +327,7 @@ mod tests {
                 verts.push(f(i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32));
             }
         }
-        Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius }
+        Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius, domain: GridDomain::Square }
     }
 
     #[test]
@@ -305,6 +352,19 @@ mod tests {
         assert!(intersect_seams(&down(1.005), &t, 1, SeamEdges(0b1101), 0.0, f32::INFINITY).is_none());
         // A grid hit closer than the box exit wins (t_max is the grid's hit).
         assert!(intersect_seams(&down(0.995), &t, 1, SeamEdges::ALL, 0.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn triangle_grids_have_seams_on_their_diagonal_not_on_the_far_edges() {
+        let mut t = grid(5, |u, v| [u, v, 0.0], 0.01);
+        t.domain = GridDomain::LowerTriangle;
+        let down = |x: f32, y: f32| WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
+        // Just beyond the diagonal, next to it: the diagonal's seam box.
+        let h = intersect_seams(&down(0.505, 0.505), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).expect("diagonal seam");
+        assert!((h.u + h.v - 1.0).abs() < 1e-5 && h.ng.z > 0.0, "{h:?}");
+        // Just beyond u = 1 at v = 0.5: outside the triangle, no seam there.
+        assert!(intersect_seams(&down(1.005, 0.5), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).is_none());
+        assert!(intersect_seams(&down(0.5, -0.005), &t, 2, SeamEdges::ALL, 0.0, f32::INFINITY).is_some());
     }
 
     #[test]

@@ -99,6 +99,36 @@ pub struct Tessellation {
     /// rounding margin (object units): the half-width of the seam boxes that close cracks
     /// between neighbours tessellated at different rates (see [`crate::seam`]).
     pub seam_radius: f32,
+    /// Which part of the grid is surface: all of it, or only the half u + v ≤ 1 of a triangle
+    /// (Loop) patch, whose basis extrapolates beyond its domain.
+    pub domain: GridDomain,
+}
+
+/// The part of a grid over a subpatch that is surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum GridDomain {
+    /// All of it: square patches, and children of triangle patches inside the triangle.
+    #[default]
+    Square,
+    /// The lower-left half (grid-local u + v ≤ 1): a triangle patch, or a split child on its
+    /// diagonal (children are dyadic squares, so the diagonal runs corner to corner).
+    LowerTriangle,
+    /// None: a split child of a triangle patch beyond its diagonal.
+    Empty,
+}
+
+impl GridDomain {
+    /// The domain of a grid over `rect` of a patch of `kind`.
+    pub fn of(kind: crate::patch::PatchKind, rect: &crate::patch::UvRect) -> GridDomain {
+        const EPS: f32 = 1e-6;
+        if !kind.is_triangle() || rect.u1 + rect.v1 <= 1.0 + EPS {
+            GridDomain::Square
+        } else if rect.u0 + rect.v0 >= 1.0 - EPS {
+            GridDomain::Empty
+        } else {
+            GridDomain::LowerTriangle
+        }
+    }
 }
 
 impl CacheEntry for Tessellation {
@@ -152,7 +182,8 @@ pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displa
             *v = q.into();
         }
     }
-    let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius };
+    let domain = GridDomain::of(surface.patch_param(sub.patch as usize).kind, &sub.rect);
+    let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius, domain };
     if tier == Tier::Fine {
         t.sub_boxes = (0..16)
             .map(|b| {

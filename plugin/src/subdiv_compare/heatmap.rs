@@ -7,7 +7,7 @@ use glam::Vec3A;
 use mipray::image_io::ImageBuf;
 use mipray::patch::{GridSamples, LimitSurface, UvRect};
 use mipray::subpatch::Subpatch;
-use mipray::tessellate::{tessellate, Rate};
+use mipray::tessellate::{tessellate, GridDomain, Rate};
 
 use super::tessellation::grid_error;
 
@@ -71,18 +71,23 @@ pub fn render(surface: &dyn LimitSurface, diag: f32, opts: &HeatmapOptions) -> I
         });
         for qj in 0..q {
             for qi in 0..q {
-                let (u, v) = ((qi as f32 + 0.5) / q as f32, (qj as f32 + 0.5) / q as f32);
-                if kind.is_triangle() && u + v > 1.0 {
+                let triangle = t.domain == GridDomain::LowerTriangle;
+                if t.domain == GridDomain::Empty || (triangle && qi + qj + 1 > q) {
                     continue;
                 }
+                let diagonal = triangle && qi + qj + 1 == q;
                 let c = colormap(scale_of(err[qj * q + qi] / f64::from(diag)));
                 let p = |i: usize, j: usize| to_view(t.vert(i * stride, j * stride));
                 let (p00, p10, p11, p01) = (p(qi, qj), p(qi + 1, qj), p(qi + 1, qj + 1), p(qi, qj + 1));
-                let n = (p10 - p00).cross(p11 - p00).normalize_or_zero();
+                let n = (p10 - p00).cross(p01 - p00).normalize_or_zero();
                 let shade = 0.35 + 0.65 * n.z.abs();
                 let col = [c[0] * shade, c[1] * shade, c[2] * shade];
-                tris.push(([p00, p10, p11], col));
-                tris.push(([p00, p11, p01], col));
+                if diagonal {
+                    tris.push(([p00, p10, p01], col));
+                } else {
+                    tris.push(([p00, p10, p11], col));
+                    tris.push(([p00, p11, p01], col));
+                }
             }
         }
     }

@@ -13,7 +13,7 @@ use glam::Vec3A;
 use mipray::geometry_cache::Tier;
 use mipray::patch::{GridSamples, LimitSurface, PatchKind, UvRect};
 use mipray::subpatch::{ChildCell, Subpatch};
-use mipray::tessellate::{tessellate, Tessellation};
+use mipray::tessellate::{tessellate, GridDomain, Tessellation};
 
 use super::{in_domain, spread, CompareOptions};
 
@@ -26,9 +26,12 @@ pub struct TessellationErrors {
     pub patches: usize,
 }
 
-/// The renderer's triangle interpolation of quad (p00, p10, p11, p01) at quad-local (lu, lv).
-pub fn triangle_point(p00: Vec3A, p10: Vec3A, p11: Vec3A, p01: Vec3A, lu: f32, lv: f32) -> Vec3A {
-    if lu >= lv {
+/// The renderer's triangle interpolation of quad (p00, p10, p11, p01) at quad-local (lu, lv);
+/// `diagonal`: the quad is on a triangle patch's diagonal, where only (p00, p10, p01) is drawn.
+pub fn triangle_point(p00: Vec3A, p10: Vec3A, p11: Vec3A, p01: Vec3A, lu: f32, lv: f32, diagonal: bool) -> Vec3A {
+    if diagonal {
+        p00 + (p10 - p00) * lu + (p01 - p00) * lv
+    } else if lu >= lv {
         p00 * (1.0 - lu) + p10 * (lu - lv) + p11 * lv
     } else {
         p00 * (1.0 - lv) + p11 * lu + p01 * (lv - lu)
@@ -37,11 +40,27 @@ pub fn triangle_point(p00: Vec3A, p10: Vec3A, p11: Vec3A, p01: Vec3A, lu: f32, l
 
 /// The largest error (object units) of `tess`, a grid over `rect` of `patch`, read at vertex
 /// `stride`; `each(qi, qj, error)` sees every probe's error with its quad (in stride units).
-pub fn grid_error(surface: &dyn LimitSurface, patch: usize, kind: PatchKind, rect: UvRect, tess: &Tessellation, stride: usize, mut each: impl FnMut(usize, usize, f64)) -> f64 {
+pub fn grid_error(
+    surface: &dyn LimitSurface,
+    patch: usize,
+    kind: PatchKind,
+    rect: UvRect,
+    tess: &Tessellation,
+    stride: usize,
+    mut each: impl FnMut(usize, usize, f64),
+) -> f64 {
     let q = (tess.n - 1) / stride;
     let mut worst = 0.0f64;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    if tess.domain == GridDomain::Empty {
+        return 0.0;
+    }
     for qj in 0..q {
         for qi in 0..q {
+            if triangle && qi + qj + 1 > q {
+                continue;
+            }
+            let diagonal = triangle && qi + qj + 1 == q;
             let p00 = tess.vert(qi * stride, qj * stride);
             let p10 = tess.vert((qi + 1) * stride, qj * stride);
             let p11 = tess.vert((qi + 1) * stride, (qj + 1) * stride);
@@ -61,7 +80,7 @@ pub fn grid_error(surface: &dyn LimitSurface, patch: usize, kind: PatchKind, rec
                     continue;
                 }
                 let s = surface.evaluate(patch, u, v).p;
-                let e = f64::from((s - triangle_point(p00, p10, p11, p01, lu, lv)).length());
+                let e = f64::from((s - triangle_point(p00, p10, p11, p01, lu, lv, diagonal)).length());
                 let e = if e.is_nan() { f64::INFINITY } else { e };
                 each(qi, qj, e);
                 worst = worst.max(e);

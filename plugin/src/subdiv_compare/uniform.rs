@@ -40,8 +40,26 @@ struct Tri {
 }
 
 /// The closest point of triangle `p` to `x` as barycentric weights (Ericson, *Real-Time
-/// Collision Detection*, §5.1.5).
+/// Collision Detection*, §5.1.5); for a degenerate triangle, its nearest corner.
 fn closest_barycentric(x: Vec3A, p: &[Vec3A; 3]) -> [f32; 3] {
+    let w = closest_barycentric_raw(x, p);
+    if w.iter().all(|c| c.is_finite()) {
+        return w;
+    }
+    let d: [f32; 3] = p.map(|q| (q - x).length_squared());
+    let k = if d[0] <= d[1] && d[0] <= d[2] {
+        0
+    } else if d[1] <= d[2] {
+        1
+    } else {
+        2
+    };
+    let mut w = [0.0; 3];
+    w[k] = 1.0;
+    w
+}
+
+fn closest_barycentric_raw(x: Vec3A, p: &[Vec3A; 3]) -> [f32; 3] {
     let (a, b, c) = (p[0], p[1], p[2]);
     let (ab, ac, ap) = (b - a, c - a, x - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
@@ -90,7 +108,8 @@ struct TriGrid {
 
 impl TriGrid {
     fn new(tris: Vec<Tri>) -> Self {
-        let mean: f32 = tris.iter().map(|t| (t.p[1] - t.p[0]).length().max((t.p[2] - t.p[0]).length())).sum::<f32>() / tris.len().max(1) as f32;
+        let mean: f32 =
+            tris.iter().map(|t| (t.p[1] - t.p[0]).length().max((t.p[2] - t.p[0]).length())).sum::<f32>() / tris.len().max(1) as f32;
         let size = if mean.is_finite() && mean > 0.0 { mean } else { 1.0 };
         let mut cells: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
         for (k, t) in tris.iter().enumerate() {
@@ -143,9 +162,25 @@ impl TriGrid {
             found.truncate(k);
             // Every unvisited triangle is at least `ring` cells away.
             if found.len() >= k.min(self.tris.len()) && found.last().is_some_and(|f| f.0 <= ring as f32 * self.size) {
-                break;
+                return found;
             }
         }
+        // Far from everything (a refined point with no patch near it): look at every triangle.
+        for (t, tri) in self.tris.iter().enumerate() {
+            if seen.contains(&(t as u32)) {
+                continue;
+            }
+            let w = closest_barycentric(x, &tri.p);
+            let q = tri.p[0] * w[0] + tri.p[1] * w[1] + tri.p[2] * w[2];
+            found.push((
+                (q - x).length(),
+                tri.patch,
+                tri.uv[0].0 * w[0] + tri.uv[1].0 * w[1] + tri.uv[2].0 * w[2],
+                tri.uv[0].1 * w[0] + tri.uv[1].1 * w[1] + tri.uv[2].1 * w[2],
+            ));
+        }
+        found.sort_by(|a, b| a.0.total_cmp(&b.0));
+        found.truncate(k);
         found
     }
 }
@@ -226,5 +261,12 @@ pub fn measure(surface: &OsdSurface, level: u32, max_points: usize, diag: f32) -
     }
     let n = measured.len().max(1) as f64;
     let dg = f64::from(diag);
-    Ok(UniformReport { level, faces: faces.len(), points: used.len(), points_measured: measured.len(), max_rel_distance: max_d / dg, rms_rel_distance: (sum2 / n).sqrt() / dg })
+    Ok(UniformReport {
+        level,
+        faces: faces.len(),
+        points: used.len(),
+        points_measured: measured.len(),
+        max_rel_distance: max_d / dg,
+        rms_rel_distance: (sum2 / n).sqrt() / dg,
+    })
 }

@@ -20,11 +20,11 @@ use std::collections::{BTreeMap, HashMap};
 use glam::Vec3A;
 use mipray::geometry_cache::Tier;
 use mipray::patch::{GridSamples, LimitSurface, UvRect};
+use mipray::seam::{edge_uv, edge_vertex, point_segment_distance, seam_margin, SeamEdges, DIAGONAL, EDGE_COUNT};
+use mipray::subpatch::{ChildCell, Subpatch};
+use mipray::tessellate::{tessellate, GridDomain, Tessellation};
 use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::OsdSurface;
-use mipray::seam::{edge_uv, edge_vertex, point_segment_distance, seam_margin, SeamEdges, EDGE_COUNT};
-use mipray::subpatch::{ChildCell, Subpatch};
-use mipray::tessellate::{tessellate, Tessellation};
 use serde::Serialize;
 
 use super::{spread, CompareOptions};
@@ -57,8 +57,9 @@ pub struct WatertightReport {
     pub max_rel_rate_gap_by_rate: BTreeMap<String, f64>,
     /// Boundary chords checked against their seam boxes.
     pub seam_chords_checked: usize,
-    /// Largest (curve's distance from a chord + the largest edge mismatch) / seam box
-    /// half-width: ≤ 1 is condition 2 (the box reaches the neighbour's evaluation of the curve).
+    /// Largest (curve's distance from a chord + the edge mismatch there) / seam box half-width,
+    /// the mismatch taken as `max_edge_mismatch_over_margin` rounding margins of that grid: ≤ 1
+    /// is condition 2 (the box reaches the neighbour's evaluation of the curve).
     pub max_seam_coverage_ratio: f64,
     /// Chords whose seam box does not contain the curve.
     pub uncovered_seam_chords: usize,
@@ -66,26 +67,26 @@ pub struct WatertightReport {
     /// patches): then the two sides of every edge coincide at every pair of rates even without
     /// seams.
     pub edges_match_without_seams: bool,
-    /// Triangle (Loop) patches, whose grids the renderer lays over the unit square: their seams
-    /// are not checked.
-    pub triangle_patches_skipped: usize,
 }
 
 impl WatertightReport {
     /// Conditions 1 and 2 of the module doc: no ray passes between neighbours at any pair of
-    /// rates. False with triangle patches, whose seams are not checked.
+    /// rates.
     pub fn watertight(&self) -> bool {
-        self.max_edge_mismatch_over_margin <= 1.0 && self.uncovered_seam_chords == 0 && self.triangle_patches_skipped == 0
+        self.max_edge_mismatch_over_margin <= 1.0 && self.uncovered_seam_chords == 0
     }
 }
 
+/// A patch edge as its (u, v) at t ∈ [0, 1].
+type EdgeCurve = Box<dyn Fn(f32) -> (f32, f32)>;
+
 /// The edge curves of a patch as (u, v) functions of t ∈ [0, 1]: the four square edges, or the
 /// three triangle edges (v = 0, u = 0, and the diagonal).
-fn patch_edges(triangle: bool) -> Vec<Box<dyn Fn(f32) -> (f32, f32)>> {
+fn patch_edges(triangle: bool) -> Vec<EdgeCurve> {
     if triangle {
         vec![Box::new(|t| (t, 0.0)), Box::new(|t| (0.0, t)), Box::new(|t| (t, 1.0 - t))]
     } else {
-        (0..EDGE_COUNT).map(|e| Box::new(move |t| edge_uv(e, t)) as Box<dyn Fn(f32) -> (f32, f32)>).collect()
+        (0..EDGE_COUNT).map(|e| Box::new(move |t| edge_uv(e, t)) as EdgeCurve).collect()
     }
 }
 
@@ -99,7 +100,7 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
     let edge_patches = spread(surface.patch_count(), EDGE_PATCHES);
     r.edge_patches_checked = edge_patches.len();
     match_edges(surface, topology, diag, &edge_patches, &mut r);
-    let mismatch = r.max_edge_mismatch;
+    let mismatch = r.max_edge_mismatch_over_margin;
     let mut worst_gap_over_margin = 0.0f64;
     let mut scratch = GridSamples::default();
     let mut gap = |r: &mut WatertightReport, rate: u32, dist: f64, margin: f64, radius: f64| {
@@ -107,9 +108,9 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
         *slot = slot.max(dist / d);
         r.max_rel_rate_gap = r.max_rel_rate_gap.max(dist / d);
         worst_gap_over_margin = worst_gap_over_margin.max(dist / margin.max(f64::MIN_POSITIVE));
-        // The neighbour's curve lies within `mismatch` of ours: the box must reach that far.
-        let _ = margin;
-        let ratio = (dist + mismatch) / radius.max(f64::MIN_POSITIVE);
+        // The neighbour's evaluation of the curve lies within `mismatch` margins of ours (the
+        // largest ratio over the mesh, scaled to this grid's margin): the box must reach it.
+        let ratio = (dist + mismatch * margin) / radius.max(f64::MIN_POSITIVE);
         r.seam_chords_checked += 1;
         r.max_seam_coverage_ratio = r.max_seam_coverage_ratio.max(if ratio.is_nan() { f64::INFINITY } else { ratio });
         if !(ratio <= 1.0) {
@@ -117,11 +118,6 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
         }
     };
     for patch in spread(surface.patch_count(), options.tessellation_patches) {
-        let pp = surface.patch_param(patch);
-        if pp.kind.is_triangle() {
-            r.triangle_patches_skipped += 1;
-            continue;
-        }
         let bounds = surface.patch_bounds(patch);
         for tier in Tier::ALL {
             let sub = Subpatch { patch: patch as u32, rect: UvRect::UNIT, bounds, affine: false };
@@ -131,25 +127,23 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
                     continue;
                 }
                 let rate = ((t.n - 1) / stride) as u32;
-                chords(surface, patch, UvRect::UNIT, &t, stride, SeamEdges::ALL, |dist, margin, radius| gap(&mut r, rate, dist, margin, radius));
+                chords(surface, patch, UvRect::UNIT, &t, stride, SeamEdges::ALL, |dist, margin, radius| {
+                    gap(&mut r, rate, dist, margin, radius)
+                });
             }
         }
     }
     for depth in 1..=options.split_depth.min(mipray::tessellate::MAX_SPLIT_DEPTH) {
         for patch in spread(surface.patch_count(), options.split_patches) {
-            let pp = surface.patch_param(patch);
-            if pp.kind.is_triangle() {
-                continue;
-            }
             let bounds = surface.patch_bounds(patch);
             let cells = 1u32 << depth;
             for j in 0..cells {
                 for i in 0..cells {
-                    let edges = SeamEdges::of_child(depth as u8, i, j);
+                    let rect = ChildCell { root: 0, depth: depth as u8, i, j }.rect(&UvRect::UNIT);
+                    let edges = SeamEdges::of_child(depth as u8, i, j).within(GridDomain::of(surface.patch_param(patch).kind, &rect));
                     if edges == SeamEdges::NONE {
                         continue;
                     }
-                    let rect = ChildCell { root: 0, depth: depth as u8, i, j }.rect(&UvRect::UNIT);
                     let sub = Subpatch { patch: patch as u32, rect, bounds, affine: false };
                     let (t, _) = tessellate(surface, &sub, Tier::Fine, None, &mut scratch);
                     chords(surface, patch, rect, &t, 1, edges, |dist, margin, radius| gap(&mut r, 16 << depth, dist, margin, radius));
@@ -164,12 +158,21 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
 /// For every boundary chord of `tess` (over `rect`, read at `stride`) on `edges`, calls
 /// `each(distance of the curve from the chord, rounding margin, seam box half-width)` in object
 /// units, with the half-width the renderer gives that chord.
-fn chords(surface: &dyn LimitSurface, patch: usize, rect: UvRect, tess: &Tessellation, stride: usize, edges: SeamEdges, mut each: impl FnMut(f64, f64, f64)) {
+fn chords(
+    surface: &dyn LimitSurface,
+    patch: usize,
+    rect: UvRect,
+    tess: &Tessellation,
+    stride: usize,
+    edges: SeamEdges,
+    mut each: impl FnMut(f64, f64, f64),
+) {
     let n = tess.n;
     let q = (n - 1) / stride;
     let max_abs = tess.verts.iter().fold(0.0f32, |m, v| m.max(v[0].abs()).max(v[1].abs()).max(v[2].abs()));
     let margin = f64::from(seam_margin(max_abs));
-    for e in (0..EDGE_COUNT).filter(|&e| edges.contains(e)) {
+    let edges = edges.within(tess.domain);
+    for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
         let vert = |k: usize| {
             let (i, j) = edge_vertex(e, k, n);
             tess.vert(i, j)
@@ -248,7 +251,8 @@ impl<'a> PtexAdjacency<'a> {
         let n = self.face_size(f);
         let first = self.first_ptex[f];
         if n == self.regular {
-            let corners: &[(f32, f32)] = if n == 3 { &[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)] } else { &[(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] };
+            let corners: &[(f32, f32)] =
+                if n == 3 { &[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)] } else { &[(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] };
             let (a, b) = (corners[k % n], corners[(k + 1) % n]);
             (first, a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t)
         } else if t <= 0.5 {
@@ -269,21 +273,43 @@ impl<'a> PtexAdjacency<'a> {
         let mut out = Vec::new();
         if sub == usize::MAX {
             if n == 3 {
-                if v.abs() < EPS { on_edges.push((0, u)); }
-                if (u + v - 1.0).abs() < EPS { on_edges.push((1, v)); }
-                if u.abs() < EPS { on_edges.push((2, 1.0 - v)); }
+                if v.abs() < EPS {
+                    on_edges.push((0, u));
+                }
+                if (u + v - 1.0).abs() < EPS {
+                    on_edges.push((1, v));
+                }
+                if u.abs() < EPS {
+                    on_edges.push((2, 1.0 - v));
+                }
             } else {
-                if v.abs() < EPS { on_edges.push((0, u)); }
-                if (u - 1.0).abs() < EPS { on_edges.push((1, v)); }
-                if (v - 1.0).abs() < EPS { on_edges.push((2, 1.0 - u)); }
-                if u.abs() < EPS { on_edges.push((3, 1.0 - v)); }
+                if v.abs() < EPS {
+                    on_edges.push((0, u));
+                }
+                if (u - 1.0).abs() < EPS {
+                    on_edges.push((1, v));
+                }
+                if (v - 1.0).abs() < EPS {
+                    on_edges.push((2, 1.0 - u));
+                }
+                if u.abs() < EPS {
+                    on_edges.push((3, 1.0 - v));
+                }
             }
         } else {
             let first = self.first_ptex[f];
-            if v.abs() < EPS { on_edges.push((sub, 0.5 * u)); }
-            if u.abs() < EPS { on_edges.push(((sub + n - 1) % n, 1.0 - 0.5 * v)); }
-            if (u - 1.0).abs() < EPS { out.push((first + ((sub + 1) % n) as u32, v, 1.0)); }
-            if (v - 1.0).abs() < EPS { out.push((first + ((sub + n - 1) % n) as u32, 1.0, u)); }
+            if v.abs() < EPS {
+                on_edges.push((sub, 0.5 * u));
+            }
+            if u.abs() < EPS {
+                on_edges.push(((sub + n - 1) % n, 1.0 - 0.5 * v));
+            }
+            if (u - 1.0).abs() < EPS {
+                out.push((first + ((sub + 1) % n) as u32, v, 1.0));
+            }
+            if (v - 1.0).abs() < EPS {
+                out.push((first + ((sub + n - 1) % n) as u32, 1.0, u));
+            }
         }
         for (k, t) in on_edges {
             let (a, b) = (self.vertex(f, k), self.vertex(f, k + 1));
@@ -304,21 +330,31 @@ impl<'a> PtexAdjacency<'a> {
 /// adjacency in the neighbouring face — and the two evaluations compared.
 fn match_edges(surface: &OsdSurface, topology: &MeshTopology, diag: f32, patches: &[usize], r: &mut WatertightReport) {
     let adjacency = PtexAdjacency::new(topology);
-    let corner_abs = |patch: usize| [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)].iter().map(|&(u, v)| surface.evaluate(patch, u, v).p.abs().max_element()).fold(0.0f32, f32::max);
+    let corner_abs = |patch: usize| {
+        [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+            .iter()
+            .map(|&(u, v)| surface.evaluate(patch, u, v).p.abs().max_element())
+            .fold(0.0f32, f32::max)
+    };
     let mut corner_cache: HashMap<usize, f32> = HashMap::new();
     for &patch in patches {
         let pp = surface.patch_param(patch);
         let tri = pp.kind.is_triangle();
         let own_abs = corner_abs(patch);
         // Outward directions of the edges in the patch's own (u, v).
-        let outward: Vec<(f32, f32)> = if tri { vec![(0.0, -1.0), (-1.0, 0.0), (1.0, 1.0)] } else { vec![(0.0, -1.0), (1.0, 0.0), (0.0, 1.0), (-1.0, 0.0)] };
+        let outward: Vec<(f32, f32)> =
+            if tri { vec![(0.0, -1.0), (-1.0, 0.0), (1.0, 1.0)] } else { vec![(0.0, -1.0), (1.0, 0.0), (0.0, 1.0), (-1.0, 0.0)] };
         for (edge, out) in patch_edges(tri).iter().zip(outward) {
             for k in 0..EDGE_SAMPLES {
                 let (u, v) = edge(k as f32 / (EDGE_SAMPLES - 1) as f32);
                 let p = surface.evaluate(patch, u, v).p;
                 let (fu, fv) = pp.to_face_uv(u, v);
                 let mut others: Vec<(usize, Vec3A)> = Vec::new();
-                let on_face_edge = fu.abs() < 1e-6 || fv.abs() < 1e-6 || (fu - 1.0).abs() < 1e-6 || (fv - 1.0).abs() < 1e-6 || (tri && (fu + fv - 1.0).abs() < 1e-6);
+                let on_face_edge = fu.abs() < 1e-6
+                    || fv.abs() < 1e-6
+                    || (fu - 1.0).abs() < 1e-6
+                    || (fv - 1.0).abs() < 1e-6
+                    || (tri && (fu + fv - 1.0).abs() < 1e-6);
                 if on_face_edge {
                     for (g, gu, gv) in adjacency.across(pp.ptex_face, fu.clamp(0.0, 1.0), fv.clamp(0.0, 1.0)) {
                         if let Some((b, s, t)) = surface.find_patch(g, gu.clamp(0.0, 1.0), gv.clamp(0.0, 1.0)) {
