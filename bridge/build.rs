@@ -12,29 +12,16 @@ use std::path::{Path, PathBuf};
 const OSD_PROBE_HEADER: &str = "opensubdiv/far/topologyRefiner.h";
 
 fn main() {
-    for f in [
-        "src/ffi.rs",
-        "cpp/osd.cpp",
-        "cpp/oiio.cpp",
-        "cpp/texture.cpp",
-        "include/osd.h",
-        "include/oiio.h",
-        "include/texture.h",
-    ] {
+    for f in ["src/ffi.rs", "cpp/osd.cpp", "cpp/oiio.cpp", "cpp/texture.cpp", "include/osd.h", "include/oiio.h", "include/texture.h"] {
         println!("cargo:rerun-if-changed={f}");
     }
     println!("cargo:rerun-if-env-changed=OSD_ROOT");
 
     let mut include_dirs: Vec<PathBuf> = Vec::new();
 
-    let oiio = pkg_config::Config::new()
-        .atleast_version("2.4")
-        .probe("OpenImageIO")
-        .unwrap_or_else(|e| {
-            fail(&format!(
-                "OpenImageIO >= 2.4 not found by pkg-config ({e}); install libopenimageio-dev or set PKG_CONFIG_PATH"
-            ))
-        });
+    let oiio = pkg_config::Config::new().atleast_version("2.4").probe("OpenImageIO").unwrap_or_else(|e| {
+        fail(&format!("OpenImageIO >= 2.4 not found by pkg-config ({e}); install libopenimageio-dev or set PKG_CONFIG_PATH"))
+    });
     include_dirs.extend(oiio.include_paths);
 
     include_dirs.extend(find_opensubdiv());
@@ -72,17 +59,9 @@ fn find_opensubdiv() -> Vec<PathBuf> {
     if let Some(root) = env::var_os("OSD_ROOT").map(PathBuf::from) {
         let include = root.join("include");
         if !include.join(OSD_PROBE_HEADER).is_file() {
-            fail(&format!(
-                "OSD_ROOT={} has no include/{OSD_PROBE_HEADER}",
-                root.display()
-            ));
+            fail(&format!("OSD_ROOT={} has no include/{OSD_PROBE_HEADER}", root.display()));
         }
-        for lib in [
-            "lib",
-            "lib64",
-            "lib/x86_64-linux-gnu",
-            "lib/aarch64-linux-gnu",
-        ] {
+        for lib in ["lib", "lib64", "lib/x86_64-linux-gnu", "lib/aarch64-linux-gnu"] {
             let dir = root.join(lib);
             if dir.is_dir() {
                 println!("cargo:rustc-link-search=native={}", dir.display());
@@ -106,11 +85,7 @@ fn find_opensubdiv() -> Vec<PathBuf> {
                 }
             }
             println!("cargo:rustc-link-lib=osdCPU");
-            return if prefix == "/usr" {
-                Vec::new()
-            } else {
-                vec![include]
-            };
+            return if prefix == "/usr" { Vec::new() } else { vec![include] };
         }
     }
 

@@ -181,25 +181,11 @@ pub(crate) mod bridge {
         /// A 2-float primvar (face-varying channel, or vertex primvar when `vertex`) at the
         /// patch's local (u, v): value, d/du, d/dv into `out[0..6]`. False for a bad index or a
         /// short `out`.
-        fn evaluate_primvar(
-            self: &OsdMesh,
-            vertex: bool,
-            channel: usize,
-            patch: usize,
-            u: f32,
-            v: f32,
-            out: &mut [f32],
-        ) -> bool;
+        fn evaluate_primvar(self: &OsdMesh, vertex: bool, channel: usize, patch: usize, u: f32, v: f32, out: &mut [f32]) -> bool;
 
         /// Reference path: a fresh refiner and `Far::LimitStencilTableFactory` at the given
         /// (ptex face, u, v) locations.
-        fn osd_limit_stencil_eval(
-            desc: &OsdMeshDesc,
-            points: &[f32],
-            ptex_faces: &[i32],
-            u: &[f32],
-            v: &[f32],
-        ) -> Result<OsdLimitSamples>;
+        fn osd_limit_stencil_eval(desc: &OsdMeshDesc, points: &[f32], ptex_faces: &[i32], u: &[f32], v: &[f32]) -> Result<OsdLimitSamples>;
         /// Reference path for face-varying channel `channel`: a fresh refiner and
         /// `Far::LimitStencilTableFactory` in face-varying mode at (ptex face, u, v) locations.
         /// Values and derivatives come back as 3 floats each, the third 0.
@@ -211,8 +197,7 @@ pub(crate) mod bridge {
             v: &[f32],
         ) -> Result<OsdLimitSamples>;
         /// Uniform refinement to `level`: the refined points and faces of the last level.
-        fn osd_uniform_refine(desc: &OsdMeshDesc, points: &[f32], level: i32)
-            -> Result<OsdUniform>;
+        fn osd_uniform_refine(desc: &OsdMeshDesc, points: &[f32], level: i32) -> Result<OsdUniform>;
 
         /// Opened image file for reading.
         type OiioReader;

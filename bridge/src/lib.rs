@@ -40,8 +40,5 @@ pub mod osd;
 pub mod texture;
 
 pub use oiio::{oiio_version, OiioImageIo};
-pub use osd::{
-    limit_stencil_fvar_reference, limit_stencil_reference, LimitSample, OsdOptions, OsdSurface,
-    UniformMesh,
-};
+pub use osd::{limit_stencil_fvar_reference, limit_stencil_reference, LimitSample, OsdOptions, OsdSurface, UniformMesh};
 pub use texture::{OiioTextureOptions, OiioTextureSystem};

@@ -33,9 +33,7 @@ use mipray::bounds::Bounds3;
 use mipray::error::MeshError;
 use mipray::patch::{GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
 use mipray::texture::{BaseFacePrimvar, Interpolation, Primvar2, Value2};
-use mipray::topology::{
-    BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision,
-};
+use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 
 use crate::ffi::bridge as ffi;
 
@@ -52,10 +50,7 @@ pub struct OsdOptions {
 
 impl OsdOptions {
     /// Level 4 for both: OpenSubdiv's usual choice for rendering.
-    pub const DEFAULT: OsdOptions = OsdOptions {
-        isolation_level: 4,
-        secondary_level: 4,
-    };
+    pub const DEFAULT: OsdOptions = OsdOptions { isolation_level: 4, secondary_level: 4 };
 }
 
 impl Default for OsdOptions {
@@ -127,11 +122,7 @@ impl OsdSurface {
     /// [`MeshError::Invalid`] for topology that [`MeshTopology::validate`] refuses or a Loop mesh
     /// with non-triangles, [`MeshError::NonFinite`] naming the first non-finite point,
     /// [`MeshError::Subdivision`] with OpenSubdiv's own messages when it refuses the mesh.
-    pub fn new(
-        name: &str,
-        topology: &MeshTopology,
-        points: &[[f32; 3]],
-    ) -> Result<OsdSurface, MeshError> {
+    pub fn new(name: &str, topology: &MeshTopology, points: &[[f32; 3]]) -> Result<OsdSurface, MeshError> {
         Self::with_options(name, topology, points, &OsdOptions::DEFAULT)
     }
 
@@ -139,12 +130,7 @@ impl OsdSurface {
     ///
     /// # Errors
     /// As [`OsdSurface::new`], and [`MeshError::Invalid`] for out-of-range options.
-    pub fn with_options(
-        name: &str,
-        topology: &MeshTopology,
-        points: &[[f32; 3]],
-        options: &OsdOptions,
-    ) -> Result<OsdSurface, MeshError> {
+    pub fn with_options(name: &str, topology: &MeshTopology, points: &[[f32; 3]], options: &OsdOptions) -> Result<OsdSurface, MeshError> {
         Self::with_primvars(name, topology, points, options, &[])
     }
 
@@ -170,17 +156,11 @@ impl OsdSurface {
         let mut sources = Vec::with_capacity(primvars.len());
         let (mut fvar, mut vertex) = (0usize, 0usize);
         for p in primvars {
-            let indices = p
-                .face_varying_indices(topology, points.len())
-                .map_err(|e| named(name, e))?;
+            let indices = p.face_varying_indices(topology, points.len()).map_err(|e| named(name, e))?;
             match p.interpolation {
                 Interpolation::FaceVarying => {
-                    let count = i32::try_from(p.values.len()).map_err(|_| {
-                        MeshError::Invalid(format!(
-                            "{name}: primvar {} has too many values",
-                            p.name
-                        ))
-                    })?;
+                    let count = i32::try_from(p.values.len())
+                        .map_err(|_| MeshError::Invalid(format!("{name}: primvar {} has too many values", p.name)))?;
                     desc.fvar_value_counts.push(count);
                     desc.fvar_values.extend(p.values.iter().flatten());
                     desc.fvar_indices.extend(indices);
@@ -190,41 +170,27 @@ impl OsdSurface {
                 Interpolation::Vertex => {
                     // One value per point: the point's element, through USD's indices.
                     desc.vertex_primvars.extend((0..points.len()).flat_map(|i| {
-                        let k = if p.indices.is_empty() {
-                            i
-                        } else {
-                            p.indices[i] as usize
-                        };
+                        let k = if p.indices.is_empty() { i } else { p.indices[i] as usize };
                         p.values[k]
                     }));
                     sources.push(PrimvarSource::Vertex(vertex));
                     vertex += 1;
                 }
                 Interpolation::Constant | Interpolation::Uniform | Interpolation::Varying => {
-                    let b = BaseFacePrimvar::new(topology, points.len(), p)
-                        .map_err(|e| named(name, e))?;
+                    let b = BaseFacePrimvar::new(topology, points.len(), p).map_err(|e| named(name, e))?;
                     sources.push(PrimvarSource::BaseFace(b));
                 }
             }
         }
-        let mesh = ffi::osd_mesh_new(&desc, points.as_flattened())
-            .map_err(|e| subdivision_error(name, &e))?;
+        let mesh = ffi::osd_mesh_new(&desc, points.as_flattened()).map_err(|e| subdivision_error(name, &e))?;
         if mesh.fvar_channel_count() != fvar || mesh.vertex_primvar_count() != vertex {
-            return Err(subdivision_error(
-                name,
-                &"OpenSubdiv did not build every primvar channel",
-            ));
+            return Err(subdivision_error(name, &"OpenSubdiv did not build every primvar channel"));
         }
         let warnings = mesh.warnings();
         for w in warnings.lines() {
             log::warn!("{name}: OpenSubdiv: {w}");
         }
-        let params = mesh
-            .patch_infos()
-            .map_err(|e| subdivision_error(name, &e))?
-            .iter()
-            .map(patch_param_of)
-            .collect();
+        let params = mesh.patch_infos().map_err(|e| subdivision_error(name, &e))?.iter().map(patch_param_of).collect();
         let mut surface = OsdSurface {
             name: name.to_string(),
             mesh,
@@ -240,17 +206,9 @@ impl OsdSurface {
     }
 
     fn refresh_bounds(&mut self) -> Result<(), MeshError> {
-        let flat = self
-            .mesh
-            .patch_bounds()
-            .map_err(|e| subdivision_error(&self.name, &e))?;
-        self.bounds = flat
-            .chunks_exact(6)
-            .map(|b| Bounds3 {
-                min: Vec3A::new(b[0], b[1], b[2]),
-                max: Vec3A::new(b[3], b[4], b[5]),
-            })
-            .collect();
+        let flat = self.mesh.patch_bounds().map_err(|e| subdivision_error(&self.name, &e))?;
+        self.bounds =
+            flat.chunks_exact(6).map(|b| Bounds3 { min: Vec3A::new(b[0], b[1], b[2]), max: Vec3A::new(b[3], b[4], b[5]) }).collect();
         Ok(())
     }
 
@@ -285,10 +243,7 @@ impl OsdSurface {
             )));
         }
         check_finite(&self.name, points)?;
-        self.mesh
-            .pin_mut()
-            .update_points(points.as_flattened())
-            .map_err(|e| subdivision_error(&self.name, &e))?;
+        self.mesh.pin_mut().update_points(points.as_flattened()).map_err(|e| subdivision_error(&self.name, &e))?;
         self.refresh_bounds()
     }
 
@@ -331,28 +286,17 @@ impl OsdSurface {
     /// fails.
     pub fn uniform_refinement(&self, level: u32) -> Result<UniformMesh, MeshError> {
         if level > 10 {
-            return Err(MeshError::Invalid(format!(
-                "{}: uniform level {level} is above 10",
-                self.name
-            )));
+            return Err(MeshError::Invalid(format!("{}: uniform level {level} is above 10", self.name)));
         }
         let points = self.base_points()?;
-        let r = ffi::osd_uniform_refine(&self.desc, &points, level as i32)
-            .map_err(|e| subdivision_error(&self.name, &e))?;
-        let pts = r
-            .points
-            .chunks_exact(3)
-            .map(|c| [c[0], c[1], c[2]])
-            .collect();
+        let r = ffi::osd_uniform_refine(&self.desc, &points, level as i32).map_err(|e| subdivision_error(&self.name, &e))?;
+        let pts = r.points.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         let mut faces = Vec::with_capacity(r.face_vertex_counts.len());
         let mut start = 0usize;
         for &n in &r.face_vertex_counts {
             let n = n.max(0) as usize;
             let Some(idx) = r.face_vertex_indices.get(start..start + n) else {
-                return Err(subdivision_error(
-                    &self.name,
-                    &"uniform refinement returned short face indices",
-                ));
+                return Err(subdivision_error(&self.name, &"uniform refinement returned short face indices"));
             };
             faces.push(idx.iter().map(|&i| i.max(0) as u32).collect());
             start += n;
@@ -365,10 +309,7 @@ impl OsdSurface {
         let n = self.desc.num_vertices as usize;
         let mut out = vec![0.0f32; 3 * n];
         if !self.mesh.base_points(&mut out) {
-            return Err(subdivision_error(
-                &self.name,
-                &"could not read back the mesh points",
-            ));
+            return Err(subdivision_error(&self.name, &"could not read back the mesh points"));
         }
         Ok(out)
     }
@@ -391,24 +332,13 @@ pub fn limit_stencil_reference(
     let desc = mesh_desc(name, topology, points, options)?;
     let mut faces = Vec::with_capacity(locations.len());
     for &(f, _, _) in locations {
-        faces.push(
-            i32::try_from(f).map_err(|_| {
-                MeshError::Invalid(format!("{name}: ptex face {f} is out of range"))
-            })?,
-        );
+        faces.push(i32::try_from(f).map_err(|_| MeshError::Invalid(format!("{name}: ptex face {f} is out of range")))?);
     }
     let us: Vec<f32> = locations.iter().map(|l| l.1).collect();
     let vs: Vec<f32> = locations.iter().map(|l| l.2).collect();
-    let r = ffi::osd_limit_stencil_eval(&desc, points.as_flattened(), &faces, &us, &vs)
-        .map_err(|e| subdivision_error(name, &e))?;
+    let r = ffi::osd_limit_stencil_eval(&desc, points.as_flattened(), &faces, &us, &vs).map_err(|e| subdivision_error(name, &e))?;
     let v3 = |a: &[f32], i: usize| Vec3A::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
-    Ok((0..locations.len())
-        .map(|i| LimitSample {
-            p: v3(&r.p, i),
-            dpdu: v3(&r.dpdu, i),
-            dpdv: v3(&r.dpdv, i),
-        })
-        .collect())
+    Ok((0..locations.len()).map(|i| LimitSample { p: v3(&r.p, i), dpdu: v3(&r.dpdu, i), dpdv: v3(&r.dpdv, i) }).collect())
 }
 
 /// A face-varying primvar's value and first derivatives from OpenSubdiv's
@@ -428,40 +358,25 @@ pub fn limit_stencil_fvar_reference(
     locations: &[(u32, f32, f32)],
 ) -> Result<Vec<Value2>, MeshError> {
     if primvar.interpolation != Interpolation::FaceVarying {
-        return Err(MeshError::Invalid(format!(
-            "{name}: primvar {} is not face-varying",
-            primvar.name
-        )));
+        return Err(MeshError::Invalid(format!("{name}: primvar {} is not face-varying", primvar.name)));
     }
     let mut desc = mesh_desc(name, topology, points, options)?;
-    let indices = primvar
-        .face_varying_indices(topology, points.len())
-        .map_err(|e| named(name, e))?;
-    desc.fvar_value_counts
-        .push(i32::try_from(primvar.values.len()).map_err(|_| {
-            MeshError::Invalid(format!(
-                "{name}: primvar {} has too many values",
-                primvar.name
-            ))
-        })?);
+    let indices = primvar.face_varying_indices(topology, points.len()).map_err(|e| named(name, e))?;
+    desc.fvar_value_counts.push(
+        i32::try_from(primvar.values.len())
+            .map_err(|_| MeshError::Invalid(format!("{name}: primvar {} has too many values", primvar.name)))?,
+    );
     desc.fvar_values.extend(primvar.values.iter().flatten());
     desc.fvar_indices.extend(indices);
     let mut faces = Vec::with_capacity(locations.len());
     for &(f, _, _) in locations {
-        faces.push(
-            i32::try_from(f).map_err(|_| {
-                MeshError::Invalid(format!("{name}: ptex face {f} is out of range"))
-            })?,
-        );
+        faces.push(i32::try_from(f).map_err(|_| MeshError::Invalid(format!("{name}: ptex face {f} is out of range")))?);
     }
     let us: Vec<f32> = locations.iter().map(|l| l.1).collect();
     let vs: Vec<f32> = locations.iter().map(|l| l.2).collect();
-    let r = ffi::osd_limit_stencil_fvar_eval(&desc, 0, &faces, &us, &vs)
-        .map_err(|e| subdivision_error(name, &e))?;
+    let r = ffi::osd_limit_stencil_fvar_eval(&desc, 0, &faces, &us, &vs).map_err(|e| subdivision_error(name, &e))?;
     let v2 = |a: &[f32], i: usize| [a[3 * i], a[3 * i + 1]];
-    Ok((0..locations.len())
-        .map(|i| (v2(&r.p, i), v2(&r.dpdu, i), v2(&r.dpdv, i)))
-        .collect())
+    Ok((0..locations.len()).map(|i| (v2(&r.p, i), v2(&r.dpdu, i), v2(&r.dpdv, i))).collect())
 }
 
 impl LimitSurface for OsdSurface {
@@ -486,21 +401,9 @@ impl LimitSurface for OsdSurface {
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
         let mut o = [0.0f32; 18];
         let ok = self.mesh.evaluate(patch, u, v, &mut o);
-        assert!(
-            ok,
-            "{}: patch {patch} out of range ({} patches)",
-            self.name,
-            self.params.len()
-        );
+        assert!(ok, "{}: patch {patch} out of range ({} patches)", self.name, self.params.len());
         let v3 = |k: usize| Vec3A::new(o[k], o[k + 1], o[k + 2]);
-        SurfacePoint {
-            p: v3(0),
-            dpdu: v3(3),
-            dpdv: v3(6),
-            dpduu: v3(9),
-            dpduv: v3(12),
-            dpdvv: v3(15),
-        }
+        SurfacePoint { p: v3(0), dpdu: v3(3), dpdv: v3(6), dpduu: v3(9), dpduv: v3(12), dpdvv: v3(15) }
     }
 
     /// One call into C++ for the whole grid; the vertices equal [`LimitSurface::evaluate`] at
@@ -508,14 +411,7 @@ impl LimitSurface for OsdSurface {
     ///
     /// # Panics
     /// If `patch >= patch_count()`.
-    fn evaluate_grid(
-        &self,
-        patch: usize,
-        rect: UvRect,
-        n: usize,
-        derivatives: bool,
-        out: &mut GridSamples,
-    ) {
+    fn evaluate_grid(&self, patch: usize, rect: UvRect, n: usize, derivatives: bool, out: &mut GridSamples) {
         out.n = n;
         out.p.clear();
         out.dpdu.clear();
@@ -539,12 +435,7 @@ impl LimitSurface for OsdSurface {
             out.dpdu.as_flattened_mut(),
             out.dpdv.as_flattened_mut(),
         );
-        assert!(
-            ok,
-            "{}: patch {patch} out of range ({} patches)",
-            self.name,
-            self.params.len()
-        );
+        assert!(ok, "{}: patch {patch} out of range ({} patches)", self.name, self.params.len());
     }
 
     fn control_face_count(&self) -> usize {
@@ -560,9 +451,7 @@ impl LimitSurface for OsdSurface {
             PrimvarSource::Vertex(k) => (true, *k),
         };
         let mut o = [0.0f32; 6];
-        self.mesh
-            .evaluate_primvar(vertex, k, patch, u, v, &mut o)
-            .then_some(([o[0], o[1]], [o[2], o[3]], [o[4], o[5]]))
+        self.mesh.evaluate_primvar(vertex, k, patch, u, v, &mut o).then_some(([o[0], o[1]], [o[2], o[3]], [o[4], o[5]]))
     }
 }
 
@@ -581,30 +470,18 @@ fn subdivision_error(name: &str, e: &dyn std::fmt::Display) -> MeshError {
 }
 
 fn check_finite(name: &str, points: &[[f32; 3]]) -> Result<(), MeshError> {
-    if let Some((i, p)) = points
-        .iter()
-        .enumerate()
-        .find(|(_, p)| p.iter().any(|c| !c.is_finite()))
-    {
+    if let Some((i, p)) = points.iter().enumerate().find(|(_, p)| p.iter().any(|c| !c.is_finite())) {
         return Err(MeshError::NonFinite(format!("{name}: point {i} is {p:?}")));
     }
     Ok(())
 }
 
 /// Validates a mesh and translates it into OpenSubdiv's terms.
-fn mesh_desc(
-    name: &str,
-    topology: &MeshTopology,
-    points: &[[f32; 3]],
-    options: &OsdOptions,
-) -> Result<ffi::OsdMeshDesc, MeshError> {
+fn mesh_desc(name: &str, topology: &MeshTopology, points: &[[f32; 3]], options: &OsdOptions) -> Result<ffi::OsdMeshDesc, MeshError> {
     let invalid = |m: String| MeshError::Invalid(format!("{name}: {m}"));
-    topology
-        .validate(points.len())
-        .map_err(|e| named(name, e))?;
+    topology.validate(points.len()).map_err(|e| named(name, e))?;
     check_finite(name, points)?;
-    let num_vertices = i32::try_from(points.len())
-        .map_err(|_| invalid(format!("{} points is too many", points.len())))?;
+    let num_vertices = i32::try_from(points.len()).map_err(|_| invalid(format!("{} points is too many", points.len())))?;
     if topology.face_count() == 0 {
         return Err(invalid("the mesh has no faces".into()));
     }
@@ -614,9 +491,7 @@ fn mesh_desc(
              do not make a fan: not supported (OpenSubdiv would abort); split the face"
         )));
     }
-    if !(1..=10).contains(&options.isolation_level)
-        || options.secondary_level > options.isolation_level
-    {
+    if !(1..=10).contains(&options.isolation_level) || options.secondary_level > options.isolation_level {
         return Err(invalid(format!(
             "isolation levels {} / {} are not in 1..=10 with secondary ≤ primary",
             options.isolation_level, options.secondary_level
@@ -625,15 +500,8 @@ fn mesh_desc(
     let scheme = match topology.scheme {
         Scheme::CatmullClark => 0,
         Scheme::Loop => {
-            if let Some((f, n)) = topology
-                .face_vertex_counts
-                .iter()
-                .enumerate()
-                .find(|(_, &n)| n != 3)
-            {
-                return Err(invalid(format!(
-                    "the Loop scheme needs triangles, but face {f} has {n} vertices"
-                )));
+            if let Some((f, n)) = topology.face_vertex_counts.iter().enumerate().find(|(_, &n)| n != 3) {
+                return Err(invalid(format!("the Loop scheme needs triangles, but face {f} has {n} vertices")));
             }
             1
         }
@@ -669,11 +537,7 @@ fn mesh_desc(
         // Negative sharpness means smooth, as in OpenSubdiv's own shape reader.
         crease_weights: edges.iter().map(|&(_, _, s)| s.max(0.0)).collect(),
         corner_indices: topology.corner_indices.clone(),
-        corner_weights: topology
-            .corner_sharpnesses
-            .iter()
-            .map(|s| s.max(0.0))
-            .collect(),
+        corner_weights: topology.corner_sharpnesses.iter().map(|s| s.max(0.0)).collect(),
         hole_indices: topology.hole_indices.clone(),
         fvar_value_counts: Vec::new(),
         fvar_values: Vec::new(),
@@ -745,9 +609,7 @@ fn repeated_vertex_opensubdiv_cannot_take(topology: &MeshTopology) -> Option<(us
         }
         start += n;
     }
-    suspects
-        .into_iter()
-        .find(|(_, v)| corners.get(v).copied().unwrap_or(0) != edges.get(v).map_or(0, HashSet::len))
+    suspects.into_iter().find(|(_, v)| corners.get(v).copied().unwrap_or(0) != edges.get(v).map_or(0, HashSet::len))
 }
 
 fn patch_param_of(info: &ffi::OsdPatchInfo) -> PatchParam {

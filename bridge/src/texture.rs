@@ -79,10 +79,7 @@ impl std::fmt::Debug for OiioTextureSystem {
 }
 
 fn system_error(message: impl Into<String>) -> TextureError {
-    TextureError {
-        path: "(texture system)".into(),
-        message: message.into(),
-    }
+    TextureError { path: "(texture system)".into(), message: message.into() }
 }
 
 fn wrap_code(w: Wrap) -> u8 {
@@ -144,14 +141,8 @@ impl OiioTextureSystem {
         // Read (and so clear) this thread's error either way; log only the first.
         let message = self.sys.take_error().unwrap_or_default();
         if !self.warned.swap(true, Ordering::Relaxed) {
-            let path = self
-                .paths()
-                .get(handle.index() as usize)
-                .cloned()
-                .unwrap_or_else(|| format!("handle {}", handle.index()));
-            log::warn!(
-                "texture {path}: lookup failed: {message} (further failures are only counted)"
-            );
+            let path = self.paths().get(handle.index() as usize).cloned().unwrap_or_else(|| format!("handle {}", handle.index()));
+            log::warn!("texture {path}: lookup failed: {message} (further failures are only counted)");
         }
     }
 }
@@ -170,25 +161,14 @@ impl TextureSampler for OiioTextureSystem {
         if let Some(&h) = guard.0.get(path) {
             return Ok(h);
         }
-        let index = self.sys.open(path).map_err(|e| TextureError {
-            path: path.to_string(),
-            message: e.what().to_string(),
-        })?;
+        let index = self.sys.open(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?;
         let h = TextureHandle::new(index);
         guard.0.insert(path.to_string(), h);
         guard.1.push(path.to_string());
         Ok(h)
     }
 
-    fn sample(
-        &self,
-        handle: TextureHandle,
-        st: [f32; 2],
-        dst_dx: [f32; 2],
-        dst_dy: [f32; 2],
-        lookup: &Lookup,
-        out: &mut [f32],
-    ) -> bool {
+    fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool {
         self.lookups.fetch_add(1, Ordering::Relaxed);
         let (dx, dy) = self.options.filter.widths(dst_dx, dst_dy);
         let raw = ffi::OiioLookup {
@@ -241,14 +221,8 @@ impl TextureSampler for OiioTextureSystem {
         m.insert("kind".into(), json!("oiio"));
         m.insert("filter_mode".into(), json!(self.options.filter.name()));
         m.insert("max_memory_mb".into(), json!(self.options.max_memory_mb));
-        m.insert(
-            "lookups".into(),
-            json!(self.lookups.load(Ordering::Relaxed)),
-        );
-        m.insert(
-            "failed_lookups".into(),
-            json!(self.failed.load(Ordering::Relaxed)),
-        );
+        m.insert("lookups".into(), json!(self.lookups.load(Ordering::Relaxed)));
+        m.insert("failed_lookups".into(), json!(self.failed.load(Ordering::Relaxed)));
         let paths = self.paths();
         m.insert("textures".into(), json!(paths.len()));
         for s in self.sys.cache_stats().unwrap_or_default() {

@@ -25,12 +25,7 @@ fn max2(a: [f32; 2], b: [f32; 2]) -> f32 {
 }
 
 fn fv(values: Vec<[f32; 2]>, indices: Vec<i32>) -> Primvar2 {
-    Primvar2 {
-        name: "st".into(),
-        interpolation: Interpolation::FaceVarying,
-        values,
-        indices,
-    }
+    Primvar2 { name: "st".into(), interpolation: Interpolation::FaceVarying, values, indices }
 }
 
 /// An n×n grid of unit quads in z = 0, points row by row.
@@ -49,12 +44,7 @@ fn grid(n: usize, scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
             idx.extend([p, p + 1, p + r + 1, p + r]);
         }
     }
-    let topo = MeshTopology {
-        scheme,
-        face_vertex_counts: vec![4; n * n],
-        face_vertex_indices: idx,
-        ..Default::default()
-    };
+    let topo = MeshTopology { scheme, face_vertex_counts: vec![4; n * n], face_vertex_indices: idx, ..Default::default() };
     (topo, points)
 }
 
@@ -91,27 +81,17 @@ fn bilinear_scheme_patch_corners_are_the_authored_values() {
         }
     }
     let st = fv(values.clone(), indices.clone());
-    let surface =
-        OsdSurface::with_primvars("/grid", &topo, &points, &OsdOptions::DEFAULT, &[st]).unwrap();
-    assert!(
-        surface.face_varying(1, 0, 0.5, 0.5).is_none(),
-        "no channel 1"
-    );
+    let surface = OsdSurface::with_primvars("/grid", &topo, &points, &OsdOptions::DEFAULT, &[st]).unwrap();
+    assert!(surface.face_varying(1, 0, 0.5, 0.5).is_none(), "no channel 1");
     let mut corners = 0;
     for patch in 0..surface.patch_count() {
         let pp = surface.patch_param(patch);
-        for (c, (u, v)) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
-            .into_iter()
-            .enumerate()
-        {
+        for (c, (u, v)) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)].into_iter().enumerate() {
             let (val, _, _) = surface.face_varying(0, patch, u, v).unwrap();
             if pp.size == 1.0 {
                 // A whole face: its corner c is face-vertex c.
                 let authored = values[indices[4 * pp.base_face as usize + c] as usize];
-                assert!(
-                    max2(val, authored) < 1e-6,
-                    "patch {patch} corner {c}: {val:?} vs {authored:?}"
-                );
+                assert!(max2(val, authored) < 1e-6, "patch {patch} corner {c}: {val:?} vs {authored:?}");
                 corners += 1;
             }
         }
@@ -134,9 +114,7 @@ fn catmull_clark_cube_with_linear_face_varying_is_bilinear_per_face() {
     let topo = MeshTopology {
         scheme: Scheme::CatmullClark,
         face_vertex_counts: vec![4; 6],
-        face_vertex_indices: vec![
-            0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4,
-        ],
+        face_vertex_indices: vec![0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4],
         face_varying: FaceVaryingInterpolation::All,
         ..Default::default()
     };
@@ -158,26 +136,12 @@ fn catmull_clark_cube_with_linear_face_varying_is_bilinear_per_face() {
         [0.125, 0.25],
     ]
     .to_vec();
-    let indices = vec![
-        0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 9, 8, 1, 10, 11, 3, 12, 0, 2, 13,
-    ];
+    let indices = vec![0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 9, 8, 1, 10, 11, 3, 12, 0, 2, 13];
     let st = fv(values, indices);
-    let surface = OsdSurface::with_primvars(
-        "/cube",
-        &topo,
-        &points,
-        &OsdOptions::DEFAULT,
-        std::slice::from_ref(&st),
-    )
-    .unwrap();
+    let surface = OsdSurface::with_primvars("/cube", &topo, &points, &OsdOptions::DEFAULT, std::slice::from_ref(&st)).unwrap();
     let linear = BaseFacePrimvar::new(&topo, points.len(), &st).unwrap();
-    let (ev, ed) = compare(&surface, |patch, u, v| {
-        linear.at_patch(&surface.patch_param(patch), u, v).unwrap()
-    });
-    println!(
-        "cube, linear face-varying: {} patches, value error {ev:.1e}, derivative error {ed:.1e}",
-        surface.patch_count()
-    );
+    let (ev, ed) = compare(&surface, |patch, u, v| linear.at_patch(&surface.patch_param(patch), u, v).unwrap());
+    println!("cube, linear face-varying: {} patches, value error {ev:.1e}, derivative error {ed:.1e}", surface.patch_count());
     assert!(ev < 1e-5 && ed < 1e-4, "{ev} {ed}");
 }
 
@@ -187,17 +151,11 @@ fn smooth_face_varying_preserves_an_affine_st_on_a_flat_grid() {
     // functions, so the limit st is A·(limit point) + b, boundaries included.
     let (topo, points) = grid(4, Scheme::CatmullClark);
     let (a, b) = ([[0.2f32, 0.05], [-0.03, 0.25]], [0.1f32, 0.3]);
-    let map = |x: f32, y: f32| {
-        [
-            a[0][0] * x + a[0][1] * y + b[0],
-            a[1][0] * x + a[1][1] * y + b[1],
-        ]
-    };
+    let map = |x: f32, y: f32| [a[0][0] * x + a[0][1] * y + b[0], a[1][0] * x + a[1][1] * y + b[1]];
     let lin = |d: glam::Vec3A| [a[0][0] * d.x + a[0][1] * d.y, a[1][0] * d.x + a[1][1] * d.y];
     let values: Vec<[f32; 2]> = points.iter().map(|p| map(p[0], p[1])).collect();
     let st = fv(values, topo.face_vertex_indices.clone());
-    let surface =
-        OsdSurface::with_primvars("/flat", &topo, &points, &OsdOptions::DEFAULT, &[st]).unwrap();
+    let surface = OsdSurface::with_primvars("/flat", &topo, &points, &OsdOptions::DEFAULT, &[st]).unwrap();
     let (ev, ed) = compare(&surface, |patch, u, v| {
         let s = surface.evaluate(patch, u, v);
         (map(s.p.x, s.p.y), lin(s.dpdu), lin(s.dpdv))
@@ -209,44 +167,24 @@ fn smooth_face_varying_preserves_an_affine_st_on_a_flat_grid() {
     // and a constant one is constant.
     let mut vertex = fv(points.iter().map(|p| map(p[0], p[1])).collect(), Vec::new());
     vertex.interpolation = Interpolation::Vertex;
-    let constant = Primvar2 {
-        name: "c".into(),
-        interpolation: Interpolation::Constant,
-        values: vec![[0.25, 0.75]],
-        indices: vec![],
-    };
-    let surface = OsdSurface::with_primvars(
-        "/flat",
-        &topo,
-        &points,
-        &OsdOptions::DEFAULT,
-        &[vertex, constant],
-    )
-    .unwrap();
+    let constant = Primvar2 { name: "c".into(), interpolation: Interpolation::Constant, values: vec![[0.25, 0.75]], indices: vec![] };
+    let surface = OsdSurface::with_primvars("/flat", &topo, &points, &OsdOptions::DEFAULT, &[vertex, constant]).unwrap();
     let (ev, ed) = compare(&surface, |patch, u, v| {
         let s = surface.evaluate(patch, u, v);
         (map(s.p.x, s.p.y), lin(s.dpdu), lin(s.dpdv))
     });
     assert!(ev < 1e-5 && ed < 1e-4, "vertex primvar: {ev} {ed}");
-    assert_eq!(
-        surface.face_varying(1, 3, 0.3, 0.6),
-        Some(([0.25, 0.75], [0.0; 2], [0.0; 2]))
-    );
+    assert_eq!(surface.face_varying(1, 3, 0.3, 0.6), Some(([0.25, 0.75], [0.0; 2], [0.0; 2])));
 }
 
 #[test]
 fn bad_primvars_are_refused_naming_mesh_and_primvar() {
     let (topo, points) = grid(1, Scheme::CatmullClark);
     let short = fv(vec![[0.0; 2]; 4], vec![0, 1, 2]);
-    let err = OsdSurface::with_primvars("/m", &topo, &points, &OsdOptions::DEFAULT, &[short])
-        .unwrap_err()
-        .to_string();
+    let err = OsdSurface::with_primvars("/m", &topo, &points, &OsdOptions::DEFAULT, &[short]).unwrap_err().to_string();
     assert!(err.contains("/m") && err.contains("primvar st"), "{err}");
     let out_of_range = fv(vec![[0.0; 2]; 4], vec![0, 1, 2, 4]);
-    let err =
-        OsdSurface::with_primvars("/m", &topo, &points, &OsdOptions::DEFAULT, &[out_of_range])
-            .unwrap_err()
-            .to_string();
+    let err = OsdSurface::with_primvars("/m", &topo, &points, &OsdOptions::DEFAULT, &[out_of_range]).unwrap_err().to_string();
     assert!(err.contains("indices[3] = 4"), "{err}");
     // OsdSurface::new still builds without primvars.
     let plain = OsdSurface::new("/m", &topo, &points).unwrap();
@@ -265,19 +203,14 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
         println!("note: the OpenSubdiv shape corpus is absent; skipping");
         return;
     };
-    let mut paths: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-        .collect();
+    let mut paths: Vec<PathBuf> =
+        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "obj")).collect();
     paths.sort();
     let only = std::env::var("MIPRAY_SHAPES").ok();
     let (mut checked, mut problems) = (0, Vec::new());
     for path in &paths {
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
-        if only
-            .as_deref()
-            .is_some_and(|o| !o.split(',').any(|x| x == name))
-        {
+        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == name)) {
             continue;
         }
         let shape = parse_obj_shape(&name, &std::fs::read_to_string(path).unwrap()).unwrap();
@@ -285,20 +218,15 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
             continue;
         }
         let st = fv(shape.uvs.clone(), shape.uv_indices.clone());
-        let surface = match OsdSurface::with_primvars(
-            &name,
-            &shape.topology,
-            &shape.points,
-            &OsdOptions::DEFAULT,
-            std::slice::from_ref(&st),
-        ) {
-            Ok(s) => s,
-            Err(e) => {
-                println!("{name:32} FAIL    {e}");
-                problems.push(format!("{name}: {e}"));
-                continue;
-            }
-        };
+        let surface =
+            match OsdSurface::with_primvars(&name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, std::slice::from_ref(&st)) {
+                Ok(s) => s,
+                Err(e) => {
+                    println!("{name:32} FAIL    {e}");
+                    problems.push(format!("{name}: {e}"));
+                    continue;
+                }
+            };
         let side = if surface.patch_count() > 4000 { 2 } else { 3 };
         let regular = if shape.scheme == Scheme::Loop { 3 } else { 4 };
         let (mut ours, mut locations, mut scale) = (Vec::new(), Vec::new(), Vec::new());
@@ -316,22 +244,11 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
                     // Limit-stencil derivatives are per ptex face, per half sub-face on the
                     // sub-faces of a non-quad (see LimitSample); ours are per patch.
                     let n = shape.topology.face_vertex_counts[pp.base_face as usize];
-                    scale.push((
-                        pp.size,
-                        if n != regular { 2.0 } else { 1.0 },
-                        u > 0.0 && v > 0.0 && u < 1.0 && v < 1.0,
-                    ));
+                    scale.push((pp.size, if n != regular { 2.0 } else { 1.0 }, u > 0.0 && v > 0.0 && u < 1.0 && v < 1.0));
                 }
             }
         }
-        let reference = match limit_stencil_fvar_reference(
-            &name,
-            &shape.topology,
-            &shape.points,
-            &OsdOptions::DEFAULT,
-            &st,
-            &locations,
-        ) {
+        let reference = match limit_stencil_fvar_reference(&name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, &st, &locations) {
             Ok(r) => r,
             Err(e) => {
                 println!("{name:32} FAIL    reference: {e}");
@@ -339,34 +256,19 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
                 continue;
             }
         };
-        let extent = shape
-            .uvs
-            .iter()
-            .fold(0.0f32, |m, uv| m.max(uv[0].abs()).max(uv[1].abs()))
-            .max(1e-3);
-        let max_deriv = reference.iter().fold(0.0f32, |m, r| {
-            m.max(r.1[0].abs())
-                .max(r.1[1].abs())
-                .max(r.2[0].abs())
-                .max(r.2[1].abs())
-        });
+        let extent = shape.uvs.iter().fold(0.0f32, |m, uv| m.max(uv[0].abs()).max(uv[1].abs())).max(1e-3);
+        let max_deriv = reference.iter().fold(0.0f32, |m, r| m.max(r.1[0].abs()).max(r.1[1].abs()).max(r.2[0].abs()).max(r.2[1].abs()));
         let (mut ev, mut ed) = (0.0f32, 0.0f32);
         for ((o, r), &(size, nq, interior)) in ours.iter().zip(&reference).zip(&scale) {
             ev = ev.max(max2(o.0, r.0));
             if interior {
-                let d = |a: [f32; 2], b: [f32; 2]| {
-                    max2([a[0] / size, a[1] / size], [b[0] / nq, b[1] / nq])
-                };
+                let d = |a: [f32; 2], b: [f32; 2]| max2([a[0] / size, a[1] / size], [b[0] / nq, b[1] / nq]);
                 ed = ed.max(d(o.1, r.1)).max(d(o.2, r.2));
             }
         }
         let (rv, rd) = (ev / (1e-5 * extent), ed / (1e-4 * (extent + max_deriv)));
         checked += 1;
-        let line = format!(
-            "patches={:6} samples={:6} value={ev:.1e}({rv:.2}) deriv={ed:.1e}({rd:.2})",
-            surface.patch_count(),
-            ours.len()
-        );
+        let line = format!("patches={:6} samples={:6} value={ev:.1e}({rv:.2}) deriv={ed:.1e}({rd:.2})", surface.patch_count(), ours.len());
         if rv.is_nan() || rd.is_nan() || rv > 1.0 || rd > 1.0 {
             println!("{name:32} FAIL    {line}");
             problems.push(format!("{name}: {line}"));
@@ -374,13 +276,6 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
             println!("{name:32} ok      {line}");
         }
     }
-    println!(
-        "summary: {checked} shapes with uvs checked, {} problems",
-        problems.len()
-    );
-    assert!(
-        problems.is_empty(),
-        "face-varying problems:\n{}",
-        problems.join("\n")
-    );
+    println!("summary: {checked} shapes with uvs checked, {} problems", problems.len());
+    assert!(problems.is_empty(), "face-varying problems:\n{}", problems.join("\n"));
 }

@@ -30,22 +30,12 @@ fn test_image(channels: &[&str], width: usize, height: usize) -> ImageBuf {
             }
         }
     }
-    ImageBuf {
-        width,
-        height,
-        channels: channels.iter().map(|s| s.to_string()).collect(),
-        pixels,
-        metadata: vec![],
-    }
+    ImageBuf { width, height, channels: channels.iter().map(|s| s.to_string()).collect(), pixels, metadata: vec![] }
 }
 
 /// The value of channel `name` at pixel index `i` of `img`.
 fn value(img: &ImageBuf, name: &str, i: usize) -> f32 {
-    let c = img
-        .channels
-        .iter()
-        .position(|n| n == name)
-        .unwrap_or_else(|| panic!("no channel {name} in {:?}", img.channels));
+    let c = img.channels.iter().position(|n| n == name).unwrap_or_else(|| panic!("no channel {name} in {:?}", img.channels));
     img.pixels[i * img.channels.len() + c]
 }
 
@@ -73,21 +63,11 @@ fn exr_keeps_half_and_float_channels_and_metadata() {
     let dir = scratch_dir("exr");
     let path = dir.join("beauty.exr");
     let img = test_image(&["R", "G", "B", "Z"], 7, 5);
-    let formats = [
-        ChannelFormat::Half,
-        ChannelFormat::Half,
-        ChannelFormat::Half,
-        ChannelFormat::Float,
-    ];
-    let w2c: [f32; 16] = [
-        1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.5, -2.0, 3.25, 1.0,
-    ];
+    let formats = [ChannelFormat::Half, ChannelFormat::Half, ChannelFormat::Half, ChannelFormat::Float];
+    let w2c: [f32; 16] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.5, -2.0, 3.25, 1.0];
     let metadata = vec![
         ("worldtocamera".to_string(), MetaValue::Matrix44(w2c)),
-        (
-            "mipray:scene".to_string(),
-            MetaValue::Str("/tmp/scene.usda".into()),
-        ),
+        ("mipray:scene".to_string(), MetaValue::Str("/tmp/scene.usda".into())),
         ("mipray:samples".to_string(), MetaValue::Int(64)),
         ("mipray:wall_s".to_string(), MetaValue::Float(1.5)),
     ];
@@ -108,24 +88,15 @@ fn exr_keeps_half_and_float_channels_and_metadata() {
         float_err = float_err.max((value(&img, "Z", i) - value(&back, "Z", i)).abs());
     }
     println!("exr: half rel err {half_err:.1e} ({half_rounded} values rounded), float err {float_err:.1e}");
-    assert!(
-        half_err <= 2f32.powi(-11),
-        "half channels off by {half_err}"
-    );
+    assert!(half_err <= 2f32.powi(-11), "half channels off by {half_err}");
     // The color channels really were stored as half (values rounded), depth as float (exact).
     assert!(half_rounded > 0, "color channels were not stored as half");
     assert_eq!(float_err, 0.0, "depth was not stored as float");
-    assert_eq!(
-        meta(&back, "Software"),
-        format!("mipray {}", env!("CARGO_PKG_VERSION"))
-    );
+    assert_eq!(meta(&back, "Software"), format!("mipray {}", env!("CARGO_PKG_VERSION")));
     assert_eq!(meta(&back, "mipray:scene"), "/tmp/scene.usda");
     assert_eq!(meta(&back, "mipray:samples"), "64");
     assert_eq!(meta(&back, "mipray:wall_s").parse::<f32>().unwrap(), 1.5);
-    let m: Vec<f32> = meta(&back, "worldtocamera")
-        .split(',')
-        .map(|s| s.trim().parse().unwrap())
-        .collect();
+    let m: Vec<f32> = meta(&back, "worldtocamera").split(',').map(|s| s.trim().parse().unwrap()).collect();
     assert_eq!(m, w2c, "worldtocamera round trip");
     std::fs::remove_dir_all(dir).ok();
 }
@@ -136,25 +107,17 @@ fn png_is_stored_as_8_bits() {
     let path = dir.join("color.png");
     let img = test_image(&["R", "G", "B"], 6, 4);
     // Asked for float: PNG cannot hold it, so 8 bits.
-    OiioImageIo
-        .write(&path, &img, &[ChannelFormat::Float], &[])
-        .unwrap();
+    OiioImageIo.write(&path, &img, &[ChannelFormat::Float], &[]).unwrap();
     let back = OiioImageIo.read(&path).unwrap();
     assert_eq!(back.channels, ["R", "G", "B"]);
     let mut err = 0.0f32;
     for (w, r) in img.pixels.iter().zip(&back.pixels) {
         err = err.max((w - r).abs());
-        assert!(
-            (r * 255.0 - (r * 255.0).round()).abs() < 1e-4,
-            "{r} is not an 8-bit value"
-        );
+        assert!((r * 255.0 - (r * 255.0).round()).abs() < 1e-4, "{r} is not an 8-bit value");
     }
     println!("png: max err {err:.1e}");
     assert!(err <= 1.0 / 510.0 + 1e-6);
-    assert_eq!(
-        meta(&back, "Software"),
-        format!("mipray {}", env!("CARGO_PKG_VERSION"))
-    );
+    assert_eq!(meta(&back, "Software"), format!("mipray {}", env!("CARGO_PKG_VERSION")));
     std::fs::remove_dir_all(dir).ok();
 }
 
@@ -163,14 +126,7 @@ fn tiff_keeps_float() {
     let dir = scratch_dir("tiff");
     let path = dir.join("aovs.tif");
     let img = test_image(&["R", "G", "B", "A"], 5, 3);
-    OiioImageIo
-        .write(
-            &path,
-            &img,
-            &[ChannelFormat::Float; 4],
-            &[("mipray:note".into(), MetaValue::Str("tiff".into()))],
-        )
-        .unwrap();
+    OiioImageIo.write(&path, &img, &[ChannelFormat::Float; 4], &[("mipray:note".into(), MetaValue::Str("tiff".into()))]).unwrap();
     let back = OiioImageIo.read(&path).unwrap();
     assert_eq!(back.channels, ["R", "G", "B", "A"]);
     assert_eq!(back.pixels, img.pixels);
@@ -184,44 +140,18 @@ fn failures_name_the_path() {
     let check = |path: &Path, err: mipray::error::ImageError| {
         let s = err.to_string();
         println!("{s}");
-        assert!(
-            s.contains(&path.display().to_string()),
-            "path missing from: {s}"
-        );
+        assert!(s.contains(&path.display().to_string()), "path missing from: {s}");
     };
     let unwritable = Path::new("/nonexistent-mipray-dir/sub/out.exr");
-    check(
-        unwritable,
-        io.write(unwritable, &img, &[ChannelFormat::Half], &[])
-            .unwrap_err(),
-    );
+    check(unwritable, io.write(unwritable, &img, &[ChannelFormat::Half], &[]).unwrap_err());
     let unknown = std::env::temp_dir().join("mipray-bridge-test.not-an-image-format");
-    check(
-        &unknown,
-        io.write(&unknown, &img, &[ChannelFormat::Half], &[])
-            .unwrap_err(),
-    );
+    check(&unknown, io.write(&unknown, &img, &[ChannelFormat::Half], &[]).unwrap_err());
     let missing = Path::new("/nonexistent-mipray-dir/in.exr");
     check(missing, io.read(missing).unwrap_err());
-    let short = ImageBuf {
-        pixels: vec![0.0; 5],
-        ..img.clone()
-    };
+    let short = ImageBuf { pixels: vec![0.0; 5], ..img.clone() };
     let p = std::env::temp_dir().join("mipray-bridge-short.exr");
-    check(
-        &p,
-        io.write(&p, &short, &[ChannelFormat::Half], &[])
-            .unwrap_err(),
-    );
-    check(
-        &p,
-        io.write(&p, &img, &[ChannelFormat::Half, ChannelFormat::Float], &[])
-            .unwrap_err(),
-    );
+    check(&p, io.write(&p, &short, &[ChannelFormat::Half], &[]).unwrap_err());
+    check(&p, io.write(&p, &img, &[ChannelFormat::Half, ChannelFormat::Float], &[]).unwrap_err());
     let big = [("n".to_string(), MetaValue::Int(1 << 40))];
-    check(
-        &p,
-        io.write(&p, &img, &[ChannelFormat::Half], &big)
-            .unwrap_err(),
-    );
+    check(&p, io.write(&p, &img, &[ChannelFormat::Half], &big).unwrap_err());
 }

@@ -18,10 +18,7 @@ fn plane_grid(n: usize, scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
     let mut points = Vec::new();
     for j in 0..=n {
         for i in 0..=n {
-            let (x, y) = (
-                i as f32 / n as f32 * 4.0 - 2.0,
-                j as f32 / n as f32 * 3.0 - 1.0,
-            );
+            let (x, y) = (i as f32 / n as f32 * 4.0 - 2.0, j as f32 / n as f32 * 3.0 - 1.0);
             points.push([x, y, plane_z(x, y)]);
         }
     }
@@ -89,14 +86,8 @@ fn flat_grids_evaluate_onto_their_plane() {
             }
         }
         println!("{scheme:?}: {} patches, max plane distance {max_dist:.1e}, max normal angle {max_angle:.1e} rad", surface.patch_count());
-        assert!(
-            max_dist <= 1e-5 * diag,
-            "{scheme:?}: distance {max_dist} from the plane"
-        );
-        assert!(
-            max_angle <= 1e-4,
-            "{scheme:?}: normal off by {max_angle} rad"
-        );
+        assert!(max_dist <= 1e-5 * diag, "{scheme:?}: distance {max_dist} from the plane");
+        assert!(max_angle <= 1e-4, "{scheme:?}: normal off by {max_angle} rad");
         assert!(n_control_faces_ok(&surface, &topology));
     }
 }
@@ -107,35 +98,19 @@ fn n_control_faces_ok(surface: &OsdSurface, topology: &MeshTopology) -> bool {
 
 #[test]
 fn bilinear_quad_is_bilinear_interpolation() {
-    let points = [
-        [0.0, 0.0, 0.0],
-        [2.0, 0.0, 1.0],
-        [2.5, 1.5, 0.0],
-        [0.0, 1.0, -1.0],
-    ];
-    let topology = MeshTopology {
-        scheme: Scheme::Bilinear,
-        face_vertex_counts: vec![4],
-        face_vertex_indices: vec![0, 1, 2, 3],
-        ..Default::default()
-    };
+    let points = [[0.0, 0.0, 0.0], [2.0, 0.0, 1.0], [2.5, 1.5, 0.0], [0.0, 1.0, -1.0]];
+    let topology =
+        MeshTopology { scheme: Scheme::Bilinear, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
     let s = OsdSurface::new("/quad", &topology, &points).unwrap();
     assert_eq!(s.patch_count(), 1);
     assert_eq!(s.patch_param(0).kind, PatchKind::Bilinear);
     let p = points.map(Vec3A::from);
     for &(u, v) in &[(0.0, 0.0), (0.25, 0.75), (0.5, 0.5), (1.0, 0.3)] {
         let e = s.evaluate(0, u, v);
-        let want = p[0] * (1.0 - u) * (1.0 - v)
-            + p[1] * u * (1.0 - v)
-            + p[2] * u * v
-            + p[3] * (1.0 - u) * v;
+        let want = p[0] * (1.0 - u) * (1.0 - v) + p[1] * u * (1.0 - v) + p[2] * u * v + p[3] * (1.0 - u) * v;
         let dpdu = (p[1] - p[0]) * (1.0 - v) + (p[2] - p[3]) * v;
         let dpdv = (p[3] - p[0]) * (1.0 - u) + (p[2] - p[1]) * u;
-        assert!(
-            (e.p - want).length() < 1e-6,
-            "p at ({u}, {v}): {:?} vs {want:?}",
-            e.p
-        );
+        assert!((e.p - want).length() < 1e-6, "p at ({u}, {v}): {:?} vs {want:?}", e.p);
         assert!((e.dpdu - dpdu).length() < 1e-6 && (e.dpdv - dpdv).length() < 1e-6);
         assert!((e.dpduv - (p[0] - p[1] + p[2] - p[3])).length() < 1e-6);
         assert!(e.dpduu.length() < 1e-6 && e.dpdvv.length() < 1e-6);
@@ -161,10 +136,7 @@ fn limit_at_finds_the_patches_and_holes_have_none() {
     let (patch, u, v) = s.find_patch(6, 0.3, 0.6).unwrap();
     let e = s.evaluate(patch, u, v);
     assert!((l.p - e.p).length() < 1e-6);
-    assert!(
-        (l.dpdu.x - 1.0).abs() < 1e-4 && (l.dpdv.y - 0.75).abs() < 1e-4,
-        "{l:?}"
-    );
+    assert!((l.dpdu.x - 1.0).abs() < 1e-4 && (l.dpdv.y - 0.75).abs() < 1e-4, "{l:?}");
     let pp = s.patch_param(patch);
     let (fu, fv) = pp.to_face_uv(u, v);
     assert!((fu - 0.3).abs() < 1e-6 && (fv - 0.6).abs() < 1e-6);
@@ -176,10 +148,7 @@ fn animated_points_update_without_rebuilding() {
     let mut s = OsdSurface::new("/anim", &topology, &points).unwrap();
     let before = s.evaluate(4, 0.5, 0.5);
     let bounds_before = s.patch_bounds(4);
-    let shifted: Vec<[f32; 3]> = points
-        .iter()
-        .map(|p| [p[0] + 1.0, p[1], p[2] + 2.0])
-        .collect();
+    let shifted: Vec<[f32; 3]> = points.iter().map(|p| [p[0] + 1.0, p[1], p[2] + 2.0]).collect();
     s.update_points(&shifted).unwrap();
     let after = s.evaluate(4, 0.5, 0.5);
     // Affine invariance: translating the control points translates the surface.
@@ -187,23 +156,14 @@ fn animated_points_update_without_rebuilding() {
     assert!((after.dpdu - before.dpdu).length() < 1e-5);
     let shift = Vec3A::new(1.0, 0.0, 2.0);
     let b = s.patch_bounds(4);
-    assert!(
-        (b.min - bounds_before.min - shift).length() < 1e-5
-            && (b.max - bounds_before.max - shift).length() < 1e-5
-    );
+    assert!((b.min - bounds_before.min - shift).length() < 1e-5 && (b.max - bounds_before.max - shift).length() < 1e-5);
     // Bad updates leave the surface as it was.
     let err = s.update_points(&shifted[1..]).unwrap_err();
-    assert!(
-        matches!(err, MeshError::Invalid(_)) && err.to_string().contains("/anim"),
-        "{err}"
-    );
+    assert!(matches!(err, MeshError::Invalid(_)) && err.to_string().contains("/anim"), "{err}");
     let mut nan = shifted.clone();
     nan[3][1] = f32::NAN;
     let err = s.update_points(&nan).unwrap_err();
-    assert!(
-        matches!(err, MeshError::NonFinite(_)) && err.to_string().contains("point 3"),
-        "{err}"
-    );
+    assert!(matches!(err, MeshError::NonFinite(_)) && err.to_string().contains("point 3"), "{err}");
     assert_eq!(s.evaluate(4, 0.5, 0.5), after);
 }
 
@@ -214,12 +174,8 @@ fn uniform_refinement_matches_catmull_clark_counts() {
     let (pts, faces) = s.uniform_refinement(2).unwrap();
     assert_eq!(faces.len(), 4 * 16);
     assert_eq!(pts.len(), 9 * 9);
-    assert!(faces
-        .iter()
-        .all(|f| f.len() == 4 && f.iter().all(|&i| (i as usize) < pts.len())));
-    assert!(pts
-        .iter()
-        .all(|p| (p[2] - plane_z(p[0], p[1])).abs() < 1e-5));
+    assert!(faces.iter().all(|f| f.len() == 4 && f.iter().all(|&i| (i as usize) < pts.len())));
+    assert!(pts.iter().all(|p| (p[2] - plane_z(p[0], p[1])).abs() < 1e-5));
     let (pts0, faces0) = s.uniform_refinement(0).unwrap();
     assert_eq!((pts0.len(), faces0.len()), (9, 4));
     assert!(s.uniform_refinement(11).is_err());
@@ -231,17 +187,11 @@ fn surfaces_are_shared_between_threads() {
     assert_send_sync::<OsdSurface>();
     let (topology, points) = plane_grid(4, Scheme::CatmullClark);
     let s = std::sync::Arc::new(OsdSurface::new("/shared", &topology, &points).unwrap());
-    let expected: Vec<_> = (0..s.patch_count())
-        .map(|p| s.evaluate(p, 0.25, 0.5))
-        .collect();
+    let expected: Vec<_> = (0..s.patch_count()).map(|p| s.evaluate(p, 0.25, 0.5)).collect();
     let handles: Vec<_> = (0..4)
         .map(|_| {
             let s = s.clone();
-            std::thread::spawn(move || {
-                (0..s.patch_count())
-                    .map(|p| s.evaluate(p, 0.25, 0.5))
-                    .collect::<Vec<_>>()
-            })
+            std::thread::spawn(move || (0..s.patch_count()).map(|p| s.evaluate(p, 0.25, 0.5)).collect::<Vec<_>>())
         })
         .collect();
     for h in handles {
@@ -256,57 +206,22 @@ fn quad_mesh() -> (MeshTopology, Vec<[f32; 3]>) {
         face_vertex_indices: vec![0, 1, 4, 3, 1, 2, 5, 4],
         ..Default::default()
     };
-    let points = vec![
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [2.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [2.0, 1.0, 0.0],
-    ];
+    let points = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]];
     (topology, points)
 }
 
 /// Each case: what is wrong, the mesh, and what the error must say.
 #[test]
 fn bad_meshes_are_refused_with_the_mesh_named() {
-    type Case = (
-        &'static str,
-        Box<dyn Fn(&mut MeshTopology, &mut Vec<[f32; 3]>)>,
-        &'static str,
-    );
+    type Case = (&'static str, Box<dyn Fn(&mut MeshTopology, &mut Vec<[f32; 3]>)>, &'static str);
     let cases: Vec<Case> = vec![
-        (
-            "index out of range",
-            Box::new(|t, _| t.face_vertex_indices[2] = 17),
-            "faceVertexIndices[2] = 17",
-        ),
-        (
-            "negative index",
-            Box::new(|t, _| t.face_vertex_indices[0] = -1),
-            "faceVertexIndices[0] = -1",
-        ),
-        (
-            "counts disagree",
-            Box::new(|t, _| t.face_vertex_counts[1] = 5),
-            "faceVertexCounts",
-        ),
+        ("index out of range", Box::new(|t, _| t.face_vertex_indices[2] = 17), "faceVertexIndices[2] = 17"),
+        ("negative index", Box::new(|t, _| t.face_vertex_indices[0] = -1), "faceVertexIndices[0] = -1"),
+        ("counts disagree", Box::new(|t, _| t.face_vertex_counts[1] = 5), "faceVertexCounts"),
         ("NaN point", Box::new(|_, p| p[2][1] = f32::NAN), "point 2"),
-        (
-            "infinite point",
-            Box::new(|_, p| p[5][0] = f32::INFINITY),
-            "point 5",
-        ),
-        (
-            "Loop with a quad",
-            Box::new(|t, _| t.scheme = Scheme::Loop),
-            "Loop scheme needs triangles",
-        ),
-        (
-            "hole out of range",
-            Box::new(|t, _| t.hole_indices = vec![2]),
-            "holeIndices",
-        ),
+        ("infinite point", Box::new(|_, p| p[5][0] = f32::INFINITY), "point 5"),
+        ("Loop with a quad", Box::new(|t, _| t.scheme = Scheme::Loop), "Loop scheme needs triangles"),
+        ("hole out of range", Box::new(|t, _| t.hole_indices = vec![2]), "holeIndices"),
         (
             "crease vertex out of range",
             Box::new(|t, _| {
@@ -328,35 +243,16 @@ fn bad_meshes_are_refused_with_the_mesh_named() {
     for (what, mutate, expect) in cases {
         let (mut t, mut p) = quad_mesh();
         mutate(&mut t, &mut p);
-        let err = OsdSurface::new("/World/bad_mesh", &t, &p)
-            .expect_err(what)
-            .to_string();
+        let err = OsdSurface::new("/World/bad_mesh", &t, &p).expect_err(what).to_string();
         println!("{what:28} -> {err}");
-        assert!(
-            err.contains("/World/bad_mesh"),
-            "{what}: the mesh is not named: {err}"
-        );
-        assert!(
-            err.contains(expect),
-            "{what}: expected '{expect}' in: {err}"
-        );
+        assert!(err.contains("/World/bad_mesh"), "{what}: the mesh is not named: {err}");
+        assert!(err.contains(expect), "{what}: expected '{expect}' in: {err}");
     }
     let (t, p) = quad_mesh();
-    let err = OsdSurface::with_options(
-        "/World/bad_mesh",
-        &t,
-        &p,
-        &OsdOptions {
-            isolation_level: 0,
-            secondary_level: 0,
-        },
-    )
-    .expect_err("isolation 0")
-    .to_string();
-    assert!(
-        err.contains("/World/bad_mesh") && err.contains("isolation"),
-        "{err}"
-    );
+    let err = OsdSurface::with_options("/World/bad_mesh", &t, &p, &OsdOptions { isolation_level: 0, secondary_level: 0 })
+        .expect_err("isolation 0")
+        .to_string();
+    assert!(err.contains("/World/bad_mesh") && err.contains("isolation"), "{err}");
 }
 
 /// Topology that passes validation but that OpenSubdiv itself finds wrong: it must answer with
@@ -387,14 +283,8 @@ fn topology_opensubdiv_dislikes_does_not_abort() {
         match OsdSurface::new(name, &t, &p) {
             Ok(s) => {
                 // Whatever OpenSubdiv made of it must evaluate without trouble.
-                let bad = (0..s.patch_count())
-                    .filter(|&k| !s.evaluate(k, 0.5, 0.5).p.is_finite())
-                    .count();
-                println!(
-                    "{name}: ok, {} patches ({bad} non-finite at the centre), warnings: {:?}",
-                    s.patch_count(),
-                    s.warnings()
-                );
+                let bad = (0..s.patch_count()).filter(|&k| !s.evaluate(k, 0.5, 0.5).p.is_finite()).count();
+                println!("{name}: ok, {} patches ({bad} non-finite at the centre), warnings: {:?}", s.patch_count(), s.warnings());
             }
             Err(e) => {
                 println!("{name}: {e}");

@@ -107,17 +107,11 @@ fn max_abs(v: Vec3A) -> f32 {
 
 fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
     let name = shape.name.as_str();
-    let surface =
-        OsdSurface::new(name, &shape.topology, &shape.points).map_err(|e| e.to_string())?;
-    let diag = mipray::bounds::Bounds3::from_points(shape.points.iter().map(|&p| Vec3A::from(p)))
-        .diagonal()
-        .length();
+    let surface = OsdSurface::new(name, &shape.topology, &shape.points).map_err(|e| e.to_string())?;
+    let diag = mipray::bounds::Bounds3::from_points(shape.points.iter().map(|&p| Vec3A::from(p))).diagonal().length();
     let n_patches = surface.patch_count();
     let side = grid_side(n_patches);
-    let mut stats = Stats {
-        patches: n_patches,
-        ..Default::default()
-    };
+    let mut stats = Stats { patches: n_patches, ..Default::default() };
     let mut ratios = Ratios::default();
     if n_patches == 0 {
         return Err("no patches".into());
@@ -142,10 +136,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
                 let k = j * side + i;
                 let g = Vec3A::from(grid.p[k]);
                 let gd = Vec3A::from(grid.dpdu[k]);
-                stats.grid_err = stats
-                    .grid_err
-                    .max(max_abs(g - sp.p))
-                    .max(max_abs(gd - sp.dpdu));
+                stats.grid_err = stats.grid_err.max(max_abs(g - sp.p)).max(max_abs(gd - sp.dpdu));
                 if tri && u + v > 1.0 + 1e-6 {
                     // Outside the triangle's domain: the basis extrapolates there.
                     continue;
@@ -173,8 +164,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         let sv1 = surface.evaluate(patch, u, v + h);
         let scale1 = max_abs(s.dpdu).max(max_abs(s.dpdv));
         let scale2 = max_abs(s.dpduu).max(max_abs(s.dpduv)).max(max_abs(s.dpdvv)) + scale1;
-        let fd1 = max_abs((su1.p - su0.p) / (2.0 * h) - s.dpdu)
-            .max(max_abs((sv1.p - sv0.p) / (2.0 * h) - s.dpdv));
+        let fd1 = max_abs((su1.p - su0.p) / (2.0 * h) - s.dpdu).max(max_abs((sv1.p - sv0.p) / (2.0 * h) - s.dpdv));
         let fd2 = max_abs((su1.dpdu - su0.dpdu) / (2.0 * h) - s.dpduu)
             .max(max_abs((sv1.dpdv - sv0.dpdv) / (2.0 * h) - s.dpdvv))
             .max(max_abs((su1.dpdv - su0.dpdv) / (2.0 * h) - s.dpduv))
@@ -182,26 +172,14 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         // Rounding of f32 positions (and derivatives) divided by the step: the floor below which
         // a difference quotient cannot resolve anything.
         let noise1 = 8.0 * f32::EPSILON * max_abs(s.p).max(diag) / h;
-        let near1 = [&su0, &su1, &sv0, &sv1]
-            .iter()
-            .fold(scale1, |m, e| m.max(max_abs(e.dpdu)).max(max_abs(e.dpdv)));
+        let near1 = [&su0, &su1, &sv0, &sv1].iter().fold(scale1, |m, e| m.max(max_abs(e.dpdu)).max(max_abs(e.dpdv)));
         let noise2 = 8.0 * f32::EPSILON * near1.max(1e-3 * diag) / h;
-        let (r1, r2) = (
-            fd1 / (FD1_REL * scale1 + noise1),
-            fd2 / (FD2_REL * scale2 + noise2),
-        );
-        if matches!(
-            pp.kind,
-            PatchKind::GregoryBasis | PatchKind::GregoryTriangle
-        ) {
+        let (r1, r2) = (fd1 / (FD1_REL * scale1 + noise1), fd2 / (FD2_REL * scale2 + noise2));
+        if matches!(pp.kind, PatchKind::GregoryBasis | PatchKind::GregoryTriangle) {
             stats.fd1_gregory = stats.fd1_gregory.max(fd1 / scale1.max(f32::MIN_POSITIVE));
             stats.fd2_gregory = stats.fd2_gregory.max(fd2 / scale2.max(f32::MIN_POSITIVE));
-            ratios.fd_gregory = ratios
-                .fd_gregory
-                .max(fd1 / (FD_GREGORY_REL * scale1 + noise1));
-            ratios.fd_gregory = ratios
-                .fd_gregory
-                .max(fd2 / (FD_GREGORY_REL * scale2 + noise2));
+            ratios.fd_gregory = ratios.fd_gregory.max(fd1 / (FD_GREGORY_REL * scale1 + noise1));
+            ratios.fd_gregory = ratios.fd_gregory.max(fd2 / (FD_GREGORY_REL * scale2 + noise2));
         } else {
             stats.fd1 = stats.fd1.max(fd1);
             stats.fd2 = stats.fd2.max(fd2);
@@ -210,14 +188,8 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         }
     }
 
-    let reference = limit_stencil_reference(
-        name,
-        &shape.topology,
-        &shape.points,
-        &OsdOptions::DEFAULT,
-        &locations,
-    )
-    .map_err(|e| e.to_string())?;
+    let reference =
+        limit_stencil_reference(name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, &locations).map_err(|e| e.to_string())?;
     let mut max_deriv = 0.0f32;
     for r in &reference {
         max_deriv = max_deriv.max(max_abs(r.dpdu)).max(max_abs(r.dpdv));
@@ -240,12 +212,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
 }
 
 fn face_size(shape: &ObjShape, face: usize) -> i32 {
-    shape
-        .topology
-        .face_vertex_counts
-        .get(face)
-        .copied()
-        .unwrap_or(0)
+    shape.topology.face_vertex_counts.get(face).copied().unwrap_or(0)
 }
 
 enum Outcome {
@@ -255,11 +222,7 @@ enum Outcome {
 }
 
 fn run_one(path: &Path) -> (String, Outcome, String) {
-    let name = path
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or_default()
-        .to_string();
+    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) => return (name, Outcome::Fail(format!("read: {e}")), String::new()),
@@ -273,18 +236,10 @@ fn run_one(path: &Path) -> (String, Outcome, String) {
         return if msg.contains("not supported") {
             (name, Outcome::Refused, msg)
         } else {
-            (
-                name,
-                Outcome::Fail(format!("refused without 'not supported': {msg}")),
-                String::new(),
-            )
+            (name, Outcome::Fail(format!("refused without 'not supported': {msg}")), String::new())
         };
     }
-    let note = if shape.crease_method == CreaseMethod::Chaikin {
-        " [chaikin creasing evaluated as uniform]"
-    } else {
-        ""
-    };
+    let note = if shape.crease_method == CreaseMethod::Chaikin { " [chaikin creasing evaluated as uniform]" } else { "" };
     match check_shape(&shape) {
         Err(e) => (name, Outcome::Fail(e), String::new()),
         Ok((s, r)) => {
@@ -319,38 +274,24 @@ fn run_one(path: &Path) -> (String, Outcome, String) {
 fn regression_shapes_match_limit_stencils() {
     let dir = shapes_dir();
     let Ok(entries) = std::fs::read_dir(&dir) else {
-        println!(
-            "note: {} is absent; skipping the OpenSubdiv shape corpus",
-            dir.display()
-        );
+        println!("note: {} is absent; skipping the OpenSubdiv shape corpus", dir.display());
         return;
     };
-    let mut paths: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-        .collect();
+    let mut paths: Vec<PathBuf> =
+        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "obj")).collect();
     paths.sort();
     let only = std::env::var("MIPRAY_SHAPES").ok();
     let mut problems = Vec::new();
     let (mut passed, mut refused, mut known) = (0, 0, 0);
     let mut seen = Vec::new();
     for path in &paths {
-        let stem = path
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or_default();
-        if only
-            .as_deref()
-            .is_some_and(|o| !o.split(',').any(|x| x == stem))
-        {
+        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == stem)) {
             continue;
         }
         let (name, outcome, line) = run_one(path);
         seen.push(name.clone());
-        let expected = KNOWN_FAILURES
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, why)| *why);
+        let expected = KNOWN_FAILURES.iter().find(|(n, _)| *n == name).map(|(_, why)| *why);
         match (outcome, expected) {
             (Outcome::Pass, None) => {
                 passed += 1;
@@ -376,17 +317,9 @@ fn regression_shapes_match_limit_stencils() {
     }
     if only.is_none() {
         for r in REQUIRED {
-            assert!(
-                seen.iter().any(|s| s == r),
-                "required shape {r} is missing from {}",
-                dir.display()
-            );
+            assert!(seen.iter().any(|s| s == r), "required shape {r} is missing from {}", dir.display());
         }
     }
     println!("summary: {passed} shapes ok, {refused} refused (hierarchical edits), {known} known failures, {} problems", problems.len());
-    assert!(
-        problems.is_empty(),
-        "shape problems:\n{}",
-        problems.join("\n")
-    );
+    assert!(problems.is_empty(), "shape problems:\n{}", problems.join("\n"));
 }

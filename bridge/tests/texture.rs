@@ -28,10 +28,7 @@ fn scratch_dir(test: &str) -> PathBuf {
 
 /// True if `tool` runs; otherwise prints why the test is skipped.
 fn have(tool: &str) -> bool {
-    let ok = Command::new(tool)
-        .arg("--help")
-        .output()
-        .is_ok_and(|o| o.status.success() || !o.stdout.is_empty());
+    let ok = Command::new(tool).arg("--help").output().is_ok_and(|o| o.status.success() || !o.stdout.is_empty());
     if !ok {
         println!("note: `{tool}` (openimageio-tools) is not on the PATH; skipping this test");
     }
@@ -40,11 +37,7 @@ fn have(tool: &str) -> bool {
 
 fn run(cmd: &mut Command) {
     let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{cmd:?} failed: {}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// A `res`² one-channel float checker of `squares`² squares, t up: the bottom-left square is 0,
@@ -59,32 +52,16 @@ fn write_checker(dir: &Path, res: usize, squares: usize) -> PathBuf {
             pixels.push(((x / side + ty) % 2) as f32);
         }
     }
-    let image = ImageBuf {
-        width: res,
-        height: res,
-        channels: vec!["Y".into()],
-        pixels,
-        metadata: vec![],
-    };
+    let image = ImageBuf { width: res, height: res, channels: vec!["Y".into()], pixels, metadata: vec![] };
     let exr = dir.join("checker.exr");
-    OiioImageIo
-        .write(&exr, &image, &[ChannelFormat::Float], &[])
-        .unwrap();
+    OiioImageIo.write(&exr, &image, &[ChannelFormat::Float], &[]).unwrap();
     let tx = dir.join("checker.tx");
-    run(Command::new("maketx")
-        .arg(&exr)
-        .arg("-o")
-        .arg(&tx)
-        .args(["--filter", "box"]));
+    run(Command::new("maketx").arg(&exr).arg("-o").arg(&tx).args(["--filter", "box"]));
     tx
 }
 
 fn system(filter: FilterMode) -> OiioTextureSystem {
-    OiioTextureSystem::new(OiioTextureOptions {
-        filter,
-        ..OiioTextureOptions::DEFAULT
-    })
-    .unwrap()
+    OiioTextureSystem::new(OiioTextureOptions { filter, ..OiioTextureOptions::DEFAULT }).unwrap()
 }
 
 #[test]
@@ -101,11 +78,7 @@ fn filtered_values_match_the_analytic_checker() {
     assert_eq!(ts.resolution(h), Some([512, 512]));
     let analytic = CheckerSampler::new(path, 512, 8, FilterMode::Differentials);
     let mut out = [0.0f32; 1];
-    let periodic = Lookup {
-        wrap_s: Wrap::Periodic,
-        wrap_t: Wrap::Periodic,
-        ..Lookup::DEFAULT
-    };
+    let periodic = Lookup { wrap_s: Wrap::Periodic, wrap_t: Wrap::Periodic, ..Lookup::DEFAULT };
     let (mut worst_point, mut worst_wide) = (0.0f32, 0.0f32);
     for j in 0..8 {
         for i in 0..8 {
@@ -125,14 +98,7 @@ fn filtered_values_match_the_analytic_checker() {
     assert!(worst_point < 1e-4, "point lookups: {worst_point}");
     assert!(worst_wide < 0.02, "wide lookups: {worst_wide}");
     // Wider than one square but far from the whole texture: in between, and not the point value.
-    assert!(ts.sample(
-        h,
-        [0.5 / 8.0, 0.5 / 8.0],
-        [0.3, 0.0],
-        [0.0, 0.3],
-        &Lookup::DEFAULT,
-        &mut out
-    ));
+    assert!(ts.sample(h, [0.5 / 8.0, 0.5 / 8.0], [0.3, 0.0], [0.0, 0.3], &Lookup::DEFAULT, &mut out));
     assert!(out[0] > 0.15 && out[0] < 0.85, "{}", out[0]);
 
     let stats = ts.stats();
@@ -141,12 +107,7 @@ fn filtered_values_match_the_analytic_checker() {
     assert_eq!(stats["lookups"], 129);
     assert_eq!(stats["failed_lookups"], 0);
     assert_eq!(stats["textures"], 1);
-    for key in [
-        "bytes_read",
-        "tiles_read",
-        "cache_memory_used_bytes",
-        "open_files_created",
-    ] {
+    for key in ["bytes_read", "tiles_read", "cache_memory_used_bytes", "open_files_created"] {
         assert!(stats[key].as_u64().unwrap_or(0) > 0, "{key}: {stats}");
     }
     assert!(stats["fileopen_time_s"].as_f64().is_some(), "{stats}");
@@ -170,18 +131,9 @@ fn unreadable_textures_are_refused_naming_the_path() {
     let err = ts.handle(junk.to_str().unwrap()).unwrap_err();
     assert!(err.to_string().contains("junk.tx"), "{err}");
     // A handle nobody opened fails the lookup and is counted, not a crash.
-    let bogus = CheckerSampler::new("x", 4, 1, FilterMode::Differentials)
-        .handle("x")
-        .unwrap();
+    let bogus = CheckerSampler::new("x", 4, 1, FilterMode::Differentials).handle("x").unwrap();
     let mut out = [0.0f32; 1];
-    assert!(!ts.sample(
-        bogus,
-        [0.5, 0.5],
-        [0.0; 2],
-        [0.0; 2],
-        &Lookup::DEFAULT,
-        &mut out
-    ));
+    assert!(!ts.sample(bogus, [0.5, 0.5], [0.0; 2], [0.0; 2], &Lookup::DEFAULT, &mut out));
     assert_eq!(ts.stats()["failed_lookups"], 1);
 }
 
@@ -190,20 +142,12 @@ fn untiled_images_work_through_autotile_and_automip() {
     let dir = scratch_dir("untiled");
     // No maketx: a scanline EXR straight from OiioImageIo.
     let res = 64;
-    let pixels = (0..res * res)
-        .map(|k| (((k % res) / 8 + (res - 1 - k / res) / 8) % 2) as f32)
-        .collect();
+    let pixels = (0..res * res).map(|k| (((k % res) / 8 + (res - 1 - k / res) / 8) % 2) as f32).collect();
     let exr = dir.join("plain.exr");
     OiioImageIo
         .write(
             &exr,
-            &ImageBuf {
-                width: res,
-                height: res,
-                channels: vec!["Y".into()],
-                pixels,
-                metadata: vec![],
-            },
+            &ImageBuf { width: res, height: res, channels: vec!["Y".into()], pixels, metadata: vec![] },
             &[ChannelFormat::Float],
             &[],
         )
@@ -211,23 +155,9 @@ fn untiled_images_work_through_autotile_and_automip() {
     let ts = system(FilterMode::Differentials);
     let h = ts.handle(exr.to_str().unwrap()).unwrap();
     let mut out = [0.0f32; 1];
-    assert!(ts.sample(
-        h,
-        [0.05, 0.05],
-        [0.0; 2],
-        [0.0; 2],
-        &Lookup::DEFAULT,
-        &mut out
-    ));
+    assert!(ts.sample(h, [0.05, 0.05], [0.0; 2], [0.0; 2], &Lookup::DEFAULT, &mut out));
     assert!(out[0].abs() < 1e-4, "{}", out[0]);
-    assert!(ts.sample(
-        h,
-        [0.5, 0.5],
-        [2.0, 0.0],
-        [0.0, 2.0],
-        &Lookup::DEFAULT,
-        &mut out
-    ));
+    assert!(ts.sample(h, [0.5, 0.5], [2.0, 0.0], [0.0, 2.0], &Lookup::DEFAULT, &mut out));
     assert!((out[0] - 0.5).abs() < 0.02, "{}", out[0]);
 }
 
@@ -282,15 +212,7 @@ fn finest_level_lookups_read_many_times_more_than_proper_widths() {
     let dir = scratch_dir("thrash");
     let tif = dir.join("big.tif");
     run(Command::new("oiiotool")
-        .args([
-            "--pattern",
-            "checker:width=64:height=64:color1=0:color2=1",
-            "4096x4096",
-            "1",
-            "-d",
-            "uint8",
-            "-o",
-        ])
+        .args(["--pattern", "checker:width=64:height=64:color1=0:color2=1", "4096x4096", "1", "-d", "uint8", "-o"])
         .arg(&tif));
     let tx = dir.join("big.tx");
     run(Command::new("maketx").arg(&tif).arg("-o").arg(&tx));
@@ -303,10 +225,7 @@ fn finest_level_lookups_read_many_times_more_than_proper_widths() {
         let w = 1.0 / 64.0;
         // A fixed low-discrepancy sequence: scattered, reproducible.
         for k in 0..40_000u32 {
-            let st = [
-                (k as f32 * 0.618_034).fract(),
-                (k as f32 * 0.754_878).fract(),
-            ];
+            let st = [(k as f32 * 0.618_034).fract(), (k as f32 * 0.754_878).fract()];
             assert!(ts.sample(h, st, [w, 0.0], [0.0, w], &Lookup::DEFAULT, &mut out));
         }
         ts.stats()
@@ -328,12 +247,7 @@ fn finest_level_lookups_read_many_times_more_than_proper_widths() {
         bytes(&finest) as f64 / bytes(&proper).max(1) as f64
     );
     assert!(bytes(&proper) > 0);
-    assert!(
-        bytes(&finest) >= 10 * bytes(&proper),
-        "finest {} vs differentials {}",
-        bytes(&finest),
-        bytes(&proper)
-    );
+    assert!(bytes(&finest) >= 10 * bytes(&proper), "finest {} vs differentials {}", bytes(&finest), bytes(&proper));
     // The finest level does not fit: tiles were evicted and read again.
     assert!(redundant(&finest) > 0, "{finest}");
     assert_eq!(redundant(&proper), 0, "{proper}");

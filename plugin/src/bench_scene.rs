@@ -60,7 +60,8 @@ pub fn blob_mesh(n: usize, seed: u64) -> (MeshTopology, Vec<[f32; 3]>) {
     ];
     let lumps: Vec<(Vec3, f32)> = (0..5)
         .map(|k| {
-            let d = Vec3::new(rand01(seed, 3 * k) - 0.5, rand01(seed, 3 * k + 1) - 0.5, rand01(seed, 3 * k + 2) - 0.5).normalize_or(Vec3::Z);
+            let d =
+                Vec3::new(rand01(seed, 3 * k) - 0.5, rand01(seed, 3 * k + 1) - 0.5, rand01(seed, 3 * k + 2) - 0.5).normalize_or(Vec3::Z);
             (d, 0.35 * (rand01(seed, 100 + k) - 0.4))
         })
         .collect();
@@ -83,7 +84,12 @@ pub fn blob_mesh(n: usize, seed: u64) -> (MeshTopology, Vec<[f32; 3]>) {
             }
         }
     }
-    let topo = MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6 * n * n], face_vertex_indices: idx, ..Default::default() };
+    let topo = MeshTopology {
+        scheme: Scheme::CatmullClark,
+        face_vertex_counts: vec![4; 6 * n * n],
+        face_vertex_indices: idx,
+        ..Default::default()
+    };
     (topo, pts)
 }
 
@@ -116,7 +122,9 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
             let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * spacing;
             let y = j as f32 * spacing;
             let s = 0.8 + 0.4 * rand01(seed, 7);
-            let xf = Mat4::from_translation(Vec3::new(x, y, s)) * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU) * Mat4::from_scale(Vec3::splat(s));
+            let xf = Mat4::from_translation(Vec3::new(x, y, s))
+                * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU)
+                * Mat4::from_scale(Vec3::splat(s));
             scene.add_instance(m, xf);
         }
     }
@@ -128,7 +136,14 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
     scene.add_instance(g, Mat4::IDENTITY);
     scene.lights.push(Light::distant("/sun", Vec3A::new(0.4, 0.6, -0.7), Vec3A::splat(2.5)));
     let eye = Vec3::new(0.0, -9.0, 6.0);
-    scene.camera = Camera { render_from_camera: Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z), focal_length: 24.0, horizontal_aperture: 36.0, vertical_aperture: 24.0, clipping_range: (0.1, 1e5), ..Default::default() };
+    scene.camera = Camera {
+        render_from_camera: Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z),
+        focal_length: 24.0,
+        horizontal_aperture: 36.0,
+        vertical_aperture: 24.0,
+        clipping_range: (0.1, 1e5),
+        ..Default::default()
+    };
     Ok(scene)
 }
 
@@ -138,7 +153,8 @@ struct BilinearGround;
 impl BilinearGround {
     #[allow(clippy::new_ret_no_self)]
     fn new(half: f32) -> Result<mipray::bilinear::BilinearSurface, mipray::error::MeshError> {
-        let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+        let topo =
+            MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
         mipray::bilinear::BilinearSurface::new(&topo, &[[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]])
     }
 }

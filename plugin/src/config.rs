@@ -61,7 +61,24 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { samples: 1, seed: 0, threads: 0, tess_factor: 1.0, tess_factor_incoherent: 1.0, geometry_cache_mb: 30.0, tier_mb: [None; 3], cache_mode: CacheMode::Multires, texture_filter: mipray::texture::FilterMode::Differentials, texture_cache_mb: 10.0, displacement_bound: 0.0, ao_samples: 0, ao_distance: f32::INFINITY, ao_intensity: 1.0, max_depth: 4, shadow_samples: 4 }
+        RenderSettings {
+            samples: 1,
+            seed: 0,
+            threads: 0,
+            tess_factor: 1.0,
+            tess_factor_incoherent: 1.0,
+            geometry_cache_mb: 30.0,
+            tier_mb: [None; 3],
+            cache_mode: CacheMode::Multires,
+            texture_filter: mipray::texture::FilterMode::Differentials,
+            texture_cache_mb: 10.0,
+            displacement_bound: 0.0,
+            ao_samples: 0,
+            ao_distance: f32::INFINITY,
+            ao_intensity: 1.0,
+            max_depth: 4,
+            shadow_samples: 4,
+        }
     }
 }
 
@@ -129,7 +146,8 @@ impl RenderSettings {
                 }
                 "textureFilter" => {
                     let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
-                    s.texture_filter = mipray::texture::FilterMode::from_name(name).ok_or_else(|| bad(k, format!("'{name}' is not differentials or finest")))?;
+                    s.texture_filter = mipray::texture::FilterMode::from_name(name)
+                        .ok_or_else(|| bad(k, format!("'{name}' is not differentials or finest")))?;
                 }
                 "textureCacheMb" => {
                     let x = as_f64(k, v)?;

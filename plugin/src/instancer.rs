@@ -44,9 +44,18 @@ impl InstancerData {
     /// # Errors
     /// Sizes that disagree, an index out of range, a transform that is not finite, or an empty
     /// prototype path; the message names `path`.
-    pub fn new(path: &str, prototypes: Vec<String>, proto_indices: &[i32], transforms: Vec<Mat4>, prototype: bool) -> Result<Self, DelegateError> {
+    pub fn new(
+        path: &str,
+        prototypes: Vec<String>,
+        proto_indices: &[i32],
+        transforms: Vec<Mat4>,
+        prototype: bool,
+    ) -> Result<Self, DelegateError> {
         if proto_indices.len() != transforms.len() {
-            return Err(DelegateError::prim(path, format!("protoIndices has {} entries but there are {} transforms", proto_indices.len(), transforms.len())));
+            return Err(DelegateError::prim(
+                path,
+                format!("protoIndices has {} entries but there are {} transforms", proto_indices.len(), transforms.len()),
+            ));
         }
         if let Some(i) = prototypes.iter().position(String::is_empty) {
             return Err(DelegateError::prim(path, format!("prototypes[{i}] is an empty path")));
@@ -101,11 +110,17 @@ pub fn check_references(instancers: &BTreeMap<String, InstancerPrim>, is_mesh: &
     for inst in instancers.values() {
         for proto in &inst.data.prototypes {
             if !is_mesh(proto) && !instancers.contains_key(proto) {
-                errors.push(DelegateError::prim(&inst.path, format!("prototype {proto} is neither a mesh nor an instancer; its instances are left out")));
+                errors.push(DelegateError::prim(
+                    &inst.path,
+                    format!("prototype {proto} is neither a mesh nor an instancer; its instances are left out"),
+                ));
             }
         }
         if nesting_depth(instancers, &inst.path, 0) > MAX_NESTING {
-            errors.push(DelegateError::prim(&inst.path, format!("instancers nest more than {MAX_NESTING} deep (a cycle?); deeper levels are left out")));
+            errors.push(DelegateError::prim(
+                &inst.path,
+                format!("instancers nest more than {MAX_NESTING} deep (a cycle?); deeper levels are left out"),
+            ));
         }
     }
     errors
@@ -118,17 +133,37 @@ fn nesting_depth(instancers: &BTreeMap<String, InstancerPrim>, path: &str, depth
     if depth > MAX_NESTING {
         return depth;
     }
-    inst.data.prototypes.iter().filter(|p| instancers.contains_key(p.as_str())).map(|p| nesting_depth(instancers, p, depth + 1)).max().unwrap_or(depth + 1).max(depth + 1)
+    inst.data
+        .prototypes
+        .iter()
+        .filter(|p| instancers.contains_key(p.as_str()))
+        .map(|p| nesting_depth(instancers, p, depth + 1))
+        .max()
+        .unwrap_or(depth + 1)
+        .max(depth + 1)
 }
 
 /// Calls `place(mesh_path, transform)` for every mesh placement `inst` makes, nested instancers
 /// followed, each transform composed with `parent` (`parent × instance transform`). Prototype
 /// meshes' own transforms are the caller's to apply.
-pub fn expand(instancers: &BTreeMap<String, InstancerPrim>, inst: &InstancerPrim, parent: Mat4, is_mesh: &dyn Fn(&str) -> bool, place: &mut dyn FnMut(&str, Mat4)) {
+pub fn expand(
+    instancers: &BTreeMap<String, InstancerPrim>,
+    inst: &InstancerPrim,
+    parent: Mat4,
+    is_mesh: &dyn Fn(&str) -> bool,
+    place: &mut dyn FnMut(&str, Mat4),
+) {
     expand_at(instancers, inst, parent, 1, is_mesh, place);
 }
 
-fn expand_at(instancers: &BTreeMap<String, InstancerPrim>, inst: &InstancerPrim, parent: Mat4, depth: usize, is_mesh: &dyn Fn(&str) -> bool, place: &mut dyn FnMut(&str, Mat4)) {
+fn expand_at(
+    instancers: &BTreeMap<String, InstancerPrim>,
+    inst: &InstancerPrim,
+    parent: Mat4,
+    depth: usize,
+    is_mesh: &dyn Fn(&str) -> bool,
+    place: &mut dyn FnMut(&str, Mat4),
+) {
     if depth > MAX_NESTING {
         return; // reported by check_references
     }
@@ -160,7 +195,8 @@ mod tests {
 
     fn prim(path: &str, prototypes: &[&str], indices: &[i32], xs: &[f32], prototype: bool) -> (String, InstancerPrim) {
         let transforms = xs.iter().map(|x| Mat4::from_translation(Vec3::new(*x, 0.0, 0.0))).collect();
-        let data = InstancerData::new(path, prototypes.iter().map(|s| s.to_string()).collect(), indices, transforms, prototype).expect("valid");
+        let data =
+            InstancerData::new(path, prototypes.iter().map(|s| s.to_string()).collect(), indices, transforms, prototype).expect("valid");
         (path.to_string(), InstancerPrim { path: path.to_string(), data, updates: 1 })
     }
 
@@ -180,8 +216,12 @@ mod tests {
 
     #[test]
     fn nested_instancers_compose_transforms() {
-        let map: BTreeMap<String, InstancerPrim> =
-            [prim("/outer", &["/inner", "/m"], &[0, 0, 1], &[10.0, 20.0, 30.0], false), prim("/inner", &["/m"], &[0, 0], &[1.0, 2.0], true)].into_iter().collect();
+        let map: BTreeMap<String, InstancerPrim> = [
+            prim("/outer", &["/inner", "/m"], &[0, 0, 1], &[10.0, 20.0, 30.0], false),
+            prim("/inner", &["/m"], &[0, 0], &[1.0, 2.0], true),
+        ]
+        .into_iter()
+        .collect();
         let is_mesh = |p: &str| p == "/m";
         let mut xs = Vec::new();
         expand(&map, &map["/outer"], Mat4::IDENTITY, &is_mesh, &mut |p, t| {
@@ -194,7 +234,8 @@ mod tests {
 
     #[test]
     fn missing_prototypes_and_cycles_are_reported_not_followed() {
-        let map: BTreeMap<String, InstancerPrim> = [prim("/a", &["/b", "/gone"], &[0, 1], &[1.0, 2.0], false), prim("/b", &["/a"], &[0], &[1.0], true)].into_iter().collect();
+        let map: BTreeMap<String, InstancerPrim> =
+            [prim("/a", &["/b", "/gone"], &[0, 1], &[1.0, 2.0], false), prim("/b", &["/a"], &[0], &[1.0], true)].into_iter().collect();
         let is_mesh = |_: &str| false;
         let errors: Vec<String> = check_references(&map, &is_mesh).iter().map(ToString::to_string).collect();
         assert!(errors.iter().any(|e| e.starts_with("/a: prototype /gone")), "{errors:?}");

@@ -20,9 +20,16 @@ pub struct DistantLightData {
 /// units, emission along −Z for rect and disk lights).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum AreaKind {
-    Sphere { radius: f32 },
-    Rect { width: f32, height: f32 },
-    Disk { radius: f32 },
+    Sphere {
+        radius: f32,
+    },
+    Rect {
+        width: f32,
+        height: f32,
+    },
+    Disk {
+        radius: f32,
+    },
     /// An environment of constant radiance (a dome texture is not read yet).
     Dome,
 }
@@ -52,7 +59,10 @@ impl LightPrim {
                 let shape = match kind {
                     AreaKind::Sphere { radius } => {
                         // A sphere stays a sphere under the light's mean scale.
-                        let s = (m.transform_vector3a(Vec3A::X).length() + m.transform_vector3a(Vec3A::Y).length() + m.transform_vector3a(Vec3A::Z).length()) / 3.0;
+                        let s = (m.transform_vector3a(Vec3A::X).length()
+                            + m.transform_vector3a(Vec3A::Y).length()
+                            + m.transform_vector3a(Vec3A::Z).length())
+                            / 3.0;
                         LightShape::Sphere { center, radius: f(radius) * s }
                     }
                     AreaKind::Rect { width, height } => LightShape::Rect {
@@ -61,7 +71,12 @@ impl LightPrim {
                         v: m.transform_vector3a(Vec3A::Y * (f(height) * 0.5)),
                         normal,
                     },
-                    AreaKind::Disk { radius } => LightShape::Disk { center, u: m.transform_vector3a(Vec3A::X * f(radius)), v: m.transform_vector3a(Vec3A::Y * f(radius)), normal },
+                    AreaKind::Disk { radius } => LightShape::Disk {
+                        center,
+                        u: m.transform_vector3a(Vec3A::X * f(radius)),
+                        v: m.transform_vector3a(Vec3A::Y * f(radius)),
+                        normal,
+                    },
                     AreaKind::Dome => LightShape::Dome,
                 };
                 Light::usd_area(&self.path, shape, f(d.intensity), f(d.exposure), color, d.normalize)

@@ -100,7 +100,16 @@ pub struct MeshPrim {
 
 impl MeshPrim {
     pub fn new(path: &str, data: MeshData, cache_id: u32) -> Self {
-        MeshPrim { path: path.to_string(), data, surface: None, dirty: DirtyBits::ALL, surface_syncs: 0, generation: 0, error: None, cache_id }
+        MeshPrim {
+            path: path.to_string(),
+            data,
+            surface: None,
+            dirty: DirtyBits::ALL,
+            surface_syncs: 0,
+            generation: 0,
+            error: None,
+            cache_id,
+        }
     }
 
     /// What differs between the current data and `new`.
@@ -115,13 +124,21 @@ impl MeshPrim {
         if self.data.transform != new.transform {
             d = d | DirtyBits::TRANSFORM;
         }
-        if self.data.albedo != new.albedo || self.data.mirror != new.mirror || self.data.double_sided != new.double_sided || self.data.face_albedo != new.face_albedo || self.data.diffuse_texture != new.diffuse_texture {
+        if self.data.albedo != new.albedo
+            || self.data.mirror != new.mirror
+            || self.data.double_sided != new.double_sided
+            || self.data.face_albedo != new.face_albedo
+            || self.data.diffuse_texture != new.diffuse_texture
+        {
             d = d | DirtyBits::MATERIAL;
         }
         if self.data.prototype != new.prototype {
             d = d | DirtyBits::VISIBILITY;
         }
-        if self.data.displacement != new.displacement || self.data.displacement_bound != new.displacement_bound || self.data.displacement_texture != new.displacement_texture {
+        if self.data.displacement != new.displacement
+            || self.data.displacement_bound != new.displacement_bound
+            || self.data.displacement_texture != new.displacement_texture
+        {
             // Displacement changes the tessellated shape: new cache generation.
             d = d | DirtyBits::POINTS;
         }
@@ -191,9 +208,19 @@ impl MeshPrim {
         // Textures read `st` as the surface's primvar channel 0.
         let primvars: Vec<Primvar2> = self.data.st.iter().cloned().collect();
         Ok(match t.scheme {
-            Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?.with_primvars(t, self.data.points.len(), &primvars)?)),
+            Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?.with_primvars(
+                t,
+                self.data.points.len(),
+                &primvars,
+            )?)),
             _ if primvars.is_empty() => Surface::Osd(Arc::new(OsdSurface::new(&self.path, t, &self.data.points)?)),
-            _ => Surface::Osd(Arc::new(OsdSurface::with_primvars(&self.path, t, &self.data.points, &mipray_bridge::OsdOptions::default(), &primvars)?)),
+            _ => Surface::Osd(Arc::new(OsdSurface::with_primvars(
+                &self.path,
+                t,
+                &self.data.points,
+                &mipray_bridge::OsdOptions::default(),
+                &primvars,
+            )?)),
         })
     }
 }

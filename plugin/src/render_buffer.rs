@@ -30,7 +30,12 @@ pub fn buffers_from_film(film: Film) -> Vec<RenderBuffer> {
 ///
 /// # Errors
 /// Mismatched sizes, or what OpenImageIO reports, naming the path.
-pub fn write_buffers(path: &Path, buffers: &[&RenderBuffer], formats: &[Option<ChannelFormat>], metadata: &[(String, MetaValue)]) -> Result<(), mipray::error::ImageError> {
+pub fn write_buffers(
+    path: &Path,
+    buffers: &[&RenderBuffer],
+    formats: &[Option<ChannelFormat>],
+    metadata: &[(String, MetaValue)],
+) -> Result<(), mipray::error::ImageError> {
     let err = |m: String| mipray::error::ImageError { path: path.display().to_string(), message: m };
     let first = buffers.first().ok_or_else(|| err("no AOVs to write".into()))?;
     let (w, h) = (first.width, first.height);

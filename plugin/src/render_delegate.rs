@@ -179,7 +179,8 @@ impl RenderDelegate {
 
     /// Every prim path held, sorted.
     pub fn prim_paths(&self) -> Vec<String> {
-        let mut v: Vec<String> = self.meshes.keys().chain(self.cameras.keys()).chain(self.lights.keys()).chain(self.instancers.keys()).cloned().collect();
+        let mut v: Vec<String> =
+            self.meshes.keys().chain(self.cameras.keys()).chain(self.lights.keys()).chain(self.instancers.keys()).cloned().collect();
         v.sort();
         v
     }
@@ -227,7 +228,10 @@ impl RenderDelegate {
     pub fn build_scene(&self, camera_path: &str, default_displacement_bound: f32) -> Result<Scene, DelegateError> {
         let cam = self.cameras.get(camera_path).ok_or_else(|| {
             let known: Vec<&str> = self.cameras.keys().map(String::as_str).collect();
-            DelegateError::prim(camera_path, format!("no such camera (cameras: {})", if known.is_empty() { "none".into() } else { known.join(", ") }))
+            DelegateError::prim(
+                camera_path,
+                format!("no such camera (cameras: {})", if known.is_empty() { "none".into() } else { known.join(", ") }),
+            )
         })?;
         let mut scene = Scene { camera: cam.camera.clone(), ..Default::default() };
         // Core mesh index per prim path, added on first placement: a prototype nobody places
@@ -269,7 +273,10 @@ impl RenderDelegate {
                 st_channel: 0,
             }),
             Err(e) => {
-                self.warn_once(format!("{path} {}", input.file), format!("{path}: cannot read diffuseColor texture {}: {}; using its fallback", input.file, e.message));
+                self.warn_once(
+                    format!("{path} {}", input.file),
+                    format!("{path}: cannot read diffuseColor texture {}: {}; using its fallback", input.file, e.message),
+                );
                 None
             }
         }
@@ -288,7 +295,10 @@ impl RenderDelegate {
                 Some(DisplacementShader::Texture(Arc::new(d)))
             }
             Err(e) => {
-                self.warn_once(format!("{path} {}", input.file), format!("{path}: cannot read displacement texture {}: {}; not displaced", input.file, e.message));
+                self.warn_once(
+                    format!("{path} {}", input.file),
+                    format!("{path}: cannot read displacement texture {}: {}; not displaced", input.file, e.message),
+                );
                 None
             }
         }
@@ -303,7 +313,8 @@ impl RenderDelegate {
             material.diffuse_texture = self.textured_color(&m.path, input);
             if material.diffuse_texture.is_none() {
                 // Unreadable: the input's fallback value, as UsdUVTexture says.
-                material.diffuse_color = glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]).clamp(glam::Vec3A::ZERO, glam::Vec3A::ONE);
+                material.diffuse_color =
+                    glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]).clamp(glam::Vec3A::ZERO, glam::Vec3A::ONE);
             }
         }
         let mat = scene.add_material(material);
@@ -328,7 +339,8 @@ impl RenderDelegate {
             }
         }
         // The authored bound, else the displacement's own (exact) one, else the setting.
-        mesh.displacement_bound = m.data.displacement_bound.or(mesh.displacement.as_ref().map(DisplacementShader::bound)).unwrap_or(default_displacement_bound);
+        mesh.displacement_bound =
+            m.data.displacement_bound.or(mesh.displacement.as_ref().map(DisplacementShader::bound)).unwrap_or(default_displacement_bound);
         Some(scene.add_mesh(mesh))
     }
 }

@@ -29,7 +29,16 @@ fn grid(scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
 }
 
 fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
-    let pts = vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]];
+    let pts = vec![
+        [-1.0, -1.0, -1.0],
+        [1.0, -1.0, -1.0],
+        [1.0, 1.0, -1.0],
+        [-1.0, 1.0, -1.0],
+        [-1.0, -1.0, 1.0],
+        [1.0, -1.0, 1.0],
+        [1.0, 1.0, 1.0],
+        [-1.0, 1.0, 1.0],
+    ];
     let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
     (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() }, pts)
 }
@@ -40,13 +49,40 @@ fn data(topology: MeshTopology, points: Vec<[f32; 3]>, transform: Mat4) -> MeshD
 
 fn delegate_with_camera(eye: Vec3, target: Vec3) -> RenderDelegate {
     let mut d = RenderDelegate::new();
-    d.set_camera("/cam", Camera { render_from_camera: Camera::look_at(eye, target, Vec3::Y), horizontal_aperture: 20.0, vertical_aperture: 20.0, focal_length: 35.0, clipping_range: (0.1, 1000.0), ..Default::default() });
-    d.set_distant_light("/sun", DistantLightData { transform: Mat4::IDENTITY, intensity: 1.0, exposure: 0.0, color: [1.0; 3], angle_deg: 0.5, normalize: false, shadow_enable: true });
+    d.set_camera(
+        "/cam",
+        Camera {
+            render_from_camera: Camera::look_at(eye, target, Vec3::Y),
+            horizontal_aperture: 20.0,
+            vertical_aperture: 20.0,
+            focal_length: 35.0,
+            clipping_range: (0.1, 1000.0),
+            ..Default::default()
+        },
+    );
+    d.set_distant_light(
+        "/sun",
+        DistantLightData {
+            transform: Mat4::IDENTITY,
+            intensity: 1.0,
+            exposure: 0.0,
+            color: [1.0; 3],
+            angle_deg: 0.5,
+            normalize: false,
+            shadow_enable: true,
+        },
+    );
     d
 }
 
 fn pass(aovs: &[&str]) -> RenderPass {
-    RenderPass { camera: "/cam".into(), width: 32, height: 32, aovs: aovs.iter().map(|s| s.to_string()).collect(), settings: RenderSettings::default() }
+    RenderPass {
+        camera: "/cam".into(),
+        width: 32,
+        height: 32,
+        aovs: aovs.iter().map(|s| s.to_string()).collect(),
+        settings: RenderSettings::default(),
+    }
 }
 
 fn cold(stats: &Value) -> u64 {

@@ -14,16 +14,31 @@ use mipray::topology::{MeshTopology, Scheme};
 
 /// A subdivided cube of side 2 centred on the origin.
 fn cube(transform: Mat4) -> MeshData {
-    let points = vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]];
+    let points = vec![
+        [-1.0, -1.0, -1.0],
+        [1.0, -1.0, -1.0],
+        [1.0, 1.0, -1.0],
+        [-1.0, 1.0, -1.0],
+        [-1.0, -1.0, 1.0],
+        [1.0, -1.0, 1.0],
+        [1.0, 1.0, 1.0],
+        [-1.0, 1.0, 1.0],
+    ];
     let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
-    let topology = MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() };
+    let topology =
+        MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() };
     MeshData { topology, points, transform, albedo: [0.5; 3], ..Default::default() }
 }
 
 /// Two polygonal unit quads side by side in z = 0: face 0 on the left (x < 0), face 1 on the right.
 fn two_quads() -> MeshData {
     let points = vec![[-1.0, -0.5, 0.0], [0.0, -0.5, 0.0], [1.0, -0.5, 0.0], [-1.0, 0.5, 0.0], [0.0, 0.5, 0.0], [1.0, 0.5, 0.0]];
-    let topology = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4, 4], face_vertex_indices: vec![0, 1, 4, 3, 1, 2, 5, 4], ..Default::default() };
+    let topology = MeshTopology {
+        scheme: Scheme::None,
+        face_vertex_counts: vec![4, 4],
+        face_vertex_indices: vec![0, 1, 4, 3, 1, 2, 5, 4],
+        ..Default::default()
+    };
     MeshData { topology, points, albedo: [0.5; 3], ..Default::default() }
 }
 
@@ -40,12 +55,29 @@ fn delegate(eye: Vec3) -> RenderDelegate {
             ..Default::default()
         },
     );
-    d.set_distant_light("/sun", DistantLightData { transform: Mat4::IDENTITY, intensity: 1.0, exposure: 0.0, color: [1.0; 3], angle_deg: 0.5, normalize: false, shadow_enable: false });
+    d.set_distant_light(
+        "/sun",
+        DistantLightData {
+            transform: Mat4::IDENTITY,
+            intensity: 1.0,
+            exposure: 0.0,
+            color: [1.0; 3],
+            angle_deg: 0.5,
+            normalize: false,
+            shadow_enable: false,
+        },
+    );
     d
 }
 
 fn render(d: &mut RenderDelegate, aovs: &[&str]) -> PassResult {
-    let pass = RenderPass { camera: "/cam".into(), width: 32, height: 32, aovs: aovs.iter().map(|s| s.to_string()).collect(), settings: RenderSettings::default() };
+    let pass = RenderPass {
+        camera: "/cam".into(),
+        width: 32,
+        height: 32,
+        aovs: aovs.iter().map(|s| s.to_string()).collect(),
+        settings: RenderSettings::default(),
+    };
     pass.execute(d, &NoProgress).expect("render")
 }
 
@@ -68,7 +100,8 @@ fn instances_share_one_prototype_mesh() {
     d.remove("/single");
 
     let n = 400;
-    let transforms: Vec<Mat4> = (0..n).map(|i| Mat4::from_translation(Vec3::new((i % 20) as f32 - 9.5, (i / 20) as f32 - 9.5, 0.0))).collect();
+    let transforms: Vec<Mat4> =
+        (0..n).map(|i| Mat4::from_translation(Vec3::new((i % 20) as f32 - 9.5, (i / 20) as f32 - 9.5, 0.0))).collect();
     d.set_instancer("/pi", InstancerData::new("/pi", vec!["/proto".into()], &vec![0; n], transforms, false).expect("valid"));
     let many = render(&mut d, &["alpha"]);
     assert!(many.prim_errors.is_empty());
@@ -88,7 +121,11 @@ fn nested_instancers_and_missing_prototypes() {
     let pair = vec![Mat4::from_translation(Vec3::new(-1.5, 0.0, 0.0)), Mat4::from_translation(Vec3::new(1.5, 0.0, 0.0))];
     d.set_instancer("/grove", InstancerData::new("/grove", vec!["/proto".into()], &[0, 0], pair, true).expect("valid"));
     let rows = [Mat4::from_translation(Vec3::new(0.0, -3.0, 0.0)), Mat4::from_translation(Vec3::new(0.0, 3.0, 0.0))];
-    d.set_instancer("/forest", InstancerData::new("/forest", vec!["/grove".into(), "/nothing".into()], &[0, 0, 1], vec![rows[0], rows[1], Mat4::IDENTITY], false).expect("valid"));
+    d.set_instancer(
+        "/forest",
+        InstancerData::new("/forest", vec!["/grove".into(), "/nothing".into()], &[0, 0, 1], vec![rows[0], rows[1], Mat4::IDENTITY], false)
+            .expect("valid"),
+    );
     let r = render(&mut d, &["alpha"]);
     assert_eq!(scene_figure(&r, "instances"), 4);
     assert_eq!(r.prim_errors.len(), 1);

@@ -13,15 +13,15 @@ use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
+use hd_mipray::material::TextureInput;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
-use hd_mipray::material::TextureInput;
 use mipray::camera::{Camera, Projection};
-use mipray::texture::{Interpolation, Primvar2, Wrap};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
 use mipray::progress::Progress;
+use mipray::texture::{Interpolation, Primvar2, Wrap};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 use mipray_bridge::OiioImageIo;
 use numpy::ndarray::Array3;
@@ -108,7 +108,12 @@ fn matrices(path: &str, m: &PyReadonlyArray3<'_, f64>) -> PyResult<Vec<Mat4>> {
 }
 
 /// The per-face albedo table of `set_mesh`: both arrays or neither.
-fn face_albedo(path: &str, albedos: Option<PyReadonlyArray2<'_, f32>>, indices: Option<PyReadonlyArray1<'_, i32>>, face_count: usize) -> PyResult<Option<FaceAlbedo>> {
+fn face_albedo(
+    path: &str,
+    albedos: Option<PyReadonlyArray2<'_, f32>>,
+    indices: Option<PyReadonlyArray1<'_, i32>>,
+    face_count: usize,
+) -> PyResult<Option<FaceAlbedo>> {
     let (albedos, indices) = match (albedos, indices) {
         (None, None) => return Ok(None),
         (Some(a), Some(i)) => (a, i),
@@ -305,8 +310,15 @@ impl RenderDelegate {
                 if a.ncols() != 2 {
                     return Err(value_error(path, format!("primvars:st must be N×2, got {:?}", a.shape())));
                 }
-                let interpolation = Interpolation::from_usd(st_interpolation).ok_or_else(|| value_error(path, format!("primvars:st interpolation '{st_interpolation}' is not a USD interpolation")))?;
-                let pv = Primvar2 { name: "st".into(), interpolation, values: a.rows().into_iter().map(|r| [r[0], r[1]]).collect(), indices: vec_i32(st_indices) };
+                let interpolation = Interpolation::from_usd(st_interpolation).ok_or_else(|| {
+                    value_error(path, format!("primvars:st interpolation '{st_interpolation}' is not a USD interpolation"))
+                })?;
+                let pv = Primvar2 {
+                    name: "st".into(),
+                    interpolation,
+                    values: a.rows().into_iter().map(|r| [r[0], r[1]]).collect(),
+                    indices: vec_i32(st_indices),
+                };
                 // Check now, so a bad primvar names the prim at once rather than at sync.
                 pv.face_varying_indices(&topology, points.len()).map_err(|e| value_error(path, e))?;
                 Some(pv)
@@ -360,7 +372,14 @@ impl RenderDelegate {
     /// Inserts or replaces an instancer: `prototypes[proto_indices[i]]` placed at
     /// `transforms[i]`. See the stubs.
     #[pyo3(signature = (path, *, prototypes, proto_indices, transforms, prototype=false))]
-    fn set_instancer(&mut self, path: &str, prototypes: Vec<String>, proto_indices: PyReadonlyArray1<'_, i32>, transforms: PyReadonlyArray3<'_, f64>, prototype: bool) -> PyResult<()> {
+    fn set_instancer(
+        &mut self,
+        path: &str,
+        prototypes: Vec<String>,
+        proto_indices: PyReadonlyArray1<'_, i32>,
+        transforms: PyReadonlyArray3<'_, f64>,
+        prototype: bool,
+    ) -> PyResult<()> {
         let transforms = matrices(path, &transforms)?;
         let indices = proto_indices.as_array();
         let data = match indices.as_slice() {
@@ -429,7 +448,18 @@ impl RenderDelegate {
             return Err(value_error(path, "light inputs must be finite"));
         }
         let transform = matrix(path, &transform)?;
-        self.inner.set_distant_light(path, DistantLightData { transform, intensity, exposure, color: [color.0, color.1, color.2], angle_deg: angle, normalize, shadow_enable });
+        self.inner.set_distant_light(
+            path,
+            DistantLightData {
+                transform,
+                intensity,
+                exposure,
+                color: [color.0, color.1, color.2],
+                angle_deg: angle,
+                normalize,
+                shadow_enable,
+            },
+        );
         Ok(())
     }
 
@@ -456,8 +486,17 @@ impl RenderDelegate {
         if vals.iter().any(|v| !v.is_finite()) {
             return Err(value_error(path, "light inputs must be finite"));
         }
-        let data = DistantLightData { transform: matrix(path, &transform)?, intensity, exposure, color: [color.0, color.1, color.2], angle_deg: angle, normalize, shadow_enable };
-        let size = |name: &str, v: f32| if v > 0.0 { Ok(v) } else { Err(value_error(path, format!("inputs:{name} = {v} must be positive"))) };
+        let data = DistantLightData {
+            transform: matrix(path, &transform)?,
+            intensity,
+            exposure,
+            color: [color.0, color.1, color.2],
+            angle_deg: angle,
+            normalize,
+            shadow_enable,
+        };
+        let size =
+            |name: &str, v: f32| if v > 0.0 { Ok(v) } else { Err(value_error(path, format!("inputs:{name} = {v} must be positive"))) };
         let area = match kind {
             "distant" => {
                 self.inner.set_distant_light(path, data);
@@ -512,22 +551,32 @@ impl RenderDelegate {
                 pairs.push((k.extract::<String>()?, py_to_json(&v)?));
             }
         }
-        let settings = RenderSettings::from_pairs(pairs.iter().map(|(k, v)| (k.as_str(), v))).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let settings =
+            RenderSettings::from_pairs(pairs.iter().map(|(k, v)| (k.as_str(), v))).map_err(|e| PyValueError::new_err(e.to_string()))?;
         let pass = RenderPass { camera: camera.to_string(), width, height, aovs, settings };
-        let prog = PyProgress { callback: progress, total: AtomicU64::new(0), done: AtomicU64::new(0), last: AtomicU64::new(0), cancelled: AtomicBool::new(false) };
+        let prog = PyProgress {
+            callback: progress,
+            total: AtomicU64::new(0),
+            done: AtomicU64::new(0),
+            last: AtomicU64::new(0),
+            cancelled: AtomicBool::new(false),
+        };
         let inner = &mut self.inner;
         let result = py.detach(|| pass.execute(inner, &prog));
         forward_logs(py);
         let result = match result {
             Ok(r) => r,
-            Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Cancelled)) => return Err(PyKeyboardInterrupt::new_err("render cancelled")),
+            Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Cancelled)) => {
+                return Err(PyKeyboardInterrupt::new_err("render cancelled"))
+            }
             Err(e @ hd_mipray::DelegateError::Prim { .. }) => return Err(PyValueError::new_err(e.to_string())),
             Err(e @ hd_mipray::DelegateError::Setting { .. }) => return Err(PyValueError::new_err(e.to_string())),
             Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
         };
         let dict = PyDict::new(py);
         for b in result.buffers {
-            let arr = Array3::from_shape_vec((b.height, b.width, b.channels), b.data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+            let arr =
+                Array3::from_shape_vec((b.height, b.width, b.channels), b.data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
             dict.set_item(b.aov, arr.into_pyarray(py))?;
         }
         Ok((dict, result.stats.to_string()))
@@ -559,7 +608,9 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
             None => Ok(Wrap::FromFile),
             Some(v) => {
                 let t: String = v.extract()?;
-                Wrap::from_usd(&t).ok_or_else(|| value_error(path, format!("{input} texture {key} '{t}' is not black, clamp, repeat, mirror or useMetadata")))
+                Wrap::from_usd(&t).ok_or_else(|| {
+                    value_error(path, format!("{input} texture {key} '{t}' is not black, clamp, repeat, mirror or useMetadata"))
+                })
             }
         }
     };
@@ -570,7 +621,15 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
     if channel > 3 {
         return Err(value_error(path, format!("{input} texture channel {channel} is not 0–3")));
     }
-    Ok(TextureInput { file, scale: four("scale", [1.0; 4])?, bias: four("bias", [0.0; 4])?, fallback: four("fallback", [0.0, 0.0, 0.0, 1.0])?, wrap_s: wrap("wrapS")?, wrap_t: wrap("wrapT")?, channel })
+    Ok(TextureInput {
+        file,
+        scale: four("scale", [1.0; 4])?,
+        bias: four("bias", [0.0; 4])?,
+        fallback: four("fallback", [0.0, 0.0, 0.0, 1.0])?,
+        wrap_s: wrap("wrapS")?,
+        wrap_t: wrap("wrapT")?,
+        channel,
+    })
 }
 
 fn parse_format(s: &str) -> PyResult<ChannelFormat> {
@@ -610,12 +669,22 @@ fn meta_value(v: &Bound<'_, PyAny>) -> PyResult<MetaValue> {
 /// Writes AOV arrays (H×W×C float32) in `order` into one image through OpenImageIO.
 #[pyfunction]
 #[pyo3(signature = (path, aovs, order, formats=None, metadata=None))]
-fn write_image(py: Python<'_>, path: &str, aovs: &Bound<'_, PyDict>, order: Vec<String>, formats: Option<HashMap<String, String>>, metadata: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+fn write_image(
+    py: Python<'_>,
+    path: &str,
+    aovs: &Bound<'_, PyDict>,
+    order: Vec<String>,
+    formats: Option<HashMap<String, String>>,
+    metadata: Option<&Bound<'_, PyDict>>,
+) -> PyResult<()> {
     let mut buffers = Vec::new();
     let mut fmts = Vec::new();
     for name in &order {
-        let arr = aovs.get_item(name)?.ok_or_else(|| PyValueError::new_err(format!("{path}: AOV '{name}' is not among the arrays given")))?;
-        let arr = arr.cast_into::<PyArray3<f32>>().map_err(|_| PyValueError::new_err(format!("{path}: AOV '{name}' must be an H×W×C float32 array")))?;
+        let arr =
+            aovs.get_item(name)?.ok_or_else(|| PyValueError::new_err(format!("{path}: AOV '{name}' is not among the arrays given")))?;
+        let arr = arr
+            .cast_into::<PyArray3<f32>>()
+            .map_err(|_| PyValueError::new_err(format!("{path}: AOV '{name}' must be an H×W×C float32 array")))?;
         let ro = arr.readonly();
         let shape = ro.shape().to_vec();
         let data: Vec<f32> = ro.as_array().iter().copied().collect();

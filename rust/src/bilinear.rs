@@ -41,10 +41,7 @@ impl BilinearSurface {
         let (mut start, mut ptex) = (0usize, 0u32);
         for (face, &n) in topology.face_vertex_counts.iter().enumerate() {
             let n = n as usize;
-            let fv: Vec<Vec3A> = topology.face_vertex_indices[start..start + n]
-                .iter()
-                .map(|&i| Vec3A::from(points[i as usize]))
-                .collect();
+            let fv: Vec<Vec3A> = topology.face_vertex_indices[start..start + n].iter().map(|&i| Vec3A::from(points[i as usize])).collect();
             start += n;
             let sub_faces = if n == 4 { 1 } else { n };
             if !holes.contains(&(face as i32)) {

@@ -58,7 +58,11 @@ mod tests {
         bvh.ray_traverse(ray, &mut hit, |_r, id| {
             let b = bvh.primitive_indices[id] as usize;
             seen.push(b);
-            if b == 10 { 4.0 } else { f32::INFINITY }
+            if b == 10 {
+                4.0
+            } else {
+                f32::INFINITY
+            }
         });
         assert!(seen.contains(&10));
         assert_eq!(bvh.primitive_indices[hit.primitive_id as usize], 10);

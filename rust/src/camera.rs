@@ -138,12 +138,7 @@ impl Camera {
             Projection::Orthographic => APERTURE_UNIT,
         };
         let (cx, cy) = (self.horizontal_aperture_offset, self.vertical_aperture_offset);
-        Window {
-            x0: (cx - ha * 0.5) * scale,
-            x1: (cx + ha * 0.5) * scale,
-            y0: (cy - va * 0.5) * scale,
-            y1: (cy + va * 0.5) * scale,
-        }
+        Window { x0: (cx - ha * 0.5) * scale, x1: (cx + ha * 0.5) * scale, y0: (cy - va * 0.5) * scale, y1: (cy + va * 0.5) * scale }
     }
 
     /// The camera ray through continuous pixel position (`px`, `py`) of a `width`×`height`
@@ -198,7 +193,11 @@ impl Camera {
     /// True when the camera asks for depth of field: an f-stop and a focus distance, both
     /// positive, on a perspective camera.
     pub fn has_depth_of_field(&self) -> bool {
-        self.projection == Projection::Perspective && self.f_stop > 0.0 && self.focus_distance > 0.0 && self.f_stop.is_finite() && self.focus_distance.is_finite()
+        self.projection == Projection::Perspective
+            && self.f_stop > 0.0
+            && self.focus_distance > 0.0
+            && self.f_stop.is_finite()
+            && self.focus_distance.is_finite()
     }
 
     /// Lens radius in camera-space units: focal length (tenths of a scene unit, as USD stores
@@ -275,7 +274,11 @@ fn concentric_disk(u: f32, v: f32) -> (f32, f32) {
     if a == 0.0 && b == 0.0 {
         return (0.0, 0.0);
     }
-    let (r, phi) = if a.abs() > b.abs() { (a, std::f32::consts::FRAC_PI_4 * (b / a)) } else { (b, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (a / b)) };
+    let (r, phi) = if a.abs() > b.abs() {
+        (a, std::f32::consts::FRAC_PI_4 * (b / a))
+    } else {
+        (b, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (a / b))
+    };
     (r * phi.cos(), r * phi.sin())
 }
 
@@ -293,12 +296,7 @@ mod tests {
         // 50 mm lens, 36×24 aperture, 360×240 image: a point at x = 1.8 on the plane 50 units away
         // sits at 1.8/50 = 36/1000 of the focal length... i.e. 1.8 mm on a 36 mm back = 1/20 of
         // the width right of centre: pixel 180 + 18 = 198.
-        let cam = Camera {
-            render_from_camera: look_from(50.0),
-            horizontal_aperture: 36.0,
-            vertical_aperture: 24.0,
-            ..Default::default()
-        };
+        let cam = Camera { render_from_camera: look_from(50.0), horizontal_aperture: 36.0, vertical_aperture: 24.0, ..Default::default() };
         let (px, py) = cam.project(Vec3A::new(1.8, -1.2, 0.0), 360, 240).unwrap();
         assert!((px - 198.0).abs() < 1e-3 && (py - 132.0).abs() < 1e-3, "{px} {py}");
         // And the ray through that pixel passes through the point.
@@ -309,7 +307,13 @@ mod tests {
 
     #[test]
     fn aperture_offset_shifts_the_image() {
-        let mut cam = Camera { render_from_camera: look_from(10.0), horizontal_aperture: 20.0, vertical_aperture: 20.0, focal_length: 10.0, ..Default::default() };
+        let mut cam = Camera {
+            render_from_camera: look_from(10.0),
+            horizontal_aperture: 20.0,
+            vertical_aperture: 20.0,
+            focal_length: 10.0,
+            ..Default::default()
+        };
         let (px0, _) = cam.project(Vec3A::ZERO, 100, 100).unwrap();
         cam.horizontal_aperture_offset = 2.0; // a tenth of the aperture: the image shifts 10 px left
         let (px1, _) = cam.project(Vec3A::ZERO, 100, 100).unwrap();
@@ -360,7 +364,13 @@ mod tests {
     #[test]
     fn fit_policy_keeps_the_whole_aperture_visible() {
         // A square aperture on a 2:1 image: the horizontal window widens, the vertical stays.
-        let cam = Camera { render_from_camera: look_from(10.0), horizontal_aperture: 10.0, vertical_aperture: 10.0, focal_length: 10.0, ..Default::default() };
+        let cam = Camera {
+            render_from_camera: look_from(10.0),
+            horizontal_aperture: 10.0,
+            vertical_aperture: 10.0,
+            focal_length: 10.0,
+            ..Default::default()
+        };
         let (_, top) = cam.project(Vec3A::new(0.0, 5.0, 0.0), 200, 100).unwrap();
         let (right, _) = cam.project(Vec3A::new(10.0, 0.0, 0.0), 200, 100).unwrap();
         assert!(top.abs() < 1e-3 && (right - 200.0).abs() < 1e-3, "{top} {right}");

@@ -33,7 +33,13 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
         used.insert(m.material);
         used.extend(m.face_materials.iter().flat_map(|t| t.iter().map(|&f| f as usize)));
     }
-    let mirrors: Vec<&str> = scene.materials.iter().enumerate().filter(|(i, m)| used.contains(i) && m.mirror.max_element() > 0.0).map(|(_, m)| m.name.as_str()).collect();
+    let mirrors: Vec<&str> = scene
+        .materials
+        .iter()
+        .enumerate()
+        .filter(|(i, m)| used.contains(i) && m.mirror.max_element() > 0.0)
+        .map(|(_, m)| m.name.as_str())
+        .collect();
     if !mirrors.is_empty() && options.max_depth > 0 {
         let shown: Vec<&str> = mirrors.iter().take(5).copied().collect();
         let more = if mirrors.len() > 5 { format!(" and {} more", mirrors.len() - 5) } else { String::new() };

@@ -7,8 +7,8 @@ use glam::Vec3A;
 use crate::differential::{dndu_dndv, reflect_direction, RayDifferential, UvDifferentials};
 use crate::effects::{enabled, Effect};
 use crate::options::RenderOptions;
-use crate::sampling::{cosine_hemisphere, frame, Sampler};
 use crate::ray::{offset_origin, Ray, RayKind};
+use crate::sampling::{cosine_hemisphere, frame, Sampler};
 use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
 
@@ -67,7 +67,9 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
         let spacing = s.dpdu.length().max(s.dpdv.length()) * 2.0 * step;
         let displaced = |u: f32, v: f32| {
             let e = mesh.surface.evaluate(hit.patch as usize, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
-            e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, spacing, 2.0 * step)
+            e.p + e.dpdu.cross(e.dpdv).normalize_or_zero()
+                * sign
+                * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, spacing, 2.0 * step)
         };
         let (u0, u1) = ((hit.u - step).max(0.0), (hit.u + step).min(1.0));
         let (v0, v1) = ((hit.v - step).max(0.0), (hit.v + step).min(1.0));
@@ -115,7 +117,9 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
             Some(d) => {
                 let at = |u: f32, v: f32| {
                     let e = mesh.surface.evaluate(hit.patch as usize, u, v);
-                    e.p + e.dpdu.cross(e.dpdv).normalize_or_zero() * sign * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, 0.0, 0.0)
+                    e.p + e.dpdu.cross(e.dpdv).normalize_or_zero()
+                        * sign
+                        * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, 0.0, 0.0)
                 };
                 let h = 1e-3;
                 (at(u, v), (at(u + h, v) - at(u - h, v)) / (2.0 * h), (at(u, v + h) - at(u, v - h)) / (2.0 * h))
@@ -251,7 +255,14 @@ impl<'a> DirectLighting<'a> {
             if wr.dot(sp.ng) > 0.0 {
                 let (diff, clamped) = footprint.reflect_checked(ray.d, sp.ns, dndx, dndy);
                 counters.differential_clamps += u64::from(clamped);
-                let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, wr), d: wr, t_min: 0.0, t_max: f32::INFINITY, diff, kind: RayKind::Reflection };
+                let r = Ray {
+                    o: offset_origin(sp.p, hit.p_error, sp.ng, wr),
+                    d: wr,
+                    t_min: 0.0,
+                    t_max: f32::INFINITY,
+                    diff,
+                    kind: RayKind::Reflection,
+                };
                 if let Some(reflected) = self.radiance(&r, depth + 1, sampler, counters) {
                     color += material.mirror * reflected.color;
                     (beam_width, quads) = (reflected.beam_width, reflected.quads);
@@ -294,7 +305,14 @@ impl<'a> DirectLighting<'a> {
     /// Light from every light (irradiance-weighted, over π for the lambertian BRDF), with shadow
     /// rays toward those that cast them. A point-like light takes one ray; area and dome lights
     /// and distant lights with an angle take `shadow_samples`, each with the §4.5 spread.
-    fn direct(&self, sp: &ShadingPoint, hit: &Hit, footprint: &RayDifferential, sampler: &mut Sampler, counters: &mut TraceCounters) -> Vec3A {
+    fn direct(
+        &self,
+        sp: &ShadingPoint,
+        hit: &Hit,
+        footprint: &RayDifferential,
+        sampler: &mut Sampler,
+        counters: &mut TraceCounters,
+    ) -> Vec3A {
         let mut sum = Vec3A::ZERO;
         for light in &self.scene.lights {
             let n = if light.is_delta() { 1 } else { self.shadow_samples.max(1) };
@@ -336,7 +354,14 @@ impl<'a> DirectLighting<'a> {
     /// The unoccluded fraction of the cosine-weighted hemisphere within `ao_distance`, from
     /// `ao_samples` rays whose spread is √(1/(N·p(ω))) (the paper's §4.6): wide near the
     /// horizon, narrower at the pole.
-    fn occlusion(&self, sp: &ShadingPoint, hit: &Hit, footprint: &RayDifferential, sampler: &mut Sampler, counters: &mut TraceCounters) -> f32 {
+    fn occlusion(
+        &self,
+        sp: &ShadingPoint,
+        hit: &Hit,
+        footprint: &RayDifferential,
+        sampler: &mut Sampler,
+        counters: &mut TraceCounters,
+    ) -> f32 {
         let (t, b) = frame(sp.ns);
         let n = self.ao_samples;
         let mut open = 0u32;

@@ -28,7 +28,17 @@ pub struct WatertightRay {
 impl WatertightRay {
     pub fn new(o: Vec3A, d: Vec3A) -> Self {
         let a = d.abs();
-        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+        let kz = if a.x > a.y {
+            if a.x > a.z {
+                0
+            } else {
+                2
+            }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
         if d[kz] < 0.0 {
@@ -104,7 +114,15 @@ pub struct GridHit {
 }
 
 /// Tests quads `[i0, i1) × [j0, j1)` (in stride units) of `tess` read with vertex `stride`.
-fn hit_quads(ray: &WatertightRay, tess: &Tessellation, stride: usize, range: (usize, usize, usize, usize), t_min: f32, best: &mut Option<GridHit>, t_max: &mut f32) {
+fn hit_quads(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    range: (usize, usize, usize, usize),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+) {
     let q = (tess.n - 1) / stride;
     let inv_q = 1.0 / q as f32;
     let (i0, i1, j0, j1) = range;
@@ -124,7 +142,8 @@ fn hit_quads(ray: &WatertightRay, tess: &Tessellation, stride: usize, range: (us
                 if let Some((t, _b0, b1, b2)) = ray.hit_triangle(p00, p10, p01, *t_max) {
                     if t > t_min {
                         *t_max = t;
-                        *best = Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng: (p10 - p00).cross(p01 - p00) });
+                        *best =
+                            Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng: (p10 - p00).cross(p01 - p00) });
                     }
                 }
                 continue;
@@ -220,7 +239,9 @@ mod tests {
     fn triangle_domains_are_hit_below_their_diagonal_only() {
         let mut t = flat_grid(5);
         t.domain = GridDomain::LowerTriangle;
-        for &(x, y, inside) in &[(0.1f32, 0.2f32, true), (0.45, 0.45, true), (0.2, 0.77, true), (0.55, 0.5, false), (0.9, 0.9, false), (0.3, 0.74, false)] {
+        for &(x, y, inside) in
+            &[(0.1f32, 0.2f32, true), (0.45, 0.45, true), (0.2, 0.77, true), (0.55, 0.5, false), (0.9, 0.9, false), (0.3, 0.74, false)]
+        {
             for stride in [1, 2] {
                 let r = WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
                 let h = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY);

@@ -58,11 +58,23 @@ pub struct LightSample {
 impl Light {
     /// A distant light travelling along `direction` with irradiance `irradiance` (RGB).
     pub fn distant(name: impl Into<String>, direction: Vec3A, irradiance: Vec3A) -> Self {
-        Light { name: name.into(), shape: LightShape::Distant { direction: direction.normalize_or(Vec3A::NEG_Z), angle_deg: 0.0 }, radiance_scale: irradiance, casts_shadows: true }
+        Light {
+            name: name.into(),
+            shape: LightShape::Distant { direction: direction.normalize_or(Vec3A::NEG_Z), angle_deg: 0.0 },
+            radiance_scale: irradiance,
+            casts_shadows: true,
+        }
     }
 
     /// A UsdLux.DistantLight from its world transform and inputs.
-    pub fn usd_distant(name: impl Into<String>, render_from_light: &Mat4, intensity: f32, exposure: f32, color: Vec3A, angle_deg: f32) -> Self {
+    pub fn usd_distant(
+        name: impl Into<String>,
+        render_from_light: &Mat4,
+        intensity: f32,
+        exposure: f32,
+        color: Vec3A,
+        angle_deg: f32,
+    ) -> Self {
         let dir = render_from_light.transform_vector3a(Vec3A::NEG_Z);
         let mut l = Light::distant(name, dir, color * intensity * exposure.exp2());
         if let LightShape::Distant { angle_deg: a, .. } = &mut l.shape {
@@ -106,7 +118,12 @@ impl Light {
                 let phi = 2.0 * std::f32::consts::PI * u2;
                 let (t, b) = frame(toward);
                 let wi = (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + toward * cos_t).normalize();
-                Some(LightSample { wi, distance: f32::INFINITY, weight: self.radiance_scale, solid_angle_sr: 2.0 * std::f32::consts::PI * (1.0 - cos_max) })
+                Some(LightSample {
+                    wi,
+                    distance: f32::INFINITY,
+                    weight: self.radiance_scale,
+                    solid_angle_sr: 2.0 * std::f32::consts::PI * (1.0 - cos_max),
+                })
             }
             LightShape::Dome => {
                 let (local, pdf) = cosine_hemisphere(u1, u2);
@@ -115,7 +132,12 @@ impl Light {
                 }
                 let (t, b) = frame(n);
                 let wi = t * local.x + b * local.y + n * local.z;
-                Some(LightSample { wi, distance: f32::INFINITY, weight: self.radiance_scale / pdf, solid_angle_sr: 2.0 * std::f32::consts::PI })
+                Some(LightSample {
+                    wi,
+                    distance: f32::INFINITY,
+                    weight: self.radiance_scale / pdf,
+                    solid_angle_sr: 2.0 * std::f32::consts::PI,
+                })
             }
             shape => {
                 let (y, ny, area) = sample_surface(shape, u1, u2)?;
@@ -193,7 +215,8 @@ mod tests {
     #[test]
     fn sphere_light_irradiance_is_analytic() {
         // A sphere of radiance L, radius r, at distance d on the normal: E = π L (r/d)².
-        let light = Light::usd_area("/s", LightShape::Sphere { center: Vec3A::new(0.0, 0.0, 4.0), radius: 0.5 }, 1.0, 0.0, Vec3A::ONE, false);
+        let light =
+            Light::usd_area("/s", LightShape::Sphere { center: Vec3A::new(0.0, 0.0, 4.0), radius: 0.5 }, 1.0, 0.0, Vec3A::ONE, false);
         let e = irradiance(&light, Vec3A::ZERO, Vec3A::Z, 200_000);
         let expected = std::f32::consts::PI * (0.5f32 / 4.0).powi(2);
         assert!((e - expected).abs() < 0.02 * expected, "{e} vs {expected}");

@@ -27,13 +27,23 @@ pub struct TexturedColor {
 
 impl std::fmt::Debug for TexturedColor {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TexturedColor").field("path", &self.path).field("scale", &self.scale).field("bias", &self.bias).finish_non_exhaustive()
+        f.debug_struct("TexturedColor")
+            .field("path", &self.path)
+            .field("scale", &self.scale)
+            .field("bias", &self.bias)
+            .finish_non_exhaustive()
     }
 }
 
 impl PartialEq for TexturedColor {
     fn eq(&self, o: &Self) -> bool {
-        Arc::ptr_eq(&self.sampler, &o.sampler) && self.texture == o.texture && self.lookup == o.lookup && self.scale == o.scale && self.bias == o.bias && self.fallback == o.fallback && self.st_channel == o.st_channel
+        Arc::ptr_eq(&self.sampler, &o.sampler)
+            && self.texture == o.texture
+            && self.lookup == o.lookup
+            && self.scale == o.scale
+            && self.bias == o.bias
+            && self.fallback == o.fallback
+            && self.st_channel == o.st_channel
     }
 }
 

@@ -21,9 +21,7 @@
 //! containing `lefthanded` sets [`MeshTopology::left_handed`] (USD's `orientation`).
 
 use crate::error::MeshError;
-use crate::topology::{
-    BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision,
-};
+use crate::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 
 /// How crease sharpness decays under subdivision (`Sdc::Options::CreasingMethod`).
 ///
@@ -70,10 +68,7 @@ impl ObjShape {
     /// [`MeshError::Unsupported`] naming the shape when it has hierarchical edits.
     pub fn check_supported(&self) -> Result<(), MeshError> {
         if self.has_hierarchical_edits {
-            return Err(MeshError::Unsupported(format!(
-                "{}: hierarchical edits (OpenSubdiv 2 `hedit` tags) are not supported",
-                self.name
-            )));
+            return Err(MeshError::Unsupported(format!("{}: hierarchical edits (OpenSubdiv 2 `hedit` tags) are not supported", self.name)));
         }
         Ok(())
     }
@@ -104,73 +99,46 @@ struct Tag<'a> {
 fn parse_tag<'a>(rest: &'a str, err: &dyn Fn(String) -> MeshError) -> Result<Tag<'a>, MeshError> {
     let mut it = rest.split_whitespace();
     let name = it.next().ok_or_else(|| err("tag without a name".into()))?;
-    let counts = it
-        .next()
-        .ok_or_else(|| err(format!("tag '{name}' has no int/float/string counts")))?;
+    let counts = it.next().ok_or_else(|| err(format!("tag '{name}' has no int/float/string counts")))?;
     let parsed: Vec<usize> = counts
         .split('/')
         .map(|c| c.parse::<usize>())
         .collect::<Result<_, _>>()
         .map_err(|_| err(format!("tag '{name}': bad counts '{counts}'")))?;
     let [ni, nf, ns] = parsed[..] else {
-        return Err(err(format!(
-            "tag '{name}': counts '{counts}' are not N/N/N"
-        )));
+        return Err(err(format!("tag '{name}': counts '{counts}' are not N/N/N")));
     };
-    let mut next = |what: &str| {
-        it.next()
-            .ok_or_else(|| err(format!("tag '{name}': missing {what} argument")))
-    };
+    let mut next = |what: &str| it.next().ok_or_else(|| err(format!("tag '{name}': missing {what} argument")));
     let mut ints = Vec::with_capacity(ni);
     for _ in 0..ni {
         let s = next("int")?;
-        ints.push(
-            s.parse()
-                .map_err(|_| err(format!("tag '{name}': '{s}' is not an integer")))?,
-        );
+        ints.push(s.parse().map_err(|_| err(format!("tag '{name}': '{s}' is not an integer")))?);
     }
     let mut floats = Vec::with_capacity(nf);
     for _ in 0..nf {
         let s = next("float")?;
-        floats.push(
-            s.parse()
-                .map_err(|_| err(format!("tag '{name}': '{s}' is not a number")))?,
-        );
+        floats.push(s.parse().map_err(|_| err(format!("tag '{name}': '{s}' is not a number")))?);
     }
     let mut strings = Vec::with_capacity(ns);
     for _ in 0..ns {
         strings.push(next("string")?);
     }
-    Ok(Tag {
-        name,
-        ints,
-        floats,
-        strings,
-    })
+    Ok(Tag { name, ints, floats, strings })
 }
 
-fn parse_floats<const N: usize>(
-    rest: &str,
-    err: &dyn Fn(String) -> MeshError,
-) -> Result<[f32; N], MeshError> {
+fn parse_floats<const N: usize>(rest: &str, err: &dyn Fn(String) -> MeshError) -> Result<[f32; N], MeshError> {
     let mut out = [0.0f32; N];
     let mut it = rest.split_whitespace();
     for o in out.iter_mut() {
-        let s = it
-            .next()
-            .ok_or_else(|| err(format!("expected {N} numbers")))?;
-        *o = s
-            .parse()
-            .map_err(|_| err(format!("'{s}' is not a number")))?;
+        let s = it.next().ok_or_else(|| err(format!("expected {N} numbers")))?;
+        *o = s.parse().map_err(|_| err(format!("'{s}' is not a number")))?;
     }
     Ok(out)
 }
 
 /// Resolves a 1-based (or negative, relative) OBJ index against `count` items read so far.
 fn obj_index(s: &str, count: usize, err: &dyn Fn(String) -> MeshError) -> Result<i32, MeshError> {
-    let i: i64 = s
-        .parse()
-        .map_err(|_| err(format!("'{s}' is not an index")))?;
+    let i: i64 = s.parse().map_err(|_| err(format!("'{s}' is not an index")))?;
     let resolved = match i {
         0 => return Err(err("index 0 (OBJ indices start at 1)".into())),
         i if i > 0 => i - 1,
@@ -189,10 +157,7 @@ fn obj_index(s: &str, count: usize, err: &dyn Fn(String) -> MeshError) -> Result
 /// topology that [`MeshTopology::validate`] refuses. Hierarchical edits are *not* an error here:
 /// see [`ObjShape::check_supported`].
 pub fn parse_obj_shape(name: &str, text: &str) -> Result<ObjShape, MeshError> {
-    let mut shape = ObjShape {
-        name: name.to_string(),
-        ..Default::default()
-    };
+    let mut shape = ObjShape { name: name.to_string(), ..Default::default() };
     let mut header_scheme = None;
     let mut topo = MeshTopology {
         // OpenSubdiv's GetSdcOptions defaults, not USD's: these are OpenSubdiv's shapes.
@@ -228,12 +193,9 @@ pub fn parse_obj_shape(name: &str, text: &str) -> Result<ObjShape, MeshError> {
                 for item in rest.split_whitespace() {
                     let mut parts = item.split('/');
                     let v = parts.next().unwrap_or("");
-                    topo.face_vertex_indices
-                        .push(obj_index(v, shape.points.len(), &err)?);
+                    topo.face_vertex_indices.push(obj_index(v, shape.points.len(), &err)?);
                     match parts.next() {
-                        Some(t) if !t.is_empty() => {
-                            uv_indices.push(obj_index(t, shape.uvs.len(), &err)?)
-                        }
+                        Some(t) if !t.is_empty() => uv_indices.push(obj_index(t, shape.uvs.len(), &err)?),
                         _ => all_faces_have_uvs = false,
                     }
                     n += 1;
@@ -249,11 +211,9 @@ pub fn parse_obj_shape(name: &str, text: &str) -> Result<ObjShape, MeshError> {
         }
     }
 
-    shape.scheme = scheme_from_name(name).or(header_scheme).ok_or_else(|| {
-        MeshError::Invalid(format!(
-            "{name}: no scheme (name prefix catmark_/loop_/bilinear_ or header)"
-        ))
-    })?;
+    shape.scheme = scheme_from_name(name)
+        .or(header_scheme)
+        .ok_or_else(|| MeshError::Invalid(format!("{name}: no scheme (name prefix catmark_/loop_/bilinear_ or header)")))?;
     topo.scheme = shape.scheme;
     if let Some(rule) = smooth_triangles {
         // GetSdcOptions applies `smoothtriangles` to Catmark meshes only.
@@ -267,24 +227,13 @@ pub fn parse_obj_shape(name: &str, text: &str) -> Result<ObjShape, MeshError> {
     if name.contains("hedit") {
         shape.has_hierarchical_edits = true;
     }
-    if all_faces_have_uvs
-        && uv_indices.len() == topo.face_vertex_indices.len()
-        && !uv_indices.is_empty()
-    {
-        if let Some((i, &bad)) = uv_indices
-            .iter()
-            .enumerate()
-            .find(|(_, &t)| t < 0 || t as usize >= shape.uvs.len())
-        {
-            return Err(MeshError::Invalid(format!(
-                "{name}: uv index [{i}] = {bad} is out of range [0, {})",
-                shape.uvs.len()
-            )));
+    if all_faces_have_uvs && uv_indices.len() == topo.face_vertex_indices.len() && !uv_indices.is_empty() {
+        if let Some((i, &bad)) = uv_indices.iter().enumerate().find(|(_, &t)| t < 0 || t as usize >= shape.uvs.len()) {
+            return Err(MeshError::Invalid(format!("{name}: uv index [{i}] = {bad} is out of range [0, {})", shape.uvs.len())));
         }
         shape.uv_indices = uv_indices;
     }
-    topo.validate(shape.points.len())
-        .map_err(|e| MeshError::Invalid(format!("{name}: {e}")))?;
+    topo.validate(shape.points.len()).map_err(|e| MeshError::Invalid(format!("{name}: {e}")))?;
     shape.topology = topo;
     Ok(shape)
 }
@@ -296,18 +245,13 @@ fn apply_tag(
     smooth_triangles: &mut Option<TriangleSubdivision>,
     err: &dyn Fn(String) -> MeshError,
 ) -> Result<(), MeshError> {
-    let to_i32 = |v: i64| {
-        i32::try_from(v).map_err(|_| err(format!("tag '{}': {v} is out of range", tag.name)))
-    };
+    let to_i32 = |v: i64| i32::try_from(v).map_err(|_| err(format!("tag '{}': {v} is out of range", tag.name)));
     // OpenSubdiv clamps negative sharpness to 0; one float applies to all, else one per element.
     let sharpness = |k: usize| -> Result<f32, MeshError> {
         let s = match tag.floats.len() {
             0 => return Err(err(format!("tag '{}' has no sharpness", tag.name))),
             1 => tag.floats[0],
-            _ => *tag
-                .floats
-                .get(k)
-                .ok_or_else(|| err(format!("tag '{}': no sharpness for element {k}", tag.name)))?,
+            _ => *tag.floats.get(k).ok_or_else(|| err(format!("tag '{}': no sharpness for element {k}", tag.name)))?,
         };
         Ok(s.max(0.0))
     };
@@ -323,8 +267,7 @@ fn apply_tag(
                 return Err(err("tag 'crease' expects vertex pairs".into()));
             }
             for (k, pair) in tag.ints.chunks_exact(2).enumerate() {
-                topo.crease_indices
-                    .extend([to_i32(pair[0])?, to_i32(pair[1])?]);
+                topo.crease_indices.extend([to_i32(pair[0])?, to_i32(pair[1])?]);
                 topo.crease_lengths.push(2);
                 topo.crease_sharpnesses.push(sharpness(k)?);
             }
@@ -363,22 +306,14 @@ fn apply_tag(
             *smooth_triangles = Some(match tag.strings.first().copied() {
                 Some("catmark") => TriangleSubdivision::CatmullClark,
                 Some("smooth") => TriangleSubdivision::Smooth,
-                other => {
-                    return Err(err(format!(
-                        "smoothtriangles expects catmark or smooth, got {other:?}"
-                    )))
-                }
+                other => return Err(err(format!("smoothtriangles expects catmark or smooth, got {other:?}"))),
             })
         }
         "creasemethod" => {
             shape.crease_method = match tag.strings.first().copied() {
                 Some("normal") => CreaseMethod::Uniform,
                 Some("chaikin") => CreaseMethod::Chaikin,
-                other => {
-                    return Err(err(format!(
-                        "creasemethod expects normal or chaikin, got {other:?}"
-                    )))
-                }
+                other => return Err(err(format!("creasemethod expects normal or chaikin, got {other:?}"))),
             }
         }
         "vertexedit" | "edgeedit" | "faceedit" => shape.has_hierarchical_edits = true,
@@ -430,26 +365,14 @@ t interpolateboundary 1/0/0 1
 
     #[test]
     fn scheme_comes_from_the_name_then_the_header() {
-        assert_eq!(
-            parse_obj_shape("loop_x", "v 0 0 0\n").unwrap().scheme,
-            Scheme::Loop
-        );
-        assert_eq!(
-            parse_obj_shape("x", "# s, scheme: bilinear\nv 0 0 0\n")
-                .unwrap()
-                .scheme,
-            Scheme::Bilinear
-        );
+        assert_eq!(parse_obj_shape("loop_x", "v 0 0 0\n").unwrap().scheme, Scheme::Loop);
+        assert_eq!(parse_obj_shape("x", "# s, scheme: bilinear\nv 0 0 0\n").unwrap().scheme, Scheme::Bilinear);
         assert!(parse_obj_shape("x", "v 0 0 0\n").is_err());
     }
 
     #[test]
     fn defaults_follow_opensubdiv_not_usd() {
-        let s = parse_obj_shape(
-            "catmark_q",
-            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n",
-        )
-        .unwrap();
+        let s = parse_obj_shape("catmark_q", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n").unwrap();
         assert_eq!(s.topology.boundary, BoundaryInterpolation::EdgeOnly);
         assert_eq!(s.topology.face_varying, FaceVaryingInterpolation::All);
         assert!(s.uv_indices.is_empty());
@@ -457,20 +380,11 @@ t interpolateboundary 1/0/0 1
 
     #[test]
     fn bad_lines_name_the_shape_and_line() {
-        let e = parse_obj_shape("catmark_bad", "v 0 0 0\nv 1 0\n")
-            .unwrap_err()
-            .to_string();
+        let e = parse_obj_shape("catmark_bad", "v 0 0 0\nv 1 0\n").unwrap_err().to_string();
         assert!(e.contains("catmark_bad: line 2"), "{e}");
-        let e = parse_obj_shape("catmark_bad", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("catmark_bad") && e.contains("faceVertexIndices"),
-            "{e}"
-        );
-        let e = parse_obj_shape("catmark_bad", "v 0 0 0\nf 0 1 1\n")
-            .unwrap_err()
-            .to_string();
+        let e = parse_obj_shape("catmark_bad", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n").unwrap_err().to_string();
+        assert!(e.contains("catmark_bad") && e.contains("faceVertexIndices"), "{e}");
+        let e = parse_obj_shape("catmark_bad", "v 0 0 0\nf 0 1 1\n").unwrap_err().to_string();
         assert!(e.contains("index 0"), "{e}");
     }
 
@@ -481,10 +395,7 @@ t interpolateboundary 1/0/0 1
         let s = parse_obj_shape("catmark_q", text).unwrap();
         assert!(s.has_hierarchical_edits);
         let e = s.check_supported().unwrap_err().to_string();
-        assert!(
-            e.contains("not supported") && e.contains("catmark_q"),
-            "{e}"
-        );
+        assert!(e.contains("not supported") && e.contains("catmark_q"), "{e}");
     }
 
     fn shapes_dir() -> PathBuf {
@@ -495,16 +406,11 @@ t interpolateboundary 1/0/0 1
     fn every_regression_shape_parses() {
         let dir = shapes_dir();
         let Ok(entries) = std::fs::read_dir(&dir) else {
-            println!(
-                "note: {} is absent; skipping the shape corpus",
-                dir.display()
-            );
+            println!("note: {} is absent; skipping the shape corpus", dir.display());
             return;
         };
-        let mut paths: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-            .collect();
+        let mut paths: Vec<PathBuf> =
+            entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "obj")).collect();
         paths.sort();
         assert!(!paths.is_empty(), "no .obj files in {}", dir.display());
         let mut hedits = 0;
@@ -512,16 +418,10 @@ t interpolateboundary 1/0/0 1
             let name = p.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
             let text = std::fs::read_to_string(p).unwrap();
             let s = parse_obj_shape(name, &text).unwrap_or_else(|e| panic!("{e}"));
-            assert!(
-                !s.points.is_empty() && s.topology.face_count() > 0,
-                "{name} is empty"
-            );
+            assert!(!s.points.is_empty() && s.topology.face_count() > 0, "{name} is empty");
             assert_eq!(s.has_hierarchical_edits, name.contains("hedit"), "{name}");
             hedits += usize::from(s.has_hierarchical_edits);
         }
-        println!(
-            "{} shapes parsed, {hedits} with hierarchical edits",
-            paths.len()
-        );
+        println!("{} shapes parsed, {hedits} with hierarchical edits", paths.len());
     }
 }

@@ -80,10 +80,16 @@ impl RenderOptions {
             return Err(RenderError::Settings(format!("tessFactorIncoherent {} must be a positive number", self.tess_factor_incoherent)));
         }
         if !(self.ao_distance > 0.0) || !(self.ao_intensity.is_finite() && self.ao_intensity >= 0.0) {
-            return Err(RenderError::Settings(format!("aoDistance {} must be positive and aoIntensity {} a non-negative number", self.ao_distance, self.ao_intensity)));
+            return Err(RenderError::Settings(format!(
+                "aoDistance {} must be positive and aoIntensity {} a non-negative number",
+                self.ao_distance, self.ao_intensity
+            )));
         }
         if self.ao_samples > 65_536 || self.max_depth > 64 {
-            return Err(RenderError::Settings(format!("aoSamples {} must be at most 65536 and maxDepth {} at most 64", self.ao_samples, self.max_depth)));
+            return Err(RenderError::Settings(format!(
+                "aoSamples {} must be at most 65536 and maxDepth {} at most 64",
+                self.ao_samples, self.max_depth
+            )));
         }
         for a in &self.aovs {
             if crate::film::aov_channels(a).is_none() {

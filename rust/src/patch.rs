@@ -93,10 +93,7 @@ impl UvRect {
     #[inline]
     pub fn grid_uv(&self, i: usize, j: usize, n: usize) -> (f32, f32) {
         let d = (n.max(2) - 1) as f32;
-        (
-            self.u0 + (self.u1 - self.u0) * (i as f32 / d),
-            self.v0 + (self.v1 - self.v0) * (j as f32 / d),
-        )
+        (self.u0 + (self.u1 - self.u0) * (i as f32 / d), self.v0 + (self.v1 - self.v0) * (j as f32 / d))
     }
 }
 

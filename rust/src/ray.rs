@@ -17,15 +17,8 @@ pub enum RayKind {
 }
 
 impl RayKind {
-    pub const ALL: [RayKind; 7] = [
-        RayKind::Camera,
-        RayKind::Shadow,
-        RayKind::Reflection,
-        RayKind::Refraction,
-        RayKind::Glossy,
-        RayKind::Diffuse,
-        RayKind::Ao,
-    ];
+    pub const ALL: [RayKind; 7] =
+        [RayKind::Camera, RayKind::Shadow, RayKind::Reflection, RayKind::Refraction, RayKind::Glossy, RayKind::Diffuse, RayKind::Ao];
 
     /// The stats name (`render.rays.<name>`).
     pub const fn name(self) -> &'static str {

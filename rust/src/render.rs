@@ -12,13 +12,13 @@ use crate::effects;
 use crate::error::RenderError;
 use crate::film::Film;
 use crate::geometry_cache::{CacheMode, GeometryCache};
-use crate::tessellate::Tessellation;
 use crate::integrator::{DirectLighting, SampleValue};
 use crate::options::RenderOptions;
 use crate::progress::Progress;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::stats::{collect, RenderFigures};
+use crate::tessellate::Tessellation;
 use crate::trace::{TraceCounters, Tracer};
 
 /// Tile edge in pixels: small enough to balance two threads on small images.
@@ -53,7 +53,12 @@ pub fn render(scene: &Scene, options: &RenderOptions, progress: &dyn Progress) -
 ///
 /// # Errors
 /// As [`render`].
-pub fn render_with_cache(scene: &Scene, options: &RenderOptions, cache: Option<Arc<GeometryCache<Tessellation>>>, progress: &dyn Progress) -> Result<RenderOutput, RenderError> {
+pub fn render_with_cache(
+    scene: &Scene,
+    options: &RenderOptions,
+    cache: Option<Arc<GeometryCache<Tessellation>>>,
+    progress: &dyn Progress,
+) -> Result<RenderOutput, RenderError> {
     options.validate()?;
     scene.camera.validate().map_err(RenderError::Camera)?;
     let start = Instant::now();
@@ -104,7 +109,14 @@ pub fn render_with_cache(scene: &Scene, options: &RenderOptions, cache: Option<A
         if dropped > 0 {
             log::warn!("dropped {dropped} non-finite samples");
         }
-        let figures = RenderFigures { wall_s: start.elapsed().as_secs_f64(), threads, dropped_samples: dropped, width: w, height: h, samples: options.samples };
+        let figures = RenderFigures {
+            wall_s: start.elapsed().as_secs_f64(),
+            threads,
+            dropped_samples: dropped,
+            width: w,
+            height: h,
+            samples: options.samples,
+        };
         let control_faces = scene.meshes.iter().map(|m| m.surface.control_face_count()).sum();
         let stats = collect(&tracer, &counters, &fx, &figures, control_faces, scene.instances.len());
         Ok(RenderOutput { film, stats })

@@ -67,9 +67,18 @@ mod tests {
 
     #[test]
     fn streams_are_reproducible_and_uniform() {
-        let a: Vec<f32> = { let mut s = Sampler::new(7, 3, 1); (0..4).map(|_| s.next_f32()).collect() };
-        let b: Vec<f32> = { let mut s = Sampler::new(7, 3, 1); (0..4).map(|_| s.next_f32()).collect() };
-        let c: Vec<f32> = { let mut s = Sampler::new(8, 3, 1); (0..4).map(|_| s.next_f32()).collect() };
+        let a: Vec<f32> = {
+            let mut s = Sampler::new(7, 3, 1);
+            (0..4).map(|_| s.next_f32()).collect()
+        };
+        let b: Vec<f32> = {
+            let mut s = Sampler::new(7, 3, 1);
+            (0..4).map(|_| s.next_f32()).collect()
+        };
+        let c: Vec<f32> = {
+            let mut s = Sampler::new(8, 3, 1);
+            (0..4).map(|_| s.next_f32()).collect()
+        };
         assert_eq!(a, b);
         assert_ne!(a, c);
         let mut s = Sampler::new(1, 2, 3);

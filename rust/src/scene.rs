@@ -52,7 +52,17 @@ impl std::fmt::Debug for Mesh {
 
 impl Mesh {
     pub fn new(name: impl Into<String>, surface: Arc<dyn LimitSurface>) -> Self {
-        Mesh { name: name.into(), surface, material: usize::MAX, displacement_bound: 0.0, generation: 0, left_handed: false, displacement: None, cache_id: None, face_materials: None }
+        Mesh {
+            name: name.into(),
+            surface,
+            material: usize::MAX,
+            displacement_bound: 0.0,
+            generation: 0,
+            left_handed: false,
+            displacement: None,
+            cache_id: None,
+            face_materials: None,
+        }
     }
 }
 
@@ -103,10 +113,7 @@ impl Scene {
     /// The material of a mesh (the default material when unbound).
     pub fn material_of(&self, mesh: usize) -> &Material {
         static DEFAULT: std::sync::OnceLock<Material> = std::sync::OnceLock::new();
-        self.meshes
-            .get(mesh)
-            .and_then(|m| self.materials.get(m.material))
-            .unwrap_or_else(|| DEFAULT.get_or_init(Material::default))
+        self.meshes.get(mesh).and_then(|m| self.materials.get(m.material)).unwrap_or_else(|| DEFAULT.get_or_init(Material::default))
     }
 
     /// The material at patch `patch` of mesh `mesh`: its base face's entry in

@@ -13,9 +13,7 @@ pub fn peak_rss_bytes() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1).and_then(|kb| kb.parse::<u64>().ok()))
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1).and_then(|kb| kb.parse::<u64>().ok()))
         })
         .map_or(0, |kb| kb * 1024)
 }
@@ -31,9 +29,18 @@ pub struct RenderFigures {
 }
 
 /// Builds the stats JSON of one render.
-pub fn collect(tracer: &Tracer<'_>, counters: &TraceCounters, effects: &[Effect], figures: &RenderFigures, control_faces: usize, instances: usize) -> Value {
-    let rays: serde_json::Map<String, Value> = RayKind::ALL.iter().enumerate().map(|(i, k)| (k.name().to_string(), json!(counters.rays[i]))).collect();
-    let rates: serde_json::Map<String, Value> = Rate::ALL.iter().map(|r| (r.quads().to_string(), json!(counters.rate_tests[*r as usize]))).collect();
+pub fn collect(
+    tracer: &Tracer<'_>,
+    counters: &TraceCounters,
+    effects: &[Effect],
+    figures: &RenderFigures,
+    control_faces: usize,
+    instances: usize,
+) -> Value {
+    let rays: serde_json::Map<String, Value> =
+        RayKind::ALL.iter().enumerate().map(|(i, k)| (k.name().to_string(), json!(counters.rays[i]))).collect();
+    let rates: serde_json::Map<String, Value> =
+        Rate::ALL.iter().map(|r| (r.quads().to_string(), json!(counters.rate_tests[*r as usize]))).collect();
     let by_kind: serde_json::Map<String, Value> = RayKind::ALL
         .iter()
         .enumerate()

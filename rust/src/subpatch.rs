@@ -106,7 +106,12 @@ impl MeshGeometry {
         let s = &mesh.surface;
         let grow = mesh.displacement_bound.max(0.0);
         let mut subpatches: Vec<Subpatch> = (0..s.patch_count())
-            .map(|i| Subpatch { patch: i as u32, rect: UvRect::UNIT, bounds: s.patch_bounds(i).expanded(grow), affine: mesh.displacement.is_none() && s.patch_is_affine(i) })
+            .map(|i| Subpatch {
+                patch: i as u32,
+                rect: UvRect::UNIT,
+                bounds: s.patch_bounds(i).expanded(grow),
+                affine: mesh.displacement.is_none() && s.patch_is_affine(i),
+            })
             .filter(|sp| !sp.bounds.is_empty())
             .collect();
         // Collected through a filter, the vector may hold twice its length: give it back.
@@ -129,7 +134,13 @@ mod tests {
         let c = ChildCell { root: 3, depth: 2, i: 1, j: 3 };
         assert_eq!(c.rect(&root), UvRect { u0: 0.125, v0: 0.875, u1: 0.25, v1: 1.0 });
         let kids = ChildCell { root: 3, depth: 0, i: 0, j: 0 }.children();
-        let area: f32 = kids.iter().map(|k| { let r = k.rect(&root); (r.u1 - r.u0) * (r.v1 - r.v0) }).sum();
+        let area: f32 = kids
+            .iter()
+            .map(|k| {
+                let r = k.rect(&root);
+                (r.u1 - r.u0) * (r.v1 - r.v0)
+            })
+            .sum();
         assert!((area - 0.25).abs() < 1e-7);
         let ids = ChildIds::new(10);
         assert_eq!(ids.id(ChildCell { root: 4, depth: 0, i: 0, j: 0 }), 4);

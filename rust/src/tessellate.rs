@@ -133,7 +133,9 @@ impl GridDomain {
 
 impl CacheEntry for Tessellation {
     fn byte_size(&self) -> usize {
-        self.verts.len() * std::mem::size_of::<[f32; 3]>() + self.sub_boxes.len() * std::mem::size_of::<Bounds3>() + 2 * std::mem::size_of::<f32>()
+        self.verts.len() * std::mem::size_of::<[f32; 3]>()
+            + self.sub_boxes.len() * std::mem::size_of::<Bounds3>()
+            + 2 * std::mem::size_of::<f32>()
     }
 
     fn vertex_count(&self) -> usize {
@@ -162,7 +164,13 @@ pub struct DisplaceParams {
 /// limit normal filtered at the grid's own spacing, then (for the fine tier) the 4×4 sub-boxes.
 /// Returns the tessellation and how many displaced vertices left `sub.bounds` (counted, never
 /// clipped). `scratch` is reused between calls to avoid allocation.
-pub fn tessellate(surface: &dyn LimitSurface, sub: &Subpatch, tier: Tier, displace: Option<&DisplaceParams>, scratch: &mut GridSamples) -> (Tessellation, u32) {
+pub fn tessellate(
+    surface: &dyn LimitSurface,
+    sub: &Subpatch,
+    tier: Tier,
+    displace: Option<&DisplaceParams>,
+    scratch: &mut GridSamples,
+) -> (Tessellation, u32) {
     let n = tier.verts_per_side() as usize;
     surface.evaluate_grid(sub.patch as usize, sub.rect, n, displace.is_some(), scratch);
     // Measured on the undisplaced grid: seams follow the limit surface's edges.
@@ -261,7 +269,8 @@ mod tests {
         // Every other vertex of the fine grid is the 9×9 grid of the same surface: the merged
         // 8×8 rate is exactly a coarser tessellation, not an approximation of one.
         let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.7]];
-        let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+        let topo =
+            MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
         let s = BilinearSurface::new(&topo, &pts).unwrap();
         let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: s.patch_bounds(0), affine: false };
         let mut scratch = GridSamples::default();

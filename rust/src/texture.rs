@@ -151,12 +151,7 @@ pub struct Lookup {
 
 impl Lookup {
     /// Channel 0, wrap as the file says, fill 0.
-    pub const DEFAULT: Lookup = Lookup {
-        first_channel: 0,
-        wrap_s: Wrap::FromFile,
-        wrap_t: Wrap::FromFile,
-        fill: 0.0,
-    };
+    pub const DEFAULT: Lookup = Lookup { first_channel: 0, wrap_s: Wrap::FromFile, wrap_t: Wrap::FromFile, fill: 0.0 };
 }
 
 impl Default for Lookup {
@@ -184,15 +179,7 @@ pub trait TextureSampler: Send + Sync {
     /// units per step; see the module doc), as the sampler's [`FilterMode`] says. Returns false,
     /// leaving `out` unspecified, for an unknown handle or a read failure; the failure is counted
     /// in [`TextureSampler::stats`].
-    fn sample(
-        &self,
-        handle: TextureHandle,
-        st: [f32; 2],
-        dst_dx: [f32; 2],
-        dst_dy: [f32; 2],
-        lookup: &Lookup,
-        out: &mut [f32],
-    ) -> bool;
+    fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool;
 
     /// The finest level's resolution in texels (width, height), if known.
     fn resolution(&self, _handle: TextureHandle) -> Option<[u32; 2]> {
@@ -266,10 +253,7 @@ impl CheckerSampler {
     /// # Panics
     /// If `resolution` or `squares` is 0 (a test's mistake).
     pub fn new(name: &str, resolution: u32, squares: u32, filter: FilterMode) -> Self {
-        assert!(
-            resolution > 0 && squares > 0,
-            "checker needs a positive resolution and square count"
-        );
+        assert!(resolution > 0 && squares > 0, "checker needs a positive resolution and square count");
         CheckerSampler {
             name: name.to_string(),
             resolution,
@@ -289,10 +273,7 @@ impl CheckerSampler {
 
     /// Lookups per MIP level so far (index = level, the last bin holds deeper ones).
     pub fn level_histogram(&self) -> Vec<u64> {
-        self.levels
-            .iter()
-            .map(|a| a.load(Ordering::Relaxed))
-            .collect()
+        self.levels.iter().map(|a| a.load(Ordering::Relaxed)).collect()
     }
 
     /// Mean fractional MIP level of the lookups so far (0 when there were none).
@@ -349,22 +330,11 @@ impl TextureSampler for CheckerSampler {
         if path == self.name {
             Ok(TextureHandle::new(0))
         } else {
-            Err(TextureError {
-                path: path.to_string(),
-                message: format!("no such texture (the checker serves only {:?})", self.name),
-            })
+            Err(TextureError { path: path.to_string(), message: format!("no such texture (the checker serves only {:?})", self.name) })
         }
     }
 
-    fn sample(
-        &self,
-        handle: TextureHandle,
-        st: [f32; 2],
-        dst_dx: [f32; 2],
-        dst_dy: [f32; 2],
-        _lookup: &Lookup,
-        out: &mut [f32],
-    ) -> bool {
+    fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], _lookup: &Lookup, out: &mut [f32]) -> bool {
         if handle.index() != 0 || !(st[0].is_finite() && st[1].is_finite()) {
             self.failed.fetch_add(1, Ordering::Relaxed);
             return false;
@@ -374,8 +344,7 @@ impl TextureSampler for CheckerSampler {
         let level = mip_level(dx, dy, res, self.max_level());
         self.lookups.fetch_add(1, Ordering::Relaxed);
         self.levels[(level as usize).min(CHECKER_LEVELS - 1)].fetch_add(1, Ordering::Relaxed);
-        self.level_sum_milli
-            .fetch_add((level * 1024.0) as u64, Ordering::Relaxed);
+        self.level_sum_milli.fetch_add((level * 1024.0) as u64, Ordering::Relaxed);
         let ws = 0.5 * dx[0].abs().max(dy[0].abs());
         let wt = 0.5 * dx[1].abs().max(dy[1].abs());
         let v = self.box_average(st[0] - ws, st[0] + ws, st[1] - wt, st[1] + wt);
@@ -468,49 +437,22 @@ impl Primvar2 {
     /// [`MeshError::Invalid`] naming the primvar when the element count (or index count) does not
     /// match the interpolation, or an index is out of range; [`MeshError::NonFinite`] for a NaN
     /// or infinite value.
-    pub fn face_varying_indices(
-        &self,
-        topology: &MeshTopology,
-        points: usize,
-    ) -> Result<Vec<i32>, MeshError> {
+    pub fn face_varying_indices(&self, topology: &MeshTopology, points: usize) -> Result<Vec<i32>, MeshError> {
         let name = &self.name;
         let elements = self.interpolation.element_count(topology, points);
-        if let Some((i, v)) = self
-            .values
-            .iter()
-            .enumerate()
-            .find(|(_, v)| !(v[0].is_finite() && v[1].is_finite()))
-        {
-            return Err(MeshError::NonFinite(format!(
-                "primvar {name}: value [{i}] = {v:?}"
-            )));
+        if let Some((i, v)) = self.values.iter().enumerate().find(|(_, v)| !(v[0].is_finite() && v[1].is_finite())) {
+            return Err(MeshError::NonFinite(format!("primvar {name}: value [{i}] = {v:?}")));
         }
-        let element_source = if self.indices.is_empty() {
-            self.values.len()
-        } else {
-            self.indices.len()
-        };
+        let element_source = if self.indices.is_empty() { self.values.len() } else { self.indices.len() };
         if element_source != elements {
-            let what = if self.indices.is_empty() {
-                "values"
-            } else {
-                "indices"
-            };
+            let what = if self.indices.is_empty() { "values" } else { "indices" };
             return Err(MeshError::Invalid(format!(
                 "primvar {name}: {element_source} {what} for {:?} interpolation, which needs {elements}",
                 self.interpolation
             )));
         }
-        if let Some((i, &bad)) = self
-            .indices
-            .iter()
-            .enumerate()
-            .find(|(_, &k)| k < 0 || k as usize >= self.values.len())
-        {
-            return Err(MeshError::Invalid(format!(
-                "primvar {name}: indices[{i}] = {bad} is out of range [0, {})",
-                self.values.len()
-            )));
+        if let Some((i, &bad)) = self.indices.iter().enumerate().find(|(_, &k)| k < 0 || k as usize >= self.values.len()) {
+            return Err(MeshError::Invalid(format!("primvar {name}: indices[{i}] = {bad} is out of range [0, {})", self.values.len())));
         }
         let value_of = |element: usize| {
             if self.indices.is_empty() {
@@ -526,10 +468,9 @@ impl Primvar2 {
                 let element = match self.interpolation {
                     Interpolation::Constant => 0,
                     Interpolation::Uniform => face,
-                    Interpolation::Varying | Interpolation::Vertex => topology
-                        .face_vertex_indices
-                        .get(fv)
-                        .map_or(0, |&p| p.max(0) as usize),
+                    Interpolation::Varying | Interpolation::Vertex => {
+                        topology.face_vertex_indices.get(fv).map_or(0, |&p| p.max(0) as usize)
+                    }
                     Interpolation::FaceVarying => fv,
                 };
                 out.push(value_of(element));
@@ -562,28 +503,18 @@ impl BaseFacePrimvar {
     /// # Errors
     /// As [`Primvar2::face_varying_indices`], and [`MeshError::Invalid`] for a Loop mesh with a
     /// non-triangle.
-    pub fn new(
-        topology: &MeshTopology,
-        points: usize,
-        primvar: &Primvar2,
-    ) -> Result<Self, MeshError> {
+    pub fn new(topology: &MeshTopology, points: usize, primvar: &Primvar2) -> Result<Self, MeshError> {
         let idx = primvar.face_varying_indices(topology, points)?;
         let triangles = topology.scheme == Scheme::Loop;
         let mut corners = Vec::with_capacity(topology.face_count());
         let mut start = 0usize;
         for (face, &n) in topology.face_vertex_counts.iter().enumerate() {
             let n = n.max(0) as usize;
-            let fv: Vec<[f32; 2]> = idx[start..start + n]
-                .iter()
-                .map(|&k| primvar.values[k as usize])
-                .collect();
+            let fv: Vec<[f32; 2]> = idx[start..start + n].iter().map(|&k| primvar.values[k as usize]).collect();
             start += n;
             if triangles {
                 if n != 3 {
-                    return Err(MeshError::Invalid(format!(
-                        "primvar {}: Loop face {face} has {n} vertices",
-                        primvar.name
-                    )));
+                    return Err(MeshError::Invalid(format!("primvar {}: Loop face {face} has {n} vertices", primvar.name)));
                 }
                 corners.push([fv[0], fv[1], fv[2], fv[2]]);
             } else if n == 4 {
@@ -591,16 +522,9 @@ impl BaseFacePrimvar {
             } else {
                 let mid = |a: [f32; 2], b: [f32; 2]| [(a[0] + b[0]) * 0.5, (a[1] + b[1]) * 0.5];
                 let inv = 1.0 / n as f32;
-                let centroid = fv
-                    .iter()
-                    .fold([0.0f32; 2], |c, v| [c[0] + v[0] * inv, c[1] + v[1] * inv]);
+                let centroid = fv.iter().fold([0.0f32; 2], |c, v| [c[0] + v[0] * inv, c[1] + v[1] * inv]);
                 for i in 0..n {
-                    corners.push([
-                        fv[i],
-                        mid(fv[i], fv[(i + 1) % n]),
-                        centroid,
-                        mid(fv[i], fv[(i + n - 1) % n]),
-                    ]);
+                    corners.push([fv[i], mid(fv[i], fv[(i + 1) % n]), centroid, mid(fv[i], fv[(i + n - 1) % n])]);
                 }
             }
         }
@@ -624,10 +548,7 @@ impl BaseFacePrimvar {
                 du[k] = c1[k] - c0[k];
                 dv[k] = c2[k] - c0[k];
             } else {
-                val[k] = (1.0 - u) * (1.0 - v) * c0[k]
-                    + u * (1.0 - v) * c1[k]
-                    + u * v * c2[k]
-                    + (1.0 - u) * v * c3[k];
+                val[k] = (1.0 - u) * (1.0 - v) * c0[k] + u * (1.0 - v) * c1[k] + u * v * c2[k] + (1.0 - u) * v * c3[k];
                 du[k] = (1.0 - v) * (c1[k] - c0[k]) + v * (c2[k] - c3[k]);
                 dv[k] = (1.0 - u) * (c3[k] - c0[k]) + u * (c2[k] - c1[k]);
             }
@@ -670,54 +591,19 @@ mod tests {
         assert!(c.handle("other").unwrap_err().to_string().contains("other"));
         let mut out = [0.0f32; 3];
         // One texel wide: level 0. 64 texels: level 6. The whole texture: level 10, value 0.5.
-        assert!(c.sample(
-            h,
-            [0.06, 0.06],
-            [1.0 / 1024.0, 0.0],
-            [0.0, 1.0 / 1024.0],
-            &Lookup::DEFAULT,
-            &mut out
-        ));
+        assert!(c.sample(h, [0.06, 0.06], [1.0 / 1024.0, 0.0], [0.0, 1.0 / 1024.0], &Lookup::DEFAULT, &mut out));
         assert_eq!(out, [0.0; 3]);
-        c.sample(
-            h,
-            [0.5, 0.5],
-            [64.0 / 1024.0, 0.0],
-            [0.0, 64.0 / 1024.0],
-            &Lookup::DEFAULT,
-            &mut out,
-        );
-        c.sample(
-            h,
-            [0.3, 0.7],
-            [1.0, 0.0],
-            [0.0, 1.0],
-            &Lookup::DEFAULT,
-            &mut out,
-        );
+        c.sample(h, [0.5, 0.5], [64.0 / 1024.0, 0.0], [0.0, 64.0 / 1024.0], &Lookup::DEFAULT, &mut out);
+        c.sample(h, [0.3, 0.7], [1.0, 0.0], [0.0, 1.0], &Lookup::DEFAULT, &mut out);
         assert!((out[0] - 0.5).abs() < 1e-6, "{out:?}");
         let hist = c.level_histogram();
         assert_eq!((hist[0], hist[6], hist[10]), (1, 1, 1));
         let f = CheckerSampler::new("c", 1024, 8, FilterMode::Finest);
-        f.sample(
-            h,
-            [0.3, 0.7],
-            [1.0, 0.0],
-            [0.0, 1.0],
-            &Lookup::DEFAULT,
-            &mut out,
-        );
+        f.sample(h, [0.3, 0.7], [1.0, 0.0], [0.0, 1.0], &Lookup::DEFAULT, &mut out);
         assert_eq!(f.level_histogram()[0], 1);
         assert!(out[0] == 0.0 || out[0] == 1.0);
         assert_eq!(c.stats()["lookups"], 3);
-        assert!(!c.sample(
-            TextureHandle::new(7),
-            [0.5, 0.5],
-            [0.0; 2],
-            [0.0; 2],
-            &Lookup::DEFAULT,
-            &mut out
-        ));
+        assert!(!c.sample(TextureHandle::new(7), [0.5, 0.5], [0.0; 2], [0.0; 2], &Lookup::DEFAULT, &mut out));
         assert_eq!(c.stats()["failed_lookups"], 1);
     }
 
@@ -741,82 +627,37 @@ mod tests {
     #[test]
     fn every_interpolation_resolves_to_face_vertex_indices() {
         let t = two_quads_and_a_triangle();
-        let pv = |interpolation, values: Vec<[f32; 2]>, indices: Vec<i32>| Primvar2 {
-            name: "st".into(),
-            interpolation,
-            values,
-            indices,
-        };
+        let pv = |interpolation, values: Vec<[f32; 2]>, indices: Vec<i32>| Primvar2 { name: "st".into(), interpolation, values, indices };
         let c = pv(Interpolation::Constant, vec![[0.5, 0.5]], vec![]);
         assert_eq!(c.face_varying_indices(&t, 7).unwrap(), vec![0; 11]);
         let u = pv(Interpolation::Uniform, vec![[0.0; 2]; 3], vec![]);
-        assert_eq!(
-            u.face_varying_indices(&t, 7).unwrap(),
-            vec![0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2]
-        );
+        assert_eq!(u.face_varying_indices(&t, 7).unwrap(), vec![0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2]);
         let v = pv(Interpolation::Vertex, vec![[0.0; 2]; 7], vec![]);
-        assert_eq!(
-            v.face_varying_indices(&t, 7).unwrap(),
-            t.face_vertex_indices
-        );
-        let fv = pv(
-            Interpolation::FaceVarying,
-            vec![[0.0; 2], [1.0; 2]],
-            vec![0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1],
-        );
+        assert_eq!(v.face_varying_indices(&t, 7).unwrap(), t.face_vertex_indices);
+        let fv = pv(Interpolation::FaceVarying, vec![[0.0; 2], [1.0; 2]], vec![0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1]);
         assert_eq!(fv.face_varying_indices(&t, 7).unwrap(), fv.indices);
         let short = pv(Interpolation::Vertex, vec![[0.0; 2]; 6], vec![]);
-        assert!(short
-            .face_varying_indices(&t, 7)
-            .unwrap_err()
-            .to_string()
-            .contains("primvar st: 6 values"));
+        assert!(short.face_varying_indices(&t, 7).unwrap_err().to_string().contains("primvar st: 6 values"));
         let bad = pv(Interpolation::Uniform, vec![[0.0; 2]], vec![0, 0, 3]);
-        assert!(bad
-            .face_varying_indices(&t, 7)
-            .unwrap_err()
-            .to_string()
-            .contains("indices[2] = 3"));
+        assert!(bad.face_varying_indices(&t, 7).unwrap_err().to_string().contains("indices[2] = 3"));
         let nan = pv(Interpolation::Constant, vec![[f32::NAN, 0.0]], vec![]);
-        assert!(matches!(
-            nan.face_varying_indices(&t, 7),
-            Err(MeshError::NonFinite(_))
-        ));
+        assert!(matches!(nan.face_varying_indices(&t, 7), Err(MeshError::NonFinite(_))));
     }
 
     #[test]
     fn base_face_primvar_is_bilinear_per_ptex_face() {
         let t = two_quads_and_a_triangle();
-        let st: Vec<[f32; 2]> = vec![
-            [0.0, 0.0],
-            [0.5, 0.0],
-            [1.0, 0.0],
-            [0.0, 1.0],
-            [0.5, 1.0],
-            [1.0, 1.0],
-            [0.25, 2.0],
-        ];
-        let p = BaseFacePrimvar::new(
-            &t,
-            7,
-            &Primvar2 {
-                name: "st".into(),
-                interpolation: Interpolation::Vertex,
-                values: st,
-                indices: vec![],
-            },
-        )
-        .unwrap();
+        let st: Vec<[f32; 2]> = vec![[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 1.0], [1.0, 1.0], [0.25, 2.0]];
+        let p =
+            BaseFacePrimvar::new(&t, 7, &Primvar2 { name: "st".into(), interpolation: Interpolation::Vertex, values: st, indices: vec![] })
+                .unwrap();
         // Two quads and a triangle split into three: five ptex faces.
         assert_eq!(p.ptex_face_count(), 5);
         let (v, du, dv) = p.at_face(1, 0.5, 0.25).unwrap();
         assert_eq!((v, du, dv), ([0.75, 0.25], [0.5, 0.0], [0.0, 1.0]));
         // The triangle's first sub-face: corner 3 at (0,0), the centroid at (1,1).
         let (v, _, _) = p.at_face(2, 1.0, 1.0).unwrap();
-        assert!(
-            (v[0] - 0.25).abs() < 1e-6 && (v[1] - 4.0 / 3.0).abs() < 1e-6,
-            "{v:?}"
-        );
+        assert!((v[0] - 0.25).abs() < 1e-6 && (v[1] - 4.0 / 3.0).abs() < 1e-6, "{v:?}");
         // Through a patch param: a quarter-size patch at (0.5, 0.5) of face 0.
         let param = PatchParam {
             base_face: 0,

@@ -87,9 +87,7 @@ impl MeshTopology {
         let mut total: usize = 0;
         for (f, &n) in self.face_vertex_counts.iter().enumerate() {
             if n < 3 {
-                return Err(MeshError::Invalid(format!(
-                    "faceVertexCounts[{f}] = {n}: a face needs at least 3 vertices"
-                )));
+                return Err(MeshError::Invalid(format!("faceVertexCounts[{f}] = {n}: a face needs at least 3 vertices")));
             }
             total += n as usize;
         }
@@ -100,14 +98,8 @@ impl MeshTopology {
             )));
         }
         let check = |name: &str, idx: &[i32], bound: usize| -> Result<(), MeshError> {
-            if let Some((i, &v)) = idx
-                .iter()
-                .enumerate()
-                .find(|(_, &v)| v < 0 || v as usize >= bound)
-            {
-                return Err(MeshError::Invalid(format!(
-                    "{name}[{i}] = {v} is out of range [0, {bound})"
-                )));
+            if let Some((i, &v)) = idx.iter().enumerate().find(|(_, &v)| v < 0 || v as usize >= bound) {
+                return Err(MeshError::Invalid(format!("{name}[{i}] = {v} is out of range [0, {bound})")));
             }
             Ok(())
         };
@@ -137,12 +129,7 @@ impl MeshTopology {
                 self.corner_indices.len()
             )));
         }
-        if let Some(s) = self
-            .crease_sharpnesses
-            .iter()
-            .chain(&self.corner_sharpnesses)
-            .find(|s| !s.is_finite())
-        {
+        if let Some(s) = self.crease_sharpnesses.iter().chain(&self.corner_sharpnesses).find(|s| !s.is_finite()) {
             return Err(MeshError::Invalid(format!("sharpness {s} is not finite")));
         }
         Ok(())
@@ -156,14 +143,8 @@ impl MeshTopology {
         for (c, &len) in self.crease_lengths.iter().enumerate() {
             let len = len.max(0) as usize;
             for k in 1..len {
-                let s = if per_chain {
-                    self.crease_sharpnesses.get(c)
-                } else {
-                    self.crease_sharpnesses.get(edge)
-                };
-                if let (Some(&a), Some(&b)) =
-                    (self.crease_indices.get(start + k - 1), self.crease_indices.get(start + k))
-                {
+                let s = if per_chain { self.crease_sharpnesses.get(c) } else { self.crease_sharpnesses.get(edge) };
+                if let (Some(&a), Some(&b)) = (self.crease_indices.get(start + k - 1), self.crease_indices.get(start + k)) {
                     out.push((a, b, s.copied().unwrap_or(0.0)));
                 }
                 edge += 1;
@@ -179,11 +160,7 @@ mod tests {
     use super::*;
 
     fn quad() -> MeshTopology {
-        MeshTopology {
-            face_vertex_counts: vec![4],
-            face_vertex_indices: vec![0, 1, 2, 3],
-            ..Default::default()
-        }
+        MeshTopology { face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() }
     }
 
     #[test]

@@ -171,7 +171,19 @@ impl<'s> Tracer<'s> {
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
-        Tracer { scene, meshes, instances, tlas, cache, tess_factor, kind_factor: [1.0; 7], single, seams: true, bounds, displaced_outside: AtomicU64::new(0) }
+        Tracer {
+            scene,
+            meshes,
+            instances,
+            tlas,
+            cache,
+            tess_factor,
+            kind_factor: [1.0; 7],
+            single,
+            seams: true,
+            bounds,
+            displaced_outside: AtomicU64::new(0),
+        }
     }
 
     /// Coarsens (factor > 1) or refines the tessellation for incoherent rays (ambient
@@ -215,7 +227,8 @@ impl<'s> Tracer<'s> {
 
     /// Bytes of every BVH (both levels), for the stats.
     pub fn bvh_bytes(&self) -> usize {
-        self.meshes.iter().filter_map(|m| m.bvh.as_ref()).map(crate::bvh::bvh_bytes).sum::<usize>() + self.tlas.as_ref().map_or(0, crate::bvh::bvh_bytes)
+        self.meshes.iter().filter_map(|m| m.bvh.as_ref()).map(crate::bvh::bvh_bytes).sum::<usize>()
+            + self.tlas.as_ref().map_or(0, crate::bvh::bvh_bytes)
     }
 
     /// The scene's root subpatches and the render-space instance placements, for statistics.
@@ -313,7 +326,13 @@ impl<'s> Tracer<'s> {
                 let (tier, stride) = rate.tier_and_stride();
                 let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(inst.mesh, geom, cell, tier);
-                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), ray.t_min, t_best).map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: sp.rect, ng: h.ng, quads: rate.quads() as u32 })
+                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), ray.t_min, t_best).map(|h| LocalHit {
+                    t: h.t,
+                    uv: (h.u, h.v),
+                    rect: sp.rect,
+                    ng: h.ng,
+                    quads: rate.quads() as u32,
+                })
             };
             match found {
                 Some(h) => {
@@ -339,21 +358,46 @@ impl<'s> Tracer<'s> {
         // The hit point came from o + t·d after a transform: its error is bounded by a few ulps
         // of the larger of the origin's and the point's magnitude (pbrt §6.8, loosely).
         let p_error = Vec3A::splat(gamma(12)) * (p.abs() + ray.o.abs() + Vec3A::splat(h.t * ray.d.abs().max_element()));
-        Some(Hit { t: h.t, instance: ii as u32, instance_id: inst.id, mesh: inst.mesh as u32, patch: sp.patch, u, v, p, p_error, ng, quads: h.quads })
+        Some(Hit {
+            t: h.t,
+            instance: ii as u32,
+            instance_id: inst.id,
+            mesh: inst.mesh as u32,
+            patch: sp.patch,
+            u,
+            v,
+            p,
+            p_error,
+            ng,
+            quads: h.quads,
+        })
     }
 
     /// The tessellation of a (root or split) subpatch at a tier, from the cache or built now.
     fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Arc<Tessellation> {
         let mesh = &self.scene.meshes[mesh_index];
         let root = &geom.subpatches[cell.root as usize];
-        let key = CacheKey { mesh: mesh.cache_id.unwrap_or(mesh_index as u32), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
+        let key = CacheKey {
+            mesh: mesh.cache_id.unwrap_or(mesh_index as u32),
+            generation: mesh.generation,
+            subpatch: geom.child_ids.id(cell),
+            tier,
+        };
         self.cache.get_or_build(key, || {
             let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds, affine: root.affine };
             let mut scratch = GridSamples::default();
-            let displace = mesh.displacement.clone().map(|displacement| DisplaceParams { displacement, normal_sign: if mesh.left_handed { -1.0 } else { 1.0 }, bound: mesh.displacement_bound });
+            let displace = mesh.displacement.clone().map(|displacement| DisplaceParams {
+                displacement,
+                normal_sign: if mesh.left_handed { -1.0 } else { 1.0 },
+                bound: mesh.displacement_bound,
+            });
             let (t, outside) = tessellate(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch);
             if outside > 0 && self.displaced_outside.fetch_add(u64::from(outside), Ordering::Relaxed) == 0 {
-                log::warn!("{}: displaced vertices leave their subpatch bounds; raise primvars:displacementBound (now {})", mesh.name, mesh.displacement_bound);
+                log::warn!(
+                    "{}: displaced vertices leave their subpatch bounds; raise primvars:displacementBound (now {})",
+                    mesh.name,
+                    mesh.displacement_bound
+                );
             }
             t
         })
@@ -364,7 +408,18 @@ impl<'s> Tracer<'s> {
     /// grids. A child's box is the part of its parent's fine grid over it, grown by the parent's
     /// chord error estimate (and a few ulps), so the descent never skips the surface.
     #[allow(clippy::too_many_arguments)]
-    fn hit_split(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tess: &Tessellation, target_depth: u32, wray: &WatertightRay, t_min: f32, t_best: &mut f32, best: &mut Option<LocalHit>) {
+    fn hit_split(
+        &self,
+        mesh_index: usize,
+        geom: &MeshGeometry,
+        cell: ChildCell,
+        tess: &Tessellation,
+        target_depth: u32,
+        wray: &WatertightRay,
+        t_min: f32,
+        t_best: &mut f32,
+        best: &mut Option<LocalHit>,
+    ) {
         let root_rect = geom.subpatches[cell.root as usize].rect;
         if u32::from(cell.depth) >= target_depth {
             if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best) {

@@ -21,7 +21,12 @@ fn plane(half: f32, n: i32) -> BilinearSurface {
             idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
         }
     }
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4; (n * n) as usize], face_vertex_indices: idx, ..Default::default() };
+    let topo = MeshTopology {
+        scheme: Scheme::None,
+        face_vertex_counts: vec![4; (n * n) as usize],
+        face_vertex_indices: idx,
+        ..Default::default()
+    };
     BilinearSurface::new(&topo, &pts).unwrap()
 }
 
@@ -40,7 +45,12 @@ fn scene(displacement: Option<Displacement>, bound: f32) -> Scene {
 #[test]
 fn displaced_surface_moves_within_its_bound_and_shades_by_its_own_normal() {
     let d = Displacement { amplitude: 0.1, frequency: 1.5, octaves: 4, gain: 0.5 };
-    let flat = render(&scene(None, 0.0), &RenderOptions { width: 32, height: 32, aovs: vec!["color".into(), "depth".into(), "normal".into()], ..Default::default() }, &NoProgress).unwrap();
+    let flat = render(
+        &scene(None, 0.0),
+        &RenderOptions { width: 32, height: 32, aovs: vec!["color".into(), "depth".into(), "normal".into()], ..Default::default() },
+        &NoProgress,
+    )
+    .unwrap();
     let opts = RenderOptions { width: 32, height: 32, aovs: vec!["color".into(), "depth".into(), "normal".into()], ..Default::default() };
     let bumpy = render(&scene(Some(d), d.bound()), &opts, &NoProgress).unwrap();
     let depth = &bumpy.film.aov("depth").unwrap().data;
@@ -57,6 +67,11 @@ fn displaced_surface_moves_within_its_bound_and_shades_by_its_own_normal() {
 #[test]
 fn a_bound_too_small_is_counted_not_clipped() {
     let d = Displacement { amplitude: 0.2, frequency: 1.5, octaves: 3, gain: 0.5 };
-    let out = render(&scene(Some(d), 0.01), &RenderOptions { width: 16, height: 16, aovs: vec!["depth".into()], ..Default::default() }, &NoProgress).unwrap();
+    let out = render(
+        &scene(Some(d), 0.01),
+        &RenderOptions { width: 16, height: 16, aovs: vec!["depth".into()], ..Default::default() },
+        &NoProgress,
+    )
+    .unwrap();
     assert!(out.stats["scene"]["displaced_vertices_outside_bounds"].as_u64().unwrap() > 0);
 }

@@ -10,7 +10,8 @@ use mipray::prelude::*;
 use mipray::topology::{MeshTopology, Scheme};
 
 fn quad(corners: [[f32; 3]; 4]) -> Arc<BilinearSurface> {
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let topo =
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
     Arc::new(BilinearSurface::new(&topo, &corners).unwrap())
 }
 
@@ -53,9 +54,19 @@ fn ambient_occlusion_beside_an_infinite_wall_is_one_half() {
 #[test]
 fn a_flat_mirror_reflects_the_radiance_above_it() {
     let mut scene = Scene::default();
-    add(&mut scene, "/mirror", quad([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]]), Material::mirror("/chrome", Vec3A::ZERO, Vec3A::splat(0.8)));
+    add(
+        &mut scene,
+        "/mirror",
+        quad([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]]),
+        Material::mirror("/chrome", Vec3A::ZERO, Vec3A::splat(0.8)),
+    );
     // A lit white ceiling facing down.
-    add(&mut scene, "/ceiling", quad([[-50.0, -50.0, 10.0], [-50.0, 50.0, 10.0], [50.0, 50.0, 10.0], [50.0, -50.0, 10.0]]), Material::lambertian("/white", Vec3A::ONE).0);
+    add(
+        &mut scene,
+        "/ceiling",
+        quad([[-50.0, -50.0, 10.0], [-50.0, 50.0, 10.0], [50.0, 50.0, 10.0], [50.0, -50.0, 10.0]]),
+        Material::lambertian("/white", Vec3A::ONE).0,
+    );
     let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
     light.casts_shadows = false;
     scene.lights.push(light);
@@ -95,8 +106,19 @@ fn grazing_hits_clamp_differentials_count_them_and_stay_finite() {
     add(&mut scene, "/ground", quad([[-big, -big, 0.0], [big, -big, 0.0], [big, big, 0.0], [-big, big, 0.0]]), Material::default());
     scene.lights.push(Light::distant("/sun", Vec3A::new(0.0, 0.3, -1.0), Vec3A::ONE));
     let eye = Vec3::new(0.0, 0.0, 1.0);
-    scene.camera = Camera { render_from_camera: Camera::look_at(eye, Vec3::new(0.0, 1.0e4, 0.99), Vec3::Z), focal_length: 50.0, clipping_range: (0.1, 1.0e7), ..Default::default() };
-    let opts = RenderOptions { width: 32, height: 32, ao_samples: 4, aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()], ..Default::default() };
+    scene.camera = Camera {
+        render_from_camera: Camera::look_at(eye, Vec3::new(0.0, 1.0e4, 0.99), Vec3::Z),
+        focal_length: 50.0,
+        clipping_range: (0.1, 1.0e7),
+        ..Default::default()
+    };
+    let opts = RenderOptions {
+        width: 32,
+        height: 32,
+        ao_samples: 4,
+        aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()],
+        ..Default::default()
+    };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     assert!(out.stats["render"]["differential_clamps"].as_u64().unwrap() > 0);
     for a in ["color", "beamWidth", "tessRate"] {
@@ -123,7 +145,12 @@ fn incoherent_tess_factor_coarsens_ao_rays_only() {
             idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
         }
     }
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4; (n * n) as usize], face_vertex_indices: idx, ..Default::default() };
+    let topo = MeshTopology {
+        scheme: Scheme::None,
+        face_vertex_counts: vec![4; (n * n) as usize],
+        face_vertex_indices: idx,
+        ..Default::default()
+    };
     let mut scene = Scene::default();
     add(&mut scene, "/bumps", Arc::new(BilinearSurface::new(&topo, &pts).unwrap()), Material::default());
     scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, -9.0, 5.0), Vec3::ZERO, Vec3::Z), 35.0);
@@ -149,9 +176,27 @@ fn depth_of_field_blurs_only_what_is_out_of_focus() {
     // Two thin bars across the view: one at the focus distance stays sharp (a pixel is fully
     // covered or empty), the other, far behind, is blurred into partial coverage.
     let mut scene = Scene::default();
-    add(&mut scene, "/near_bar", quad([[-0.05, -5.0, -10.0], [0.05, -5.0, -10.0], [0.05, 5.0, -10.0], [-0.05, 5.0, -10.0]]), Material::default());
-    add(&mut scene, "/far_bar", quad([[0.9, -20.0, -40.0], [1.3, -20.0, -40.0], [1.3, 20.0, -40.0], [0.9, 20.0, -40.0]]), Material::default());
-    scene.camera = Camera { render_from_camera: Mat4::IDENTITY, focal_length: 50.0, horizontal_aperture: 20.0, vertical_aperture: 2.0, f_stop: 1.4, focus_distance: 10.0, ..Default::default() };
+    add(
+        &mut scene,
+        "/near_bar",
+        quad([[-0.05, -5.0, -10.0], [0.05, -5.0, -10.0], [0.05, 5.0, -10.0], [-0.05, 5.0, -10.0]]),
+        Material::default(),
+    );
+    add(
+        &mut scene,
+        "/far_bar",
+        quad([[0.9, -20.0, -40.0], [1.3, -20.0, -40.0], [1.3, 20.0, -40.0], [0.9, 20.0, -40.0]]),
+        Material::default(),
+    );
+    scene.camera = Camera {
+        render_from_camera: Mat4::IDENTITY,
+        focal_length: 50.0,
+        horizontal_aperture: 20.0,
+        vertical_aperture: 2.0,
+        f_stop: 1.4,
+        focus_distance: 10.0,
+        ..Default::default()
+    };
     let opts = RenderOptions { width: 40, height: 4, samples: 64, aovs: vec!["alpha".into()], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let names: Vec<&str> = out.stats["effects"]["enabled"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
@@ -175,7 +220,12 @@ fn a_disk_light_lights_a_plane_as_the_formula_says_and_casts_soft_shadows() {
     use mipray::light::LightShape;
     // E = π L r² / (h² + r²) under a disk of radiance L, radius r, height h; radiance ρ E / π.
     let mut scene = Scene::default();
-    add(&mut scene, "/ground", quad([[-20.0, -20.0, 0.0], [20.0, -20.0, 0.0], [20.0, 20.0, 0.0], [-20.0, 20.0, 0.0]]), Material::lambertian("/white", Vec3A::ONE).0);
+    add(
+        &mut scene,
+        "/ground",
+        quad([[-20.0, -20.0, 0.0], [20.0, -20.0, 0.0], [20.0, 20.0, 0.0], [-20.0, 20.0, 0.0]]),
+        Material::lambertian("/white", Vec3A::ONE).0,
+    );
     let disk = LightShape::Disk { center: Vec3A::new(0.0, 0.0, 2.0), u: Vec3A::X, v: Vec3A::Y, normal: Vec3A::NEG_Z };
     scene.lights.push(Light::usd_area("/disk", disk, 1.0, 0.0, Vec3A::ONE, false));
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y), 1.0, 1.0);
@@ -190,7 +240,8 @@ fn a_disk_light_lights_a_plane_as_the_formula_says_and_casts_soft_shadows() {
     // A small occluder halfway up: its shadow has a penumbra of partly lit pixels.
     add(&mut scene, "/blocker", quad([[-0.3, -0.3, 1.0], [0.3, -0.3, 1.0], [0.3, 0.3, 1.0], [-0.3, 0.3, 1.0]]), Material::default());
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 0.5), Vec3::ZERO, Vec3::Y), 60.0, 1.25);
-    let out = render(&scene, &RenderOptions { width: 48, height: 1, samples: 4, shadow_samples: 32, ..Default::default() }, &NoProgress).unwrap();
+    let out =
+        render(&scene, &RenderOptions { width: 48, height: 1, samples: 4, shadow_samples: 32, ..Default::default() }, &NoProgress).unwrap();
     let row: Vec<f32> = (0..48).map(|x| out.film.pixel("color", x, 0)[0]).collect();
     let peak = row.iter().cloned().fold(0.0, f32::max);
     let partial = row.iter().filter(|v| **v > 0.1 * peak && **v < 0.9 * peak).count();

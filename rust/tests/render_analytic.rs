@@ -9,7 +9,8 @@ use mipray::geometry_cache::CacheConfig;
 use mipray::prelude::*;
 
 fn quad(half: f32, z: f32) -> BilinearSurface {
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let topo =
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
     let pts = [[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]];
     BilinearSurface::new(&topo, &pts).unwrap()
 }
@@ -58,7 +59,8 @@ fn an_occluder_casts_a_shadow_exactly_where_geometry_puts_it() {
     let opts = RenderOptions { width: 80, height: 80, ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     // Pixel (x, y) centre is at world (x+0.5-40)/10, (40-y-0.5)/10.
-    let at = |wx: f32, wy: f32| out.film.pixel("color", (wx * 10.0 + 40.0 - 0.5).round() as usize, (40.0 - wy * 10.0 - 0.5).round() as usize)[0];
+    let at =
+        |wx: f32, wy: f32| out.film.pixel("color", (wx * 10.0 + 40.0 - 0.5).round() as usize, (40.0 - wy * 10.0 - 0.5).round() as usize)[0];
     let lit = 0.18 / PI * (PI / 4.0).cos();
     assert!((at(1.5, 0.0) - 0.0).abs() < 1e-6, "shadow at x=1.5: {}", at(1.5, 0.0));
     assert!((at(1.85, 0.5) - 0.0).abs() < 1e-6);
@@ -90,7 +92,12 @@ fn cache_modes_give_bit_identical_images() {
             idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
         }
     }
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4; (n * n) as usize], face_vertex_indices: idx, ..Default::default() };
+    let topo = MeshTopology {
+        scheme: Scheme::None,
+        face_vertex_counts: vec![4; (n * n) as usize],
+        face_vertex_indices: idx,
+        ..Default::default()
+    };
     let m = scene.add_mesh(Mesh::new("/bumps", Arc::new(BilinearSurface::new(&topo, &pts).unwrap())));
     scene.add_instance(m, Mat4::IDENTITY);
     scene.camera = Camera::perspective(Camera::look_at(Vec3::new(3.0, -4.0, 6.0), Vec3::ZERO, Vec3::Z), 35.0);

@@ -21,7 +21,17 @@ impl LimitSurface for Sphere {
         8
     }
     fn patch_param(&self, patch: usize) -> PatchParam {
-        PatchParam { base_face: patch as u32, ptex_face: patch as u32, u0: 0.0, v0: 0.0, size: 1.0, depth: 0, boundary_mask: 0, transition_mask: 0, kind: PatchKind::Other }
+        PatchParam {
+            base_face: patch as u32,
+            ptex_face: patch as u32,
+            u0: 0.0,
+            v0: 0.0,
+            size: 1.0,
+            depth: 0,
+            boundary_mask: 0,
+            transition_mask: 0,
+            kind: PatchKind::Other,
+        }
     }
     fn patch_bounds(&self, _patch: usize) -> Bounds3 {
         Bounds3 { min: Vec3A::splat(-self.r), max: Vec3A::splat(self.r) }
@@ -110,7 +120,13 @@ fn tess_error_aov_is_the_chord_distance_to_the_true_sphere() {
     scene.add_instance(m, Mat4::IDENTITY);
     let eye = Vec3::from(c * 5.0);
     scene.camera = Camera::orthographic(Camera::look_at(eye, Vec3::ZERO, if c.z.abs() < 0.9 { Vec3::Z } else { Vec3::X }), 10.0, 10.0);
-    let opts = RenderOptions { width: 5, height: 5, cache: mipray::geometry_cache::CacheConfig::single(30_000_000), aovs: vec!["tessError".into(), "tessRate".into()], ..Default::default() };
+    let opts = RenderOptions {
+        width: 5,
+        height: 5,
+        cache: mipray::geometry_cache::CacheConfig::single(30_000_000),
+        aovs: vec!["tessError".into(), "tessRate".into()],
+        ..Default::default()
+    };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     assert_eq!(out.film.pixel("tessRate", 2, 2)[0], 16.0);
     let corner = |a: f32, b: f32| sphere.evaluate(0, a / 16.0, b / 16.0).p;
@@ -127,14 +143,20 @@ fn tess_error_aov_is_the_chord_distance_to_the_true_sphere() {
 #[test]
 fn a_flat_patch_has_zero_tessellation_error_at_every_rate() {
     // A trapezoid: flat but not affine, so it is tessellated at the beam's rate like any patch.
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let topo =
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
     let s = BilinearSurface::new(&topo, &[[-3.0, -1.0, 0.0], [3.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]]).unwrap();
     let mut scene = Scene::default();
     let m = scene.add_mesh(Mesh::new("/flat", Arc::new(s)));
     scene.add_instance(m, Mat4::IDENTITY);
     for tess_factor in [0.05f32, 0.5, 4.0, 40.0] {
         scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.3, -2.0, 3.0), Vec3::ZERO, Vec3::Z), 35.0);
-        let out = render(&scene, &RenderOptions { width: 24, height: 16, tess_factor, aovs: vec!["tessError".into(), "alpha".into()], ..Default::default() }, &NoProgress).unwrap();
+        let out = render(
+            &scene,
+            &RenderOptions { width: 24, height: 16, tess_factor, aovs: vec!["tessError".into(), "alpha".into()], ..Default::default() },
+            &NoProgress,
+        )
+        .unwrap();
         let e = &out.film.aov("tessError").unwrap().data;
         assert!(e.iter().all(|x| x.abs() < 1e-4), "tessFactor {tess_factor}: {:?}", e.iter().cloned().fold(0.0f32, f32::max));
         assert!(out.film.aov("alpha").unwrap().data.iter().any(|a| *a > 0.0));

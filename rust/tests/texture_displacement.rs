@@ -25,28 +25,16 @@ const RES: u32 = 1024;
 
 /// A 2×2 quad in z = 0 with faceVarying, indexed `st` covering the texture once.
 fn quad() -> BilinearSurface {
-    let topo = MeshTopology {
-        scheme: Scheme::None,
-        face_vertex_counts: vec![4],
-        face_vertex_indices: vec![0, 1, 2, 3],
-        ..Default::default()
-    };
-    let pts = [
-        [-1.0, -1.0, 0.0],
-        [1.0, -1.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [-1.0, 1.0, 0.0],
-    ];
+    let topo =
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let pts = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]];
     let st = Primvar2 {
         name: "st".into(),
         interpolation: Interpolation::FaceVarying,
         values: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
         indices: vec![0, 1, 2, 3],
     };
-    BilinearSurface::new(&topo, &pts)
-        .unwrap()
-        .with_primvars(&topo, 4, &[st])
-        .unwrap()
+    BilinearSurface::new(&topo, &pts).unwrap().with_primvars(&topo, 4, &[st]).unwrap()
 }
 
 fn displacement(filter: FilterMode) -> (Arc<CheckerSampler>, TextureDisplacement) {
@@ -58,13 +46,7 @@ fn displacement(filter: FilterMode) -> (Arc<CheckerSampler>, TextureDisplacement
 }
 
 /// Offsets of one grid, and the histogram of MIP levels its lookups asked for.
-fn grid(
-    d: &TextureDisplacement,
-    checker: &CheckerSampler,
-    surface: &dyn LimitSurface,
-    rect: UvRect,
-    n: usize,
-) -> (Vec<f32>, Vec<u64>) {
+fn grid(d: &TextureDisplacement, checker: &CheckerSampler, surface: &dyn LimitSurface, rect: UvRect, n: usize) -> (Vec<f32>, Vec<u64>) {
     checker.reset();
     let mut out = Vec::new();
     d.grid_offsets(surface, 0, rect, n, &mut out);
@@ -76,33 +58,15 @@ fn grid(
 fn coarse_tiers_read_coarser_mip_levels() {
     let surface = quad();
     let (checker, d) = displacement(FilterMode::Differentials);
-    let half = UvRect {
-        u0: 0.0,
-        v0: 0.0,
-        u1: 0.5,
-        v1: 0.5,
-    };
+    let half = UvRect { u0: 0.0, v0: 0.0, u1: 0.5, v1: 0.5 };
     // (tier, rect, expected level): 1024 texels over 1, 4, 16 quads, and 512 over 16 (a split child).
-    let cases = [
-        (Tier::Coarse, UvRect::UNIT, 10),
-        (Tier::Medium, UvRect::UNIT, 8),
-        (Tier::Fine, UvRect::UNIT, 6),
-        (Tier::Fine, half, 5),
-    ];
+    let cases = [(Tier::Coarse, UvRect::UNIT, 10), (Tier::Medium, UvRect::UNIT, 8), (Tier::Fine, UvRect::UNIT, 6), (Tier::Fine, half, 5)];
     let mut summary = Vec::new();
     for (tier, rect, level) in cases {
         let n = tier.verts_per_side() as usize;
         let (offsets, hist) = grid(&d, &checker, &surface, rect, n);
-        assert_eq!(
-            hist[level],
-            (n * n) as u64,
-            "{tier:?} over {rect:?}: every lookup at level {level}, got {hist:?}"
-        );
-        assert!(
-            (checker.mean_level() - level as f64).abs() < 1e-3,
-            "{}",
-            checker.mean_level()
-        );
+        assert_eq!(hist[level], (n * n) as u64, "{tier:?} over {rect:?}: every lookup at level {level}, got {hist:?}");
+        assert!((checker.mean_level() - level as f64).abs() < 1e-3, "{}", checker.mean_level());
         for o in &offsets {
             assert!(o.abs() <= d.bound() + 1e-6, "{o}");
         }
@@ -114,9 +78,7 @@ fn coarse_tiers_read_coarser_mip_levels() {
     assert!(coarse.iter().all(|o| o.abs() < 1e-6), "{coarse:?}");
     // A fine grid resolves the squares (64 texels per step, half a square): offsets vary.
     let (fine, _) = grid(&d, &checker, &surface, UvRect::UNIT, 17);
-    let (lo, hi) = fine
-        .iter()
-        .fold((f32::MAX, f32::MIN), |(a, b), &o| (a.min(o), b.max(o)));
+    let (lo, hi) = fine.iter().fold((f32::MAX, f32::MIN), |(a, b), &o| (a.min(o), b.max(o)));
     assert!(hi - lo > 0.09, "fine offsets span {lo}..{hi}");
     assert_eq!(d.failed_lookups(), 0);
 }
@@ -136,12 +98,7 @@ fn finest_mode_reads_level_zero_at_every_tier() {
 #[test]
 fn shader_enum_keeps_the_procedural_path_and_bounds() {
     let surface = quad();
-    let fbm = Displacement {
-        amplitude: 0.1,
-        frequency: 1.5,
-        octaves: 4,
-        gain: 0.5,
-    };
+    let fbm = Displacement { amplitude: 0.1, frequency: 1.5, octaves: 4, gain: 0.5 };
     let shader = DisplacementShader::from(fbm);
     let mut samples = GridSamples::default();
     surface.evaluate_grid(0, UvRect::UNIT, 17, false, &mut samples);
@@ -164,12 +121,7 @@ fn shader_enum_keeps_the_procedural_path_and_bounds() {
 
 #[test]
 fn missing_texture_names_its_path_and_missing_st_reads_the_fallback() {
-    let checker: Arc<dyn TextureSampler> = Arc::new(CheckerSampler::new(
-        "disp.tx",
-        RES,
-        8,
-        FilterMode::Differentials,
-    ));
+    let checker: Arc<dyn TextureSampler> = Arc::new(CheckerSampler::new("disp.tx", RES, 8, FilterMode::Differentials));
     let err = TextureDisplacement::new(checker.clone(), "textures/missing.tx", 0).unwrap_err();
     assert!(err.to_string().contains("textures/missing.tx"), "{err}");
     // Channel 1 does not exist on the quad: every vertex reads st_fallback (0.06, 0.06), which
@@ -189,12 +141,7 @@ fn pointwise_offsets_equal_the_grid_offsets_at_its_vertices() {
     // What shading at a hit uses (offset_at) agrees with what the tessellation stored.
     let surface = quad();
     let (_, d) = displacement(FilterMode::Differentials);
-    let fbm = Displacement {
-        amplitude: 0.1,
-        frequency: 1.5,
-        octaves: 4,
-        gain: 0.5,
-    };
+    let fbm = Displacement { amplitude: 0.1, frequency: 1.5, octaves: 4, gain: 0.5 };
     let mut samples = GridSamples::default();
     surface.evaluate_grid(0, UvRect::UNIT, 5, false, &mut samples);
     let spacing = grid_spacing(&samples.p, 5);

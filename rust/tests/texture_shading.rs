@@ -10,14 +10,29 @@ use mipray::prelude::*;
 use mipray::texture::{CheckerSampler, FilterMode, Interpolation, Lookup, Primvar2, TextureSampler};
 
 fn textured_scene(sampler: Arc<CheckerSampler>) -> Scene {
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let topo =
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
     let pts = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]];
-    let st = Primvar2 { name: "st".into(), interpolation: Interpolation::Vertex, values: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], indices: vec![] };
+    let st = Primvar2 {
+        name: "st".into(),
+        interpolation: Interpolation::Vertex,
+        values: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
+        indices: vec![],
+    };
     let surface = BilinearSurface::new(&topo, &pts).unwrap().with_primvars(&topo, 4, &[st]).unwrap();
     let dyn_sampler: Arc<dyn TextureSampler> = sampler.clone();
     let texture = dyn_sampler.handle("checker").unwrap();
     let mut mat = Material::lambertian("/checker", Vec3A::splat(0.5)).0;
-    mat.diffuse_texture = Some(TexturedColor { sampler: dyn_sampler.clone(), texture, path: "checker".into(), lookup: Lookup::DEFAULT, scale: Vec3A::ONE, bias: Vec3A::ZERO, fallback: Vec3A::splat(0.18), st_channel: 0 });
+    mat.diffuse_texture = Some(TexturedColor {
+        sampler: dyn_sampler.clone(),
+        texture,
+        path: "checker".into(),
+        lookup: Lookup::DEFAULT,
+        scale: Vec3A::ONE,
+        bias: Vec3A::ZERO,
+        fallback: Vec3A::splat(0.18),
+        st_channel: 0,
+    });
     let mut scene = Scene::default();
     let m = scene.add_material(mat);
     let mut mesh = Mesh::new("/quad", Arc::new(surface));

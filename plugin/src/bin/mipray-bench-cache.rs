@@ -38,7 +38,8 @@ fn usage() -> ! {
 }
 
 fn parse(args: &[String]) -> Args {
-    let mut a = Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 1, grid: (24, 20), face_res: 13, configs: None };
+    let mut a =
+        Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 1, grid: (24, 20), face_res: 13, configs: None };
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
@@ -102,7 +103,15 @@ fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
         "none" => CacheConfig::none(),
         _ => usage(),
     };
-    let opts = RenderOptions { width: a.width, height: a.height, ao_samples: a.ao, ao_distance: 6.0, cache, aovs: vec!["color".into()], ..Default::default() };
+    let opts = RenderOptions {
+        width: a.width,
+        height: a.height,
+        ao_samples: a.ao,
+        ao_distance: 6.0,
+        cache,
+        aovs: vec!["color".into()],
+        ..Default::default()
+    };
     let out = match render(&scene, &opts, &NoProgress) {
         Ok(o) => o,
         Err(e) => {
@@ -171,11 +180,29 @@ fn main() {
         let mut last: Option<Value> = None;
         let raw = tmp.join(format!("{mode}-{mb}.f32"));
         for run in 0..a.runs {
-            eprint!("\r[{}/{}] {mode} {mb} MB run {}/{} ({:.0} s elapsed)   ", i + 1, configs.len(), run + 1, a.runs, t_all.elapsed().as_secs_f64());
+            eprint!(
+                "\r[{}/{}] {mode} {mb} MB run {}/{} ({:.0} s elapsed)   ",
+                i + 1,
+                configs.len(),
+                run + 1,
+                a.runs,
+                t_all.elapsed().as_secs_f64()
+            );
             let _ = std::io::stderr().flush();
             let mut cmd = Command::new(&exe);
             cmd.arg("run").arg(mode).arg(mb.to_string()).arg(&raw);
-            cmd.args(["--width", &a.width.to_string(), "--height", &a.height.to_string(), "--ao", &a.ao.to_string(), "--face-res", &a.face_res.to_string(), "--grid", &format!("{},{}", a.grid.0, a.grid.1)]);
+            cmd.args([
+                "--width",
+                &a.width.to_string(),
+                "--height",
+                &a.height.to_string(),
+                "--ao",
+                &a.ao.to_string(),
+                "--face-res",
+                &a.face_res.to_string(),
+                "--grid",
+                &format!("{},{}", a.grid.0, a.grid.1),
+            ]);
             let out = match cmd.output() {
                 Ok(o) if o.status.success() => o,
                 Ok(o) => {
@@ -253,7 +280,14 @@ fn markdown(doc: &Value) -> String {
         doc["runs"],
     );
     let rays = &first["render"]["rays"];
-    s += &format!("Rays: {} camera, {} shadow, {} reflection, {} AO; {} ray–subpatch tests.\n\n", rays["camera"], rays["shadow"], rays["reflection"], rays["ao"], fmt_count(first["render"]["ray_subpatch_tests"].as_f64().unwrap_or(0.0)));
+    s += &format!(
+        "Rays: {} camera, {} shadow, {} reflection, {} AO; {} ray–subpatch tests.\n\n",
+        rays["camera"],
+        rays["shadow"],
+        rays["reflection"],
+        rays["ao"],
+        fmt_count(first["render"]["ray_subpatch_tests"].as_f64().unwrap_or(0.0))
+    );
     s += "| mode | budget | capacity (entries, c/m/f) | cold tessellations (c/m/f) | misses (c/m/f) | hit rate (c/m/f) | recomputed vertices | wall s | peak RSS MB | image vs unbounded |\n|---|---|---|---|---|---|---|---|---|---|\n";
     for r in &rows {
         let gc = &r["stats"]["geometry_cache"];
@@ -263,11 +297,25 @@ fn markdown(doc: &Value) -> String {
             let v: Vec<String> = tiers
                 .iter()
                 .filter(|t| mode != "single" || t["name"] == "fine")
-                .map(|t| if f == "hit_rate" { format!("{:.2}%", t[f].as_f64().unwrap_or(0.0) * 100.0) } else { fmt_count(t[f].as_f64().unwrap_or(0.0)) })
+                .map(|t| {
+                    if f == "hit_rate" {
+                        format!("{:.2}%", t[f].as_f64().unwrap_or(0.0) * 100.0)
+                    } else {
+                        fmt_count(t[f].as_f64().unwrap_or(0.0))
+                    }
+                })
                 .collect();
             v.join(" / ")
         };
-        let img = if r["bit_identical_to_unbounded"].as_bool() == Some(true) { "identical".to_string() } else { format!("RMSE {:.2e}, max {:.2e}", r["rmse_vs_unbounded"].as_f64().unwrap_or(0.0), r["max_abs_diff_vs_unbounded"].as_f64().unwrap_or(0.0)) };
+        let img = if r["bit_identical_to_unbounded"].as_bool() == Some(true) {
+            "identical".to_string()
+        } else {
+            format!(
+                "RMSE {:.2e}, max {:.2e}",
+                r["rmse_vs_unbounded"].as_f64().unwrap_or(0.0),
+                r["max_abs_diff_vs_unbounded"].as_f64().unwrap_or(0.0)
+            )
+        };
         s += &format!(
             "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.0} | {} |\n",
             mode,
@@ -295,11 +343,17 @@ fn targets(rows: &[Value]) -> String {
     };
     let rv = |r: &Value| r["stats"]["geometry_cache"]["recomputed_vertices"].as_f64().unwrap_or(0.0);
     let ratio = rv(single) / rv(multi).max(1.0);
-    let min_hit = multi["stats"]["geometry_cache"]["tiers"].as_array().map(|t| t.iter().filter(|t| t["lookups"].as_u64().unwrap_or(0) > 0).map(|t| t["hit_rate"].as_f64().unwrap_or(0.0)).fold(1.0, f64::min)).unwrap_or(0.0);
+    let min_hit = multi["stats"]["geometry_cache"]["tiers"]
+        .as_array()
+        .map(|t| {
+            t.iter().filter(|t| t["lookups"].as_u64().unwrap_or(0) > 0).map(|t| t["hit_rate"].as_f64().unwrap_or(0.0)).fold(1.0, f64::min)
+        })
+        .unwrap_or(0.0);
     let tratio = multi["wall_s_median"].as_f64().unwrap_or(0.0) / unb["wall_s_median"].as_f64().unwrap_or(1.0);
     let base = multi["base_rss_bytes"].as_f64().unwrap_or(0.0);
     // The acceleration structure: both BVH levels and the subpatch bounds they index.
-    let bvh = multi["stats"]["scene"]["bvh_bytes"].as_f64().unwrap_or(0.0) + multi["stats"]["scene"]["subpatch_bytes"].as_f64().unwrap_or(0.0);
+    let bvh =
+        multi["stats"]["scene"]["bvh_bytes"].as_f64().unwrap_or(0.0) + multi["stats"]["scene"]["subpatch_bytes"].as_f64().unwrap_or(0.0);
     let allowed = (base + 30e6 + bvh) * 1.1;
     let peak = multi["stats"]["memory"]["peak_rss_bytes"].as_f64().unwrap_or(0.0);
     let ok = |b: bool| if b { "met" } else { "NOT met" };

@@ -25,7 +25,8 @@ use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::{OiioImageIo, OsdSurface};
 
 fn quad(c: [[f32; 3]; 4]) -> Result<BilinearSurface, mipray::error::MeshError> {
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+    let topo =
+        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
     BilinearSurface::new(&topo, &c)
 }
 
@@ -44,7 +45,12 @@ fn grid(half: f32, n: i32) -> Result<BilinearSurface, mipray::error::MeshError> 
             idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
         }
     }
-    let topo = MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4; (n * n) as usize], face_vertex_indices: idx, ..Default::default() };
+    let topo = MeshTopology {
+        scheme: Scheme::None,
+        face_vertex_counts: vec![4; (n * n) as usize],
+        face_vertex_indices: idx,
+        ..Default::default()
+    };
     BilinearSurface::new(&topo, &pts)
 }
 
@@ -62,20 +68,42 @@ fn scene() -> Result<Scene, mipray::error::MeshError> {
     add(&mut s, Mesh::new("/ground", Arc::new(ground)), Material::lambertian("/ground_mat", Vec3A::splat(0.5)).0, Mat4::IDENTITY);
     // A flat mirror standing on the left, facing the camera and the objects.
     let mirror = quad([[-4.5, 2.0, 0.0], [-1.0, 4.5, 0.0], [-1.0, 4.5, 3.0], [-4.5, 2.0, 3.0]])?;
-    add(&mut s, Mesh::new("/flat_mirror", Arc::new(mirror)), Material::mirror("/chrome_flat", Vec3A::ZERO, Vec3A::splat(0.9)), Mat4::IDENTITY);
+    add(
+        &mut s,
+        Mesh::new("/flat_mirror", Arc::new(mirror)),
+        Material::mirror("/chrome_flat", Vec3A::ZERO, Vec3A::splat(0.9)),
+        Mat4::IDENTITY,
+    );
     // A convex mirror: a subdivided cube limit surface, scaled into a ball.
     let (t, p) = blob_mesh(4, 0);
     let ball = OsdSurface::new("/convex_mirror", &t, &p)?;
-    add(&mut s, Mesh::new("/convex_mirror", Arc::new(ball)), Material::mirror("/chrome_ball", Vec3A::ZERO, Vec3A::splat(0.9)), Mat4::from_translation(Vec3::new(2.2, 2.5, 1.2)) * Mat4::from_scale(Vec3::splat(1.1)));
+    add(
+        &mut s,
+        Mesh::new("/convex_mirror", Arc::new(ball)),
+        Material::mirror("/chrome_ball", Vec3A::ZERO, Vec3A::splat(0.9)),
+        Mat4::from_translation(Vec3::new(2.2, 2.5, 1.2)) * Mat4::from_scale(Vec3::splat(1.1)),
+    );
     // Matte things for the mirrors to show.
     for (k, (x, y)) in [(-1.0f32, 0.5f32), (0.8, 5.5), (-3.0, 6.5), (4.5, 6.0)].into_iter().enumerate() {
         let (t, p) = blob_mesh(6, 10 + k as u64);
         let b = OsdSurface::new(&format!("/blob{k}"), &t, &p)?;
         let colour = [Vec3A::new(0.7, 0.25, 0.2), Vec3A::new(0.2, 0.5, 0.7), Vec3A::new(0.8, 0.7, 0.3), Vec3A::new(0.4, 0.7, 0.35)][k];
-        add(&mut s, Mesh::new(format!("/blob{k}"), Arc::new(b)), Material::lambertian(format!("/matte{k}"), colour).0, Mat4::from_translation(Vec3::new(x, y, 0.6)) * Mat4::from_scale(Vec3::splat(0.6)));
+        add(
+            &mut s,
+            Mesh::new(format!("/blob{k}"), Arc::new(b)),
+            Material::lambertian(format!("/matte{k}"), colour).0,
+            Mat4::from_translation(Vec3::new(x, y, 0.6)) * Mat4::from_scale(Vec3::splat(0.6)),
+        );
     }
     s.lights.push(Light::distant("/sun", Vec3A::new(0.3, 0.5, -0.8), Vec3A::splat(2.0)));
-    s.camera = Camera { render_from_camera: Camera::look_at(Vec3::new(0.5, -7.0, 3.2), Vec3::new(0.0, 3.0, 1.0), Vec3::Z), focal_length: 30.0, horizontal_aperture: 36.0, vertical_aperture: 24.0, clipping_range: (0.1, 1000.0), ..Default::default() };
+    s.camera = Camera {
+        render_from_camera: Camera::look_at(Vec3::new(0.5, -7.0, 3.2), Vec3::new(0.0, 3.0, 1.0), Vec3::Z),
+        focal_length: 30.0,
+        horizontal_aperture: 36.0,
+        vertical_aperture: 24.0,
+        clipping_range: (0.1, 1000.0),
+        ..Default::default()
+    };
     Ok(s)
 }
 
@@ -91,7 +119,9 @@ fn ramp(t: f32) -> [f32; 3] {
 
 fn write_rgb(path: &Path, w: usize, h: usize, rgb: Vec<f32>, note: &str) -> Result<(), String> {
     let img = ImageBuf { width: w, height: h, channels: vec!["R".into(), "G".into(), "B".into()], pixels: rgb, metadata: Vec::new() };
-    OiioImageIo::new().write(path, &img, &[ChannelFormat::U8; 3], &[("ImageDescription".into(), MetaValue::Str(note.into()))]).map_err(|e| e.to_string())
+    OiioImageIo::new()
+        .write(path, &img, &[ChannelFormat::U8; 3], &[("ImageDescription".into(), MetaValue::Str(note.into()))])
+        .map_err(|e| e.to_string())
 }
 
 fn srgb(x: f32) -> f32 {
@@ -117,7 +147,15 @@ fn main() {
         }
     };
     let (w, h) = (480, 320);
-    let opts = RenderOptions { width: w, height: h, samples: 4, ao_samples: 32, ao_distance: 4.0, aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()], ..Default::default() };
+    let opts = RenderOptions {
+        width: w,
+        height: h,
+        samples: 4,
+        ao_samples: 32,
+        ao_distance: 4.0,
+        aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()],
+        ..Default::default()
+    };
     let r = match render(&scene, &opts, &NoProgress) {
         Ok(r) => r,
         Err(e) => {
@@ -129,15 +167,23 @@ fn main() {
     let color: Vec<f32> = film.aov("color").map(|a| a.data.iter().map(|c| srgb(*c)).collect()).unwrap_or_default();
     let bw = film.aov("beamWidth").map(|a| a.data.clone()).unwrap_or_default();
     let (lo, hi) = (1e-3f32, 1.0f32);
-    let bw_rgb: Vec<f32> = bw.iter().flat_map(|b| if *b > 0.0 { ramp(((b.log10() - lo.log10()) / (hi.log10() - lo.log10())).clamp(0.0, 1.0)) } else { [0.0; 3] }).collect();
+    let bw_rgb: Vec<f32> = bw
+        .iter()
+        .flat_map(|b| if *b > 0.0 { ramp(((b.log10() - lo.log10()) / (hi.log10() - lo.log10())).clamp(0.0, 1.0)) } else { [0.0; 3] })
+        .collect();
     let rate = film.aov("tessRate").map(|a| a.data.clone()).unwrap_or_default();
     // Discrete: 1 blue, 2 cyan, 4 green, 8 yellow, 16 orange, split (32 and finer) red.
     let palette = [[0.1, 0.2, 0.8], [0.1, 0.7, 0.8], [0.2, 0.7, 0.2], [0.9, 0.85, 0.2], [0.95, 0.5, 0.1], [0.8, 0.1, 0.1]];
-    let rate_rgb: Vec<f32> = rate.iter().flat_map(|q| if *q > 0.0 { palette[(q.log2().round() as usize).min(5)] } else { [0.0; 3] }).collect();
+    let rate_rgb: Vec<f32> =
+        rate.iter().flat_map(|q| if *q > 0.0 { palette[(q.log2().round() as usize).min(5)] } else { [0.0; 3] }).collect();
     let files = [
         ("differentials-color.png", color, "colour: flat mirror (left), convex mirror (right), AO ground"),
         ("differentials-beamwidth.png", bw_rgb, "beamWidth at the camera ray's hit, log scale 1e-3 (blue) to 1 (yellow) scene units"),
-        ("differentials-tessrate.png", rate_rgb, "tessRate at the end of the specular chain: 1 blue, 2 cyan, 4 green, 8 yellow, 16 orange, split red"),
+        (
+            "differentials-tessrate.png",
+            rate_rgb,
+            "tessRate at the end of the specular chain: 1 blue, 2 cyan, 4 green, 8 yellow, 16 orange, split red",
+        ),
     ];
     for (name, rgb, note) in files {
         let p = out.join(name);

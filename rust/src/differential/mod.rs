@@ -107,11 +107,7 @@ fn sanitize_t(t: f32) -> (f32, bool) {
 /// A directional spread in radians: NaN becomes the widest, a negative one its magnitude, and
 /// none exceeds [`MAX_SPREAD_RAD`].
 fn sanitize_spread(s: f32) -> (f32, bool) {
-    let m = if s.is_nan() {
-        MAX_SPREAD_RAD
-    } else {
-        s.abs().min(MAX_SPREAD_RAD)
-    };
+    let m = if s.is_nan() { MAX_SPREAD_RAD } else { s.abs().min(MAX_SPREAD_RAD) };
     (m, m != s)
 }
 
@@ -121,23 +117,14 @@ fn sanitize_spread(s: f32) -> (f32, bool) {
 fn refraction(d: Vec3A, n: Vec3A, eta: f32) -> Option<(Vec3A, f32, f32, f32, bool)> {
     let c = d.dot(n);
     let flip = c > 0.0; // leaving: the ray is on the side `n` points away from
-    let (n, c, eta_rel) = if flip {
-        (-n, -c, eta)
-    } else {
-        (n, c, 1.0 / eta)
-    };
+    let (n, c, eta_rel) = if flip { (-n, -c, eta) } else { (n, c, 1.0 / eta) };
     let k = 1.0 - eta_rel * eta_rel * (1.0 - c * c);
     (k >= 0.0).then(|| (n, c, eta_rel, k.sqrt(), flip))
 }
 
 impl RayDifferential {
     /// No spread at all: a ray that stands for itself only.
-    pub const ZERO: Self = Self {
-        dpdx: Vec3A::ZERO,
-        dpdy: Vec3A::ZERO,
-        dddx: Vec3A::ZERO,
-        dddy: Vec3A::ZERO,
-    };
+    pub const ZERO: Self = Self { dpdx: Vec3A::ZERO, dpdy: Vec3A::ZERO, dddx: Vec3A::ZERO, dddy: Vec3A::ZERO };
 
     /// From the four derivatives (world units and radians per pixel), sanitized.
     pub fn new(dpdx: Vec3A, dpdy: Vec3A, dddx: Vec3A, dddy: Vec3A) -> Self {
@@ -147,15 +134,7 @@ impl RayDifferential {
     fn new_checked(dpdx: Vec3A, dpdy: Vec3A, dddx: Vec3A, dddy: Vec3A) -> (Self, bool) {
         let ((dpdx, a), (dpdy, b)) = (sanitize(dpdx), sanitize(dpdy));
         let ((dddx, c), (dddy, d)) = (sanitize(dddx), sanitize(dddy));
-        (
-            Self {
-                dpdx,
-                dpdy,
-                dddx,
-                dddy,
-            },
-            a | b | c | d,
-        )
+        (Self { dpdx, dpdy, dddx, dddy }, a | b | c | d)
     }
 
     /// `self` sanitized (the fields are public: anyone may have stored a NaN), and whether that
@@ -166,9 +145,7 @@ impl RayDifferential {
 
     /// Whether every component is finite.
     pub fn is_finite(&self) -> bool {
-        [self.dpdx, self.dpdy, self.dddx, self.dddy]
-            .iter()
-            .all(|v| v.is_finite())
+        [self.dpdx, self.dpdy, self.dddx, self.dddy].iter().all(|v| v.is_finite())
     }
 
     /// A pinhole camera ray, exactly: the origin is fixed (`dP = 0`) and `D = d / |d|` for the
@@ -207,11 +184,7 @@ impl RayDifferential {
     fn from_spread_checked(dpdx: Vec3A, dpdy: Vec3A, dir: Vec3A, spread: f32) -> (Self, bool) {
         let (s, cs) = sanitize_spread(spread);
         let dir = dir.normalize_or_zero();
-        let ((e1, e2), cd) = if dir == Vec3A::ZERO {
-            ((Vec3A::X, Vec3A::Y), true)
-        } else {
-            (dir.any_orthonormal_pair(), false)
-        };
+        let ((e1, e2), cd) = if dir == Vec3A::ZERO { ((Vec3A::X, Vec3A::Y), true) } else { (dir.any_orthonormal_pair(), false) };
         let (r, c) = Self::new_checked(dpdx, dpdy, e1 * s, e2 * s);
         (r, c | cs | cd)
     }
@@ -326,20 +299,9 @@ impl RayDifferential {
     }
 
     /// [`RayDifferential::refract`], and whether it clamped.
-    pub fn refract_checked(
-        &self,
-        d: Vec3A,
-        n: Vec3A,
-        dndx: Vec3A,
-        dndy: Vec3A,
-        eta: f32,
-    ) -> Option<(Self, bool)> {
+    pub fn refract_checked(&self, d: Vec3A, n: Vec3A, dndx: Vec3A, dndy: Vec3A, eta: f32) -> Option<(Self, bool)> {
         let (s, cs) = self.sanitized();
-        let (eta, ce) = if eta.is_finite() && eta > 0.0 {
-            (eta, false)
-        } else {
-            (1.0, true)
-        };
+        let (eta, ce) = if eta.is_finite() && eta > 0.0 { (eta, false) } else { (1.0, true) };
         let (d, n) = (d.normalize_or_zero(), n.normalize_or_zero());
         if d == Vec3A::ZERO || n == Vec3A::ZERO {
             return Some((s, true));
@@ -371,12 +333,7 @@ impl RayDifferential {
     }
 
     /// [`RayDifferential::glossy`], and whether it clamped.
-    pub fn glossy_checked(
-        &self,
-        dir: Vec3A,
-        lobe_half_angle_rad: f32,
-        n_rays: u32,
-    ) -> (Self, bool) {
+    pub fn glossy_checked(&self, dir: Vec3A, lobe_half_angle_rad: f32, n_rays: u32) -> (Self, bool) {
         let (sg, cg) = glossy_spread(lobe_half_angle_rad, n_rays);
         self.distribution(dir, sg.max(self.directional_spread_rad()), cg)
     }
@@ -386,17 +343,11 @@ impl RayDifferential {
     /// steradians there (`area · cos θ_light / distance²`); 0, a point light, gives a spread of
     /// 0 (§4.3). See [`area_light_spread_rad`].
     pub fn area_light_shadow(&self, dir: Vec3A, light_solid_angle_sr: f32, n_rays: u32) -> Self {
-        self.area_light_shadow_checked(dir, light_solid_angle_sr, n_rays)
-            .0
+        self.area_light_shadow_checked(dir, light_solid_angle_sr, n_rays).0
     }
 
     /// [`RayDifferential::area_light_shadow`], and whether it clamped.
-    pub fn area_light_shadow_checked(
-        &self,
-        dir: Vec3A,
-        light_solid_angle_sr: f32,
-        n_rays: u32,
-    ) -> (Self, bool) {
+    pub fn area_light_shadow_checked(&self, dir: Vec3A, light_solid_angle_sr: f32, n_rays: u32) -> (Self, bool) {
         let (sp, c) = solid_angle_spread(light_solid_angle_sr, n_rays);
         self.distribution(dir, sp, c)
     }
@@ -472,11 +423,7 @@ fn pdf_spread(pdf_sr: f32, n_rays: u32) -> (f32, bool) {
 /// One of `n_rays` rays sharing a solid angle of `solid_angle_sr` steradians uniformly:
 /// `sqrt(Ω / N)` radians, i.e. [`spread_from_pdf_rad`] with `p = 1 / Ω`.
 fn solid_angle_spread(solid_angle_sr: f32, n_rays: u32) -> (f32, bool) {
-    let omega = if solid_angle_sr.is_nan() {
-        4.0 * PI
-    } else {
-        solid_angle_sr.clamp(0.0, 4.0 * PI)
-    };
+    let omega = if solid_angle_sr.is_nan() { 4.0 * PI } else { solid_angle_sr.clamp(0.0, 4.0 * PI) };
     let (s, cs) = sanitize_spread((omega / n_rays.max(1) as f32).sqrt());
     (s, cs | (omega != solid_angle_sr) | (n_rays == 0))
 }
@@ -491,11 +438,7 @@ pub fn glossy_spread_rad(lobe_half_angle_rad: f32, n_rays: u32) -> f32 {
 }
 
 fn glossy_spread(lobe_half_angle_rad: f32, n_rays: u32) -> (f32, bool) {
-    let a = if lobe_half_angle_rad.is_nan() {
-        PI
-    } else {
-        lobe_half_angle_rad.clamp(0.0, PI)
-    };
+    let a = if lobe_half_angle_rad.is_nan() { PI } else { lobe_half_angle_rad.clamp(0.0, PI) };
     // 2π (1 − cos α) = 4π sin²(α/2), without the cancellation of narrow lobes.
     let half_sin = (0.5 * a).sin();
     let (s, cs) = solid_angle_spread(4.0 * PI * half_sin * half_sin, n_rays);
@@ -548,13 +491,7 @@ pub fn refract_direction(d: Vec3A, n: Vec3A, eta: f32) -> Option<Vec3A> {
 /// field does not change), so `EG − F²` neither overflows nor underflows at huge or tiny scene
 /// scales; and `EG − F²` is computed as `|dpdu × dpdv|²` (Lagrange's identity), which does not
 /// cancel. A degenerate parameterization gives zeros (a flat surface).
-pub fn dndu_dndv(
-    dpdu: Vec3A,
-    dpdv: Vec3A,
-    dpduu: Vec3A,
-    dpduv: Vec3A,
-    dpdvv: Vec3A,
-) -> (Vec3A, Vec3A) {
+pub fn dndu_dndv(dpdu: Vec3A, dpdv: Vec3A, dpduu: Vec3A, dpduv: Vec3A, dpdvv: Vec3A) -> (Vec3A, Vec3A) {
     let k = dpdu.length().max(dpdv.length()).recip();
     let (pu, pv) = (dpdu * k, dpdv * k);
     let cross = pu.cross(pv);
@@ -604,10 +541,7 @@ impl UvDifferentials {
         let inv_det = c.length_squared().recip();
         let ok = |x: f32| x.is_finite() && x > 0.0;
         if !(ok(inv_lu) && ok(inv_lv) && inv_det.is_finite()) {
-            return Self {
-                clamped: true,
-                ..Self::default()
-            };
+            return Self { clamped: true, ..Self::default() };
         }
         let raw = |p: Vec3A| (p.cross(pv).dot(c) * inv_lu, pu.cross(p).dot(c) * inv_lv);
         let ((a, b), (e, f)) = (raw(dpdx), raw(dpdy));
@@ -617,13 +551,7 @@ impl UvDifferentials {
         };
         let (dudx, dvdx, dudy, dvdy) = (fix(a), fix(b), fix(e), fix(f));
         let changed = [dudx, dvdx, dudy, dvdy] != [a, b, e, f].map(|x| x * inv_det);
-        Self {
-            dudx,
-            dvdx,
-            dudy,
-            dvdy,
-            clamped: cx | cy | changed,
-        }
+        Self { dudx, dvdx, dudy, dvdy, clamped: cx | cy | changed }
     }
 
     /// The chain rule for a vector quantity `f(u, v)` on the surface: `(df/dx, df/dy)`

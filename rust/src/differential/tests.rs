@@ -65,11 +65,7 @@ fn trace(cam: &Pinhole, x: f64, y: f64, path: &Path) -> Vec<(f64, [DVec3; 4])> {
             Event::Reflect => d - 2.0 * d.dot(n) * n,
             // Snell in tangential form, independent of the module's formula.
             Event::Refract(eta) => {
-                let (n, e) = if d.dot(n) > 0.0 {
-                    (-n, eta)
-                } else {
-                    (n, 1.0 / eta)
-                };
+                let (n, e) = if d.dot(n) > 0.0 { (-n, eta) } else { (n, 1.0 / eta) };
                 let tan = e * (d - d.dot(n) * n);
                 tan - (1.0 - tan.length_squared()).sqrt() * n
             }
@@ -113,9 +109,7 @@ fn propagate(cam: &Pinhole, path: &Path) -> Vec<(RayDifferential, RayDifferentia
         let c1;
         (rd, c1) = match event {
             Event::Reflect => at.reflect_checked(f(*d), n, dndx, dndy),
-            Event::Refract(eta) => at
-                .refract_checked(f(*d), n, dndx, dndy, eta as f32)
-                .expect("TIR"),
+            Event::Refract(eta) => at.refract_checked(f(*d), n, dndx, dndy, eta as f32).expect("TIR"),
             Event::Stop => (at, false),
         };
         assert!(!c0 && !c1, "nothing here is degenerate");
@@ -128,19 +122,9 @@ fn propagate(cam: &Pinhole, path: &Path) -> Vec<(RayDifferential, RayDifferentia
 /// neighbour rays at ±1 pixel (`back = -1`), or the one-sided difference to the neighbour
 /// at +1 pixel (`back = 0`), which is what a pbrt-style neighbour ray represents.
 fn truth(cam: &Pinhole, path: &Path, back: f64) -> Vec<[DVec3; 4]> {
-    let [xp, xm, yp, ym] =
-        [(1.0, 0.0), (back, 0.0), (0.0, 1.0), (0.0, back)].map(|(x, y)| trace(cam, x, y, path));
-    let d = |a: &[(f64, [DVec3; 4])], b: &[(f64, [DVec3; 4])], i: usize, k: usize| {
-        (a[i].1[k] - b[i].1[k]) / (1.0 - back)
-    };
-    let per_hit = |i| {
-        [
-            d(&xp, &xm, i, 0),
-            d(&yp, &ym, i, 0),
-            d(&xp, &xm, i, 3),
-            d(&yp, &ym, i, 3),
-        ]
-    };
+    let [xp, xm, yp, ym] = [(1.0, 0.0), (back, 0.0), (0.0, 1.0), (0.0, back)].map(|(x, y)| trace(cam, x, y, path));
+    let d = |a: &[(f64, [DVec3; 4])], b: &[(f64, [DVec3; 4])], i: usize, k: usize| (a[i].1[k] - b[i].1[k]) / (1.0 - back);
+    let per_hit = |i| [d(&xp, &xm, i, 0), d(&yp, &ym, i, 0), d(&xp, &xm, i, 3), d(&yp, &ym, i, 3)];
     (0..path.len()).map(per_hit).collect()
 }
 
@@ -178,12 +162,7 @@ fn specular_paths_match_real_neighbour_rays() {
             let (est, tru) = (propagate(&cam, &path), truth(&cam, &path, back));
             let mut worst = 0.0f64;
             for ((at, out), t) in est.iter().zip(&tru) {
-                let e = [
-                    rel(at.dpdx, t[0]),
-                    rel(at.dpdy, t[1]),
-                    rel(out.dddx, t[2]),
-                    rel(out.dddy, t[3]),
-                ];
+                let e = [rel(at.dpdx, t[0]), rel(at.dpdy, t[1]), rel(out.dddx, t[2]), rel(out.dddy, t[3])];
                 worst = e.into_iter().fold(worst, f64::max);
             }
             eprintln!(
@@ -201,10 +180,7 @@ fn flat_mirror_keeps_the_spread_convex_mirror_widens_it() {
     let s = scenes(1e-4);
     let spread = |i: usize| propagate(&s[i].1, &s[i].2)[0].1.directional_spread_rad();
     let camera = s[0].1.differential().directional_spread_rad();
-    assert!(
-        (spread(0) / camera - 1.0).abs() < 1e-5,
-        "flat: the unfolded straight beam"
-    );
+    assert!((spread(0) / camera - 1.0).abs() < 1e-5, "flat: the unfolded straight beam");
     assert!(spread(1) > 3.0 * s[1].1.differential().directional_spread_rad());
 }
 
@@ -217,27 +193,15 @@ fn concave_mirror_narrows_then_widens_past_the_crossover() {
     let ts = [0.0, 1.0, 2.0, 2.5, 8.0 / 3.0, 2.8, 3.5, 3.9];
     let w = ts.map(|t| {
         let (qx, qy) = q(t);
-        let (w, truth) = (
-            est.beam_width_at(t as f32) as f64,
-            qx.length().max(qy.length()),
-        );
+        let (w, truth) = (est.beam_width_at(t as f32) as f64, qx.length().max(qy.length()));
         // The width nearly vanishes at the crossover: errors relative to the width at t = 0.
-        eprintln!(
-            "concave t={t:.3}: width {w:.4e} truth {truth:.4e} err/w0 {:.1e}",
-            (w - truth).abs() / w0
-        );
+        eprintln!("concave t={t:.3}: width {w:.4e} truth {truth:.4e} err/w0 {:.1e}", (w - truth).abs() / w0);
         assert!((w - truth).abs() < 1e-4 * w0, "t {t}: {w} vs {truth}");
         w
     });
-    assert!(
-        w[1] < 0.7 * w[0] && w[2] < w[1] && w[3] < w[2],
-        "narrows: {w:?}"
-    );
+    assert!(w[1] < 0.7 * w[0] && w[2] < w[1] && w[3] < w[2], "narrows: {w:?}");
     assert!(w[4] < 0.05 * w[0], "crosses over near 8/3: {w:?}");
-    assert!(
-        w[5] > w[4] && w[6] > w[5] && w[7] > 0.3 * w[0],
-        "widens: {w:?}"
-    );
+    assert!(w[5] > w[4] && w[6] > w[5] && w[7] > 0.3 * w[0], "widens: {w:?}");
     // The beam's x edge reverses past the crossover, in the module as in the truth.
     let ex = |t: f32| est.dpdx + t * est.dddx;
     assert!(ex(1.0).dot(ex(3.9)) < 0.0 && q(1.0).0.dot(q(3.9).0) < 0.0);
@@ -246,20 +210,10 @@ fn concave_mirror_narrows_then_widens_past_the_crossover() {
 #[test]
 fn camera_differentials_are_exact() {
     // A wide (90°), skewed, non-orthonormal pinhole: d(x, y) = o + x sx + y sy.
-    let (o, sx, sy) = (
-        DVec3::new(0.2, -0.1, -1.0),
-        DVec3::new(0.03, 0.004, 0.01),
-        DVec3::new(-0.002, -0.025, 0.005),
-    );
+    let (o, sx, sy) = (DVec3::new(0.2, -0.1, -1.0), DVec3::new(0.03, 0.004, 0.01), DVec3::new(-0.002, -0.025, 0.005));
     let unit = |x: f64, y: f64| (o + x * sx + y * sy).normalize();
     let mut worst = 0.0f64;
-    for (x, y) in [
-        (0.0, 0.0),
-        (32.0, 32.0),
-        (-32.0, 32.0),
-        (32.0, -40.0),
-        (-7.0, 3.0),
-    ] {
+    for (x, y) in [(0.0, 0.0), (32.0, 32.0), (-32.0, 32.0), (32.0, -40.0), (-7.0, 3.0)] {
         let rd = RayDifferential::from_pinhole(f(o + x * sx + y * sy), f(sx), f(sy));
         let e = 1e-3; // pixels: central differences of the normalized direction
         let tx = (unit(x + e, y) - unit(x - e, y)) / (2.0 * e);
@@ -286,10 +240,7 @@ fn pinhole_beam_width_grows_linearly_with_t() {
         assert!((rd.beam_width_area_at(t) / (t * a1) - 1.0).abs() < 1e-5);
         // It is the distance between real neighbour rays at that distance.
         let q = |x: f64, y: f64| t as f64 * cam.dir(x, y).normalize();
-        let (qx, qy) = (
-            (q(1.0, 0.0) - q(-1.0, 0.0)) / 2.0,
-            (q(0.0, 1.0) - q(0.0, -1.0)) / 2.0,
-        );
+        let (qx, qy) = ((q(1.0, 0.0) - q(-1.0, 0.0)) / 2.0, (q(0.0, 1.0) - q(0.0, -1.0)) / 2.0);
         assert!((rd.beam_width_at(t) as f64 / qx.length().max(qy.length()) - 1.0).abs() < 1e-5);
     }
 }
@@ -298,26 +249,17 @@ fn pinhole_beam_width_grows_linearly_with_t() {
 fn cosine_weighted_hemisphere_is_narrower_at_the_pole() {
     let (theta_p, theta_h, n) = (0.1f32, 1.5f32, 256);
     let spread = |theta: f32| spread_from_pdf_rad(theta.cos() / PI, n);
-    let (ratio, expected) = (
-        spread(theta_p) / spread(theta_h),
-        (theta_h.cos() / theta_p.cos()).sqrt(),
-    );
+    let (ratio, expected) = (spread(theta_p) / spread(theta_h), (theta_h.cos() / theta_p.cos()).sqrt());
     eprintln!("hemisphere: spread ratio {ratio:.7}, expected {expected:.7}");
     assert!((ratio / expected - 1.0).abs() < 1e-5);
     assert!((spread(0.0) - (PI / 256.0).sqrt()).abs() < 1e-6);
     // Its differential: the footprint, and two orthogonal vectors ⟂ dir of that length.
-    let at_hit =
-        RayDifferential::new(Vec3A::X * 0.01, Vec3A::Y * 0.02, Vec3A::ONE, Vec3A::ZERO);
+    let at_hit = RayDifferential::new(Vec3A::X * 0.01, Vec3A::Y * 0.02, Vec3A::ONE, Vec3A::ZERO);
     let dir = Vec3A::new(0.3, 0.2, 0.9).normalize();
-    let ((rd, clamped), s) = (
-        at_hit.hemisphere_checked(dir, 0.9 / PI, n),
-        spread_from_pdf_rad(0.9 / PI, n),
-    );
+    let ((rd, clamped), s) = (at_hit.hemisphere_checked(dir, 0.9 / PI, n), spread_from_pdf_rad(0.9 / PI, n));
     assert!(rd.dpdx == at_hit.dpdx && rd.dpdy == at_hit.dpdy && !clamped);
     assert!((rd.dddx.length() - s).abs() < 1e-6 && (rd.dddy.length() - s).abs() < 1e-6);
-    assert!([rd.dddx.dot(dir), rd.dddy.dot(dir), rd.dddx.dot(rd.dddy)]
-        .iter()
-        .all(|c| c.abs() < 1e-6));
+    assert!([rd.dddx.dot(dir), rd.dddy.dot(dir), rd.dddx.dot(rd.dddy)].iter().all(|c| c.abs() < 1e-6));
     // At the horizon (p = 0): the widest spread, flagged.
     let (edge, clamped) = at_hit.hemisphere_checked(Vec3A::X, 0.0, n);
     assert!(clamped && edge.directional_spread_rad() == MAX_SPREAD_RAD);
@@ -328,14 +270,8 @@ fn cosine_weighted_hemisphere_is_narrower_at_the_pole() {
 fn glossy_area_light_path_and_scale() {
     // Glossy: N rays share a cone's solid angle 2π (1 − cos α).
     let a = 0.2f32;
-    assert!(
-        (glossy_spread_rad(a, 64) / (2.0 * PI * (1.0 - a.cos()) / 64.0).sqrt() - 1.0).abs()
-            < 1e-4
-    );
-    assert!(
-        glossy_spread_rad(a, 256) < glossy_spread_rad(a, 64)
-            && glossy_spread_rad(0.0, 4) == 0.0
-    );
+    assert!((glossy_spread_rad(a, 64) / (2.0 * PI * (1.0 - a.cos()) / 64.0).sqrt() - 1.0).abs() < 1e-4);
+    assert!(glossy_spread_rad(a, 256) < glossy_spread_rad(a, 64) && glossy_spread_rad(0.0, 4) == 0.0);
     // Flat mirror: the specular spread is the camera's, so the glossy one wins; curved: a
     // wider specular spread is kept (§4.4's max).
     let cam = Pinhole::look_at(DVec3::ZERO, -DVec3::Z, 1e-3).differential();
@@ -353,9 +289,7 @@ fn glossy_area_light_path_and_scale() {
     let (hemi, path) = (cam.hemisphere(dir, p, 256), cam.path(dir, p, 1, 256));
     assert!((hemi.directional_spread_rad() / path.directional_spread_rad() - 1.0).abs() < 1e-6);
     assert!((path_sample_spacing(1, 256) - 1.0 / 16.0).abs() < 1e-7);
-    assert!(
-        (path_sample_spacing(2, 256) - 0.5).abs() < 1e-6 && path_sample_spacing(3, 1) == 1.0
-    );
+    assert!((path_sample_spacing(2, 256) - 0.5).abs() < 1e-6 && path_sample_spacing(3, 1) == 1.0);
     // scale(1/√spp): 16 samples per pixel, a quarter of the width.
     let mut rd = RayDifferential::new(Vec3A::X, Vec3A::Y * 2.0, Vec3A::Z * 0.1, Vec3A::X * 0.3);
     let w = rd.beam_width_at(3.0);
@@ -371,20 +305,13 @@ fn weingarten_and_uv_least_squares_are_exact() {
     let pv = |u: f64, v: f64| DVec3::new(0.3, 1.0, -0.7 * u + 0.4 * v);
     let nrm = |u: f64, v: f64| pu(u, v).cross(pv(u, v)).normalize();
     let second = [0.8, -0.7, 0.4].map(|z| DVec3::new(0.0, 0.0, z));
-    for ((u, v), s) in [(0.0, 0.0), (0.5, -0.3), (-1.2, 0.8)]
-        .into_iter()
-        .zip([1.0, 1e-12, 1e12])
-    {
+    for ((u, v), s) in [(0.0, 0.0), (0.5, -0.3), (-1.2, 0.8)].into_iter().zip([1.0, 1e-12, 1e12]) {
         let e = 1e-5;
         let tu = (nrm(u + e, v) - nrm(u - e, v)) / (2.0 * e);
         let tv = (nrm(u, v + e) - nrm(u, v - e)) / (2.0 * e);
-        let [a, b, c, d, g] =
-            [pu(u, v), pv(u, v), second[0], second[1], second[2]].map(|x| f(x * s));
+        let [a, b, c, d, g] = [pu(u, v), pv(u, v), second[0], second[1], second[2]].map(|x| f(x * s));
         let (dndu, dndv) = dndu_dndv(a, b, c, d, g);
-        assert!(
-            rel(dndu, tu).max(rel(dndv, tv)) < 1e-5,
-            "({u}, {v}) scale {s}"
-        );
+        assert!(rel(dndu, tu).max(rel(dndv, tv)) < 1e-5, "({u}, {v}) scale {s}");
     }
     // A sphere of radius 3 with the outward normal: dN/du = dpdu / 3.
     let [pu, pv, puu, puv, pvv] = sphere_derivs(DVec3::ZERO, 3.0, DVec3::new(1.0, 2.0, 2.0));
@@ -398,12 +325,7 @@ fn weingarten_and_uv_least_squares_are_exact() {
         let dpdy = (-0.05 * dpdu + 0.4 * dpdv - 0.1 * n) * s;
         let uv = UvDifferentials::from_footprint(dpdx, dpdy, dpdu * s, dpdv * s);
         let got = [uv.dudx, uv.dvdx, uv.dudy, uv.dvdy];
-        assert!(
-            got.iter()
-                .zip([0.3, -0.2, -0.05, 0.4])
-                .all(|(g, w)| (g - w).abs() < 1e-5),
-            "{got:?}"
-        );
+        assert!(got.iter().zip([0.3, -0.2, -0.05, 0.4]).all(|(g, w)| (g - w).abs() < 1e-5), "{got:?}");
         assert!(!uv.clamped);
     }
     let degenerate = UvDifferentials::from_footprint(Vec3A::X, Vec3A::Y, dpdu, 2.0 * dpdu);
@@ -422,26 +344,15 @@ fn direction_helpers_obey_the_laws() {
     // Leaving glass 60° from the normal: 1.5 sin 60° > 1, total internal reflection.
     let steep = Vec3A::new(0.866_025_4, 0.5, 0.0);
     assert!(refract_direction(steep, n, 1.5).is_none());
-    assert!(RayDifferential::ZERO
-        .refract(steep, n, Vec3A::ZERO, Vec3A::ZERO, 1.5)
-        .is_none());
+    assert!(RayDifferential::ZERO.refract(steep, n, Vec3A::ZERO, Vec3A::ZERO, 1.5).is_none());
 }
 
 #[test]
 fn grazing_and_degenerate_inputs_are_finite_and_flagged() {
-    let rd = RayDifferential::new(
-        Vec3A::X * 1e-3,
-        Vec3A::Y * 1e-3,
-        Vec3A::X * 1e-3,
-        Vec3A::Z * 1e-3,
-    );
+    let rd = RayDifferential::new(Vec3A::X * 1e-3, Vec3A::Y * 1e-3, Vec3A::X * 1e-3, Vec3A::Z * 1e-3);
     let d = Vec3A::X;
     // Exactly and nearly grazing: finite, flagged, at most 1 / GRAZING_COS_MIN times wider.
-    for n in [
-        Vec3A::Y,
-        Vec3A::new(1e-8, 1.0, 0.0),
-        Vec3A::new(-1e-6, 1.0, 0.0),
-    ] {
+    for n in [Vec3A::Y, Vec3A::new(1e-8, 1.0, 0.0), Vec3A::new(-1e-6, 1.0, 0.0)] {
         let (h, clamped) = rd.transfer_checked(d, 2.0, n);
         assert!(h.is_finite() && clamped);
         assert!(h.beam_width_at(0.0) <= 1.01 * rd.beam_width_at(2.0) / GRAZING_COS_MIN);
@@ -457,15 +368,11 @@ fn grazing_and_degenerate_inputs_are_finite_and_flagged() {
     // Degenerate normal, direction, camera direction.
     assert!(rd.transfer_checked(d, 1.0, Vec3A::ZERO).1);
     assert!(rd.transfer_checked(Vec3A::NAN, 1.0, n).1);
-    assert!(
-        RayDifferential::from_pinhole(Vec3A::ZERO, Vec3A::X, Vec3A::Y) == RayDifferential::ZERO
-    );
+    assert!(RayDifferential::from_pinhole(Vec3A::ZERO, Vec3A::X, Vec3A::Y) == RayDifferential::ZERO);
     // Just below the critical angle: clamped, not infinite.
     let crit = (1.0f32 / 1.5).asin() - 1e-7;
     let inside = Vec3A::new(crit.sin(), crit.cos(), 0.0);
-    let (near, clamped) = rd
-        .refract_checked(inside, Vec3A::Y, Vec3A::ZERO, Vec3A::ZERO, 1.5)
-        .expect("below critical");
+    let (near, clamped) = rd.refract_checked(inside, Vec3A::Y, Vec3A::ZERO, Vec3A::ZERO, 1.5).expect("below critical");
     assert!(near.is_finite() && clamped);
     // Infinite and huge keep their direction at the cap; NaN becomes zero.
     let inf = Vec3A::new(f32::INFINITY, 0.0, 0.0);
@@ -493,12 +400,7 @@ fn no_nan_escapes_any_public_function() {
     for i in 0..20_000 {
         let [v0, v1, v2, v3, v4, v5, v6, v7, v8] = [(); 9].map(|_| Vec3A::new(x(), x(), x()));
         let (a, b, c, t, k) = (x(), x(), x(), x(), counts[i % counts.len()]);
-        let raw = RayDifferential {
-            dpdx: v0,
-            dpdy: v1,
-            dddx: v2,
-            dddy: v3,
-        };
+        let raw = RayDifferential { dpdx: v0, dpdy: v1, dddx: v2, dddy: v3 };
         let mut scaled = raw;
         let scale_clamped = scaled.scale(t);
         let outs = [
@@ -518,30 +420,14 @@ fn no_nan_escapes_any_public_function() {
         ];
         assert!(outs.iter().all(|o| o.0.is_finite()), "{outs:?}");
         flagged += outs.iter().filter(|o| o.1).count();
-        let (w, wa, sd) = (
-            raw.beam_width_at(t),
-            raw.beam_width_area_at(t),
-            raw.directional_spread_rad(),
-        );
-        let (sp, sg, sa) = (
-            spread_from_pdf_rad(c, k),
-            glossy_spread_rad(a, k),
-            area_light_spread_rad(b, k),
-        );
+        let (w, wa, sd) = (raw.beam_width_at(t), raw.beam_width_area_at(t), raw.directional_spread_rad());
+        let (sp, sg, sa) = (spread_from_pdf_rad(c, k), glossy_spread_rad(a, k), area_light_spread_rad(b, k));
         let scalars = [w, wa, sd, sp, sg, sa, path_sample_spacing(k, k)];
-        assert!(
-            scalars.iter().all(|s| s.is_finite() && *s >= 0.0),
-            "{scalars:?}"
-        );
+        assert!(scalars.iter().all(|s| s.is_finite() && *s >= 0.0), "{scalars:?}");
         let uv = UvDifferentials::from_footprint(v0, v1, v4, v5);
         let ((n1, n2), (c1, c2)) = (dndu_dndv(v4, v5, v6, v7, v8), uv.chain(v6, v7));
-        let r = [
-            reflect_direction(v4, v5),
-            refract_direction(v4, v5, a).unwrap_or_default(),
-        ];
-        assert!([uv.dudx, uv.dvdx, uv.dudy, uv.dvdy]
-            .iter()
-            .all(|x| x.is_finite()));
+        let r = [reflect_direction(v4, v5), refract_direction(v4, v5, a).unwrap_or_default()];
+        assert!([uv.dudx, uv.dvdx, uv.dudy, uv.dvdy].iter().all(|x| x.is_finite()));
         assert!([n1, n2, c1, c2, r[0], r[1]].iter().all(|v| v.is_finite()));
     }
     assert!(flagged > 0);

@@ -29,13 +29,7 @@ pub(crate) struct LruList<T> {
 
 impl<T> Default for LruList<T> {
     fn default() -> Self {
-        Self {
-            nodes: Vec::new(),
-            head: NIL,
-            tail: NIL,
-            free: NIL,
-            len: 0,
-        }
+        Self { nodes: Vec::new(), head: NIL, tail: NIL, free: NIL, len: 0 }
     }
 }
 
@@ -58,15 +52,8 @@ impl<T> LruList<T> {
             node.value = Some(value);
             i
         } else {
-            let i = u32::try_from(self.nodes.len())
-                .ok()
-                .filter(|&i| i != NIL)
-                .expect("LRU list holds more than u32::MAX - 1 entries");
-            self.nodes.push(Node {
-                value: Some(value),
-                prev: NIL,
-                next: NIL,
-            });
+            let i = u32::try_from(self.nodes.len()).ok().filter(|&i| i != NIL).expect("LRU list holds more than u32::MAX - 1 entries");
+            self.nodes.push(Node { value: Some(value), prev: NIL, next: NIL });
             i
         };
         self.link_front(i);
@@ -79,10 +66,7 @@ impl<T> LruList<T> {
     /// # Panics
     /// If `i` is not a live node.
     pub(crate) fn get(&self, i: u32) -> &T {
-        self.nodes[i as usize]
-            .value
-            .as_ref()
-            .expect("LRU node is live")
+        self.nodes[i as usize].value.as_ref().expect("LRU node is live")
     }
 
     /// Marks node `i` as the most recently used.

@@ -115,12 +115,7 @@ pub struct CacheKey {
 impl CacheKey {
     /// A key from its parts.
     pub const fn new(mesh: u32, generation: u32, subpatch: u32, tier: Tier) -> Self {
-        Self {
-            mesh,
-            generation,
-            subpatch,
-            tier,
-        }
+        Self { mesh, generation, subpatch, tier }
     }
 }
 
@@ -156,12 +151,7 @@ pub enum CacheMode {
 
 impl CacheMode {
     /// Every mode, in the order of the docs.
-    pub const ALL: [CacheMode; 4] = [
-        CacheMode::Multires,
-        CacheMode::Single,
-        CacheMode::Unbounded,
-        CacheMode::None,
-    ];
+    pub const ALL: [CacheMode; 4] = [CacheMode::Multires, CacheMode::Single, CacheMode::Unbounded, CacheMode::None];
 
     /// "multires", "single", "unbounded" or "none": the name in stats and options.
     pub const fn name(self) -> &'static str {
@@ -192,10 +182,7 @@ impl FromStr for CacheMode {
     type Err = ParseCacheModeError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        CacheMode::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| ParseCacheModeError { name: s.to_owned() })
+        CacheMode::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| ParseCacheModeError { name: s.to_owned() })
     }
 }
 
@@ -227,11 +214,7 @@ impl CacheConfig {
     /// The paper's default: multires, 10 MB per tier.
     pub const DEFAULT: CacheConfig = CacheConfig::multires(3 * DEFAULT_TIER_BUDGET_BYTES);
 
-    const NOMINAL_ENTRY_BYTES: [usize; 3] = [
-        Tier::Coarse.vertex_bytes(),
-        Tier::Medium.vertex_bytes(),
-        Tier::Fine.vertex_bytes(),
-    ];
+    const NOMINAL_ENTRY_BYTES: [usize; 3] = [Tier::Coarse.vertex_bytes(), Tier::Medium.vertex_bytes(), Tier::Fine.vertex_bytes()];
 
     /// Three tiers sharing `total_bytes` evenly (the fine tier takes the 0–2 bytes of rounding,
     /// so the budgets add up to `total_bytes`).
@@ -247,32 +230,17 @@ impl CacheConfig {
 
     /// Only the fine tier, with all of `total_bytes`.
     pub const fn single(total_bytes: usize) -> Self {
-        Self {
-            mode: CacheMode::Single,
-            budget_bytes: [0, 0, total_bytes],
-            entry_bytes: Self::NOMINAL_ENTRY_BYTES,
-            shards: 0,
-        }
+        Self { mode: CacheMode::Single, budget_bytes: [0, 0, total_bytes], entry_bytes: Self::NOMINAL_ENTRY_BYTES, shards: 0 }
     }
 
     /// Never evicts.
     pub const fn unbounded() -> Self {
-        Self {
-            mode: CacheMode::Unbounded,
-            budget_bytes: [0; 3],
-            entry_bytes: Self::NOMINAL_ENTRY_BYTES,
-            shards: 0,
-        }
+        Self { mode: CacheMode::Unbounded, budget_bytes: [0; 3], entry_bytes: Self::NOMINAL_ENTRY_BYTES, shards: 0 }
     }
 
     /// Never stores.
     pub const fn none() -> Self {
-        Self {
-            mode: CacheMode::None,
-            budget_bytes: [0; 3],
-            entry_bytes: Self::NOMINAL_ENTRY_BYTES,
-            shards: 0,
-        }
+        Self { mode: CacheMode::None, budget_bytes: [0; 3], entry_bytes: Self::NOMINAL_ENTRY_BYTES, shards: 0 }
     }
 
     /// `mode` with a total budget of `total_bytes` (ignored by `unbounded` and `none`): what a
@@ -304,11 +272,7 @@ impl CacheConfig {
     pub const fn shard_count(&self, tier: Tier) -> usize {
         if self.shards > 0 {
             let n = self.shards.next_power_of_two();
-            return if n < MAX_FORCED_SHARDS {
-                n
-            } else {
-                MAX_FORCED_SHARDS
-            };
+            return if n < MAX_FORCED_SHARDS { n } else { MAX_FORCED_SHARDS };
         }
         let capacity = match self.mode {
             CacheMode::Unbounded | CacheMode::None => return MAX_SHARDS,
@@ -329,11 +293,7 @@ impl CacheConfig {
     pub const fn with_entry_bytes(mut self, entry_bytes: [usize; 3]) -> Self {
         let mut i = 0;
         while i < 3 {
-            self.entry_bytes[i] = if entry_bytes[i] == 0 {
-                1
-            } else {
-                entry_bytes[i]
-            };
+            self.entry_bytes[i] = if entry_bytes[i] == 0 { 1 } else { entry_bytes[i] };
             i += 1;
         }
         self
@@ -343,11 +303,7 @@ impl CacheConfig {
     pub const fn tier_budget_bytes(&self, tier: Tier) -> Option<usize> {
         match self.mode {
             CacheMode::Multires => Some(self.budget_bytes[tier.index()]),
-            CacheMode::Single => Some(if matches!(tier, Tier::Fine) {
-                self.budget_bytes[2]
-            } else {
-                0
-            }),
+            CacheMode::Single => Some(if matches!(tier, Tier::Fine) { self.budget_bytes[2] } else { 0 }),
             CacheMode::Unbounded => None,
             CacheMode::None => Some(0),
         }
@@ -355,11 +311,7 @@ impl CacheConfig {
 
     /// The bytes all tiers may hold together; `None` when unbounded.
     pub const fn total_budget_bytes(&self) -> Option<usize> {
-        match (
-            self.tier_budget_bytes(Tier::Coarse),
-            self.tier_budget_bytes(Tier::Medium),
-            self.tier_budget_bytes(Tier::Fine),
-        ) {
+        match (self.tier_budget_bytes(Tier::Coarse), self.tier_budget_bytes(Tier::Medium), self.tier_budget_bytes(Tier::Fine)) {
             (Some(c), Some(m), Some(f)) => Some(c.saturating_add(m).saturating_add(f)),
             _ => None,
         }
@@ -395,13 +347,7 @@ pub struct GeometryCache<E: CacheEntry> {
 impl<E: CacheEntry> GeometryCache<E> {
     /// An empty cache.
     pub fn new(config: CacheConfig) -> Self {
-        let tiers = Tier::ALL.map(|t| {
-            TierCache::new(
-                config.shard_count(t),
-                config.tier_budget_bytes(t),
-                config.mode != CacheMode::None,
-            )
-        });
+        let tiers = Tier::ALL.map(|t| TierCache::new(config.shard_count(t), config.tier_budget_bytes(t), config.mode != CacheMode::None));
         Self { config, tiers }
     }
 
@@ -506,10 +452,7 @@ impl<E: CacheEntry> fmt::Debug for GeometryCache<E> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("GeometryCache")
             .field("config", &self.config)
-            .field(
-                "resident_entries",
-                &Tier::ALL.map(|t| self.resident_entries(t)),
-            )
+            .field("resident_entries", &Tier::ALL.map(|t| self.resident_entries(t)))
             .field("resident_bytes", &Tier::ALL.map(|t| self.resident_bytes(t)))
             .finish()
     }

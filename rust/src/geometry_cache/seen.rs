@@ -105,11 +105,7 @@ impl SeenSet {
         let slot = std::mem::size_of::<((u32, u32), Vec<u64>)>() + 1;
         let sparse_slot = std::mem::size_of::<(u32, u32, u32)>() + 1;
         self.dense.capacity() * slot
-            + self
-                .dense
-                .values()
-                .map(|bits| bits.capacity() * 8)
-                .sum::<usize>()
+            + self.dense.values().map(|bits| bits.capacity() * 8).sum::<usize>()
             + self.sparse.capacity() * sparse_slot
     }
 }
@@ -186,13 +182,7 @@ mod tests {
     fn fx_hash_spreads_sequential_keys() {
         // hashbrown takes its control bits from the top 7 bits: sequential ids must not share them.
         let b = FxBuild::default();
-        let tops: HashSet<u64> = (0u32..256)
-            .map(|i| b.hash_one((1u32, 0u32, i)) >> 57)
-            .collect();
-        assert!(
-            tops.len() > 64,
-            "only {} distinct top-7-bit values",
-            tops.len()
-        );
+        let tops: HashSet<u64> = (0u32..256).map(|i| b.hash_one((1u32, 0u32, i)) >> 57).collect();
+        assert!(tops.len() > 64, "only {} distinct top-7-bit values", tops.len());
     }
 }

@@ -36,11 +36,7 @@ impl LookupCounters {
     /// Counts a lookup that builds: a cold tessellation, or a miss.
     #[inline]
     pub(crate) fn count_build(&self, cold: bool) {
-        let counter = if cold {
-            &self.cold_tessellations
-        } else {
-            &self.misses
-        };
+        let counter = if cold { &self.cold_tessellations } else { &self.misses };
         Self::add(counter, 1);
     }
 
@@ -48,11 +44,7 @@ impl LookupCounters {
     /// (the cache cost) for a rebuild.
     #[inline]
     pub(crate) fn built(&self, cold: bool, vertices: usize) {
-        let counter = if cold {
-            &self.cold_vertices
-        } else {
-            &self.recomputed_vertices
-        };
+        let counter = if cold { &self.cold_vertices } else { &self.recomputed_vertices };
         Self::add(counter, vertices as u64);
     }
 }
@@ -175,30 +167,14 @@ impl CacheStats {
         let _ = writeln!(
             s,
             "{:<7} {:>6} {:>10} {:>10} {:>13} {:>13} {:>10} {:>9} {:>13} {:>13} {:>10}",
-            "tier",
-            "grid",
-            "capacity",
-            "cold tess",
-            "lookups",
-            "hits",
-            "misses",
-            "hit rate",
-            "recomp verts",
-            "cold verts",
-            "peak bytes"
+            "tier", "grid", "capacity", "cold tess", "lookups", "hits", "misses", "hit rate", "recomp verts", "cold verts", "peak bytes"
         );
         for t in &self.tiers {
             if t.capacity_entries == Some(0) && t.lookups == 0 {
                 continue;
             }
-            let capacity = t
-                .capacity_entries
-                .map_or_else(|| "unbounded".to_owned(), |c| c.to_string());
-            let hit_rate = if t.lookups == 0 {
-                "-".to_owned()
-            } else {
-                format!("{:.2}%", 100.0 * t.hit_rate)
-            };
+            let capacity = t.capacity_entries.map_or_else(|| "unbounded".to_owned(), |c| c.to_string());
+            let hit_rate = if t.lookups == 0 { "-".to_owned() } else { format!("{:.2}%", 100.0 * t.hit_rate) };
             let _ = writeln!(
                 s,
                 "{:<7} {:>6} {:>10} {:>10} {:>13} {:>13} {:>10} {:>9} {:>13} {:>13} {:>10}",
@@ -215,11 +191,7 @@ impl CacheStats {
                 human_bytes(t.peak_bytes),
             );
         }
-        let _ = writeln!(
-            s,
-            "cold vertices {}, recomputed vertices (cache cost) {}",
-            self.cold_vertices, self.recomputed_vertices
-        );
+        let _ = writeln!(s, "cold vertices {}, recomputed vertices (cache cost) {}", self.cold_vertices, self.recomputed_vertices);
         s
     }
 }
@@ -236,10 +208,7 @@ fn human_bytes(b: u64) -> String {
     UNITS
         .iter()
         .find(|&&(_, scale)| b as f64 >= scale)
-        .map_or_else(
-            || format!("{b} B"),
-            |&(unit, scale)| format!("{:.1} {unit}", b as f64 / scale),
-        )
+        .map_or_else(|| format!("{b} B"), |&(unit, scale)| format!("{:.1} {unit}", b as f64 / scale))
 }
 
 #[cfg(test)]
@@ -270,18 +239,9 @@ mod tests {
         shards[0].count_build(false);
         shards[0].built(false, 289);
         let s = tier_stats(Tier::Fine, Some(3), 100, shards.iter());
-        assert_eq!(
-            (s.lookups, s.hits, s.misses, s.cold_tessellations),
-            (4, 3, 1, 1)
-        );
+        assert_eq!((s.lookups, s.hits, s.misses, s.cold_tessellations), (4, 3, 1, 1));
         assert_eq!(s.hit_rate, 0.75);
-        assert_eq!(
-            (s.cold_vertices, s.recomputed_vertices, s.peak_bytes),
-            (289, 289, 100)
-        );
-        assert_eq!(
-            (s.name, s.verts_per_side, s.capacity_entries),
-            ("fine", 17, Some(3))
-        );
+        assert_eq!((s.cold_vertices, s.recomputed_vertices, s.peak_bytes), (289, 289, 100));
+        assert_eq!((s.name, s.verts_per_side, s.capacity_entries), ("fine", 17, Some(3)));
     }
 }

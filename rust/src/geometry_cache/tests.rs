@@ -30,11 +30,7 @@ impl CacheEntry for Grid {
 
 /// A grid of `tier`'s nominal size.
 fn grid(tier: Tier, id: u64) -> Grid {
-    Grid {
-        id,
-        bytes: tier.vertex_bytes(),
-        verts: tier.vertex_count() as usize,
-    }
+    Grid { id, bytes: tier.vertex_bytes(), verts: tier.vertex_count() as usize }
 }
 
 fn key(mesh: u32, subpatch: u32, tier: Tier) -> CacheKey {
@@ -43,20 +39,12 @@ fn key(mesh: u32, subpatch: u32, tier: Tier) -> CacheKey {
 
 /// A multires config with the given per-tier budgets.
 fn budgets(coarse: usize, medium: usize, fine: usize) -> CacheConfig {
-    CacheConfig {
-        budget_bytes: [coarse, medium, fine],
-        ..CacheConfig::multires(0)
-    }
+    CacheConfig { budget_bytes: [coarse, medium, fine], ..CacheConfig::multires(0) }
 }
 
 fn check_invariant(stats: &CacheStats) {
     for t in &stats.tiers {
-        assert_eq!(
-            t.lookups,
-            t.hits + t.misses + t.cold_tessellations,
-            "tier {}: {t:?}",
-            t.name
-        );
+        assert_eq!(t.lookups, t.hits + t.misses + t.cold_tessellations, "tier {}: {t:?}", t.name);
     }
 }
 
@@ -81,15 +69,7 @@ fn lru_evicts_the_least_recently_used_and_a_get_refreshes_it() {
     assert!(!cache.contains(key(0, 0, f)));
     let s = cache.stats();
     let fine = s.tier(f);
-    assert_eq!(
-        (
-            fine.lookups,
-            fine.hits,
-            fine.misses,
-            fine.cold_tessellations
-        ),
-        (7, 1, 1, 5)
-    );
+    assert_eq!((fine.lookups, fine.hits, fine.misses, fine.cold_tessellations), (7, 1, 1, 5));
     assert_eq!(fine.recomputed_vertices, 289);
     assert_eq!(s.cold_vertices, 5 * 289);
     assert_eq!(cache.resident_entries(f), 3);
@@ -104,10 +84,7 @@ fn contains_neither_counts_nor_refreshes() {
     cache.get_or_build(key(0, 1, c), || grid(c, 1));
     assert!(cache.contains(key(0, 0, c)));
     cache.get_or_build(key(0, 2, c), || grid(c, 2));
-    assert!(
-        !cache.contains(key(0, 0, c)),
-        "contains() must not refresh recency"
-    );
+    assert!(!cache.contains(key(0, 0, c)), "contains() must not refresh recency");
     assert_eq!(cache.stats().tier(c).lookups, 3);
 }
 
@@ -123,11 +100,7 @@ fn bytes_are_accounted_per_tier_and_eviction_frees_exactly_the_entry() {
     for (s, &bytes) in sizes.iter().enumerate() {
         let s = s as u32;
         let before = cache.resident_bytes(m);
-        cache.get_or_build(key(0, s, m), || Grid {
-            id: s.into(),
-            bytes,
-            verts: 25,
-        });
+        cache.get_or_build(key(0, s, m), || Grid { id: s.into(), bytes, verts: 25 });
         let mut evicted = 0;
         while model.iter().map(|e| e.1).sum::<usize>() + bytes > budget {
             evicted += model.pop_back().map_or(0, |e| e.1);
@@ -137,26 +110,16 @@ fn bytes_are_accounted_per_tier_and_eviction_frees_exactly_the_entry() {
         peak = peak.max(expected);
         let now = cache.resident_bytes(m);
         assert_eq!(now, expected, "after storing {bytes} bytes");
-        assert_eq!(
-            now,
-            before + bytes - evicted,
-            "eviction must free exactly the evicted bytes"
-        );
+        assert_eq!(now, before + bytes - evicted, "eviction must free exactly the evicted bytes");
         assert!(now <= budget);
         assert_eq!(cache.stats().tier(m).peak_bytes, peak as u64);
         assert!(model.iter().all(|&(k, _)| cache.contains(key(0, k, m))));
         assert_eq!(cache.resident_entries(m), model.len());
     }
     // The other tiers saw nothing.
-    assert_eq!(
-        cache.resident_bytes(Tier::Coarse) + cache.resident_bytes(Tier::Fine),
-        0
-    );
+    assert_eq!(cache.resident_bytes(Tier::Coarse) + cache.resident_bytes(Tier::Fine), 0);
     let s = cache.stats();
-    assert_eq!(
-        s.tier(Tier::Coarse).peak_bytes + s.tier(Tier::Fine).peak_bytes,
-        0
-    );
+    assert_eq!(s.tier(Tier::Coarse).peak_bytes + s.tier(Tier::Fine).peak_bytes, 0);
     assert_eq!(s.tier(m).peak_bytes, 1000);
 }
 
@@ -169,38 +132,23 @@ fn capacity_entries_at_the_default_budget_match_the_paper() {
     let caps = Tier::ALL.map(|t| default.capacity_entries(t));
     assert_eq!(caps, [Some(208_333), Some(33_333), Some(2_883)]);
     let stats = GeometryCache::<Grid>::new(default).stats();
-    assert_eq!(
-        stats.tiers.clone().map(|t| t.capacity_entries),
-        [Some(208_333), Some(33_333), Some(2_883)]
-    );
+    assert_eq!(stats.tiers.clone().map(|t| t.capacity_entries), [Some(208_333), Some(33_333), Some(2_883)]);
     assert_eq!(stats.budget_bytes, Some(30_000_000));
 
     // The paper's figures (§5.2) are for binary megabytes: within 1% at 10 MiB and 30 MiB.
     let mib = 1 << 20;
     let near = |got: Option<usize>, paper: f64| {
         let got = got.unwrap_or(0) as f64;
-        assert!(
-            (got - paper).abs() / paper < 0.01,
-            "{got} vs the paper's {paper}"
-        );
+        assert!((got - paper).abs() / paper < 0.01, "{got} vs the paper's {paper}");
     };
     let per_mib = CacheConfig::multires(30 * mib);
     near(per_mib.capacity_entries(Tier::Coarse), 220_000.0);
     near(per_mib.capacity_entries(Tier::Medium), 35_000.0);
     near(per_mib.capacity_entries(Tier::Fine), 3_000.0);
-    near(
-        CacheConfig::single(30 * mib).capacity_entries(Tier::Fine),
-        9_100.0,
-    );
+    near(CacheConfig::single(30 * mib).capacity_entries(Tier::Fine), 9_100.0);
     // The dragon table's single-resolution rows (§6.3.2): 100 MB → 30k, 1 MB → 300.
-    near(
-        CacheConfig::single(100 * mib).capacity_entries(Tier::Fine),
-        30_000.0 * 1.0079,
-    );
-    near(
-        CacheConfig::single(mib).capacity_entries(Tier::Fine),
-        300.0 * 1.0067,
-    );
+    near(CacheConfig::single(100 * mib).capacity_entries(Tier::Fine), 30_000.0 * 1.0079);
+    near(CacheConfig::single(mib).capacity_entries(Tier::Fine), 300.0 * 1.0067);
 
     // Counting the fine tier's 16 sub-bounding boxes (24 bytes each) lowers its capacity.
     let with_boxes = default.with_entry_bytes([48, 300, 3468 + 16 * 24]);
@@ -215,18 +163,10 @@ fn capacity_entries_follow_the_real_entry_size() {
     assert_eq!(cache.capacity_entries(f), Some(2_883));
     // A fine tessellation that also holds 16 sub-boxes (two `Vec3A`, 32 bytes, each) and a
     // 4-byte chord error: 3,984 bytes.
-    cache.get_or_build(key(0, 0, f), || Grid {
-        id: 0,
-        bytes: 3468 + 16 * 32 + 4,
-        verts: 289,
-    });
+    cache.get_or_build(key(0, 0, f), || Grid { id: 0, bytes: 3468 + 16 * 32 + 4, verts: 289 });
     assert_eq!(cache.capacity_entries(f), Some(2_510));
     assert_eq!(cache.stats().tier(f).capacity_entries, Some(2_510));
-    assert_eq!(
-        cache.capacity_entries(Tier::Coarse),
-        Some(208_333),
-        "other tiers keep theirs"
-    );
+    assert_eq!(cache.capacity_entries(Tier::Coarse), Some(208_333), "other tiers keep theirs");
     // Building does not give a budget to tiers without one.
     let none = GeometryCache::new(CacheConfig::none());
     none.get_or_build(key(0, 0, f), || grid(f, 0));
@@ -248,10 +188,7 @@ fn shard_counts_are_chosen_so_each_shard_keeps_hundreds_of_entries() {
     assert_eq!(shards(CacheConfig::none()), [16; 3]);
     assert_eq!(shards(CacheConfig::DEFAULT.with_shards(3)), [4; 3]);
     assert_eq!(shards(CacheConfig::DEFAULT.with_shards(1000)), [64; 3]);
-    assert_eq!(
-        shards(CacheConfig::DEFAULT.with_shards(5).with_shards(0)),
-        [16, 16, 8]
-    );
+    assert_eq!(shards(CacheConfig::DEFAULT.with_shards(5).with_shards(0)), [16, 16, 8]);
     let cache = GeometryCache::<Grid>::new(CacheConfig::DEFAULT);
     assert_eq!(Tier::ALL.map(|t| cache.shard_count(t)), [16, 16, 8]);
 }
@@ -285,11 +222,7 @@ fn sharded_tiers_account_bytes_and_peak_over_all_shards() {
     for s in 0..200u32 {
         let bytes = 100 + (s as usize * 37) % 300;
         total_built += bytes;
-        cache.get_or_build(key(s % 3, s, m), || Grid {
-            id: 0,
-            bytes,
-            verts: 25,
-        });
+        cache.get_or_build(key(s % 3, s, m), || Grid { id: 0, bytes, verts: 25 });
         let now = cache.resident_bytes(m);
         assert!(now <= budget, "{now} > {budget}");
         peak = peak.max(now);
@@ -315,42 +248,23 @@ fn config_constructors() {
     for mode in CacheMode::ALL {
         assert_eq!(CacheConfig::for_mode(mode, 99).mode, mode);
     }
-    assert_eq!(
-        CacheConfig::for_mode(CacheMode::Single, 99),
-        CacheConfig::single(99)
-    );
+    assert_eq!(CacheConfig::for_mode(CacheMode::Single, 99), CacheConfig::single(99));
     // Single ignores coarse and medium budgets even if someone sets them.
-    let odd = CacheConfig {
-        budget_bytes: [5, 5, 5],
-        ..CacheConfig::single(0)
-    };
+    let odd = CacheConfig { budget_bytes: [5, 5, 5], ..CacheConfig::single(0) };
     assert_eq!(odd.tier_budget_bytes(Tier::Coarse), Some(0));
     assert_eq!(odd.total_budget_bytes(), Some(5));
-    assert_eq!(
-        CacheConfig::DEFAULT.with_entry_bytes([0, 1, 2]).entry_bytes,
-        [1, 1, 2]
-    );
+    assert_eq!(CacheConfig::DEFAULT.with_entry_bytes([0, 1, 2]).entry_bytes, [1, 1, 2]);
 }
 
 #[test]
 fn mode_names_round_trip_and_unknown_names_list_the_valid_ones() {
     for mode in CacheMode::ALL {
         assert_eq!(mode.to_string().parse::<CacheMode>(), Ok(mode));
-        assert_eq!(
-            serde_json::to_string(&mode).ok(),
-            Some(format!("\"{mode}\""))
-        );
+        assert_eq!(serde_json::to_string(&mode).ok(), Some(format!("\"{mode}\"")));
     }
-    assert_eq!(
-        CacheMode::ALL.map(CacheMode::name),
-        ["multires", "single", "unbounded", "none"]
-    );
+    assert_eq!(CacheMode::ALL.map(CacheMode::name), ["multires", "single", "unbounded", "none"]);
     assert_eq!(CacheMode::default(), CacheMode::Multires);
-    let err = "lru"
-        .parse::<CacheMode>()
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default();
+    let err = "lru".parse::<CacheMode>().err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("\"lru\""), "{err}");
     for name in ["multires", "single", "unbounded", "none"] {
         assert!(err.contains(name), "{err} should list {name}");
@@ -361,11 +275,7 @@ fn mode_names_round_trip_and_unknown_names_list_the_valid_ones() {
 fn concurrent_lookups_build_each_key_exactly_once() {
     const THREADS: usize = 8;
     const ROUNDS: usize = 4;
-    let keys = [
-        key(0, 0, Tier::Fine),
-        key(0, 1, Tier::Fine),
-        key(1, 0, Tier::Medium),
-    ];
+    let keys = [key(0, 0, Tier::Fine), key(0, 1, Tier::Fine), key(1, 0, Tier::Medium)];
     let builds: [AtomicUsize; 3] = Default::default();
     let cache = GeometryCache::new(CacheConfig::default());
     let start = Barrier::new(THREADS);
@@ -380,10 +290,7 @@ fn concurrent_lookups_build_each_key_exactly_once() {
                             got.push(cache.get_or_build(k, || {
                                 std::thread::sleep(Duration::from_millis(20));
                                 let n = builds[i].fetch_add(1, SeqCst);
-                                Grid {
-                                    id: (i * 1000 + n) as u64,
-                                    ..grid(k.tier, 0)
-                                }
+                                Grid { id: (i * 1000 + n) as u64, ..grid(k.tier, 0) }
                             }));
                         }
                     }
@@ -391,10 +298,7 @@ fn concurrent_lookups_build_each_key_exactly_once() {
                 })
             })
             .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_default())
-            .collect()
+        handles.into_iter().map(|h| h.join().unwrap_or_default()).collect()
     });
     assert_eq!(builds.each_ref().map(|b| b.load(SeqCst)), [1, 1, 1]);
     // Every caller got the one build of its key.
@@ -409,14 +313,8 @@ fn concurrent_lookups_build_each_key_exactly_once() {
     check_invariant(&s);
     let fine = s.tier(Tier::Fine);
     let medium = s.tier(Tier::Medium);
-    assert_eq!(
-        (fine.lookups, fine.cold_tessellations, fine.misses),
-        (2 * (THREADS * ROUNDS) as u64, 2, 0)
-    );
-    assert_eq!(
-        (medium.lookups, medium.cold_tessellations, medium.misses),
-        ((THREADS * ROUNDS) as u64, 1, 0)
-    );
+    assert_eq!((fine.lookups, fine.cold_tessellations, fine.misses), (2 * (THREADS * ROUNDS) as u64, 2, 0));
+    assert_eq!((medium.lookups, medium.cold_tessellations, medium.misses), ((THREADS * ROUNDS) as u64, 1, 0));
     assert_eq!(s.recomputed_vertices, 0);
 }
 
@@ -445,18 +343,11 @@ fn concurrent_lookups_rebuild_once_per_residency() {
     cache.get_or_build(key(0, 1, f), || grid(f, 100)); // evicts key 0
     assert!(!cache.contains(key(0, 0, f)));
     hammer(&cache);
-    assert_eq!(
-        builds.load(SeqCst),
-        2,
-        "one rebuild for the second residency"
-    );
+    assert_eq!(builds.load(SeqCst), 2, "one rebuild for the second residency");
     let s = cache.stats();
     check_invariant(&s);
     let fine = s.tier(f);
-    assert_eq!(
-        (fine.cold_tessellations, fine.misses, fine.hits),
-        (2, 1, 2 * THREADS as u64 - 2)
-    );
+    assert_eq!((fine.cold_tessellations, fine.misses, fine.hits), (2, 1, 2 * THREADS as u64 - 2));
     assert_eq!(fine.recomputed_vertices, 289);
 }
 
@@ -482,14 +373,8 @@ fn lookups_are_hits_plus_misses_plus_cold_in_every_mode() {
                 s.spawn(move || {
                     let mut x = 0x9e37_79b9_7f4a_7c15_u64.wrapping_mul(t + 1);
                     for _ in 0..LOOKUPS {
-                        x = x
-                            .wrapping_mul(6_364_136_223_846_793_005)
-                            .wrapping_add(1_442_695_040_888_963_407);
-                        let tier = if config.mode == CacheMode::Single {
-                            Tier::Fine
-                        } else {
-                            Tier::ALL[(x >> 60) as usize % 3]
-                        };
+                        x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+                        let tier = if config.mode == CacheMode::Single { Tier::Fine } else { Tier::ALL[(x >> 60) as usize % 3] };
                         let k = key((x >> 40) as u32 % 2, ((x >> 20) % SUBPATCHES) as u32, tier);
                         let e = cache.get_or_build(k, || {
                             builds[tier.index()].fetch_add(1, SeqCst);
@@ -502,21 +387,11 @@ fn lookups_are_hits_plus_misses_plus_cold_in_every_mode() {
         });
         let s = cache.stats();
         check_invariant(&s);
-        assert_eq!(
-            s.tiers.iter().map(|t| t.lookups).sum::<u64>(),
-            THREADS * LOOKUPS,
-            "{}",
-            config.mode
-        );
+        assert_eq!(s.tiers.iter().map(|t| t.lookups).sum::<u64>(), THREADS * LOOKUPS, "{}", config.mode);
         for t in Tier::ALL {
             let ts = s.tier(t);
             let verts = u64::from(t.vertex_count());
-            assert_eq!(
-                builds[t.index()].load(SeqCst) as u64,
-                ts.cold_tessellations + ts.misses,
-                "{} {t}",
-                config.mode
-            );
+            assert_eq!(builds[t.index()].load(SeqCst) as u64, ts.cold_tessellations + ts.misses, "{} {t}", config.mode);
             assert!(ts.cold_tessellations <= 2 * SUBPATCHES);
             assert_eq!(ts.recomputed_vertices, ts.misses * verts);
             assert!(cache.resident_bytes(t) <= config.tier_budget_bytes(t).unwrap_or(usize::MAX));
@@ -525,10 +400,7 @@ fn lookups_are_hits_plus_misses_plus_cold_in_every_mode() {
                 assert_eq!(ts.cold_tessellations, 2 * SUBPATCHES, "{} {t}", config.mode);
             }
         }
-        let cold: u64 = Tier::ALL
-            .iter()
-            .map(|t| s.tier(*t).cold_tessellations * u64::from(t.vertex_count()))
-            .sum();
+        let cold: u64 = Tier::ALL.iter().map(|t| s.tier(*t).cold_tessellations * u64::from(t.vertex_count())).sum();
         assert_eq!(s.cold_vertices, cold);
         match config.mode {
             CacheMode::Unbounded => assert_eq!(s.recomputed_vertices, 0),
@@ -546,19 +418,13 @@ fn unbounded_never_evicts() {
         cache.get_or_build(key(s % 7, s, f), || grid(f, s.into()));
     }
     for s in 0..2000 {
-        assert_eq!(
-            cache.get_or_build(key(s % 7, s, f), || grid(f, 0)).id,
-            u64::from(s)
-        );
+        assert_eq!(cache.get_or_build(key(s % 7, s, f), || grid(f, 0)).id, u64::from(s));
     }
     assert_eq!(cache.resident_entries(f), 2000);
     assert_eq!(cache.resident_bytes(f), 2000 * 3468);
     let s = cache.stats();
     let fine = s.tier(f);
-    assert_eq!(
-        (fine.cold_tessellations, fine.hits, fine.misses),
-        (2000, 2000, 0)
-    );
+    assert_eq!((fine.cold_tessellations, fine.hits, fine.misses), (2000, 2000, 0));
     assert_eq!(fine.peak_bytes, 2000 * 3468);
     assert_eq!((s.budget_bytes, fine.capacity_entries), (None, None));
 }
@@ -578,14 +444,8 @@ fn none_never_stores_and_reports_recomputation() {
     assert_eq!(cache.resident_bytes(m), 0);
     let s = cache.stats();
     let med = s.tier(m);
-    assert_eq!(
-        (med.lookups, med.cold_tessellations, med.misses, med.hits),
-        (4, 2, 2, 0)
-    );
-    assert_eq!(
-        (med.recomputed_vertices, s.cold_vertices, med.peak_bytes),
-        (50, 50, 0)
-    );
+    assert_eq!((med.lookups, med.cold_tessellations, med.misses, med.hits), (4, 2, 2, 0));
+    assert_eq!((med.recomputed_vertices, s.cold_vertices, med.peak_bytes), (50, 50, 0));
     assert_eq!((s.budget_bytes, med.capacity_entries), (Some(0), Some(0)));
     check_invariant(&s);
 }
@@ -604,19 +464,10 @@ fn single_stores_only_fine() {
     assert!(!cache.contains(coarse));
     assert_eq!(cache.resident_bytes(Tier::Coarse), 0);
     let s = cache.stats();
-    assert_eq!(
-        s.tiers.clone().map(|t| t.capacity_entries),
-        [Some(0), Some(0), Some(10)]
-    );
+    assert_eq!(s.tiers.clone().map(|t| t.capacity_entries), [Some(0), Some(0), Some(10)]);
     assert_eq!(s.budget_bytes, Some(10 * 3468));
-    assert_eq!(
-        (s.tier(Tier::Coarse).misses, s.tier(Tier::Fine).hits),
-        (1, 1)
-    );
-    assert!(
-        !s.table().contains("medium"),
-        "an unused tier is left out of the table"
-    );
+    assert_eq!((s.tier(Tier::Coarse).misses, s.tier(Tier::Fine).hits), (1, 1));
+    assert!(!s.table().contains("medium"), "an unused tier is left out of the table");
 }
 
 #[test]
@@ -625,46 +476,26 @@ fn invalidate_mesh_removes_only_that_mesh_and_frees_its_bytes() {
     for mesh in [1, 2] {
         for t in Tier::ALL {
             for s in 0..5 {
-                cache.get_or_build(key(mesh, s, t), || Grid {
-                    id: s.into(),
-                    bytes: 100 * mesh as usize + 1,
-                    verts: 4,
-                });
+                cache.get_or_build(key(mesh, s, t), || Grid { id: s.into(), bytes: 100 * mesh as usize + 1, verts: 4 });
             }
         }
     }
     let before = cache.stats();
     cache.invalidate_mesh(1);
     for t in Tier::ALL {
-        assert_eq!(
-            cache.resident_bytes(t),
-            5 * 201,
-            "mesh 2's bytes stay, mesh 1's are freed"
-        );
+        assert_eq!(cache.resident_bytes(t), 5 * 201, "mesh 2's bytes stay, mesh 1's are freed");
         assert_eq!(cache.resident_entries(t), 5);
         for s in 0..5 {
             assert!(!cache.contains(key(1, s, t)));
             assert!(cache.contains(key(2, s, t)));
         }
     }
-    assert_eq!(
-        cache.stats(),
-        before,
-        "invalidation alone changes no counter"
-    );
+    assert_eq!(cache.stats(), before, "invalidation alone changes no counter");
     // Mesh 2 still hits; mesh 1's next build is of new geometry, so it is cold, not a miss.
-    assert_eq!(
-        cache
-            .get_or_build(key(2, 0, Tier::Fine), || grid(Tier::Fine, 9))
-            .id,
-        0
-    );
+    assert_eq!(cache.get_or_build(key(2, 0, Tier::Fine), || grid(Tier::Fine, 9)).id, 0);
     cache.get_or_build(key(1, 0, Tier::Fine), || grid(Tier::Fine, 9));
     let fine = cache.stats().tier(Tier::Fine).clone();
-    assert_eq!(
-        (fine.hits, fine.misses, fine.cold_tessellations),
-        (1, 0, 11)
-    );
+    assert_eq!((fine.hits, fine.misses, fine.cold_tessellations), (1, 0, 11));
     cache.invalidate_mesh(3); // an unknown mesh: nothing happens
     assert_eq!(cache.resident_entries(Tier::Fine), 6);
 }
@@ -698,12 +529,7 @@ fn generation_is_part_of_the_key() {
     let c = Tier::Coarse;
     let cache = GeometryCache::new(CacheConfig::default());
     cache.get_or_build(CacheKey::new(4, 0, 1, c), || grid(c, 0));
-    assert_eq!(
-        cache
-            .get_or_build(CacheKey::new(4, 1, 1, c), || grid(c, 1))
-            .id,
-        1
-    );
+    assert_eq!(cache.get_or_build(CacheKey::new(4, 1, 1, c), || grid(c, 1)).id, 1);
     assert!(cache.contains(CacheKey::new(4, 0, 1, c)));
     assert_eq!(cache.stats().tier(c).cold_tessellations, 2);
 }
@@ -712,50 +538,18 @@ fn generation_is_part_of_the_key() {
 fn an_oversized_entry_is_returned_but_not_stored() {
     let m = Tier::Medium;
     let cache = GeometryCache::new(budgets(0, 1000, 0));
-    cache.get_or_build(key(0, 0, m), || Grid {
-        id: 0,
-        bytes: 300,
-        verts: 25,
-    });
-    let big = cache.get_or_build(key(0, 1, m), || Grid {
-        id: 1,
-        bytes: 1001,
-        verts: 25,
-    });
+    cache.get_or_build(key(0, 0, m), || Grid { id: 0, bytes: 300, verts: 25 });
+    let big = cache.get_or_build(key(0, 1, m), || Grid { id: 1, bytes: 1001, verts: 25 });
     assert_eq!(big.id, 1);
     assert!(!cache.contains(key(0, 1, m)));
-    assert!(
-        cache.contains(key(0, 0, m)),
-        "an oversized entry evicts nothing"
-    );
+    assert!(cache.contains(key(0, 0, m)), "an oversized entry evicts nothing");
     assert_eq!(cache.resident_bytes(m), 300);
-    assert_eq!(
-        cache
-            .get_or_build(key(0, 1, m), || Grid {
-                id: 2,
-                bytes: 1001,
-                verts: 25
-            })
-            .id,
-        2
-    );
+    assert_eq!(cache.get_or_build(key(0, 1, m), || Grid { id: 2, bytes: 1001, verts: 25 }).id, 2);
     let s = cache.stats();
     let med = s.tier(m);
-    assert_eq!(
-        (
-            med.peak_bytes,
-            med.cold_tessellations,
-            med.misses,
-            med.recomputed_vertices
-        ),
-        (300, 2, 1, 25)
-    );
+    assert_eq!((med.peak_bytes, med.cold_tessellations, med.misses, med.recomputed_vertices), (300, 2, 1, 25));
     // Exactly the budget still fits.
-    cache.get_or_build(key(0, 2, m), || Grid {
-        id: 3,
-        bytes: 1000,
-        verts: 25,
-    });
+    cache.get_or_build(key(0, 2, m), || Grid { id: 3, bytes: 1000, verts: 25 });
     assert!(cache.contains(key(0, 2, m)));
     assert_eq!(cache.resident_bytes(m), 1000);
 }
@@ -804,10 +598,7 @@ fn a_build_that_looks_up_its_own_key_panics_instead_of_deadlocking() {
             grid(c, 2)
         })
     }));
-    let message = result
-        .err()
-        .and_then(|p| p.downcast_ref::<String>().cloned())
-        .unwrap_or_default();
+    let message = result.err().and_then(|p| p.downcast_ref::<String>().cloned()).unwrap_or_default();
     assert!(message.contains("wait for itself"), "{message}");
     // The outer build was abandoned, so the key can still be built.
     assert_eq!(cache.get_or_build(k, || grid(c, 3)).id, 3);
@@ -818,20 +609,8 @@ fn stats_json_has_every_named_field() {
     let cache = GeometryCache::new(CacheConfig::default());
     cache.get_or_build(key(0, 0, Tier::Fine), || grid(Tier::Fine, 0));
     let json = serde_json::to_value(cache.stats()).unwrap_or_default();
-    let keys = |v: &serde_json::Value| -> HashSet<String> {
-        v.as_object()
-            .map(|o| o.keys().cloned().collect())
-            .unwrap_or_default()
-    };
-    let top: HashSet<String> = [
-        "mode",
-        "budget_bytes",
-        "tiers",
-        "cold_vertices",
-        "recomputed_vertices",
-    ]
-    .map(String::from)
-    .into();
+    let keys = |v: &serde_json::Value| -> HashSet<String> { v.as_object().map(|o| o.keys().cloned().collect()).unwrap_or_default() };
+    let top: HashSet<String> = ["mode", "budget_bytes", "tiers", "cold_vertices", "recomputed_vertices"].map(String::from).into();
     assert_eq!(keys(&json), top);
     let tier_fields: HashSet<String> = [
         "name",
@@ -862,12 +641,8 @@ fn stats_json_has_every_named_field() {
     assert_eq!(tiers[2]["capacity_entries"], 2883);
     assert!(tiers[2]["hit_rate"].is_f64());
     // Unbounded has no budget and no capacity: null, not a huge number.
-    let unbounded =
-        serde_json::to_value(GeometryCache::<Grid>::new(CacheConfig::unbounded()).stats())
-            .unwrap_or_default();
-    assert!(
-        unbounded["budget_bytes"].is_null() && unbounded["tiers"][0]["capacity_entries"].is_null()
-    );
+    let unbounded = serde_json::to_value(GeometryCache::<Grid>::new(CacheConfig::unbounded()).stats()).unwrap_or_default();
+    assert!(unbounded["budget_bytes"].is_null() && unbounded["tiers"][0]["capacity_entries"].is_null());
     assert_eq!(unbounded["mode"], "unbounded");
 }
 
@@ -881,29 +656,13 @@ fn table_reads_like_the_papers() {
     let table = cache.table();
     assert_eq!(table, cache.stats().to_string());
     let lines: Vec<&str> = table.lines().collect();
-    assert!(
-        lines[0].contains("multires") && lines[0].contains("30.0 MB"),
-        "{table}"
-    );
-    let coarse = lines
-        .iter()
-        .find(|l| l.starts_with("coarse"))
-        .copied()
-        .unwrap_or_default();
-    assert!(
-        coarse.contains("2x2") && coarse.contains("208333") && coarse.contains("100.00%"),
-        "{coarse}"
-    );
-    assert!(
-        lines.iter().any(|l| l.starts_with("medium"))
-            && lines.iter().any(|l| l.starts_with("fine"))
-    );
+    assert!(lines[0].contains("multires") && lines[0].contains("30.0 MB"), "{table}");
+    let coarse = lines.iter().find(|l| l.starts_with("coarse")).copied().unwrap_or_default();
+    assert!(coarse.contains("2x2") && coarse.contains("208333") && coarse.contains("100.00%"), "{coarse}");
+    assert!(lines.iter().any(|l| l.starts_with("medium")) && lines.iter().any(|l| l.starts_with("fine")));
     assert!(table.contains("recomputed vertices (cache cost) 0"));
     let unbounded = GeometryCache::<Grid>::new(CacheConfig::unbounded()).table();
-    assert!(
-        unbounded.contains("no budget") && unbounded.contains("unbounded"),
-        "{unbounded}"
-    );
+    assert!(unbounded.contains("no budget") && unbounded.contains("unbounded"), "{unbounded}");
 }
 
 #[test]
@@ -925,9 +684,5 @@ fn bookkeeping_is_as_documented() {
         cache.get_or_build(key(0, s, Tier::Coarse), || grid(Tier::Coarse, 0));
     }
     // 10,000 ids: 1,250 bytes of bitset, rounded up by amortised growth.
-    assert!(
-        cache.seen_set_bytes(Tier::Coarse) < 4096,
-        "{}",
-        cache.seen_set_bytes(Tier::Coarse)
-    );
+    assert!(cache.seen_set_bytes(Tier::Coarse) < 4096, "{}", cache.seen_set_bytes(Tier::Coarse));
 }

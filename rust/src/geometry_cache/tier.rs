@@ -103,10 +103,7 @@ impl FromStr for Tier {
     type Err = ParseTierError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Tier::ALL
-            .into_iter()
-            .find(|t| t.name() == s)
-            .ok_or_else(|| ParseTierError { name: s.to_owned() })
+        Tier::ALL.into_iter().find(|t| t.name() == s).ok_or_else(|| ParseTierError { name: s.to_owned() })
     }
 }
 
@@ -116,17 +113,7 @@ mod tests {
 
     #[test]
     fn grid_sizes_are_the_papers() {
-        let got: Vec<_> = Tier::ALL
-            .iter()
-            .map(|t| {
-                (
-                    t.verts_per_side(),
-                    t.quads_per_side(),
-                    t.vertex_count(),
-                    t.vertex_bytes(),
-                )
-            })
-            .collect();
+        let got: Vec<_> = Tier::ALL.iter().map(|t| (t.verts_per_side(), t.quads_per_side(), t.vertex_count(), t.vertex_bytes())).collect();
         assert_eq!(got, [(2, 1, 4, 48), (5, 4, 25, 300), (17, 16, 289, 3468)]);
     }
 
@@ -144,20 +131,10 @@ mod tests {
         for t in Tier::ALL {
             assert_eq!(t.to_string(), t.name());
             assert_eq!(t.name().parse::<Tier>(), Ok(t));
-            assert_eq!(
-                serde_json::to_string(&t).ok(),
-                Some(format!("\"{}\"", t.name()))
-            );
+            assert_eq!(serde_json::to_string(&t).ok(), Some(format!("\"{}\"", t.name())));
         }
         assert_eq!(["coarse", "medium", "fine"], Tier::ALL.map(Tier::name));
-        let err = "Fine"
-            .parse::<Tier>()
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
-        assert!(
-            err.contains("\"Fine\"") && err.contains("coarse, medium, fine"),
-            "{err}"
-        );
+        let err = "Fine".parse::<Tier>().err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(err.contains("\"Fine\"") && err.contains("coarse, medium, fine"), "{err}");
     }
 }

@@ -97,11 +97,7 @@ enum PendingState<E> {
 
 impl<E> Pending<E> {
     fn new() -> Self {
-        Self {
-            builder: thread::current().id(),
-            state: Mutex::new(PendingState::Building),
-            done: Condvar::new(),
-        }
+        Self { builder: thread::current().id(), state: Mutex::new(PendingState::Building), done: Condvar::new() }
     }
 
     fn finish(&self, state: PendingState<E>) {
@@ -159,11 +155,7 @@ impl<E: CacheEntry> TierCache<E> {
         Self {
             shards: (0..shards)
                 .map(|_| Shard {
-                    state: Mutex::new(ShardState {
-                        slots: HashMap::default(),
-                        lru: LruList::default(),
-                        resident_bytes: 0,
-                    }),
+                    state: Mutex::new(ShardState { slots: HashMap::default(), lru: LruList::default(), resident_bytes: 0 }),
                     counters: LookupCounters::default(),
                 })
                 .collect(),
@@ -187,9 +179,7 @@ impl<E: CacheEntry> TierCache<E> {
 
     /// Records that `key` is being built; true if it never was before (a cold tessellation).
     fn first_build(&self, key: &CacheKey) -> bool {
-        self.seen
-            .lock()
-            .insert(key.mesh, key.generation, key.subpatch)
+        self.seen.lock().insert(key.mesh, key.generation, key.subpatch)
     }
 
     /// See [`GeometryCache::get_or_build`](super::GeometryCache::get_or_build).
@@ -257,20 +247,8 @@ impl<E: CacheEntry> TierCache<E> {
 
     /// Builds `key` as the one thread registered to, stores it if it still may, and wakes the
     /// threads waiting for it.
-    fn build_and_store(
-        &self,
-        shard: &Shard<E>,
-        key: CacheKey,
-        pending: &Arc<Pending<E>>,
-        cold: bool,
-        build: impl FnOnce() -> E,
-    ) -> Arc<E> {
-        let mut guard = AbandonOnUnwind {
-            shard,
-            key,
-            pending,
-            armed: true,
-        };
+    fn build_and_store(&self, shard: &Shard<E>, key: CacheKey, pending: &Arc<Pending<E>>, cold: bool, build: impl FnOnce() -> E) -> Arc<E> {
+        let mut guard = AbandonOnUnwind { shard, key, pending, armed: true };
         let entry = Arc::new(build());
         // `byte_size` and `vertex_count` are the entry's code too: still under the guard.
         let bytes = self.record_build(shard, cold, &entry);
@@ -285,14 +263,7 @@ impl<E: CacheEntry> TierCache<E> {
     /// Makes `entry` resident, evicting least recently used entries of its shard until it fits.
     /// Does nothing if the build was unregistered meanwhile (its mesh was invalidated); only
     /// unregisters it if it is larger than the shard's whole budget. Returns the evicted entries.
-    fn store(
-        &self,
-        shard: &Shard<E>,
-        key: CacheKey,
-        pending: &Arc<Pending<E>>,
-        entry: &Arc<E>,
-        bytes: usize,
-    ) -> Vec<Arc<E>> {
+    fn store(&self, shard: &Shard<E>, key: CacheKey, pending: &Arc<Pending<E>>, entry: &Arc<E>, bytes: usize) -> Vec<Arc<E>> {
         let mut evicted = Vec::new();
         let mut st = shard.state.lock();
         if !is_build(st.slots.get(&key), pending) {
@@ -310,11 +281,7 @@ impl<E: CacheEntry> TierCache<E> {
             self.resident_bytes.fetch_sub(old.bytes, Relaxed);
             evicted.push(old.entry);
         }
-        let node = st.lru.push_front(Resident {
-            key,
-            entry: Arc::clone(entry),
-            bytes,
-        });
+        let node = st.lru.push_front(Resident { key, entry: Arc::clone(entry), bytes });
         st.slots.insert(key, Slot::Resident(node));
         st.resident_bytes += bytes;
         // Every value in the total's modification order is a real moment's total (evictions
@@ -329,11 +296,7 @@ impl<E: CacheEntry> TierCache<E> {
         for shard in self.shards.iter() {
             let mut dropped = Vec::new();
             let mut st = shard.state.lock();
-            let ShardState {
-                slots,
-                lru,
-                resident_bytes,
-            } = &mut *st;
+            let ShardState { slots, lru, resident_bytes } = &mut *st;
             slots.retain(|key, slot| {
                 if key.mesh != mesh {
                     return true;
@@ -380,11 +343,6 @@ impl<E: CacheEntry> TierCache<E> {
     /// This tier's row of the stats, without locking.
     pub(crate) fn stats(&self, tier: Tier, capacity_entries: Option<u64>) -> TierStats {
         let peak = self.peak_bytes.load(Relaxed) as u64;
-        tier_stats(
-            tier,
-            capacity_entries,
-            peak,
-            self.shards.iter().map(|s| &s.counters),
-        )
+        tier_stats(tier, capacity_entries, peak, self.shards.iter().map(|s| &s.counters))
     }
 }
