@@ -82,6 +82,7 @@ pub fn render_with_cache(
             None => Tracer::new(scene, options.cache, options.tess_factor),
         };
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
+        let cache_before = tracer.cache.stats();
         let fx = effects::analyze(scene, options);
         let integrator = DirectLighting::new(&tracer, scene, &fx, options);
         let results: Vec<Option<TileResult>> = tiles
@@ -118,7 +119,7 @@ pub fn render_with_cache(
             samples: options.samples,
         };
         let control_faces = scene.meshes.iter().map(|m| m.surface.control_face_count()).sum();
-        let stats = collect(&tracer, &counters, &fx, &figures, control_faces, scene.instances.len());
+        let stats = collect(&tracer, &counters, &fx, &figures, control_faces, scene.instances.len(), &cache_before);
         Ok(RenderOutput { film, stats })
     });
     progress.finish();

@@ -28,7 +28,9 @@ pub struct RenderFigures {
     pub samples: u32,
 }
 
-/// Builds the stats JSON of one render.
+/// Builds the stats JSON of one render. `cache_before` is the cache's statistics when the
+/// render started (a delegate's cache lives across renders): the JSON reports this render's
+/// lookups, misses and vertices only.
 pub fn collect(
     tracer: &Tracer<'_>,
     counters: &TraceCounters,
@@ -36,6 +38,7 @@ pub fn collect(
     figures: &RenderFigures,
     control_faces: usize,
     instances: usize,
+    cache_before: &crate::geometry_cache::CacheStats,
 ) -> Value {
     let rays: serde_json::Map<String, Value> =
         RayKind::ALL.iter().enumerate().map(|(i, k)| (k.name().to_string(), json!(counters.rays[i]))).collect();
@@ -65,7 +68,7 @@ pub fn collect(
             "differential_clamps": counters.differential_clamps,
             "dropped_samples": figures.dropped_samples,
         },
-        "geometry_cache": serde_json::to_value(tracer.cache.stats()).unwrap_or(Value::Null),
+        "geometry_cache": serde_json::to_value(tracer.cache.stats().since(cache_before)).unwrap_or(Value::Null),
         "scene": {
             "control_faces": control_faces,
             "subpatches": subpatches,

@@ -149,6 +149,31 @@ pub struct CacheStats {
 }
 
 impl CacheStats {
+    /// The figures of what happened after `before` was taken (counters subtracted, hit rates
+    /// recomputed), for a cache that outlives one render: each render's stats are its own.
+    /// `peak_bytes` and `capacity_entries` stay as they are now (a peak is not a difference).
+    pub fn since(&self, before: &CacheStats) -> CacheStats {
+        let mut out = self.clone();
+        for (t, b) in out.tiers.iter_mut().zip(&before.tiers) {
+            t.cold_tessellations = t.cold_tessellations.saturating_sub(b.cold_tessellations);
+            t.lookups = t.lookups.saturating_sub(b.lookups);
+            t.hits = t.hits.saturating_sub(b.hits);
+            t.misses = t.misses.saturating_sub(b.misses);
+            t.recomputed_vertices = t.recomputed_vertices.saturating_sub(b.recomputed_vertices);
+            t.cold_vertices = t.cold_vertices.saturating_sub(b.cold_vertices);
+            t.hit_rate = if t.hits + t.misses > 0 {
+                t.hits as f64 / (t.hits + t.misses) as f64
+            } else if t.lookups > 0 {
+                1.0
+            } else {
+                0.0
+            };
+        }
+        out.cold_vertices = self.cold_vertices.saturating_sub(before.cold_vertices);
+        out.recomputed_vertices = self.recomputed_vertices.saturating_sub(before.recomputed_vertices);
+        out
+    }
+
     /// The row of one tier.
     pub fn tier(&self, tier: Tier) -> &TierStats {
         &self.tiers[tier.index()]
