@@ -225,8 +225,8 @@ impl<'a> DirectLighting<'a> {
         out
     }
 
-    fn radiance(&self, ray: &Ray, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Option<Shade> {
-        let hit = self.tracer.intersect(ray, counters)?;
+    fn radiance(&self, ray: &Ray, from: &Hit, depth: u32, sampler: &mut Sampler, counters: &mut TraceCounters) -> Option<Shade> {
+        let hit = self.tracer.intersect_from(ray, from, counters)?;
         Some(self.shade(ray, &hit, depth, sampler, counters))
     }
 
@@ -263,7 +263,7 @@ impl<'a> DirectLighting<'a> {
                     diff,
                     kind: RayKind::Reflection,
                 };
-                if let Some(reflected) = self.radiance(&r, depth + 1, sampler, counters) {
+                if let Some(reflected) = self.radiance(&r, hit, depth + 1, sampler, counters) {
                     color += material.mirror * reflected.color;
                     (beam_width, quads) = (reflected.beam_width, reflected.quads);
                 }
@@ -340,7 +340,7 @@ impl<'a> DirectLighting<'a> {
                     // mesh can coincide with it).
                     let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
                     let shadow = Ray { o, d: ls.wi, t_min: 0.0, t_max, diff, kind: RayKind::Shadow };
-                    if self.tracer.occluded(&shadow, counters) {
+                    if self.tracer.occluded_from(&shadow, hit, counters) {
                         continue;
                     }
                 }
@@ -374,7 +374,7 @@ impl<'a> DirectLighting<'a> {
             let (diff, clamped) = footprint.hemisphere_checked(d, pdf, n);
             counters.differential_clamps += u64::from(clamped);
             let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, d), d, t_min: 0.0, t_max: self.ao_distance, diff, kind: RayKind::Ao };
-            if !self.tracer.occluded(&r, counters) {
+            if !self.tracer.occluded_from(&r, hit, counters) {
                 open += 1;
             }
         }

@@ -91,6 +91,33 @@ pub struct Hit {
     /// The effective rate the hit was found at, in quads per side of the root subpatch: 1, 2, 4,
     /// 8, 16, or 16·2^depth after splitting.
     pub quads: u32,
+    /// The root subpatch hit (index in its mesh's subpatches).
+    pub subpatch: u32,
+    /// How far the tessellation that was hit may stray from the surface (render units): new rays
+    /// from this hit ignore their own subpatch closer than this plus the error of whatever
+    /// tessellation of it they test (see [`Tracer::intersect_from`]).
+    pub chord_error: f32,
+}
+
+/// The surface a secondary ray starts on: hits on the same root subpatch of the same instance
+/// closer than the two tessellations' chord errors are the surface meeting itself at another
+/// rate, not an occluder.
+#[derive(Clone, Copy, Debug)]
+struct Origin {
+    instance: u32,
+    subpatch: u32,
+    /// Render units.
+    chord_error: f32,
+    /// 1 / |cos| between the ray and the surface (capped): a gap across the surface is this
+    /// much longer along a slanted ray.
+    inv_cos: f32,
+}
+
+impl Origin {
+    fn of(hit: &Hit, ray: &Ray) -> Origin {
+        let cos = ray.d.dot(hit.ng).abs().max(0.05);
+        Origin { instance: hit.instance, subpatch: hit.subpatch, chord_error: hit.chord_error, inv_cos: 1.0 / cos }
+    }
 }
 
 /// A hit within one subpatch: t, (u, v) local to the tested grid's domain `rect`, the object-
@@ -102,6 +129,8 @@ struct LocalHit {
     rect: UvRect,
     ng: Vec3A,
     quads: u32,
+    /// Object units.
+    chord_error: f32,
 }
 
 struct InstanceData {
@@ -238,19 +267,34 @@ impl<'s> Tracer<'s> {
 
     /// The closest hit along `ray` in (t_min, t_max), or `None`.
     pub fn intersect(&self, ray: &Ray, counters: &mut TraceCounters) -> Option<Hit> {
-        self.trace(ray, counters, false)
+        self.trace(ray, counters, false, None)
     }
 
     /// True when anything blocks `ray` in (t_min, t_max) (shadow rays).
     pub fn occluded(&self, ray: &Ray, counters: &mut TraceCounters) -> bool {
-        self.trace(ray, counters, true).is_some()
+        self.trace(ray, counters, true, None).is_some()
+    }
+
+    /// As [`Tracer::intersect`], for a ray leaving the surface at `from`: where it meets the
+    /// subpatch it starts on again, closer than the two tessellations' chord errors (over the
+    /// ray's cosine to the surface), that is the surface at another rate, not an occluder. Rays
+    /// of different widths test one subpatch at different rates; without this a coarse grid
+    /// of a concave surface shadows the fine grid a camera ray hit.
+    pub fn intersect_from(&self, ray: &Ray, from: &Hit, counters: &mut TraceCounters) -> Option<Hit> {
+        self.trace(ray, counters, false, Some(Origin::of(from, ray)))
+    }
+
+    /// As [`Tracer::occluded`] for a ray leaving the surface at `from` (see
+    /// [`Tracer::intersect_from`]).
+    pub fn occluded_from(&self, ray: &Ray, from: &Hit, counters: &mut TraceCounters) -> bool {
+        self.trace(ray, counters, true, Some(Origin::of(from, ray))).is_some()
     }
 
     fn kind_index(kind: RayKind) -> usize {
         RayKind::ALL.iter().position(|k| *k == kind).unwrap_or(0)
     }
 
-    fn trace(&self, ray: &Ray, counters: &mut TraceCounters, any_hit: bool) -> Option<Hit> {
+    fn trace(&self, ray: &Ray, counters: &mut TraceCounters, any_hit: bool, origin: Option<Origin>) -> Option<Hit> {
         counters.rays[Self::kind_index(ray.kind)] += 1;
         let tlas = self.tlas.as_ref()?;
         if !(ray.o.is_finite() && ray.d.is_finite()) {
@@ -266,7 +310,7 @@ impl<'s> Tracer<'s> {
                 return f32::INFINITY;
             }
             let ii = tlas.primitive_indices[id] as usize;
-            if let Some(h) = self.trace_instance(ii, ray, t_best, counters, any_hit) {
+            if let Some(h) = self.trace_instance(ii, ray, t_best, counters, any_hit, origin) {
                 t_best = h.t;
                 best = Some(h);
                 if any_hit {
@@ -279,7 +323,15 @@ impl<'s> Tracer<'s> {
         best
     }
 
-    fn trace_instance(&self, ii: usize, ray: &Ray, t_max: f32, counters: &mut TraceCounters, any_hit: bool) -> Option<Hit> {
+    fn trace_instance(
+        &self,
+        ii: usize,
+        ray: &Ray,
+        t_max: f32,
+        counters: &mut TraceCounters,
+        any_hit: bool,
+        origin: Option<Origin>,
+    ) -> Option<Hit> {
         let inst = &self.instances[ii];
         let geom = &self.meshes[inst.mesh];
         let blas = geom.bvh.as_ref()?;
@@ -305,13 +357,19 @@ impl<'s> Tracer<'s> {
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
             let kind = Self::kind_index(ray.kind);
+            // On the subpatch the ray starts from, skip the surface's own other tessellation.
+            let own = origin.filter(|o| o.instance == ii as u32 && o.subpatch == si as u32);
+            let t_min_for = |chord_error: f32| match own {
+                Some(o) => ray.t_min.max((o.chord_error + chord_error * inst.scale) * o.inv_cos),
+                None => ray.t_min,
+            };
             let found = if depth > 0 {
                 counters.finer_than_fine += 1;
                 counters.rate_tests_by_kind[kind][5] += 1;
                 let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(inst.mesh, geom, root, Tier::Fine);
                 let mut found = None;
-                self.hit_split(inst.mesh, geom, root, &tess, depth, &wray, ray.t_min, &mut t_best, &mut found);
+                self.hit_split(inst.mesh, geom, root, &tess, depth, &wray, t_min_for(tess.chord_error), &mut t_best, &mut found);
                 found
             } else {
                 let rate = if self.single {
@@ -326,12 +384,13 @@ impl<'s> Tracer<'s> {
                 let (tier, stride) = rate.tier_and_stride();
                 let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(inst.mesh, geom, cell, tier);
-                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), ray.t_min, t_best).map(|h| LocalHit {
+                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), t_min_for(tess.chord_error), t_best).map(|h| LocalHit {
                     t: h.t,
                     uv: (h.u, h.v),
                     rect: sp.rect,
                     ng: h.ng,
                     quads: rate.quads() as u32,
+                    chord_error: tess.chord_error,
                 })
             };
             match found {
@@ -370,6 +429,8 @@ impl<'s> Tracer<'s> {
             p_error,
             ng,
             quads: h.quads,
+            subpatch: si,
+            chord_error: h.chord_error * inst.scale,
         })
     }
 
@@ -424,7 +485,14 @@ impl<'s> Tracer<'s> {
         if u32::from(cell.depth) >= target_depth {
             if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best) {
                 *t_best = h.t;
-                *best = Some(LocalHit { t: h.t, uv: (h.u, h.v), rect: cell.rect(&root_rect), ng: h.ng, quads: 16 << cell.depth });
+                *best = Some(LocalHit {
+                    t: h.t,
+                    uv: (h.u, h.v),
+                    rect: cell.rect(&root_rect),
+                    ng: h.ng,
+                    quads: 16 << cell.depth,
+                    chord_error: tess.chord_error,
+                });
             }
             return;
         }
