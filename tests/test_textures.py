@@ -78,3 +78,32 @@ def test_forcing_the_finest_mip_level_reads_more_texture_bytes(stage) -> None:
     normal = mipray.render(stage, width=48, aovs=("color",))
     finest = mipray.render(stage, width=48, aovs=("color",), settings={"textureFilter": "finest"})
     assert finest.stats["texture_cache"]["bytes_read"] > 3 * normal.stats["texture_cache"]["bytes_read"]
+
+
+def test_a_transform2d_scales_and_moves_st() -> None:
+    from mipray.usd.shading import apply_transform2d
+
+    st = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], dtype=np.float32)
+    out = apply_transform2d(st, ((2.0, 3.0), 90.0, (0.5, 0.25)))
+    # Scale, rotate 90° counter-clockwise, translate: (1,0)→(2,0)→(0,2)→(0.5,2.25).
+    np.testing.assert_allclose(out, [[0.5, 0.25], [0.5, 2.25], [-2.5, 0.25]], atol=1e-6)
+
+
+def test_the_scene_delegate_applies_a_transform2d_between_reader_and_texture(stage) -> None:
+    from pxr import Sdf
+
+    from mipray.usd.shading import shading_arguments
+
+    root = "/World/Looks/BrickWall"
+    xf = UsdShade.Shader.Define(stage, f"{root}/Tiling")
+    xf.CreateIdAttr("UsdTransform2d")
+    reader = UsdShade.Shader(stage.GetPrimAtPath(f"{root}/StReader"))
+    xf.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.GetOutput("result"))
+    xf.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set((4.0, 4.0))
+    out = xf.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    for name in ("ColorTexture", "HeightTexture"):
+        UsdShade.Shader(stage.GetPrimAtPath(f"{root}/{name}")).GetInput("st").ConnectToSource(out)
+    wall = stage.GetPrimAtPath("/World/Geo/Wall")
+    args = shading_arguments(wall, Usd.TimeCode.Default())
+    authored = np.asarray(wall.GetAttribute("primvars:st").Get(), dtype=np.float32)
+    np.testing.assert_allclose(args["st_values"], authored * 4.0, atol=1e-6)

@@ -84,9 +84,33 @@ def _floats(value: Any, n: int, default: list[float]) -> list[float]:
     return out + default[len(out) :]
 
 
+Transform2d = tuple[tuple[float, float], float, tuple[float, float]]
+
+
+def _transform2d(shader: UsdShade.Shader, time: Usd.TimeCode) -> Transform2d:
+    """A UsdTransform2d's (scale, rotation in degrees, translation)."""
+    scale = _floats(_const(shader, "scale", time) or (1.0, 1.0), 2, [1.0, 1.0])
+    rotation = _const(shader, "rotation", time)
+    translation = _floats(_const(shader, "translation", time) or (0.0, 0.0), 2, [0.0, 0.0])
+    return (scale[0], scale[1]), float(rotation or 0.0), (translation[0], translation[1])
+
+
+def apply_transform2d(st: np.ndarray, transform: Transform2d) -> np.ndarray:
+    """``st`` through a UsdTransform2d: scaled, rotated counter-clockwise, then translated
+    (UsdPreviewSurface's definition)."""
+    (sx, sy), degrees, (tx, ty) = transform
+    a = math.radians(degrees)
+    c, s = math.cos(a), math.sin(a)
+    x, y = st[:, 0] * sx, st[:, 1] * sy
+    out = np.empty_like(st)
+    out[:, 0] = x * c - y * s + tx
+    out[:, 1] = x * s + y * c + ty
+    return out
+
+
 def _texture(
     prim_path: str, shader: UsdShade.Shader, output: str, time: Usd.TimeCode, what: str
-) -> tuple[dict[str, Any], str] | None:
+) -> tuple[dict[str, Any], str, Transform2d | None] | None:
     """A UsdUVTexture's description and the primvar its ``st`` reads."""
     if shader.GetShaderId() != "UsdUVTexture":
         _warn_once(
@@ -113,18 +137,19 @@ def _texture(
         if v:
             desc[key] = str(v)
     varname = "st"
+    transform: Transform2d | None = None
     st_src = _source(shader, "st")
     if st_src is not None:
         reader, _ = st_src
         if reader.GetShaderId() == "UsdTransform2d":
-            _warn_once(f"{prim_path}: UsdTransform2d on {what} is not supported yet; ignoring it")
+            transform = _transform2d(reader, time)
             inner = _source(reader, "in")
             reader = inner[0] if inner else reader
         if reader.GetShaderId() == "UsdPrimvarReader_float2":
             name = _const(reader, "varname", time)
             if name:
                 varname = str(name)
-    return desc, varname
+    return desc, varname, transform
 
 
 def _st_arguments(prim: Usd.Prim, varname: str, time: Usd.TimeCode) -> dict[str, Any]:
@@ -179,6 +204,7 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
         return args
     surface, _, _ = material.ComputeSurfaceSource()
     st_name: str | None = None
+    st_transform: Transform2d | None = None
     if surface and surface.GetShaderId() == "UsdPreviewSurface":
         metallic = _const(surface, "metallic", time)
         roughness = _const(surface, "roughness", time)
@@ -195,17 +221,24 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
         if src is not None:
             tex = _texture(path, src[0], src[1], time, "diffuseColor")
             if tex is not None:
-                args["diffuse_texture"], st_name = tex
+                args["diffuse_texture"], st_name, st_transform = tex
     disp_shader, _, _ = material.ComputeDisplacementSource()
     if disp_shader and disp_shader.GetShaderId() == "UsdPreviewSurface":
         src = _source(disp_shader, "displacement")
         if src is not None:
             tex = _texture(path, src[0], src[1], time, "displacement")
             if tex is not None:
-                args["displacement_texture"], name = tex
-                st_name = st_name or name
+                args["displacement_texture"], name, transform = tex
+                if st_name is not None and transform != st_transform:
+                    _warn_once(f"{path}: diffuseColor and displacement read st differently; using diffuseColor's")
+                if st_name is None:
+                    st_name, st_transform = name, transform
     if st_name is not None:
         args.update(_st_arguments(prim, st_name, time))
+        if st_transform is not None and "st_values" in args:
+            # One st channel serves the mesh's textures: the UsdTransform2d applies to its values
+            # (an affine map commutes with every interpolation the primvar may have).
+            args["st_values"] = apply_transform2d(args["st_values"], st_transform).astype(np.float32)
     if not all(math.isfinite(float(c)) for c in args.get("mirror", ())):
         args.pop("mirror")
     return args
