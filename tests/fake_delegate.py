@@ -166,6 +166,7 @@ class FakeRenderDelegate:
         radius: float = 0.5,
         width: float = 1.0,
         height: float = 1.0,
+        texture: str | None = None,
     ) -> None:
         self._set("set_light", path, dict(locals_without_self(locals())))
 

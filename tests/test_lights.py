@@ -58,3 +58,21 @@ def test_a_rect_light_lights_the_ground_with_soft_shadows(native) -> None:
     assert centre.sum() > 0.0 and np.isfinite(result.aovs["color"]).all()
     names = [e["name"] for e in result.stats["effects"]["enabled"]]
     assert "soft_shadows" in names, names
+
+
+def test_a_dome_texture_colours_the_light(native, tmp_path) -> None:
+    # A latlong map that is red above the horizon: a ground lit by it turns red.
+    from mipray import _mipray
+
+    env = np.zeros((32, 64, 3), dtype=np.float32)
+    env[:16, :, 0] = 1.0  # top half (+Y up in the light's space): red sky
+    path = tmp_path / "sky.exr"
+    _mipray.write_image(str(path), {"color": env}, ["color"], {"color": "float"})
+    stage = _stage(UsdLux.DomeLight, intensity=1.0)
+    light = stage.GetPrimAtPath("/World/Light")
+    light.GetAttribute("inputs:texture:file").Set(str(path))
+    # The stage is Z-up: turn the dome so its +Y points up the stage's +Z.
+    UsdGeom.Xformable(light).AddRotateXOp().Set(90.0)
+    result = mipray.render(stage, width=16, aovs=("color",))
+    r, g, b = result.aovs["color"][8, 8]
+    assert r > 0.05 and g < 0.2 * r and b < 0.2 * r, (r, g, b)

@@ -18,7 +18,7 @@ pub struct DistantLightData {
 
 /// The shape of a non-distant light, in the light's own space (UsdLux: sizes in the light's
 /// units, emission along −Z for rect and disk lights).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum AreaKind {
     Sphere {
         radius: f32,
@@ -30,8 +30,10 @@ pub enum AreaKind {
     Disk {
         radius: f32,
     },
-    /// An environment of constant radiance (a dome texture is not read yet).
-    Dome,
+    /// An environment: constant radiance, or a latlong texture (resolved file path).
+    Dome {
+        texture: Option<String>,
+    },
 }
 
 /// A light prim.
@@ -47,16 +49,22 @@ impl LightPrim {
     /// The core's light. Non-finite inputs are the scene delegate's to refuse; here they are
     /// zeroed so nothing non-finite can reach the film.
     pub fn to_light(&self) -> Light {
+        self.to_light_with(None)
+    }
+
+    /// As [`LightPrim::to_light`], with the texture system a dome texture is read through
+    /// (without one, or when the file cannot be read, the dome is its constant colour).
+    pub fn to_light_with(&self, textures: Option<&std::sync::Arc<dyn mipray::texture::TextureSampler>>) -> Light {
         let d = &self.data;
         let f = |x: f32| if x.is_finite() { x } else { 0.0 };
         let color = Vec3A::from(d.color.map(f));
         let m = &d.transform;
-        let mut l = match self.area {
+        let mut l = match &self.area {
             None => Light::usd_distant(&self.path, m, f(d.intensity), f(d.exposure), color, f(d.angle_deg)),
             Some(kind) => {
                 let center = m.transform_point3a(Vec3A::ZERO);
                 let normal = m.transform_vector3a(Vec3A::NEG_Z).normalize_or(Vec3A::NEG_Z);
-                let shape = match kind {
+                let shape = match kind.clone() {
                     AreaKind::Sphere { radius } => {
                         // A sphere stays a sphere under the light's mean scale.
                         let s = (m.transform_vector3a(Vec3A::X).length()
@@ -77,7 +85,20 @@ impl LightPrim {
                         v: m.transform_vector3a(Vec3A::Y * f(radius)),
                         normal,
                     },
-                    AreaKind::Dome => LightShape::Dome,
+                    AreaKind::Dome { texture } => {
+                        let env = texture.as_ref().zip(textures).and_then(|(file, sampler)| match sampler.handle(file) {
+                            Ok(handle) => Some(mipray::light::EnvTexture {
+                                sampler: sampler.clone(),
+                                texture: handle,
+                                light_from_render: glam::Mat3A::from_mat4(*m).inverse(),
+                            }),
+                            Err(e) => {
+                                log::warn!("{}: cannot read dome texture {file}: {}; lighting with its colour", self.path, e.message);
+                                None
+                            }
+                        });
+                        LightShape::Dome(env)
+                    }
                 };
                 Light::usd_area(&self.path, shape, f(d.intensity), f(d.exposure), color, d.normalize)
             }

@@ -133,7 +133,8 @@ impl RenderDelegate {
     /// # Errors
     /// OpenImageIO could not start a texture system.
     pub fn prepare_textures(&mut self, options: OiioTextureOptions) -> Result<(), DelegateError> {
-        let needed = self.meshes.values().any(|m| m.data.diffuse_texture.is_some() || m.data.displacement_texture.is_some());
+        let needed = self.meshes.values().any(|m| m.data.diffuse_texture.is_some() || m.data.displacement_texture.is_some())
+            || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
         if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
             return Ok(());
         }
@@ -252,8 +253,9 @@ impl RenderDelegate {
         for inst in self.instancers.values().filter(|i| !i.data.prototype) {
             expand(&self.instancers, inst, Mat4::IDENTITY, &is_mesh, &mut |p, t| place(&mut scene, p, t));
         }
-        scene.lights = self.lights.values().map(LightPrim::to_light).collect();
-        scene.textures = self.sampler();
+        let sampler = self.sampler();
+        scene.lights = self.lights.values().map(|l| l.to_light_with(sampler.as_ref())).collect();
+        scene.textures = sampler;
         Ok(scene)
     }
 

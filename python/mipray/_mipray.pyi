@@ -209,13 +209,14 @@ class RenderDelegate:
         radius: float = 0.5,
         width: float = 1.0,
         height: float = 1.0,
+        texture: str | None = None,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
 
         ``kind`` is ``distant`` (as :meth:`set_distant_light`), ``sphere``
         (``radius``), ``rect`` (``width`` × ``height``, emitting along local
-        -Z), ``disk`` (``radius``, along -Z) or ``dome`` (constant radiance
-        from every direction). Area lights emit radiance ``color * intensity
+        -Z), ``disk`` (``radius``, along -Z) or ``dome`` (radiance from every
+        direction: constant, or the latlong ``texture`` file, +Y up). Area lights emit radiance ``color * intensity
         * 2**exposure``, divided by their area with ``normalize``; they cast
         soft shadows with ``shadowSamples`` rays each.
 

@@ -465,7 +465,7 @@ impl RenderDelegate {
 
     /// Inserts or replaces a UsdLux light of any kind: ``distant`` (as `set_distant_light`),
     /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius) or ``dome``.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0))]
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -481,6 +481,7 @@ impl RenderDelegate {
         radius: f32,
         width: f32,
         height: f32,
+        texture: Option<String>,
     ) -> PyResult<()> {
         let vals = [intensity, exposure, color.0, color.1, color.2, angle, radius, width, height];
         if vals.iter().any(|v| !v.is_finite()) {
@@ -505,7 +506,7 @@ impl RenderDelegate {
             "sphere" => AreaKind::Sphere { radius: size("radius", radius)? },
             "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)? },
             "disk" => AreaKind::Disk { radius: size("radius", radius)? },
-            "dome" => AreaKind::Dome,
+            "dome" => AreaKind::Dome { texture },
             _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk or dome"))),
         };
         self.inner.set_area_light(path, data, area);

@@ -29,8 +29,49 @@ pub enum LightShape {
     Rect { center: Vec3A, u: Vec3A, v: Vec3A, normal: Vec3A },
     /// An ellipse `center + a·u + b·v`, a² + b² ≤ 1, emitting along `normal`.
     Disk { center: Vec3A, u: Vec3A, v: Vec3A, normal: Vec3A },
-    /// Uniform radiance from every direction.
-    Dome,
+    /// Radiance from every direction: uniform, or a latlong environment texture.
+    Dome(Option<EnvTexture>),
+}
+
+/// A latlong environment (UsdLux.DomeLight `texture:file`): +Y up in the light's space, the
+/// image's centre column looking down −Z, as USD's dome lights are authored.
+#[derive(Clone)]
+pub struct EnvTexture {
+    pub sampler: std::sync::Arc<dyn crate::texture::TextureSampler>,
+    pub texture: crate::texture::TextureHandle,
+    /// Render-space directions to the light's space (the inverse of its rotation).
+    pub light_from_render: glam::Mat3A,
+}
+
+impl std::fmt::Debug for EnvTexture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EnvTexture").field("texture", &self.texture).finish_non_exhaustive()
+    }
+}
+
+impl PartialEq for EnvTexture {
+    fn eq(&self, o: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.sampler, &o.sampler) && self.texture == o.texture && self.light_from_render == o.light_from_render
+    }
+}
+
+impl EnvTexture {
+    /// The environment's RGB radiance (before the light's intensity) toward render-space `wi`.
+    pub fn radiance(&self, wi: Vec3A) -> Vec3A {
+        let d = (self.light_from_render * wi).normalize_or(Vec3A::Y);
+        let s = 0.5 + d.x.atan2(-d.z) / (2.0 * std::f32::consts::PI);
+        let t = 1.0 - d.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI;
+        // About a degree of filtering: lights are integrated over many samples, not seen.
+        let w = 1.0 / 360.0;
+        let mut rgb = [0.0f32; 3];
+        let lookup =
+            crate::texture::Lookup { wrap_s: crate::texture::Wrap::Periodic, wrap_t: crate::texture::Wrap::Clamp, ..Default::default() };
+        if self.sampler.sample(self.texture, [s, t], [w, 0.0], [0.0, w], &lookup, &mut rgb) {
+            Vec3A::from(rgb).max(Vec3A::ZERO)
+        } else {
+            Vec3A::ONE
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -125,17 +166,18 @@ impl Light {
                     solid_angle_sr: 2.0 * std::f32::consts::PI * (1.0 - cos_max),
                 })
             }
-            LightShape::Dome => {
+            LightShape::Dome(env) => {
                 let (local, pdf) = cosine_hemisphere(u1, u2);
                 if pdf <= 0.0 {
                     return None;
                 }
                 let (t, b) = frame(n);
                 let wi = t * local.x + b * local.y + n * local.z;
+                let texel = env.as_ref().map_or(Vec3A::ONE, |e| e.radiance(wi));
                 Some(LightSample {
                     wi,
                     distance: f32::INFINITY,
-                    weight: self.radiance_scale / pdf,
+                    weight: self.radiance_scale * texel / pdf,
                     solid_angle_sr: 2.0 * std::f32::consts::PI,
                 })
             }
@@ -239,7 +281,7 @@ mod tests {
 
     #[test]
     fn dome_and_distant_cone_deliver_their_irradiance() {
-        let dome = Light::usd_area("/dome", LightShape::Dome, 1.0, 0.0, Vec3A::ONE, false);
+        let dome = Light::usd_area("/dome", LightShape::Dome(None), 1.0, 0.0, Vec3A::ONE, false);
         let e = irradiance(&dome, Vec3A::ZERO, Vec3A::Z, 100_000);
         assert!((e - std::f32::consts::PI).abs() < 1e-4, "{e}");
         let sun = Light::usd_distant("/sun", &Mat4::IDENTITY, 2.0, 0.0, Vec3A::ONE, 10.0);

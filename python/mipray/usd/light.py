@@ -105,8 +105,8 @@ def area_light_arguments(
     """``RenderDelegate.set_light`` keyword arguments for a sphere, rect, disk or dome light.
 
     Returns None when ``prim`` is none of those. Sizes are UsdLux's (``radius``,
-    ``width``, ``height``, in the light's units). A dome light's texture is not
-    read yet: it lights with its constant colour, and says so once.
+    ``width``, ``height``, in the light's units). A dome light's texture is
+    read through OpenImageIO as a latlong environment (``texture`` argument).
 
     Raises:
         PrimError: a non-finite, negative or zero value, or a non-finite transform.
@@ -143,8 +143,15 @@ def area_light_arguments(
         args["height"] = float(get("height", 1.0))
         if get("texture:file", None):
             _warn_once(f"{path}: rect light textures are not supported yet; lighting with its colour")
-    if kind == "dome" and get("texture:file", None):
-        _warn_once(f"{path}: dome light textures are not supported yet; lighting with its colour")
+    if kind == "dome":
+        attr = prim.GetAttribute("inputs:texture:file")
+        value = attr.Get(time) if attr else None
+        if value is not None and getattr(value, "path", ""):
+            from pxr import Sdf
+
+            from .shading import _resolve
+
+            args["texture"] = _resolve(attr, value) if isinstance(value, Sdf.AssetPath) else str(value)
     for key in ("intensity", "exposure", "radius", "width", "height"):
         if key in args and not math.isfinite(args[key]):
             raise PrimError(path, f"inputs:{key} is not finite")

@@ -106,6 +106,7 @@ class RenderDelegateLike(Protocol):
         radius: float = ...,
         width: float = ...,
         height: float = ...,
+        texture: str | None = ...,
     ) -> None:
         """Add or replace a sphere, rect, disk or dome light (``kind``)."""
 
