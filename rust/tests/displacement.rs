@@ -8,25 +8,7 @@ use mipray::displacement::Displacement;
 use mipray::prelude::*;
 
 fn plane(half: f32, n: i32) -> BilinearSurface {
-    let mut pts = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            pts.push([(i as f32 / n as f32 * 2.0 - 1.0) * half, (j as f32 / n as f32 * 2.0 - 1.0) * half, 0.0]);
-        }
-    }
-    let mut idx = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let v = |a: i32, b: i32| b * (n + 1) + a;
-            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
-        }
-    }
-    let topo = MeshTopology {
-        scheme: Scheme::None,
-        face_vertex_counts: vec![4; (n * n) as usize],
-        face_vertex_indices: idx,
-        ..Default::default()
-    };
+    let (topo, pts) = mipray::bilinear::grid_mesh(half, n, 0.0);
     BilinearSurface::new(&topo, &pts).unwrap()
 }
 

@@ -32,25 +32,7 @@ fn quad(c: [[f32; 3]; 4]) -> Result<BilinearSurface, mipray::error::MeshError> {
 
 /// A flat square of `n × n` quads, `half` units from the centre to each side.
 fn grid(half: f32, n: i32) -> Result<BilinearSurface, mipray::error::MeshError> {
-    let mut pts = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            pts.push([(2.0 * i as f32 / n as f32 - 1.0) * half, (2.0 * j as f32 / n as f32 - 1.0) * half, 0.0]);
-        }
-    }
-    let mut idx = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let v = |a: i32, b: i32| b * (n + 1) + a;
-            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
-        }
-    }
-    let topo = MeshTopology {
-        scheme: Scheme::None,
-        face_vertex_counts: vec![4; (n * n) as usize],
-        face_vertex_indices: idx,
-        ..Default::default()
-    };
+    let (topo, pts) = mipray::bilinear::grid_mesh(half, n, 0.0);
     BilinearSurface::new(&topo, &pts)
 }
 
