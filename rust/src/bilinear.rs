@@ -10,7 +10,7 @@ use glam::Vec3A;
 
 use crate::bounds::Bounds3;
 use crate::error::MeshError;
-use crate::patch::{GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
+use crate::patch::{LimitSurface, PatchKind, PatchParam, SurfacePoint};
 use crate::texture::{BaseFacePrimvar, Primvar2};
 use crate::topology::MeshTopology;
 
@@ -132,6 +132,31 @@ impl LimitSurface for BilinearSurface {
     }
 }
 
+/// A flat `n × n` grid of quads in the plane z = `z`, `half` units from its centre to each side,
+/// counter-clockwise (facing +z): topology and points, for tests, examples and ground planes.
+pub fn grid_mesh(half: f32, n: i32, z: f32) -> (MeshTopology, Vec<[f32; 3]>) {
+    let mut pts = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            pts.push([(2.0 * i as f32 / n as f32 - 1.0) * half, (2.0 * j as f32 / n as f32 - 1.0) * half, z]);
+        }
+    }
+    let mut idx = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let v = |a: i32, b: i32| b * (n + 1) + a;
+            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
+        }
+    }
+    let topo = MeshTopology {
+        scheme: crate::topology::Scheme::None,
+        face_vertex_counts: vec![4; (n * n).max(0) as usize],
+        face_vertex_indices: idx,
+        ..Default::default()
+    };
+    (topo, pts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -197,29 +222,4 @@ mod tests {
         let err = BilinearSurface::new(&topo(vec![3], vec![0, 1, 2]), &pts).unwrap_err();
         assert!(err.to_string().contains("points[1]"), "{err}");
     }
-}
-
-/// A flat `n × n` grid of quads in the plane z = `z`, `half` units from its centre to each side,
-/// counter-clockwise (facing +z): topology and points, for tests, examples and ground planes.
-pub fn grid_mesh(half: f32, n: i32, z: f32) -> (MeshTopology, Vec<[f32; 3]>) {
-    let mut pts = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            pts.push([(2.0 * i as f32 / n as f32 - 1.0) * half, (2.0 * j as f32 / n as f32 - 1.0) * half, z]);
-        }
-    }
-    let mut idx = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let v = |a: i32, b: i32| b * (n + 1) + a;
-            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
-        }
-    }
-    let topo = MeshTopology {
-        scheme: crate::topology::Scheme::None,
-        face_vertex_counts: vec![4; (n * n).max(0) as usize],
-        face_vertex_indices: idx,
-        ..Default::default()
-    };
-    (topo, pts)
 }
