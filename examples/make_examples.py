@@ -479,13 +479,17 @@ def _textured_material(stage: Usd.Stage, name: str, displacement: float) -> UsdS
         surface.CreateInput("displacement", Sdf.ValueTypeNames.Float).ConnectToSource(
             height.CreateOutput("r", Sdf.ValueTypeNames.Float)
         )
-        material.CreateDisplacementOutput().ConnectToSource(surface.ConnectableAPI(), "displacement")
+        material.CreateDisplacementOutput().ConnectToSource(
+            surface.ConnectableAPI(), "displacement"
+        )
     return material
 
 
 def textured(path: Path) -> None:
-    """Write examples/textured.usda: a brick wall and a brick-wrapped cube, textures by
-    examples/make_textures.py (made into tiled MIP maps with maketx)."""
+    """Write examples/textured.usda: a brick wall and a brick-wrapped cube.
+
+    The textures are drawn by examples/make_textures.py and made into tiled MIP maps with maketx.
+    """
     stage = _new_stage(
         path,
         "mipray example: UsdUVTexture on diffuseColor (filtered by the ray differentials) and on "

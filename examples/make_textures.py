@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Make the textures of ``examples/textured.usda``: a brick colour map and a brick height map,
-drawn with numpy, written through OpenImageIO (``mipray._mipray.write_image``) and turned into
-tiled MIP maps with OpenImageIO's ``maketx``.
+"""Make the textures of ``examples/textured.usda``: brick colour and height maps.
+
+They are drawn with numpy, written through OpenImageIO (``mipray._mipray.write_image``) and
+turned into tiled MIP maps with OpenImageIO's ``maketx``.
 
     .venv/bin/python examples/make_textures.py [OUTPUT_DIR]     (default examples/textures)
 
@@ -48,7 +49,9 @@ def main(argv: list[str]) -> int:
     out.mkdir(parents=True, exist_ok=True)
     maketx = shutil.which("maketx")
     if maketx is None:
-        print("make_textures: maketx not found (apt-get install openimageio-tools)", file=sys.stderr)
+        print(
+            "make_textures: maketx not found (apt-get install openimageio-tools)", file=sys.stderr
+        )
         return 1
     from mipray import _mipray
 
@@ -56,10 +59,17 @@ def main(argv: list[str]) -> int:
     if all((out / f"{n}.tx").exists() for n in targets):
         return 0
     colour, height = bricks()
-    for name, img, channels in (("bricks_color", colour, "color"), ("bricks_height", height, "height")):
+    for name, img, channels in (
+        ("bricks_color", colour, "color"),
+        ("bricks_height", height, "height"),
+    ):
         src = out / f"{name}.exr"
         _mipray.write_image(str(src), {channels: img}, [channels], {channels: "float"})
-        subprocess.run([maketx, "--oiio", "--wrap", "periodic", str(src), "-o", str(out / f"{name}.tx")], check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [maketx, "--oiio", "--wrap", "periodic", str(src), "-o", str(out / f"{name}.tx")],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
         src.unlink()
         print(out / f"{name}.tx")
     return 0

@@ -47,7 +47,7 @@ def test_area_lights_are_read_with_their_shape(light_type, kind, inputs) -> None
 
 def test_a_zero_sized_light_is_an_error_naming_the_prim() -> None:
     stage = _stage(UsdLux.DiskLight, radius=0.0)
-    with pytest.raises(mipray.MiprayError, match="/World/Light.*radius"):
+    with pytest.raises(mipray.MiprayError, match=r"/World/Light.*radius"):
         area_light_arguments(stage.GetPrimAtPath("/World/Light"), Usd.TimeCode.Default(), np.eye(4))
 
 

@@ -77,7 +77,10 @@ def test_forcing_the_finest_mip_level_reads_more_texture_bytes(stage) -> None:
     surface.GetInput("displacement").ClearSources()
     normal = mipray.render(stage, width=48, aovs=("color",))
     finest = mipray.render(stage, width=48, aovs=("color",), settings={"textureFilter": "finest"})
-    assert finest.stats["texture_cache"]["bytes_read"] > 3 * normal.stats["texture_cache"]["bytes_read"]
+    assert (
+        finest.stats["texture_cache"]["bytes_read"]
+        > 3 * normal.stats["texture_cache"]["bytes_read"]
+    )
 
 
 def test_a_transform2d_scales_and_moves_st() -> None:

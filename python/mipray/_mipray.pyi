@@ -216,7 +216,8 @@ class RenderDelegate:
         ``kind`` is ``distant`` (as :meth:`set_distant_light`), ``sphere``
         (``radius``), ``rect`` (``width`` × ``height``, emitting along local
         -Z), ``disk`` (``radius``, along -Z) or ``dome`` (radiance from every
-        direction: constant, or the latlong ``texture`` file, +Y up). Area lights emit radiance ``color * intensity
+        direction: constant, or the latlong ``texture`` file, +Y up). Area
+        lights emit radiance ``color * intensity
         * 2**exposure``, divided by their area with ``normalize``; they cast
         soft shadows with ``shadowSamples`` rays each.
 

@@ -183,7 +183,9 @@ def compare(
     usd = split_usd_input(input_spec)
     if usd is not None:
         path, prim_path = usd
-        out = _mipray.subdiv_compare(prim_path, **_usd_mesh_kwargs(path, prim_path, time), **options)
+        out = _mipray.subdiv_compare(
+            prim_path, **_usd_mesh_kwargs(path, prim_path, time), **options
+        )
     else:
         with open(input_spec, encoding="utf-8") as f:
             text = f.read()

@@ -137,12 +137,16 @@ def area_light_arguments(
     if kind in ("sphere", "disk"):
         args["radius"] = float(get("radius", 0.5))
         if kind == "sphere" and bool(get("treatAsPoint", False)):
-            raise PrimError(path, "treatAsPoint point lights are not supported yet; give the sphere a radius")
+            raise PrimError(
+                path, "treatAsPoint point lights are not supported yet; give the sphere a radius"
+            )
     if kind == "rect":
         args["width"] = float(get("width", 1.0))
         args["height"] = float(get("height", 1.0))
         if get("texture:file", None):
-            _warn_once(f"{path}: rect light textures are not supported yet; lighting with its colour")
+            _warn_once(
+                f"{path}: rect light textures are not supported yet; lighting with its colour"
+            )
     if kind == "dome":
         attr = prim.GetAttribute("inputs:texture:file")
         value = attr.Get(time) if attr else None
@@ -151,7 +155,9 @@ def area_light_arguments(
 
             from .shading import _resolve
 
-            args["texture"] = _resolve(attr, value) if isinstance(value, Sdf.AssetPath) else str(value)
+            args["texture"] = (
+                _resolve(attr, value) if isinstance(value, Sdf.AssetPath) else str(value)
+            )
     for key in ("intensity", "exposure", "radius", "width", "height"):
         if key in args and not math.isfinite(args[key]):
             raise PrimError(path, f"inputs:{key} is not finite")

@@ -96,8 +96,10 @@ def _transform2d(shader: UsdShade.Shader, time: Usd.TimeCode) -> Transform2d:
 
 
 def apply_transform2d(st: np.ndarray, transform: Transform2d) -> np.ndarray:
-    """``st`` through a UsdTransform2d: scaled, rotated counter-clockwise, then translated
-    (UsdPreviewSurface's definition)."""
+    """``st`` through a UsdTransform2d: scaled, rotated counter-clockwise, then translated.
+
+    This is UsdPreviewSurface's definition of the node.
+    """
     (sx, sy), degrees, (tx, ty) = transform
     a = math.radians(degrees)
     c, s = math.cos(a), math.sin(a)
@@ -122,13 +124,19 @@ def _texture(
     attrs = file_inp.GetValueProducingAttributes() if file_inp else []
     value = attrs[0].Get(time) if attrs else None
     if not isinstance(value, Sdf.AssetPath) or not value.path:
-        _warn_once(f"{prim_path}: {what} texture {shader.GetPath()} has no file; using its fallback")
+        _warn_once(
+            f"{prim_path}: {what} texture {shader.GetPath()} has no file; using its fallback"
+        )
         return None
     desc: dict[str, Any] = {
         "file": _resolve(attrs[0], value),
         "channel": _CHANNELS.get(output, 0),
     }
-    for key, default in (("scale", [1.0] * 4), ("bias", [0.0] * 4), ("fallback", [0.0, 0.0, 0.0, 1.0])):
+    for key, default in (
+        ("scale", [1.0] * 4),
+        ("bias", [0.0] * 4),
+        ("fallback", [0.0, 0.0, 0.0, 1.0]),
+    ):
         v = _const(shader, key, time)
         if v is not None:
             desc[key] = _floats(v, 4, default)
@@ -212,11 +220,16 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
         if metallic is not None and float(metallic) > 0.0:
             rough = 0.5 if roughness is None else float(roughness)
             if rough <= 0.05:
-                base = _floats(diffuse if diffuse is not None else (0.18, 0.18, 0.18), 3, [0.18] * 3)
+                base = _floats(
+                    diffuse if diffuse is not None else (0.18, 0.18, 0.18), 3, [0.18] * 3
+                )
                 m = min(max(float(metallic), 0.0), 1.0)
                 args["mirror"] = tuple(min(max(c * m, 0.0), 1.0) for c in base)
             else:
-                _warn_once(f"{path}: rough metal (roughness {rough}) renders diffuse until glossy reflection is supported")
+                _warn_once(
+                    f"{path}: rough metal (roughness {rough}) renders diffuse "
+                    "until glossy reflection is supported"
+                )
         src = _source(surface, "diffuseColor")
         if src is not None:
             tex = _texture(path, src[0], src[1], time, "diffuseColor")
@@ -230,7 +243,10 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
             if tex is not None:
                 args["displacement_texture"], name, transform = tex
                 if st_name is not None and transform != st_transform:
-                    _warn_once(f"{path}: diffuseColor and displacement read st differently; using diffuseColor's")
+                    _warn_once(
+                        f"{path}: diffuseColor and displacement read st differently; "
+                        "using diffuseColor's"
+                    )
                 if st_name is None:
                     st_name, st_transform = name, transform
     if st_name is not None:
@@ -238,7 +254,9 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
         if st_transform is not None and "st_values" in args:
             # One st channel serves the mesh's textures: the UsdTransform2d applies to its values
             # (an affine map commutes with every interpolation the primvar may have).
-            args["st_values"] = apply_transform2d(args["st_values"], st_transform).astype(np.float32)
+            args["st_values"] = apply_transform2d(args["st_values"], st_transform).astype(
+                np.float32
+            )
     if not all(math.isfinite(float(c)) for c in args.get("mirror", ())):
         args.pop("mirror")
     return args
