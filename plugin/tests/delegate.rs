@@ -1,9 +1,9 @@
 //! The render delegate end to end in Rust: sync costs in proportion to the edit, and the
 //! attributes a renderer must honour change the picture.
 
+mod common;
+
 use glam::{Mat4, Vec3};
-use hd_mipray::camera::Camera;
-use hd_mipray::light::DistantLightData;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
 use mipray::progress::NoProgress;
@@ -48,31 +48,7 @@ fn data(topology: MeshTopology, points: Vec<[f32; 3]>, transform: Mat4) -> MeshD
 }
 
 fn delegate_with_camera(eye: Vec3, target: Vec3) -> RenderDelegate {
-    let mut d = RenderDelegate::new();
-    d.set_camera(
-        "/cam",
-        Camera {
-            render_from_camera: Camera::look_at(eye, target, Vec3::Y),
-            horizontal_aperture: 20.0,
-            vertical_aperture: 20.0,
-            focal_length: 35.0,
-            clipping_range: (0.1, 1000.0),
-            ..Default::default()
-        },
-    );
-    d.set_distant_light(
-        "/sun",
-        DistantLightData {
-            transform: Mat4::IDENTITY,
-            intensity: 1.0,
-            exposure: 0.0,
-            color: [1.0; 3],
-            angle_deg: 0.5,
-            normalize: false,
-            shadow_enable: true,
-        },
-    );
-    d
+    common::delegate_with_camera(eye, target, true)
 }
 
 fn pass(aovs: &[&str]) -> RenderPass {

@@ -1,10 +1,10 @@
 //! Instancers share a prototype's geometry (one core mesh, many placements), transform-only
 //! updates rebuild nothing, and per-face materials colour exactly their faces.
 
+mod common;
+
 use glam::{Mat4, Vec3};
-use hd_mipray::camera::Camera;
 use hd_mipray::instancer::InstancerData;
-use hd_mipray::light::DistantLightData;
 use hd_mipray::material::FaceAlbedo;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_pass::PassResult;
@@ -43,31 +43,7 @@ fn two_quads() -> MeshData {
 }
 
 fn delegate(eye: Vec3) -> RenderDelegate {
-    let mut d = RenderDelegate::new();
-    d.set_camera(
-        "/cam",
-        Camera {
-            render_from_camera: Camera::look_at(eye, Vec3::ZERO, Vec3::Y),
-            horizontal_aperture: 20.0,
-            vertical_aperture: 20.0,
-            focal_length: 35.0,
-            clipping_range: (0.1, 1000.0),
-            ..Default::default()
-        },
-    );
-    d.set_distant_light(
-        "/sun",
-        DistantLightData {
-            transform: Mat4::IDENTITY,
-            intensity: 1.0,
-            exposure: 0.0,
-            color: [1.0; 3],
-            angle_deg: 0.5,
-            normalize: false,
-            shadow_enable: false,
-        },
-    );
-    d
+    common::delegate_with_camera(eye, Vec3::ZERO, false)
 }
 
 fn render(d: &mut RenderDelegate, aovs: &[&str]) -> PassResult {

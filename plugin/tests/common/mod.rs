@@ -134,3 +134,35 @@ pub fn boxed(h: [f32; 3], scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
     let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
     (MeshTopology { scheme, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() }, pts)
 }
+
+/// A delegate with a 35 mm camera at `eye` looking at `target` (Y up, 20-unit square aperture)
+/// and a unit distant light shining down −Z that casts shadows or not.
+pub fn delegate_with_camera(eye: glam::Vec3, target: glam::Vec3, shadows: bool) -> hd_mipray::RenderDelegate {
+    use hd_mipray::camera::Camera;
+    use hd_mipray::light::DistantLightData;
+    let mut d = hd_mipray::RenderDelegate::new();
+    d.set_camera(
+        "/cam",
+        Camera {
+            render_from_camera: Camera::look_at(eye, target, glam::Vec3::Y),
+            horizontal_aperture: 20.0,
+            vertical_aperture: 20.0,
+            focal_length: 35.0,
+            clipping_range: (0.1, 1000.0),
+            ..Default::default()
+        },
+    );
+    d.set_distant_light(
+        "/sun",
+        DistantLightData {
+            transform: glam::Mat4::IDENTITY,
+            intensity: 1.0,
+            exposure: 0.0,
+            color: [1.0; 3],
+            angle_deg: 0.5,
+            normalize: false,
+            shadow_enable: shadows,
+        },
+    );
+    d
+}
