@@ -735,6 +735,26 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
   }
 }
 
+// One LocationArray per run of equal ptex faces, so the stencils come out in the input's order.
+// The arrays point into `u` and `v`, which must outlive them.
+static Far::LimitStencilTableFactory::LocationArrayVec location_arrays(rust::Slice<const int32_t> ptex_faces,
+                                                                       rust::Slice<const float> u,
+                                                                       rust::Slice<const float> v) {
+  Far::LimitStencilTableFactory::LocationArrayVec arrays;
+  for (std::size_t i = 0; i < ptex_faces.size();) {
+    std::size_t j = i;
+    while (j < ptex_faces.size() && ptex_faces[j] == ptex_faces[i]) ++j;
+    Far::LimitStencilTableFactory::LocationArray la;
+    la.ptexIdx = ptex_faces[i];
+    la.numLocations = int(j - i);
+    la.s = u.data() + i;
+    la.t = v.data() + i;
+    arrays.push_back(la);
+    i = j;
+  }
+  return arrays;
+}
+
 OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
                                        rust::Slice<const int32_t> ptex_faces,
                                        rust::Slice<const float> u, rust::Slice<const float> v) {
@@ -746,19 +766,7 @@ OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<cons
     RefinerPtr refiner = create_refiner(desc, capture);
     refine_adaptive(*refiner, desc, capture);
 
-    // One LocationArray per run of equal ptex faces keeps the output in the input's order.
-    Far::LimitStencilTableFactory::LocationArrayVec arrays;
-    for (std::size_t i = 0; i < ptex_faces.size();) {
-      std::size_t j = i;
-      while (j < ptex_faces.size() && ptex_faces[j] == ptex_faces[i]) ++j;
-      Far::LimitStencilTableFactory::LocationArray la;
-      la.ptexIdx = ptex_faces[i];
-      la.numLocations = int(j - i);
-      la.s = u.data() + i;
-      la.t = v.data() + i;
-      arrays.push_back(la);
-      i = j;
-    }
+    Far::LimitStencilTableFactory::LocationArrayVec arrays = location_arrays(ptex_faces, u, v);
     Far::LimitStencilTableFactory::Options lo;
     lo.generate1stDerivatives = true;
     lo.generate2ndDerivatives = false;
@@ -822,18 +830,7 @@ OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t
     RefinerPtr refiner = create_refiner(desc, capture);
     refine_adaptive(*refiner, desc, capture);
 
-    Far::LimitStencilTableFactory::LocationArrayVec arrays;
-    for (std::size_t i = 0; i < ptex_faces.size();) {
-      std::size_t j = i;
-      while (j < ptex_faces.size() && ptex_faces[j] == ptex_faces[i]) ++j;
-      Far::LimitStencilTableFactory::LocationArray la;
-      la.ptexIdx = ptex_faces[i];
-      la.numLocations = int(j - i);
-      la.s = u.data() + i;
-      la.t = v.data() + i;
-      arrays.push_back(la);
-      i = j;
-    }
+    Far::LimitStencilTableFactory::LocationArrayVec arrays = location_arrays(ptex_faces, u, v);
     // OpenSubdiv's own face-varying path: stencils of the channel's refined values (from
     // StencilTableFactory, not PrimvarRefiner) and its own patch table.
     Far::LimitStencilTableFactory::Options lo;

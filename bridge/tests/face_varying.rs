@@ -14,7 +14,7 @@
 
 use std::path::PathBuf;
 
-use mipray::obj_shape::parse_obj_shape;
+use mipray::obj_shape::{corpus_dir, corpus_paths, parse_obj_shape};
 use mipray::patch::{LimitSurface, UvRect};
 use mipray::texture::{BaseFacePrimvar, Interpolation, Primvar2, Value2};
 use mipray::topology::{FaceVaryingInterpolation, MeshTopology, Scheme};
@@ -191,28 +191,17 @@ fn bad_primvars_are_refused_naming_mesh_and_primvar() {
     assert!(plain.face_varying(0, 0, 0.5, 0.5).is_none());
 }
 
-fn shapes_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/osd-shapes")
-}
-
 /// Every regression shape with texture coordinates: our face-varying patches against OpenSubdiv's
 /// face-varying limit stencils (its own refiner, stencil tables and patch table).
 #[test]
 fn regression_shapes_face_varying_matches_limit_stencils() {
-    let Ok(entries) = std::fs::read_dir(shapes_dir()) else {
+    let Some(paths) = corpus_paths(&corpus_dir()) else {
         println!("note: the OpenSubdiv shape corpus is absent; skipping");
         return;
     };
-    let mut paths: Vec<PathBuf> =
-        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "obj")).collect();
-    paths.sort();
-    let only = std::env::var("MIPRAY_SHAPES").ok();
     let (mut checked, mut problems) = (0, Vec::new());
     for path in &paths {
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
-        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == name)) {
-            continue;
-        }
         let shape = parse_obj_shape(&name, &std::fs::read_to_string(path).unwrap()).unwrap();
         if shape.uv_indices.is_empty() || shape.check_supported().is_err() {
             continue;

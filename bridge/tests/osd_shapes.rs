@@ -23,10 +23,10 @@
 // Tests may unwrap: a panic is the failure report.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::Vec3A;
-use mipray::obj_shape::{parse_obj_shape, CreaseMethod, ObjShape};
+use mipray::obj_shape::{corpus_dir, corpus_paths, parse_obj_shape, CreaseMethod, ObjShape};
 use mipray::patch::{GridSamples, LimitSurface, PatchKind, UvRect};
 use mipray::topology::Scheme;
 use mipray_bridge::{limit_stencil_reference, OsdOptions, OsdSurface};
@@ -68,10 +68,6 @@ fn grid_side(patches: usize) -> usize {
     } else {
         5
     }
-}
-
-fn shapes_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/osd-shapes")
 }
 
 #[derive(Default)]
@@ -272,23 +268,15 @@ fn run_one(path: &Path) -> (String, Outcome, String) {
 
 #[test]
 fn regression_shapes_match_limit_stencils() {
-    let dir = shapes_dir();
-    let Ok(entries) = std::fs::read_dir(&dir) else {
+    let dir = corpus_dir();
+    let Some(paths) = corpus_paths(&dir) else {
         println!("note: {} is absent; skipping the OpenSubdiv shape corpus", dir.display());
         return;
     };
-    let mut paths: Vec<PathBuf> =
-        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "obj")).collect();
-    paths.sort();
-    let only = std::env::var("MIPRAY_SHAPES").ok();
     let mut problems = Vec::new();
     let (mut passed, mut refused, mut known) = (0, 0, 0);
     let mut seen = Vec::new();
     for path in &paths {
-        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
-        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == stem)) {
-            continue;
-        }
         let (name, outcome, line) = run_one(path);
         seen.push(name.clone());
         let expected = KNOWN_FAILURES.iter().find(|(n, _)| *n == name).map(|(_, why)| *why);
@@ -315,7 +303,7 @@ fn regression_shapes_match_limit_stencils() {
             }
         }
     }
-    if only.is_none() {
+    if std::env::var_os("MIPRAY_SHAPES").is_none() {
         for r in REQUIRED {
             assert!(seen.iter().any(|s| s == r), "required shape {r} is missing from {}", dir.display());
         }

@@ -16,13 +16,10 @@
 use std::path::PathBuf;
 
 use hd_mipray::subdiv_compare::{compare_obj, CompareOptions, CompareReport};
+use mipray::obj_shape::{corpus_dir, corpus_paths};
 
 const POSITION_TOL: f64 = 1e-5;
 const NORMAL_TOL_DEG: f64 = 0.05;
-
-fn shapes_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/osd-shapes")
-}
 
 /// Why a report fails, or `None`.
 fn problems(r: &CompareReport) -> Vec<String> {
@@ -69,22 +66,15 @@ fn summary(r: &CompareReport) -> String {
 
 #[test]
 fn every_corpus_shape_compares_with_opensubdiv() {
-    let dir = shapes_dir();
-    let Ok(entries) = std::fs::read_dir(&dir) else {
+    let dir = corpus_dir();
+    let Some(paths) = corpus_paths(&dir) else {
         println!("note: {} is absent; skipping the OpenSubdiv shape corpus", dir.display());
         return;
     };
-    let mut paths: Vec<PathBuf> =
-        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "obj")).collect();
-    paths.sort();
-    let only = std::env::var("MIPRAY_SHAPES").ok();
     let options = CompareOptions::quick();
     let (mut ok, mut refused, mut failed) = (0, 0, Vec::new());
     for path in &paths {
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
-        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == name)) {
-            continue;
-        }
         let text = std::fs::read_to_string(path).unwrap();
         let hedit = name.contains("hedit");
         match compare_obj(&name, &text, &options) {
