@@ -12,8 +12,6 @@
 // Tests may unwrap: a panic is the failure report.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::PathBuf;
-
 use mipray::obj_shape::{corpus_dir, corpus_paths, parse_obj_shape};
 use mipray::patch::{LimitSurface, UvRect};
 use mipray::texture::{BaseFacePrimvar, Interpolation, Primvar2, Value2};
