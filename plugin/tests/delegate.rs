@@ -12,35 +12,13 @@ use serde_json::Value;
 
 /// A 3×3 grid of unit quads in z = 0 centred on the origin, as a subdivision or polygon mesh.
 fn grid(scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
-    let mut pts = Vec::new();
-    for j in 0..4 {
-        for i in 0..4 {
-            pts.push([i as f32 - 1.5, j as f32 - 1.5, 0.0]);
-        }
-    }
-    let mut idx = Vec::new();
-    for j in 0..3 {
-        for i in 0..3 {
-            let v = |a: i32, b: i32| b * 4 + a;
-            idx.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
-        }
-    }
-    (MeshTopology { scheme, face_vertex_counts: vec![4; 9], face_vertex_indices: idx, ..Default::default() }, pts)
+    let (mut topo, pts) = mipray::bilinear::grid_mesh(1.5, 3, 0.0);
+    topo.scheme = scheme;
+    (topo, pts)
 }
 
 fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
-    let pts = vec![
-        [-1.0, -1.0, -1.0],
-        [1.0, -1.0, -1.0],
-        [1.0, 1.0, -1.0],
-        [-1.0, 1.0, -1.0],
-        [-1.0, -1.0, 1.0],
-        [1.0, -1.0, 1.0],
-        [1.0, 1.0, 1.0],
-        [-1.0, 1.0, 1.0],
-    ];
-    let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
-    (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() }, pts)
+    common::cube()
 }
 
 fn data(topology: MeshTopology, points: Vec<[f32; 3]>, transform: Mat4) -> MeshData {

@@ -14,19 +14,7 @@ use mipray::topology::{MeshTopology, Scheme};
 
 /// A subdivided cube of side 2 centred on the origin.
 fn cube(transform: Mat4) -> MeshData {
-    let points = vec![
-        [-1.0, -1.0, -1.0],
-        [1.0, -1.0, -1.0],
-        [1.0, 1.0, -1.0],
-        [-1.0, 1.0, -1.0],
-        [-1.0, -1.0, 1.0],
-        [1.0, -1.0, 1.0],
-        [1.0, 1.0, 1.0],
-        [-1.0, 1.0, 1.0],
-    ];
-    let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
-    let topology =
-        MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() };
+    let (topology, points) = common::cube();
     MeshData { topology, points, transform, albedo: [0.5; 3], ..Default::default() }
 }
 

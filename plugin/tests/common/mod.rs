@@ -166,3 +166,19 @@ pub fn delegate_with_camera(eye: glam::Vec3, target: glam::Vec3, shadows: bool) 
     );
     d
 }
+
+/// A cube of side 2 centred on the origin, outward winding, as a Catmull-Clark control mesh.
+pub fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
+    let pts = vec![
+        [-1.0, -1.0, -1.0],
+        [1.0, -1.0, -1.0],
+        [1.0, 1.0, -1.0],
+        [-1.0, 1.0, -1.0],
+        [-1.0, -1.0, 1.0],
+        [1.0, -1.0, 1.0],
+        [1.0, 1.0, 1.0],
+        [-1.0, 1.0, 1.0],
+    ];
+    let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
+    (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() }, pts)
+}
