@@ -136,45 +136,6 @@ fn vec_f32(a: Option<PyReadonlyArray1<'_, f32>>) -> Vec<f32> {
     a.map(|a| a.as_array().to_vec()).unwrap_or_default()
 }
 
-fn parse_scheme(path: &str, s: &str) -> PyResult<Scheme> {
-    Ok(match s {
-        "catmullClark" => Scheme::CatmullClark,
-        "loop" => Scheme::Loop,
-        "bilinear" => Scheme::Bilinear,
-        "none" => Scheme::None,
-        _ => return Err(value_error(path, format!("subdivisionScheme '{s}' is not one of catmullClark, loop, bilinear, none"))),
-    })
-}
-
-fn parse_boundary(path: &str, s: &str) -> PyResult<BoundaryInterpolation> {
-    Ok(match s {
-        "none" => BoundaryInterpolation::None,
-        "edgeOnly" => BoundaryInterpolation::EdgeOnly,
-        "edgeAndCorner" => BoundaryInterpolation::EdgeAndCorner,
-        _ => return Err(value_error(path, format!("interpolateBoundary '{s}' is not one of none, edgeOnly, edgeAndCorner"))),
-    })
-}
-
-fn parse_fvar(path: &str, s: &str) -> PyResult<FaceVaryingInterpolation> {
-    Ok(match s {
-        "none" => FaceVaryingInterpolation::None,
-        "cornersOnly" => FaceVaryingInterpolation::CornersOnly,
-        "cornersPlus1" => FaceVaryingInterpolation::CornersPlus1,
-        "cornersPlus2" => FaceVaryingInterpolation::CornersPlus2,
-        "boundaries" => FaceVaryingInterpolation::Boundaries,
-        "all" => FaceVaryingInterpolation::All,
-        _ => return Err(value_error(path, format!("faceVaryingLinearInterpolation '{s}' is not a USD token"))),
-    })
-}
-
-fn parse_triangle(path: &str, s: &str) -> PyResult<TriangleSubdivision> {
-    Ok(match s {
-        "catmullClark" => TriangleSubdivision::CatmullClark,
-        "smooth" => TriangleSubdivision::Smooth,
-        _ => return Err(value_error(path, format!("triangleSubdivisionRule '{s}' is not one of catmullClark, smooth"))),
-    })
-}
-
 fn py_to_json(v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
     if let Ok(b) = v.extract::<bool>() {
         return Ok(b.into());
@@ -287,7 +248,7 @@ impl RenderDelegate {
         }
         let points: Vec<[f32; 3]> = pts.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
         let topology = MeshTopology {
-            scheme: parse_scheme(path, scheme)?,
+            scheme: Scheme::from_usd(scheme).map_err(|e| value_error(path, e))?,
             face_vertex_counts: face_vertex_counts.as_array().to_vec(),
             face_vertex_indices: face_vertex_indices.as_array().to_vec(),
             crease_indices: vec_i32(crease_indices),
@@ -296,9 +257,9 @@ impl RenderDelegate {
             corner_indices: vec_i32(corner_indices),
             corner_sharpnesses: vec_f32(corner_sharpnesses),
             hole_indices: vec_i32(hole_indices),
-            boundary: parse_boundary(path, interpolate_boundary)?,
-            face_varying: parse_fvar(path, face_varying_linear_interpolation)?,
-            triangle_subdivision: parse_triangle(path, triangle_subdivision_rule)?,
+            boundary: BoundaryInterpolation::from_usd(interpolate_boundary).map_err(|e| value_error(path, e))?,
+            face_varying: FaceVaryingInterpolation::from_usd(face_varying_linear_interpolation).map_err(|e| value_error(path, e))?,
+            triangle_subdivision: TriangleSubdivision::from_usd(triangle_subdivision_rule).map_err(|e| value_error(path, e))?,
             left_handed,
         };
         topology.validate(points.len()).map_err(|e| value_error(path, e))?;
@@ -794,7 +755,7 @@ fn subdiv_compare(
             }
             let pts: Vec<[f32; 3]> = a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
             let topology = MeshTopology {
-                scheme: parse_scheme(name, scheme)?,
+                scheme: Scheme::from_usd(scheme).map_err(|e| value_error(name, e))?,
                 face_vertex_counts: vec_i32(face_vertex_counts),
                 face_vertex_indices: vec_i32(face_vertex_indices),
                 crease_indices: vec_i32(crease_indices),
@@ -803,9 +764,9 @@ fn subdiv_compare(
                 corner_indices: vec_i32(corner_indices),
                 corner_sharpnesses: vec_f32(corner_sharpnesses),
                 hole_indices: vec_i32(hole_indices),
-                boundary: parse_boundary(name, interpolate_boundary)?,
-                face_varying: parse_fvar(name, face_varying_linear_interpolation)?,
-                triangle_subdivision: parse_triangle(name, triangle_subdivision_rule)?,
+                boundary: BoundaryInterpolation::from_usd(interpolate_boundary).map_err(|e| value_error(name, e))?,
+                face_varying: FaceVaryingInterpolation::from_usd(face_varying_linear_interpolation).map_err(|e| value_error(name, e))?,
+                triangle_subdivision: TriangleSubdivision::from_usd(triangle_subdivision_rule).map_err(|e| value_error(name, e))?,
                 left_handed,
             };
             (topology, pts)

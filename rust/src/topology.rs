@@ -46,6 +46,69 @@ pub enum TriangleSubdivision {
     Smooth,
 }
 
+/// Parses a USD token into one of these enums; the error lists the valid tokens.
+fn from_token<T: Copy>(attribute: &str, token: &str, table: &[(&str, T)]) -> Result<T, MeshError> {
+    table.iter().find(|(t, _)| *t == token).map(|(_, v)| *v).ok_or_else(|| {
+        let valid: Vec<&str> = table.iter().map(|(t, _)| *t).collect();
+        MeshError::Invalid(format!("{attribute} '{token}' is not one of {}", valid.join(", ")))
+    })
+}
+
+impl Scheme {
+    /// From USD's `subdivisionScheme` token.
+    ///
+    /// # Errors
+    /// An unknown token; the message lists the valid ones.
+    pub fn from_usd(token: &str) -> Result<Self, MeshError> {
+        use Scheme::*;
+        from_token("subdivisionScheme", token, &[("catmullClark", CatmullClark), ("loop", Loop), ("bilinear", Bilinear), ("none", None)])
+    }
+}
+
+impl BoundaryInterpolation {
+    /// From USD's `interpolateBoundary` token.
+    ///
+    /// # Errors
+    /// An unknown token; the message lists the valid ones.
+    pub fn from_usd(token: &str) -> Result<Self, MeshError> {
+        use BoundaryInterpolation::*;
+        from_token("interpolateBoundary", token, &[("none", None), ("edgeOnly", EdgeOnly), ("edgeAndCorner", EdgeAndCorner)])
+    }
+}
+
+impl FaceVaryingInterpolation {
+    /// From USD's `faceVaryingLinearInterpolation` token.
+    ///
+    /// # Errors
+    /// An unknown token; the message lists the valid ones.
+    pub fn from_usd(token: &str) -> Result<Self, MeshError> {
+        use FaceVaryingInterpolation::*;
+        from_token(
+            "faceVaryingLinearInterpolation",
+            token,
+            &[
+                ("none", None),
+                ("cornersOnly", CornersOnly),
+                ("cornersPlus1", CornersPlus1),
+                ("cornersPlus2", CornersPlus2),
+                ("boundaries", Boundaries),
+                ("all", All),
+            ],
+        )
+    }
+}
+
+impl TriangleSubdivision {
+    /// From USD's `triangleSubdivisionRule` token.
+    ///
+    /// # Errors
+    /// An unknown token; the message lists the valid ones.
+    pub fn from_usd(token: &str) -> Result<Self, MeshError> {
+        use TriangleSubdivision::*;
+        from_token("triangleSubdivisionRule", token, &[("catmullClark", CatmullClark), ("smooth", Smooth)])
+    }
+}
+
 /// The topology of one mesh, in USD's terms. Indices refer to the mesh's points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MeshTopology {
@@ -161,6 +224,16 @@ mod tests {
 
     fn quad() -> MeshTopology {
         MeshTopology { face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() }
+    }
+
+    #[test]
+    fn usd_tokens_parse_and_unknown_ones_list_the_valid() {
+        assert_eq!(Scheme::from_usd("loop"), Ok(Scheme::Loop));
+        assert_eq!(BoundaryInterpolation::from_usd("edgeOnly"), Ok(BoundaryInterpolation::EdgeOnly));
+        assert_eq!(FaceVaryingInterpolation::from_usd("cornersPlus2"), Ok(FaceVaryingInterpolation::CornersPlus2));
+        assert_eq!(TriangleSubdivision::from_usd("smooth"), Ok(TriangleSubdivision::Smooth));
+        let e = Scheme::from_usd("catmull-clark").unwrap_err().to_string();
+        assert!(e.contains("subdivisionScheme 'catmull-clark'") && e.contains("catmullClark, loop, bilinear, none"), "{e}");
     }
 
     #[test]
