@@ -173,6 +173,8 @@ pub struct DirectLighting<'a> {
     max_depth: u32,
     /// Shadow rays per shading point toward each wide light.
     shadow_samples: u32,
+    /// The `tessError` AOV was asked for.
+    tess_error: bool,
 }
 
 /// Radiance along a ray, the AO fraction at its hit, and the beam width and rate at the end of
@@ -180,6 +182,8 @@ pub struct DirectLighting<'a> {
 struct Shade {
     color: Vec3A,
     ao: f32,
+    /// The shading normal at the ray's own hit (render space, facing the ray).
+    normal: Vec3A,
     beam_width: f32,
     quads: u32,
 }
@@ -198,6 +202,7 @@ impl<'a> DirectLighting<'a> {
             ao_intensity: options.ao_intensity,
             max_depth: options.max_depth,
             shadow_samples: options.shadow_samples,
+            tess_error: options.aovs.iter().any(|a| a == "tessError"),
         }
     }
 
@@ -209,19 +214,21 @@ impl<'a> DirectLighting<'a> {
             return out;
         };
         let shade = self.shade(ray, &hit, 0, sampler, counters);
-        let sp = shading_point(self.tracer, self.scene, ray, &hit);
         out.color = shade.color;
         out.ao = shade.ao;
         out.alpha = 1.0;
         out.depth = self.scene.camera.depth(hit.p);
-        out.normal = sp.ns;
+        out.normal = shade.normal;
         out.prim_id = hit.patch as f32;
         out.instance_id = hit.instance_id as f32;
         out.beam_width = shade.beam_width;
         out.tess_rate = shade.quads as f32;
-        let err = tessellation_error(self.tracer, self.scene, ray, &hit);
-        let width = ray.beam_width(hit.t);
-        out.tess_error = [err, if width > 0.0 { err / width } else { 0.0 }];
+        if self.tess_error {
+            // Newton's method on the limit surface: a few evaluations per pixel, only when asked.
+            let err = tessellation_error(self.tracer, self.scene, ray, &hit);
+            let width = ray.beam_width(hit.t);
+            out.tess_error = [err, if width > 0.0 { err / width } else { 0.0 }];
+        }
         out
     }
 
@@ -269,7 +276,7 @@ impl<'a> DirectLighting<'a> {
                 }
             }
         }
-        Shade { color, ao, beam_width, quads }
+        Shade { color, ao, normal: sp.ns, beam_width, quads }
     }
 
     /// A textured colour at the hit, filtered over the footprint the ray differential gives:
