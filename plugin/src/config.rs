@@ -34,7 +34,11 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "aoDistance", default: "inf", description: "ambient-occlusion ray length, scene units" },
     SettingDescriptor { key: "aoIntensity", default: "1", description: "radiance of the white sky ambient occlusion lights with" },
     SettingDescriptor { key: "shadowSamples", default: "4", description: "shadow rays per shading point toward each area, dome or angular light" },
-    SettingDescriptor { key: "maxDepth", default: "4", description: "longest chain of mirror bounces" },
+    SettingDescriptor { key: "maxDepth", default: "4", description: "longest chain of specular bounces (and path length for path tracing)" },
+    SettingDescriptor { key: "integrator", default: "auto", description: "auto (what the scene calls for), direct, ao, colorBleeding or path" },
+    SettingDescriptor { key: "indirectSamples", default: "16", description: "hemisphere rays per shading point for one-bounce indirect diffuse (color bleeding)" },
+    SettingDescriptor { key: "irradianceCache", default: "0", description: "interpolate ambient occlusion and irradiance with gradients (the paper's 5.1): 0 or 1" },
+    SettingDescriptor { key: "irradianceCacheError", default: "0.2", description: "the irradiance cache's error bound (Ward's a); smaller is more accurate" },
 ];
 
 /// The settings a render was asked for, validated.
@@ -57,6 +61,10 @@ pub struct RenderSettings {
     pub ao_intensity: f32,
     pub max_depth: u32,
     pub shadow_samples: u32,
+    pub integrator: mipray::options::IntegratorKind,
+    pub indirect_samples: u32,
+    pub irradiance_cache: bool,
+    pub irradiance_cache_error: f32,
 }
 
 impl Default for RenderSettings {
@@ -78,6 +86,10 @@ impl Default for RenderSettings {
             ao_intensity: 1.0,
             max_depth: 4,
             shadow_samples: 4,
+            integrator: mipray::options::IntegratorKind::Auto,
+            indirect_samples: 16,
+            irradiance_cache: false,
+            irradiance_cache_error: 0.2,
         }
     }
 }
@@ -178,6 +190,26 @@ impl RenderSettings {
                     }
                     s.shadow_samples = x as u32;
                 }
+                "integrator" => {
+                    let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
+                    s.integrator = mipray::options::IntegratorKind::from_name(name).ok_or_else(|| {
+                        bad(k, format!("'{name}' is not one of {}", mipray::options::IntegratorKind::NAMES.join(", ")))
+                    })?;
+                }
+                "indirectSamples" => s.indirect_samples = as_f64(k, v)?.clamp(0.0, 65_536.0) as u32,
+                "irradianceCache" => {
+                    s.irradiance_cache = match v {
+                        Value::Bool(b) => *b,
+                        _ => as_f64(k, v)? != 0.0,
+                    }
+                }
+                "irradianceCacheError" => {
+                    let x = as_f64(k, v)?;
+                    if !(x > 0.0 && x <= 10.0) {
+                        return Err(bad(k, format!("{x} must be within (0, 10]")));
+                    }
+                    s.irradiance_cache_error = x as f32;
+                }
                 _ => {
                     let keys: Vec<&str> = SETTINGS.iter().map(|d| d.key).collect();
                     return Err(bad(k, format!("unknown setting; valid settings: {}", keys.join(", "))));
@@ -224,6 +256,10 @@ impl RenderSettings {
             ao_intensity: self.ao_intensity,
             max_depth: self.max_depth,
             shadow_samples: self.shadow_samples,
+            integrator: self.integrator,
+            indirect_samples: self.indirect_samples,
+            irradiance_cache: self.irradiance_cache,
+            irradiance_cache_error: self.irradiance_cache_error,
         }
     }
 }

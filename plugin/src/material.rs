@@ -8,9 +8,9 @@ use mipray::material::Material;
 /// values were clamped.
 pub fn mesh_material(path: &str, albedo: [f32; 3], mirror: [f32; 3]) -> Material {
     let (d, m) = (Vec3A::from(albedo), Vec3A::from(mirror));
-    let mat = Material::mirror(path, d, m);
-    if mat.diffuse_color != d || mat.mirror != m {
-        log::warn!("{path}: diffuse color {albedo:?} and mirror {mirror:?} clamped to [0, 1] with a sum of at most 1");
+    let mat = if m == Vec3A::ZERO { Material::lambertian(path, d).0 } else { Material::mirror(path, d, m) };
+    if mat.surface.diffuse_color != d || (m != Vec3A::ZERO && mat.surface.specular_color != m) {
+        log::warn!("{path}: diffuse color {albedo:?} and mirror {mirror:?} clamped to [0, 1]");
     }
     mat
 }

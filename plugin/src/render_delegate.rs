@@ -312,11 +312,11 @@ impl RenderDelegate {
         let surface = m.surface.as_ref()?;
         let mut material = mesh_material(&m.path, m.data.albedo, m.data.mirror);
         if let Some(input) = &m.data.diffuse_texture {
-            material.diffuse_texture = self.textured_color(&m.path, input);
-            if material.diffuse_texture.is_none() {
+            match self.textured_color(&m.path, input) {
+                Some(t) => material.textures.push((mipray::material::Input::DiffuseColor, t)),
                 // Unreadable: the input's fallback value, as UsdUVTexture says.
-                material.diffuse_color =
-                    glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]).clamp(glam::Vec3A::ZERO, glam::Vec3A::ONE);
+                None => material.surface.diffuse_color =
+                    glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]).clamp(glam::Vec3A::ZERO, glam::Vec3A::ONE),
             }
         }
         let mat = scene.add_material(material);

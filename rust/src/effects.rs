@@ -37,7 +37,11 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
         .materials
         .iter()
         .enumerate()
-        .filter(|(i, m)| used.contains(i) && m.mirror.max_element() > 0.0)
+        .filter(|(i, m)| {
+            let s = &m.surface;
+            let specular = if s.use_specular_workflow { s.specular_color.max_element() > 0.0 } else { s.metallic > 0.0 };
+            used.contains(i) && specular && s.roughness == 0.0
+        })
         .map(|(_, m)| m.name.as_str())
         .collect();
     if !mirrors.is_empty() && options.max_depth > 0 {

@@ -38,6 +38,56 @@ pub struct RenderOptions {
     pub max_depth: u32,
     /// Shadow rays per shading point toward each area, dome or wide distant light.
     pub shadow_samples: u32,
+    /// Which integrator renders (`integrator` setting); `Auto` picks from what the scene calls for.
+    pub integrator: IntegratorKind,
+    /// Hemisphere rays per shading point for one-bounce indirect diffuse (color bleeding).
+    pub indirect_samples: u32,
+    /// Interpolate ambient occlusion and irradiance from a cache of hemisphere integrals with
+    /// gradients (the paper's §5.1; Ward and Heckbert 1992) instead of sampling at every point.
+    pub irradiance_cache: bool,
+    /// The irradiance cache's error bound (Ward's a): records are reused within this relative
+    /// error estimate; smaller is more accurate and slower.
+    pub irradiance_cache_error: f32,
+}
+
+/// The `integrator` render setting.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum IntegratorKind {
+    /// What the scene calls for: path tracing when asked by the settings; color bleeding when
+    /// indirect diffuse is asked for; otherwise the classic direct-lighting ray tracer (with
+    /// ambient occlusion when AO samples are set).
+    #[default]
+    Auto,
+    /// Direct light, shadows, specular and glossy reflection and refraction to `max_depth`.
+    Direct,
+    /// Ambient occlusion only.
+    Ao,
+    /// Direct light plus one diffuse bounce of `indirect_samples` hemisphere rays.
+    ColorBleeding,
+    /// Unidirectional path tracing with Russian roulette.
+    Path,
+}
+
+impl IntegratorKind {
+    pub const NAMES: &'static [&'static str] = &["auto", "direct", "ao", "colorBleeding", "path"];
+
+    /// The setting's token.
+    pub const fn name(self) -> &'static str {
+        match self {
+            IntegratorKind::Auto => "auto",
+            IntegratorKind::Direct => "direct",
+            IntegratorKind::Ao => "ao",
+            IntegratorKind::ColorBleeding => "colorBleeding",
+            IntegratorKind::Path => "path",
+        }
+    }
+
+    /// Parses [`IntegratorKind::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        [IntegratorKind::Auto, IntegratorKind::Direct, IntegratorKind::Ao, IntegratorKind::ColorBleeding, IntegratorKind::Path]
+            .into_iter()
+            .find(|k| k.name() == name)
+    }
 }
 
 impl Default for RenderOptions {
@@ -57,6 +107,10 @@ impl Default for RenderOptions {
             ao_intensity: 1.0,
             max_depth: 4,
             shadow_samples: 4,
+            integrator: IntegratorKind::Auto,
+            indirect_samples: 16,
+            irradiance_cache: false,
+            irradiance_cache_error: 0.2,
         }
     }
 }
@@ -90,6 +144,12 @@ impl RenderOptions {
                 "aoSamples {} must be at most 65536 and maxDepth {} at most 64",
                 self.ao_samples, self.max_depth
             )));
+        }
+        if self.indirect_samples > 65_536 {
+            return Err(RenderError::Settings(format!("indirectSamples {} must be at most 65536", self.indirect_samples)));
+        }
+        if !(self.irradiance_cache_error.is_finite() && self.irradiance_cache_error > 0.0 && self.irradiance_cache_error <= 10.0) {
+            return Err(RenderError::Settings(format!("irradianceCacheError {} must be within (0, 10]", self.irradiance_cache_error)));
         }
         for a in &self.aovs {
             if crate::film::aov_channels(a).is_none() {

@@ -12,7 +12,7 @@ use crate::effects;
 use crate::error::RenderError;
 use crate::film::Film;
 use crate::geometry_cache::{CacheMode, GeometryCache};
-use crate::integrator::{DirectLighting, SampleValue};
+use crate::integrator::{DirectLighting, Integrator, SampleValue};
 use crate::options::RenderOptions;
 use crate::progress::Progress;
 use crate::sampling::Sampler;
@@ -129,14 +129,14 @@ pub fn render_with_cache(
 /// Renders one tile: every sample of every pixel, averaged. Colour averages over samples;
 /// depth, normal and ids come from sample 0 (the pixel centre), so they are never blends of two
 /// surfaces.
-fn render_tile(integrator: &DirectLighting<'_>, options: &RenderOptions, tile: Tile) -> TileResult {
+fn render_tile(integrator: &dyn Integrator, options: &RenderOptions, tile: Tile) -> TileResult {
     let (x0, y0, tw, th) = tile;
     let mut counters = TraceCounters::default();
     let mut values = Vec::with_capacity(tw * th);
     let mut dropped = 0;
     let spp = options.samples;
-    let cam = &integrator.scene.camera;
-    let dof = integrator.depth_of_field;
+    let cam = &integrator.scene().camera;
+    let dof = integrator.depth_of_field();
     for y in y0..y0 + th {
         for x in x0..x0 + tw {
             let pixel = (y * options.width + x) as u64;

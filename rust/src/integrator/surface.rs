@@ -1,0 +1,126 @@
+//! The surface at a ray hit: the exact limit surface evaluated at the hit's (u, v) (the paper:
+//! intersect the tessellation, shade the surface), and how far the tessellation is from it.
+
+use glam::Vec3A;
+
+use crate::ray::Ray;
+use crate::scene::Scene;
+use crate::trace::{Hit, Tracer};
+
+/// The surface at a hit, in render space, oriented toward the incoming ray.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingPoint {
+    pub p: Vec3A,
+    pub ng: Vec3A,
+    pub ns: Vec3A,
+    pub dpdu: Vec3A,
+    pub dpdv: Vec3A,
+}
+
+/// Evaluates the exact limit surface at the hit's (u, v) for shading (the paper: intersect the
+/// tessellation, shade the surface). The position stays the tessellation's hit point, so new
+/// rays start where this ray stopped.
+pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> ShadingPoint {
+    let mesh = &scene.meshes[hit.mesh as usize];
+    let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
+    let to_world = tracer.render_from_object(hit.instance);
+    let nm = tracer.normal_matrix(hit.instance);
+    let (mut odpdu, mut odpdv) = (s.dpdu, s.dpdv);
+    if let Some(d) = &mesh.displacement {
+        // Shade the displaced surface: its tangents by central differences over half the
+        // hit's quad, displacement filtered at that quad's spacing as the tessellation was.
+        let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+        let step = 0.5 / hit.quads.max(1) as f32;
+        let spacing = s.dpdu.length().max(s.dpdv.length()) * 2.0 * step;
+        let displaced = |u: f32, v: f32| {
+            let e = mesh.surface.evaluate(hit.patch as usize, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+            e.p + e.dpdu.cross(e.dpdv).normalize_or_zero()
+                * sign
+                * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, spacing, 2.0 * step)
+        };
+        let (u0, u1) = ((hit.u - step).max(0.0), (hit.u + step).min(1.0));
+        let (v0, v1) = ((hit.v - step).max(0.0), (hit.v + step).min(1.0));
+        let du = (displaced(u1, hit.v) - displaced(u0, hit.v)) / (u1 - u0).max(f32::MIN_POSITIVE);
+        let dv = (displaced(hit.u, v1) - displaced(hit.u, v0)) / (v1 - v0).max(f32::MIN_POSITIVE);
+        if du.is_finite() && dv.is_finite() && du.cross(dv).length_squared() > 0.0 {
+            (odpdu, odpdv) = (du, dv);
+        }
+    }
+    let dpdu = to_world.transform_vector3a(odpdu);
+    let dpdv = to_world.transform_vector3a(odpdv);
+    let mut ns = (nm * odpdu.cross(odpdv)).normalize_or_zero();
+    if mesh.left_handed {
+        ns = -ns;
+    }
+    if ns == Vec3A::ZERO || !ns.is_finite() {
+        // Degenerate derivatives (a collapsed edge, a pole): the triangle's normal is all we have.
+        ns = hit.ng;
+    }
+    let mut ng = hit.ng;
+    // Face the viewer: both normals on the side the ray came from, shading normal kept in the
+    // geometric normal's hemisphere.
+    if ng.dot(ray.d) > 0.0 {
+        ng = -ng;
+    }
+    if ns.dot(ng) < 0.0 {
+        ns = -ns;
+    }
+    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv }
+}
+
+/// How far the tessellation hit is from the exact limit surface along the ray (world units):
+/// Newton's method on S(u, v) = o + t·d from the hit's (u, v, t), with the displaced surface
+/// where the mesh is displaced (unfiltered: the truth the tessellation approximates). Where
+/// Newton leaves the patch or does not converge, the distance from the hit point to S(u, v)
+/// stands in (an upper bound of the same order).
+pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> f32 {
+    let mesh = &scene.meshes[hit.mesh as usize];
+    let m = tracer.render_from_object(hit.instance);
+    let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+    let surf = |u: f32, v: f32| -> (Vec3A, Vec3A, Vec3A) {
+        let e = mesh.surface.evaluate(hit.patch as usize, u, v);
+        match &mesh.displacement {
+            None => (e.p, e.dpdu, e.dpdv),
+            Some(d) => {
+                let at = |u: f32, v: f32| {
+                    let e = mesh.surface.evaluate(hit.patch as usize, u, v);
+                    e.p + e.dpdu.cross(e.dpdv).normalize_or_zero()
+                        * sign
+                        * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, 0.0, 0.0)
+                };
+                let h = 1e-3;
+                (at(u, v), (at(u + h, v) - at(u - h, v)) / (2.0 * h), (at(u, v + h) - at(u, v - h)) / (2.0 * h))
+            }
+        }
+    };
+    let (mut u, mut v, mut t) = (hit.u, hit.v, hit.t);
+    let (p0, _, _) = surf(u, v);
+    let fallback = (m.transform_point3a(p0) - hit.p).length();
+    for _ in 0..8 {
+        let (p, du, dv) = surf(u, v);
+        let f = m.transform_point3a(p) - ray.at(t);
+        let scale = hit.p.abs().max_element().max(1.0);
+        if f.length() <= 4.0 * f32::EPSILON * scale {
+            return if (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v) { (t - hit.t).abs() } else { fallback };
+        }
+        let j = glam::Mat3A::from_cols(m.transform_vector3a(du), m.transform_vector3a(dv), -ray.d);
+        if j.determinant().abs() < 1e-20 {
+            break;
+        }
+        let step = j.inverse() * -f;
+        u += step.x;
+        v += step.y;
+        t += step.z;
+        if !(u.is_finite() && v.is_finite() && t.is_finite()) || !(-0.25..=1.25).contains(&u) || !(-0.25..=1.25).contains(&v) {
+            break;
+        }
+    }
+    let (p, _, _) = surf(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    let f = m.transform_point3a(p) - ray.at(t);
+    if (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v) && f.length() < fallback {
+        (t - hit.t).abs()
+    } else {
+        fallback
+    }
+}
+
