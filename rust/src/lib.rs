@@ -29,6 +29,7 @@
 
 pub mod bilinear;
 pub mod bounds;
+pub mod bsdf;
 pub mod bvh;
 pub mod camera;
 pub mod differential;
