@@ -161,6 +161,7 @@ fn down_ray(x: f32, y: f32) -> Ray {
         t_max: f32::INFINITY,
         diff: RayDifferential::default(),
         kind: RayKind::Camera,
+        time: 0.0,
     }
 }
 
@@ -271,6 +272,7 @@ fn very_thin_box_is_hit_on_the_side_the_ray_comes_from() {
                     t_max: f32::INFINITY,
                     diff: RayDifferential::default(),
                     kind: RayKind::Camera,
+                    time: 0.0,
                 };
                 let h = tracer.intersect(&r, &mut c).unwrap_or_else(|| panic!("{scheme:?}: ({x}, {y}) from {sign} misses the box"));
                 assert!(h.p.z * sign >= -1e-6, "{scheme:?}: the ray from {sign} went through to the far sheet (z = {})", h.p.z);
@@ -395,6 +397,7 @@ fn plane_seen_at_89_9_degrees_is_hit_and_never_leaks() {
                 t_max: f32::INFINITY,
                 diff: RayDifferential::from_pinhole(d, Vec3A::X * 1e-3, Vec3A::Y * 1e-3),
                 kind: RayKind::Camera,
+                time: 0.0,
             };
             let h = tracer.intersect(&r, &mut c).unwrap_or_else(|| panic!("{scheme:?}: grazing ray at ({x}, {y}) slipped through"));
             assert!(h.t.is_finite() && h.ng.is_finite() && h.p.z.abs() < 1e-4, "{scheme:?}: {h:?}");

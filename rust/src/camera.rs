@@ -170,6 +170,7 @@ impl Camera {
                     t_max: far * len,
                     diff: RayDifferential::from_pinhole(d, ddx, ddy),
                     kind: RayKind::Camera,
+            time: 0.0,
                 }
             }
             Projection::Orthographic => {
@@ -185,6 +186,7 @@ impl Camera {
                     t_max: far * len,
                     diff: RayDifferential::from_orthographic(dpdx, dpdy),
                     kind: RayKind::Camera,
+            time: 0.0,
                 }
             }
         }
@@ -241,6 +243,7 @@ impl Camera {
             t_max: far / fd * len,
             diff: RayDifferential::from_pinhole(d, ddx, ddy),
             kind: RayKind::Camera,
+            time: 0.0,
         }
     }
 

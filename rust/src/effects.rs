@@ -53,6 +53,17 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
     if cam.has_depth_of_field() {
         out.push(Effect { name: "depth_of_field".into(), why: format!("camera fStop {} focused at {}", cam.f_stop, cam.focus_distance) });
     }
+    let moving: Vec<&str> = scene
+        .moving_instances()
+        .filter_map(|i| scene.meshes.get(i.mesh).map(|m| m.name.as_str()))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    if !moving.is_empty() {
+        let shown: Vec<&str> = moving.iter().take(5).copied().collect();
+        let more = if moving.len() > 5 { format!(" and {} more", moving.len() - 5) } else { String::new() };
+        out.push(Effect { name: "motion_blur".into(), why: format!("moving within the shutter: {}{more}", shown.join(", ")) });
+    }
     if options.ao_samples > 0 {
         out.push(Effect { name: "ao".into(), why: format!("render setting aoSamples = {}", options.ao_samples) });
     }

@@ -43,6 +43,7 @@ pub mod integrator;
 pub mod intersect;
 pub mod light;
 pub mod material;
+pub mod motion;
 pub mod obj_shape;
 pub mod options;
 pub mod patch;

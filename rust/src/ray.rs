@@ -45,6 +45,10 @@ pub struct Ray {
     pub t_max: f32,
     pub diff: RayDifferential,
     pub kind: RayKind,
+    /// When the ray exists, as a fraction of the camera's shutter interval: 0 at shutter open, 1
+    /// at close. Every ray a camera sample spawns inherits its time, so a moving object is seen,
+    /// shadowed and reflected where it was at that instant (transform motion blur).
+    pub time: f32,
 }
 
 impl Ray {

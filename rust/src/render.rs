@@ -84,6 +84,7 @@ pub fn render_with_cache(
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
         let cache_before = tracer.cache.stats();
         let fx = effects::analyze(scene, options);
+        let motion_blur = effects::enabled(&fx, "motion_blur");
         let integrator = DirectLighting::new(&tracer, scene, &fx, options);
         let results: Vec<Option<TileResult>> = tiles
             .par_iter()
@@ -91,7 +92,7 @@ pub fn render_with_cache(
                 if progress.cancelled() {
                     return None;
                 }
-                let r = render_tile(&integrator, options, tile);
+                let r = render_tile(&integrator, options, tile, motion_blur);
                 progress.advance((tile.2 * tile.3) as u64);
                 Some(r)
             })
@@ -129,7 +130,8 @@ pub fn render_with_cache(
 /// Renders one tile: every sample of every pixel, averaged. Colour averages over samples;
 /// depth, normal and ids come from sample 0 (the pixel centre), so they are never blends of two
 /// surfaces.
-fn render_tile(integrator: &dyn Integrator, options: &RenderOptions, tile: Tile) -> TileResult {
+/// With `motion_blur`, each camera sample gets a time within the shutter that all its rays share.
+fn render_tile(integrator: &dyn Integrator, options: &RenderOptions, tile: Tile, motion_blur: bool) -> TileResult {
     let (x0, y0, tw, th) = tile;
     let mut counters = TraceCounters::default();
     let mut values = Vec::with_capacity(tw * th);
@@ -155,6 +157,10 @@ fn render_tile(integrator: &dyn Integrator, options: &RenderOptions, tile: Tile)
                     cam.generate_ray(x as f32 + jx, y as f32 + jy, options.width, options.height)
                 };
                 ray.diff.scale(1.0 / (spp as f32).sqrt());
+                if motion_blur {
+                    // Stratified over the pixel's samples, jittered within each stratum.
+                    ray.time = (s as f32 + sampler.next_f32()) / spp as f32;
+                }
                 let v = integrator.sample(&ray, &mut sampler, &mut counters);
                 if s == 0 {
                     first = v;

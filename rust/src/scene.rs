@@ -75,6 +75,9 @@ pub struct Instance {
     pub render_from_object: Mat4,
     /// The id the `instanceId` AOV reports.
     pub id: u32,
+    /// The transform over the shutter when it changes within it (transform motion blur);
+    /// `render_from_object` is then its value at shutter open.
+    pub motion: Option<Arc<crate::motion::MotionTransform>>,
 }
 
 /// Everything one render needs. Render space is USD's world space.
@@ -100,8 +103,21 @@ impl Scene {
     /// Places mesh `mesh` with transform `render_from_object`; returns the instance index.
     pub fn add_instance(&mut self, mesh: usize, render_from_object: Mat4) -> usize {
         let id = self.instances.len() as u32;
-        self.instances.push(Instance { mesh, render_from_object, id });
+        self.instances.push(Instance { mesh, render_from_object, id, motion: None });
         self.instances.len() - 1
+    }
+
+    /// Places mesh `mesh` moving through `motion` during the shutter; returns the instance index.
+    pub fn add_moving_instance(&mut self, mesh: usize, motion: crate::motion::MotionTransform) -> usize {
+        let id = self.instances.len() as u32;
+        let render_from_object = motion.at(0.0);
+        self.instances.push(Instance { mesh, render_from_object, id, motion: Some(Arc::new(motion)) });
+        self.instances.len() - 1
+    }
+
+    /// The instances whose transform changes within the shutter.
+    pub fn moving_instances(&self) -> impl Iterator<Item = &Instance> {
+        self.instances.iter().filter(|i| i.motion.is_some())
     }
 
     /// Adds a material and returns its index.

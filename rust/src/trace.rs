@@ -97,6 +97,8 @@ pub struct Hit {
     /// from this hit ignore their own subpatch closer than this plus the error of whatever
     /// tessellation of it they test (see [`Tracer::intersect_from`]).
     pub chord_error: f32,
+    /// The ray's shutter time (see [`Ray::time`]): rays leaving this hit inherit it.
+    pub time: f32,
 }
 
 /// The surface a secondary ray starts on: hits on the same root subpatch of the same instance
@@ -137,12 +139,44 @@ struct InstanceData {
     /// The scene's instance id.
     id: u32,
     mesh: usize,
+    /// The pose; for a moving instance, at shutter open.
+    pose: Pose,
+    /// Set when the instance moves within the shutter: each ray then uses the pose at its own
+    /// time.
+    motion: Option<Arc<crate::motion::MotionTransform>>,
+}
+
+/// An instance's placement at one time.
+#[derive(Clone)]
+struct Pose {
     render_from_object: Mat4,
     object_from_render: Mat4,
     /// For normals: the inverse transpose of the linear part.
     normal_from_object: Mat3A,
     /// Largest stretch of the linear part: object sizes × this ≥ world sizes.
     scale: f32,
+}
+
+impl Pose {
+    fn of(render_from_object: Mat4) -> Pose {
+        let m3 = Mat3A::from_mat4(render_from_object);
+        Pose {
+            render_from_object,
+            object_from_render: render_from_object.inverse(),
+            normal_from_object: m3.inverse().transpose(),
+            scale: m3.x_axis.length().max(m3.y_axis.length()).max(m3.z_axis.length()),
+        }
+    }
+}
+
+impl InstanceData {
+    /// The pose at shutter time `time` (computed for moving instances, stored for others).
+    fn pose(&self, time: f32) -> std::borrow::Cow<'_, Pose> {
+        match &self.motion {
+            Some(m) => std::borrow::Cow::Owned(Pose::of(m.at(time))),
+            None => std::borrow::Cow::Borrowed(&self.pose),
+        }
+    }
 }
 
 /// The scene prepared for tracing: BVHs at both levels and the geometry cache.
@@ -186,17 +220,11 @@ impl<'s> Tracer<'s> {
             if g.bvh.is_none() || !inst.render_from_object.is_finite() {
                 continue;
             }
-            let m3 = Mat3A::from_mat4(inst.render_from_object);
-            let scale = m3.x_axis.length().max(m3.y_axis.length()).max(m3.z_axis.length());
-            boxes.push(g.bounds.transformed(&inst.render_from_object));
-            instances.push(InstanceData {
-                id: inst.id,
-                mesh: inst.mesh,
-                render_from_object: inst.render_from_object,
-                object_from_render: inst.render_from_object.inverse(),
-                normal_from_object: m3.inverse().transpose(),
-                scale,
+            boxes.push(match &inst.motion {
+                Some(m) => m.swept_bounds(&g.bounds),
+                None => g.bounds.transformed(&inst.render_from_object),
             });
+            instances.push(InstanceData { id: inst.id, mesh: inst.mesh, pose: Pose::of(inst.render_from_object), motion: inst.motion.clone() });
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
@@ -332,10 +360,11 @@ impl<'s> Tracer<'s> {
         any_hit: bool,
         origin: Option<Origin>,
     ) -> Option<Hit> {
-        let inst = &self.instances[ii];
-        let geom = &self.meshes[inst.mesh];
+        let instance = &self.instances[ii];
+        let geom = &self.meshes[instance.mesh];
         let blas = geom.bvh.as_ref()?;
-        let mesh = &self.scene.meshes[inst.mesh];
+        let mesh = &self.scene.meshes[instance.mesh];
+        let inst = instance.pose(ray.time);
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         let wray = WatertightRay::new(o, d);
@@ -367,9 +396,9 @@ impl<'s> Tracer<'s> {
                 counters.finer_than_fine += 1;
                 counters.rate_tests_by_kind[kind][5] += 1;
                 let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                let tess = self.lookup(inst.mesh, geom, root, Tier::Fine);
+                let tess = self.lookup(instance.mesh, geom, root, Tier::Fine);
                 let mut found = None;
-                self.hit_split(inst.mesh, geom, root, &tess, depth, &wray, t_min_for(tess.chord_error), &mut t_best, &mut found);
+                self.hit_split(instance.mesh, geom, root, &tess, depth, &wray, t_min_for(tess.chord_error), &mut t_best, &mut found);
                 found
             } else {
                 let rate = if self.single {
@@ -383,7 +412,7 @@ impl<'s> Tracer<'s> {
                 counters.rate_tests_by_kind[kind][rate as usize] += 1;
                 let (tier, stride) = rate.tier_and_stride();
                 let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                let tess = self.lookup(inst.mesh, geom, cell, tier);
+                let tess = self.lookup(instance.mesh, geom, cell, tier);
                 intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), t_min_for(tess.chord_error), t_best).map(|h| LocalHit {
                     t: h.t,
                     uv: (h.u, h.v),
@@ -420,8 +449,8 @@ impl<'s> Tracer<'s> {
         Some(Hit {
             t: h.t,
             instance: ii as u32,
-            instance_id: inst.id,
-            mesh: inst.mesh as u32,
+            instance_id: instance.id,
+            mesh: instance.mesh as u32,
             patch: sp.patch,
             u,
             v,
@@ -431,6 +460,7 @@ impl<'s> Tracer<'s> {
             quads: h.quads,
             subpatch: si,
             chord_error: h.chord_error * inst.scale,
+            time: ray.time,
         })
     }
 
@@ -514,13 +544,25 @@ impl<'s> Tracer<'s> {
         }
     }
 
-    /// The normal matrix (inverse transpose of the linear part) of a hit's instance.
+    /// The normal matrix (inverse transpose of the linear part) of an instance at shutter open;
+    /// for a hit on a moving instance use [`Tracer::hit_normal_matrix`].
     pub fn normal_matrix(&self, instance: u32) -> Mat3A {
-        self.instances[instance as usize].normal_from_object
+        self.instances[instance as usize].pose.normal_from_object
     }
 
-    /// Render-from-object transform of a hit's instance.
+    /// Render-from-object transform of an instance at shutter open; for a hit on a moving
+    /// instance use [`Tracer::hit_render_from_object`].
     pub fn render_from_object(&self, instance: u32) -> Mat4 {
-        self.instances[instance as usize].render_from_object
+        self.instances[instance as usize].pose.render_from_object
+    }
+
+    /// Render-from-object transform of a hit's instance at the hit's time.
+    pub fn hit_render_from_object(&self, hit: &Hit) -> Mat4 {
+        self.instances[hit.instance as usize].pose(hit.time).render_from_object
+    }
+
+    /// The normal matrix of a hit's instance at the hit's time.
+    pub fn hit_normal_matrix(&self, hit: &Hit) -> Mat3A {
+        self.instances[hit.instance as usize].pose(hit.time).normal_from_object
     }
 }

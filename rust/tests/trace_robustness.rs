@@ -34,6 +34,7 @@ fn negative_zero_direction_components_still_hit() {
             t_max: f32::INFINITY,
             diff: RayDifferential::default(),
             kind: RayKind::Shadow,
+            time: 0.0,
         };
         assert!(tracer.occluded(&r, &mut c), "{d:?}");
         assert!(tracer.intersect(&r, &mut c).is_some(), "{d:?}");
@@ -52,6 +53,7 @@ fn left_handed_orientation_flips_the_geometric_normal() {
         t_max: f32::INFINITY,
         diff: RayDifferential::default(),
         kind: RayKind::Camera,
+        time: 0.0,
     };
     let ng = |scene: &Scene| Tracer::new(scene, CacheConfig::unbounded(), 1.0).intersect(&ray, &mut TraceCounters::default()).unwrap().ng;
     assert!(ng(&scene).z > 0.99, "counter-clockwise faces +z");

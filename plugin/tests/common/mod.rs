@@ -82,7 +82,7 @@ pub fn cube_sphere(m: usize, scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
 pub fn beam_ray(o: Vec3A, d: Vec3A, w0: f32, spread_rad: f32, kind: RayKind) -> Ray {
     let (e1, e2) = d.any_orthonormal_pair();
     let diff = RayDifferential::from_spread(e1 * w0, e2 * w0, d, spread_rad);
-    Ray { o, d, t_min: 0.0, t_max: f32::INFINITY, diff, kind }
+    Ray { o, d, t_min: 0.0, t_max: f32::INFINITY, diff, kind, time: 0.0 }
 }
 
 /// A disk of `n` quads around one vertex of valence `n` (an extraordinary vertex unless n = 4):

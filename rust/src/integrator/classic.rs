@@ -133,6 +133,7 @@ impl<'a> DirectLighting<'a> {
                     t_max: f32::INFINITY,
                     diff,
                     kind: RayKind::Reflection,
+                    time: ray.time,
                 };
                 if let Some(reflected) = self.radiance(&r, hit, depth + 1, sampler, counters) {
                     color += mirror * reflected.color;
@@ -162,7 +163,7 @@ impl<'a> DirectLighting<'a> {
     fn normal_differentials(&self, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> (Vec3A, Vec3A) {
         let mesh = &self.scene.meshes[hit.mesh as usize];
         let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
-        let m = self.tracer.render_from_object(hit.instance);
+        let m = self.tracer.hit_render_from_object(hit);
         let w = |v: Vec3A| m.transform_vector3a(v);
         let (mut dndu, mut dndv) = dndu_dndv(sp.dpdu, sp.dpdv, w(s.dpduu), w(s.dpduv), w(s.dpdvv));
         // dndu_dndv belongs to the normal dpdu × dpdv; the shading normal may be its negative.

@@ -60,7 +60,7 @@ pub fn estimate(
                 // Stop short of an area light's own surface (it is not geometry here, but a
                 // mesh can coincide with it).
                 let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
-                let shadow = Ray { o, d: ls.wi, t_min: 0.0, t_max, diff, kind: RayKind::Shadow };
+                let shadow = Ray { o, d: ls.wi, t_min: 0.0, t_max, diff, kind: RayKind::Shadow, time: hit.time };
                 if tracer.occluded_from(&shadow, hit, counters) {
                     continue;
                 }

@@ -40,7 +40,7 @@ impl Hemisphere {
             }
             let (diff, clamped) = footprint.hemisphere_checked(d, pdf, n);
             counters.differential_clamps += u64::from(clamped);
-            let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, d), d, t_min: 0.0, t_max: self.distance, diff, kind: RayKind::Ao };
+            let r = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, d), d, t_min: 0.0, t_max: self.distance, diff, kind: RayKind::Ao, time: hit.time };
             if !tracer.occluded_from(&r, hit, counters) {
                 open += 1;
             }

@@ -23,8 +23,8 @@ pub struct ShadingPoint {
 pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> ShadingPoint {
     let mesh = &scene.meshes[hit.mesh as usize];
     let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
-    let to_world = tracer.render_from_object(hit.instance);
-    let nm = tracer.normal_matrix(hit.instance);
+    let to_world = tracer.hit_render_from_object(hit);
+    let nm = tracer.hit_normal_matrix(hit);
     let (mut odpdu, mut odpdv) = (s.dpdu, s.dpdv);
     if let Some(d) = &mesh.displacement {
         // Shade the displaced surface: its tangents by central differences over half the
@@ -75,7 +75,7 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
 /// stands in (an upper bound of the same order).
 pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> f32 {
     let mesh = &scene.meshes[hit.mesh as usize];
-    let m = tracer.render_from_object(hit.instance);
+    let m = tracer.hit_render_from_object(hit);
     let sign = if mesh.left_handed { -1.0 } else { 1.0 };
     let surf = |u: f32, v: f32| -> (Vec3A, Vec3A, Vec3A) {
         let e = mesh.surface.evaluate(hit.patch as usize, u, v);
