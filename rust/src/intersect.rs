@@ -203,7 +203,14 @@ mod tests {
                 verts.push([i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32, 0.0]);
             }
         }
-        Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius: 0.0, domain: GridDomain::Square }
+        Tessellation {
+            n,
+            verts: verts.into(),
+            sub_boxes: Default::default(),
+            chord_error: 0.0,
+            seam_radius: 0.0,
+            domain: GridDomain::Square,
+        }
     }
 
     #[test]

@@ -327,7 +327,7 @@ mod tests {
                 verts.push(f(i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32));
             }
         }
-        Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius, domain: GridDomain::Square }
+        Tessellation { n, verts: verts.into(), sub_boxes: Default::default(), chord_error: 0.0, seam_radius, domain: GridDomain::Square }
     }
 
     #[test]

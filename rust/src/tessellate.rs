@@ -6,6 +6,8 @@
 //! next finer tier: 2×2 quads from the medium grid, 8×8 from the fine one. Five effective rates
 //! from three stored, as the paper says.
 
+use std::sync::Arc;
+
 use glam::Vec3A;
 
 use crate::bounds::Bounds3;
@@ -83,14 +85,21 @@ pub fn split_depth(needed: f32) -> u32 {
 }
 
 /// One cache entry: a subpatch's limit surface on a tier's vertex grid, object space.
+///
+/// The cache keeps resident entries by value in its LRU nodes, as a [`StoredTessellation`], and
+/// hands out `Tessellation`s made from them (see [`crate::geometry_cache`]), so both are laid out
+/// to be small and cheap to make: a coarse grid's 4 vertices are inline (no heap allocation at
+/// all: the coarse tier holds hundreds of thousands of them), a medium or fine grid's vertices
+/// and a fine grid's sub-boxes live in one shared, immutable allocation each, so a copy is a
+/// reference-count increment. 88 bytes (pinned by a test).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tessellation {
     /// Vertices per side.
     pub n: usize,
     /// `n × n` vertices, u fastest (index `j * n + i`): 12 bytes each, as in the paper.
-    pub verts: Vec<[f32; 3]>,
-    /// Fine tier only: 4×4 boxes, each over 4×4 quads (row-major, u fastest).
-    pub sub_boxes: Vec<Bounds3>,
+    pub verts: GridVerts,
+    /// Fine tier only: 4×4 boxes, each over 4×4 quads (row-major, u fastest); empty otherwise.
+    pub sub_boxes: SubBoxes,
     /// Fine tier only: an estimate of how far the limit surface strays from the grid's quads
     /// (object units): twice the largest distance, at 16 probe points, between the surface and
     /// the bilinear quad under it. Pads the bounds of split children.
@@ -102,6 +111,138 @@ pub struct Tessellation {
     /// Which part of the grid is surface: all of it, or only the half u + v ≤ 1 of a triangle
     /// (Loop) patch, whose basis extrapolates beyond its domain.
     pub domain: GridDomain,
+}
+
+/// A grid's vertices, read as a slice (`Deref<Target = [[f32; 3]]>`). Made from a `Vec` with
+/// `.into()`. Four vertices (a coarse 2×2 grid) are stored inline; more are stored once, behind
+/// an `Arc`, so cloning never copies a medium or fine grid. Equal when the vertices are.
+#[derive(Clone)]
+pub struct GridVerts(VertStore);
+
+#[derive(Clone)]
+enum VertStore {
+    Quad([[f32; 3]; 4]),
+    Shared(Arc<[[f32; 3]]>),
+}
+
+impl GridVerts {
+    /// The vertices as a slice.
+    #[inline]
+    pub fn as_slice(&self) -> &[[f32; 3]] {
+        match &self.0 {
+            VertStore::Quad(v) => v,
+            VertStore::Shared(v) => v,
+        }
+    }
+
+    /// Heap bytes this grid holds beyond the `Tessellation` itself: 0 for an inline coarse
+    /// grid, else the shared block (its 16-byte reference counts and the vertices).
+    pub fn heap_bytes(&self) -> usize {
+        match &self.0 {
+            VertStore::Quad(_) => 0,
+            VertStore::Shared(v) => 2 * std::mem::size_of::<usize>() + std::mem::size_of_val::<[[f32; 3]]>(v),
+        }
+    }
+
+    /// `v` as grid vertices: inline if they are 4, else in `block` if it has room for exactly
+    /// them and nothing else shares it (an evicted entry's), else in a new block.
+    fn refill(v: &[[f32; 3]], block: Option<Arc<[[f32; 3]]>>) -> Self {
+        if let Ok(quad) = <[[f32; 3]; 4]>::try_from(v) {
+            return GridVerts(VertStore::Quad(quad));
+        }
+        if let Some(mut block) = block.filter(|b| b.len() == v.len()) {
+            if let Some(dst) = Arc::get_mut(&mut block) {
+                dst.copy_from_slice(v);
+                return GridVerts(VertStore::Shared(block));
+            }
+        }
+        GridVerts(VertStore::Shared(Arc::from(v)))
+    }
+}
+
+impl std::ops::Deref for GridVerts {
+    type Target = [[f32; 3]];
+    #[inline]
+    fn deref(&self) -> &[[f32; 3]] {
+        self.as_slice()
+    }
+}
+
+impl From<&[[f32; 3]]> for GridVerts {
+    fn from(v: &[[f32; 3]]) -> Self {
+        GridVerts::refill(v, None)
+    }
+}
+
+impl From<Vec<[f32; 3]>> for GridVerts {
+    fn from(v: Vec<[f32; 3]>) -> Self {
+        GridVerts::from(&v[..])
+    }
+}
+
+impl PartialEq for GridVerts {
+    fn eq(&self, other: &Self) -> bool {
+        self.as_slice() == other.as_slice()
+    }
+}
+
+impl std::fmt::Debug for GridVerts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.as_slice().fmt(f)
+    }
+}
+
+/// A fine grid's 4×4 sub-bounding boxes, read as a slice of 16 (or of none, for the other
+/// tiers): `Deref<Target = [Bounds3]>`. Shared behind one `Arc`, so a clone copies a pointer.
+#[derive(Clone, Default, PartialEq)]
+pub struct SubBoxes(Option<Arc<[Bounds3; 16]>>);
+
+impl SubBoxes {
+    /// No sub-boxes (coarse and medium grids).
+    pub const NONE: SubBoxes = SubBoxes(None);
+
+    /// The boxes as a slice: 16 or none.
+    #[inline]
+    pub fn as_slice(&self) -> &[Bounds3] {
+        self.0.as_deref().map_or(&[], |b| b.as_slice())
+    }
+
+    /// Heap bytes the boxes hold (their 16-byte reference counts and 16 boxes), or 0.
+    pub fn heap_bytes(&self) -> usize {
+        self.0.as_ref().map_or(0, |_| 2 * std::mem::size_of::<usize>() + std::mem::size_of::<[Bounds3; 16]>())
+    }
+
+    /// `boxes`, in `spare`'s block if it has one and nothing else shares it (an evicted
+    /// entry's), else in a new one.
+    fn refill(boxes: [Bounds3; 16], spare: SubBoxes) -> Self {
+        if let Some(mut block) = spare.0 {
+            if let Some(dst) = Arc::get_mut(&mut block) {
+                *dst = boxes;
+                return SubBoxes(Some(block));
+            }
+        }
+        boxes.into()
+    }
+}
+
+impl From<[Bounds3; 16]> for SubBoxes {
+    fn from(b: [Bounds3; 16]) -> Self {
+        SubBoxes(Some(Arc::new(b)))
+    }
+}
+
+impl std::ops::Deref for SubBoxes {
+    type Target = [Bounds3];
+    #[inline]
+    fn deref(&self) -> &[Bounds3] {
+        self.as_slice()
+    }
+}
+
+impl std::fmt::Debug for SubBoxes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.as_slice().fmt(f)
+    }
 }
 
 /// The part of a grid over a subpatch that is surface.
@@ -131,7 +272,39 @@ impl GridDomain {
     }
 }
 
+/// A resident [`Tessellation`] as the cache keeps it, in 64 bytes instead of 88: a coarse grid
+/// keeps its vertices inline and needs no pointers, any other grid keeps pointers to its shared
+/// blocks and needs no inline room. That is a fifth of what a resident coarse entry costs in
+/// all (see the `geometry_cache` module docs).
+#[derive(Clone, Debug)]
+pub struct StoredTessellation(StoredRepr);
+
+#[derive(Clone, Debug)]
+enum StoredRepr {
+    /// A 2×2 grid with inline vertices and no sub-boxes: every coarse entry.
+    Quad { verts: [[f32; 3]; 4], chord_error: f32, seam_radius: f32, domain: GridDomain },
+    /// Any other grid.
+    Grid { n: u32, verts: Arc<[[f32; 3]]>, sub_boxes: SubBoxes, chord_error: f32, seam_radius: f32, domain: GridDomain },
+}
+
+impl StoredTessellation {
+    /// The shared blocks this entry holds, for a new tessellation to refill.
+    fn into_blocks(self) -> (Option<Arc<[[f32; 3]]>>, SubBoxes) {
+        match self.0 {
+            StoredRepr::Quad { .. } => (None, SubBoxes::NONE),
+            StoredRepr::Grid { verts, sub_boxes, .. } => (Some(verts), sub_boxes),
+        }
+    }
+}
+
+/// What the budget counts is the paper's payload (§5.2): 12 bytes a vertex, plus what an entry
+/// needs beyond its vertices to be tested (a fine grid's 16 sub-boxes, the two error floats), so
+/// tier capacities compare with the paper's. The rest of what a resident entry costs (its cache
+/// node, hash bucket, reference counts, the allocator's rounding) is bookkeeping; see the
+/// `geometry_cache` module docs for its size.
 impl CacheEntry for Tessellation {
+    type Stored = StoredTessellation;
+
     fn byte_size(&self) -> usize {
         self.verts.len() * std::mem::size_of::<[f32; 3]>()
             + self.sub_boxes.len() * std::mem::size_of::<Bounds3>()
@@ -141,6 +314,48 @@ impl CacheEntry for Tessellation {
     fn vertex_count(&self) -> usize {
         self.verts.len()
     }
+
+    fn to_stored(&self) -> StoredTessellation {
+        let (chord_error, seam_radius, domain) = (self.chord_error, self.seam_radius, self.domain);
+        StoredTessellation(match &self.verts.0 {
+            VertStore::Quad(verts) if self.n == 2 && self.sub_boxes.is_empty() => {
+                StoredRepr::Quad { verts: *verts, chord_error, seam_radius, domain }
+            }
+            store => StoredRepr::Grid {
+                // `n × n` vertices fit in memory, so `n` fits in 32 bits.
+                n: u32::try_from(self.n).unwrap_or(u32::MAX),
+                verts: match store {
+                    VertStore::Shared(v) => Arc::clone(v),
+                    VertStore::Quad(v) => Arc::from(v.as_slice()),
+                },
+                sub_boxes: self.sub_boxes.clone(),
+                chord_error,
+                seam_radius,
+                domain,
+            },
+        })
+    }
+
+    fn from_stored(stored: &StoredTessellation) -> Tessellation {
+        match &stored.0 {
+            StoredRepr::Quad { verts, chord_error, seam_radius, domain } => Tessellation {
+                n: 2,
+                verts: GridVerts(VertStore::Quad(*verts)),
+                sub_boxes: SubBoxes::NONE,
+                chord_error: *chord_error,
+                seam_radius: *seam_radius,
+                domain: *domain,
+            },
+            StoredRepr::Grid { n, verts, sub_boxes, chord_error, seam_radius, domain } => Tessellation {
+                n: *n as usize,
+                verts: GridVerts(VertStore::Shared(Arc::clone(verts))),
+                sub_boxes: sub_boxes.clone(),
+                chord_error: *chord_error,
+                seam_radius: *seam_radius,
+                domain: *domain,
+            },
+        }
+    }
 }
 
 impl Tessellation {
@@ -148,6 +363,12 @@ impl Tessellation {
     #[inline]
     pub fn vert(&self, i: usize, j: usize) -> Vec3A {
         Vec3A::from(self.verts[j * self.n + i])
+    }
+
+    /// Heap bytes this tessellation holds outside itself: 0 for a coarse grid, the shared
+    /// vertex block (and a fine grid's shared sub-boxes) otherwise. Shared with every clone.
+    pub fn heap_bytes(&self) -> usize {
+        self.verts.heap_bytes() + self.sub_boxes.heap_bytes()
     }
 }
 
@@ -171,16 +392,31 @@ pub fn tessellate(
     displace: Option<&DisplaceParams>,
     scratch: &mut GridSamples,
 ) -> (Tessellation, u32) {
+    tessellate_reusing(surface, sub, tier, displace, scratch, None)
+}
+
+/// As [`tessellate`], writing the grid into `spare`'s blocks (an entry the cache evicted, see
+/// [`GeometryCache::get_or_build_reusing`](crate::geometry_cache::GeometryCache::get_or_build_reusing))
+/// where they fit and nothing else shares them, instead of allocating new ones. The result is
+/// the same either way.
+pub fn tessellate_reusing(
+    surface: &dyn LimitSurface,
+    sub: &Subpatch,
+    tier: Tier,
+    displace: Option<&DisplaceParams>,
+    scratch: &mut GridSamples,
+    spare: Option<StoredTessellation>,
+) -> (Tessellation, u32) {
+    let (spare_verts, spare_boxes) = spare.map_or((None, SubBoxes::NONE), StoredTessellation::into_blocks);
     let n = tier.verts_per_side() as usize;
     surface.evaluate_grid(sub.patch as usize, sub.rect, n, displace.is_some(), scratch);
     // Measured on the undisplaced grid: seams follow the limit surface's edges.
     let seam_radius = crate::seam::seam_radius(surface, sub.patch as usize, sub.rect, &scratch.p, n);
-    let mut verts = std::mem::take(&mut scratch.p);
     let mut outside = 0;
     if let Some(d) = displace {
         let mut offsets = Vec::with_capacity(n * n);
-        d.displacement.grid_offsets(surface, sub.patch as usize, sub.rect, &verts, n, &mut offsets);
-        for (k, v) in verts.iter_mut().enumerate() {
+        d.displacement.grid_offsets(surface, sub.patch as usize, sub.rect, &scratch.p, n, &mut offsets);
+        for (k, v) in scratch.p.iter_mut().enumerate() {
             let p = Vec3A::from(*v);
             let nrm = (Vec3A::from(scratch.dpdu[k]).cross(Vec3A::from(scratch.dpdv[k]))).normalize_or_zero() * d.normal_sign;
             let q = p + nrm * offsets[k];
@@ -190,21 +426,21 @@ pub fn tessellate(
             *v = q.into();
         }
     }
+    let verts = GridVerts::refill(&scratch.p, spare_verts);
     let domain = GridDomain::of(surface.patch_param(sub.patch as usize).kind, &sub.rect);
-    let mut t = Tessellation { n, verts, sub_boxes: Vec::new(), chord_error: 0.0, seam_radius, domain };
+    let mut t = Tessellation { n, verts, sub_boxes: SubBoxes::NONE, chord_error: 0.0, seam_radius, domain };
     if tier == Tier::Fine {
-        t.sub_boxes = (0..16)
-            .map(|b| {
-                let (bi, bj) = (b % 4 * 4, b / 4 * 4);
-                let mut bb = Bounds3::EMPTY;
-                for j in bj..=bj + 4 {
-                    for i in bi..=bi + 4 {
-                        bb.grow(t.vert(i, j));
-                    }
+        let boxes: [Bounds3; 16] = std::array::from_fn(|b| {
+            let (bi, bj) = (b % 4 * 4, b / 4 * 4);
+            let mut bb = Bounds3::EMPTY;
+            for j in bj..=bj + 4 {
+                for i in bi..=bi + 4 {
+                    bb.grow(t.vert(i, j));
                 }
-                bb
-            })
-            .collect();
+            }
+            bb
+        });
+        t.sub_boxes = SubBoxes::refill(boxes, spare_boxes);
     }
     t.chord_error = 2.0 * probe_chord_error(surface, sub, &t);
     if let Some(d) = displace {
@@ -298,5 +534,54 @@ mod tests {
         let (medium, _) = tessellate(&s, &sub, Tier::Medium, None, &mut scratch);
         assert_eq!(medium.verts.len(), 25);
         assert!(medium.sub_boxes.is_empty());
+    }
+
+    /// The layout the cache's memory figures rest on (see the `geometry_cache` module docs): a
+    /// coarse grid is 88 bytes with its vertices inline; a clone of a medium or fine one shares
+    /// its vertices and boxes.
+    #[test]
+    fn entries_are_compact_and_clones_share_their_grids() {
+        assert_eq!(std::mem::size_of::<Tessellation>(), 88);
+        assert_eq!(std::mem::size_of::<StoredTessellation>(), 64);
+        assert_eq!(std::mem::size_of::<Option<StoredTessellation>>(), 64);
+        let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.7]];
+        let topo =
+            MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
+        let s = BilinearSurface::new(&topo, &pts).unwrap();
+        let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: s.patch_bounds(0), affine: false };
+        let mut scratch = GridSamples::default();
+        let (coarse, _) = tessellate(&s, &sub, Tier::Coarse, None, &mut scratch);
+        assert_eq!((coarse.verts.len(), coarse.heap_bytes(), coarse.byte_size()), (4, 0, 56));
+        let (medium, _) = tessellate(&s, &sub, Tier::Medium, None, &mut scratch);
+        assert_eq!(medium.heap_bytes(), 16 + 300);
+        let (fine, _) = tessellate(&s, &sub, Tier::Fine, None, &mut scratch);
+        assert_eq!(fine.heap_bytes(), 16 + 3468 + 16 + 512);
+        // What the cache hands out equals what was built, and shares its grids.
+        for t in [&coarse, &medium, &fine] {
+            assert_eq!(&Tessellation::from_stored(&t.to_stored()), t);
+        }
+        let copy = Tessellation::from_stored(&fine.to_stored());
+        assert!(std::ptr::eq(copy.verts.as_slice(), fine.verts.as_slice()));
+        assert!(std::ptr::eq(copy.sub_boxes.as_slice(), fine.sub_boxes.as_slice()));
+        // Rebuilt into an evicted entry's blocks: the same grid, in those very blocks (unless
+        // something still shares them).
+        let spare = fine.to_stored();
+        let (verts_at, boxes_at) = (fine.verts.as_ptr(), fine.sub_boxes.as_ptr());
+        drop((fine, copy));
+        let (refilled, _) = tessellate_reusing(&s, &sub, Tier::Fine, None, &mut scratch, Some(spare));
+        assert!(std::ptr::eq(refilled.verts.as_ptr(), verts_at) && std::ptr::eq(refilled.sub_boxes.as_ptr(), boxes_at));
+        assert_eq!(refilled, tessellate(&s, &sub, Tier::Fine, None, &mut scratch).0);
+        let held = refilled.clone();
+        let (fresh, _) = tessellate_reusing(&s, &sub, Tier::Fine, None, &mut scratch, Some(refilled.to_stored()));
+        assert!(!std::ptr::eq(fresh.verts.as_ptr(), held.verts.as_ptr()), "a shared block is not overwritten");
+        assert_eq!(fresh, held);
+        let (medium_again, _) = tessellate_reusing(&s, &sub, Tier::Medium, None, &mut scratch, Some(held.to_stored()));
+        assert_eq!(medium_again, medium, "a block of another tier's size is not used");
+        let fine = held;
+        // Odd shapes (only tests make them) round-trip too.
+        let odd = Tessellation { n: 3, verts: vec![[1.0, 2.0, 3.0]; 4].into(), sub_boxes: fine.sub_boxes.clone(), ..coarse.clone() };
+        assert_eq!(Tessellation::from_stored(&odd.to_stored()), odd);
+        let v: GridVerts = vec![[1.0, 2.0, 3.0]; 4].into();
+        assert_eq!(format!("{v:?}"), format!("{:?}", vec![[1.0f32, 2.0, 3.0]; 4]));
     }
 }

@@ -18,7 +18,7 @@ use crate::ray::{gamma, Ray, RayKind};
 use crate::scene::Scene;
 use crate::seam::{intersect_with_seams, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, Subpatch};
-use crate::tessellate::{needed_quads, split_depth, tessellate, DisplaceParams, Rate, Tessellation};
+use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceParams, Rate, Tessellation};
 
 /// Replaces −0.0 components by +0.0. obvhs 0.4's CWBVH traversal picks the child order from the
 /// direction's sign bits but its slab test from comparisons, and misses every box when a
@@ -465,7 +465,7 @@ impl<'s> Tracer<'s> {
     }
 
     /// The tessellation of a (root or split) subpatch at a tier, from the cache or built now.
-    fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Arc<Tessellation> {
+    fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Tessellation {
         let mesh = &self.scene.meshes[mesh_index];
         let root = &geom.subpatches[cell.root as usize];
         let key = CacheKey {
@@ -474,7 +474,7 @@ impl<'s> Tracer<'s> {
             subpatch: geom.child_ids.id(cell),
             tier,
         };
-        self.cache.get_or_build(key, || {
+        self.cache.get_or_build_reusing(key, |spare| {
             let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds, affine: root.affine };
             let mut scratch = GridSamples::default();
             let displace = mesh.displacement.clone().map(|displacement| DisplaceParams {
@@ -482,7 +482,7 @@ impl<'s> Tracer<'s> {
                 normal_sign: if mesh.left_handed { -1.0 } else { 1.0 },
                 bound: mesh.displacement_bound,
             });
-            let (t, outside) = tessellate(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch);
+            let (t, outside) = tessellate_reusing(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch, spare);
             if outside > 0 && self.displaced_outside.fetch_add(u64::from(outside), Ordering::Relaxed) == 0 {
                 log::warn!(
                     "{}: displaced vertices leave their subpatch bounds; raise primvars:displacementBound (now {})",

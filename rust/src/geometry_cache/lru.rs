@@ -3,7 +3,9 @@
 //! O(1), so a cache lookup holds its tier's lock only briefly.
 //!
 //! Nodes live in one `Vec` and link to each other by `u32` index, not by pointer: no `unsafe`,
-//! one allocation for the whole list, and 8 bytes of links per node. Freed nodes are reused.
+//! one allocation for the whole list, and 8 bytes of links per node. Freed nodes are reused. The
+//! tier keeps each entry itself in its node (not behind a pointer), so a resident entry is one
+//! slab slot and one index bucket, and no allocation of its own unless the entry has one.
 
 /// "No node": the end of the list, or of the free list.
 const NIL: u32 = u32::MAX;
@@ -93,8 +95,24 @@ impl<T> LruList<T> {
     }
 
     /// Removes and returns the least recently used value.
+    #[cfg(test)]
     pub(crate) fn pop_back(&mut self) -> Option<T> {
         (self.tail != NIL).then(|| self.remove(self.tail))
+    }
+
+    /// The node of the least recently used value.
+    pub(crate) fn back(&self) -> Option<u32> {
+        (self.tail != NIL).then_some(self.tail)
+    }
+
+    /// Live nodes and their values, in slab order (not recency order).
+    pub(crate) fn live(&self) -> impl Iterator<Item = (u32, &T)> + '_ {
+        self.nodes.iter().enumerate().filter_map(|(i, n)| n.value.as_ref().map(|v| (i as u32, v)))
+    }
+
+    /// Heap bytes of the slab (all nodes it has room for, live or not).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        self.nodes.capacity() * std::mem::size_of::<Node<T>>()
     }
 
     /// Values from the most to the least recently used.

@@ -11,15 +11,14 @@
 //! [`CacheMode`] must give the same pixels, only the work and memory differ.
 //!
 //! ```
-//! use std::sync::Arc;
 //! use mipray::geometry_cache::{CacheConfig, CacheKey, GeometryCache, Tier};
 //!
 //! // Entries are object-space vertices; `Vec<[f32; 3]>` is a `CacheEntry` of 12 bytes a vertex.
 //! let cache: GeometryCache<Vec<[f32; 3]>> = GeometryCache::new(CacheConfig::default());
 //! let key = CacheKey::new(0, 0, 7, Tier::Coarse);
-//! let grid = cache.get_or_build(key, || vec![[0.0; 3]; 4]); // a cold tessellation
+//! let grid = cache.get_or_build(key, || vec![[0.5; 3]; 4]); // a cold tessellation
 //! let again = cache.get_or_build(key, || unreachable!("resident")); // a hit
-//! assert!(Arc::ptr_eq(&grid, &again));
+//! assert_eq!(grid, again);
 //! let coarse = cache.stats().tiers[Tier::Coarse.index()].clone();
 //! assert_eq!((coarse.lookups, coarse.cold_tessellations, coarse.hits), (2, 1, 1));
 //! ```
@@ -37,14 +36,34 @@
 //!
 //! # What the budget counts
 //! A tier's budget is compared with the sum of its resident entries' [`CacheEntry::byte_size`]:
-//! the tessellation payload, as the paper counts it (12 bytes a vertex, §5.2), so capacities and
-//! hit rates compare with its tables. Bookkeeping is not counted: per resident entry about 36–73
-//! bytes of hash-table slot, 40 bytes of LRU node and 16 bytes of `Arc` header, plus the entry's
-//! own headers (a `Vec` is 24 bytes) and the allocator's rounding. Next to a fine entry (3,468
-//! bytes) that is noise; next to a coarse one (48 bytes) it more than triples the real memory:
-//! a full 10 MB coarse tier of bare grids (208,333 entries) takes 35–40 MB. An entry type that
-//! must bound real memory can count its overhead in `byte_size`. Entries handed out stay alive,
-//! uncounted, until the last ray holding one drops it.
+//! the tessellation payload, as the paper counts it (12 bytes a vertex, §5.2, plus for a
+//! [`Tessellation`](crate::tessellate::Tessellation) its two error floats and a fine grid's 16
+//! sub-boxes), so capacities and hit rates compare with its tables (208,333 / 33,333 / 2,883
+//! bare-vertex entries at 10 MB). Counting the bookkeeping too would cut the coarse tier to
+//! about half the paper's entries (and its hit rate with it), so the bookkeeping is kept small
+//! and fixed instead. A resident entry is one slot of its shard's LRU slab, holding the entry by
+//! value in its [`CacheEntry::Stored`] form beside its 12-byte key, its size and two 4-byte
+//! links, and one 8-byte bucket of the shard's hash index (kept 37.5–75% full); the cache adds
+//! no allocation, reference count or hash-map slot of its own (see the `lru` and `table`
+//! modules). For tessellations:
+//!
+//! | tier | counted | real, per resident entry | before this layout |
+//! |---|---|---|---|
+//! | coarse (vertices inline) | 56 B | 88-byte node + 11–21 B of index: 113 B | 244 B |
+//! | medium | 308 B | node, index and a 316-byte shared vertex block (336 with malloc's header): 448 B | 506 B |
+//! | fine | 3,988 B | node, index and 3,484- and 528-byte shared blocks: ~4,150 B | ~4,200 B |
+//!
+//! (measured filling an unbounded cache; before, a coarse entry was an `Arc` of a 72-byte struct,
+//! a separate vertex `Vec`, a 40-byte LRU node and a 33-byte hash-map slot at the map's load.)
+//! So a full default 30 MB (10 MB a tier: 178,571 / 32,467 / 2,507 tessellations) takes about
+//! 20 + 14.5 + 10.5 = 45 MB; in the geometry cache benchmark (`docs/cache-benchmark.md`) the
+//! render's peak RSS is 44 MB above the same render in `none` mode, against 78 MB before. Builds
+//! also refill evicted entries' blocks ([`GeometryCache::get_or_build_reusing`]) rather than
+//! free and allocate them, which spares the allocator the holes that churn leaves in its
+//! per-thread arenas (5 MB more in that benchmark with two render threads, 6.5 MB with four).
+//! [`GeometryCache::table_bytes`] reports the slabs and indexes as allocated. Entries handed out
+//! share their vertex blocks with the cache's copy; an evicted block stays alive, uncounted,
+//! until the last ray holding it drops it.
 //!
 //! To tell cold tessellations from misses, each tier remembers every key it ever built: one bit
 //! per subpatch id per (mesh, generation) — 121 KB per tier for the paper's 970,000-subpatch
@@ -53,6 +72,7 @@
 mod lru;
 mod seen;
 mod stats;
+mod table;
 #[cfg(test)]
 mod tests;
 mod tier;
@@ -77,7 +97,18 @@ pub use tier::{ParseTierError, Tier, VERTEX_BYTES};
 pub const DEFAULT_TIER_BUDGET_BYTES: usize = 10_000_000;
 
 /// A tessellation the cache can hold.
+///
+/// A resident entry is kept by value, as its [`Stored`](Self::Stored) form, inside the tier's
+/// LRU node; a lookup hands out a fresh `Self` made from it. Both should be small and cheap to
+/// make: the stored form's size is paid by every resident entry (see "What the budget counts" in
+/// the module docs), and a hit makes a `Self` under the shard's lock. Large data belongs behind
+/// an `Arc` shared by both; [`crate::tessellate::Tessellation`] keeps a coarse grid inline in 64
+/// bytes and larger grids shared. An entry type that is simply shared can be wrapped in `Arc`
+/// (one allocation and reference count per entry; lookups hand out that allocation).
 pub trait CacheEntry: Send + Sync + 'static {
+    /// The form a resident entry is kept in.
+    type Stored: Send + Sync + 'static;
+
     /// Bytes this entry counts against its tier's budget: its tessellation payload (12 bytes a
     /// vertex, plus e.g. the fine tier's sub-bounding boxes if it holds them). Called once, when
     /// the entry is built; it must not change afterwards. Every entry of a tier should report the
@@ -86,15 +117,47 @@ pub trait CacheEntry: Send + Sync + 'static {
 
     /// Vertices computed to build this entry (counted as cold or recomputed vertices).
     fn vertex_count(&self) -> usize;
+
+    /// The form to keep this entry in while it is resident (called when it is stored, and for
+    /// threads that waited for its build).
+    fn to_stored(&self) -> Self::Stored;
+
+    /// The entry a lookup of a resident one returns; equal to the one that was stored.
+    fn from_stored(stored: &Self::Stored) -> Self;
 }
 
-/// A bare grid of object-space vertices, 12 bytes each.
+/// A bare grid of object-space vertices, 12 bytes each. Kept and handed out as copies: fine for
+/// tests and examples; a renderer shares its grids instead.
 impl CacheEntry for Vec<[f32; 3]> {
+    type Stored = Vec<[f32; 3]>;
     fn byte_size(&self) -> usize {
         self.len() * VERTEX_BYTES
     }
     fn vertex_count(&self) -> usize {
         self.len()
+    }
+    fn to_stored(&self) -> Self {
+        self.clone()
+    }
+    fn from_stored(stored: &Self) -> Self {
+        stored.clone()
+    }
+}
+
+/// A shared entry: lookups hand out the one allocation that was built.
+impl<T: CacheEntry> CacheEntry for Arc<T> {
+    type Stored = Arc<T>;
+    fn byte_size(&self) -> usize {
+        (**self).byte_size()
+    }
+    fn vertex_count(&self) -> usize {
+        (**self).vertex_count()
+    }
+    fn to_stored(&self) -> Self {
+        Arc::clone(self)
+    }
+    fn from_stored(stored: &Self) -> Self {
+        Arc::clone(stored)
     }
 }
 
@@ -338,7 +401,7 @@ impl CacheConfig {
     }
 }
 
-/// The multiresolution geometry cache: three LRU tiers of shared, immutable tessellations.
+/// The multiresolution geometry cache: three LRU tiers of immutable tessellations.
 /// See the [module docs](self).
 pub struct GeometryCache<E: CacheEntry> {
     config: CacheConfig,
@@ -359,12 +422,14 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// The tessellation of `key`: the resident one, or the one another thread is building (this
     /// thread waits for it), or else `build()`'s, which is then stored in `key.tier`'s LRU,
     /// evicting least recently used entries (of the key's shard) to keep within the budget.
+    /// (Resident entries are kept as their [`CacheEntry::Stored`] form; what is returned is made
+    /// from it.)
     ///
     /// An entry whose [`byte_size`](CacheEntry::byte_size) exceeds its shard's whole budget
     /// (the tier's budget over [`CacheConfig::shard_count`], which leaves room for at least 256
-    /// entries of the configured size) is returned but not stored, and evicts nothing; so is
-    /// every entry in `none` mode, and any entry of a tier without budget (coarse and medium in
-    /// `single` mode).
+    /// entries of the configured size), or is 4 GB or more, is returned but not stored, and
+    /// evicts nothing; so is every entry in `none` mode, and any entry of a tier without budget
+    /// (coarse and medium in `single` mode).
     ///
     /// `build` runs without any cache lock held. It must not look up `key` itself, nor wait on a
     /// thread that is looking up `key`: that would wait for itself. For the same reason it should
@@ -374,7 +439,17 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// # Panics
     /// If `build` panics (the panic is passed on; threads waiting for this build then build the
     /// entry themselves), or if `build` looks up `key` (instead of deadlocking).
-    pub fn get_or_build(&self, key: CacheKey, build: impl FnOnce() -> E) -> Arc<E> {
+    pub fn get_or_build(&self, key: CacheKey, build: impl FnOnce() -> E) -> E {
+        self.tiers[key.tier.index()].get_or_build(key, |_| build())
+    }
+
+    /// As [`get_or_build`](Self::get_or_build), but `build` may reuse the storage of an entry
+    /// the key's shard evicted: it gets one, if the shard kept one, to refill in place (where no
+    /// ray still shares it) or to drop. A full tier evicts about one entry per build, so its
+    /// entries' blocks are recycled rather than freed and allocated again, which keeps the
+    /// allocator from scattering holes over its per-thread arenas. Each shard keeps at most 4
+    /// evicted entries for this, not counted as resident.
+    pub fn get_or_build_reusing(&self, key: CacheKey, build: impl FnOnce(Option<E::Stored>) -> E) -> E {
         self.tiers[key.tier.index()].get_or_build(key, build)
     }
 
@@ -412,6 +487,13 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// Heap bytes of `tier`'s set of ever-built keys (bookkeeping, not counted in any budget).
     pub fn seen_set_bytes(&self, tier: Tier) -> usize {
         self.tiers[tier.index()].seen_set_bytes()
+    }
+
+    /// Heap bytes of `tier`'s LRU nodes (each holding an entry by value, with its key and
+    /// size) and hash index, as allocated now: the resident entries' bookkeeping plus their
+    /// inline parts; not what the entries allocate themselves, nor the ever-built set.
+    pub fn table_bytes(&self, tier: Tier) -> usize {
+        self.tiers[tier.index()].table_bytes()
     }
 
     /// How many entries `tier`'s budget holds: the budget over the largest entry built in the

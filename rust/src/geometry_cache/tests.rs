@@ -8,11 +8,13 @@ use std::sync::atomic::{AtomicUsize, Ordering::SeqCst};
 use std::sync::{mpsc, Arc, Barrier};
 use std::time::Duration;
 
-use super::tier_cache::{Resident, Slot};
+use super::tier_cache::{NodeKey, Resident};
 use super::*;
 
-/// A stand-in tessellation: an id to check which build a caller got, and sizes.
-#[derive(Debug)]
+/// A stand-in tessellation: an id to check which build a caller got, and sizes. Held by value,
+/// as a small tessellation is (`Arc<Grid>` where a test needs to see which allocation a caller
+/// got).
+#[derive(Clone, Debug)]
 struct Grid {
     id: u64,
     bytes: usize,
@@ -20,11 +22,18 @@ struct Grid {
 }
 
 impl CacheEntry for Grid {
+    type Stored = Grid;
     fn byte_size(&self) -> usize {
         self.bytes
     }
     fn vertex_count(&self) -> usize {
         self.verts
+    }
+    fn to_stored(&self) -> Grid {
+        self.clone()
+    }
+    fn from_stored(stored: &Grid) -> Grid {
+        stored.clone()
     }
 }
 
@@ -279,6 +288,8 @@ fn concurrent_lookups_build_each_key_exactly_once() {
     let builds: [AtomicUsize; 3] = Default::default();
     let cache = GeometryCache::new(CacheConfig::default());
     let start = Barrier::new(THREADS);
+    // Shared entries: every caller must get the very allocation of the one build.
+    let cache: GeometryCache<Arc<Grid>> = cache;
     let got: Vec<Vec<Arc<Grid>>> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..THREADS)
             .map(|_| {
@@ -290,7 +301,7 @@ fn concurrent_lookups_build_each_key_exactly_once() {
                             got.push(cache.get_or_build(k, || {
                                 std::thread::sleep(Duration::from_millis(20));
                                 let n = builds[i].fetch_add(1, SeqCst);
-                                Grid { id: (i * 1000 + n) as u64, ..grid(k.tier, 0) }
+                                Arc::new(Grid { id: (i * 1000 + n) as u64, ..grid(k.tier, 0) })
                             }));
                         }
                     }
@@ -673,16 +684,82 @@ fn vertex_vectors_are_entries() {
     assert_eq!(cache.resident_bytes(Tier::Medium), 300);
 }
 
-/// The bookkeeping sizes the module docs quote.
+/// A coarse tessellation as the renderer caches it (4 vertices inline).
+fn coarse_tessellation(x: f32) -> crate::tessellate::Tessellation {
+    use crate::tessellate::{GridDomain, SubBoxes, Tessellation};
+    Tessellation {
+        n: 2,
+        verts: vec![[x, 0.0, 0.0]; 4].into(),
+        sub_boxes: SubBoxes::NONE,
+        chord_error: 0.0,
+        seam_radius: 0.0,
+        domain: GridDomain::Square,
+    }
+}
+
+/// The bookkeeping sizes the module docs quote: a resident coarse tessellation is an 88-byte
+/// LRU node (the 64-byte stored entry, its 12-byte key, its size and two links) and an 8-byte
+/// index bucket at a load of 37.5–75%; nothing else is allocated for it.
 #[test]
 fn bookkeeping_is_as_documented() {
+    use crate::tessellate::Tessellation;
     assert_eq!(std::mem::size_of::<CacheKey>(), 16);
-    assert_eq!(std::mem::size_of::<(CacheKey, Slot<Grid>)>(), 32);
-    assert_eq!(std::mem::size_of::<Option<Resident<Grid>>>(), 32);
-    let cache: GeometryCache<Grid> = GeometryCache::new(CacheConfig::default());
-    for s in 0..10_000 {
-        cache.get_or_build(key(0, s, Tier::Coarse), || grid(Tier::Coarse, 0));
+    assert_eq!(std::mem::size_of::<NodeKey>(), 12);
+    assert_eq!(std::mem::size_of::<Option<Resident<Tessellation>>>(), 80);
+    let cache: GeometryCache<Tessellation> = GeometryCache::new(CacheConfig::default().with_shards(1));
+    let n = 12_000;
+    for s in 0..n {
+        let e = cache.get_or_build(key(0, s, Tier::Coarse), || coarse_tessellation(s as f32));
+        assert_eq!(e.verts[0][0], s as f32);
     }
-    // 10,000 ids: 1,250 bytes of bitset, rounded up by amortised growth.
+    assert_eq!(cache.resident_entries(Tier::Coarse), n as usize);
+    assert_eq!(cache.resident_bytes(Tier::Coarse), n as usize * 56);
+    // 12,000 entries: 16,384 buckets (73% full) of 8 bytes; the slab's amortised growth
+    // reserves up to 16,384 nodes, of which only the 12,000 written are ever touched.
+    let table = cache.table_bytes(Tier::Coarse);
+    let (lo, hi) = (n as usize * 88 + 16_384 * 8, 16_384 * (88 + 8));
+    assert!((lo..=hi).contains(&table), "{table} bytes for {n} entries");
+    // Hits return the stored grid.
+    assert_eq!(cache.get_or_build(key(0, 7, Tier::Coarse), || unreachable!("resident")).verts[3][0], 7.0);
+    // 12,000 ids: 1,500 bytes of bitset, rounded up by amortised growth.
     assert!(cache.seen_set_bytes(Tier::Coarse) < 4096, "{}", cache.seen_set_bytes(Tier::Coarse));
+}
+
+#[test]
+fn builds_get_evicted_entries_to_reuse() {
+    let f = Tier::Fine;
+    let cache: GeometryCache<Arc<Grid>> = GeometryCache::new(budgets(0, 0, 2 * f.vertex_bytes()));
+    let mut spares = Vec::new();
+    for s in 0..8u32 {
+        cache.get_or_build_reusing(key(0, s, f), |spare| {
+            spares.push(spare.map(|g| g.id));
+            Arc::new(grid(f, s.into()))
+        });
+    }
+    // Two fit; from the third build on, each evicts the least recent one, which the next build
+    // of the shard gets.
+    assert_eq!(spares, [None, None, None, Some(0), Some(1), Some(2), Some(3), Some(4)]);
+    // Hits and plain builds do not take spares; waiting is the same as before.
+    assert_eq!(cache.get_or_build(key(0, 7, f), || unreachable!("resident")).id, 7);
+    assert_eq!(cache.resident_entries(f), 2);
+    // No more than `MAX_SPARES` are kept: a tier of 1-entry shards that evicts 8 at once.
+    let m = Tier::Medium;
+    let cache: GeometryCache<Arc<Grid>> = GeometryCache::new(budgets(0, 8, 0));
+    for s in 0..8u32 {
+        cache.get_or_build(key(0, s, m), || Arc::new(Grid { id: s.into(), bytes: 1, verts: 1 }));
+    }
+    let big = cache.get_or_build(key(0, 8, m), || Arc::new(Grid { id: 8, bytes: 8, verts: 1 }));
+    assert_eq!(Arc::strong_count(&big), 2);
+    let mut kept = Vec::new();
+    for s in 9..20u32 {
+        cache.get_or_build_reusing(key(0, s, m), |spare| {
+            kept.extend(spare.map(|g| g.id));
+            Arc::new(Grid { id: s.into(), bytes: 8, verts: 1 })
+        });
+    }
+    // Of the 8 evicted at once, the first 4 (0–3) were kept, the rest dropped; the next build
+    // got the newest kept one, and every later build the entry the one before it evicted.
+    assert_eq!(super::tier_cache::MAX_SPARES, 4);
+    assert_eq!(kept, [3, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17]);
+    check_invariant(&cache.stats());
 }
