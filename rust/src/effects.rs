@@ -3,6 +3,7 @@
 
 use serde::Serialize;
 
+use crate::material::SurfaceCalls;
 use crate::options::RenderOptions;
 use crate::scene::Scene;
 
@@ -14,8 +15,12 @@ pub struct Effect {
 }
 
 /// The effects `scene` rendered with `options` calls for: camera rays always; shadow rays
-/// toward each light that casts shadows; mirror reflection from materials with a mirror layer
-/// (and a maximum depth above 0); ambient occlusion when the settings ask for AO samples.
+/// toward each light that casts shadows; soft shadows toward wide lights; from the materials of
+/// placed meshes ([`crate::material::PreviewSurface::calls`], with a maximum depth above 0):
+/// `reflection` from delta-specular lobes, `refraction` from transmitting ones, `glossy` from
+/// significant rough specular; `emission` from emissive materials (no rays: it is listed
+/// because the image has it); depth of field; ambient occlusion when the settings ask for AO
+/// samples. Each names the materials (up to five) or setting that called for it.
 pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
     let mut out = vec![Effect { name: "camera".into(), why: "primary visibility".into() }];
     let shadow_lights: Vec<&str> = scene.lights.iter().filter(|l| l.casts_shadows).map(|l| l.name.as_str()).collect();
@@ -33,21 +38,32 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
         used.insert(m.material);
         used.extend(m.face_materials.iter().flat_map(|t| t.iter().map(|&f| f as usize)));
     }
-    let mirrors: Vec<&str> = scene
-        .materials
-        .iter()
-        .enumerate()
-        .filter(|(i, m)| {
-            let s = &m.surface;
-            let specular = if s.use_specular_workflow { s.specular_color.max_element() > 0.0 } else { s.metallic > 0.0 };
-            used.contains(i) && specular && s.roughness == 0.0
-        })
-        .map(|(_, m)| m.name.as_str())
-        .collect();
-    if !mirrors.is_empty() && options.max_depth > 0 {
-        let shown: Vec<&str> = mirrors.iter().take(5).copied().collect();
-        let more = if mirrors.len() > 5 { format!(" and {} more", mirrors.len() - 5) } else { String::new() };
-        out.push(Effect { name: "reflection".into(), why: format!("mirror materials: {}{more}", shown.join(", ")) });
+    // What each used material's lobes call for (textured inputs may take any value).
+    let calls: Vec<(&str, SurfaceCalls)> =
+        scene.materials.iter().enumerate().filter(|(i, _)| used.contains(i)).map(|(_, m)| (m.name.as_str(), m.calls())).collect();
+    let named = |pick: fn(&SurfaceCalls) -> bool| -> Vec<&str> { calls.iter().filter(|(_, c)| pick(c)).map(|(n, _)| *n).collect() };
+    let list = |names: &[&str]| {
+        let shown: Vec<&str> = names.iter().take(5).copied().collect();
+        let more = if names.len() > 5 { format!(" and {} more", names.len() - 5) } else { String::new() };
+        format!("{}{more}", shown.join(", "))
+    };
+    if options.max_depth > 0 {
+        let mirrors = named(|c| c.reflection);
+        if !mirrors.is_empty() {
+            out.push(Effect { name: "reflection".into(), why: format!("smooth specular materials: {}", list(&mirrors)) });
+        }
+        let glass = named(|c| c.refraction);
+        if !glass.is_empty() {
+            out.push(Effect { name: "refraction".into(), why: format!("transmitting materials (opacity < 1): {}", list(&glass)) });
+        }
+        let glossy = named(|c| c.glossy);
+        if !glossy.is_empty() {
+            out.push(Effect { name: "glossy".into(), why: format!("rough specular materials: {}", list(&glossy)) });
+        }
+    }
+    let emissive = named(|c| c.emission);
+    if !emissive.is_empty() {
+        out.push(Effect { name: "emission".into(), why: format!("emissive materials: {}", list(&emissive)) });
     }
     let cam = &scene.camera;
     if cam.has_depth_of_field() {

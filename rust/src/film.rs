@@ -4,7 +4,11 @@
 
 use crate::image_io::{ChannelFormat, ImageBuf};
 
-/// Every AOV the renderer can produce, with its channel count.
+/// Every AOV the renderer can produce, with its channel count. Hydra's names where Hydra has one
+/// (`color`, `depth`, `normal`, `Neye`, `primId`, `instanceId`, `elementId`); `normal` is world
+/// space, `Neye` camera space. The light AOVs add up to the colour:
+/// `color = emission + directDiffuse + indirectDiffuse + specular` (ambient occlusion's sky light
+/// counts as indirect diffuse).
 pub const AOVS: &[(&str, usize)] = &[
     ("color", 3),
     ("alpha", 1),
@@ -16,10 +20,41 @@ pub const AOVS: &[(&str, usize)] = &[
     ("tessRate", 1),
     ("ao", 1),
     ("tessError", 2),
+    ("position", 3),
+    ("elementId", 1),
+    ("Neye", 3),
+    ("albedo", 3),
+    ("emission", 3),
+    ("directDiffuse", 3),
+    ("indirectDiffuse", 3),
+    ("specular", 3),
 ];
 
 /// The AOV names, for messages.
-pub const AOV_NAMES: &[&str] = &["color", "alpha", "depth", "normal", "primId", "instanceId", "beamWidth", "tessRate", "ao", "tessError"];
+pub const AOV_NAMES: &[&str] = &[
+    "color",
+    "alpha",
+    "depth",
+    "normal",
+    "primId",
+    "instanceId",
+    "beamWidth",
+    "tessRate",
+    "ao",
+    "tessError",
+    "position",
+    "elementId",
+    "Neye",
+    "albedo",
+    "emission",
+    "directDiffuse",
+    "indirectDiffuse",
+    "specular",
+];
+
+/// The AOVs holding linear RGB (radiance or reflectance): averaged over a pixel's samples and
+/// stored as half floats with `.R`, `.G`, `.B` channels.
+const COLOR_AOVS: &[&str] = &["albedo", "emission", "directDiffuse", "indirectDiffuse", "specular"];
 
 /// Channel count of a named AOV, or `None` if the renderer does not know it.
 pub fn aov_channels(name: &str) -> Option<usize> {
@@ -35,6 +70,7 @@ pub fn file_channel_names(aov: &str, channels: usize) -> Vec<String> {
         "depth" => vec!["Z".into()],
         "normal" => vec!["N.x".into(), "N.y".into(), "N.z".into()],
         "tessError" => vec!["tessError.world".into(), "tessError.beam".into()],
+        _ if COLOR_AOVS.contains(&aov) && channels == 3 => ["R", "G", "B"].iter().map(|c| format!("{aov}.{c}")).collect(),
         _ if channels == 1 => vec![aov.to_string()],
         _ => ["x", "y", "z", "w"].iter().take(channels).map(|c| format!("{aov}.{c}")).collect(),
     }
@@ -44,7 +80,8 @@ pub fn file_channel_names(aov: &str, channels: usize) -> Vec<String> {
 /// precision matters (depth, positions, ids).
 pub fn default_format(aov: &str) -> ChannelFormat {
     match aov {
-        "color" | "alpha" | "normal" => ChannelFormat::Half,
+        "color" | "alpha" | "normal" | "Neye" => ChannelFormat::Half,
+        _ if COLOR_AOVS.contains(&aov) => ChannelFormat::Half,
         _ => ChannelFormat::Float,
     }
 }
@@ -110,5 +147,24 @@ impl Film {
             pixels,
             metadata: Vec::new(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_aov_has_one_name_and_file_channels() {
+        assert_eq!(AOVS.len(), AOV_NAMES.len());
+        for (&(name, channels), &listed) in AOVS.iter().zip(AOV_NAMES) {
+            assert_eq!(name, listed);
+            let files = file_channel_names(name, channels);
+            assert_eq!(files.len(), channels, "{name}");
+        }
+        assert_eq!(file_channel_names("specular", 3), ["specular.R", "specular.G", "specular.B"]);
+        assert_eq!(file_channel_names("Neye", 3), ["Neye.x", "Neye.y", "Neye.z"]);
+        assert_eq!(default_format("directDiffuse"), ChannelFormat::Half);
+        assert_eq!(default_format("position"), ChannelFormat::Float);
     }
 }

@@ -1,26 +1,43 @@
-//! Lights (UsdLux): distant, sphere, rect, disk and dome (constant colour).
+//! Lights (UsdLux): distant, sphere, rect, disk and dome.
 //!
-//! Units. A distant light delivers irradiance `intensity · 2^exposure · color` on a surface facing
-//! it, so a white lambertian surface facing a light of intensity 1 has radiance 1/π. Area lights
-//! (sphere, rect, disk) emit radiance `intensity · 2^exposure · color` from their surface; with
-//! `normalize` the radiance is divided by the light's area, so its power does not change with its
-//! size (UsdLux's definition). A dome light is an environment of that radiance in every
-//! direction.
+//! **Units** (UsdLux's `LightAPI`): a light's scalar emission is `intensity · 2^exposure`, times
+//! `color` (and the blackbody colour of `colorTemperature`, which the USD front end folds into
+//! `color`). Sphere, rect, disk and dome lights emit that as **radiance**; with `normalize` an
+//! area light's radiance is divided by its world-space surface area, so its power does not
+//! change with its size (a dome ignores `normalize`). A distant light's emission is the radiance
+//! of a disk of angular diameter `angle`; with `normalize` it is divided by UsdLux's
+//! `sizeFactor` (π sin²θmax for θmax ≤ π/2, θmax = angle/2), which makes `intensity` the
+//! **irradiance** on a surface facing the light whatever its angle. A distant light of angle 0
+//! is a point at infinity (a delta light) whose emission is that irradiance. So a white
+//! lambertian surface facing a normalized distant light of intensity 1 has radiance 1/π.
 //!
-//! Sampling (the paper's §4.3 and §4.5): point-like lights (a distant light with no angle) get one
-//! narrow shadow ray; area lights and distant lights with an angle get `shadow_samples` rays
-//! whose directional spread is the light's solid angle over the number of rays, so wide lights
-//! cast wide, incoherent, coarsely tessellated shadow rays.
+//! **Sampling** (what [`crate::integrator::direct`] and the light sampler build on): every
+//! light samples a direction toward it from a shading point with a solid-angle density
+//! ([`Light::sample`], [`Light::pdf`]): a sphere uniformly over the cone it subtends, a rect or
+//! disk uniformly over its area, a distant light uniformly over its cone, a textured dome by its
+//! importance table ([`EnvTexture`]) and a uniform dome cosine-weighted about the normal. Rays
+//! found by BSDF sampling meet area lights through [`Light::intersect`] (lights are not geometry
+//! in the BVH) and, when they escape, dome and distant lights through [`Light::environment`] /
+//! [`Scene::environment`], so the two strategies can be weighted by multiple importance
+//! sampling. Shadow rays get the paper's differentials: narrow toward point-like lights (§4.3),
+//! spread over the light's solid angle divided among the rays toward wide ones (§4.5).
+
+use std::f32::consts::PI;
 
 use glam::{Mat4, Vec3A};
 
 use crate::sampling::{cosine_hemisphere, frame};
+use crate::scene::Scene;
+
+mod env;
+
+pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightShape {
     /// Light arriving from direction −`direction`; `direction` is where it travels (render space,
     /// unit length): a UsdLux.DistantLight emits along its local −Z. `angle_deg` is the angular
-    /// diameter of the source (0: a point at infinity).
+    /// diameter of the source, in [0, 360) (0: a point at infinity).
     Distant { direction: Vec3A, angle_deg: f32 },
     /// A sphere of `radius` (render units) around `center`, emitting outward.
     Sphere { center: Vec3A, radius: f32 },
@@ -33,71 +50,77 @@ pub enum LightShape {
     Dome(Option<EnvTexture>),
 }
 
-/// A latlong environment (UsdLux.DomeLight `texture:file`): +Y up in the light's space, the
-/// image's centre column looking down −Z, as USD's dome lights are authored.
-#[derive(Clone)]
-pub struct EnvTexture {
-    pub sampler: std::sync::Arc<dyn crate::texture::TextureSampler>,
-    pub texture: crate::texture::TextureHandle,
-    /// Render-space directions to the light's space (the inverse of its rotation).
-    pub light_from_render: glam::Mat3A,
-}
-
-impl std::fmt::Debug for EnvTexture {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("EnvTexture").field("texture", &self.texture).finish_non_exhaustive()
-    }
-}
-
-impl PartialEq for EnvTexture {
-    fn eq(&self, o: &Self) -> bool {
-        std::sync::Arc::ptr_eq(&self.sampler, &o.sampler) && self.texture == o.texture && self.light_from_render == o.light_from_render
-    }
-}
-
-impl EnvTexture {
-    /// The environment's RGB radiance (before the light's intensity) toward render-space `wi`.
-    pub fn radiance(&self, wi: Vec3A) -> Vec3A {
-        let d = (self.light_from_render * wi).normalize_or(Vec3A::Y);
-        let s = 0.5 + d.x.atan2(-d.z) / (2.0 * std::f32::consts::PI);
-        let t = 1.0 - d.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI;
-        // About a degree of filtering: lights are integrated over many samples, not seen.
-        let w = 1.0 / 360.0;
-        let mut rgb = [0.0f32; 3];
-        let lookup =
-            crate::texture::Lookup { wrap_s: crate::texture::Wrap::Periodic, wrap_t: crate::texture::Wrap::Clamp, ..Default::default() };
-        if self.sampler.sample(self.texture, [s, t], [w, 0.0], [0.0, w], &lookup, &mut rgb) {
-            Vec3A::from(rgb).max(Vec3A::ZERO)
-        } else {
-            Vec3A::ONE
-        }
-    }
-}
-
 #[derive(Clone, Debug, PartialEq)]
 pub struct Light {
     /// Prim path, for messages and stats.
     pub name: String,
     pub shape: LightShape,
-    /// Linear RGB: the irradiance of a distant light, the emitted radiance of the others.
+    /// Linear RGB: the emitted radiance (a dome's multiplies its texture), except for a distant
+    /// light of angle 0, where it is the irradiance on a surface facing the light.
     pub radiance_scale: Vec3A,
     pub casts_shadows: bool,
 }
 
-/// One sample of a light as seen from a point: direction (unit, toward the light), distance
-/// (infinite for distant and dome lights), incident radiance over pdf (what the integrator
-/// multiplies by the BRDF and cosine), and the light's solid angle seen from the point (for the
-/// shadow ray's differential).
+/// One sample of a light as seen from a point.
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
+    /// Unit direction from the point toward the light (render space).
     pub wi: Vec3A,
+    /// Distance to the sampled point on the light (render units; infinite for distant and dome
+    /// lights).
     pub distance: f32,
-    pub weight: Vec3A,
-    pub solid_angle_sr: f32,
+    /// Radiance arriving along `wi` (for a delta light: the irradiance it delivers).
+    pub radiance: Vec3A,
+    /// Solid-angle density of `wi` (per steradian); 1 for a delta light.
+    pub pdf: f32,
+    /// A point at infinity: one sample is the light's whole contribution.
+    pub delta: bool,
+}
+
+impl LightSample {
+    /// Radiance over density: what the integrator multiplies by `f · |cos θ|`.
+    pub fn weight(&self) -> Vec3A {
+        if self.pdf > 0.0 {
+            self.radiance / self.pdf
+        } else {
+            Vec3A::ZERO
+        }
+    }
+}
+
+/// Where a ray meets an area light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightHit {
+    /// Distance along the (unit) ray, render units.
+    pub t: f32,
+    /// Radiance the light sends back along the ray.
+    pub radiance: Vec3A,
+    /// The solid-angle density with which [`Light::sample`] from the ray's origin picks this
+    /// direction (for multiple importance sampling).
+    pub pdf: f32,
+}
+
+/// UsdLux's `sizeFactor` of a normalized distant light of half-angle `theta_max` (radians,
+/// clamped to [0, π]): 1 for a point, π sin²θmax up to π/2, (2 − sin²θmax)·π beyond. Up to π/2
+/// it is the irradiance a cone of unit radiance delivers to a surface facing it.
+pub fn distant_size_factor(theta_max: f32) -> f32 {
+    let t = theta_max.clamp(0.0, PI);
+    if t <= 0.0 {
+        1.0
+    } else if t <= PI / 2.0 {
+        PI * t.sin().powi(2)
+    } else {
+        (2.0 - t.sin().powi(2)) * PI
+    }
+}
+
+/// 1 − cos θ without cancellation for small θ (radians).
+fn one_minus_cos(theta: f32) -> f32 {
+    2.0 * (0.5 * theta).sin().powi(2)
 }
 
 impl Light {
-    /// A distant light travelling along `direction` with irradiance `irradiance` (RGB).
+    /// A point at infinity travelling along `direction` with irradiance `irradiance` (RGB).
     pub fn distant(name: impl Into<String>, direction: Vec3A, irradiance: Vec3A) -> Self {
         Light {
             name: name.into(),
@@ -107,7 +130,8 @@ impl Light {
         }
     }
 
-    /// A UsdLux.DistantLight from its world transform and inputs.
+    /// A UsdLux.DistantLight from its world transform and inputs (see the module doc for what
+    /// `normalize` does). `angle_deg` is clipped to [0, 360), as UsdLux says.
     pub fn usd_distant(
         name: impl Into<String>,
         render_from_light: &Mat4,
@@ -115,17 +139,21 @@ impl Light {
         exposure: f32,
         color: Vec3A,
         angle_deg: f32,
+        normalize: bool,
     ) -> Self {
         let dir = render_from_light.transform_vector3a(Vec3A::NEG_Z);
-        let mut l = Light::distant(name, dir, color * intensity * exposure.exp2());
-        if let LightShape::Distant { angle_deg: a, .. } = &mut l.shape {
-            *a = angle_deg.clamp(0.0, 180.0);
+        let angle = if angle_deg.is_finite() { angle_deg.clamp(0.0, 360.0 - 1e-3) } else { 0.0 };
+        let mut emission = color * intensity * exposure.exp2();
+        if normalize {
+            emission /= distant_size_factor((0.5 * angle).to_radians());
         }
+        let mut l = Light::distant(name, dir, emission);
+        l.shape = LightShape::Distant { direction: dir.normalize_or(Vec3A::NEG_Z), angle_deg: angle };
         l
     }
 
     /// An area or dome light from its UsdLux inputs: `shape` already in render space. With
-    /// `normalize`, the radiance is divided by the area.
+    /// `normalize`, an area light's radiance is divided by its area (a dome's is not).
     pub fn usd_area(name: impl Into<String>, shape: LightShape, intensity: f32, exposure: f32, color: Vec3A, normalize: bool) -> Self {
         let mut radiance = color * intensity * exposure.exp2();
         if normalize {
@@ -142,47 +170,91 @@ impl Light {
         matches!(self.shape, LightShape::Distant { angle_deg, .. } if angle_deg <= 0.0)
     }
 
-    /// Samples the light from point `p` with normal `n` (the dome is cosine-sampled about `n`),
-    /// with two uniform numbers. `None` when the sample cannot light `p` (behind the light).
-    pub fn sample(&self, p: Vec3A, n: Vec3A, u1: f32, u2: f32) -> Option<LightSample> {
+    /// Distant and dome lights: at infinity, met by rays that escape the scene.
+    pub fn is_infinite(&self) -> bool {
+        matches!(self.shape, LightShape::Distant { .. } | LightShape::Dome(_))
+    }
+
+    /// Irradiance (RGB) a distant light delivers to a surface facing it; zero for other lights.
+    pub fn distant_irradiance(&self) -> Vec3A {
+        match self.shape {
+            LightShape::Distant { angle_deg, .. } => self.radiance_scale * distant_size_factor((0.5 * angle_deg).to_radians()),
+            _ => Vec3A::ZERO,
+        }
+    }
+
+    /// The solid angle (steradians) the light subtends from `p`: exact for spheres, distant
+    /// lights and domes; for rects and disks the area × cosine / distance² of their centre
+    /// (an estimate, used only for ray spreads). 0 for a delta light.
+    pub fn solid_angle(&self, p: Vec3A) -> f32 {
         match &self.shape {
+            LightShape::Distant { angle_deg, .. } => 2.0 * PI * one_minus_cos((0.5 * angle_deg).to_radians()),
+            LightShape::Dome(_) => 4.0 * PI,
+            LightShape::Sphere { center, radius } => {
+                let d2 = (*center - p).length_squared();
+                if d2 <= radius * radius {
+                    return 4.0 * PI;
+                }
+                let sin2 = radius * radius / d2;
+                2.0 * PI * sin2 / (1.0 + (1.0 - sin2).max(0.0).sqrt())
+            }
+            shape @ (LightShape::Rect { center, normal, .. } | LightShape::Disk { center, normal, .. }) => {
+                let d = *center - p;
+                let d2 = d.length_squared();
+                if !(d2 > 0.0) {
+                    return 2.0 * PI;
+                }
+                (shape_area(shape) * normal.dot(d).abs() / (d2 * d2.sqrt())).min(2.0 * PI)
+            }
+        }
+    }
+
+    /// Samples a direction toward the light from point `p` with shading normal `n` (only a
+    /// uniform dome uses `n`: it is cosine-sampled about it), with two uniform numbers. `None`
+    /// when the sample cannot light `p` (behind a one-sided light, inside a sphere light).
+    pub fn sample(&self, p: Vec3A, n: Vec3A, u1: f32, u2: f32) -> Option<LightSample> {
+        let sample = match &self.shape {
             LightShape::Distant { direction, angle_deg } => {
                 let toward = -*direction;
                 if *angle_deg <= 0.0 {
-                    return Some(LightSample { wi: toward, distance: f32::INFINITY, weight: self.radiance_scale, solid_angle_sr: 0.0 });
+                    return Some(LightSample { wi: toward, distance: f32::INFINITY, radiance: self.radiance_scale, pdf: 1.0, delta: true });
                 }
-                // Uniform over the cone of the source's angular radius; the irradiance is
-                // spread evenly over it, so every sample carries the whole irradiance.
-                let cos_max = (angle_deg.to_radians() * 0.5).cos();
-                let cos_t = 1.0 - u1 * (1.0 - cos_max);
-                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-                let phi = 2.0 * std::f32::consts::PI * u2;
-                let (t, b) = frame(toward);
-                let wi = (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + toward * cos_t).normalize();
-                Some(LightSample {
-                    wi,
-                    distance: f32::INFINITY,
-                    weight: self.radiance_scale,
-                    solid_angle_sr: 2.0 * std::f32::consts::PI * (1.0 - cos_max),
-                })
+                let omc_max = one_minus_cos((0.5 * angle_deg).to_radians());
+                let wi = cone_direction(toward, omc_max, u1, u2);
+                LightSample { wi, distance: f32::INFINITY, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
             LightShape::Dome(env) => {
-                let (local, pdf) = cosine_hemisphere(u1, u2);
-                if pdf <= 0.0 {
+                if let Some((wi, pdf)) = env.as_ref().and_then(|e| e.sample([u1, u2])) {
+                    let radiance = self.radiance_scale * env.as_ref().map_or(Vec3A::ONE, |e| e.radiance(wi));
+                    LightSample { wi, distance: f32::INFINITY, radiance, pdf, delta: false }
+                } else {
+                    let (local, pdf) = cosine_hemisphere(u1, u2);
+                    let (t, b) = frame(n);
+                    let wi = t * local.x + b * local.y + n * local.z;
+                    let texel = env.as_ref().map_or(Vec3A::ONE, |e| e.radiance(wi));
+                    LightSample { wi, distance: f32::INFINITY, radiance: self.radiance_scale * texel, pdf, delta: false }
+                }
+            }
+            LightShape::Sphere { center, radius } => {
+                let to_c = *center - p;
+                let dc2 = to_c.length_squared();
+                let r2 = radius * radius;
+                if !(dc2 > r2) {
+                    // Inside (or on) the sphere: an outward-emitting sphere lights nothing there.
                     return None;
                 }
-                let (t, b) = frame(n);
-                let wi = t * local.x + b * local.y + n * local.z;
-                let texel = env.as_ref().map_or(Vec3A::ONE, |e| e.radiance(wi));
-                Some(LightSample {
-                    wi,
-                    distance: f32::INFINITY,
-                    weight: self.radiance_scale * texel / pdf,
-                    solid_angle_sr: 2.0 * std::f32::consts::PI,
-                })
+                let dc = dc2.sqrt();
+                let sin2_max = r2 / dc2;
+                let omc_max = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
+                let wi = cone_direction(to_c / dc, omc_max, u1, u2);
+                // Distance to the near intersection with the sphere along wi.
+                let b = wi.dot(to_c);
+                let disc = (r2 - (dc2 - b * b)).max(0.0);
+                let distance = (b - disc.sqrt()).max(0.0);
+                LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
-            shape => {
-                let (y, ny, area) = sample_surface(shape, u1, u2)?;
+            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. }) => {
+                let (y, ny, area) = sample_planar(shape, u1, u2)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
                 if !(dist2 > 0.0 && dist2.is_finite()) {
@@ -194,43 +266,198 @@ impl Light {
                 if cos_l <= 0.0 {
                     return None;
                 }
-                // Area sampling: pdf in solid angle = dist² / (cos_l · area).
-                let weight = self.radiance_scale * (cos_l * area / dist2);
-                let solid = (area * cos_l / dist2).min(4.0 * std::f32::consts::PI);
-                Some(LightSample { wi, distance: dist, weight, solid_angle_sr: solid })
+                // Area sampling: density in solid angle = dist² / (cos_l · area).
+                LightSample { wi, distance: dist, radiance: self.radiance_scale, pdf: dist2 / (cos_l * area), delta: false }
             }
+        };
+        // A non-finite radiance (a broken light) is passed on: the render loop drops and counts
+        // such samples.
+        (sample.pdf.is_finite() && sample.pdf > 0.0 && sample.wi.is_finite()).then_some(sample)
+    }
+
+    /// The solid-angle density with which [`Light::sample`] from `p` (normal `n`) picks
+    /// direction `wi` (unit): 0 where it never does, and for a delta light.
+    pub fn pdf(&self, p: Vec3A, n: Vec3A, wi: Vec3A) -> f32 {
+        match &self.shape {
+            LightShape::Distant { direction, angle_deg } => {
+                if *angle_deg <= 0.0 {
+                    return 0.0;
+                }
+                let omc_max = one_minus_cos((0.5 * angle_deg).to_radians());
+                if 1.0 - wi.dot(-*direction) <= omc_max {
+                    1.0 / (2.0 * PI * omc_max)
+                } else {
+                    0.0
+                }
+            }
+            LightShape::Dome(env) => match env.as_ref().filter(|e| e.distribution.is_some()) {
+                Some(e) => e.pdf(wi),
+                None => n.dot(wi).max(0.0) * std::f32::consts::FRAC_1_PI,
+            },
+            LightShape::Sphere { center, radius } => {
+                let to_c = *center - p;
+                let dc2 = to_c.length_squared();
+                let r2 = radius * radius;
+                if !(dc2 > r2) {
+                    return 0.0;
+                }
+                let sin2_max = r2 / dc2;
+                let omc_max = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
+                if 1.0 - wi.dot(to_c / dc2.sqrt()) <= omc_max {
+                    1.0 / (2.0 * PI * omc_max)
+                } else {
+                    0.0
+                }
+            }
+            LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
         }
     }
+
+    /// Where the ray from `o` along unit `d` meets this area light's emitting side before
+    /// `t_max` (sphere, rect, disk; `None` for distant and dome lights, which rays meet only by
+    /// escaping: [`Light::environment`]).
+    pub fn intersect(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        match &self.shape {
+            LightShape::Sphere { center, radius } => {
+                let to_c = *center - o;
+                let dc2 = to_c.length_squared();
+                let r2 = radius * radius;
+                if !(dc2 > r2) {
+                    return None;
+                }
+                let b = d.dot(to_c);
+                let h2 = dc2 - b * b;
+                if b <= 0.0 || h2 > r2 {
+                    return None;
+                }
+                let t = b - (r2 - h2).max(0.0).sqrt();
+                let sin2_max = r2 / dc2;
+                let omc_max = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
+                (t > 0.0 && t < t_max).then(|| LightHit { t, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max) })
+            }
+            LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(o, d, t_max),
+            _ => None,
+        }
+    }
+
+    fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        let (LightShape::Rect { center, u, v, normal } | LightShape::Disk { center, u, v, normal }) = &self.shape else {
+            return None;
+        };
+        let cos_l = -normal.dot(d);
+        // Only the emitting side (the ray travels against the normal) sends light back.
+        if !(cos_l > 0.0) {
+            return None;
+        }
+        let t = normal.dot(o - *center) / cos_l;
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        let q = o + d * t - *center;
+        // q = a·u + b·v in the light's plane (u and v need not be orthogonal).
+        let (uu, uv, vv) = (u.dot(*u), u.dot(*v), v.dot(*v));
+        let det = uu * vv - uv * uv;
+        if !(det > 0.0) {
+            return None;
+        }
+        let (qu, qv) = (q.dot(*u), q.dot(*v));
+        let a = (qu * vv - qv * uv) / det;
+        let b = (qv * uu - qu * uv) / det;
+        let inside = match self.shape {
+            LightShape::Rect { .. } => a.abs() <= 1.0 && b.abs() <= 1.0,
+            _ => a * a + b * b <= 1.0,
+        };
+        if !inside {
+            return None;
+        }
+        let area = shape_area(&self.shape);
+        Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * area) })
+    }
+
+    /// Radiance arriving along unit `wi` from this light when a ray escapes the scene: a dome's,
+    /// or a distant light's inside its cone; zero otherwise (a delta light is never met).
+    pub fn environment(&self, wi: Vec3A) -> Vec3A {
+        match &self.shape {
+            LightShape::Dome(env) => self.radiance_scale * env.as_ref().map_or(Vec3A::ONE, |e| e.radiance(wi)),
+            LightShape::Distant { direction, angle_deg } if *angle_deg > 0.0 => {
+                if 1.0 - wi.dot(-*direction) <= one_minus_cos((0.5 * angle_deg).to_radians()) {
+                    self.radiance_scale
+                } else {
+                    Vec3A::ZERO
+                }
+            }
+            _ => Vec3A::ZERO,
+        }
+    }
+}
+
+impl Light {
+    /// What a camera or mirror ray escaping along unit `wi` sees of this light, its
+    /// directional spread (from its differential) `spread_rad`: a dome's texture filtered over
+    /// that angle rather than over the importance table's texel ([`Light::environment`]), a
+    /// distant light's disk. For rays no light sample could have found (no multiple importance
+    /// sampling involved).
+    pub fn seen(&self, wi: Vec3A, spread_rad: f32) -> Vec3A {
+        match &self.shape {
+            LightShape::Dome(Some(env)) => self.radiance_scale * env.radiance_filtered(wi, spread_rad),
+            _ => self.environment(wi),
+        }
+    }
+}
+
+impl Scene {
+    /// Radiance (RGB) arriving along render-space unit `wi` from rays that escape the scene, as
+    /// lighting integrates it: the sum of every dome light and of every distant light with an
+    /// angle whose disk `wi` falls in ([`Light::environment`]). Zero without such lights. What
+    /// the direct-light estimator's BSDF samples and a path tracer's MIS-weighted escaped rays
+    /// add.
+    pub fn environment(&self, wi: Vec3A) -> Vec3A {
+        self.lights.iter().filter(|l| l.is_infinite()).map(|l| l.environment(wi)).sum()
+    }
+
+    /// The background a camera ray, or a mirror's reflection, sees along unit `wi` when it
+    /// escapes, filtered over the ray's directional spread `spread_rad` (radians, from its
+    /// differential: [`crate::differential::RayDifferential::directional_spread_rad`]), so a
+    /// dome seen directly is as sharp as the pixel ([`Light::seen`]). Zero without dome or
+    /// angular distant lights.
+    pub fn background(&self, wi: Vec3A, spread_rad: f32) -> Vec3A {
+        self.lights.iter().filter(|l| l.is_infinite()).map(|l| l.seen(wi, spread_rad)).sum()
+    }
+}
+
+/// A direction uniformly distributed over the cone around unit `axis` with 1 − cos(half-angle)
+/// = `omc_max`, from two uniform numbers.
+fn cone_direction(axis: Vec3A, omc_max: f32, u1: f32, u2: f32) -> Vec3A {
+    // 1 − cos θ uniform in [0, omc_max]; sin θ from it without cancellation.
+    let omc = u1 * omc_max;
+    let cos_t = 1.0 - omc;
+    let sin_t = (omc * (2.0 - omc)).max(0.0).sqrt();
+    let phi = 2.0 * PI * u2;
+    let (t, b) = frame(axis);
+    (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize()
 }
 
 /// Area of an area light's surface (render units²); 0 for distant and dome lights.
 pub fn shape_area(shape: &LightShape) -> f32 {
     match shape {
-        LightShape::Sphere { radius, .. } => 4.0 * std::f32::consts::PI * radius * radius,
+        LightShape::Sphere { radius, .. } => 4.0 * PI * radius * radius,
         LightShape::Rect { u, v, .. } => 4.0 * u.cross(*v).length(),
-        LightShape::Disk { u, v, .. } => std::f32::consts::PI * u.cross(*v).length(),
+        LightShape::Disk { u, v, .. } => PI * u.cross(*v).length(),
         _ => 0.0,
     }
 }
 
-/// A uniformly distributed point on an area light: (point, outward normal, area).
-fn sample_surface(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, f32)> {
+/// A uniformly distributed point on a rect or disk light: (point, emitting normal, area).
+fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, f32)> {
     let area = shape_area(shape);
     if !(area > 0.0) {
         return None;
     }
     match shape {
-        LightShape::Sphere { center, radius } => {
-            let z = 1.0 - 2.0 * u1;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = 2.0 * std::f32::consts::PI * u2;
-            let n = Vec3A::new(r * phi.cos(), r * phi.sin(), z);
-            Some((*center + n * *radius, n, area))
-        }
         LightShape::Rect { center, u, v, normal } => Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area)),
         LightShape::Disk { center, u, v, normal } => {
             let r = u1.sqrt();
-            let phi = 2.0 * std::f32::consts::PI * u2;
+            let phi = 2.0 * PI * u2;
             Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area))
         }
         _ => None,
@@ -248,7 +475,7 @@ mod tests {
         let mut e = 0.0f64;
         for _ in 0..samples {
             if let Some(ls) = light.sample(p, n, s.next_f32(), s.next_f32()) {
-                e += f64::from(ls.weight.x * ls.wi.dot(n).max(0.0));
+                e += f64::from(ls.weight().x * ls.wi.dot(n).max(0.0));
             }
         }
         (e / f64::from(samples)) as f32
@@ -260,8 +487,8 @@ mod tests {
         let light =
             Light::usd_area("/s", LightShape::Sphere { center: Vec3A::new(0.0, 0.0, 4.0), radius: 0.5 }, 1.0, 0.0, Vec3A::ONE, false);
         let e = irradiance(&light, Vec3A::ZERO, Vec3A::Z, 200_000);
-        let expected = std::f32::consts::PI * (0.5f32 / 4.0).powi(2);
-        assert!((e - expected).abs() < 0.02 * expected, "{e} vs {expected}");
+        let expected = PI * (0.5f32 / 4.0).powi(2);
+        assert!((e - expected).abs() < 0.01 * expected, "{e} vs {expected}");
     }
 
     #[test]
@@ -271,10 +498,10 @@ mod tests {
         let shape = LightShape::Disk { center: Vec3A::new(0.0, 0.0, 2.0), u: Vec3A::X, v: Vec3A::Y, normal: down };
         let light = Light::usd_area("/d", shape.clone(), 1.0, 0.0, Vec3A::ONE, false);
         let e = irradiance(&light, Vec3A::ZERO, Vec3A::Z, 200_000);
-        let expected = std::f32::consts::PI / (4.0 + 1.0);
+        let expected = PI / (4.0 + 1.0);
         assert!((e - expected).abs() < 0.02 * expected, "{e} vs {expected}");
         let normalized = Light::usd_area("/d", shape, 1.0, 0.0, Vec3A::ONE, true);
-        assert!((normalized.radiance_scale.x - 1.0 / std::f32::consts::PI).abs() < 1e-6);
+        assert!((normalized.radiance_scale.x - 1.0 / PI).abs() < 1e-6);
         // Behind the disk nothing arrives.
         assert_eq!(irradiance(&light, Vec3A::new(0.0, 0.0, 4.0), Vec3A::NEG_Z, 1000), 0.0);
     }
@@ -283,12 +510,20 @@ mod tests {
     fn dome_and_distant_cone_deliver_their_irradiance() {
         let dome = Light::usd_area("/dome", LightShape::Dome(None), 1.0, 0.0, Vec3A::ONE, false);
         let e = irradiance(&dome, Vec3A::ZERO, Vec3A::Z, 100_000);
-        assert!((e - std::f32::consts::PI).abs() < 1e-4, "{e}");
-        let sun = Light::usd_distant("/sun", &Mat4::IDENTITY, 2.0, 0.0, Vec3A::ONE, 10.0);
+        assert!((e - PI).abs() < 1e-4, "{e}");
+        // Normalized: the intensity is the irradiance facing the light, whatever the angle.
+        let sun = Light::usd_distant("/sun", &Mat4::IDENTITY, 2.0, 0.0, Vec3A::ONE, 10.0, true);
         let e = irradiance(&sun, Vec3A::ZERO, Vec3A::Z, 100_000);
-        // The cone of 5° radius around +Z: mean cosine (1 + cos 5°)/2.
-        let expected = 2.0 * (1.0 + 5f32.to_radians().cos()) / 2.0;
-        assert!((e - expected).abs() < 2e-3, "{e} vs {expected}");
+        assert!((e - 2.0).abs() < 2e-3, "{e}");
+        assert!((sun.distant_irradiance().x - 2.0).abs() < 1e-5);
+        // Not normalized: the intensity is the disk's radiance, E = L π sin²(5°).
+        let raw = Light::usd_distant("/sun", &Mat4::IDENTITY, 2.0, 0.0, Vec3A::ONE, 10.0, false);
+        let e = irradiance(&raw, Vec3A::ZERO, Vec3A::Z, 100_000);
+        let expected = 2.0 * PI * 5f32.to_radians().sin().powi(2);
+        assert!((e - expected).abs() < 1e-3 * expected, "{e} vs {expected}");
         assert!(!sun.is_delta() && Light::distant("/p", Vec3A::NEG_Z, Vec3A::ONE).is_delta());
+        // A point at infinity: the intensity is the irradiance, normalized or not.
+        let point = Light::usd_distant("/pt", &Mat4::IDENTITY, 3.0, 1.0, Vec3A::ONE, 0.0, false);
+        assert!(point.is_delta() && (point.radiance_scale.x - 6.0).abs() < 1e-6);
     }
 }

@@ -1,11 +1,17 @@
-//! Materials: UsdPreviewSurface's inputs, constant or fed by textures. The BSDF they make at a
-//! shading point is in [`crate::bsdf`].
+//! Materials: UsdPreviewSurface's inputs, constant or fed by textures; [`Material::resolve`]
+//! reads them at a shading point (textures filtered over the ray's footprint, normal mapping),
+//! and [`ResolvedSurface::bsdf`] makes the BSDF ([`crate::bsdf::PreviewSurfaceBsdf`]).
 
 use std::sync::Arc;
 
 use glam::Vec3A;
 
+use crate::bsdf::PreviewSurfaceBsdf;
+use crate::differential::{RayDifferential, UvDifferentials};
+use crate::integrator::ShadingPoint;
+use crate::patch::LimitSurface;
 use crate::texture::{Lookup, TextureHandle, TextureSampler};
+use crate::trace::Hit;
 
 /// A colour input fed by a texture (UsdUVTexture → UsdPreviewSurface `diffuseColor`):
 /// `texel.rgb · scale + bias`, looked up at the surface's `st` primvar channel with filter
@@ -51,12 +57,28 @@ impl TexturedColor {
     /// The filtered colour at `st` over the footprint (ds/dx, dt/dx), (ds/dy, dt/dy), clamped
     /// into [0, 1] like any reflectance.
     pub fn eval(&self, st: Option<[f32; 2]>, dst_dx: [f32; 2], dst_dy: [f32; 2]) -> Vec3A {
+        clamp_color(self.eval_raw(st, dst_dx, dst_dy, 3))
+    }
+
+    /// `texel · scale + bias`, unclamped (a normal map's components are negative, an `ior` or
+    /// an emissive colour above 1), from `channels` channels: 3 for a colour, 1 for a float
+    /// input, which is then splatted into all three lanes (`lookup.first_channel` says which
+    /// channel of the file; `scale.x`, `bias.x` apply). The fallback where the lookup fails or
+    /// there is no `st`.
+    pub fn eval_raw(&self, st: Option<[f32; 2]>, dst_dx: [f32; 2], dst_dy: [f32; 2], channels: usize) -> Vec3A {
         let Some(st) = st else { return self.fallback };
         let mut rgb = [0.0f32; 3];
-        if !self.sampler.sample(self.texture, st, dst_dx, dst_dy, &self.lookup, &mut rgb) {
+        let n = channels.clamp(1, 3);
+        if !self.sampler.sample(self.texture, st, dst_dx, dst_dy, &self.lookup, &mut rgb[..n]) {
             return self.fallback;
         }
-        clamp_color(Vec3A::from(rgb) * self.scale + self.bias)
+        let v = if n == 1 { Vec3A::splat(rgb[0]) } else { Vec3A::from(rgb) };
+        let out = v * self.scale + self.bias;
+        if n == 1 {
+            Vec3A::splat(out.x)
+        } else {
+            out
+        }
     }
 }
 
@@ -150,6 +172,66 @@ impl PreviewSurface {
     }
 }
 
+/// Roughness under which a plain dielectric (metallic workflow, `metallic` 0) calls for glossy
+/// rays: its 4 % reflection is a recognisable image of its surroundings only while the lobe is
+/// narrow; rougher, it is a faint haze that direct light's highlights already show, not worth
+/// `glossySamples` rays per hit. See [`SurfaceCalls::glossy`].
+pub const GLOSSY_DIELECTRIC_MAX_ROUGHNESS: f32 = 0.4;
+
+/// Which rays a surface's lobes call for (the effects analysis, DESIGN.md "Effects a scene
+/// calls for", and the classic integrator per hit). "Maybe" counts as yes: an input fed by a
+/// texture may take any value.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SurfaceCalls {
+    /// A delta reflection: the specular lobe (metal, plastic or glass reflection) with
+    /// `roughness` < [`crate::bsdf::preview::DELTA_ROUGHNESS`] and a non-zero Fresnel, or a
+    /// clearcoat as smooth.
+    pub reflection: bool,
+    /// Transmission: `opacity` < 1, `opacityThreshold` 0, not entirely metal.
+    pub refraction: bool,
+    /// Significant rough specular: a rough (roughness ≥ the delta threshold) specular lobe on a
+    /// metal (`metallic` > 0), a specular-workflow surface with `specularColor` > 0, or a
+    /// dielectric smoother than [`GLOSSY_DIELECTRIC_MAX_ROUGHNESS`]; a rough clearcoat
+    /// (`clearcoat` > 0); rough refraction (a transmitting surface, `ior` ≠ 1).
+    pub glossy: bool,
+    /// `emissiveColor` > 0.
+    pub emission: bool,
+}
+
+impl PreviewSurface {
+    /// The rays these inputs call for; `textured(input)`: a texture feeds it (any value).
+    pub fn calls(&self, textured: &dyn Fn(Input) -> bool) -> SurfaceCalls {
+        use crate::bsdf::preview::DELTA_ROUGHNESS;
+        let s = self;
+        let t = |i: Input| textured(i);
+        let metallic_may_be = |pred: &dyn Fn(f32) -> bool| !s.use_specular_workflow && (pred(s.metallic) || t(Input::Metallic));
+        let metal = metallic_may_be(&|m| m > 0.0) && (s.diffuse_color.max_element() > 0.0 || t(Input::DiffuseColor));
+        // The dielectric part (plastic and glass) weighs 1 − metallic.
+        let dielectric_weight = s.use_specular_workflow || s.metallic < 1.0 || t(Input::Metallic);
+        let dielectric_fresnel = if s.use_specular_workflow {
+            s.specular_color.max_element() > 0.0 || t(Input::SpecularColor)
+        } else {
+            (s.ior - 1.0).abs() >= 1e-3 || t(Input::Ior)
+        };
+        let dielectric = dielectric_weight && dielectric_fresnel;
+        let smooth = s.roughness < DELTA_ROUGHNESS || t(Input::Roughness);
+        let rough = s.roughness >= DELTA_ROUGHNESS || t(Input::Roughness);
+        let coat = s.clearcoat > 0.0 || t(Input::Clearcoat);
+        let coat_smooth = s.clearcoat_roughness < DELTA_ROUGHNESS || t(Input::ClearcoatRoughness);
+        let coat_rough = s.clearcoat_roughness >= DELTA_ROUGHNESS || t(Input::ClearcoatRoughness);
+        let transmits = (s.opacity < 1.0 || t(Input::Opacity)) && s.opacity_threshold <= 0.0 && dielectric_weight;
+        let bends = (s.ior - 1.0).abs() >= 1e-3 || t(Input::Ior);
+        let glossy_dielectric =
+            dielectric && (s.use_specular_workflow || s.roughness < GLOSSY_DIELECTRIC_MAX_ROUGHNESS || t(Input::Roughness) || transmits);
+        SurfaceCalls {
+            reflection: (smooth && (metal || dielectric)) || (coat && coat_smooth),
+            refraction: transmits,
+            glossy: (rough && (metal || glossy_dielectric)) || (coat && coat_rough) || (transmits && rough && bends),
+            emission: s.emissive_color.max_element() > 0.0 || t(Input::EmissiveColor),
+        }
+    }
+}
+
 /// A UsdPreviewSurface input that a texture can feed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Input {
@@ -240,6 +322,161 @@ impl Material {
     /// The texture feeding `input`, if any.
     pub fn texture(&self, input: Input) -> Option<&TexturedColor> {
         self.textures.iter().find(|(i, _)| *i == input).map(|(_, t)| t)
+    }
+
+    /// The rays this material may call for anywhere on a surface (textured inputs may take any
+    /// value): [`PreviewSurface::calls`].
+    pub fn calls(&self) -> SurfaceCalls {
+        self.surface.calls(&|i| self.texture(i).is_some())
+    }
+}
+
+/// UsdPreviewSurface's inputs at one shading point, and the shading normal there: what
+/// [`Material::resolve`] returns.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ResolvedSurface {
+    /// The inputs, each the texture's value where one feeds it (clamped into the input's range)
+    /// or the constant.
+    pub inputs: PreviewSurface,
+    /// Shading normal after normal mapping: world space, unit, facing the viewer and in the
+    /// geometric normal's hemisphere.
+    pub ns: Vec3A,
+}
+
+impl ResolvedSurface {
+    /// `opacityThreshold` > 0 makes opacity a cutout mask: where opacity is below the threshold
+    /// there is no surface, and rays continue through (UsdPreviewSurface; Storm discards the
+    /// fragment).
+    pub fn cut_out(&self) -> bool {
+        self.inputs.opacity_threshold > 0.0 && self.inputs.opacity < self.inputs.opacity_threshold
+    }
+
+    /// The BSDF at shading point `sp` (whose geometric normal and side it takes; the shading
+    /// normal is [`ResolvedSurface::ns`]).
+    pub fn bsdf(&self, sp: &ShadingPoint) -> PreviewSurfaceBsdf {
+        PreviewSurfaceBsdf::new(&self.inputs, self.ns, sp.ng, sp.front)
+    }
+}
+
+/// Filter widths for lookups at one hit: `st` of each primvar channel and its derivatives per
+/// pixel, computed once per channel however many textures read it.
+struct TextureSite<'a> {
+    surface: &'a dyn LimitSurface,
+    hit: &'a Hit,
+    uv: UvDifferentials,
+    /// (channel, st, d(st)/dx, d(st)/dy, d(st)/du, d(st)/dv) of the channels looked up so far.
+    cache: Vec<(usize, Option<[[f32; 2]; 5]>)>,
+}
+
+impl TextureSite<'_> {
+    /// `st` at the hit, (ds/dx, dt/dx), (ds/dy, dt/dy) from the footprint by the chain rule
+    /// through the surface's d(st)/du, d(st)/dv (the paper's §2.6 and §6.3.3: wide rays read
+    /// coarse MIP levels), and d(st)/du, d(st)/dv themselves.
+    fn st(&mut self, channel: usize) -> Option<[[f32; 2]; 5]> {
+        if let Some((_, v)) = self.cache.iter().find(|(c, _)| *c == channel) {
+            return *v;
+        }
+        let v = self.surface.face_varying(channel, self.hit.patch as usize, self.hit.u, self.hit.v).map(|(st, du, dv)| {
+            let uv = &self.uv;
+            let dx = [du[0] * uv.dudx + dv[0] * uv.dvdx, du[1] * uv.dudx + dv[1] * uv.dvdx];
+            let dy = [du[0] * uv.dudy + dv[0] * uv.dvdy, du[1] * uv.dudy + dv[1] * uv.dvdy];
+            [st, dx, dy, du, dv]
+        });
+        self.cache.push((channel, v));
+        v
+    }
+
+    /// The texture's value, unclamped, from `channels` channels.
+    fn lookup(&mut self, tex: &TexturedColor, channels: usize) -> Vec3A {
+        match self.st(tex.st_channel) {
+            Some([st, dx, dy, _, _]) => tex.eval_raw(Some(st), dx, dy, channels),
+            None => tex.eval_raw(None, [0.0; 2], [0.0; 2], channels),
+        }
+    }
+}
+
+impl Material {
+    /// The inputs at a hit: every textured input looked up with filter widths from the ray
+    /// differential (`footprint`: the ray's differential transferred to the hit), exactly as
+    /// the diffuse colour always was; float inputs read one channel. Out-of-range texture
+    /// values are clamped into the input's range (colours [0, 1], emission ≥ 0, `ior` > 0) —
+    /// silently: the material's constants were checked once when it was made.
+    ///
+    /// **Normal mapping** (`normal`): the texel after scale and bias (UsdUVTexture's usual
+    /// `scale = 2, bias = −1`) is a tangent-space normal in the frame (T, B, N) where N is the
+    /// surface's outward shading normal, T the direction of increasing `s` on the surface
+    /// (dP/ds, made perpendicular to N) and B = N × T, flipped if `t` increases the other way:
+    /// the frame Storm's `previewSurface.glslfx` builds from screen-space derivatives of `P` and
+    /// `st`. On a mesh whose `st` is its (u, v) that is the (dP/du, dP/dv, N) frame; without
+    /// `st` the (dP/du, dP/dv, N) frame is used. The mapped normal is kept in the geometric
+    /// normal's hemisphere (tilted back to just above it), so no shading normal faces away.
+    pub fn resolve(&self, surface: &dyn LimitSurface, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> ResolvedSurface {
+        let mut inputs = self.surface;
+        let mut ns = sp.ns;
+        if self.textures.is_empty() {
+            return ResolvedSurface { inputs, ns };
+        }
+        let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
+        let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
+        let unit = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        for (input, tex) in &self.textures {
+            match input {
+                Input::DiffuseColor => inputs.diffuse_color = clamp_color(site.lookup(tex, 3)),
+                Input::SpecularColor => inputs.specular_color = clamp_color(site.lookup(tex, 3)),
+                Input::EmissiveColor => {
+                    let e = site.lookup(tex, 3);
+                    inputs.emissive_color = Vec3A::select(e.is_nan_mask(), Vec3A::ZERO, e).clamp(Vec3A::ZERO, Vec3A::splat(f32::MAX));
+                }
+                Input::Metallic => inputs.metallic = unit(site.lookup(tex, 1).x),
+                Input::Roughness => inputs.roughness = unit(site.lookup(tex, 1).x),
+                Input::Clearcoat => inputs.clearcoat = unit(site.lookup(tex, 1).x),
+                Input::ClearcoatRoughness => inputs.clearcoat_roughness = unit(site.lookup(tex, 1).x),
+                Input::Opacity => inputs.opacity = unit(site.lookup(tex, 1).x),
+                Input::Ior => {
+                    let v = site.lookup(tex, 1).x;
+                    // ior ≤ 0 has no meaning: the constant's own value is the nearest sane one.
+                    inputs.ior = if v.is_finite() && v > 0.0 { v } else { self.surface.ior };
+                }
+                Input::Normal => {
+                    let t = site.lookup(tex, 3);
+                    let st = site.st(tex.st_channel);
+                    ns = normal_mapped(sp, t, st.map(|v| (v[3], v[4])));
+                }
+            }
+        }
+        ResolvedSurface { inputs, ns }
+    }
+}
+
+/// The shading normal for tangent-space normal `t` at `sp` (see [`Material::resolve`]);
+/// `dst`: (d(st)/du, d(st)/dv) when the surface has `st`.
+fn normal_mapped(sp: &ShadingPoint, t: Vec3A, dst: Option<([f32; 2], [f32; 2])>) -> Vec3A {
+    let Some(t) = t.try_normalize() else { return sp.ns };
+    // The outward normal: sp.ns faces the viewer, who may be inside.
+    let n_out = if sp.front { sp.ns } else { -sp.ns };
+    let (mut dps, mut dpt) = (sp.dpdu, sp.dpdv);
+    if let Some((du, dv)) = dst {
+        // [dP/du dP/dv] = [dP/ds dP/dt] · J with J = ∂(s, t)/∂(u, v): invert J.
+        let det = du[0] * dv[1] - dv[0] * du[1];
+        if det.abs() > 1e-12 && det.is_finite() {
+            dps = (sp.dpdu * dv[1] - sp.dpdv * du[1]) / det;
+            dpt = (sp.dpdv * du[0] - sp.dpdu * dv[0]) / det;
+        }
+    }
+    let Some(tan) = (dps - n_out * n_out.dot(dps)).try_normalize() else { return sp.ns };
+    let mut bit = n_out.cross(tan);
+    if bit.dot(dpt) < 0.0 {
+        bit = -bit;
+    }
+    let Some(n) = (tan * t.x + bit * t.y + n_out * t.z).try_normalize() else { return sp.ns };
+    let n = if sp.front { n } else { -n };
+    // Keep it in the geometric normal's hemisphere, just above the horizon at worst.
+    let c = n.dot(sp.ng);
+    const MIN_COS: f32 = 0.01;
+    if c >= MIN_COS {
+        n
+    } else {
+        (n + sp.ng * (MIN_COS - c)).try_normalize().unwrap_or(sp.ng)
     }
 }
 

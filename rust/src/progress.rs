@@ -6,10 +6,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Receives progress from a render. Called from render threads: implementations must be cheap
 /// and thread safe.
 pub trait Progress: Sync {
-    /// The render is starting `total` units of work (pixels).
+    /// The render is starting `total` units of work (pixel samples: pixels × samples per pixel).
     fn start(&self, _total: u64) {}
     /// `n` more units are done.
     fn advance(&self, _n: u64) {}
+    /// A pass over the whole image is done: `film` is the image averaged over the first
+    /// `samples` samples per pixel. Called once per pass, in order, between passes (no render
+    /// thread is writing the film meanwhile): once for a render of fixed sample count, after
+    /// each of the passes of 1, 2, 4, … samples of a progressive one (the last one is the
+    /// finished image). An implementation that shows it copies what it needs.
+    fn pass_finished(&self, _samples: u32, _film: &crate::film::Film) {}
     /// The render finished (or stopped).
     fn finish(&self) {}
     /// Polled between tiles: returning true stops the render with [`crate::error::RenderError::Cancelled`].

@@ -186,6 +186,19 @@ pub trait TextureSampler: Send + Sync {
         None
     }
 
+    /// The whole texture at a reduced resolution, at most `max_width` texels wide: the first MIP
+    /// level that narrow (each texel the average of the finest texels it covers), `channels`
+    /// channels from channel 0. What importance tables are built from (the dome light's, see
+    /// [`crate::light::EnvTexture`]); not for shading. `None` when the texture cannot be read.
+    ///
+    /// The default makes one lookup per texel at its centre, filtered over exactly that texel
+    /// (derivatives of one texel): right for any sampler whose lookups box-filter their
+    /// footprint. Implementations with direct access to MIP levels (OpenImageIO's `get_texels`)
+    /// override it.
+    fn texels(&self, handle: TextureHandle, max_width: u32, channels: u32) -> Option<Texels> {
+        texels_by_lookups(self, handle, max_width, channels)
+    }
+
     /// The filter mode every lookup uses.
     fn filter_mode(&self) -> FilterMode;
 
@@ -198,6 +211,60 @@ impl std::fmt::Debug for dyn TextureSampler {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "TextureSampler({:?})", self.filter_mode())
     }
+}
+
+/// A texture's texels at one resolution (see [`TextureSampler::texels`]): row-major, `channels`
+/// floats per texel, the **first row at the top** of the image (t = 1) and s increasing along a
+/// row, so texel (i, j) covers s ∈ [i/width, (i+1)/width], t ∈ [1 − (j+1)/height, 1 − j/height].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texels {
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+    pub data: Vec<f32>,
+}
+
+impl Texels {
+    /// Channel `c` of texel (column `i`, row `j` from the top).
+    pub fn at(&self, i: u32, j: u32, c: u32) -> f32 {
+        self.data[((j as usize * self.width as usize + i as usize) * self.channels as usize) + c as usize]
+    }
+}
+
+/// The resolution of the first MIP level at most `max_width` wide: halve (rounding down, at
+/// least 1) from the finest `resolution`, as MIP levels are made.
+pub fn reduced_resolution(resolution: [u32; 2], max_width: u32) -> ([u32; 2], u32) {
+    let [mut w, mut h] = resolution.map(|x| x.max(1));
+    let mut level = 0;
+    while w > max_width.max(1) {
+        w = (w / 2).max(1);
+        h = (h / 2).max(1);
+        level += 1;
+    }
+    ([w, h], level)
+}
+
+/// [`TextureSampler::texels`] by one box-filtered lookup per texel (the trait's default). A
+/// texture of unknown resolution is read at `max_width` × `max_width / 2` (a latlong's shape).
+pub fn texels_by_lookups<S: TextureSampler + ?Sized>(sampler: &S, handle: TextureHandle, max_width: u32, channels: u32) -> Option<Texels> {
+    let [w, h] = match sampler.resolution(handle) {
+        Some(r) => reduced_resolution(r, max_width).0,
+        None => [max_width.max(1), (max_width / 2).max(1)],
+    };
+    let channels = channels.clamp(1, 4);
+    let lookup = Lookup { first_channel: 0, wrap_s: Wrap::Clamp, wrap_t: Wrap::Clamp, fill: 0.0 };
+    let mut data = vec![0.0f32; (w * h * channels) as usize];
+    let (dx, dy) = ([1.0 / w as f32, 0.0], [0.0, 1.0 / h as f32]);
+    for j in 0..h {
+        for i in 0..w {
+            let st = [(i as f32 + 0.5) / w as f32, 1.0 - (j as f32 + 0.5) / h as f32];
+            let k = ((j * w + i) * channels) as usize;
+            if !sampler.sample(handle, st, dx, dy, &lookup, &mut data[k..k + channels as usize]) {
+                return None;
+            }
+        }
+    }
+    Some(Texels { width: w, height: h, channels, data })
 }
 
 /// Width of the lookup footprint in texels of the finest level: the longer side of the

@@ -9,6 +9,11 @@ use glam::Vec3A;
 
 use crate::sampling::{cosine_hemisphere, frame};
 
+pub mod microfacet;
+pub mod preview;
+
+pub use preview::{GlossySample, PreviewSurfaceBsdf};
+
 /// Which part of the BSDF a sample came from: it decides the ray's kind (and so its
 /// differential and tessellation rate) and which AOV its light goes to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,6 +78,15 @@ pub trait Scattering {
 
     /// Some lobe is a delta (mirror or smooth glass).
     fn has_delta(&self) -> bool;
+
+    /// The diffuse part's directional albedo seen from `wo`: what an irradiance estimate
+    /// (ambient occlusion, an irradiance cache, one-bounce color bleeding) is multiplied by, over
+    /// π, to give the diffuse radiance toward `wo`. A specular layer over the diffuse makes it
+    /// depend on `wo`; by default, [`Scattering::diffuse_reflectance`].
+    fn diffuse_albedo(&self, wo: Vec3A) -> Vec3A {
+        let _ = wo;
+        self.diffuse_reflectance()
+    }
 }
 
 /// A lambertian reflector of reflectance `r` around shading normal `n` (geometric normal `ng`

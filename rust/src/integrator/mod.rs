@@ -7,7 +7,8 @@
 //!   maximum depth, ambient occlusion (the paper's classic plus distribution ray tracing);
 //! - [`surface`]: the shading point at a hit (exact limit surface), shared by all;
 //! - [`direct`]: light from the scene's lights at a shading point;
-//! - [`hemisphere`]: hemisphere integrals (ambient occlusion) at a shading point.
+//! - [`hemisphere`]: hemisphere integrals (ambient occlusion) at a shading point;
+//! - [`bleed`]: one-bounce color bleeding, with the irradiance cache when asked.
 
 use glam::Vec3A;
 
@@ -16,16 +17,24 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::trace::TraceCounters;
 
+pub mod ao;
+pub mod bleed;
 pub mod classic;
 pub mod direct;
 pub mod hemisphere;
+pub mod path;
+pub mod select;
 pub mod surface;
 
+pub use ao::AmbientOcclusion;
+pub use bleed::ColorBleeding;
 pub use classic::DirectLighting;
+pub use path::PathTracer;
 pub use surface::{shading_point, tessellation_error, ShadingPoint};
 
-/// Everything one camera sample yields, one field per AOV.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// Everything one camera sample yields, one field per AOV. The default is all zeros except
+/// `element_id`, −1 (no face); see [`SampleValue::miss`] for a camera ray that hits nothing.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleValue {
     /// Linear RGB radiance.
     pub color: Vec3A,
@@ -50,8 +59,152 @@ pub struct SampleValue {
     /// Effective tessellation rate of that same hit, quads per side of its root subpatch: 1, 2,
     /// 4, 8, 16, or 16·2^depth where the subpatch was split.
     pub tess_rate: f32,
+    /// World-space position of the camera ray's hit (`position`; 0 where nothing is hit).
+    pub position: Vec3A,
+    /// The control (base) face of the mesh hit (Hydra's `elementId`; −1 for none).
+    pub element_id: f32,
+    /// The shading normal in camera space (Hydra's `Neye`: USD's camera looks down −z).
+    pub neye: Vec3A,
+    /// Diffuse reflectance seen from the camera at the hit (`albedo`): the BSDF's
+    /// [`crate::bsdf::Scattering::diffuse_albedo`] toward the camera.
+    pub albedo: Vec3A,
+    /// Radiance the camera sees emitted: emissive surfaces, and lights seen directly (a dome
+    /// as the background) — `emission`.
+    pub emission: Vec3A,
+    /// Direct light from the scene's lights reflected by the diffuse lobe at the camera ray's
+    /// hit (`directDiffuse`).
+    pub direct_diffuse: Vec3A,
+    /// Light from other surfaces (and, for the classic integrator, the ambient-occlusion sky)
+    /// reflected by the diffuse lobe at the camera ray's hit (`indirectDiffuse`).
+    pub indirect_diffuse: Vec3A,
+    /// Everything the non-diffuse lobes at the camera ray's hit reflect or refract: direct
+    /// light through glossy lobes, and whatever mirror, glass, glossy and refraction rays bring
+    /// back (`specular`).
+    pub specular: Vec3A,
 }
 
+impl Default for SampleValue {
+    fn default() -> Self {
+        SampleValue {
+            color: Vec3A::ZERO,
+            alpha: 0.0,
+            depth: 0.0,
+            normal: Vec3A::ZERO,
+            prim_id: 0.0,
+            instance_id: 0.0,
+            beam_width: 0.0,
+            tess_error: [0.0; 2],
+            ao: 0.0,
+            tess_rate: 0.0,
+            position: Vec3A::ZERO,
+            element_id: -1.0,
+            neye: Vec3A::ZERO,
+            albedo: Vec3A::ZERO,
+            emission: Vec3A::ZERO,
+            direct_diffuse: Vec3A::ZERO,
+            indirect_diffuse: Vec3A::ZERO,
+            specular: Vec3A::ZERO,
+        }
+    }
+}
+
+impl SampleValue {
+    /// The values of a camera ray that hits nothing: depth at the far clip `far`, ids −1, every
+    /// radiance 0.
+    pub fn miss(far: f32) -> Self {
+        SampleValue { depth: far, prim_id: -1.0, instance_id: -1.0, ..Default::default() }
+    }
+
+    /// Sets the AOVs that describe the surface a camera ray hit — alpha, depth, position,
+    /// `normal` (world, the shading normal `normal` facing the camera), `Neye`, and the ids —
+    /// the same way for every integrator.
+    pub fn set_hit(&mut self, scene: &Scene, hit: &crate::trace::Hit, normal: Vec3A) {
+        self.alpha = 1.0;
+        self.depth = scene.camera.depth(hit.p);
+        self.position = hit.p;
+        self.normal = normal;
+        // Normals go by the inverse transpose of camera-from-render: the transpose of
+        // render-from-camera's linear part.
+        let m = glam::Mat3A::from_mat4(scene.camera.render_from_camera);
+        self.neye = (m.transpose() * normal).normalize_or_zero();
+        self.prim_id = hit.patch as f32;
+        self.instance_id = hit.instance_id as f32;
+        self.element_id = scene.meshes.get(hit.mesh as usize).map_or(-1.0, |m| m.surface.patch_param(hit.patch as usize).base_face as f32);
+    }
+
+    /// Sets `color` to the sum of its parts: emission + direct diffuse + indirect diffuse +
+    /// specular (the identity the AOVs keep).
+    pub fn set_color_from_parts(&mut self) {
+        self.color = self.emission + self.direct_diffuse + self.indirect_diffuse + self.specular;
+    }
+
+    /// A copy whose averaged AOVs (colour and its parts, alpha, ao, albedo) are 0: what a pixel's
+    /// running sums start from, keeping sample 0's other values (depth, normal, ids: never
+    /// blends of two surfaces).
+    pub fn without_averaged(&self) -> Self {
+        SampleValue {
+            color: Vec3A::ZERO,
+            alpha: 0.0,
+            ao: 0.0,
+            albedo: Vec3A::ZERO,
+            emission: Vec3A::ZERO,
+            direct_diffuse: Vec3A::ZERO,
+            indirect_diffuse: Vec3A::ZERO,
+            specular: Vec3A::ZERO,
+            ..*self
+        }
+    }
+
+    /// Every averaged AOV is finite (a sample that is not is dropped whole, so the parts still
+    /// add up to the colour).
+    pub fn averaged_finite(&self) -> bool {
+        self.color.is_finite()
+            && self.alpha.is_finite()
+            && self.ao.is_finite()
+            && self.albedo.is_finite()
+            && self.emission.is_finite()
+            && self.direct_diffuse.is_finite()
+            && self.indirect_diffuse.is_finite()
+            && self.specular.is_finite()
+    }
+
+    /// Adds `v`'s averaged AOVs into these sums.
+    pub fn add_averaged(&mut self, v: &SampleValue) {
+        self.color += v.color;
+        self.alpha += v.alpha;
+        self.ao += v.ao;
+        self.albedo += v.albedo;
+        self.emission += v.emission;
+        self.direct_diffuse += v.direct_diffuse;
+        self.indirect_diffuse += v.indirect_diffuse;
+        self.specular += v.specular;
+    }
+
+    /// These sums times `inv` (1 / the number of samples summed) in the averaged AOVs.
+    pub fn averaged(&self, inv: f32) -> Self {
+        SampleValue {
+            color: self.color * inv,
+            alpha: self.alpha * inv,
+            ao: self.ao * inv,
+            albedo: self.albedo * inv,
+            emission: self.emission * inv,
+            direct_diffuse: self.direct_diffuse * inv,
+            indirect_diffuse: self.indirect_diffuse * inv,
+            specular: self.specular * inv,
+            ..*self
+        }
+    }
+
+    /// The non-averaged AOVs are finite (depth, normals, position, debug values).
+    pub fn geometry_finite(&self) -> bool {
+        self.depth.is_finite()
+            && self.normal.is_finite()
+            && self.neye.is_finite()
+            && self.position.is_finite()
+            && self.beam_width.is_finite()
+            && self.tess_error.iter().all(|e| e.is_finite())
+    }
+}
 
 /// What the render loop asks of an integrator: one camera sample's values, from any thread.
 pub trait Integrator: Sync {
@@ -61,4 +214,22 @@ pub trait Integrator: Sync {
     fn depth_of_field(&self) -> bool;
     /// The scene rendered.
     fn scene(&self) -> &Scene;
+    /// Work before the first pixel, run once on the render's thread pool: the irradiance
+    /// cache's records ([`crate::irradiance_cache`]), made in a fixed order so the image stays a
+    /// function of the seed. Returns the rays it traced. Default: nothing.
+    ///
+    /// # Errors
+    /// [`crate::error::RenderError::Cancelled`] through `progress`.
+    fn prepass(
+        &self,
+        _options: &crate::options::RenderOptions,
+        _progress: &dyn crate::progress::Progress,
+    ) -> Result<TraceCounters, crate::error::RenderError> {
+        Ok(TraceCounters::default())
+    }
+    /// The stats' `irradiance_cache` object (records, pre-pass rays, lookups), when the
+    /// integrator caches hemisphere integrals.
+    fn cache_stats(&self) -> Option<serde_json::Value> {
+        None
+    }
 }

@@ -11,10 +11,16 @@ use crate::trace::{Hit, Tracer};
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingPoint {
     pub p: Vec3A,
+    /// Unit geometric normal, facing the incoming ray.
     pub ng: Vec3A,
+    /// Unit shading normal (the limit surface's), in `ng`'s hemisphere.
     pub ns: Vec3A,
     pub dpdu: Vec3A,
     pub dpdv: Vec3A,
+    /// The ray arrived on the side the surface's normal points to (its outside: dP/du × dP/dv,
+    /// negated for a left-handed mesh). Refraction enters the material from the front and
+    /// leaves it from the back.
+    pub front: bool,
 }
 
 /// Evaluates the exact limit surface at the hit's (u, v) for shading (the paper: intersect the
@@ -56,16 +62,17 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
         // Degenerate derivatives (a collapsed edge, a pole): the triangle's normal is all we have.
         ns = hit.ng;
     }
-    let mut ng = hit.ng;
+    // The outward geometric normal: the triangle's, turned to the side of the outward shading
+    // normal (the winding of a tessellated triangle says nothing of a left-handed mesh).
+    let ng_out = if hit.ng.dot(ns) < 0.0 { -hit.ng } else { hit.ng };
+    let front = ng_out.dot(ray.d) <= 0.0;
     // Face the viewer: both normals on the side the ray came from, shading normal kept in the
     // geometric normal's hemisphere.
-    if ng.dot(ray.d) > 0.0 {
-        ng = -ng;
-    }
+    let ng = if front { ng_out } else { -ng_out };
     if ns.dot(ng) < 0.0 {
         ns = -ns;
     }
-    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv }
+    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front }
 }
 
 /// How far the tessellation hit is from the exact limit surface along the ray (world units):
@@ -123,4 +130,3 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
         fallback
     }
 }
-
