@@ -8,6 +8,7 @@
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <OpenImageIO/imagecache.h>
 #include <OpenImageIO/texture.h>
@@ -130,6 +131,8 @@ struct OiioTexSys::Impl {
   uint32_t capacity = 0;
   std::atomic<uint32_t> count{0};
   std::mutex open_mutex;
+  // Paths by handle (under `open_mutex`): whole-level reads go through the ImageCache by name.
+  std::vector<std::string> paths;
 
   ~Impl() {
     if (ts) TextureSystem::destroy(ts);
@@ -205,6 +208,7 @@ uint32_t OiioTexSys::open(rust::Str path_in) const {
       throw std::runtime_error(err.empty() ? "cannot be opened as a texture" : err);
     }
     m.table[n].store(h, std::memory_order_release);
+    m.paths.push_back(path);
     m.count.store(n + 1, std::memory_order_release);
     return n;
   } catch (const std::exception&) {
@@ -251,6 +255,56 @@ bool OiioTexSys::resolution(uint32_t handle, rust::Slice<int32_t> out) const noe
     return true;
   } catch (...) {
     return false;
+  }
+}
+
+rust::Vec<float> OiioTexSys::texels(uint32_t handle, uint32_t max_width, uint32_t channels,
+                                   rust::Slice<int32_t> dims) const {
+  try {
+    Impl& m = *impl;
+    if (dims.size() < 3) throw std::runtime_error("texels: dims needs 3 entries");
+    std::string path;
+    {
+      std::lock_guard<std::mutex> lock(m.open_mutex);
+      if (handle >= m.paths.size()) throw std::runtime_error("unknown texture handle");
+      path = m.paths[handle];
+    }
+    const OIIO::ustring name(path);
+    OIIO::ImageSpec spec;
+    if (!m.cache->get_imagespec(name, spec, 0, 0)) {
+      std::string err = one_line(m.cache->geterror());
+      throw std::runtime_error(err.empty() ? "cannot read the image header" : err);
+    }
+    // Down the MIP levels (real ones, or automip's emulated ones) until narrow enough.
+    int level = 0;
+    while (spec.width > int(std::max(max_width, 1u))) {
+      OIIO::ImageSpec next;
+      if (!m.cache->get_imagespec(name, next, 0, level + 1)) {
+        (void)m.cache->geterror();
+        break;
+      }
+      spec = next;
+      ++level;
+    }
+    const int nch = std::clamp(int(channels), 1, std::max(spec.nchannels, 1));
+    std::vector<float> buf(size_t(spec.width) * size_t(spec.height) * size_t(nch));
+    if (!m.cache->get_pixels(name, 0, level, spec.x, spec.x + spec.width, spec.y,
+                             spec.y + spec.height, spec.z, spec.z + std::max(spec.depth, 1), 0, nch,
+                             OIIO::TypeFloat, buf.data())) {
+      std::string err = one_line(m.cache->geterror());
+      throw std::runtime_error(err.empty() ? "cannot read the MIP level's pixels" : err);
+    }
+    rust::Vec<float> out;
+    out.reserve(buf.size());
+    for (float v : buf) out.push_back(v);
+    dims[0] = spec.width;
+    dims[1] = spec.height;
+    dims[2] = nch;
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while reading texels");
   }
 }
 

@@ -35,6 +35,11 @@ class OiioTexSys {
   bool sample(const OiioLookup& lookup, rust::Slice<float> out) const noexcept;
   // Resolution of the finest level into out[0..2]; false if unknown.
   bool resolution(uint32_t handle, rust::Slice<int32_t> out) const noexcept;
+  // The whole first MIP level at most `max_width` texels wide (the coarsest there is if none
+  // is), up to `channels` channels from channel 0, as floats, scanlines top first; its width,
+  // height and channel count into dims[0..3]. Throws naming the reason.
+  rust::Vec<float> texels(uint32_t handle, uint32_t max_width, uint32_t channels,
+                          rust::Slice<int32_t> dims) const;
   // The ImageCache's statistics, under mipray's names (see texture.cpp).
   rust::Vec<OiioStat> cache_stats() const;
   // One file's statistics (tiles and bytes read, re-reads, I/O time).

@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use mipray::texture::serde_json::{json, Map, Value};
-use mipray::texture::{FilterMode, Lookup, TextureError, TextureHandle, TextureSampler, Wrap};
+use mipray::texture::{texels_by_lookups, FilterMode, Lookup, Texels, TextureError, TextureHandle, TextureSampler, Wrap};
 
 use crate::ffi::bridge as ffi;
 
@@ -197,6 +197,27 @@ impl TextureSampler for OiioTextureSystem {
             return None;
         }
         Some([u32::try_from(r[0]).ok()?, u32::try_from(r[1]).ok()?])
+    }
+
+    /// The MIP level through the ImageCache (`get_pixels` of the first level at most
+    /// `max_width` wide, automip's emulated levels for un-MIP-mapped files). If that fails, one
+    /// lookup per texel (the trait's default), after one warning naming the file.
+    fn texels(&self, handle: TextureHandle, max_width: u32, channels: u32) -> Option<Texels> {
+        let mut dims = [0i32; 3];
+        match self.sys.texels(handle.index(), max_width.max(1), channels.clamp(1, 4), &mut dims) {
+            Ok(data) => {
+                let [w, h, c] = dims.map(|d| u32::try_from(d).unwrap_or(0));
+                if w == 0 || h == 0 || c == 0 || data.len() != (w * h * c) as usize {
+                    return None;
+                }
+                Some(Texels { width: w, height: h, channels: c, data })
+            }
+            Err(e) => {
+                let path = self.paths().get(handle.index() as usize).cloned().unwrap_or_else(|| format!("handle {}", handle.index()));
+                log::warn!("texture {path}: cannot read a MIP level ({}); reading it by lookups", e.what());
+                texels_by_lookups(self, handle, max_width, channels)
+            }
+        }
     }
 
     fn filter_mode(&self) -> FilterMode {
