@@ -24,7 +24,7 @@ pub fn default_aov_descriptor(name: &str) -> Option<AovDescriptor> {
         channels,
         format: default_format(name),
         clear_value: match name {
-            "primId" | "instanceId" => -1.0,
+            "primId" | "instanceId" | "elementId" => -1.0,
             _ => 0.0,
         },
         file_channels: file_channel_names(name, channels),

@@ -33,12 +33,15 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "aoSamples", default: "0", description: "ambient-occlusion rays per shading point (0: off)" },
     SettingDescriptor { key: "aoDistance", default: "inf", description: "ambient-occlusion ray length, scene units" },
     SettingDescriptor { key: "aoIntensity", default: "1", description: "radiance of the white sky ambient occlusion lights with" },
-    SettingDescriptor { key: "shadowSamples", default: "4", description: "shadow rays per shading point toward each area, dome or angular light" },
+    SettingDescriptor { key: "shadowSamples", default: "4", description: "light samples per shading point, shared among the lights by importance (plus as many BSDF samples)" },
+    SettingDescriptor { key: "glossySamples", default: "4", description: "glossy rays per shading point at a camera ray's first non-mirror hit (1 further along)" },
     SettingDescriptor { key: "maxDepth", default: "4", description: "longest chain of specular bounces (and path length for path tracing)" },
     SettingDescriptor { key: "integrator", default: "auto", description: "auto (what the scene calls for), direct, ao, colorBleeding or path" },
     SettingDescriptor { key: "indirectSamples", default: "16", description: "hemisphere rays per shading point for one-bounce indirect diffuse (color bleeding)" },
     SettingDescriptor { key: "irradianceCache", default: "0", description: "interpolate ambient occlusion and irradiance with gradients (the paper's 5.1): 0 or 1" },
     SettingDescriptor { key: "irradianceCacheError", default: "0.2", description: "the irradiance cache's error bound (Ward's a); smaller is more accurate" },
+    SettingDescriptor { key: "russianRouletteDepth", default: "3", description: "path tracing: bounces before Russian roulette may end a path (maxDepth or more: never)" },
+    SettingDescriptor { key: "progressive", default: "0", description: "render in passes of 1, 2, 4, ... samples per pixel, reporting each; the final image is the same: 0 or 1" },
 ];
 
 /// The settings a render was asked for, validated.
@@ -61,10 +64,13 @@ pub struct RenderSettings {
     pub ao_intensity: f32,
     pub max_depth: u32,
     pub shadow_samples: u32,
+    pub glossy_samples: u32,
     pub integrator: mipray::options::IntegratorKind,
     pub indirect_samples: u32,
     pub irradiance_cache: bool,
     pub irradiance_cache_error: f32,
+    pub russian_roulette_depth: u32,
+    pub progressive: bool,
 }
 
 impl Default for RenderSettings {
@@ -86,10 +92,13 @@ impl Default for RenderSettings {
             ao_intensity: 1.0,
             max_depth: 4,
             shadow_samples: 4,
+            glossy_samples: 4,
             integrator: mipray::options::IntegratorKind::Auto,
             indirect_samples: 16,
             irradiance_cache: false,
             irradiance_cache_error: 0.2,
+            russian_roulette_depth: 3,
+            progressive: false,
         }
     }
 }
@@ -190,6 +199,13 @@ impl RenderSettings {
                     }
                     s.shadow_samples = x as u32;
                 }
+                "glossySamples" => {
+                    let x = as_f64(k, v)?;
+                    if !(1.0..=65_536.0).contains(&x) {
+                        return Err(bad(k, format!("{x} must be within 1..=65536")));
+                    }
+                    s.glossy_samples = x as u32;
+                }
                 "integrator" => {
                     let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
                     s.integrator = mipray::options::IntegratorKind::from_name(name).ok_or_else(|| {
@@ -210,11 +226,22 @@ impl RenderSettings {
                     }
                     s.irradiance_cache_error = x as f32;
                 }
+                "russianRouletteDepth" => s.russian_roulette_depth = as_f64(k, v)?.clamp(0.0, 64.0) as u32,
+                "progressive" => {
+                    s.progressive = match v {
+                        Value::Bool(b) => *b,
+                        _ => as_f64(k, v)? != 0.0,
+                    }
+                }
                 _ => {
                     let keys: Vec<&str> = SETTINGS.iter().map(|d| d.key).collect();
                     return Err(bad(k, format!("unknown setting; valid settings: {}", keys.join(", "))));
                 }
             }
+        }
+        // Settings that only make sense together, checked once all are read.
+        if s.integrator == mipray::options::IntegratorKind::Ao && s.ao_samples == 0 {
+            return Err(bad("integrator", "ao needs aoSamples > 0 (ambient-occlusion rays per shading point)"));
         }
         Ok(s)
     }
@@ -256,10 +283,13 @@ impl RenderSettings {
             ao_intensity: self.ao_intensity,
             max_depth: self.max_depth,
             shadow_samples: self.shadow_samples,
+            glossy_samples: self.glossy_samples,
             integrator: self.integrator,
             indirect_samples: self.indirect_samples,
             irradiance_cache: self.irradiance_cache,
             irradiance_cache_error: self.irradiance_cache_error,
+            russian_roulette_depth: self.russian_roulette_depth,
+            progressive: self.progressive,
         }
     }
 }

@@ -60,7 +60,7 @@ impl LightPrim {
         let color = Vec3A::from(d.color.map(f));
         let m = &d.transform;
         let mut l = match &self.area {
-            None => Light::usd_distant(&self.path, m, f(d.intensity), f(d.exposure), color, f(d.angle_deg)),
+            None => Light::usd_distant(&self.path, m, f(d.intensity), f(d.exposure), color, f(d.angle_deg), d.normalize),
             Some(kind) => {
                 let center = m.transform_point3a(Vec3A::ZERO);
                 let normal = m.transform_vector3a(Vec3A::NEG_Z).normalize_or(Vec3A::NEG_Z);
@@ -87,11 +87,13 @@ impl LightPrim {
                     },
                     AreaKind::Dome { texture } => {
                         let env = texture.as_ref().zip(textures).and_then(|(file, sampler)| match sampler.handle(file) {
-                            Ok(handle) => Some(mipray::light::EnvTexture {
-                                sampler: sampler.clone(),
-                                texture: handle,
-                                light_from_render: glam::Mat3A::from_mat4(*m).inverse(),
-                            }),
+                            // The light's rotation only: directions, and densities over them, must
+                            // not be distorted by a scale.
+                            Ok(handle) => Some(mipray::light::EnvTexture::new(
+                                sampler.clone(),
+                                handle,
+                                glam::Mat3A::from_quat(m.to_scale_rotation_translation().1),
+                            )),
                             Err(e) => {
                                 log::warn!("{}: cannot read dome texture {file}: {}; lighting with its colour", self.path, e.message);
                                 None

@@ -1,8 +1,11 @@
-//! Materials. For now a mesh's resolved diffuse color becomes a lambertian material; material
-//! Sprims with UsdPreviewSurface networks come with the light-transport work.
+//! Materials. A mesh bound to a UsdPreviewSurface carries its inputs ([`SurfaceInputs`]: the
+//! constants as authored and a [`TextureInput`] per textured input); the render delegate turns
+//! them into the core's [`Material`], clamped into range and with its textures opened. A mesh
+//! with only a resolved diffuse color (display color, no material) becomes a lambertian
+//! material.
 
 use glam::Vec3A;
-use mipray::material::Material;
+use mipray::material::{Input, Material, PreviewSurface};
 
 /// The material for a mesh's resolved albedo and mirror reflectance; warns once per mesh when
 /// values were clamped.
@@ -66,4 +69,80 @@ impl TextureInput {
     pub fn lookup(&self) -> mipray::texture::Lookup {
         mipray::texture::Lookup { first_channel: self.channel, wrap_s: self.wrap_s, wrap_t: self.wrap_t, fill: 0.0 }
     }
+
+    /// `(scale, bias, fallback)` as the texture feeds `input`: a colour input takes the rgb
+    /// components; a float input (or the normal's single-channel outputs) reads one channel,
+    /// the connected output's, so its scale, bias and fallback are that channel's, splatted.
+    pub fn affine(&self, input: Input) -> (Vec3A, Vec3A, Vec3A) {
+        let rgb = |v: &[f32; 4]| Vec3A::new(v[0], v[1], v[2]);
+        if is_color(input) || input == Input::Normal {
+            (rgb(&self.scale), rgb(&self.bias), rgb(&self.fallback))
+        } else {
+            let c = (self.channel as usize).min(3);
+            (Vec3A::splat(self.scale[c]), Vec3A::splat(self.bias[c]), Vec3A::splat(self.fallback[c]))
+        }
+    }
+}
+
+/// A mesh's UsdPreviewSurface as the scene delegate read it: every constant input as authored
+/// (out-of-range values included: [`PreviewSurface::clamped`] brings them into range when the
+/// render delegate builds the core material, with one warning naming the material) and the
+/// UsdUVTextures feeding inputs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceInputs {
+    /// The material's prim path: messages name it.
+    pub name: String,
+    /// Constant inputs; an input fed by a texture keeps its constant for nothing (the texture's
+    /// value replaces it where the lookup succeeds, its `fallback` where it cannot be read).
+    pub surface: PreviewSurface,
+    /// Textured inputs, at most one per input, all reading the mesh's `st` primvar
+    /// ([`crate::mesh::MeshData::st`]).
+    pub textures: Vec<(Input, TextureInput)>,
+}
+
+impl SurfaceInputs {
+    /// UsdPreviewSurface's fallbacks everywhere, no textures.
+    pub fn new(name: impl Into<String>) -> Self {
+        SurfaceInputs { name: name.into(), surface: PreviewSurface::default(), textures: Vec::new() }
+    }
+}
+
+/// Whether `input` is a colour (three channels) rather than a float (one channel) or the normal.
+pub fn is_color(input: Input) -> bool {
+    matches!(input, Input::DiffuseColor | Input::EmissiveColor | Input::SpecularColor)
+}
+
+/// Sets `input` of `surface` to `value`: colours take all three components, floats the first.
+/// The normal has no constant (its fallback is the surface's own normal), so it is left alone.
+pub fn set_input(surface: &mut PreviewSurface, input: Input, value: Vec3A) {
+    match input {
+        Input::DiffuseColor => surface.diffuse_color = value,
+        Input::EmissiveColor => surface.emissive_color = value,
+        Input::SpecularColor => surface.specular_color = value,
+        Input::Metallic => surface.metallic = value.x,
+        Input::Roughness => surface.roughness = value.x,
+        Input::Clearcoat => surface.clearcoat = value.x,
+        Input::ClearcoatRoughness => surface.clearcoat_roughness = value.x,
+        Input::Opacity => surface.opacity = value.x,
+        Input::Ior => surface.ior = value.x,
+        Input::Normal => {}
+    }
+}
+
+/// The input of UsdPreviewSurface named `name` that a texture can feed, if any.
+pub fn input_from_usd(name: &str) -> Option<Input> {
+    [
+        Input::DiffuseColor,
+        Input::EmissiveColor,
+        Input::SpecularColor,
+        Input::Metallic,
+        Input::Roughness,
+        Input::Clearcoat,
+        Input::ClearcoatRoughness,
+        Input::Opacity,
+        Input::Ior,
+        Input::Normal,
+    ]
+    .into_iter()
+    .find(|i| i.usd_name() == name)
 }

@@ -11,7 +11,7 @@ use mipray_bridge::OsdSurface;
 
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
-use crate::material::{FaceAlbedo, TextureInput};
+use crate::material::{FaceAlbedo, SurfaceInputs, TextureInput};
 use mipray::texture::Primvar2;
 
 /// What the scene delegate knows about a mesh. Object space; `transform` is object-to-world
@@ -22,10 +22,14 @@ pub struct MeshData {
     pub points: Vec<[f32; 3]>,
     pub transform: Mat4,
     pub double_sided: bool,
-    /// Linear RGB diffuse reflectance (the resolved material's diffuseColor or displayColor).
+    /// Linear RGB diffuse reflectance (the resolved material's diffuseColor or displayColor);
+    /// used when there is no [`MeshData::material`].
     pub albedo: [f32; 3],
-    /// Reflectance of a perfect mirror layer (UsdPreviewSurface metallic with roughness 0).
+    /// Normal-incidence reflectance of a perfect mirror layer over `albedo` (callers without a
+    /// material); used when there is no [`MeshData::material`].
     pub mirror: [f32; 3],
+    /// The bound UsdPreviewSurface's inputs; replaces `albedo`, `mirror` and `diffuse_texture`.
+    pub material: Option<SurfaceInputs>,
     /// Object units; `None` uses the procedural displacement's own bound, else the render
     /// setting.
     pub displacement_bound: Option<f32>,
@@ -39,7 +43,7 @@ pub struct MeshData {
     pub face_albedo: Option<FaceAlbedo>,
     /// The `st` primvar the textures read (face-varying through OpenSubdiv).
     pub st: Option<Primvar2>,
-    /// `diffuseColor` from a texture (replaces `albedo`).
+    /// `diffuseColor` from a texture (replaces `albedo`) for a mesh without a `material`.
     pub diffuse_texture: Option<TextureInput>,
     /// `displacement` from a texture (replaces the procedural displacement).
     pub displacement_texture: Option<TextureInput>,
@@ -55,6 +59,7 @@ impl Default for MeshData {
             double_sided: false,
             albedo: [0.18; 3],
             mirror: [0.0; 3],
+            material: None,
             displacement_bound: None,
             displacement: None,
             prototype: false,
@@ -96,6 +101,9 @@ pub struct MeshPrim {
     pub error: Option<String>,
     /// The mesh's key in the delegate's geometry cache, fixed for the prim's life.
     pub cache_id: u32,
+    /// Its world transform over the camera's shutter, when it moves within it (set by
+    /// [`crate::render_delegate::Delegate::set_motion`]); replaces `data.transform` for renders.
+    pub motion: Option<std::sync::Arc<mipray::motion::MotionTransform>>,
 }
 
 impl MeshPrim {
@@ -109,6 +117,7 @@ impl MeshPrim {
             generation: 0,
             error: None,
             cache_id,
+            motion: None,
         }
     }
 
@@ -129,6 +138,7 @@ impl MeshPrim {
             || self.data.double_sided != new.double_sided
             || self.data.face_albedo != new.face_albedo
             || self.data.diffuse_texture != new.diffuse_texture
+            || self.data.material != new.material
         {
             d = d | DirtyBits::MATERIAL;
         }

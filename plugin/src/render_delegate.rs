@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 
 use mipray::displacement::{DisplacementShader, TextureDisplacement};
-use mipray::material::TexturedColor;
+use mipray::material::{Input, Material, TexturedColor};
 use mipray::texture::TextureSampler;
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
@@ -22,7 +22,7 @@ use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
 use crate::light::{AreaKind, DistantLightData, LightPrim};
-use crate::material::mesh_material;
+use crate::material::{mesh_material, set_input, SurfaceInputs, TextureInput};
 use crate::mesh::{MeshData, MeshPrim};
 
 /// Rprim types the delegate renders.
@@ -90,6 +90,24 @@ impl RenderDelegate {
         Ok(())
     }
 
+    /// Sets a mesh's transform over the shutter: `keys` at shutter times in [0, 1] (0 = open).
+    /// Keys that do not move (fewer than two, or all equal) clear the motion.
+    ///
+    /// # Errors
+    /// No mesh at `path`, or a key that is not finite.
+    pub fn set_motion(&mut self, path: &str, keys: Vec<mipray::motion::MotionKey>) -> Result<(), DelegateError> {
+        let m = self.meshes.get_mut(path).ok_or_else(|| DelegateError::prim(path, "set_motion: no mesh at this path"))?;
+        if let Some(k) = keys.iter().find(|k| !(k.time.is_finite() && k.render_from_object.is_finite())) {
+            return Err(DelegateError::prim(path, format!("motion key at shutter time {} is not finite", k.time)));
+        }
+        let motion = mipray::motion::MotionTransform::new(keys).map(std::sync::Arc::new);
+        if m.motion != motion {
+            m.motion = motion;
+            m.dirty = m.dirty | DirtyBits::TRANSFORM;
+        }
+        Ok(())
+    }
+
     /// Inserts or replaces an instancer. Its prototypes need not exist yet: they are looked up
     /// when a render pass syncs.
     pub fn set_instancer(&mut self, path: &str, data: InstancerData) {
@@ -133,8 +151,11 @@ impl RenderDelegate {
     /// # Errors
     /// OpenImageIO could not start a texture system.
     pub fn prepare_textures(&mut self, options: OiioTextureOptions) -> Result<(), DelegateError> {
-        let needed = self.meshes.values().any(|m| m.data.diffuse_texture.is_some() || m.data.displacement_texture.is_some())
-            || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
+        let needed = self.meshes.values().any(|m| {
+            m.data.diffuse_texture.is_some()
+                || m.data.displacement_texture.is_some()
+                || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
+        }) || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
         if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
             return Ok(());
         }
@@ -242,8 +263,16 @@ impl RenderDelegate {
             let Some((path, m)) = self.meshes.get_key_value(path) else { return };
             let slot = *index.entry(path.as_str()).or_insert_with(|| self.core_mesh(m, default_displacement_bound, scene));
             if let Some(idx) = slot {
-                // Prototype meshes sit in their prototype's space: instance × mesh transform.
-                scene.add_instance(idx, transform * m.data.transform);
+                match &m.motion {
+                    // Only a mesh placed on its own moves (instancers' motion is not read).
+                    Some(motion) if transform == Mat4::IDENTITY => {
+                        scene.add_moving_instance(idx, (**motion).clone());
+                    }
+                    // Prototype meshes sit in their prototype's space: instance × mesh transform.
+                    _ => {
+                        scene.add_instance(idx, transform * m.data.transform);
+                    }
+                }
             }
         };
         for m in self.meshes.values().filter(|m| !m.data.prototype) {
@@ -259,29 +288,59 @@ impl RenderDelegate {
         Ok(scene)
     }
 
-    /// A textured colour for `input`, or `None` (warned once, naming prim and file) when the
-    /// texture cannot be read.
-    fn textured_color(&self, path: &str, input: &crate::material::TextureInput) -> Option<TexturedColor> {
-        let sampler = self.sampler()?;
-        match sampler.handle(&input.file) {
-            Ok(texture) => Some(TexturedColor {
-                sampler,
-                texture,
-                path: input.file.clone(),
-                lookup: input.lookup(),
-                scale: glam::Vec3A::new(input.scale[0], input.scale[1], input.scale[2]),
-                bias: glam::Vec3A::new(input.bias[0], input.bias[1], input.bias[2]),
-                fallback: glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]),
-                st_channel: 0,
-            }),
-            Err(e) => {
-                self.warn_once(
-                    format!("{path} {}", input.file),
-                    format!("{path}: cannot read diffuseColor texture {}: {}; using its fallback", input.file, e.message),
-                );
-                None
+    /// The texture `tex` feeding UsdPreviewSurface input `input`, or `None` (warned once,
+    /// naming prim, input and file) when the texture cannot be read. Float inputs read the
+    /// connected output's channel: scale, bias and fallback are that channel's.
+    fn textured_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+        let problem = match self.sampler() {
+            // prepare_textures makes a texture system whenever a mesh has a texture input.
+            None => "no texture system".to_string(),
+            Some(sampler) => match sampler.handle(&tex.file) {
+                Ok(texture) => {
+                    let (scale, bias, fallback) = tex.affine(input);
+                    return Some(TexturedColor {
+                        sampler,
+                        texture,
+                        path: tex.file.clone(),
+                        lookup: tex.lookup(),
+                        scale,
+                        bias,
+                        fallback,
+                        st_channel: 0,
+                    });
+                }
+                Err(e) => e.message,
+            },
+        };
+        self.warn_once(
+            format!("{path} {}", tex.file),
+            format!("{path}: cannot read {} texture {}: {problem}; using its fallback", input.usd_name(), tex.file),
+        );
+        None
+    }
+
+    /// The core material of a mesh bound to a UsdPreviewSurface: its inputs clamped into range
+    /// (one warning per material naming the inputs), a [`TexturedColor`] per readable textured
+    /// input, and for an unreadable one the texture's `fallback` as the constant, as
+    /// UsdUVTexture defines it.
+    fn preview_material(&self, path: &str, inputs: &SurfaceInputs) -> Material {
+        let mut surface = inputs.surface;
+        let mut textures = Vec::new();
+        for (input, tex) in &inputs.textures {
+            match self.textured_color(path, *input, tex) {
+                Some(t) => textures.push((*input, t)),
+                None => set_input(&mut surface, *input, tex.affine(*input).2),
             }
         }
+        let (mut material, clamped) = Material::preview_surface(inputs.name.as_str(), surface);
+        if !clamped.is_empty() {
+            self.warn_once(
+                format!("clamped {}", inputs.name),
+                format!("{}: UsdPreviewSurface inputs out of range, clamped: {}", inputs.name, clamped.join(", ")),
+            );
+        }
+        material.textures = textures;
+        material
     }
 
     /// A texture displacement for `input`, or `None` (warned once) when unreadable.
@@ -310,15 +369,20 @@ impl RenderDelegate {
     /// synced surface (it failed to sync, or was never synced) and is left out.
     fn core_mesh(&self, m: &MeshPrim, default_displacement_bound: f32, scene: &mut Scene) -> Option<usize> {
         let surface = m.surface.as_ref()?;
-        let mut material = mesh_material(&m.path, m.data.albedo, m.data.mirror);
-        if let Some(input) = &m.data.diffuse_texture {
-            match self.textured_color(&m.path, input) {
-                Some(t) => material.textures.push((mipray::material::Input::DiffuseColor, t)),
-                // Unreadable: the input's fallback value, as UsdUVTexture says.
-                None => material.surface.diffuse_color =
-                    glam::Vec3A::new(input.fallback[0], input.fallback[1], input.fallback[2]).clamp(glam::Vec3A::ZERO, glam::Vec3A::ONE),
+        let material = match &m.data.material {
+            Some(inputs) => self.preview_material(&m.path, inputs),
+            None => {
+                let mut material = mesh_material(&m.path, m.data.albedo, m.data.mirror);
+                if let Some(input) = &m.data.diffuse_texture {
+                    match self.textured_color(&m.path, Input::DiffuseColor, input) {
+                        Some(t) => material.textures.push((Input::DiffuseColor, t)),
+                        // Unreadable: the input's fallback value, as UsdUVTexture says.
+                        None => material.surface.diffuse_color = mipray::material::clamp_color(input.affine(Input::DiffuseColor).2),
+                    }
+                }
+                material
             }
-        }
+        };
         let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
         mesh.material = mat;

@@ -1,6 +1,9 @@
 //! The render pass: syncs the delegate, renders from a camera into render buffers, with
-//! progress and cancel.
+//! progress and cancel. With the `progressive` setting the buffers are also handed over after
+//! each pass of 1, 2, 4, … samples per pixel ([`RenderPass::execute_with_updates`]), as Hydra's
+//! render buffers are read by a viewer while the render converges.
 
+use mipray::film::Film;
 use mipray::progress::Progress;
 use mipray::render::render_with_cache;
 use serde_json::Value;
@@ -35,6 +38,27 @@ impl RenderPass {
     /// A missing camera, bad settings, or cancellation. Broken prims are not errors of the pass:
     /// they are returned in [`PassResult::prim_errors`].
     pub fn execute(&self, delegate: &mut RenderDelegate, progress: &dyn Progress) -> Result<PassResult, DelegateError> {
+        self.render(delegate, progress)
+    }
+
+    /// As [`RenderPass::execute`], handing `on_pass` the render buffers after every pass (the
+    /// AOVs asked for, averaged over the samples so far). Called between passes, in order, from
+    /// a render thread; the last call (`converged`) holds the finished image. Cancelling through
+    /// `progress` after a pass keeps that pass's buffers with the caller.
+    ///
+    /// # Errors
+    /// As [`RenderPass::execute`].
+    pub fn execute_with_updates(
+        &self,
+        delegate: &mut RenderDelegate,
+        progress: &dyn Progress,
+        on_pass: &(dyn Fn(PassUpdate) + Sync),
+    ) -> Result<PassResult, DelegateError> {
+        let total = self.settings.samples;
+        self.render(delegate, &Updates { inner: progress, on_pass, total })
+    }
+
+    fn render(&self, delegate: &mut RenderDelegate, progress: &dyn Progress) -> Result<PassResult, DelegateError> {
         let prim_errors = delegate.sync();
         delegate.prepare_textures(self.settings.texture_options())?;
         let scene = delegate.build_scene(&self.camera, self.settings.displacement_bound)?;
@@ -46,5 +70,46 @@ impl RenderPass {
             obj.insert("prim_errors".into(), Value::from(prim_errors.iter().map(|e| e.to_string()).collect::<Vec<_>>()));
         }
         Ok(PassResult { buffers: buffers_from_film(out.film), stats, prim_errors })
+    }
+}
+
+/// The image after one pass of a render.
+#[derive(Clone, Debug)]
+pub struct PassUpdate {
+    /// Samples per pixel so far.
+    pub samples: u32,
+    /// The last pass: these buffers are the finished image (Hydra's `IsConverged`).
+    pub converged: bool,
+    /// The AOVs asked for, in the pass's order.
+    pub buffers: Vec<RenderBuffer>,
+}
+
+/// Forwards a render's progress to the caller's, and each finished pass as render buffers.
+struct Updates<'a> {
+    inner: &'a dyn Progress,
+    on_pass: &'a (dyn Fn(PassUpdate) + Sync),
+    total: u32,
+}
+
+impl Progress for Updates<'_> {
+    fn start(&self, total: u64) {
+        self.inner.start(total);
+    }
+
+    fn advance(&self, n: u64) {
+        self.inner.advance(n);
+    }
+
+    fn finish(&self) {
+        self.inner.finish();
+    }
+
+    fn cancelled(&self) -> bool {
+        self.inner.cancelled()
+    }
+
+    fn pass_finished(&self, samples: u32, film: &Film) {
+        self.inner.pass_finished(samples, film);
+        (self.on_pass)(PassUpdate { samples, converged: samples >= self.total, buffers: buffers_from_film(film.clone()) });
     }
 }

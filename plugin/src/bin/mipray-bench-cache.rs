@@ -39,7 +39,7 @@ fn usage() -> ! {
 
 fn parse(args: &[String]) -> Args {
     let mut a =
-        Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 1, grid: (24, 20), face_res: 13, configs: None };
+        Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 3, grid: (24, 20), face_res: 13, configs: None };
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
@@ -335,14 +335,21 @@ fn markdown(doc: &Value) -> String {
     s
 }
 
-/// The targets, checked on the 30 MB rows.
+/// The targets, checked on the 30 MB rows (without a single-resolution row, e.g. with
+/// `--configs unbounded,multires:30`, the first target reads "not run").
 fn targets(rows: &[Value]) -> String {
     let find = |mode: &str, mb: f64| rows.iter().find(|r| r["mode"] == mode && (r["budget_mb"].as_f64().unwrap_or(-1.0) - mb).abs() < 1e-9);
-    let (Some(multi), Some(single), Some(unb)) = (find("multires", 30.0), find("single", 30.0), find("unbounded", 0.0)) else {
+    let (Some(multi), Some(unb)) = (find("multires", 30.0), find("unbounded", 0.0)) else {
         return String::new();
     };
     let rv = |r: &Value| r["stats"]["geometry_cache"]["recomputed_vertices"].as_f64().unwrap_or(0.0);
-    let ratio = rv(single) / rv(multi).max(1.0);
+    let (ratio_text, ratio_ok) = match find("single", 30.0) {
+        Some(single) => {
+            let ratio = rv(single) / rv(multi).max(1.0);
+            (format!("single/multires = {ratio:.0}×"), if ratio >= 20.0 { "met" } else { "NOT met" })
+        }
+        None => ("single not run".to_string(), "—"),
+    };
     let min_hit = multi["stats"]["geometry_cache"]["tiers"]
         .as_array()
         .map(|t| {
@@ -357,9 +364,9 @@ fn targets(rows: &[Value]) -> String {
     let allowed = (base + 30e6 + bvh) * 1.1;
     let peak = multi["stats"]["memory"]["peak_rss_bytes"].as_f64().unwrap_or(0.0);
     let ok = |b: bool| if b { "met" } else { "NOT met" };
+    let rest = peak - base - bvh - 30e6;
     format!(
-        "## Targets at 30 MB\n\n| target | measured | |\n|---|---|---|\n| multires recomputes ≤ 1/20 of single's vertices | single/multires = {ratio:.0}× | {} |\n| hit rate ≥ 99.5% in every tier | lowest {:.3}% | {} |\n| wall time ≤ 1.3 × unbounded | {tratio:.2}× | {} |\n| peak RSS ≤ 1.1 × (base {:.0} MB + budget 30 MB + BVH and subpatch bounds {:.0} MB) = {:.0} MB | {:.0} MB | {} |\n| multires image bit-identical to unbounded | {} | {} |\n",
-        ok(ratio >= 20.0),
+        "## Targets at 30 MB\n\n| target | measured | |\n|---|---|---|\n| multires recomputes ≤ 1/20 of single's vertices | {ratio_text} | {ratio_ok} |\n| hit rate ≥ 99.5% in every tier | lowest {:.3}% | {} |\n| wall time ≤ 1.3 × unbounded | {tratio:.2}× | {} |\n| peak RSS ≤ 1.1 × (base {:.0} MB + budget 30 MB + BVH and subpatch bounds {:.0} MB) = {:.0} MB | {:.0} MB | {} |\n| multires image bit-identical to unbounded | {} | {} |\n\nThe multires peak at 30 MB is base {:.0} MB + BVH and subpatch bounds {:.0} MB + the cache's 30 MB as the budget counts it (the paper's 12 bytes a vertex, plus the two error floats and a fine grid's sub-boxes) + {:.0} MB more: the cache's bookkeeping (LRU nodes, hash index, shared vertex blocks' headers; see the `geometry_cache` module docs), the allocator's slack and the render's own working memory.\n",
         min_hit * 100.0,
         ok(min_hit >= 0.995),
         ok(tratio <= 1.3),
@@ -370,5 +377,8 @@ fn targets(rows: &[Value]) -> String {
         ok(peak <= allowed),
         multi["bit_identical_to_unbounded"],
         ok(multi["bit_identical_to_unbounded"].as_bool() == Some(true)),
+        base / 1e6,
+        bvh / 1e6,
+        rest / 1e6,
     )
 }
