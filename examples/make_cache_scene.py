@@ -171,6 +171,7 @@ def cache_scene(
     sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
     sun.CreateIntensityAttr(2.5)
     sun.CreateAngleAttr(1.0)
+    sun.CreateNormalizeAttr(True)  # intensity is the irradiance, whatever the angle
     sun.CreateColorAttr(Gf.Vec3f(1.0, 0.96, 0.9))
     UsdLux.ShadowAPI.Apply(sun.GetPrim()).CreateShadowEnableAttr(True)
     sun.AddRotateXYZOp().Set(Gf.Vec3f(-50.0, -35.0, 0.0))

@@ -192,6 +192,7 @@ def subdiv_showcase(path: Path) -> None:
     sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
     sun.CreateIntensityAttr(3.0)
     sun.CreateAngleAttr(1.0)
+    sun.CreateNormalizeAttr(True)  # intensity is the irradiance, whatever the angle
     sun.CreateColorAttr(Gf.Vec3f(1.0, 0.96, 0.9))
     UsdLux.ShadowAPI.Apply(sun.GetPrim()).CreateShadowEnableAttr(True)
     sun.AddRotateXYZOp().Set(Gf.Vec3f(-55.0, -35.0, 0.0))
@@ -199,6 +200,7 @@ def subdiv_showcase(path: Path) -> None:
     # Fill from the right, no shadows, so shadowed sides are not black.
     fill = UsdLux.DistantLight.Define(stage, "/World/Lights/Fill")
     fill.CreateIntensityAttr(0.6)
+    fill.CreateNormalizeAttr(True)
     fill.CreateColorAttr(Gf.Vec3f(0.85, 0.9, 1.0))
     UsdLux.ShadowAPI.Apply(fill.GetPrim()).CreateShadowEnableAttr(False)
     fill.AddRotateXYZOp().Set(Gf.Vec3f(-20.0, 60.0, 0.0))
@@ -241,11 +243,13 @@ def _sun_and_fill(stage: Usd.Stage, key: float = 3.0) -> None:
     sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
     sun.CreateIntensityAttr(key)
     sun.CreateAngleAttr(1.0)
+    sun.CreateNormalizeAttr(True)  # intensity is the irradiance, whatever the angle
     sun.CreateColorAttr(Gf.Vec3f(1.0, 0.96, 0.9))
     UsdLux.ShadowAPI.Apply(sun.GetPrim()).CreateShadowEnableAttr(True)
     sun.AddRotateXYZOp().Set(Gf.Vec3f(-50.0, -35.0, 0.0))
     fill = UsdLux.DistantLight.Define(stage, "/World/Lights/Fill")
     fill.CreateIntensityAttr(0.6)
+    fill.CreateNormalizeAttr(True)
     fill.CreateColorAttr(Gf.Vec3f(0.85, 0.9, 1.0))
     UsdLux.ShadowAPI.Apply(fill.GetPrim()).CreateShadowEnableAttr(False)
     fill.AddRotateXYZOp().Set(Gf.Vec3f(-20.0, 60.0, 0.0))

@@ -89,8 +89,13 @@ class FakeRenderDelegate:
         st_interpolation: str = "faceVarying",
         diffuse_texture: dict[str, object] | None = None,
         displacement_texture: dict[str, object] | None = None,
+        material: dict[str, object] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
+        textures = material.get("textures", {}) if material is not None else {}
+        for tex in textures.values():  # type: ignore[attr-defined]
+            if "file" not in tex:
+                raise ValueError(f"{path}: a texture needs a file")
         if st_values is not None:
             _check_array(path, "st_values", st_values, np.float32, 2)
         for tex in (diffuse_texture, displacement_texture):
@@ -169,6 +174,18 @@ class FakeRenderDelegate:
         texture: str | None = None,
     ) -> None:
         self._set("set_light", path, dict(locals_without_self(locals())))
+
+    def set_motion(
+        self, path: str, times: NDArray[np.float32], transforms: NDArray[np.float64]
+    ) -> None:
+        call = self.prims.get(path)
+        if call is None or call.method != "set_mesh":
+            raise ValueError(f"{path}: set_motion: no mesh at this path")
+        _check_array(path, "times", times, np.float32, 1)
+        _check_array(path, "transforms", transforms, np.float64, 3)
+        if len(times) != len(transforms):
+            raise ValueError(f"{path}: {len(times)} motion times for {len(transforms)} transforms")
+        self.calls.append(Call("set_motion", path, {"times": times, "transforms": transforms}))
 
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
         call = self.prims.get(path)

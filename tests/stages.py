@@ -66,6 +66,7 @@ def add_distant_light(stage: Usd.Stage, path: str, intensity: float = 2.0) -> Us
     """A distant light tilted 45° down."""
     light = UsdLux.DistantLight.Define(stage, path)
     light.CreateIntensityAttr(intensity)
+    light.CreateNormalizeAttr(True)  # intensity = irradiance facing the light (UsdLux)
     light.AddRotateXOp().Set(-45.0)
     return light
 

@@ -11,6 +11,7 @@ import pytest
 from pxr import Gf, UsdGeom
 
 from mipray import record
+from mipray.errors import RenderSettingsError
 from mipray.image import srgb_encode
 
 from stages import add_camera, add_cube, add_distant_light, new_stage
@@ -77,6 +78,34 @@ def test_tess_factor_overrides_complexity_and_flags_become_settings() -> None:
         "geometryCacheMb": 30.0,
         "cacheMode": "single",
     }
+
+
+def test_integrator_and_free_settings_become_settings() -> None:
+    args = record.build_parser().parse_args(
+        [
+            "in.usda",
+            "out.exr",
+            "--integrator",
+            "path",
+            "--setting",
+            "aoSamples=16",
+            "--setting",
+            "irradianceCacheError = 0.1",
+            "--setting",
+            "textureFilter=finest",
+        ]
+    )
+    settings = record.render_settings(args)
+    assert settings["integrator"] == "path"
+    assert settings["aoSamples"] == 16 and isinstance(settings["aoSamples"], int)
+    assert settings["irradianceCacheError"] == 0.1
+    assert settings["textureFilter"] == "finest"
+
+
+def test_a_malformed_setting_is_refused() -> None:
+    args = record.build_parser().parse_args(["in.usda", "out.exr", "--setting", "aoSamples"])
+    with pytest.raises(RenderSettingsError, match="KEY=VALUE"):
+        record.render_settings(args)
 
 
 @pytest.mark.parametrize(

@@ -92,9 +92,9 @@ def test_the_stages_default_settings_and_product_overrides() -> None:
         ),
         (
             lambda s: (
-                UsdRender.Var(s.GetPrimAtPath("/Render/Vars/z")).GetSourceNameAttr().Set("specular")
+                UsdRender.Var(s.GetPrimAtPath("/Render/Vars/z")).GetSourceNameAttr().Set("subsurface")
             ),
-            "/Render/Vars/z: sourceName 'specular' is not an AOV mipray renders",
+            "/Render/Vars/z: sourceName 'subsurface' is not an AOV mipray renders",
         ),
         (
             lambda s: (
@@ -145,7 +145,7 @@ def test_aov_aliases() -> None:
     assert aov_for_source("C.*", "lpe") == "color"
     assert aov_for_source("Z") == "depth"
     assert aov_for_source("instanceId") == "instanceId"
-    assert aov_for_source("specular") is None
+    assert aov_for_source("subsurface") is None
 
 
 # ------------------------------------------------------------------ mipray-record

@@ -168,8 +168,8 @@ def test_textured_diffuse_falls_back_to_display_color(fake) -> None:
     # The constant albedo falls back to displayColor; the texture travels separately (the
     # renderer uses the texture's own fallback if the file cannot be read).
     assert mesh["albedo"] == pytest.approx((0.1, 0.2, 0.3))
-    assert mesh["diffuse_texture"]["file"].endswith("wood.png")
-    assert mesh["diffuse_texture"]["channel"] == 0
+    assert mesh["material"]["textures"]["diffuseColor"]["file"].endswith("wood.png")
+    assert mesh["material"]["textures"]["diffuseColor"]["channel"] == 0
 
 
 def test_diffuse_through_a_material_interface_input_is_constant(fake) -> None:

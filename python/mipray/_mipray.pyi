@@ -67,6 +67,7 @@ class RenderDelegate:
         st_interpolation: str = "faceVarying",
         diffuse_texture: dict[str, object] | None = None,
         displacement_texture: dict[str, object] | None = None,
+        material: dict[str, object] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -98,8 +99,8 @@ class RenderDelegate:
             face_albedo_indices: (F,) int32, one per face in USD face order
                 (holes included): an index into ``face_albedos``, or -1 for
                 ``albedo``. Given together with ``face_albedos``.
-            mirror: reflectance of a perfect mirror layer (UsdPreviewSurface
-                metallic with roughness 0), linear RGB.
+            mirror: normal-incidence reflectance of a perfect mirror layer over
+                ``albedo``, linear RGB (for callers without a ``material``).
             displacement_bound: ``primvars:displacementBound``, object units;
                 None: the displacement's own bound, else the render setting.
             displacement: built-in fBm displacement ``(amplitude, frequency,
@@ -109,10 +110,23 @@ class RenderDelegate:
             st_interpolation: the primvar's USD interpolation.
             diffuse_texture: a UsdUVTexture feeding ``diffuseColor``: ``{"file",
                 "scale", "bias", "fallback" (4 floats each), "wrapS", "wrapT",
-                "channel" (0-3)}``; filtered by the ray differentials.
+                "channel" (0-3)}``; filtered by the ray differentials. For a mesh
+                without a ``material`` (with one, use its ``"textures"``).
             displacement_texture: the same for ``displacement``, along the
                 limit normal at tessellation time, filtered at the grid's
                 spacing (coarse tiers read coarse MIP levels).
+            material: the bound UsdPreviewSurface, replacing ``albedo``,
+                ``mirror`` and ``diffuse_texture``: ``{"name": material path,
+                "diffuseColor", "emissiveColor", "specularColor": 3 floats,
+                "useSpecularWorkflow": bool, "metallic", "roughness",
+                "clearcoat", "clearcoatRoughness", "opacity",
+                "opacityThreshold", "ior": float, "textures": {input name: a
+                UsdUVTexture as in ``diffuse_texture``}}``; every key optional
+                (an input left out keeps UsdPreviewSurface's fallback). Float
+                inputs read the texture's ``channel``; ``"normal"`` is a
+                tangent-space normal map. Out-of-range values are clamped with
+                one warning naming the material; an unreadable texture renders
+                its ``fallback`` with one warning naming prim and file.
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.
@@ -131,6 +145,25 @@ class RenderDelegate:
 
         Raises:
             ValueError: no mesh at ``path``, or the transform is not finite.
+        """
+
+    def set_motion(
+        self, path: str, times: NDArray[np.float32], transforms: NDArray[np.float64]
+    ) -> None:
+        """Set the world transform of the mesh at ``path`` over the camera's shutter.
+
+        Transform motion blur: each camera sample gets a time in the shutter and
+        sees the mesh at the transform interpolated there (scale and translation
+        linearly, rotation by slerp). Fewer than two keys, or keys that do not
+        differ, clear the motion.
+
+        Args:
+            path: a mesh set with :meth:`set_mesh` (not a prototype).
+            times: (N,) float32 shutter fractions, 0 at open and 1 at close.
+            transforms: (N, 4, 4) float64 local-to-world, row-vector convention.
+
+        Raises:
+            ValueError: no mesh at ``path``, lengths differ, or a key is not finite.
         """
 
     def set_instancer(

@@ -53,6 +53,7 @@ PROG = "mipray-record"
 #: many ray beam widths long; smaller is finer).
 COMPLEXITY_TESS_FACTOR = {"low": 4.0, "medium": 2.0, "high": 1.0, "veryhigh": 0.5}
 CACHE_MODES = ("multires", "single", "unbounded", "none")
+INTEGRATORS = ("auto", "direct", "ao", "colorBleeding", "path")
 
 _log = logging.getLogger("mipray")
 
@@ -261,6 +262,25 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     ren.add_argument(
+        "--integrator",
+        choices=INTEGRATORS,
+        help=(
+            "auto (what the scene calls for: direct light, specular, glossy, and ambient "
+            "occlusion when aoSamples is set), direct, ao, colorBleeding (one diffuse "
+            "bounce) or path (path tracing with Russian roulette) (default: auto)"
+        ),
+    )
+    ren.add_argument(
+        "--setting",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=(
+            "any renderer setting, e.g. aoSamples=16 or irradianceCache=1 (repeatable; "
+            "an unknown key is an error listing the valid ones); wins over the flags above"
+        ),
+    )
+    ren.add_argument(
         "--threads",
         type=_non_negative_int,
         metavar="N",
@@ -308,10 +328,28 @@ def render_settings(args: argparse.Namespace) -> dict[str, object]:
         ("threads", args.threads),
         ("geometryCacheMb", args.geometry_cache_mb),
         ("cacheMode", args.cache_mode),
+        ("integrator", args.integrator),
     ):
         if value is not None:
             settings[key] = value
+    for item in args.setting:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise RenderSettingsError(f"--setting {item!r} is not KEY=VALUE")
+        settings[key.strip()] = _setting_value(value.strip())
     return settings
+
+
+def _setting_value(text: str) -> object:
+    """A --setting value as the renderer takes it: a number where it reads as one, else text."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 class _Formatter(logging.Formatter):

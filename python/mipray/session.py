@@ -293,6 +293,7 @@ class RenderSession:
         camera_path = self.scene.resolve_camera(camera)
         camera_args = self.scene.cameras[camera_path]
         self.scene.update_camera_light(camera_path, camera_light)
+        self.scene.update_motion(camera_path)
         h = int(height) if height is not None else image_height(width, camera_args)
         try:
             if progress is None:

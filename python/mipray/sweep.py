@@ -374,14 +374,15 @@ def build_parser() -> argparse.ArgumentParser:
     knob_lines = "\n".join(
         f"  {k.name:<22} {k.describe()}: {k.help}" for k in available_knobs().values()
     )
+    refused = ", ".join(unavailable_knobs())
+    missing = f"  not yet available: {refused}\n" if refused else ""
     parser = _Parser(
         prog=PROG,
         description="Measure what accuracy costs in time: render a USD scene at each setting\n"
         "of some knobs and compare each image with a reference.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=(
-            f"knobs:\n{knob_lines}\n"
-            f"  not yet available: {', '.join(unavailable_knobs())}\n\n"
+            f"knobs:\n{knob_lines}\n" + missing + "\n"
             "examples:\n"
             "  mipray-sweep scene.usda --knob tessFactor=0.25,0.5,1,2,4\n"
             "  mipray-sweep scene.usda --knob tessFactor=1,4 --knob samples=4,16 --runs 3\n"

@@ -147,14 +147,26 @@ OPTIONAL_KNOBS: dict[str, Knob] = {
         ),
         Knob("textureCacheMb", "float", "texture cache budget, MB", 0.0, 1e6, low_open=True),
         Knob("shadowSamples", "int", "shadow rays toward each area light", 1, 4096),
+        Knob(
+            "irradianceCache",
+            "int",
+            "irradiance and occlusion caching with gradients: 0 off, 1 on (AO, color bleeding)",
+            0,
+            1,
+        ),
+        Knob(
+            "irradianceCacheError",
+            "float",
+            "the irradiance cache's error bound, Ward's a (smaller is more accurate)",
+            0.0,
+            10.0,
+            low_open=True,
+        ),
     )
 }
 
-#: Knobs the renderer does not have yet: refused with a message saying so.
-RESERVED_KNOBS: dict[str, str] = {
-    "irradianceCache": "irradiance caching on/off",
-    "irradianceCacheError": "the irradiance cache's error bound",
-}
+#: Knobs the renderer does not have yet: refused with a message saying so (none at present).
+RESERVED_KNOBS: dict[str, str] = {}
 
 
 @functools.cache
@@ -287,7 +299,9 @@ def auto_reference_settings(
     coarser (``tessFactorIncoherent`` at most 1); the unbounded cache (the
     cache never changes pixels, but this is the fastest exact one); at least
     ``reference_samples`` camera samples; the most AO samples and bounces
-    swept or set; the seed after the rows' so its noise is independent.
+    swept or set; no irradiance caching when it is swept or set (every
+    hemisphere integral sampled); the seed after the rows' so its noise is
+    independent.
     """
 
     def values(name: str) -> list[float]:
@@ -308,6 +322,10 @@ def auto_reference_settings(
     for name in ("aoSamples", "shadowSamples", "maxDepth"):
         if values(name):
             ref[name] = int(max(values(name)))
+    # Every hemisphere integral sampled, none interpolated: the irradiance cache off.
+    if values("irradianceCache") or values("irradianceCacheError"):
+        ref["irradianceCache"] = 0
+        ref.pop("irradianceCacheError", None)
     ref["seed"] = int(float(base.get("seed", 0))) + 1  # type: ignore[arg-type]
     return ref
 

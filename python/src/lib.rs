@@ -13,7 +13,7 @@ use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
-use hd_mipray::material::TextureInput;
+use hd_mipray::material::{input_from_usd, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
@@ -208,7 +208,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -241,6 +241,7 @@ impl RenderDelegate {
         st_interpolation: &str,
         diffuse_texture: Option<&Bound<'_, PyDict>>,
         displacement_texture: Option<&Bound<'_, PyDict>>,
+        material: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<()> {
         let pts = points.as_array();
         if pts.ncols() != 3 {
@@ -287,6 +288,7 @@ impl RenderDelegate {
         };
         let diffuse_texture = diffuse_texture.map(|d| texture_input(path, "diffuseColor", d)).transpose()?;
         let displacement_texture = displacement_texture.map(|d| texture_input(path, "displacement", d)).transpose()?;
+        let material = material.map(|d| surface_inputs(path, d)).transpose()?;
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(value_error(path, format!("points[{i}] = {:?} is not finite", points[i])));
         }
@@ -312,6 +314,7 @@ impl RenderDelegate {
                 double_sided,
                 albedo: [albedo.0, albedo.1, albedo.2],
                 mirror: [mirror.0, mirror.1, mirror.2],
+                material,
                 displacement_bound,
                 displacement,
                 prototype,
@@ -328,6 +331,18 @@ impl RenderDelegate {
     fn set_transform(&mut self, path: &str, transform: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
         let transform = matrix(path, &transform)?;
         self.inner.set_transform(path, transform).map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// Sets a mesh's world transform over the camera's shutter (transform motion blur). See the
+    /// stubs.
+    fn set_motion(&mut self, path: &str, times: PyReadonlyArray1<'_, f32>, transforms: PyReadonlyArray3<'_, f64>) -> PyResult<()> {
+        let times = times.as_array().to_vec();
+        let transforms = matrices(path, &transforms)?;
+        if times.len() != transforms.len() {
+            return Err(value_error(path, format!("{} motion times for {} transforms", times.len(), transforms.len())));
+        }
+        let keys = times.into_iter().zip(transforms).map(|(time, render_from_object)| mipray::motion::MotionKey { time, render_from_object }).collect();
+        self.inner.set_motion(path, keys).map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
     /// Inserts or replaces an instancer: `prototypes[proto_indices[i]]` placed at
@@ -543,6 +558,65 @@ impl RenderDelegate {
         }
         Ok((dict, result.stats.to_string()))
     }
+}
+
+/// A UsdPreviewSurface from Python: `{"name": material path, <input>: value for any of
+/// diffuseColor, emissiveColor, specularColor (3 floats), useSpecularWorkflow (bool or int),
+/// metallic, roughness, clearcoat, clearcoatRoughness, opacity, opacityThreshold, ior (float),
+/// "textures": {<input>: UsdUVTexture description}}`. Inputs left out keep UsdPreviewSurface's
+/// fallbacks; values out of range (NaN included) are kept, and clamped with one warning when the
+/// delegate builds the material. Unknown keys are errors naming the prim (a misspelt input
+/// would otherwise silently render its fallback).
+fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> {
+    let mut out = SurfaceInputs::new(path);
+    let color = |key: &str, v: &Bound<'_, PyAny>| -> PyResult<glam::Vec3A> {
+        let c: Vec<f32> = v.extract().map_err(|_| value_error(path, format!("material {key} must be 3 floats")))?;
+        match c[..] {
+            [r, g, b] => Ok(glam::Vec3A::new(r, g, b)),
+            _ => Err(value_error(path, format!("material {key} must be 3 floats, got {}", c.len()))),
+        }
+    };
+    let float = |key: &str, v: &Bound<'_, PyAny>| -> PyResult<f32> {
+        v.extract::<f32>().map_err(|_| value_error(path, format!("material {key} must be a float")))
+    };
+    for (k, v) in d.iter() {
+        let key: String = k.extract()?;
+        let s = &mut out.surface;
+        match key.as_str() {
+            "name" => out.name = v.extract().map_err(|_| value_error(path, "material name must be a string"))?,
+            "diffuseColor" => s.diffuse_color = color(&key, &v)?,
+            "emissiveColor" => s.emissive_color = color(&key, &v)?,
+            "specularColor" => s.specular_color = color(&key, &v)?,
+            "useSpecularWorkflow" => {
+                s.use_specular_workflow = v
+                    .extract::<bool>()
+                    .or_else(|_| v.extract::<i64>().map(|i| i != 0))
+                    .map_err(|_| value_error(path, "material useSpecularWorkflow must be a bool or an int"))?
+            }
+            "metallic" => s.metallic = float(&key, &v)?,
+            "roughness" => s.roughness = float(&key, &v)?,
+            "clearcoat" => s.clearcoat = float(&key, &v)?,
+            "clearcoatRoughness" => s.clearcoat_roughness = float(&key, &v)?,
+            "opacity" => s.opacity = float(&key, &v)?,
+            "opacityThreshold" => s.opacity_threshold = float(&key, &v)?,
+            "ior" => s.ior = float(&key, &v)?,
+            "textures" => {
+                let textures = v.cast::<PyDict>().map_err(|_| value_error(path, "material textures must be a dict"))?;
+                for (name, tex) in textures.iter() {
+                    let name: String = name.extract()?;
+                    let input = input_from_usd(&name)
+                        .ok_or_else(|| value_error(path, format!("material texture for '{name}', which is not a textured input")))?;
+                    let tex = tex.cast::<PyDict>().map_err(|_| value_error(path, format!("material {name} texture must be a dict")))?;
+                    out.textures.retain(|(i, _)| *i != input);
+                    out.textures.push((input, texture_input(path, &name, tex)?));
+                }
+            }
+            _ => return Err(value_error(path, format!("material input '{key}' is not a UsdPreviewSurface input mipray reads"))),
+        }
+    }
+    // Dict order is the caller's; the delegate's comparisons (dirty bits) want one order.
+    out.textures.sort_by_key(|(i, _)| *i as u8);
+    Ok(out)
 }
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats

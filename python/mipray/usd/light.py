@@ -3,6 +3,18 @@
 ``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
 others into ``RenderDelegate.set_light`` with their shape; a stage with no
 light at all is lit from the camera, as usdrecord does by default.
+
+Every ``LightAPI`` input the core needs is read here: ``intensity``,
+``exposure``, ``color``, ``normalize``, ``shadow:enable`` and, when
+``enableColorTemperature`` is on, ``colorTemperature``, whose blackbody colour
+(UsdLux's own ``UsdLuxBlackbodyTemperatureAsRgb``: linear Rec. 709, luminance 1)
+multiplies ``color`` before it reaches the core. What the core does with them
+(UsdLux's units, ``normalize`` per light family) is documented in
+``mipray::light``. A value UsdLux clips (a distant light's ``angle`` outside
+[0, 360), a ``colorTemperature`` outside [1000, 10000] K) is clipped with one
+warning naming the light; a value nothing sensible can be made of (non-finite,
+negative intensity or colour, zero size) is a ``PrimError`` naming the light,
+which skips that light only.
 """
 
 from __future__ import annotations
@@ -37,13 +49,57 @@ _warned: set[str] = set()
 CAMERA_LIGHT_PATH = "/__mipray_camera_light"
 
 
+def _color(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float, float]:
+    """``inputs:color`` times the blackbody colour of ``inputs:colorTemperature`` when enabled.
+
+    Raises:
+        PrimError: a colour or temperature that is not finite, or a negative colour.
+
+    """
+    path = str(prim.GetPath())
+
+    def get(name: str, default: Any) -> Any:
+        attr = prim.GetAttribute(f"inputs:{name}")
+        value = attr.Get(time) if attr else None
+        return default if value is None else value
+
+    color = tuple(float(c) for c in get("color", (1.0, 1.0, 1.0)))
+    if len(color) != 3 or not all(math.isfinite(c) and c >= 0.0 for c in color):
+        raise PrimError(path, f"inputs:color {color} is not a finite non-negative color")
+    if not bool(get("enableColorTemperature", False)):
+        return (color[0], color[1], color[2])
+    kelvin = float(get("colorTemperature", 6500.0))
+    if not math.isfinite(kelvin):
+        raise PrimError(path, "inputs:colorTemperature is not finite")
+    if not 1000.0 <= kelvin <= 10000.0:
+        clipped = min(max(kelvin, 1000.0), 10000.0)
+        _warn_once(
+            f"{path}: inputs:colorTemperature {kelvin:g} K is outside UsdLux's range "
+            f"[1000, 10000]; using {clipped:g} K"
+        )
+        kelvin = clipped
+    rgb = blackbody_rgb(kelvin)
+    return (color[0] * rgb[0], color[1] * rgb[1], color[2] * rgb[2])
+
+
+def blackbody_rgb(kelvin: float) -> tuple[float, float, float]:
+    """The colour of a blackbody at ``kelvin`` as UsdLux defines it: linear Rec. 709, luminance 1.
+
+    This is ``UsdLux.BlackbodyTemperatureAsRgb``, USD's own definition, so
+    every renderer reading the stage gets the same colour.
+    """
+    rgb = UsdLux.BlackbodyTemperatureAsRgb(float(kelvin))
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+
+
 def distant_light_arguments(
     light: UsdLux.DistantLight, time: Usd.TimeCode, transform: NDArray[np.float64]
 ) -> dict[str, Any]:
     """The keyword arguments of ``RenderDelegate.set_distant_light`` for ``light``.
 
     ``inputs:shadow:enable`` is read whether or not ``ShadowAPI`` is applied;
-    unauthored, shadows are on (the API's fallback).
+    unauthored, shadows are on (the API's fallback). ``inputs:angle`` is clipped
+    to [0, 360) with a warning, as UsdLux says.
 
     Raises:
         PrimError: a non-finite or negative value, or a non-finite transform.
@@ -56,7 +112,7 @@ def distant_light_arguments(
         return default if value is None else value
 
     shadow_attr = light.GetPrim().GetAttribute("inputs:shadow:enable")
-    color = tuple(float(c) for c in get(light.GetColorAttr(), (1.0, 1.0, 1.0)))
+    color = _color(light.GetPrim(), time)
     args: dict[str, Any] = {
         "transform": transform,
         "intensity": float(get(light.GetIntensityAttr(), 50000.0)),
@@ -71,10 +127,13 @@ def distant_light_arguments(
             raise PrimError(path, f"inputs:{key} is not finite")
     if args["intensity"] < 0.0:
         raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
-    if not (0.0 <= args["angle"] <= 180.0):
-        raise PrimError(path, f"inputs:angle is {args['angle']}; it must be in [0, 180] degrees")
-    if len(color) != 3 or not all(math.isfinite(c) and c >= 0.0 for c in color):
-        raise PrimError(path, f"inputs:color {color} is not a finite non-negative color")
+    if not (0.0 <= args["angle"] < 360.0):
+        clipped = min(max(args["angle"], 0.0), 359.999)
+        _warn_once(
+            f"{path}: inputs:angle {args['angle']:g} is outside UsdLux's [0, 360) degrees; "
+            f"using {clipped:g}"
+        )
+        args["angle"] = clipped
     if not np.isfinite(transform).all():
         raise PrimError(path, "the world transform is not finite")
     return args
@@ -84,9 +143,10 @@ def camera_light_arguments(camera_transform: NDArray[np.float64]) -> dict[str, A
     """A shadowless distant light shining along the camera's view direction.
 
     A distant light at the camera's transform shines down the camera's -Z
-    axis. Its intensity is π so that, with a Lambertian BRDF (albedo / π), a
-    surface facing the camera has radiance equal to its albedo, as the
-    fixed-function headlight of usdrecord's default renderer shows it.
+    axis. Normalized, its intensity is the irradiance it delivers: π, so that,
+    with a Lambertian BRDF (albedo / π), a surface facing the camera has
+    radiance equal to its albedo, as the fixed-function headlight of
+    usdrecord's default renderer shows it.
     """
     return {
         "transform": camera_transform,
@@ -94,7 +154,7 @@ def camera_light_arguments(camera_transform: NDArray[np.float64]) -> dict[str, A
         "exposure": 0.0,
         "color": (1.0, 1.0, 1.0),
         "angle": 0.53,
-        "normalize": False,
+        "normalize": True,
         "shadow_enable": False,
     }
 
@@ -106,7 +166,10 @@ def area_light_arguments(
 
     Returns None when ``prim`` is none of those. Sizes are UsdLux's (``radius``,
     ``width``, ``height``, in the light's units). A dome light's texture is
-    read through OpenImageIO as a latlong environment (``texture`` argument).
+    read through OpenImageIO as a latlong environment (``texture`` argument;
+    a ``texture:format`` other than ``automatic`` or ``latlong`` is read as a
+    latlong, with one warning). A sphere's ``treatAsPoint`` is a hint that
+    renderers of area lights may disregard (UsdLux): it stays a sphere.
 
     Raises:
         PrimError: a non-finite, negative or zero value, or a non-finite transform.
@@ -116,14 +179,13 @@ def area_light_arguments(
     if kind is None:
         return None
     path = str(prim.GetPath())
-    light = UsdLux.LightAPI(prim)
 
     def get(name: str, default: Any) -> Any:
         attr = prim.GetAttribute(f"inputs:{name}")
         value = attr.Get(time) if attr else None
         return default if value is None else value
 
-    color = tuple(float(c) for c in get("color", (1.0, 1.0, 1.0)))
+    color = _color(prim, time)
     args: dict[str, Any] = {
         "kind": kind,
         "transform": transform,
@@ -133,13 +195,8 @@ def area_light_arguments(
         "normalize": bool(get("normalize", False)),
         "shadow_enable": bool(get("shadow:enable", True)),
     }
-    del light
     if kind in ("sphere", "disk"):
         args["radius"] = float(get("radius", 0.5))
-        if kind == "sphere" and bool(get("treatAsPoint", False)):
-            raise PrimError(
-                path, "treatAsPoint point lights are not supported yet; give the sphere a radius"
-            )
     if kind == "rect":
         args["width"] = float(get("width", 1.0))
         args["height"] = float(get("height", 1.0))
@@ -148,16 +205,23 @@ def area_light_arguments(
                 f"{path}: rect light textures are not supported yet; lighting with its colour"
             )
     if kind == "dome":
+        from pxr import Sdf
+
+        from .shading import _resolve
+
         attr = prim.GetAttribute("inputs:texture:file")
-        value = attr.Get(time) if attr else None
-        if value is not None and getattr(value, "path", ""):
-            from pxr import Sdf
-
-            from .shading import _resolve
-
-            args["texture"] = (
-                _resolve(attr, value) if isinstance(value, Sdf.AssetPath) else str(value)
-            )
+        value: object = attr.Get(time) if attr else None
+        if isinstance(value, Sdf.AssetPath) and value.path:
+            args["texture"] = _resolve(attr, value)
+        elif isinstance(value, str) and value:
+            args["texture"] = value
+        if "texture" in args:
+            layout = str(get("texture:format", "automatic"))
+            if layout not in ("automatic", "latlong"):
+                _warn_once(
+                    f"{path}: dome texture:format '{layout}' is not supported; "
+                    "reading the texture as a latlong map"
+                )
     for key in ("intensity", "exposure", "radius", "width", "height"):
         if key in args and not math.isfinite(args[key]):
             raise PrimError(path, f"inputs:{key} is not finite")
@@ -166,8 +230,6 @@ def area_light_arguments(
             raise PrimError(path, f"inputs:{key} is {args[key]}; it must be > 0")
     if args["intensity"] < 0.0:
         raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
-    if len(color) != 3 or not all(math.isfinite(c) and c >= 0.0 for c in color):
-        raise PrimError(path, f"inputs:color {color} is not a finite non-negative color")
     if not np.isfinite(transform).all():
         raise PrimError(path, "the world transform is not finite")
     return args

@@ -1,6 +1,10 @@
 """The diffuse albedo of a gprim, from its bound material or its display color.
 
-For now a mesh carries one constant albedo. It comes from, in order:
+A mesh bound to a UsdPreviewSurface sends all of that surface's inputs to the
+renderer (:mod:`mipray.usd.shading`); the albedo resolved here is what faces
+without such a material render with — meshes with only a display color, and
+GeomSubsets bound to their own materials, which render lambertian in their
+``diffuseColor`` (:mod:`mipray.usd.face_albedo`). It comes from, in order:
 
 1. the ``diffuseColor`` of the ``UsdPreviewSurface`` that the prim's bound
    material (purpose ``full``, falling back to all-purpose, as Hydra resolves
@@ -10,8 +14,8 @@ For now a mesh carries one constant albedo. It comes from, in order:
 2. else ``primvars:displayColor`` when it is constant or has one value;
 3. else 0.18 grey.
 
-A ``diffuseColor`` connected to a texture is not a constant: such a mesh
-falls through to its display color until textures are supported.
+A ``diffuseColor`` connected to a texture is not a constant: such a subset
+falls through to its display color.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from pxr import Usd, UsdGeom
 
 from .face_albedo import compute_surface_albedo
 from .mesh import mesh_arguments
-from .shading import shading_arguments
+from .shading import material_might_vary, shading_arguments
 
 __all__ = ["MeshRead", "read_mesh"]
 
@@ -63,4 +63,5 @@ def read_mesh(
     args.update(shading_arguments(prim, time))
     if prototype:
         args["prototype"] = True
-    return MeshRead(args, surface.material_paths, data_varies or surface.might_vary)
+    varies = data_varies or surface.might_vary or material_might_vary(prim)
+    return MeshRead(args, surface.material_paths, varies)

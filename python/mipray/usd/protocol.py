@@ -49,6 +49,11 @@ class RenderDelegateLike(Protocol):
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
         """Move a mesh without resending its data."""
 
+    def set_motion(
+        self, path: str, times: NDArray[np.float32], transforms: NDArray[np.float64]
+    ) -> None:
+        """Set a mesh's world transform over the camera's shutter (none: it is still)."""
+
     def set_instancer(
         self,
         path: str,

@@ -52,6 +52,14 @@ KNOWN_AOVS = (
     "beamWidth",
     "tessRate",
     "ao",
+    "position",
+    "elementId",
+    "Neye",
+    "albedo",
+    "emission",
+    "directDiffuse",
+    "indirectDiffuse",
+    "specular",
 )
 #: RenderVar source names other renderers use, and the AOV they mean here.
 AOV_ALIASES = {

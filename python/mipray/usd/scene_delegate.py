@@ -33,6 +33,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux
 
 from ..errors import PrimError, RenderSettingsError
@@ -52,7 +53,7 @@ from .light import (
 )
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
-from .transform import ancestors_might_vary, world_transform
+from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
 
 __all__ = ["PURPOSES", "SyncError", "UsdSceneDelegate"]
 
@@ -201,6 +202,8 @@ class UsdSceneDelegate:
         self._listener: Tf.Notice.Listener | None = None
         self._warned_types: set[str] = set()
         self._default_camera: dict[str, Any] | None = None
+        # Meshes last sent a moving transform (set_motion), so one that stops moving is reset.
+        self._moving: set[str] = set()
         self._camera_light = False
         self._xform_roots: set[str] = set()  # where xform ops changed
         self._xform_only: set[str] = set()  # records whose transform alone changed in time
@@ -681,6 +684,7 @@ class UsdSceneDelegate:
     def _forget(self, path: str) -> None:
         """Remove a prim from the delegate and from the books."""
         record = self._records.pop(path, None)
+        self._moving.discard(path)
         if record is not None and record.kind == "instance":
             self._instancing.remove_instance(path)
         elif record is not None and record.instancer is not None:
@@ -698,6 +702,35 @@ class UsdSceneDelegate:
             _log.warning("mipray: skipping %d %s of unsupported type %s", count, noun, type_name)
 
     # ------------------------------------------------------- camera and lights
+
+    def update_motion(self, camera_path: str) -> list[str]:
+        """Send the world transform over ``camera_path``'s shutter of every mesh that moves in it.
+
+        Transform motion blur: only meshes whose transform (or an ancestor's) is
+        time-varying are sampled, and only when the camera's shutter is open for
+        a while; a mesh that no longer moves gets its motion cleared. Returns the
+        paths of the moving meshes. PointInstancer and native instance motion is
+        not read (their transforms at the frame's time are used).
+        """
+        shutter = camera_shutter(self.stage, camera_path, self.time)
+        moving: list[str] = []
+        for path, record in self._records.items():
+            if record.kind != "mesh" or not record.in_delegate:
+                continue
+            samples = None
+            if record.xform_varies and shutter[1] > shutter[0]:
+                prim = self.stage.GetPrimAtPath(path)
+                if prim:
+                    samples = motion_samples(prim, self.time, shutter)
+            if samples is not None:
+                self.delegate.set_motion(path, samples[0], samples[1])
+                moving.append(path)
+            elif path in self._moving:
+                self.delegate.set_motion(
+                    path, np.zeros(0, dtype=np.float32), np.zeros((0, 4, 4), dtype=np.float64)
+                )
+        self._moving = set(moving)
+        return moving
 
     def resolve_camera(self, requested: str | None = None) -> str:
         """The path of the camera to render through, syncing first if needed.

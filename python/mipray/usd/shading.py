@@ -1,19 +1,36 @@
-"""Shading inputs of a mesh beyond its constant albedo.
+"""A mesh's shading: its UsdPreviewSurface's inputs, textures, ``st`` and displacement.
 
 Read from the ``UsdPreviewSurface`` of the bound material (``full`` purpose, as
-:mod:`mipray.usd.material` resolves it) and from the mesh itself:
+:mod:`mipray.usd.material` resolves it) and from the mesh itself, as
+``set_mesh`` keyword arguments:
 
-- ``mirror``: a ``metallic`` surface with ``roughness`` ≈ 0 is a perfect mirror
-  of reflectance ``diffuseColor × metallic`` (rough metals render diffuse until
-  glossy reflection lands, with one warning);
-- ``diffuse_texture`` / ``displacement_texture``: a ``UsdUVTexture`` feeding
-  ``diffuseColor`` or ``displacement`` (``file``, ``scale``, ``bias``,
-  ``fallback``, ``wrapS``, ``wrapT`` and the output used), its ``st`` read by a
-  ``UsdPrimvarReader_float2`` (``varname``, default ``st``);
-- ``st_values`` / ``st_indices`` / ``st_interpolation``: that primvar;
-- ``displacement``: the built-in procedural displacement, from the mesh's
+- ``material``: every UsdPreviewSurface input mipray renders — ``diffuseColor``,
+  ``emissiveColor``, ``useSpecularWorkflow``, ``specularColor``, ``metallic``,
+  ``roughness``, ``clearcoat``, ``clearcoatRoughness``, ``opacity``,
+  ``opacityThreshold``, ``ior`` — each a constant (authored, or through a
+  material interface input; unauthored inputs are left out and keep the
+  specification's fallbacks), and under ``"textures"`` a ``UsdUVTexture`` per
+  textured input (``normal`` included), with ``"name"`` the material's path.
+  Values go as authored: the renderer clamps out-of-range ones with one warning
+  naming the material.
+- What feeds an input: a ``UsdUVTexture`` (``file``, ``scale``, ``bias``,
+  ``fallback``, ``wrapS``, ``wrapT`` and the connected output's channel), its
+  ``st`` read by a ``UsdPrimvarReader_float2`` (``varname``, default ``st``),
+  optionally through a ``UsdTransform2d``; or a ``UsdPrimvarReader_*`` reading
+  a primvar of the mesh (its value if constant, else its mean, with one
+  warning). Any other node falls back to the input's fallback value, with one
+  warning naming the material and the node.
+- ``st_values`` / ``st_indices`` / ``st_interpolation``: the one ``st`` primvar
+  a mesh's textures read (a ``UsdTransform2d`` applied to its values). Textures
+  reading different primvars (or transforming them differently) get the first
+  one's, with one warning.
+- ``displacement_texture``: a ``UsdUVTexture`` feeding ``displacement``;
+  ``displacement``: the built-in procedural displacement, from the mesh's
   ``mipray:displacement:amplitude``, ``frequency``, ``octaves`` and ``gain``;
-- ``displacement_bound``: ``primvars:displacementBound`` on the mesh.
+  ``displacement_bound``: ``primvars:displacementBound`` on the mesh.
+
+A material whose surface is not a UsdPreviewSurface sends no ``material``: the
+mesh renders its display color (one warning naming the material).
 """
 
 from __future__ import annotations
@@ -21,17 +38,66 @@ from __future__ import annotations
 import logging
 import math
 import os
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
-__all__ = ["shading_arguments"]
+__all__ = [
+    "COLOR_INPUTS",
+    "FALLBACKS",
+    "FLOAT_INPUTS",
+    "TEXTURED_INPUTS",
+    "material_might_vary",
+    "shading_arguments",
+]
 
 _log = logging.getLogger(__name__)
 _warned: set[str] = set()
 
 _CHANNELS = {"rgb": 0, "r": 0, "g": 1, "b": 2, "a": 3}
+
+#: Colour inputs (three floats, linear RGB).
+COLOR_INPUTS = ("diffuseColor", "emissiveColor", "specularColor")
+#: Float inputs.
+FLOAT_INPUTS = (
+    "metallic",
+    "roughness",
+    "clearcoat",
+    "clearcoatRoughness",
+    "opacity",
+    "opacityThreshold",
+    "ior",
+)
+#: Inputs a texture can feed, in the order their ``st`` is chosen (the first wins).
+TEXTURED_INPUTS = (
+    "diffuseColor",
+    "emissiveColor",
+    "specularColor",
+    "metallic",
+    "roughness",
+    "clearcoat",
+    "clearcoatRoughness",
+    "opacity",
+    "ior",
+    "normal",
+)
+#: UsdPreviewSurface's fallback values (its specification).
+FALLBACKS: dict[str, Any] = {
+    "diffuseColor": (0.18, 0.18, 0.18),
+    "emissiveColor": (0.0, 0.0, 0.0),
+    "useSpecularWorkflow": 0,
+    "specularColor": (0.0, 0.0, 0.0),
+    "metallic": 0.0,
+    "roughness": 0.5,
+    "clearcoat": 0.0,
+    "clearcoatRoughness": 0.01,
+    "opacity": 1.0,
+    "opacityThreshold": 0.0,
+    "ior": 1.5,
+    "normal": (0.0, 0.0, 1.0),
+}
 
 
 def _warn_once(message: str) -> None:
@@ -66,22 +132,35 @@ def _source(shader: UsdShade.Shader, name: str) -> tuple[UsdShade.Shader, str] |
 def _resolve(attr: Usd.Attribute, value: Sdf.AssetPath) -> str:
     if value.resolvedPath:
         return str(value.resolvedPath)
-    path = value.path
+    path = str(value.path)
     if not path or os.path.isabs(path):
         return path
     for spec in attr.GetPropertyStack(Usd.TimeCode.Default()):
         layer = spec.layer
         if layer and layer.realPath:
-            return os.path.normpath(os.path.join(os.path.dirname(layer.realPath), path))
+            return os.path.normpath(os.path.join(os.path.dirname(str(layer.realPath)), path))
     return path
 
 
 def _floats(value: Any, n: int, default: list[float]) -> list[float]:
     try:
         out = [float(x) for x in value][:n]
-    except TypeError:
+    except (TypeError, ValueError):
         return default
     return out + default[len(out) :]
+
+
+def _value(name: str, value: Any) -> Any:
+    """A constant input as ``set_mesh`` takes it, or None when it has the wrong type."""
+    try:
+        if name in COLOR_INPUTS:
+            r, g, b = (float(c) for c in value)
+            return (r, g, b)
+        if name == "useSpecularWorkflow":
+            return int(value) != 0
+        return float(value)
+    except (TypeError, ValueError):
+        return None
 
 
 Transform2d = tuple[tuple[float, float], float, tuple[float, float]]
@@ -110,23 +189,31 @@ def apply_transform2d(st: np.ndarray, transform: Transform2d) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True)
+class _Texture:
+    """A UsdUVTexture as ``set_mesh`` takes it, and the ``st`` it reads."""
+
+    desc: dict[str, Any]
+    varname: str
+    transform: Transform2d | None
+
+
+def _texture_fallback(shader: UsdShade.Shader, time: Usd.TimeCode) -> list[float]:
+    return _floats(_const(shader, "fallback", time), 4, [0.0, 0.0, 0.0, 1.0])
+
+
 def _texture(
-    prim_path: str, shader: UsdShade.Shader, output: str, time: Usd.TimeCode, what: str
-) -> tuple[dict[str, Any], str, Transform2d | None] | None:
-    """A UsdUVTexture's description and the primvar its ``st`` reads."""
-    if shader.GetShaderId() != "UsdUVTexture":
-        _warn_once(
-            f"{prim_path}: {what} is fed by {shader.GetPath()} ({shader.GetShaderId()}), "
-            "which mipray does not support; using the input's fallback"
-        )
-        return None
+    owner: str, shader: UsdShade.Shader, output: str, time: Usd.TimeCode, what: str
+) -> _Texture | None:
+    """A UsdUVTexture's description and the primvar its ``st`` reads; None without a file.
+
+    ``owner`` (the material, or the mesh for displacement) names the warnings.
+    """
     file_inp = shader.GetInput("file")
     attrs = file_inp.GetValueProducingAttributes() if file_inp else []
     value = attrs[0].Get(time) if attrs else None
     if not isinstance(value, Sdf.AssetPath) or not value.path:
-        _warn_once(
-            f"{prim_path}: {what} texture {shader.GetPath()} has no file; using its fallback"
-        )
+        _warn_once(f"{owner}: {what} texture {shader.GetPath()} has no file; using its fallback")
         return None
     desc: dict[str, Any] = {
         "file": _resolve(attrs[0], value),
@@ -157,7 +244,100 @@ def _texture(
             name = _const(reader, "varname", time)
             if name:
                 varname = str(name)
-    return desc, varname, transform
+        elif reader.GetShaderId() != "UsdTransform2d":
+            _warn_once(
+                f"{owner}: {what} texture's st is fed by {reader.GetPath()} "
+                f"({reader.GetShaderId()}), which mipray does not support; reading primvars:st"
+            )
+    return _Texture(desc, varname, transform)
+
+
+def _primvar_value(
+    material: str, prim: Usd.Prim, reader: UsdShade.Shader, name: str, time: Usd.TimeCode
+) -> Any:
+    """The value a UsdPrimvarReader feeding ``name`` reads on ``prim``.
+
+    A constant primvar is its value; a varying one its mean over its values (one
+    warning: a shading input here is one value per mesh); a missing one the
+    reader's ``fallback``, else the input's.
+    """
+    varname = _const(reader, "varname", time)
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar(str(varname)) if varname else None
+    if not primvar or not primvar.HasValue():
+        v = _value(name, _const(reader, "fallback", time))
+        return FALLBACKS[name] if v is None else v
+    values = np.asarray(primvar.ComputeFlattened(time), dtype=np.float64)
+    width = 3 if name in COLOR_INPUTS else 1
+    if values.size == 0 or values.size % width:
+        return FALLBACKS[name]
+    values = values.reshape(-1, width)
+    if len(values) > 1 and not (values == values[0]).all():
+        _warn_once(
+            f"{material}: {name} reads primvars:{varname} of {prim.GetPath()}, which varies over "
+            "the mesh; mipray uses its mean"
+        )
+    mean = values.mean(axis=0)
+    return _value(name, mean if width == 3 else mean[0])
+
+
+@dataclass
+class _Material:
+    """What :func:`_preview_surface` read."""
+
+    args: dict[str, Any]
+    #: (input, texture) in :data:`TEXTURED_INPUTS` order.
+    textures: list[tuple[str, _Texture]]
+
+
+def _preview_surface(
+    prim: Usd.Prim, material_path: str, surface: UsdShade.Shader, time: Usd.TimeCode
+) -> _Material:
+    """Every input of ``surface`` as the ``material`` argument (see the module doc)."""
+    args: dict[str, Any] = {"name": material_path}
+    textures: list[tuple[str, _Texture]] = []
+    for name in (*COLOR_INPUTS, "useSpecularWorkflow", *FLOAT_INPUTS, "normal"):
+        src = _source(surface, name)
+        if src is None:
+            if name == "normal":
+                continue  # a constant normal is the surface's own (tangent-space +Z)
+            raw = _const(surface, name, time)
+            if raw is None:
+                continue
+            v = _value(name, raw)
+            if v is None:
+                _warn_once(f"{material_path}: {name} = {raw!r} is not a number; using its fallback")
+            else:
+                args[name] = v
+            continue
+        node, output = src
+        node_id = str(node.GetShaderId() or "")
+        if node_id == "UsdUVTexture" and name in TEXTURED_INPUTS:
+            tex = _texture(material_path, node, output, time, name)
+            if tex is not None:
+                textures.append((name, tex))
+            elif name != "normal":
+                fallback = _texture_fallback(node, time)
+                channel = _CHANNELS.get(output, 0)
+                args[name] = (
+                    tuple(fallback[:3]) if name in COLOR_INPUTS else fallback[min(channel, 3)]
+                )
+        elif node_id.startswith("UsdPrimvarReader_") and name != "normal":
+            args[name] = _primvar_value(material_path, prim, node, name, time)
+        else:
+            what = f"{node_id} node" if node_id else "node without an id"
+            if node_id == "UsdUVTexture":
+                what = "texture (mipray reads only a constant here)"
+            _warn_once(
+                f"{material_path}: {name} is fed by {node.GetPath()}, a {what} mipray does not "
+                f"support; using the input's fallback {FALLBACKS[name]}"
+            )
+            if name != "normal":
+                args[name] = FALLBACKS[name]
+    order = {n: i for i, n in enumerate(TEXTURED_INPUTS)}
+    textures.sort(key=lambda t: order[t[0]])
+    if textures:
+        args["textures"] = {name: tex.desc for name, tex in textures}
+    return _Material(args, textures)
 
 
 def _st_arguments(prim: Usd.Prim, varname: str, time: Usd.TimeCode) -> dict[str, Any]:
@@ -193,6 +373,40 @@ def _procedural(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float, int, 
     )
 
 
+def material_might_vary(prim: Usd.Prim) -> bool:
+    """Whether the shading :func:`shading_arguments` reads for ``prim`` may change over time.
+
+    True when an input of the bound material's surface or displacement shader, or of a node
+    feeding one (textures, readers, transforms, interface inputs), is time-sampled.
+    """
+    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
+    if not material:
+        return False
+    seen: set[str] = set()
+    todo = [
+        s
+        for s in (material.ComputeSurfaceSource()[0], material.ComputeDisplacementSource()[0])
+        if s
+    ]
+    while todo:
+        shader = todo.pop()
+        key = str(shader.GetPath())
+        if key in seen:
+            continue
+        seen.add(key)
+        for inp in shader.GetInputs():
+            for attr in inp.GetValueProducingAttributes():
+                if UsdShade.Utils.GetType(attr.GetName()) == UsdShade.AttributeType.Output:
+                    todo.append(UsdShade.Shader(attr.GetPrim()))
+                elif attr.ValueMightBeTimeVarying():
+                    return True
+    return False
+
+
+def _describe_st(varname: str, transform: Transform2d | None) -> str:
+    return f"primvars:{varname}" + ("" if transform is None else f" through {transform}")
+
+
 def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
     """The ``set_mesh`` keyword arguments for ``prim``'s shading (see the module doc)."""
     args: dict[str, Any] = {}
@@ -210,46 +424,42 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
     material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
     if not material:
         return args
+    material_path = str(material.GetPath())
+    # Every texture of the mesh reads one st: (who reads it, varname, transform) of the first.
+    st_users: list[tuple[str, str, Transform2d | None]] = []
     surface, _, _ = material.ComputeSurfaceSource()
-    st_name: str | None = None
-    st_transform: Transform2d | None = None
     if surface and surface.GetShaderId() == "UsdPreviewSurface":
-        metallic = _const(surface, "metallic", time)
-        roughness = _const(surface, "roughness", time)
-        diffuse = _const(surface, "diffuseColor", time)
-        if metallic is not None and float(metallic) > 0.0:
-            rough = 0.5 if roughness is None else float(roughness)
-            if rough <= 0.05:
-                base = _floats(
-                    diffuse if diffuse is not None else (0.18, 0.18, 0.18), 3, [0.18] * 3
-                )
-                m = min(max(float(metallic), 0.0), 1.0)
-                args["mirror"] = tuple(min(max(c * m, 0.0), 1.0) for c in base)
-            else:
-                _warn_once(
-                    f"{path}: rough metal (roughness {rough}) renders diffuse "
-                    "until glossy reflection is supported"
-                )
-        src = _source(surface, "diffuseColor")
-        if src is not None:
-            tex = _texture(path, src[0], src[1], time, "diffuseColor")
-            if tex is not None:
-                args["diffuse_texture"], st_name, st_transform = tex
+        read = _preview_surface(prim, material_path, surface, time)
+        args["material"] = read.args
+        st_users += [(name, t.varname, t.transform) for name, t in read.textures]
+    elif surface:
+        _warn_once(
+            f"{material_path}: surface shader {surface.GetPath()} ({surface.GetShaderId()}) is "
+            "not a UsdPreviewSurface; rendering the mesh's display color"
+        )
     disp_shader, _, _ = material.ComputeDisplacementSource()
     if disp_shader and disp_shader.GetShaderId() == "UsdPreviewSurface":
         src = _source(disp_shader, "displacement")
         if src is not None:
-            tex = _texture(path, src[0], src[1], time, "displacement")
-            if tex is not None:
-                args["displacement_texture"], name, transform = tex
-                if st_name is not None and transform != st_transform:
-                    _warn_once(
-                        f"{path}: diffuseColor and displacement read st differently; "
-                        "using diffuseColor's"
-                    )
-                if st_name is None:
-                    st_name, st_transform = name, transform
-    if st_name is not None:
+            if src[0].GetShaderId() != "UsdUVTexture":
+                _warn_once(
+                    f"{material_path}: displacement is fed by {src[0].GetPath()} "
+                    f"({src[0].GetShaderId()}), which mipray does not support; not displaced"
+                )
+            else:
+                tex = _texture(path, src[0], src[1], time, "displacement")
+                if tex is not None:
+                    args["displacement_texture"] = tex.desc
+                    st_users.append(("displacement", tex.varname, tex.transform))
+    if st_users:
+        first, st_name, st_transform = st_users[0]
+        for name, varname, transform in st_users[1:]:
+            if (varname, transform) != (st_name, st_transform):
+                _warn_once(
+                    f"{path}: {name} texture reads {_describe_st(varname, transform)} but "
+                    f"{first} reads {_describe_st(st_name, st_transform)}; a mesh's textures "
+                    f"share one st: using {first}'s"
+                )
         args.update(_st_arguments(prim, st_name, time))
         if st_transform is not None and "st_values" in args:
             # One st channel serves the mesh's textures: the UsdTransform2d applies to its values
@@ -257,6 +467,4 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
             args["st_values"] = apply_transform2d(args["st_values"], st_transform).astype(
                 np.float32
             )
-    if not all(math.isfinite(float(c)) for c in args.get("mirror", ())):
-        args.pop("mirror")
     return args
