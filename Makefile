@@ -102,3 +102,11 @@ bench-cache: setup ## The paper's §6.3.2 cache tables: docs/cache-benchmark.{md
 accuracy: setup ## Accuracy against time (mipray-sweep): docs/accuracy-vs-time.{md,json}, docs/images/accuracy-*.png
 	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
 	$(PY) examples/accuracy_report.py
+
+.PHONY: mitsuba
+mitsuba: setup ## mipray against Mitsuba 3 on the same scenes: docs/mitsuba-comparison.md
+	$(PY) -m mipray.reference.compare --out docs/mitsuba-comparison.md
+
+.PHONY: bench-irradiance
+bench-irradiance: ## Irradiance/occlusion cache: time and error against its error bound: docs/irradiance-cache.{md,json}
+	cargo run --release -p hd-mipray --bin mipray-irradiance-bench -- --out docs/irradiance-cache

@@ -1,0 +1,653 @@
+"""A USD stage as Mitsuba 3 sees it: the scene mipray renders, for a reference render.
+
+The stage is read by mipray's own scene delegate into a recording delegate
+(:func:`capture`), so Mitsuba gets exactly what mipray's renderer gets: the
+same points, transforms, camera, light inputs and UsdPreviewSurface inputs.
+:func:`scene_dict` turns that into a Mitsuba scene description and
+:func:`render` renders it with the ``scalar_rgb`` variant (no LLVM needed).
+
+What maps how (render space is USD world space in both renderers):
+
+- Meshes must be polygonal (``subdivisionScheme = "none"``) with planar faces:
+  mipray renders a planar polygon as itself, Mitsuba as a triangle fan, the
+  same surface. A non-planar face (mipray: a bilinear patch) or a subdivision
+  surface is refused, naming the prim. Faces are flat-shaded in both.
+- Camera: perspective, the window fitted to the image aspect as mipray does
+  (Hydra's ``CameraUtilFit``, enlarging), the horizontal field of view from
+  it; Mitsuba's camera looks down its +Z with +X to the left, USD's down -Z
+  with +X to the right, so its ``to_world`` is USD's times diag(-1, 1, -1).
+  Pixel centres are at half-integers in both, and both box-filter over the
+  pixel (mipray's first sample sits at the pixel centre, the rest uniform).
+- Lights (UsdLux units, as ``mipray.light`` documents them): distant (angle 0)
+  → ``directional`` of irradiance intensity·2^exposure·color; sphere → a
+  ``sphere`` shape with an ``area`` emitter of that radiance (÷ area with
+  ``normalize``) and a black BSDF; rect → ``rectangle``, disk → ``disk``,
+  both emitting along the light's -Z; dome (no texture) → ``constant``. Camera
+  rays see lights in both renderers (the dome as the background).
+- Materials (UsdPreviewSurface, clamped as mipray clamps them), wrapped in
+  ``twosided`` because mipray shades both sides of a surface: no specular
+  (F0 = 0, no clearcoat) → ``diffuse`` (exact); a full metal (metallic
+  workflow, metallic 1, no clearcoat) → ``principled`` with metallic 1 (GGX,
+  α = roughness², Schlick Fresnel to F0 = diffuseColor: the same model up to
+  Mitsuba's separable Smith G), and at roughness 0 a delta mirror with that
+  Fresnel (a small Python plugin: Mitsuba's ``conductor`` has the
+  complex-index Fresnel); opacity 0 with opacityThreshold 0 →
+  ``dielectric`` / ``roughdielectric`` of ``ior`` (GGX, α = roughness²);
+  anything else → ``principled`` or ``roughplastic``, marked approximate
+  (their diffuse-specular coupling differs from UsdPreviewSurface's).
+  ``emissiveColor`` → an ``area`` emitter on the mesh, and on a turned-over
+  copy a hair behind it (mipray's emission is two-sided, Mitsuba's
+  one-sided). A cutout (opacityThreshold > 0) below its threshold removes the
+  mesh. Textured inputs are refused.
+
+Everything Mitsuba cannot represent the way mipray renders it raises
+:class:`~mipray.errors.PrimError` naming the prim, rather than rendering a
+different scene.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd
+
+from ..errors import MiprayError, PrimError
+from ..usd.camera import image_height
+from ..usd.scene_delegate import UsdSceneDelegate
+
+__all__ = [
+    "Capture",
+    "MaterialMapping",
+    "capture",
+    "material_mapping",
+    "render",
+    "scene_dict",
+]
+
+#: Mitsuba variant: CPU, RGB, no LLVM.
+VARIANT = "scalar_rgb"
+
+#: Roughness below which UsdPreviewSurface's lobes are the delta mirror and glass (mipray's
+#: BSDF uses such a threshold; Mitsuba's smooth plugins are the same limit).
+SMOOTH_ROUGHNESS = 1e-3
+
+
+class _Recorder:
+    """A render delegate that records what mipray's scene delegate sends it."""
+
+    def __init__(self) -> None:
+        self.meshes: dict[str, dict[str, Any]] = {}
+        self.cameras: dict[str, dict[str, Any]] = {}
+        self.lights: dict[str, dict[str, Any]] = {}
+
+    def set_mesh(self, path: str, **kwargs: Any) -> None:
+        self.meshes[path] = kwargs
+
+    def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
+        self.meshes[path]["transform"] = transform
+
+    def set_camera(self, path: str, **kwargs: Any) -> None:
+        self.cameras[path] = kwargs
+
+    def set_distant_light(self, path: str, **kwargs: Any) -> None:
+        self.lights[path] = {"kind": "distant", **kwargs}
+
+    def set_light(self, path: str, **kwargs: Any) -> None:
+        self.lights[path] = kwargs
+
+    def set_instancer(self, path: str, **kwargs: Any) -> None:
+        raise PrimError(path, "instancers are not exported to Mitsuba; flatten the scene")
+
+    def set_motion(self, path: str, *args: Any, **kwargs: Any) -> None:
+        raise PrimError(path, "motion blur is not exported to Mitsuba")
+
+    def remove(self, path: str) -> None:
+        for table in (self.meshes, self.cameras, self.lights):
+            table.pop(path, None)
+
+    def prim_paths(self) -> list[str]:
+        return sorted({*self.meshes, *self.cameras, *self.lights})
+
+
+@dataclass
+class Capture:
+    """A stage as mipray's render delegate receives it (``set_*`` keyword arguments)."""
+
+    camera_path: str
+    camera: dict[str, Any]
+    meshes: dict[str, dict[str, Any]]
+    lights: dict[str, dict[str, Any]]
+    #: Per mesh path: how its material maps to Mitsuba (filled by :func:`scene_dict`).
+    materials: dict[str, MaterialMapping] = field(default_factory=dict)
+
+
+def capture(
+    stage: Usd.Stage, camera: str | None = None, time: Usd.TimeCode | float | None = None
+) -> Capture:
+    """Read ``stage`` through mipray's scene delegate (the default and render purposes).
+
+    A stage without lights is exported without lights (lit by its emissive
+    surfaces alone): render it in mipray with ``camera_light=False`` to compare.
+
+    Raises:
+        PrimError: no camera (or not the one asked for), or a prim mipray itself
+            refuses.
+
+    """
+    recorder = _Recorder()
+    delegate = UsdSceneDelegate(
+        stage, recorder, time=time if time is not None else stage.GetStartTimeCode()
+    )
+    delegate.sync()
+    errors = delegate.delegate_errors if hasattr(delegate, "delegate_errors") else []
+    if errors:
+        raise MiprayError(f"the stage did not sync: {errors[0]}")
+    if camera is None:
+        if not recorder.cameras:
+            raise PrimError(str(stage.GetPseudoRoot().GetPath()), "the stage has no camera")
+        camera = sorted(recorder.cameras)[0]
+    if camera not in recorder.cameras:
+        raise PrimError(camera, f"no such camera (cameras: {', '.join(sorted(recorder.cameras))})")
+    return Capture(camera, recorder.cameras[camera], recorder.meshes, recorder.lights)
+
+
+# ----------------------------------------------------------------------------- materials
+
+
+@dataclass(frozen=True)
+class MaterialMapping:
+    """A UsdPreviewSurface as a Mitsuba BSDF (and emitter)."""
+
+    #: The Mitsuba BSDF dict; None when the mesh is cut out entirely.
+    bsdf: dict[str, Any] | None
+    #: Emitted radiance (linear RGB), or None.
+    emission: tuple[float, float, float] | None
+    #: "diffuse", "mirror", "metal", "glass", "plastic", "principled", "cutout".
+    model: str
+    #: True when Mitsuba's model is UsdPreviewSurface's (up to Smith G and sampling).
+    exact: bool
+
+
+def _clamp01(x: float) -> float:
+    return 0.0 if math.isnan(x) else min(max(x, 0.0), 1.0)
+
+
+def _rgb(value: Any, default: tuple[float, float, float]) -> tuple[float, float, float]:
+    if value is None:
+        return default
+    r, g, b = (float(c) for c in value)
+    return (r, g, b)
+
+
+def _spectrum(rgb: tuple[float, float, float]) -> dict[str, Any]:
+    return {"type": "rgb", "value": list(rgb)}
+
+
+def _surface(material: dict[str, Any] | None, albedo: Any) -> dict[str, Any]:
+    """UsdPreviewSurface's inputs with fallbacks, clamped as the core clamps them."""
+    m = material or {}
+    if material is None:
+        # mipray's display-color material: lambertian (specular workflow, no specular).
+        m = {"diffuseColor": albedo, "useSpecularWorkflow": True}
+    s = {
+        "diffuseColor": tuple(_clamp01(c) for c in _rgb(m.get("diffuseColor"), (0.18,) * 3)),
+        "emissiveColor": tuple(
+            0.0 if math.isnan(c) else max(c, 0.0) for c in _rgb(m.get("emissiveColor"), (0.0,) * 3)
+        ),
+        "useSpecularWorkflow": bool(m.get("useSpecularWorkflow", False)),
+        "specularColor": tuple(_clamp01(c) for c in _rgb(m.get("specularColor"), (0.0,) * 3)),
+    }
+    for name, default in (
+        ("metallic", 0.0),
+        ("roughness", 0.5),
+        ("clearcoat", 0.0),
+        ("clearcoatRoughness", 0.01),
+        ("opacity", 1.0),
+        ("opacityThreshold", 0.0),
+    ):
+        s[name] = _clamp01(float(m.get(name, default)))
+    ior = float(m.get("ior", 1.5))
+    s["ior"] = ior if math.isfinite(ior) and ior > 0.0 else 1.0
+    return s
+
+
+def material_mapping(
+    path: str, material: dict[str, Any] | None, albedo: Any = (0.18, 0.18, 0.18)
+) -> MaterialMapping:
+    """The Mitsuba BSDF for a mesh's ``material`` argument (or its ``albedo``).
+
+    Raises:
+        PrimError: a textured input (Mitsuba would need the mesh's st).
+
+    """
+    if material and material.get("textures"):
+        inputs = ", ".join(sorted(material["textures"]))
+        raise PrimError(path, f"textured inputs ({inputs}) are not exported to Mitsuba")
+    s = _surface(material, albedo)
+    emission = s["emissiveColor"] if max(s["emissiveColor"]) > 0.0 else None
+    rough = s["roughness"]
+    alpha = rough * rough
+    smooth = rough < SMOOTH_ROUGHNESS
+    if s["opacityThreshold"] > 0.0:
+        if s["opacity"] < s["opacityThreshold"]:
+            return MaterialMapping(None, None, "cutout", True)
+    elif s["opacity"] < 1.0:
+        glass: dict[str, Any] = {"type": "dielectric" if smooth else "roughdielectric"}
+        glass.update({"int_ior": s["ior"], "ext_ior": 1.0})
+        if not smooth:
+            glass.update({"distribution": "ggx", "alpha": alpha})
+        if s["opacity"] <= 0.0:
+            return MaterialMapping(glass, emission, "glass", True)
+        opaque = material_mapping(path, {**(material or {}), "opacity": 1.0}, albedo)
+        blend = {
+            "type": "blendbsdf",
+            "weight": 1.0 - s["opacity"],
+            "opaque": opaque.bsdf,
+            "glass": glass,
+        }
+        return MaterialMapping(blend, emission, "glass", False)
+    diffuse = s["diffuseColor"]
+    metallic = 0.0 if s["useSpecularWorkflow"] else s["metallic"]
+    if s["useSpecularWorkflow"]:
+        f0 = max(s["specularColor"])
+    else:
+        dielectric = ((1.0 - s["ior"]) / (1.0 + s["ior"])) ** 2
+        f0 = max((1.0 - metallic) * dielectric + metallic * c for c in diffuse)
+    bsdf: dict[str, Any]
+    if s["clearcoat"] <= 0.0 and f0 <= 0.0:
+        bsdf = {"type": "diffuse", "reflectance": _spectrum(diffuse)}
+        model, exact = "diffuse", True
+    elif s["clearcoat"] <= 0.0 and metallic >= 1.0 and smooth:
+        bsdf = {"type": SCHLICK_MIRROR, "f0_r": diffuse[0], "f0_g": diffuse[1], "f0_b": diffuse[2]}
+        model, exact = "mirror", True
+    elif s["clearcoat"] <= 0.0 and metallic >= 1.0:
+        bsdf = {
+            "type": "principled",
+            "base_color": _spectrum(diffuse),
+            "metallic": 1.0,
+            "roughness": max(rough, SMOOTH_ROUGHNESS),
+            "spec_tint": 0.0,
+        }
+        model, exact = "metal", True
+    elif s["clearcoat"] <= 0.0 and metallic <= 0.0 and not s["useSpecularWorkflow"]:
+        bsdf = {
+            "type": "plastic" if smooth else "roughplastic",
+            "diffuse_reflectance": _spectrum(diffuse),
+            "int_ior": max(s["ior"], 1.0 + 1e-4),
+            "ext_ior": 1.0,
+            "nonlinear": False,
+        }
+        if not smooth:
+            bsdf.update({"distribution": "ggx", "alpha": alpha})
+        model, exact = "plastic", False
+    else:
+        eta = max(s["ior"], 1.0 + 1e-4)
+        bsdf = {
+            "type": "principled",
+            "base_color": _spectrum(diffuse),
+            "metallic": metallic,
+            "roughness": max(rough, SMOOTH_ROUGHNESS),
+            "specular": ((eta - 1.0) / (eta + 1.0)) ** 2 / 0.08,
+            "clearcoat": s["clearcoat"],
+            "clearcoat_gloss": 1.0 - s["clearcoatRoughness"],
+        }
+        model, exact = "principled", False
+    return MaterialMapping({"type": "twosided", "bsdf": bsdf}, emission, model, exact)
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def _world_points(args: dict[str, Any]) -> NDArray[np.float64]:
+    p = np.asarray(args["points"], dtype=np.float64).reshape(-1, 3)
+    m = np.asarray(args["transform"], dtype=np.float64).reshape(4, 4)
+    # Row-vector USD layout: p_world = [p, 1] @ m.
+    h = np.hstack([p, np.ones((len(p), 1))]) @ m
+    out: NDArray[np.float64] = h[:, :3] / h[:, 3:4]
+    return out
+
+
+def _triangles(path: str, args: dict[str, Any], points: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Fan triangles of every planar face (F', 3), with the face each came from as column 3."""
+    scheme = args.get("scheme", "catmullClark")
+    if scheme != "none":
+        raise PrimError(
+            path,
+            f"subdivisionScheme '{scheme}': only polygonal meshes (none) are exported, "
+            "so both renderers see the same surface",
+        )
+    counts = np.asarray(args["face_vertex_counts"], dtype=np.int64)
+    indices = np.asarray(args["face_vertex_indices"], dtype=np.int64)
+    holes = set(np.asarray(args.get("hole_indices") or [], dtype=np.int64).tolist())
+    left = bool(args.get("left_handed", False))
+    out: list[tuple[int, int, int, int]] = []
+    start = 0
+    for face, n in enumerate(counts.tolist()):
+        idx = indices[start : start + n]
+        start += n
+        if face in holes or n < 3:
+            continue
+        if left:
+            idx = idx[::-1]
+        poly = points[idx]
+        if n > 3:
+            # Newell's normal; every corner must lie on the plane through the centroid.
+            nrm = np.zeros(3)
+            for i in range(n):
+                a, b = poly[i], poly[(i + 1) % n]
+                nrm += np.array([(a[1] - b[1]) * (a[2] + b[2]), (a[2] - b[2]) * (a[0] + b[0]), 0.0])
+                nrm[2] += (a[0] - b[0]) * (a[1] + b[1])
+            size = float(np.ptp(poly, axis=0).max())
+            length = float(np.linalg.norm(nrm))
+            if length > 0.0 and size > 0.0:
+                off = np.abs((poly - poly.mean(axis=0)) @ (nrm / length)).max()
+                if off > 1e-5 * size:
+                    raise PrimError(
+                        path,
+                        f"face {face} is not planar ({off:.3g} off its plane): mipray renders "
+                        "it as a bilinear patch, Mitsuba would render triangles",
+                    )
+        for i in range(1, n - 1):
+            out.append((int(idx[0]), int(idx[i]), int(idx[i + 1]), face))
+    return np.asarray(out, dtype=np.int64).reshape(-1, 4)
+
+
+def _mesh(
+    mi: Any, name: str, points: NDArray[np.float64], tris: NDArray[np.int64], props: Any
+) -> Any:
+    """A Mitsuba mesh of the triangles, without vertex normals (flat-shaded, as mipray)."""
+    used, inverse = np.unique(tris[:, :3].reshape(-1), return_inverse=True)
+    mesh = mi.Mesh(name, len(used), len(tris), props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = points[used].astype(np.float32).reshape(-1)
+    params["faces"] = inverse.astype(np.uint32).reshape(-1)
+    params.update()
+    return mesh
+
+
+# ----------------------------------------------------------------------------- lights
+
+
+def _light_radiance(args: dict[str, Any]) -> tuple[float, float, float]:
+    scale = float(args.get("intensity", 1.0)) * 2.0 ** float(args.get("exposure", 0.0))
+    r, g, b = (float(c) * scale for c in args.get("color", (1.0, 1.0, 1.0)))
+    return (r, g, b)
+
+
+def _column_matrix(args: dict[str, Any]) -> NDArray[np.float64]:
+    """A light's or camera's transform in column-vector layout (p' = M p)."""
+    return np.asarray(args["transform"], dtype=np.float64).reshape(4, 4).T
+
+
+def _light(mi: Any, path: str, args: dict[str, Any]) -> dict[str, Any]:
+    kind = args["kind"]
+    if not args.get("shadow_enable", True):
+        raise PrimError(path, "inputs:shadow:enable is off: Mitsuba's lights always cast shadows")
+    m = _column_matrix(args)
+    radiance = _light_radiance(args)
+    black = {"type": "diffuse", "reflectance": _spectrum((0.0, 0.0, 0.0))}
+    if kind == "distant":
+        if float(args.get("angle", 0.0)) > 0.0:
+            raise PrimError(
+                path,
+                f"inputs:angle {args['angle']}: Mitsuba's directional light is a point at "
+                "infinity; author angle 0",
+            )
+        d = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
+        d /= np.linalg.norm(d)
+        return {"type": "directional", "direction": d.tolist(), "irradiance": _spectrum(radiance)}
+    if kind == "dome":
+        if args.get("texture"):
+            raise PrimError(path, "dome textures are not exported to Mitsuba")
+        return {"type": "constant", "radiance": _spectrum(radiance)}
+    center = m[:3, 3]
+    if kind == "sphere":
+        scale = float(np.mean(np.linalg.norm(m[:3, :3], axis=0)))
+        radius = float(args.get("radius", 0.5)) * scale
+        area = 4.0 * math.pi * radius * radius
+        if args.get("normalize"):
+            radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
+        return {
+            "type": "sphere",
+            "center": center.tolist(),
+            "radius": radius,
+            "bsdf": black,
+            "emitter": {"type": "area", "radiance": _spectrum(radiance)},
+        }
+    if kind in ("rect", "disk"):
+        if kind == "rect":
+            u = m[:3, :3] @ np.array([float(args.get("width", 1.0)) * 0.5, 0.0, 0.0])
+            v = m[:3, :3] @ np.array([0.0, float(args.get("height", 1.0)) * 0.5, 0.0])
+            area = 4.0 * float(np.linalg.norm(np.cross(u, v)))
+        else:
+            r = float(args.get("radius", 0.5))
+            u = m[:3, :3] @ np.array([r, 0.0, 0.0])
+            v = m[:3, :3] @ np.array([0.0, r, 0.0])
+            area = math.pi * float(np.linalg.norm(np.cross(u, v)))
+        if args.get("normalize") and area > 0.0:
+            radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
+        # UsdLux rect and disk lights emit along their -Z; Mitsuba's shapes along their
+        # normal, which its to_world maps from +Z (by the inverse transpose).
+        n = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
+        n /= np.linalg.norm(n)
+        to_world = np.eye(4)
+        to_world[:3, 0], to_world[:3, 1], to_world[:3, 2], to_world[:3, 3] = u, v, n, center
+        return {
+            "type": "rectangle" if kind == "rect" else "disk",
+            "to_world": mi.ScalarTransform4f(to_world.tolist()),
+            "bsdf": black,
+            "emitter": {"type": "area", "radiance": _spectrum(radiance)},
+        }
+    raise PrimError(path, f"light kind '{kind}' is not exported to Mitsuba")
+
+
+# ----------------------------------------------------------------------------- camera
+
+
+def _camera(mi: Any, path: str, args: dict[str, Any], width: int, height: int) -> dict[str, Any]:
+    if args.get("projection", "perspective") != "perspective":
+        raise PrimError(path, "only perspective cameras are exported to Mitsuba")
+    if args.get("horizontal_aperture_offset", 0.0) or args.get("vertical_aperture_offset", 0.0):
+        raise PrimError(path, "aperture offsets are not exported to Mitsuba")
+    if args.get("f_stop", 0.0) > 0.0 and args.get("focus_distance", 0.0) > 0.0:
+        raise PrimError(path, "depth of field is not exported to Mitsuba")
+    ha, va = float(args["horizontal_aperture"]), float(args["vertical_aperture"])
+    # The window fitted to the image as mipray's camera fits it (enlarged to the image aspect).
+    aspect = width / height
+    if aspect > ha / va:
+        ha = va * aspect
+    fov = math.degrees(2.0 * math.atan(0.5 * ha / float(args["focal_length"])))
+    m = _column_matrix(args) @ np.diag([-1.0, 1.0, -1.0, 1.0])
+    near, far = args.get("clipping_range", (1.0, 1e6))
+    return {
+        "type": "perspective",
+        "fov": fov,
+        "fov_axis": "x",
+        "near_clip": float(near),
+        "far_clip": float(far),
+        "to_world": mi.ScalarTransform4f(m.tolist()),
+        "film": {
+            "type": "hdrfilm",
+            "width": width,
+            "height": height,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+            "component_format": "float32",
+            "sample_border": False,
+        },
+        "sampler": {"type": "independent", "sample_count": 1},
+    }
+
+
+# ----------------------------------------------------------------------------- scene
+
+
+#: Mitsuba plugin name of the smooth Schlick conductor registered by :func:`_mitsuba`.
+SCHLICK_MIRROR = "mipray_schlick_mirror"
+
+
+def _register_schlick_mirror(mi: Any) -> None:
+    """Registers a delta mirror whose Fresnel is Schlick's from ``f0_r/g/b`` to white.
+
+    That is UsdPreviewSurface's metal at roughness 0. Mitsuba's ``conductor`` uses the
+    complex-index Fresnel instead, and its ``principled`` at a tiny roughness is a near-delta
+    GGX whose light samples make fireflies.
+    """
+    import drjit as dr
+
+    class SchlickMirror(mi.BSDF):  # type: ignore[misc]
+        def __init__(self, props: Any) -> None:
+            mi.BSDF.__init__(self, props)
+            self.f0 = mi.Color3f(*(float(props.get(f"f0_{c}", 1.0)) for c in "rgb"))
+            self.m_flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [self.m_flags]
+
+        def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> Any:
+            cos = mi.Frame3f.cos_theta(si.wi)
+            bs = mi.BSDFSample3f()
+            bs.wo = mi.reflect(si.wi)
+            bs.pdf = 1.0
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DeltaReflection)
+            bs.sampled_component = 0
+            f = self.f0 + (1.0 - self.f0) * (1.0 - dr.clip(cos, 0.0, 1.0)) ** 5
+            return bs, dr.select(cos > 0, f, mi.Color3f(0.0))
+
+        def eval(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
+            return mi.Color3f(0.0)
+
+        def pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
+            return 0.0
+
+        def eval_pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
+            return mi.Color3f(0.0), 0.0
+
+        def to_string(self) -> str:
+            return f"SchlickMirror[f0 = {self.f0}]"
+
+    mi.register_bsdf(SCHLICK_MIRROR, lambda props: SchlickMirror(props))
+
+
+_registered: set[str] = set()
+
+
+def _mitsuba() -> Any:
+    try:
+        import mitsuba as mi
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise MiprayError(
+            f"Mitsuba 3 is not installed ({exc}); pip install mitsuba (scripts/requirements.txt)"
+        ) from exc
+    if mi.variant() != VARIANT:
+        mi.set_variant(VARIANT)
+    if VARIANT not in _registered:
+        _register_schlick_mirror(mi)
+        _registered.add(VARIANT)
+    return mi
+
+
+def scene_dict(
+    cap: Capture, width: int, height: int | None = None, integrator: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The Mitsuba scene description of a :class:`Capture`; fills ``cap.materials``.
+
+    ``integrator`` is Mitsuba's dict; by default ``path`` with max_depth 2 (direct light).
+
+    Raises:
+        PrimError: something Mitsuba cannot render the way mipray does (see the module doc).
+
+    """
+    mi = _mitsuba()
+    height = image_height(width, cap.camera) if height is None else height
+    scene: dict[str, Any] = {
+        "type": "scene",
+        "integrator": integrator or {"type": "path", "max_depth": 2},
+        "sensor": _camera(mi, cap.camera_path, cap.camera, width, height),
+    }
+    for k, (path, args) in enumerate(sorted(cap.lights.items())):
+        scene[f"light_{k}"] = _light(mi, path, args)
+    for k, (path, args) in enumerate(sorted(cap.meshes.items())):
+        if args.get("prototype"):
+            raise PrimError(path, "instance prototypes are not exported to Mitsuba")
+        points = _world_points(args)
+        tris = _triangles(path, args, points)
+        if len(tris) == 0:
+            continue
+        own = material_mapping(path, args.get("material"), args.get("albedo", (0.18,) * 3))
+        cap.materials[path] = own
+        # Per-face colours (GeomSubsets, uniform displayColor): lambertian, as mipray makes them.
+        table = args.get("face_albedo_indices")
+        groups: dict[int, MaterialMapping] = {-1: own}
+        face_group = np.full(len(tris), -1, dtype=np.int64)
+        if table is not None:
+            face_group = np.asarray(table, dtype=np.int64)[tris[:, 3]]
+            for g in np.unique(face_group).tolist():
+                if g >= 0:
+                    groups[g] = material_mapping(path, None, args["face_albedos"][g])
+        for g, mapping in groups.items():
+            sel = tris[face_group == g]
+            if len(sel) == 0 or mapping.bsdf is None:
+                continue
+            props = mi.Properties()
+            props["bsdf"] = mi.load_dict(mapping.bsdf)
+            if mapping.emission is not None:
+                props["emitter"] = mi.load_dict(
+                    {"type": "area", "radiance": _spectrum(mapping.emission)}
+                )
+                back = _back_faces(points, sel)
+                back_props = mi.Properties()
+                back_props["bsdf"] = mi.load_dict(mapping.bsdf)
+                back_props["emitter"] = mi.load_dict(
+                    {"type": "area", "radiance": _spectrum(mapping.emission)}
+                )
+                scene[f"mesh_{k}_{g + 1}_back"] = _mesh(mi, f"{path}[{g}] back", *back, back_props)
+            scene[f"mesh_{k}_{g + 1}"] = _mesh(mi, f"{path}[{g}]", points, sel, props)
+    return scene
+
+
+def _back_faces(
+    points: NDArray[np.float64], tris: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The triangles turned over and moved a hair behind themselves.
+
+    mipray's ``emissiveColor`` emits from both sides of a surface, Mitsuba's area emitter
+    along the face normal only: the turned-over copy emits the other way. Each triangle moves
+    1e-5 of the mesh's size along its own back normal, so a ray from either side meets the copy
+    that faces it first; nothing else can tell the two apart.
+    """
+    corners = points[tris[:, :3]]  # (T, 3, 3)
+    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    size = float(np.ptp(corners.reshape(-1, 3), axis=0).max())
+    moved = corners[:, ::-1] - (1e-5 * size) * n[:, None, :]
+    idx = np.arange(3 * len(tris), dtype=np.int64).reshape(-1, 3)
+    faces = np.hstack([idx, tris[:, 3:4]])
+    return moved.reshape(-1, 3), faces
+
+
+def render(
+    stage: Usd.Stage,
+    *,
+    width: int,
+    spp: int,
+    seed: int = 0,
+    integrator: dict[str, Any] | None = None,
+    camera: str | None = None,
+    height: int | None = None,
+) -> NDArray[np.float32]:
+    """Render ``stage`` with Mitsuba 3: an (H, W, 3) float32 linear RGB image, row 0 on top.
+
+    Raises:
+        PrimError: see :func:`scene_dict`.
+
+    """
+    mi = _mitsuba()
+    cap = capture(stage, camera)
+    scene = mi.load_dict(scene_dict(cap, width, height, integrator))
+    image = mi.render(scene, spp=spp, seed=seed)
+    out: NDArray[np.float32] = np.array(image, dtype=np.float32)[..., :3]
+    return out

@@ -1,0 +1,473 @@
+"""The scenes mipray is compared with Mitsuba 3 on, built in memory with usd-core.
+
+Every scene is polygonal (``subdivisionScheme = "none"``, planar faces) so both
+renderers intersect the same surface. Both show lights to camera rays (a dome is
+the background); the area lights are out of the camera's view all the same, so
+that the images compare surfaces, not the edges of bright lights.
+Each :class:`Scene` names the mipray render settings and the Mitsuba integrator
+that compute the same integral:
+
+- mipray's classic integrator (direct light, shadows, ``shadowSamples`` light
+  samples per area light) ↔ Mitsuba's ``direct`` with as many emitter samples,
+  for scenes without specular surfaces;
+- mipray's classic integrator with mirrors ↔ Mitsuba's ``path`` of the depth
+  that reaches the light through the mirror, in scenes where no longer path
+  carries light (a convex mirror over a single plane under a point-like light);
+- mipray's path tracer (``integrator = path``, ``maxDepth`` = bounces after the
+  camera hit, 0 being direct light) ↔ Mitsuba's ``path`` with ``max_depth`` =
+  bounces + 2 (Mitsuba counts the camera segment and the segment to the light).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
+
+__all__ = ["SCENES", "Scene", "by_name"]
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A comparison scene."""
+
+    name: str
+    #: One line: what it tests.
+    what: str
+    build: Callable[[], Usd.Stage]
+    #: mipray render settings (``samples`` and ``seed`` are set by the comparison).
+    settings: dict[str, Any] = field(default_factory=dict)
+    #: Mitsuba's integrator dict.
+    integrator: dict[str, Any] = field(default_factory=lambda: {"type": "direct"})
+    #: Image width in pixels (the height follows the camera's aspect).
+    width: int = 64
+
+
+# ----------------------------------------------------------------------------- building blocks
+
+
+def _stage() -> Usd.Stage:
+    stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.Xform.Define(stage, "/World")
+    return stage
+
+
+def _camera(stage: Usd.Stage, eye: Vec3, target: Vec3, focal: float = 35.0) -> None:
+    cam = UsdGeom.Camera.Define(stage, "/World/Camera")
+    view = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*eye), Gf.Vec3d(*target), Gf.Vec3d(0, 1, 0))
+    cam.AddTransformOp().Set(view.GetInverse())
+    cam.CreateFocalLengthAttr(focal)
+    cam.CreateHorizontalApertureAttr(36.0)
+    cam.CreateVerticalApertureAttr(27.0)
+    cam.CreateClippingRangeAttr(Gf.Vec2f(0.01, 1000.0))
+
+
+def _material(stage: Usd.Stage, name: str, **inputs: Any) -> UsdShade.Material:
+    """A UsdPreviewSurface material with the given inputs (Python values; colours as tuples)."""
+    material = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
+    shader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    for key, value in inputs.items():
+        if isinstance(value, tuple):
+            shader.CreateInput(key, Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*value))
+        elif key == "useSpecularWorkflow":
+            shader.CreateInput(key, Sdf.ValueTypeNames.Int).Set(int(value))
+        else:
+            shader.CreateInput(key, Sdf.ValueTypeNames.Float).Set(float(value))
+    material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    return material
+
+
+def lambert(stage: Usd.Stage, name: str, color: Vec3) -> UsdShade.Material:
+    """A pure lambertian UsdPreviewSurface: specular workflow with no specular."""
+    return _material(
+        stage, name, diffuseColor=color, useSpecularWorkflow=1, specularColor=(0, 0, 0)
+    )
+
+
+def _mesh(
+    stage: Usd.Stage,
+    path: str,
+    points: Sequence[Vec3],
+    counts: Sequence[int],
+    indices: Sequence[int],
+    material: UsdShade.Material,
+) -> UsdGeom.Mesh:
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr([Gf.Vec3f(*p) for p in points])
+    mesh.CreateFaceVertexCountsAttr(list(counts))
+    mesh.CreateFaceVertexIndicesAttr(list(indices))
+    mesh.CreateSubdivisionSchemeAttr("none")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+    return mesh
+
+
+def ground(stage: Usd.Stage, material: UsdShade.Material, half: float = 4.0) -> None:
+    """A square at y = 0, facing +Y."""
+    h = half
+    _mesh(
+        stage,
+        "/World/Ground",
+        [(-h, 0, h), (h, 0, h), (h, 0, -h), (-h, 0, -h)],
+        [4],
+        [0, 1, 2, 3],
+        material,
+    )
+
+
+def box(stage: Usd.Stage, path: str, lo: Vec3, hi: Vec3, material: UsdShade.Material) -> None:
+    """An axis-aligned box, faces outward."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    pts = [
+        (x0, y0, z1),
+        (x1, y0, z1),
+        (x1, y1, z1),
+        (x0, y1, z1),
+        (x0, y0, z0),
+        (x1, y0, z0),
+        (x1, y1, z0),
+        (x0, y1, z0),
+    ]
+    faces = [[0, 1, 2, 3], [5, 4, 7, 6], [1, 5, 6, 2], [4, 0, 3, 7], [3, 2, 6, 7], [4, 5, 1, 0]]
+    _mesh(stage, path, pts, [4] * 6, [i for f in faces for i in f], material)
+
+
+def uv_sphere(
+    stage: Usd.Stage,
+    path: str,
+    center: Vec3,
+    radius: float,
+    material: UsdShade.Material,
+    rings: int = 12,
+    segments: int = 24,
+) -> None:
+    """A latitude-longitude sphere: planar trapezoids between rings, triangles at the poles."""
+    cx, cy, cz = center
+    pts: list[Vec3] = [(cx, cy + radius, cz)]
+    for i in range(1, rings):
+        th = math.pi * i / rings
+        for j in range(segments):
+            ph = 2.0 * math.pi * j / segments
+            pts.append(
+                (
+                    cx + radius * math.sin(th) * math.cos(ph),
+                    cy + radius * math.cos(th),
+                    cz - radius * math.sin(th) * math.sin(ph),
+                )
+            )
+    pts.append((cx, cy - radius, cz))
+    south = len(pts) - 1
+
+    def ring(i: int, j: int) -> int:
+        return 1 + (i - 1) * segments + j % segments
+
+    counts: list[int] = []
+    idx: list[int] = []
+    for j in range(segments):
+        counts.append(3)
+        idx += [0, ring(1, j), ring(1, j + 1)]
+    for i in range(1, rings - 1):
+        for j in range(segments):
+            counts.append(4)
+            idx += [ring(i, j), ring(i + 1, j), ring(i + 1, j + 1), ring(i, j + 1)]
+    for j in range(segments):
+        counts.append(3)
+        idx += [ring(rings - 1, j), south, ring(rings - 1, j + 1)]
+    _mesh(stage, path, pts, counts, idx, material)
+
+
+def _place(
+    light: UsdLux.BoundableLightBase | UsdLux.NonboundableLightBase, eye: Vec3, target: Vec3
+) -> None:
+    """Points the light's -Z from ``eye`` toward ``target``."""
+    view = Gf.Matrix4d().SetLookAt(
+        Gf.Vec3d(*eye),
+        Gf.Vec3d(*target),
+        Gf.Vec3d(0, 0, 1)
+        if abs(eye[0] - target[0]) + abs(eye[2] - target[2]) < 1e-9
+        else Gf.Vec3d(0, 1, 0),
+    )
+    UsdGeom.Xformable(light).AddTransformOp().Set(view.GetInverse())
+
+
+def _set(light: Any, intensity: float, color: Vec3 = (1.0, 1.0, 1.0), **inputs: float) -> None:
+    light.CreateIntensityAttr(intensity)
+    light.CreateColorAttr(Gf.Vec3f(*color))
+    for key, value in inputs.items():
+        light.GetPrim().CreateAttribute(f"inputs:{key}", Sdf.ValueTypeNames.Float).Set(value)
+
+
+def _still_life(stage: Usd.Stage, sphere_material: UsdShade.Material | None = None) -> None:
+    """Ground, a box and a sphere (lambertian unless ``sphere_material``), a camera."""
+    ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+    box(
+        stage,
+        "/World/Box",
+        (-1.6, 0.0, -0.8),
+        (-0.4, 1.2, 0.4),
+        lambert(stage, "Red", (0.7, 0.15, 0.1)),
+    )
+    uv_sphere(
+        stage,
+        "/World/Ball",
+        (0.9, 0.8, 0.3),
+        0.8,
+        sphere_material or lambert(stage, "Blue", (0.15, 0.3, 0.7)),
+    )
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+
+
+# ----------------------------------------------------------------------------- scenes
+
+
+def _distant() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    _set(sun, 3.0, (1.0, 0.95, 0.9))
+    sun.CreateAngleAttr(0.0)
+    _place(sun, (3.0, 5.0, 2.0), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _sphere_light() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    light = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+    _set(light, 60.0, (1.0, 0.9, 0.8))
+    light.CreateRadiusAttr(0.4)
+    light.AddTranslateOp().Set(Gf.Vec3d(1.5, 4.5, -1.5))
+    return stage
+
+
+def _rect_light() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    light = UsdLux.RectLight.Define(stage, "/World/Panel")
+    _set(light, 12.0)
+    light.CreateWidthAttr(2.0)
+    light.CreateHeightAttr(1.0)
+    _place(light, (-1.0, 4.5, -2.0), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _disk_light() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    light = UsdLux.DiskLight.Define(stage, "/World/Disk")
+    _set(light, 40.0, (0.9, 0.95, 1.0))
+    light.CreateRadiusAttr(0.3)
+    light.CreateNormalizeAttr(True)
+    light.GetIntensityAttr().Set(20.0)
+    _place(light, (2.5, 4.5, 1.0), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _dome() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    dome = UsdLux.DomeLight.Define(stage, "/World/Sky")
+    _set(dome, 1.0, (0.8, 0.9, 1.0))
+    return stage
+
+
+def _mirror() -> Usd.Stage:
+    stage = _stage()
+    ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+    chrome = _material(stage, "Chrome", diffuseColor=(0.9, 0.8, 0.6), metallic=1.0, roughness=0.0)
+    uv_sphere(stage, "/World/Ball", (0.0, 0.9, 0.0), 0.9, chrome, rings=16, segments=32)
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    _set(sun, 3.0)
+    sun.CreateAngleAttr(0.0)
+    _place(sun, (3.0, 5.0, 2.0), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _bulb(stage: Usd.Stage, intensity: float = 60.0) -> None:
+    light = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+    _set(light, intensity, (1.0, 0.9, 0.8))
+    light.CreateRadiusAttr(0.4)
+    light.AddTranslateOp().Set(Gf.Vec3d(1.5, 4.5, -1.5))
+
+
+def _path_diffuse() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    # A white wall behind, for light to bounce off.
+    white = lambert(stage, "White", (0.8, 0.8, 0.8))
+    box(stage, "/World/Wall", (-4.0, 0.0, -2.6), (4.0, 3.0, -2.4), white)
+    _bulb(stage)
+    return stage
+
+
+def _metal() -> Usd.Stage:
+    stage = _stage()
+    gold = _material(stage, "Gold", diffuseColor=(0.95, 0.7, 0.3), metallic=1.0, roughness=0.5)
+    _still_life(stage, sphere_material=gold)
+    # A big panel: its highlight on the sphere spans pixels rather than hiding inside one,
+    # whose sub-pixel coverage would make the noise estimate heavy-tailed.
+    light = UsdLux.RectLight.Define(stage, "/World/Panel")
+    _set(light, 4.0)
+    light.CreateWidthAttr(4.0)
+    light.CreateHeightAttr(2.0)
+    _place(light, (-1.0, 4.5, -2.0), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _glass(roughness: float) -> Callable[[], Usd.Stage]:
+    def build() -> Usd.Stage:
+        stage = _stage()
+        glass = _material(stage, "Glass", opacity=0.0, ior=1.5, roughness=roughness)
+        _still_life(stage, sphere_material=glass)
+        sky = UsdLux.DomeLight.Define(stage, "/World/Sky")
+        _set(sky, 1.0, (0.8, 0.9, 1.0))
+        return stage
+
+    return build
+
+
+def _emissive() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    panel = _material(
+        stage,
+        "Panel",
+        diffuseColor=(0.0, 0.0, 0.0),
+        useSpecularWorkflow=1,
+        emissiveColor=(4.0, 3.6, 3.0),
+    )
+    # A glowing panel standing behind the objects, facing them (+Z).
+    corners = [(-2.0, 0.2, -2.0), (2.0, 0.2, -2.0), (2.0, 1.8, -2.0), (-2.0, 1.8, -2.0)]
+    _mesh(stage, "/World/Glow", corners, [4], [0, 1, 2, 3], panel)
+    return stage
+
+
+def _plastic() -> Usd.Stage:
+    stage = _stage()
+    red = _material(stage, "Plastic", diffuseColor=(0.7, 0.1, 0.1), roughness=0.3, ior=1.5)
+    _still_life(stage, sphere_material=red)
+    _bulb(stage)
+    return stage
+
+
+def _direct(samples: int) -> dict[str, Any]:
+    """Mitsuba's direct-light integrator with ``samples`` light samples.
+
+    mipray's ``shadowSamples`` and no BSDF samples: what its classic integrator estimates.
+    """
+    return {"type": "direct", "emitter_samples": samples, "bsdf_samples": 0}
+
+
+def _path(bounces: int) -> dict[str, Any]:
+    """Mitsuba's path tracer for mipray's ``maxDepth = bounces`` (bounces after the camera hit).
+
+    Mitsuba's max_depth counts the camera segment and the segment to the light as well.
+    """
+    return {"type": "path", "max_depth": bounces + 2}
+
+
+SCENES: tuple[Scene, ...] = (
+    Scene(
+        "distant",
+        "lambertian box, sphere and ground under a distant light (angle 0): hard shadows",
+        _distant,
+        settings={},
+    ),
+    Scene(
+        "sphere_light",
+        "the same under a sphere light: soft shadows sampled on the sphere",
+        _sphere_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "rect_light",
+        "the same under a rect light (one-sided, emitting along its -Z)",
+        _rect_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "disk_light",
+        "the same under a normalized disk light",
+        _disk_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "dome",
+        "the same under a constant dome: direct sky light with its occlusion",
+        _dome,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "mirror",
+        "a chrome sphere (metallic 1, roughness 0) over the ground under a distant light: "
+        "mipray's classic integrator follows the mirror, Mitsuba's path tracer goes to the same "
+        "depth (no longer path carries light here)",
+        _mirror,
+        settings={},
+        integrator={"type": "path", "max_depth": 3},
+    ),
+    Scene(
+        "path_diffuse",
+        "the lambertian still life and a white wall under a sphere light, path traced: "
+        "indirect diffuse (colour bleeding) to 3 bounces",
+        _path_diffuse,
+        settings={"integrator": "path", "maxDepth": 3},
+        integrator=_path(3),
+    ),
+    Scene(
+        "metal",
+        "a rough gold sphere (metallic 1, roughness 0.5) under a rect light, path traced to "
+        "2 bounces",
+        _metal,
+        settings={"integrator": "path", "maxDepth": 2},
+        integrator=_path(2),
+    ),
+    Scene(
+        "glass",
+        "a smooth glass sphere (opacity 0, ior 1.5) under a dome, path traced to 8 bounces",
+        _glass(0.0),
+        settings={"integrator": "path", "maxDepth": 8},
+        integrator=_path(8),
+    ),
+    Scene(
+        "rough_glass",
+        "a rough glass sphere (roughness 0.3) under a dome, path traced to 8 bounces",
+        _glass(0.3),
+        settings={"integrator": "path", "maxDepth": 8},
+        integrator=_path(8),
+    ),
+    Scene(
+        "emissive",
+        "the still life lit only by an emissive quad (emissiveColor), path traced to 2 bounces",
+        _emissive,
+        settings={"integrator": "path", "maxDepth": 2},
+        integrator=_path(2),
+    ),
+    Scene(
+        "plastic",
+        "a red plastic sphere (metallic 0, ior 1.5, roughness 0.3) under a sphere light, path "
+        "traced to 2 bounces; Mitsuba's roughplastic couples diffuse and specular differently",
+        _plastic,
+        settings={"integrator": "path", "maxDepth": 2},
+        integrator=_path(2),
+    ),
+)
+
+
+def by_name(name: str) -> Scene:
+    """The scene called ``name``."""
+    for s in SCENES:
+        if s.name == name:
+            return s
+    raise KeyError(f"no comparison scene '{name}' (scenes: {', '.join(s.name for s in SCENES)})")
