@@ -208,9 +208,8 @@ impl RenderSettings {
                 }
                 "integrator" => {
                     let name = v.as_str().ok_or_else(|| bad(k, format!("{v} is not a string")))?;
-                    s.integrator = mipray::options::IntegratorKind::from_name(name).ok_or_else(|| {
-                        bad(k, format!("'{name}' is not one of {}", mipray::options::IntegratorKind::NAMES.join(", ")))
-                    })?;
+                    s.integrator = mipray::options::IntegratorKind::from_name(name)
+                        .ok_or_else(|| bad(k, format!("'{name}' is not one of {}", mipray::options::IntegratorKind::NAMES.join(", "))))?;
                 }
                 "indirectSamples" => s.indirect_samples = as_f64(k, v)?.clamp(0.0, 65_536.0) as u32,
                 "irradianceCache" => {

@@ -341,7 +341,11 @@ impl RenderDelegate {
         if times.len() != transforms.len() {
             return Err(value_error(path, format!("{} motion times for {} transforms", times.len(), transforms.len())));
         }
-        let keys = times.into_iter().zip(transforms).map(|(time, render_from_object)| mipray::motion::MotionKey { time, render_from_object }).collect();
+        let keys = times
+            .into_iter()
+            .zip(transforms)
+            .map(|(time, render_from_object)| mipray::motion::MotionKey { time, render_from_object })
+            .collect();
         self.inner.set_motion(path, keys).map_err(|e| PyValueError::new_err(e.to_string()))
     }
 

@@ -170,7 +170,7 @@ impl Camera {
                     t_max: far * len,
                     diff: RayDifferential::from_pinhole(d, ddx, ddy),
                     kind: RayKind::Camera,
-            time: 0.0,
+                    time: 0.0,
                 }
             }
             Projection::Orthographic => {
@@ -186,7 +186,7 @@ impl Camera {
                     t_max: far * len,
                     diff: RayDifferential::from_orthographic(dpdx, dpdy),
                     kind: RayKind::Camera,
-            time: 0.0,
+                    time: 0.0,
                 }
             }
         }

@@ -224,7 +224,12 @@ impl<'s> Tracer<'s> {
                 Some(m) => m.swept_bounds(&g.bounds),
                 None => g.bounds.transformed(&inst.render_from_object),
             });
-            instances.push(InstanceData { id: inst.id, mesh: inst.mesh, pose: Pose::of(inst.render_from_object), motion: inst.motion.clone() });
+            instances.push(InstanceData {
+                id: inst.id,
+                mesh: inst.mesh,
+                pose: Pose::of(inst.render_from_object),
+                motion: inst.motion.clone(),
+            });
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);

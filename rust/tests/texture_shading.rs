@@ -23,16 +23,19 @@ fn textured_scene(sampler: Arc<CheckerSampler>) -> Scene {
     let dyn_sampler: Arc<dyn TextureSampler> = sampler.clone();
     let texture = dyn_sampler.handle("checker").unwrap();
     let mut mat = Material::lambertian("/checker", Vec3A::splat(0.5)).0;
-    mat.textures.push((mipray::material::Input::DiffuseColor, TexturedColor {
-        sampler: dyn_sampler.clone(),
-        texture,
-        path: "checker".into(),
-        lookup: Lookup::DEFAULT,
-        scale: Vec3A::ONE,
-        bias: Vec3A::ZERO,
-        fallback: Vec3A::splat(0.18),
-        st_channel: 0,
-    }));
+    mat.textures.push((
+        mipray::material::Input::DiffuseColor,
+        TexturedColor {
+            sampler: dyn_sampler.clone(),
+            texture,
+            path: "checker".into(),
+            lookup: Lookup::DEFAULT,
+            scale: Vec3A::ONE,
+            bias: Vec3A::ZERO,
+            fallback: Vec3A::splat(0.18),
+            st_channel: 0,
+        },
+    ));
     let mut scene = Scene::default();
     let m = scene.add_material(mat);
     let mut mesh = Mesh::new("/quad", Arc::new(surface));
