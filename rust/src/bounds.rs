@@ -46,6 +46,12 @@ impl Bounds3 {
         Bounds3 { min: self.min - Vec3A::splat(d), max: self.max + Vec3A::splat(d) }
     }
 
+    /// True when `p` lies inside or on the box.
+    #[inline]
+    pub fn contains(&self, p: Vec3A) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
     pub fn diagonal(&self) -> Vec3A {
         if self.is_empty() {
             Vec3A::ZERO

@@ -101,9 +101,9 @@ pub struct Hit {
     pub time: f32,
 }
 
-/// The surface a secondary ray starts on: hits on the same root subpatch of the same instance
-/// closer than the two tessellations' chord errors are the surface meeting itself at another
-/// rate, not an occluder.
+/// The surface a secondary ray starts on: hits on the same instance's root subpatch it starts
+/// from, or on one whose box holds the origin, closer than the two tessellations' chord errors
+/// (along the ray) are the surface meeting itself at another rate, not an occluder.
 #[derive(Clone, Copy, Debug)]
 struct Origin {
     instance: u32,
@@ -391,8 +391,12 @@ impl<'s> Tracer<'s> {
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
             let kind = Self::kind_index(ray.kind);
-            // On the subpatch the ray starts from, skip the surface's own other tessellation.
-            let own = origin.filter(|o| o.instance == ii as u32 && o.subpatch == si as u32);
+            // Near the ray's origin, skip the surface's own other tessellations: on the subpatch
+            // it starts from, and on any other subpatch of the same surface whose box holds the
+            // origin (its neighbours across a patch edge). A coarser grid there stands up to its
+            // chord error above the fine grid the ray starts on (a facet touching the limit
+            // surface at its corners, where the fine chords sag below it), and would shadow it.
+            let own = origin.filter(|org| org.instance == ii as u32 && (org.subpatch == si as u32 || sp.bounds.contains(o)));
             let t_min_for = |chord_error: f32| match own {
                 Some(o) => ray.t_min.max((o.chord_error + chord_error * inst.scale) * o.inv_cos),
                 None => ray.t_min,
