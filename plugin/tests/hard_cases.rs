@@ -678,3 +678,35 @@ fn coarse_grids_of_a_surface_do_not_shadow_the_rays_leaving_it() {
         }
     }
 }
+
+#[test]
+fn a_flat_subdivision_surface_has_zero_tessellation_error_at_every_rate() {
+    // A Catmull-Clark grid whose control points lie in z = 0 but are unevenly spaced: its limit
+    // surface is that plane, every patch is flat but not a parallelogram (so it is tessellated at
+    // the beam's rate like any patch), and every tessellation lies exactly on it. tessError is
+    // zero at every rate, splits included; the tess factors below reach all of them.
+    let (topo, mut pts) = grid(6, 2.0, Scheme::CatmullClark);
+    let mut rng = Rng(0x5eed);
+    for p in pts.iter_mut() {
+        p[0] += 0.12 * (rng.f32() - 0.5);
+        p[1] += 0.12 * (rng.f32() - 0.5);
+    }
+    let scene0 = scene_of(osd("/flat", (topo, pts)));
+    let mut rates = std::collections::BTreeSet::new();
+    for tess_factor in [0.02f32, 0.08, 0.3, 1.0, 4.0, 16.0, 64.0] {
+        let mut scene = scene0.clone();
+        scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.4, -3.0, 2.5), Vec3::ZERO, Vec3::Z), 35.0);
+        let aovs = vec!["tessError".into(), "tessRate".into(), "alpha".into()];
+        let out = render(&scene, &RenderOptions { width: 32, height: 24, tess_factor, aovs, ..Default::default() }, &NoProgress).unwrap();
+        let (e, rate, alpha) = (out.film.aov("tessError").unwrap(), out.film.aov("tessRate").unwrap(), out.film.aov("alpha").unwrap());
+        let covered = alpha.data.iter().filter(|a| **a > 0.0).count();
+        assert!(covered > 200, "tessFactor {tess_factor}: the grid fills the view ({covered} pixels)");
+        let worst = e.data.iter().step_by(2).cloned().fold(0.0f32, |a, x| a.max(x.abs()));
+        assert!(worst < 1e-5, "tessFactor {tess_factor}: tessError {worst} on a flat surface");
+        rates.extend(rate.data.iter().zip(&alpha.data).filter(|(_, a)| **a > 0.0).map(|(r, _)| *r as u32));
+    }
+    for want in [1, 4, 16] {
+        assert!(rates.contains(&want), "rate {want} was exercised: {rates:?}");
+    }
+    assert!(rates.iter().any(|&r| r > 16), "split subpatches were exercised: {rates:?}");
+}

@@ -209,6 +209,7 @@ mod tests {
             sub_boxes: Default::default(),
             chord_error: 0.0,
             seam_radius: 0.0,
+            seam_normal: Default::default(),
             domain: GridDomain::Square,
         }
     }

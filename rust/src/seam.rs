@@ -39,6 +39,11 @@ pub const SEAM_PROBES: usize = 3;
 /// probe, where it exceeds the probe's by a small fraction).
 pub const SEAM_SAFETY: f32 = 1.25;
 
+/// Each side of a seam box along its chord's normal reaches at least this fraction of the other
+/// side's measured extent: a cubic edge curve whose sign change hides between a chord's end and
+/// its first probe dips to the other side by at most 1/6.7 of its height on the first ([`SeamNormal`]).
+pub const SEAM_NORMAL_FLOOR: f32 = 0.25;
+
 /// The floating-point margin of a seam box, relative to the largest coordinate of its grid: two
 /// patches evaluating the same edge point agree to within 2.8ε of the coordinates' magnitude
 /// (the largest over OpenSubdiv's regression corpus, `loop_tetrahedron`: see
@@ -125,21 +130,131 @@ pub fn seam_margin(max_abs: f32) -> f32 {
     SEAM_MARGIN_REL * max_abs
 }
 
-/// The seam radius of an n×n grid `verts` (undisplaced, u fastest) over `rect` of `patch`:
-/// [`SEAM_SAFETY`] times the largest distance between the limit surface at [`SEAM_PROBES`]
-/// points inside a boundary chord (at stride 1) and that chord, plus [`seam_margin`]. Object
-/// units. Non-finite distances (a degenerate patch) are left out.
-pub fn seam_radius(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize) -> f32 {
+/// The boundary quad of chord `k` of edge `e` of a grid with `q` quads a side, as (i, j) in
+/// quads: the quad whose side the chord is, as [`crate::intersect`] winds it (on the diagonal,
+/// its lower-left half).
+#[inline]
+fn chord_quad(e: usize, k: usize, q: usize) -> (usize, usize) {
+    match e {
+        0 => (k, 0),
+        1 => (q - 1, k),
+        2 => (k, q - 1),
+        3 => (0, k),
+        _ => (q - 1 - k, k),
+    }
+}
+
+/// The frame of chord `k` of edge `e` of an `n × n` grid read at `stride` (`vert(i, j)` gives
+/// the vertices): the chord's ends, its unit axis and length, and `e1` the normal of its
+/// boundary quad made perpendicular to the axis (the side the quad's triangles face), `e2`
+/// completing the frame across the chord. `None` for a chord of zero or non-finite length.
+/// Computed the same way when tessellating and when intersecting, from the same vertices, so
+/// the extents measured in it are the ones the box is built with.
+fn chord_frame(vert: impl Fn(usize, usize) -> Vec3A, e: usize, k: usize, n: usize, stride: usize) -> Option<ChordFrame> {
+    let q = (n - 1) / stride;
+    let at = |m: usize| {
+        let (i, j) = edge_vertex(e, m, n);
+        vert(i, j)
+    };
+    let (a, b) = (at(k * stride), at((k + 1) * stride));
+    let ab = b - a;
+    let len = ab.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    let axis = ab / len;
+    let (qi, qj) = chord_quad(e, k, q);
+    let p00 = vert(qi * stride, qj * stride);
+    let p10 = vert((qi + 1) * stride, qj * stride);
+    let far = if e == DIAGONAL { vert(qi * stride, (qj + 1) * stride) } else { vert((qi + 1) * stride, (qj + 1) * stride) };
+    let ng = (p10 - p00).cross(far - p00);
+    let e1 = (ng - axis * ng.dot(axis)).normalize_or_zero();
+    let (e1, e2) = if e1 != Vec3A::ZERO && e1.is_finite() { (e1, axis.cross(e1)) } else { axis.any_orthonormal_pair() };
+    Some(ChordFrame { a, b, axis, len, e1, e2, ng })
+}
+
+/// See [`chord_frame`].
+#[derive(Clone, Copy, Debug)]
+struct ChordFrame {
+    a: Vec3A,
+    b: Vec3A,
+    axis: Vec3A,
+    len: f32,
+    e1: Vec3A,
+    e2: Vec3A,
+    /// The boundary quad's (unnormalised) normal.
+    ng: Vec3A,
+}
+
+/// How far the limit surface's edge curves stray from a grid's boundary chords along each
+/// chord's normal (`e1` of its frame: the boundary quad's side), below and above, as fractions
+/// of the [seam radius](Tessellation::seam_radius). The radius bounds the curve's distance from
+/// the chord in any direction; these two bound it along the normal, so a seam box need stand
+/// off the surface only as far as the curve does: a flat patch's edge curves stray from their
+/// chords only within its plane, and a convex surface's only outward. Without them a box is
+/// the radius thick on both sides of the surface, which thickens silhouettes and shadows rays
+/// leaving the surface near a seam by up to the chord error.
+///
+/// Two bytes, inside the padding of a cache entry: each fraction is `2^(−code/8)` (code 0 is
+/// the whole radius, as [`SeamNormal::ISOTROPIC`]; code 255 is 2.5·10⁻¹⁰ of it), rounded up,
+/// so the decoded extent is never smaller than the measured one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SeamNormal {
+    below: u8,
+    above: u8,
+}
+
+impl SeamNormal {
+    /// The radius on both sides: what a grid whose chords' normals mean nothing gets (a
+    /// displaced grid, sized on the undisplaced surface; a degenerate one).
+    pub const ISOTROPIC: SeamNormal = SeamNormal { below: 0, above: 0 };
+
+    /// From extents `below` (≥ 0, toward −e1) and `above` (≥ 0, toward +e1) for a radius `r`.
+    pub fn encode(below: f32, above: f32, r: f32) -> SeamNormal {
+        let code = |x: f32| -> u8 {
+            if !(r > 0.0 && r.is_finite() && x.is_finite()) || x >= r {
+                return 0;
+            }
+            if x <= 0.0 {
+                return 255;
+            }
+            // The largest code whose fraction 2^(−code/8) is still ≥ x / r.
+            let c = (-8.0 * (x / r).log2()).floor().clamp(0.0, 255.0) as u8;
+            // log2 rounds: step back while the decoded fraction falls short.
+            (0..=c).rev().find(|&c| Self::fraction(c) * r >= x).unwrap_or(0)
+        };
+        SeamNormal { below: code(below), above: code(above) }
+    }
+
+    #[inline]
+    fn fraction(code: u8) -> f32 {
+        (-(code as f32) / 8.0).exp2()
+    }
+
+    /// The extents along the normal for radius `r`: (below, above), each at most `r`.
+    #[inline]
+    pub fn extents(self, r: f32) -> (f32, f32) {
+        (r * Self::fraction(self.below), r * Self::fraction(self.above))
+    }
+}
+
+/// The seam radius of an n×n grid `verts` (undisplaced, u fastest) over `rect` of `patch`, and
+/// how far along the chords' normals it reaches ([`SeamNormal`]): [`SEAM_SAFETY`] times the
+/// largest distance (and the largest distance below and above along the normal) between the
+/// limit surface at [`SEAM_PROBES`] points inside a boundary chord (at stride 1) and that chord,
+/// plus [`seam_margin`]. Object units. Non-finite distances (a degenerate patch) are left out.
+pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize) -> (f32, SeamNormal) {
     if n < 2 || verts.len() < n * n {
-        return 0.0;
+        return (0.0, SeamNormal::ISOTROPIC);
     }
     let at = |i: usize, j: usize| Vec3A::from(verts[j * n + i]);
     let max_abs = verts.iter().fold(0.0f32, |m, v| m.max(v[0].abs()).max(v[1].abs()).max(v[2].abs()));
     let q = (n - 1) as f32;
-    let mut dev: f32 = 0.0;
+    let (mut dev, mut below, mut above): (f32, f32, f32) = (0.0, 0.0, 0.0);
     let edges = SeamEdges::ALL.within(GridDomain::of(surface.patch_param(patch).kind, &rect));
     for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
         for k in 0..n - 1 {
+            let frame = chord_frame(at, e, k, n, 1);
             let (ia, ja) = edge_vertex(e, k, n);
             let (ib, jb) = edge_vertex(e, k + 1, n);
             for probe in 1..=SEAM_PROBES {
@@ -149,47 +264,60 @@ pub fn seam_radius(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
                 let v = rect.v0 + (rect.v1 - rect.v0) * lv;
                 let c = surface.evaluate(patch, u, v).p;
                 let d = point_segment_distance(c, at(ia, ja), at(ib, jb));
-                if d.is_finite() {
-                    dev = dev.max(d);
+                if !d.is_finite() {
+                    continue;
+                }
+                dev = dev.max(d);
+                // Along the normal, from the chord's line: a box spans the chord's length (and
+                // `r` beyond its ends) whatever the curve's position along it.
+                let h = frame.map_or(d, |f| (c - f.a).dot(f.e1));
+                if h.is_finite() && frame.is_some() {
+                    below = below.max(-h);
+                    above = above.max(h);
+                } else {
+                    (below, above) = (below.max(d), above.max(d));
                 }
             }
         }
     }
-    SEAM_SAFETY * dev + seam_margin(max_abs)
+    let margin = seam_margin(max_abs);
+    let r = SEAM_SAFETY * dev + margin;
+    // The probes can miss a shallow dip to the side the curve barely crosses to (near a chord's
+    // end, beyond the outer probes); each side gets at least a fraction of the other's.
+    let floor = SEAM_NORMAL_FLOOR * below.max(above);
+    (r, SeamNormal::encode(SEAM_SAFETY * below.max(floor) + margin, SEAM_SAFETY * above.max(floor) + margin, r))
 }
 
-/// A seam box: around the chord from `a` to `b`, `r` on every side (an oriented box, length
-/// |b − a| + 2r, cross-section 2r × 2r).
+/// A seam box: around the chord from `a` to `b`, oriented along it, `r` beyond its ends and on
+/// either side across it (`e2`), and from `below` under it to `above` over it along its normal
+/// (`e1`).
 #[derive(Clone, Copy, Debug)]
-struct SeamBox {
+pub struct SeamBox {
     a: Vec3A,
     axis: Vec3A,
     e1: Vec3A,
     e2: Vec3A,
     len: f32,
     r: f32,
+    below: f32,
+    above: f32,
 }
 
 impl SeamBox {
-    fn new(a: Vec3A, b: Vec3A, r: f32) -> Option<SeamBox> {
-        let ab = b - a;
-        let len = ab.length();
-        if !(len > 0.0 && len.is_finite() && r.is_finite()) {
-            return None;
-        }
-        let axis = ab / len;
-        let (e1, e2) = axis.any_orthonormal_pair();
-        Some(SeamBox { a, axis, e1, e2, len, r })
+    /// The slabs: (direction, low, high) relative to `a`, grown by `grow`.
+    #[inline]
+    fn slabs_of(&self, grow: f32) -> [(Vec3A, f32, f32); 3] {
+        let r = self.r + grow;
+        [(self.axis, -r, self.len + r), (self.e1, -self.below - grow, self.above + grow), (self.e2, -r, r)]
     }
 
-    /// The ray's entry and exit distances, or `None` when it misses. `grow` enlarges the box.
+    /// The ray's entry and exit distances, or `None` when it misses.
     #[inline]
-    fn slabs(&self, o: Vec3A, d: Vec3A, grow: f32) -> Option<(f32, f32)> {
+    fn slabs(&self, o: Vec3A, d: Vec3A) -> Option<(f32, f32)> {
         let rel = o - self.a;
-        let (r, len) = (self.r + grow, self.len);
         let mut near = f32::NEG_INFINITY;
         let mut far = f32::INFINITY;
-        for (axis, lo, hi) in [(self.axis, -r, len + r), (self.e1, -r, r), (self.e2, -r, r)] {
+        for (axis, lo, hi) in self.slabs_of(0.0) {
             let (oc, dc) = (rel.dot(axis), d.dot(axis));
             if dc == 0.0 {
                 if oc < lo || oc > hi {
@@ -207,12 +335,70 @@ impl SeamBox {
 
     /// Whether `p` lies inside the box grown by `grow`.
     #[inline]
-    fn contains(&self, p: Vec3A, grow: f32) -> bool {
-        let rel = p - self.a;
-        let r = self.r + grow;
-        let x = rel.dot(self.axis);
-        x >= -r && x <= self.len + r && rel.dot(self.e1).abs() <= r && rel.dot(self.e2).abs() <= r
+    pub fn contains(&self, p: Vec3A, grow: f32) -> bool {
+        self.coverage(p, grow) <= 1.0
     }
+
+    /// How far into the box `p` grown by `grow` on every side reaches, as the largest of: its
+    /// offset from the middle of the box's normal and cross slabs, plus `grow`, over the slab's
+    /// half-width; and how far beyond the chord's ends it lies, plus `grow`, over how far the box
+    /// reaches beyond them. At most 1 when that grown point lies inside.
+    pub fn coverage(&self, p: Vec3A, grow: f32) -> f32 {
+        let rel = p - self.a;
+        let ratio = |x: f32| if x.is_nan() { f32::INFINITY } else { x };
+        let along = rel.dot(self.axis);
+        let beyond = (-along).max(along - self.len).max(0.0);
+        let mut m = ratio((beyond + grow) / self.r.max(f32::MIN_POSITIVE));
+        for &(axis, lo, hi) in &self.slabs_of(0.0)[1..] {
+            let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+            m = m.max(ratio(((rel.dot(axis) - mid).abs() + grow) / half.max(f32::MIN_POSITIVE)));
+        }
+        m
+    }
+}
+
+/// The seam box the renderer tests for chord `k` of edge `e` of `tess` read at `stride`, and
+/// its chord's frame (for the hit's normal). At stride 1 the box is the measured one: the seam
+/// radius across and beyond the chord, [`Tessellation::seam_normal`]'s extents along its normal.
+/// At a merged stride the long chord skips vertices, and its frame turns from its short chords'
+/// (by at most `dθ`, measured): the box then also holds the skipped vertices' polyline
+/// (`extra`, their largest distance from the long chord, across; their own height along its
+/// normal) and the short chords' measured extents turned into its frame (`r·|e1' − e1|` more
+/// either way along the normal), which for a flat grid leaves it as thin as at stride 1.
+pub fn seam_box(tess: &Tessellation, e: usize, k: usize, stride: usize) -> Option<(SeamBox, Vec3A)> {
+    let n = tess.n;
+    let vert = |i: usize, j: usize| tess.vert(i, j);
+    let f = chord_frame(vert, e, k, n, stride)?;
+    let base = tess.seam_radius;
+    let (mut below, mut above) = tess.seam_normal.extents(base);
+    let mut extra: f32 = 0.0;
+    if stride > 1 {
+        let at = |m: usize| {
+            let (i, j) = edge_vertex(e, m, n);
+            tess.vert(i, j)
+        };
+        let (mut skipped_lo, mut skipped_hi, mut turn): (f32, f32, f32) = (0.0, 0.0, 0.0);
+        for m in 1..stride {
+            let p = at(k * stride + m);
+            extra = extra.max(point_segment_distance(p, f.a, f.b));
+            let h = (p - f.a).dot(f.e1);
+            (skipped_lo, skipped_hi) = (skipped_lo.min(h), skipped_hi.max(h));
+        }
+        for s in 0..stride {
+            match chord_frame(vert, e, k * stride + s, n, 1) {
+                Some(short) => turn = turn.max((short.e1 - f.e1).length()),
+                None => turn = 2.0,
+            }
+        }
+        let turned = base * turn;
+        below = (below + turned - skipped_lo).min(base + extra);
+        above = (above + turned + skipped_hi).min(base + extra);
+        if !(turned.is_finite() && below.is_finite() && above.is_finite()) {
+            (below, above) = (base + extra, base + extra);
+        }
+    }
+    let r = base + extra;
+    Some((SeamBox { a: f.a, axis: f.axis, e1: f.e1, e2: f.e2, len: f.len, r, below, above }, f.ng))
 }
 
 /// The closest seam-box hit of `ray` on the `edges` of `tess` read at vertex `stride`, in
@@ -232,10 +418,6 @@ pub fn intersect_seams(
         return None;
     }
     let q = (n - 1) / stride;
-    // Grids are at most 17×17 (16 chords a side): the radii fit a fixed array.
-    if q > 16 {
-        return None;
-    }
     let edges = edges.within(tess.domain);
     let base = tess.seam_radius;
     if !(base >= 0.0 && base.is_finite()) {
@@ -244,58 +426,42 @@ pub fn intersect_seams(
     let mut best: Option<GridHit> = None;
     let mut t_best = t_max;
     for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
+        // Cull the edge first, cheaply: every box lies within its chord's radius plus the
+        // skipped vertices' distance (merged rates), and √3 times that bounds how far it reaches
+        // from its chord in any axis direction.
         let vert = |k: usize| {
             let (i, j) = edge_vertex(e, k, n);
             tess.vert(i, j)
         };
-        // Radius per chord: the stride-1 radius, plus how far the skipped vertex (merged
-        // rates) lies from the longer chord.
-        let mut radius = [0.0f32; 16];
         let mut edge_box = crate::bounds::Bounds3::EMPTY;
-        for (k, r) in radius.iter_mut().enumerate().take(q) {
+        let mut r_max: f32 = base;
+        for k in 0..q {
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
-            let mut extra: f32 = 0.0;
             for m in 1..stride {
-                extra = extra.max(point_segment_distance(vert(k * stride + m), a, b));
+                r_max = r_max.max(base + point_segment_distance(vert(k * stride + m), a, b));
             }
-            *r = base + extra;
             edge_box.grow(a);
             edge_box.grow(b);
         }
-        let r_max = radius.iter().take(q).fold(0.0f32, |m, &r| m.max(r));
-        // √3·r bounds how far a box reaches from its chord in any axis direction.
         if ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
             continue;
         }
-        for (k, &r) in radius.iter().enumerate().take(q) {
-            let Some(sb) = SeamBox::new(vert(k * stride), vert((k + 1) * stride), r) else { continue };
+        for k in 0..q {
+            let Some((sb, ng)) = seam_box(tess, e, k, stride) else { continue };
             // A ray that starts in (or on) the box leaves a surface near this seam: skip it.
-            let start_grow = 1e-3 * r + seam_margin(ray.o.abs().max_element());
+            let start_grow = 1e-3 * sb.r + seam_margin(ray.o.abs().max_element());
             if sb.contains(ray.o, start_grow) {
                 continue;
             }
-            let Some((near, far)) = sb.slabs(ray.o, ray.d, 0.0) else { continue };
+            let Some((near, far)) = sb.slabs(ray.o, ray.d) else { continue };
             if !(near > t_min && far < t_best && far > near) {
                 continue;
             }
             let p = ray.o + ray.d * far;
             let lambda = ((p - sb.a).dot(sb.axis) / sb.len).clamp(0.0, 1.0);
             let (u, v) = edge_uv(e, (k as f32 + lambda) / q as f32);
-            // The boundary quad at this chord, as intersect's hit_quads winds it (on the
-            // diagonal, its lower-left half).
-            let (qi, qj) = match e {
-                0 => (k, 0),
-                1 => (q - 1, k),
-                2 => (k, q - 1),
-                3 => (0, k),
-                _ => (q - 1 - k, k),
-            };
-            let p00 = tess.vert(qi * stride, qj * stride);
-            let p10 = tess.vert((qi + 1) * stride, qj * stride);
-            let far_corner =
-                if e == DIAGONAL { tess.vert(qi * stride, (qj + 1) * stride) } else { tess.vert((qi + 1) * stride, (qj + 1) * stride) };
             t_best = far;
-            best = Some(GridHit { t: far, u, v, ng: (p10 - p00).cross(far_corner - p00) });
+            best = Some(GridHit { t: far, u, v, ng });
         }
     }
     best
@@ -327,7 +493,15 @@ mod tests {
                 verts.push(f(i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32));
             }
         }
-        Tessellation { n, verts: verts.into(), sub_boxes: Default::default(), chord_error: 0.0, seam_radius, domain: GridDomain::Square }
+        Tessellation {
+            n,
+            verts: verts.into(),
+            sub_boxes: Default::default(),
+            chord_error: 0.0,
+            seam_radius,
+            seam_normal: Default::default(),
+            domain: GridDomain::Square,
+        }
     }
 
     #[test]
@@ -381,5 +555,114 @@ mod tests {
         let r = WatertightRay::new(Vec3A::new(0.5, -0.05, 1.0), Vec3A::NEG_Z);
         assert!(intersect_seams(&r, &t, 2, SeamEdges(1), 0.0, f32::INFINITY).is_some(), "within 0.1 of the stride-2 chord");
         assert!(intersect_seams(&r, &t, 1, SeamEdges(1), 0.0, f32::INFINITY).is_none(), "stride 1 has radius 0");
+    }
+
+    /// One patch given by a function of (u, v), for measuring seams on known edge curves.
+    struct FnSurface(fn(f32, f32) -> Vec3A);
+
+    impl LimitSurface for FnSurface {
+        fn patch_count(&self) -> usize {
+            1
+        }
+        fn patch_param(&self, _patch: usize) -> crate::patch::PatchParam {
+            crate::patch::PatchParam {
+                base_face: 0,
+                ptex_face: 0,
+                u0: 0.0,
+                v0: 0.0,
+                size: 1.0,
+                depth: 0,
+                boundary_mask: 0,
+                transition_mask: 0,
+                kind: crate::patch::PatchKind::Other,
+            }
+        }
+        fn patch_bounds(&self, _patch: usize) -> crate::bounds::Bounds3 {
+            crate::bounds::Bounds3::from_points((0..=8).flat_map(|j| (0..=8).map(move |i| (self.0)(i as f32 / 8.0, j as f32 / 8.0))))
+        }
+        fn evaluate(&self, _patch: usize, u: f32, v: f32) -> crate::patch::SurfacePoint {
+            crate::patch::SurfacePoint { p: (self.0)(u, v), ..Default::default() }
+        }
+        fn control_face_count(&self) -> usize {
+            1
+        }
+    }
+
+    /// The n×n grid of `surface` over the unit square, with its measured seam, as the
+    /// tessellator makes it.
+    fn measured(surface: &FnSurface, n: usize) -> Tessellation {
+        let verts: Vec<[f32; 3]> = (0..n)
+            .flat_map(|j| (0..n).map(move |i| (i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32)))
+            .map(|(u, v)| (surface.0)(u, v).into())
+            .collect();
+        let (seam_radius, seam_normal) = seam_extent(surface, 0, UvRect::UNIT, &verts, n);
+        Tessellation {
+            n,
+            verts: verts.into(),
+            sub_boxes: Default::default(),
+            chord_error: 0.0,
+            seam_radius,
+            seam_normal,
+            domain: GridDomain::Square,
+        }
+    }
+
+    #[test]
+    fn normal_extents_round_up_and_stay_within_an_eighth_of_an_octave() {
+        for r in [1e-6f32, 1.0, 3e4] {
+            for k in 0..200 {
+                let x = r * (-(k as f32) * 0.17).exp2();
+                let (below, above) = SeamNormal::encode(x, 0.5 * x, r).extents(r);
+                assert!(below >= x && above >= 0.5 * x, "r {r}: {x} -> {below}, {} -> {above}", 0.5 * x);
+                assert!(below <= (x * 1.0906).max(2.6e-10 * r), "r {r}: {x} -> {below} is loose");
+            }
+            assert_eq!(SeamNormal::encode(2.0 * r, f32::NAN, r).extents(r), (r, r), "beyond the radius, or unknown: the radius");
+        }
+        assert_eq!(SeamNormal::ISOTROPIC.extents(0.25), (0.25, 0.25));
+    }
+
+    #[test]
+    fn a_flat_patch_with_curved_edges_gets_seam_boxes_as_thin_as_rounding() {
+        // In z = 0, but the edges bow within the plane: the chords miss the edge curves by up
+        // to ~0.03 sideways and not at all along the normal.
+        let flat = FnSurface(|u, v| Vec3A::new(u + 0.12 * v * (1.0 - v), v + 0.12 * u * (1.0 - u), 0.0));
+        for n in [2usize, 5, 17] {
+            let t = measured(&flat, n);
+            let (below, above) = t.seam_normal.extents(t.seam_radius);
+            // A chord of length L of a curve of curvature 0.24 misses it by 0.24 L²/8 sideways.
+            let sag = 0.24 / (8 * (n - 1) * (n - 1)) as f32;
+            assert!(t.seam_radius > sag, "n {n}: the edges bow: radius {} against the sag {sag}", t.seam_radius);
+            assert!(below < 1e-6 && above < 1e-6, "n {n}: along the normal only rounding: {below}, {above}");
+            // Straight down just outside the middle of the first v = 0 chord, within the radius
+            // (where a coarser neighbour's crack would be): the box is hit where it leaves it,
+            // on the plane.
+            let (a, b) = (t.vert(0, 0), t.vert(1, 0));
+            let c = (b - a).normalize();
+            let p = (a + b) * 0.5 + Vec3A::new(c.y, -c.x, 0.0) * (0.5 * t.seam_radius);
+            let down = WatertightRay::new(p + Vec3A::Z, Vec3A::NEG_Z);
+            assert!(crate::intersect::intersect_tessellation(&down, &t, 1, 0.0, f32::INFINITY).is_none(), "outside the grid");
+            let h = intersect_with_seams(&down, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).expect("inside the seam box");
+            assert!((h.t - 1.0).abs() < 1e-6, "n {n}: hit {} off the plane", h.t - 1.0);
+            for stride in [2usize, 4].into_iter().filter(|s| (n - 1) % s == 0) {
+                let (sb, _) = seam_box(&t, 0, 0, stride).unwrap();
+                assert!(sb.below < 1e-6 && sb.above < 1e-6, "n {n} stride {stride}: merged chords stay flat: {sb:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_convex_edge_gets_a_seam_box_mostly_on_its_outer_side() {
+        // A roof bowed up along u: the v = 0 and v = 1 edges arc 0.1 above their coarse chord
+        // (+z, the side the grid's triangles face).
+        let dome = FnSurface(|u, v| Vec3A::new(u, v, 0.4 * u * (1.0 - u)));
+        let t = measured(&dome, 2);
+        let (below, above) = t.seam_normal.extents(t.seam_radius);
+        assert!((0.1..=0.14).contains(&above), "above {above}");
+        assert!(below <= 0.35 * above && below >= 0.25 * 0.1, "below {below} (the floor is a quarter of above)");
+        let (sb, ng) = seam_box(&t, 0, 0, 1).unwrap();
+        assert!(ng.z > 0.0 && sb.e1.z > 0.99, "{sb:?}");
+        // The curve's apex is inside its box; a point as far below the chord is not.
+        assert!(sb.contains(Vec3A::new(0.5, 0.0, 0.1), 0.0));
+        assert!(!sb.contains(Vec3A::new(0.5, 0.0, -0.1), 0.0));
     }
 }

@@ -14,6 +14,7 @@ use crate::bounds::Bounds3;
 use crate::displacement::DisplacementShader;
 use crate::geometry_cache::{CacheEntry, Tier};
 use crate::patch::{GridSamples, LimitSurface};
+use crate::seam::SeamNormal;
 use crate::subpatch::Subpatch;
 
 /// An effective tessellation rate: quads per side of a subpatch.
@@ -108,6 +109,9 @@ pub struct Tessellation {
     /// rounding margin (object units): the half-width of the seam boxes that close cracks
     /// between neighbours tessellated at different rates (see [`crate::seam`]).
     pub seam_radius: f32,
+    /// How far, of `seam_radius`, the seam boxes reach below and above the boundary chords
+    /// along their normals (see [`crate::seam::SeamNormal`]): as far as the edge curves do.
+    pub seam_normal: SeamNormal,
     /// Which part of the grid is surface: all of it, or only the half u + v ≤ 1 of a triangle
     /// (Loop) patch, whose basis extrapolates beyond its domain.
     pub domain: GridDomain,
@@ -282,9 +286,17 @@ pub struct StoredTessellation(StoredRepr);
 #[derive(Clone, Debug)]
 enum StoredRepr {
     /// A 2×2 grid with inline vertices and no sub-boxes: every coarse entry.
-    Quad { verts: [[f32; 3]; 4], chord_error: f32, seam_radius: f32, domain: GridDomain },
+    Quad { verts: [[f32; 3]; 4], chord_error: f32, seam_radius: f32, seam_normal: SeamNormal, domain: GridDomain },
     /// Any other grid.
-    Grid { n: u32, verts: Arc<[[f32; 3]]>, sub_boxes: SubBoxes, chord_error: f32, seam_radius: f32, domain: GridDomain },
+    Grid {
+        n: u32,
+        verts: Arc<[[f32; 3]]>,
+        sub_boxes: SubBoxes,
+        chord_error: f32,
+        seam_radius: f32,
+        seam_normal: SeamNormal,
+        domain: GridDomain,
+    },
 }
 
 impl StoredTessellation {
@@ -316,10 +328,10 @@ impl CacheEntry for Tessellation {
     }
 
     fn to_stored(&self) -> StoredTessellation {
-        let (chord_error, seam_radius, domain) = (self.chord_error, self.seam_radius, self.domain);
+        let (chord_error, seam_radius, seam_normal, domain) = (self.chord_error, self.seam_radius, self.seam_normal, self.domain);
         StoredTessellation(match &self.verts.0 {
             VertStore::Quad(verts) if self.n == 2 && self.sub_boxes.is_empty() => {
-                StoredRepr::Quad { verts: *verts, chord_error, seam_radius, domain }
+                StoredRepr::Quad { verts: *verts, chord_error, seam_radius, seam_normal, domain }
             }
             store => StoredRepr::Grid {
                 // `n × n` vertices fit in memory, so `n` fits in 32 bits.
@@ -331,6 +343,7 @@ impl CacheEntry for Tessellation {
                 sub_boxes: self.sub_boxes.clone(),
                 chord_error,
                 seam_radius,
+                seam_normal,
                 domain,
             },
         })
@@ -338,20 +351,22 @@ impl CacheEntry for Tessellation {
 
     fn from_stored(stored: &StoredTessellation) -> Tessellation {
         match &stored.0 {
-            StoredRepr::Quad { verts, chord_error, seam_radius, domain } => Tessellation {
+            StoredRepr::Quad { verts, chord_error, seam_radius, seam_normal, domain } => Tessellation {
                 n: 2,
                 verts: GridVerts(VertStore::Quad(*verts)),
                 sub_boxes: SubBoxes::NONE,
                 chord_error: *chord_error,
                 seam_radius: *seam_radius,
+                seam_normal: *seam_normal,
                 domain: *domain,
             },
-            StoredRepr::Grid { n, verts, sub_boxes, chord_error, seam_radius, domain } => Tessellation {
+            StoredRepr::Grid { n, verts, sub_boxes, chord_error, seam_radius, seam_normal, domain } => Tessellation {
                 n: *n as usize,
                 verts: GridVerts(VertStore::Shared(Arc::clone(verts))),
                 sub_boxes: sub_boxes.clone(),
                 chord_error: *chord_error,
                 seam_radius: *seam_radius,
+                seam_normal: *seam_normal,
                 domain: *domain,
             },
         }
@@ -410,8 +425,13 @@ pub fn tessellate_reusing(
     let (spare_verts, spare_boxes) = spare.map_or((None, SubBoxes::NONE), StoredTessellation::into_blocks);
     let n = tier.verts_per_side() as usize;
     surface.evaluate_grid(sub.patch as usize, sub.rect, n, displace.is_some(), scratch);
-    // Measured on the undisplaced grid: seams follow the limit surface's edges.
-    let seam_radius = crate::seam::seam_radius(surface, sub.patch as usize, sub.rect, &scratch.p, n);
+    // Measured on the undisplaced grid: seams follow the limit surface's edges. Displaced, the
+    // grid's chords and their normals are not the ones measured: the box is the radius on every
+    // side.
+    let (seam_radius, mut seam_normal) = crate::seam::seam_extent(surface, sub.patch as usize, sub.rect, &scratch.p, n);
+    if displace.is_some() {
+        seam_normal = SeamNormal::ISOTROPIC;
+    }
     let mut outside = 0;
     if let Some(d) = displace {
         let mut offsets = Vec::with_capacity(n * n);
@@ -428,7 +448,7 @@ pub fn tessellate_reusing(
     }
     let verts = GridVerts::refill(&scratch.p, spare_verts);
     let domain = GridDomain::of(surface.patch_param(sub.patch as usize).kind, &sub.rect);
-    let mut t = Tessellation { n, verts, sub_boxes: SubBoxes::NONE, chord_error: 0.0, seam_radius, domain };
+    let mut t = Tessellation { n, verts, sub_boxes: SubBoxes::NONE, chord_error: 0.0, seam_radius, seam_normal, domain };
     if tier == Tier::Fine {
         let boxes: [Bounds3; 16] = std::array::from_fn(|b| {
             let (bi, bj) = (b % 4 * 4, b / 4 * 4);

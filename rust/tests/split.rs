@@ -205,3 +205,68 @@ fn a_coarser_tessellation_of_its_own_surface_does_not_shadow_a_secondary_ray() {
     let rates = &out.stats["render"]["rate_tests_by_ray"]["ao"];
     assert!(rates["1"].as_u64().unwrap() + rates["2"].as_u64().unwrap() > 0, "AO rays did use coarse grids: {rates}");
 }
+
+/// A quarter cylinder of radius `r` about the z axis as one patch: u sweeps the angle φ over
+/// [−π/4, π/4], v the height z over [−½, ½]. Its grids' quads are planar rectangles, so the
+/// tessellation at rate n (n chords across the angle) is known exactly: every chord lies
+/// `r (1 − cos(π/(4n)))` inside the surface at its middle.
+struct Cylinder {
+    r: f32,
+}
+
+impl Cylinder {
+    const SPAN: f32 = PI / 2.0;
+}
+
+impl LimitSurface for Cylinder {
+    fn patch_count(&self) -> usize {
+        1
+    }
+    fn patch_param(&self, patch: usize) -> PatchParam {
+        Sphere { r: self.r }.patch_param(patch)
+    }
+    fn patch_bounds(&self, _patch: usize) -> Bounds3 {
+        let h = (Self::SPAN / 2.0).sin() * self.r;
+        Bounds3 { min: Vec3A::new((Self::SPAN / 2.0).cos() * self.r, -h, -0.5), max: Vec3A::new(self.r, h, 0.5) }
+    }
+    fn evaluate(&self, _patch: usize, u: f32, v: f32) -> SurfacePoint {
+        let phi = (u - 0.5) * Self::SPAN;
+        let p = Vec3A::new(phi.cos(), phi.sin(), 0.0) * self.r + Vec3A::new(0.0, 0.0, v - 0.5);
+        let dpdu = Vec3A::new(-phi.sin(), phi.cos(), 0.0) * self.r * Self::SPAN;
+        SurfacePoint { p, dpdu, dpdv: Vec3A::Z, ..Default::default() }
+    }
+    fn control_face_count(&self) -> usize {
+        1
+    }
+}
+
+#[test]
+fn tess_error_is_the_closed_form_chord_error_of_a_cylinder_at_every_rate() {
+    // An orthographic camera looks at the cylinder's axis through the middle of one chord of the
+    // grid at rate n: the ray meets the chord r·cos(π/(4n)) from the axis and the surface at r,
+    // so tessError is r (1 − cos(π/(4n))) in world units, and that over the 0.01-unit beam.
+    // tessFactor picks the rate (the subpatch is about 1.43 units across: 143 quads at tess
+    // factor 1 for a 0.01 beam); rates above 16 are split subpatches.
+    let r = 1.0f32;
+    let pixel = 0.01f32;
+    let mut scene = Scene::default();
+    let m = scene.add_mesh(Mesh::new("/cylinder", Arc::new(Cylinder { r })));
+    scene.add_instance(m, Mat4::IDENTITY);
+    for n in [1u32, 2, 4, 8, 16, 32, 64] {
+        // Chord k = n/2 (the one just past φ = 0; the only one for n = 1), its middle angle:
+        let k = n / 2;
+        let phi = (-0.5 + (k as f32 + 0.5) / n as f32) * Cylinder::SPAN;
+        let dir = Vec3::new(phi.cos(), phi.sin(), 0.0);
+        scene.camera = Camera::orthographic(Camera::look_at(dir * 5.0, Vec3::ZERO, Vec3::Z), 10.0 * 5.0 * pixel, 10.0 * 5.0 * pixel);
+        let tess_factor = 1.43 * r / (pixel * 0.75 * n as f32);
+        let opts =
+            RenderOptions { width: 5, height: 5, tess_factor, aovs: vec!["tessError".into(), "tessRate".into()], ..Default::default() };
+        let out = render(&scene, &opts, &NoProgress).unwrap();
+        assert_eq!(out.film.pixel("tessRate", 2, 2)[0], n as f32, "tessFactor {tess_factor} picks rate {n}");
+        let expected = r * (1.0 - (Cylinder::SPAN / (2.0 * n as f32)).cos());
+        let got = out.film.pixel("tessError", 2, 2);
+        println!("rate {n}: tessError {:.4e} (closed form {expected:.4e}), {:.4} beam widths", got[0], got[1]);
+        assert!((got[0] - expected).abs() < 1e-3 * expected + 2e-6, "rate {n}: tessError {} vs closed form {expected}", got[0]);
+        assert!((got[1] - got[0] / pixel).abs() < 1e-3 * got[1] + 1e-6, "rate {n}: over the {pixel}-unit beam: {got:?}");
+    }
+}

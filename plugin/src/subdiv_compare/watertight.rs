@@ -20,7 +20,7 @@ use std::collections::{BTreeMap, HashMap};
 use glam::Vec3A;
 use mipray::geometry_cache::Tier;
 use mipray::patch::{GridSamples, LimitSurface, UvRect};
-use mipray::seam::{edge_uv, edge_vertex, point_segment_distance, seam_margin, SeamEdges, DIAGONAL, EDGE_COUNT};
+use mipray::seam::{edge_uv, edge_vertex, point_segment_distance, seam_box, seam_margin, SeamEdges, DIAGONAL, EDGE_COUNT};
 use mipray::subpatch::{ChildCell, Subpatch};
 use mipray::tessellate::{tessellate, GridDomain, Tessellation};
 use mipray::topology::{MeshTopology, Scheme};
@@ -57,9 +57,10 @@ pub struct WatertightReport {
     pub max_rel_rate_gap_by_rate: BTreeMap<String, f64>,
     /// Boundary chords checked against their seam boxes.
     pub seam_chords_checked: usize,
-    /// Largest (curve's distance from a chord + the edge mismatch there) / seam box half-width,
-    /// the mismatch taken as `max_edge_mismatch_over_margin` rounding margins of that grid: ≤ 1
-    /// is condition 2 (the box reaches the neighbour's evaluation of the curve).
+    /// How far into its chord's seam box the curve reaches, grown by the edge mismatch there
+    /// (`max_edge_mismatch_over_margin` rounding margins of that grid), as the largest offset
+    /// from the box's middle over its half-width in any of its three directions: ≤ 1 is
+    /// condition 2 (the box holds the neighbour's evaluation of the curve).
     pub max_seam_coverage_ratio: f64,
     /// Chords whose seam box does not contain the curve.
     pub uncovered_seam_chords: usize,
@@ -103,14 +104,14 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
     let mismatch = r.max_edge_mismatch_over_margin;
     let mut worst_gap_over_margin = 0.0f64;
     let mut scratch = GridSamples::default();
-    let mut gap = |r: &mut WatertightReport, rate: u32, dist: f64, margin: f64, radius: f64| {
+    let mut gap = |r: &mut WatertightReport, rate: u32, dist: f64, margin: f64, coverage: &dyn Fn(f64) -> f64| {
         let slot = r.max_rel_rate_gap_by_rate.entry(rate.to_string()).or_insert(0.0);
         *slot = slot.max(dist / d);
         r.max_rel_rate_gap = r.max_rel_rate_gap.max(dist / d);
         worst_gap_over_margin = worst_gap_over_margin.max(dist / margin.max(f64::MIN_POSITIVE));
         // The neighbour's evaluation of the curve lies within `mismatch` margins of ours (the
         // largest ratio over the mesh, scaled to this grid's margin): the box must reach it.
-        let ratio = (dist + mismatch * margin) / radius.max(f64::MIN_POSITIVE);
+        let ratio = coverage(mismatch * margin);
         r.seam_chords_checked += 1;
         r.max_seam_coverage_ratio = r.max_seam_coverage_ratio.max(if ratio.is_nan() { f64::INFINITY } else { ratio });
         if !(ratio <= 1.0) {
@@ -127,8 +128,8 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
                     continue;
                 }
                 let rate = ((t.n - 1) / stride) as u32;
-                chords(surface, patch, UvRect::UNIT, &t, stride, SeamEdges::ALL, |dist, margin, radius| {
-                    gap(&mut r, rate, dist, margin, radius)
+                chords(surface, patch, UvRect::UNIT, &t, stride, SeamEdges::ALL, |dist, margin, coverage| {
+                    gap(&mut r, rate, dist, margin, coverage)
                 });
             }
         }
@@ -146,7 +147,7 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
                     }
                     let sub = Subpatch { patch: patch as u32, rect, bounds, affine: false };
                     let (t, _) = tessellate(surface, &sub, Tier::Fine, None, &mut scratch);
-                    chords(surface, patch, rect, &t, 1, edges, |dist, margin, radius| gap(&mut r, 16 << depth, dist, margin, radius));
+                    chords(surface, patch, rect, &t, 1, edges, |dist, margin, coverage| gap(&mut r, 16 << depth, dist, margin, coverage));
                 }
             }
         }
@@ -156,8 +157,10 @@ pub fn check(surface: &OsdSurface, topology: &MeshTopology, diag: f32, options: 
 }
 
 /// For every boundary chord of `tess` (over `rect`, read at `stride`) on `edges`, calls
-/// `each(distance of the curve from the chord, rounding margin, seam box half-width)` in object
-/// units, with the half-width the renderer gives that chord.
+/// `each(distance of the curve from the chord, rounding margin, coverage)` in object units,
+/// where `coverage(grow)` is how far into the renderer's seam box for that chord
+/// ([`mipray::seam::seam_box`]) the curve's probes reach when each is grown by `grow`: at most 1
+/// when all of them, so grown, lie inside.
 fn chords(
     surface: &dyn LimitSurface,
     patch: usize,
@@ -165,7 +168,7 @@ fn chords(
     tess: &Tessellation,
     stride: usize,
     edges: SeamEdges,
-    mut each: impl FnMut(f64, f64, f64),
+    mut each: impl FnMut(f64, f64, &dyn Fn(f64) -> f64),
 ) {
     let n = tess.n;
     let q = (n - 1) / stride;
@@ -179,9 +182,9 @@ fn chords(
         };
         for k in 0..q {
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
-            let extra = (1..stride).map(|m| point_segment_distance(vert(k * stride + m), a, b)).fold(0.0f32, f32::max);
-            let radius = f64::from(tess.seam_radius + extra);
+            let seam = seam_box(tess, e, k, stride).map(|(sb, _)| sb);
             let mut dist = 0.0f32;
+            let mut probes = Vec::with_capacity(CHORD_PROBES);
             for p in 1..=CHORD_PROBES {
                 let t = (k as f32 + p as f32 / (CHORD_PROBES + 1) as f32) / q as f32;
                 let (lu, lv) = edge_uv(e, t);
@@ -190,8 +193,20 @@ fn chords(
                 let c = surface.evaluate(patch, u, v).p;
                 let dd = point_segment_distance(c, a, b);
                 dist = dist.max(if dd.is_nan() { f32::INFINITY } else { dd });
+                probes.push(c);
             }
-            each(f64::from(dist), margin, radius);
+            let coverage = |grow: f64| match &seam {
+                Some(sb) => probes.iter().fold(0.0f64, |m, &c| m.max(f64::from(sb.coverage(c, grow as f32)))),
+                // A chord of zero length has no box: covered only if the curve is that point.
+                None => {
+                    if dist == 0.0 {
+                        0.0
+                    } else {
+                        f64::INFINITY
+                    }
+                }
+            };
+            each(f64::from(dist), margin, &coverage);
         }
     }
 }

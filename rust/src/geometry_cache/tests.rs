@@ -693,6 +693,7 @@ fn coarse_tessellation(x: f32) -> crate::tessellate::Tessellation {
         sub_boxes: SubBoxes::NONE,
         chord_error: 0.0,
         seam_radius: 0.0,
+        seam_normal: Default::default(),
         domain: GridDomain::Square,
     }
 }

@@ -78,8 +78,11 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
 /// How far the tessellation hit is from the exact limit surface along the ray (world units):
 /// Newton's method on S(u, v) = o + t·d from the hit's (u, v, t), with the displaced surface
 /// where the mesh is displaced (unfiltered: the truth the tessellation approximates). Where
-/// Newton leaves the patch or does not converge, the distance from the hit point to S(u, v)
-/// stands in (an upper bound of the same order).
+/// Newton leaves the patch (the ray meets the true surface on a neighbouring patch: near an edge
+/// a coarse grid's chord cuts across it) or does not converge, the distance along the ray to the
+/// tangent plane at the nearest point Newton reached on this patch stands in — exact for flat
+/// surfaces, first-order otherwise — or, for a ray within 3° of that plane, the distance from
+/// the hit point to S(u, v).
 pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> f32 {
     let mesh = &scene.meshes[hit.mesh as usize];
     let m = tracer.hit_render_from_object(hit);
@@ -103,12 +106,25 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
     let (mut u, mut v, mut t) = (hit.u, hit.v, hit.t);
     let (p0, _, _) = surf(u, v);
     let fallback = (m.transform_point3a(p0) - hit.p).length();
+    // Off the patch: along the ray to the tangent plane at the nearest point of the patch.
+    let off_patch = |u: f32, v: f32| {
+        let (p, du, dv) = surf(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+        let (p, n) = (m.transform_point3a(p), m.transform_vector3a(du).cross(m.transform_vector3a(dv)).normalize_or_zero());
+        let cos = ray.d.dot(n);
+        let plane = ((p - hit.p).dot(n) / cos).abs();
+        if cos.abs() > 0.05 && plane.is_finite() {
+            plane
+        } else {
+            fallback
+        }
+    };
+    let on_patch = |u: f32, v: f32| (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v);
     for _ in 0..8 {
         let (p, du, dv) = surf(u, v);
         let f = m.transform_point3a(p) - ray.at(t);
         let scale = hit.p.abs().max_element().max(1.0);
         if f.length() <= 4.0 * f32::EPSILON * scale {
-            return if (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v) { (t - hit.t).abs() } else { fallback };
+            return if on_patch(u, v) { (t - hit.t).abs() } else { off_patch(u, v) };
         }
         let j = glam::Mat3A::from_cols(m.transform_vector3a(du), m.transform_vector3a(dv), -ray.d);
         if j.determinant().abs() < 1e-20 {
@@ -124,9 +140,9 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
     }
     let (p, _, _) = surf(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
     let f = m.transform_point3a(p) - ray.at(t);
-    if (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v) && f.length() < fallback {
+    if on_patch(u, v) && f.length() < fallback {
         (t - hit.t).abs()
     } else {
-        fallback
+        off_patch(u, v)
     }
 }
