@@ -3,12 +3,14 @@
 //! BVH over them. Tessellation happens later, on demand, per subpatch.
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use obvhs::cwbvh::CwBvh;
 use parking_lot::Mutex;
 
 use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
+use crate::geometry_cache::SplitIds;
 use crate::patch::UvRect;
 use crate::scene::Mesh;
 
@@ -49,6 +51,13 @@ impl ChildCell {
         }
     }
 
+    /// The cell as one number, one-to-one for depths up to 12 (splits stop at
+    /// [`crate::tessellate::MAX_SPLIT_DEPTH`]): the key of its [`SplitIds`] entry.
+    pub fn key(&self) -> u64 {
+        debug_assert!(self.depth <= 12 && self.i >> self.depth == 0 && self.j >> self.depth == 0, "{self:?}");
+        (u64::from(self.root) << 32) | (u64::from(self.depth) << 24) | (u64::from(self.j) << 12) | u64::from(self.i)
+    }
+
     /// The four children one level down, (i, j) order: (0,0), (1,0), (0,1), (1,1).
     pub fn children(&self) -> [ChildCell; 4] {
         let c = |di: u32, dj: u32| ChildCell { root: self.root, depth: self.depth + 1, i: self.i * 2 + di, j: self.j * 2 + dj };
@@ -56,17 +65,23 @@ impl ChildCell {
     }
 }
 
-/// Dense ids for split children, made on demand (the paper's §5.1: "we subdivide it into even
-/// smaller subpatches"), so cache keys stay small and the cache's ever-built sets stay dense.
-/// Roots keep their indices; children are numbered after them in order of first use.
+/// Cache ids of one mesh's split children in one render. The ids come from the cache's
+/// [`SplitIds`] (the paper's §5.1: "we subdivide it into even smaller subpatches"), which
+/// numbers children densely after the roots and keeps each child's id for as long as the cache
+/// keeps entries under it: a render that numbered its own children would give a child the id
+/// another child had in an earlier render on the same cache, and be served that child's
+/// tessellation. Roots keep their indices.
 pub struct ChildIds {
-    map: Mutex<HashMap<ChildCell, u32>>,
-    roots: u32,
+    table: Arc<SplitIds>,
+    /// The children this render asked for, and their ids: `len` reports them, and lookups
+    /// after the first stay off the cache-wide table's lock.
+    used: Mutex<HashMap<ChildCell, u32>>,
 }
 
 impl ChildIds {
-    pub fn new(roots: u32) -> Self {
-        ChildIds { map: Mutex::new(HashMap::new()), roots }
+    /// Children's ids from `table`, which numbers them after the mesh's root subpatches.
+    pub fn new(table: Arc<SplitIds>) -> Self {
+        ChildIds { table, used: Mutex::new(HashMap::new()) }
     }
 
     /// The id of a child (or of the root itself at depth 0).
@@ -74,14 +89,17 @@ impl ChildIds {
         if cell.depth == 0 {
             return cell.root;
         }
-        let mut m = self.map.lock();
-        let next = self.roots.saturating_add(m.len() as u32);
-        *m.entry(cell).or_insert(next)
+        if let Some(&id) = self.used.lock().get(&cell) {
+            return id;
+        }
+        let id = self.table.id(cell.key());
+        self.used.lock().insert(cell, id);
+        id
     }
 
-    /// Children given ids so far.
+    /// Children this render asked for.
     pub fn len(&self) -> usize {
-        self.map.lock().len()
+        self.used.lock().len()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -96,13 +114,14 @@ pub struct MeshGeometry {
     /// `None` when the mesh has no patches (all holes, or empty).
     pub bvh: Option<CwBvh>,
     pub bounds: Bounds3,
-    /// Ids of split children, made as rays ask for them.
+    /// Ids of split children, given as rays ask for them.
     pub child_ids: ChildIds,
 }
 
 impl MeshGeometry {
-    /// Builds the root subpatches and their BVH.
-    pub fn build(mesh: &Mesh) -> Self {
+    /// Builds the root subpatches and their BVH. `split_ids(roots)` is the geometry cache's
+    /// table of split children's ids for this mesh and generation, given its root count.
+    pub fn build(mesh: &Mesh, split_ids: impl FnOnce(u32) -> Arc<SplitIds>) -> Self {
         let s = &mesh.surface;
         let grow = mesh.displacement_bound.max(0.0);
         let mut subpatches: Vec<Subpatch> = (0..s.patch_count())
@@ -119,7 +138,7 @@ impl MeshGeometry {
         let bounds = subpatches.iter().fold(Bounds3::EMPTY, |b, sp| b.union(&sp.bounds));
         let boxes: Vec<Bounds3> = subpatches.iter().map(|s| s.bounds).collect();
         let bvh = build_bvh(&boxes);
-        let child_ids = ChildIds::new(subpatches.len() as u32);
+        let child_ids = ChildIds::new(split_ids(subpatches.len() as u32));
         MeshGeometry { subpatches, bvh, bounds, child_ids }
     }
 }
@@ -127,6 +146,7 @@ impl MeshGeometry {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry_cache::{CacheConfig, GeometryCache};
 
     #[test]
     fn child_rects_tile_the_root_and_ids_are_dense_and_stable() {
@@ -142,12 +162,39 @@ mod tests {
             })
             .sum();
         assert!((area - 0.25).abs() < 1e-7);
-        let ids = ChildIds::new(10);
+        let cache = GeometryCache::<Vec<[f32; 3]>>::new(CacheConfig::default());
+        let ids = ChildIds::new(cache.split_ids(7, 0, 10));
         assert_eq!(ids.id(ChildCell { root: 4, depth: 0, i: 0, j: 0 }), 4);
         let a = ids.id(c);
         let b = ids.id(kids[0]);
         assert_eq!((a, b), (10, 11));
         assert_eq!(ids.id(c), 10);
         assert_eq!(ids.len(), 2);
+        // A later render on the same cache asks in another order, and for a new child too: the
+        // children it shares with the first keep their ids, the new one gets the next.
+        let again = ChildIds::new(cache.split_ids(7, 0, 10));
+        assert_eq!((again.id(kids[1]), again.id(kids[0]), again.id(c)), (12, 11, 10));
+        assert_eq!(again.len(), 3);
+        // Another generation is another shape: its children are numbered afresh.
+        assert_eq!(ChildIds::new(cache.split_ids(7, 1, 10)).id(kids[1]), 10);
+        // Invalidating the mesh forgets its ids with its entries.
+        cache.invalidate_mesh(7);
+        assert_eq!(ChildIds::new(cache.split_ids(7, 0, 10)).id(kids[1]), 10);
+    }
+
+    #[test]
+    fn cell_keys_are_one_to_one() {
+        let mut keys = std::collections::HashSet::new();
+        let mut cells = 0;
+        for root in [0, 1, u32::MAX] {
+            let mut level = vec![ChildCell { root, depth: 0, i: 0, j: 0 }];
+            for _ in 0..crate::tessellate::MAX_SPLIT_DEPTH {
+                level = level.iter().flat_map(|c| c.children()).collect();
+                cells += level.len();
+                keys.extend(level.iter().map(ChildCell::key));
+            }
+        }
+        assert_eq!(cells, 3 * 5460);
+        assert_eq!(keys.len(), cells);
     }
 }

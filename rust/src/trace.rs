@@ -212,7 +212,12 @@ impl<'s> Tracer<'s> {
     /// hit again by the next render.
     pub fn with_cache(scene: &'s Scene, cache: Arc<GeometryCache<Tessellation>>, single: bool, tess_factor: f32) -> Self {
         use rayon::prelude::*;
-        let meshes: Vec<MeshGeometry> = scene.meshes.par_iter().map(MeshGeometry::build).collect();
+        let meshes: Vec<MeshGeometry> = scene
+            .meshes
+            .par_iter()
+            .enumerate()
+            .map(|(i, m)| MeshGeometry::build(m, |roots| cache.split_ids(Self::cache_mesh(m, i), m.generation, roots)))
+            .collect();
         let mut boxes = Vec::new();
         let mut instances = Vec::new();
         for inst in &scene.instances {
@@ -473,16 +478,17 @@ impl<'s> Tracer<'s> {
         })
     }
 
+    /// The mesh's key in the cache.
+    fn cache_mesh(mesh: &crate::scene::Mesh, mesh_index: usize) -> u32 {
+        mesh.cache_id.unwrap_or(mesh_index as u32)
+    }
+
     /// The tessellation of a (root or split) subpatch at a tier, from the cache or built now.
     fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Tessellation {
         let mesh = &self.scene.meshes[mesh_index];
         let root = &geom.subpatches[cell.root as usize];
-        let key = CacheKey {
-            mesh: mesh.cache_id.unwrap_or(mesh_index as u32),
-            generation: mesh.generation,
-            subpatch: geom.child_ids.id(cell),
-            tier,
-        };
+        let key =
+            CacheKey { mesh: Self::cache_mesh(mesh, mesh_index), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
         self.cache.get_or_build_reusing(key, |spare| {
             let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds, affine: root.affine };
             let mut scratch = GridSamples::default();

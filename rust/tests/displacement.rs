@@ -1,11 +1,13 @@
 //! Displacement at tessellation time: the surface moves, bounds hold it, shading follows it, and
-//! a bound that is too small is counted rather than clipped.
+//! a bound that is too small is counted and warned about rather than clipped.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use glam::{Mat4, Vec3, Vec3A};
 use mipray::displacement::Displacement;
+use mipray::geometry_cache::{CacheConfig, CacheKey, GeometryCache, Tier};
 use mipray::prelude::*;
+use mipray::render::render_with_cache;
 
 fn plane(half: f32, n: i32) -> BilinearSurface {
     let (topo, pts) = mipray::bilinear::grid_mesh(half, n, 0.0);
@@ -46,14 +48,91 @@ fn displaced_surface_moves_within_its_bound_and_shades_by_its_own_normal() {
     assert_eq!(bumpy.stats["scene"]["displaced_vertices_outside_bounds"].as_u64(), Some(0));
 }
 
+/// Warnings logged by any test of this binary, as (target, message).
+static WARNINGS: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
+
+/// A logger that keeps warnings (and worse) for tests to read.
+struct Recorder;
+
+impl log::Log for Recorder {
+    fn enabled(&self, metadata: &log::Metadata) -> bool {
+        metadata.level() <= log::Level::Warn
+    }
+    fn log(&self, record: &log::Record) {
+        if self.enabled(record.metadata()) {
+            WARNINGS.lock().unwrap().push((record.target().to_string(), record.args().to_string()));
+        }
+    }
+    fn flush(&self) {}
+}
+
+fn record_warnings() {
+    static RECORDER: Recorder = Recorder;
+    // Already set by another test of this binary: the same recorder.
+    let _ = log::set_logger(&RECORDER);
+    log::set_max_level(log::LevelFilter::Warn);
+}
+
 #[test]
 fn a_bound_too_small_is_counted_not_clipped() {
+    record_warnings();
     let d = Displacement { amplitude: 0.2, frequency: 1.5, octaves: 3, gain: 0.5 };
-    let out = render(
-        &scene(Some(d), 0.01),
-        &RenderOptions { width: 16, height: 16, aovs: vec!["depth".into()], ..Default::default() },
-        &NoProgress,
-    )
-    .unwrap();
-    assert!(out.stats["scene"]["displaced_vertices_outside_bounds"].as_u64().unwrap() > 0);
+    let bound = 0.01;
+    let mut scene = scene(Some(d), bound);
+    let name = "/ground_with_too_small_a_bound";
+    scene.meshes[0].name = name.into();
+    // An unbounded cache builds each tessellation once and keeps it: afterwards it holds every
+    // displaced vertex the render made, to compare with the displacement's own formula.
+    let opts = RenderOptions {
+        width: 16,
+        height: 16,
+        threads: 2,
+        cache: CacheConfig::unbounded(),
+        aovs: vec!["depth".into()],
+        ..Default::default()
+    };
+    let cache = Arc::new(GeometryCache::new(CacheConfig::unbounded()));
+    let out = render_with_cache(&scene, &opts, Some(cache.clone()), &NoProgress).unwrap();
+    let counted = out.stats["scene"]["displaced_vertices_outside_bounds"].as_u64().unwrap();
+    assert!(counted > 0);
+
+    // Warned once for the render, naming the mesh and the primvar that fixes it.
+    let warnings: Vec<String> = WARNINGS.lock().unwrap().iter().filter(|(_, m)| m.contains(name)).map(|(_, m)| m.clone()).collect();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(warnings[0].contains("primvars:displacementBound") && warnings[0].contains(&bound.to_string()), "{}", warnings[0]);
+
+    // Every stored vertex is where the displacement puts it: the plane's exact point at the
+    // grid's (u, v), moved along its normal (+z) by the noise filtered at the grid's spacing
+    // (0.5-unit patches), however far that is outside the subpatch's box; none is clamped.
+    let surface = &scene.meshes[0].surface;
+    let (mut vertices, mut outside, mut furthest) = (0u64, 0u64, 0.0f32);
+    for patch in 0..surface.patch_count() {
+        let bounds = surface.patch_bounds(patch).expanded(bound);
+        for tier in Tier::ALL {
+            let key = CacheKey::new(0, 0, patch as u32, tier);
+            if !cache.contains(key) {
+                continue;
+            }
+            let grid = cache.get_or_build(key, || unreachable!("resident"));
+            let n = grid.n;
+            let spacing = 0.5 / (n - 1) as f32;
+            for j in 0..n {
+                for i in 0..n {
+                    let p = surface.evaluate(patch, i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32).p;
+                    let expected = p + Vec3A::Z * d.offset(p, spacing);
+                    let got = grid.vert(i, j);
+                    assert!((got - expected).abs().max_element() < 1e-5, "patch {patch} {tier:?} ({i}, {j}): {got} vs {expected}");
+                    vertices += 1;
+                    if !(got.cmpge(bounds.min).all() && got.cmple(bounds.max).all()) {
+                        outside += 1;
+                    }
+                    furthest = furthest.max(got.z.abs());
+                }
+            }
+        }
+    }
+    assert!(vertices > 0);
+    assert!(furthest > 5.0 * bound, "some vertex is far outside its box: {furthest}");
+    // Each tessellation was built once, so the count is exactly the stored vertices outside.
+    assert_eq!(outside, counted, "of {vertices} stored vertices");
 }

@@ -270,3 +270,41 @@ fn tess_error_is_the_closed_form_chord_error_of_a_cylinder_at_every_rate() {
         assert!((got[1] - got[0] / pixel).abs() < 1e-3 * got[1] + 1e-6, "rate {n}: over the {pixel}-unit beam: {got:?}");
     }
 }
+
+#[test]
+fn a_warm_cache_that_split_other_children_gives_the_same_image() {
+    // A cache kept across renders (as the render delegate keeps one) holds split children's
+    // tessellations from the views before; the image must be the one a cold cache gives.
+    let mut scene = Scene::default();
+    let m = scene.add_mesh(Mesh::new("/sphere", Arc::new(Sphere { r: 1.0 })));
+    scene.add_instance(m, Mat4::IDENTITY);
+    scene.lights.push(Light::distant("/sun", Vec3A::new(0.0, -1.0, -1.0), Vec3A::ONE));
+    // 0.02 units wide at 4 units: rays 0.001 wide want about 1,600 quads across a patch.
+    let view = |dir: Vec3| Camera {
+        render_from_camera: Camera::look_at(dir.normalize() * 5.0, Vec3::ZERO, Vec3::Z),
+        focal_length: 1000.0,
+        horizontal_aperture: 5.0,
+        vertical_aperture: 5.0,
+        clipping_range: (0.1, 100.0),
+        ..Default::default()
+    };
+    let aovs = vec!["color".into(), "depth".into(), "normal".into()];
+    let opts = |size: usize| RenderOptions { width: size, height: size, threads: 2, aovs: aovs.clone(), ..Default::default() };
+    let target = Vec3::new(1.0, 0.4, 0.3);
+    scene.camera = view(target);
+    let cold = render(&scene, &opts(20), &NoProgress).unwrap();
+    assert!(cold.stats["scene"]["split_subpatches"].as_u64().unwrap() > 0);
+    let cache = Arc::new(mipray::geometry_cache::GeometryCache::new(opts(20).cache));
+    for (dir, size) in [(Vec3::new(0.5, 1.0, -0.2), 20), (target, 32)] {
+        scene.camera = view(dir);
+        mipray::render::render_with_cache(&scene, &opts(size), Some(cache.clone()), &NoProgress).unwrap();
+    }
+    scene.camera = view(target);
+    let warm = mipray::render::render_with_cache(&scene, &opts(20), Some(cache), &NoProgress).unwrap();
+    assert!(warm.stats["geometry_cache"]["tiers"][2]["hits"].as_u64().unwrap() > 0, "served from the warm cache");
+    for aov in ["color", "depth", "normal"] {
+        let (w, c) = (&warm.film.aov(aov).unwrap().data, &cold.film.aov(aov).unwrap().data);
+        let differ = w.iter().zip(c).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(differ, 0, "{aov}: {differ} of {} values differ on the warm cache", w.len());
+    }
+}

@@ -67,10 +67,13 @@
 //!
 //! To tell cold tessellations from misses, each tier remembers every key it ever built: one bit
 //! per subpatch id per (mesh, generation) — 121 KB per tier for the paper's 970,000-subpatch
-//! city street — see the `seen` module.
+//! city street — see the `seen` module. Ids stay dense because split subpatches are numbered
+//! after their mesh's roots by the cache itself ([`GeometryCache::split_ids`]), which also keeps
+//! each child's id fixed for as long as entries under it may be resident.
 
 mod lru;
 mod seen;
+mod split_ids;
 mod stats;
 mod table;
 #[cfg(test)]
@@ -86,8 +89,10 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use split_ids::SplitIdTables;
 use tier_cache::{TierCache, MAX_FORCED_SHARDS, MAX_SHARDS, MIN_ENTRIES_PER_SHARD};
 
+pub use split_ids::SplitIds;
 pub use stats::{CacheStats, TierStats};
 pub use tier::{ParseTierError, Tier, VERTEX_BYTES};
 
@@ -169,7 +174,8 @@ pub struct CacheKey {
     /// Bumped by the owner whenever the mesh's points or displacement change, so a tessellation
     /// of the old shape, even one still being built, can never answer for the new one.
     pub generation: u32,
-    /// The subpatch's id within the mesh (dense ids keep the ever-built set small).
+    /// The subpatch's id within the mesh: a root subpatch's index, or a split child's id from
+    /// [`GeometryCache::split_ids`] (dense ids keep the ever-built set small).
     pub subpatch: u32,
     /// The tessellation rate.
     pub tier: Tier,
@@ -406,12 +412,14 @@ impl CacheConfig {
 pub struct GeometryCache<E: CacheEntry> {
     config: CacheConfig,
     tiers: [TierCache<E>; 3],
+    /// Split subpatches' ids, kept as long as the entries they name.
+    split_ids: SplitIdTables,
 }
 impl<E: CacheEntry> GeometryCache<E> {
     /// An empty cache.
     pub fn new(config: CacheConfig) -> Self {
         let tiers = Tier::ALL.map(|t| TierCache::new(config.shard_count(t), config.tier_budget_bytes(t), config.mode != CacheMode::None));
-        Self { config, tiers }
+        Self { config, tiers, split_ids: SplitIdTables::default() }
     }
 
     /// The configuration the cache was made with.
@@ -458,10 +466,30 @@ impl<E: CacheEntry> GeometryCache<E> {
     /// `mesh` was ever built, so its next builds count as cold tessellations (they are of new
     /// geometry). Other meshes' entries, recency and statistics are untouched. Takes time in
     /// proportion to the resident entries: meant for edits, not for every frame.
+    ///
+    /// The mesh's [`split_ids`](Self::split_ids) tables go too: ids are given afresh to the new
+    /// geometry. A render still holding an old table must not go on rendering the mesh under
+    /// the same generation (an owner bumps the generation with every edit, so none does).
     pub fn invalidate_mesh(&self, mesh: u32) {
         for tier in &self.tiers {
             tier.invalidate_mesh(mesh);
         }
+        self.split_ids.forget_mesh(mesh);
+    }
+
+    /// The ids of the split subpatches of `mesh` at `generation`, whose `roots` root subpatches
+    /// keep ids 0 to `roots` − 1: children get `roots`, `roots` + 1, … in order of first use,
+    /// each keeping its id for as long as the cache may hold its entries, so every render on
+    /// this cache (and every thread) gets the same id for the same child. See the `split_ids`
+    /// module.
+    pub fn split_ids(&self, mesh: u32, generation: u32, roots: u32) -> Arc<SplitIds> {
+        self.split_ids.get(mesh, generation, roots)
+    }
+
+    /// Heap bytes of the [`split_ids`](Self::split_ids) tables (bookkeeping, not counted in any
+    /// budget).
+    pub fn split_id_bytes(&self) -> usize {
+        self.split_ids.heap_bytes()
     }
 
     /// Whether `key` is resident now. Does not count as a lookup nor refresh its recency.

@@ -764,3 +764,37 @@ fn builds_get_evicted_entries_to_reuse() {
     assert_eq!(kept, [3, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17]);
     check_invariant(&cache.stats());
 }
+
+/// Threads asking for the same split children in different orders get one id per child, dense
+/// after the roots, and the same ids from every handle to the table of that mesh generation.
+#[test]
+fn split_ids_are_dense_and_the_same_for_every_thread_and_render() {
+    let cache: GeometryCache<Grid> = GeometryCache::new(CacheConfig::default());
+    let children: Vec<u64> = (0..500u64).map(|c| c * 7919 + (c << 40)).collect();
+    let per_thread: Vec<Vec<u32>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..4)
+            .map(|t| {
+                let (cache, children) = (&cache, &children);
+                s.spawn(move || {
+                    let ids = cache.split_ids(3, 2, 40);
+                    // Each thread walks the children from another start, both ways.
+                    let order: Vec<usize> = (0..children.len()).map(|k| (k * (2 * t + 1) + 97 * t) % children.len()).collect();
+                    for &k in order.iter().rev() {
+                        ids.id(children[k]);
+                    }
+                    children.iter().map(|&c| ids.id(c)).collect()
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(per_thread.windows(2).all(|w| w[0] == w[1]), "every thread sees the same ids");
+    let mut ids = per_thread[0].clone();
+    ids.sort_unstable();
+    assert_eq!(ids, (40..540).collect::<Vec<u32>>(), "one id per child, dense after the 40 roots");
+    // A later render's handle answers the same; another mesh's table is its own.
+    let later = cache.split_ids(3, 2, 40);
+    assert_eq!(children.iter().map(|&c| later.id(c)).collect::<Vec<_>>(), per_thread[0]);
+    assert_eq!(cache.split_ids(4, 2, 40).id(children[0]), 40);
+    assert!(cache.split_id_bytes() >= 500 * 12, "{}", cache.split_id_bytes());
+}
