@@ -8,7 +8,8 @@
 //! - [`surface`]: the shading point at a hit (exact limit surface), shared by all;
 //! - [`direct`]: light from the scene's lights at a shading point;
 //! - [`hemisphere`]: hemisphere integrals (ambient occlusion) at a shading point;
-//! - [`bleed`]: one-bounce color bleeding, with the irradiance cache when asked.
+//! - [`bleed`]: one-bounce color bleeding, with the irradiance cache when asked;
+//! - [`visibility`]: shadow, occlusion and hemisphere rays through opacity cut-outs.
 
 use glam::Vec3A;
 
@@ -25,6 +26,7 @@ pub mod hemisphere;
 pub mod path;
 pub mod select;
 pub mod surface;
+pub mod visibility;
 
 pub use ao::AmbientOcclusion;
 pub use bleed::ColorBleeding;
