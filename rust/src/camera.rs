@@ -247,10 +247,16 @@ impl Camera {
         }
     }
 
-    /// Camera-space depth (distance along the view axis, scene units) of a render-space point.
+    /// Camera-space depth (distance along the view axis, camera-space units: scene units for an
+    /// unscaled camera) of a render-space point: −z of [`Camera::camera_from_render`].
     pub fn depth(&self, p: Vec3A) -> f32 {
-        let c = self.render_from_camera.inverse().transform_point3a(p);
-        -c.z
+        -self.camera_from_render(p).z
+    }
+
+    /// A render-space point in camera space (USD's: +x right, +y up, looking down −z), in
+    /// camera-space units.
+    pub fn camera_from_render(&self, p: Vec3A) -> Vec3A {
+        self.render_from_camera.inverse().transform_point3a(p)
     }
 
     /// The continuous pixel position a render-space point projects to, or `None` behind a
