@@ -152,6 +152,16 @@ def test_hydra_camera_space_aovs_hold_the_hit_in_camera_space(native) -> None:
     assert camera_depth[0, 0, 0] == 0.0 and not peye[0, 0].any()
 
 
+def test_depth_of_field_names_the_camera_prim_that_asked(native) -> None:
+    stage = simple_stage()
+    camera = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+    camera.CreateFStopAttr(2.8)
+    camera.CreateFocusDistanceAttr(9.5)
+    result = mipray.render(stage, width=16, aovs=("color",))
+    why = {e["name"]: e["why"] for e in result.stats["effects"]["enabled"]}
+    assert "/World/Cam" in why["depth_of_field"] and "2.8" in why["depth_of_field"], why
+
+
 def test_session_follows_live_edits(native) -> None:
     stage = simple_stage(scheme="catmullClark")
     with mipray.RenderSession(stage) as session:

@@ -24,6 +24,8 @@ pub enum Projection {
 /// A camera as USD describes it. Lengths in USD's units (see the module doc).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
+    /// Prim path, for messages and the effects' reasons (empty for a camera no prim made).
+    pub name: String,
     /// Camera-to-render (world) transform, column-vector convention.
     pub render_from_camera: Mat4,
     pub projection: Projection,
@@ -43,6 +45,7 @@ impl Default for Camera {
     /// USD's defaults: a 50 mm lens on a 35 mm academy aperture at the origin.
     fn default() -> Self {
         Camera {
+            name: String::new(),
             render_from_camera: Mat4::IDENTITY,
             projection: Projection::Perspective,
             focal_length: 50.0,
