@@ -130,6 +130,38 @@ def test_render_live_stage_depth_and_normal(native) -> None:
     assert isinstance(result.stats, dict) and result.stats
 
 
+def test_hydra_camera_space_aovs_hold_the_hit_in_camera_space(native) -> None:
+    # The cube's front face is the camera-space plane z = -9.5; the camera sits on the world's
+    # z axis looking down -z, so Peye = (x, y, -9.5) with x, y the world's, and cameraDepth
+    # = -Peye.z = depth. Where nothing is hit: depth the far clip, cameraDepth and Peye 0.
+    result = mipray.render(
+        simple_stage(), width=64, aovs=("depth", "cameraDepth", "Peye", "position")
+    )
+    h, w = result.height, result.width
+    depth, camera_depth, peye, position = (
+        result.aovs[k] for k in ("depth", "cameraDepth", "Peye", "position")
+    )
+    assert camera_depth.shape == (h, w, 1) and peye.shape == (h, w, 3)
+    hit = np.abs(position[..., 2] - 0.5) < 1e-4
+    assert hit.sum() > 100
+    np.testing.assert_allclose(peye[hit][:, 2], -9.5, atol=1e-3)
+    np.testing.assert_allclose(camera_depth[hit][:, 0], 9.5, atol=1e-3)
+    np.testing.assert_allclose(peye[hit][:, :2], position[hit][:, :2], atol=1e-4)
+    np.testing.assert_array_equal(camera_depth[..., 0], -peye[..., 2])
+    assert depth[0, 0, 0] == pytest.approx(1.0e6)
+    assert camera_depth[0, 0, 0] == 0.0 and not peye[0, 0].any()
+
+
+def test_depth_of_field_names_the_camera_prim_that_asked(native) -> None:
+    stage = simple_stage()
+    camera = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+    camera.CreateFStopAttr(2.8)
+    camera.CreateFocusDistanceAttr(9.5)
+    result = mipray.render(stage, width=16, aovs=("color",))
+    why = {e["name"]: e["why"] for e in result.stats["effects"]["enabled"]}
+    assert "/World/Cam" in why["depth_of_field"] and "2.8" in why["depth_of_field"], why
+
+
 def test_session_follows_live_edits(native) -> None:
     stage = simple_stage(scheme="catmullClark")
     with mipray.RenderSession(stage) as session:

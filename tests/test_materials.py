@@ -575,3 +575,44 @@ def test_a_normal_map_tilts_the_shading_normal_by_its_angle(native, tmp_path, de
     h, w = image.shape[:2]
     centre = image[h // 2 - 2 : h // 2 + 2, w // 2 - 2 : w // 2 + 2]
     np.testing.assert_allclose(centre, 0.5 * math.cos(t), atol=2e-3)
+
+
+def test_a_cut_out_card_casts_a_shadow_only_where_its_opacity_mask_leaves_a_leaf(
+    native, tmp_path
+) -> None:
+    # A UsdUVTexture opacity mask under opacityThreshold 0.5: the card's left half (s < 0.5,
+    # opacity 0.2) is cut out, its right half (0.9) a surface. A sun of irradiance π travelling
+    # along (-1, 0, -1)/√2 casts the card (x in [3, 5], 2 above the ground) onto x in [1, 3]:
+    # under the cut-out half (x < 2) the lambertian ground (ρ = 0.5) has its unshadowed
+    # radiance ρ/π · π · cos 45°, under the leaf (x > 2) none. A long lens at x = 2 frames the
+    # ground x in [0.95, 3.05] and never sees the card.
+    texels = np.zeros((16, 16, 3), np.float32)
+    texels[:, :8, 0], texels[:, 8:, 0] = 0.2, 0.9
+    mask = write_map(native, tmp_path / "leaf_mask.exr", texels)
+    stage = new_stage()
+    camera = add_camera(stage, "/World/Camera", eye=(2, 0, 10))
+    camera.CreateFocalLengthAttr(100.0)
+    ground = quad(stage, "/World/Ground", half=6.0)
+    bind(
+        ground.GetPrim(),
+        surface(stage, "/World/Looks/Ground", diffuseColor=(0.5,) * 3, useSpecularWorkflow=1)[0],
+    )
+    card = quad(stage, "/World/Card", half=1.0, z=2.0)
+    card.AddTranslateOp().Set(Gf.Vec3d(4, 0, 0))
+    leaf, shader = surface(stage, "/World/Looks/Leaf", useSpecularWorkflow=1, opacityThreshold=0.5)
+    texture(stage, "/World/Looks/Leaf", shader, "opacity", mask, "r", wrapS="clamp", wrapT="clamp")
+    bind(card.GetPrim(), leaf)
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    sun.CreateIntensityAttr(math.pi)
+    sun.CreateAngleAttr(0.0)
+    sun.AddRotateYOp().Set(45.0)
+    image = render(stage, width=32)[..., 0]
+    h = image.shape[0]
+    rows = slice(h // 4, 3 * h // 4)
+    lit = 0.5 * math.cos(math.radians(45.0))
+    np.testing.assert_allclose(image[rows, 2:15], lit, atol=1e-3)
+    np.testing.assert_array_equal(image[rows, 17:30], 0.0)
+    # The same card with no threshold: opacity 0.2–0.9 is glass there, which shadow rays do not
+    # pass (a classic ray tracer's glass), so all of x in [1, 3] is in shadow.
+    shader.GetInput("opacityThreshold").Set(0.0)
+    np.testing.assert_array_equal(render(stage, width=32)[..., 0][rows, 2:30], 0.0)

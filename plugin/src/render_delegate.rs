@@ -120,8 +120,9 @@ impl RenderDelegate {
         self.instancers.get(path)
     }
 
-    /// Inserts or replaces a camera.
+    /// Inserts or replaces a camera; the scene's camera carries `path` as its name.
     pub fn set_camera(&mut self, path: &str, camera: Camera) {
+        let camera = Camera { name: path.to_string(), ..camera };
         self.cameras.insert(path.to_string(), CameraPrim { path: path.to_string(), camera });
     }
 

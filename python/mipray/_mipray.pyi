@@ -307,8 +307,11 @@ class RenderDelegate:
             height: image height in pixels.
             aovs: names of the AOVs to produce: ``"color"`` (3 channels,
                 linear), ``"depth"`` (1 channel, camera-space distance along
-                the view axis in scene units, ``inf`` where nothing is hit),
-                ``"normal"`` (3 channels, world space).
+                the view axis in scene units, the far clipping distance where
+                nothing is hit), ``"normal"`` (3 channels, world space), and
+                the others of ``aov_names()`` — README's AOV table says what
+                each holds (``"cameraDepth"``, ``"Peye"``: Hydra's
+                camera-space depth and position).
             settings: renderer settings, all optional: ``"samples"`` (int,
                 per pixel, default 1), ``"seed"`` (int), ``"threads"`` (int,
                 0 for all cores), ``"tessFactor"`` (float, the paper's tess

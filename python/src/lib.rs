@@ -393,6 +393,7 @@ impl RenderDelegate {
             _ => return Err(value_error(path, format!("projection '{projection}' is not perspective or orthographic"))),
         };
         let camera = Camera {
+            name: path.to_string(),
             render_from_camera: matrix(path, &transform)?,
             projection,
             focal_length,

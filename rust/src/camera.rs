@@ -24,6 +24,8 @@ pub enum Projection {
 /// A camera as USD describes it. Lengths in USD's units (see the module doc).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
+    /// Prim path, for messages and the effects' reasons (empty for a camera no prim made).
+    pub name: String,
     /// Camera-to-render (world) transform, column-vector convention.
     pub render_from_camera: Mat4,
     pub projection: Projection,
@@ -43,6 +45,7 @@ impl Default for Camera {
     /// USD's defaults: a 50 mm lens on a 35 mm academy aperture at the origin.
     fn default() -> Self {
         Camera {
+            name: String::new(),
             render_from_camera: Mat4::IDENTITY,
             projection: Projection::Perspective,
             focal_length: 50.0,
@@ -247,10 +250,16 @@ impl Camera {
         }
     }
 
-    /// Camera-space depth (distance along the view axis, scene units) of a render-space point.
+    /// Camera-space depth (distance along the view axis, camera-space units: scene units for an
+    /// unscaled camera) of a render-space point: −z of [`Camera::camera_from_render`].
     pub fn depth(&self, p: Vec3A) -> f32 {
-        let c = self.render_from_camera.inverse().transform_point3a(p);
-        -c.z
+        -self.camera_from_render(p).z
+    }
+
+    /// A render-space point in camera space (USD's: +x right, +y up, looking down −z), in
+    /// camera-space units.
+    pub fn camera_from_render(&self, p: Vec3A) -> Vec3A {
+        self.render_from_camera.inverse().transform_point3a(p)
     }
 
     /// The continuous pixel position a render-space point projects to, or `None` behind a

@@ -67,7 +67,11 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
     }
     let cam = &scene.camera;
     if cam.has_depth_of_field() {
-        out.push(Effect { name: "depth_of_field".into(), why: format!("camera fStop {} focused at {}", cam.f_stop, cam.focus_distance) });
+        let camera = if cam.name.is_empty() { "camera".to_string() } else { format!("camera {}", cam.name) };
+        out.push(Effect {
+            name: "depth_of_field".into(),
+            why: format!("{camera}: fStop {} focused at {}", cam.f_stop, cam.focus_distance),
+        });
     }
     let moving: Vec<&str> = scene
         .moving_instances()
@@ -89,4 +93,48 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
 /// True when `name` is among `effects`.
 pub fn enabled(effects: &[Effect], name: &str) -> bool {
     effects.iter().any(|e| e.name == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Mat4, Vec3A};
+
+    use super::*;
+    use crate::camera::Camera;
+    use crate::light::Light;
+
+    fn why<'e>(effects: &'e [Effect], name: &str) -> Option<&'e str> {
+        effects.iter().find(|e| e.name == name).map(|e| e.why.as_str())
+    }
+
+    #[test]
+    fn depth_of_field_names_the_camera_prim_and_its_f_stop() {
+        let camera = Camera { name: "/World/shot_cam".into(), f_stop: 2.8, focus_distance: 7.5, ..Camera::default() };
+        let mut scene = Scene { camera, ..Scene::default() };
+        let effects = analyze(&scene, &RenderOptions::default());
+        let reason = why(&effects, "depth_of_field").expect("an f-stop and a focus distance call for depth of field");
+        assert!(reason.contains("/World/shot_cam") && reason.contains("2.8") && reason.contains("7.5"), "{reason}");
+        scene.camera.f_stop = 0.0;
+        assert_eq!(why(&analyze(&scene, &RenderOptions::default()), "depth_of_field"), None);
+    }
+
+    #[test]
+    fn a_distant_light_with_an_angle_calls_for_soft_shadows_and_one_without_does_not() {
+        let mut scene = Scene::default();
+        let sun = |angle_deg: f32| Light::usd_distant("/World/sun", &Mat4::IDENTITY, 1.0, 0.0, Vec3A::ONE, angle_deg, false);
+        scene.lights.push(sun(0.53));
+        let effects = analyze(&scene, &RenderOptions::default());
+        let reason = why(&effects, "soft_shadows").expect("an angular sun casts soft shadows");
+        assert!(reason.contains("/World/sun"), "{reason}");
+        assert!(why(&effects, "shadows").is_some_and(|w| w.contains("/World/sun")));
+
+        scene.lights = vec![sun(0.0)];
+        let effects = analyze(&scene, &RenderOptions::default());
+        assert_eq!(why(&effects, "soft_shadows"), None, "a point at infinity casts hard shadows: {effects:?}");
+        assert!(why(&effects, "shadows").is_some());
+        // A sun that casts no shadows calls for no shadow rays at all.
+        scene.lights = vec![Light { casts_shadows: false, ..sun(0.53) }];
+        let effects = analyze(&scene, &RenderOptions::default());
+        assert_eq!((why(&effects, "shadows"), why(&effects, "soft_shadows")), (None, None), "{effects:?}");
+    }
 }

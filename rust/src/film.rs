@@ -4,15 +4,17 @@
 
 use crate::image_io::{ChannelFormat, ImageBuf};
 
-/// Every AOV the renderer can produce, with its channel count. Hydra's names where Hydra has one
-/// (`color`, `depth`, `normal`, `Neye`, `primId`, `instanceId`, `elementId`); `normal` is world
-/// space, `Neye` camera space. The light AOVs add up to the colour:
-/// `color = emission + directDiffuse + indirectDiffuse + specular` (ambient occlusion's sky light
-/// counts as indirect diffuse).
+/// Every AOV the renderer can produce, with its channel count. Hydra's names (`HdAovTokens`)
+/// where Hydra has one (`color`, `depth`, `cameraDepth`, `normal`, `Neye`, `Peye`, `primId`,
+/// `instanceId`, `elementId`); what each holds, in which units and space: [`AOV_MEANINGS`]. The
+/// light AOVs add up to the colour: `color = emission + directDiffuse + indirectDiffuse +
+/// specular` (ambient occlusion's sky light counts as indirect diffuse).
 pub const AOVS: &[(&str, usize)] = &[
     ("color", 3),
     ("alpha", 1),
     ("depth", 1),
+    ("cameraDepth", 1),
+    ("Peye", 3),
     ("normal", 3),
     ("primId", 1),
     ("instanceId", 1),
@@ -35,6 +37,8 @@ pub const AOV_NAMES: &[&str] = &[
     "color",
     "alpha",
     "depth",
+    "cameraDepth",
+    "Peye",
     "normal",
     "primId",
     "instanceId",
@@ -51,6 +55,54 @@ pub const AOV_NAMES: &[&str] = &[
     "indirectDiffuse",
     "specular",
 ];
+
+/// What each AOV holds, its units and its space, in [`AOVS`] order (the AOV descriptors' and
+/// README's text). Camera space is USD's: +x right, +y up, the camera looking down −z; its units
+/// are scene units for a camera whose transform does not scale. Colour-like AOVs and `alpha`,
+/// `ao` are averaged over a pixel's samples; the others are the pixel centre's (sample 0's), never
+/// a blend of two surfaces.
+pub const AOV_MEANINGS: &[(&str, &str)] = &[
+    ("color", "linear RGB radiance toward the camera, in the lights' units: emission + directDiffuse + indirectDiffuse + specular"),
+    ("alpha", "fraction of the pixel's camera rays that hit a surface, in [0, 1]"),
+    (
+        "depth",
+        "camera-space depth of the hit: distance along the view axis (−z in camera space), camera-space units; the far clipping distance where nothing is hit. EXR's Z channel; not Hydra's clip-space depth",
+    ),
+    (
+        "cameraDepth",
+        "Hydra's cameraDepth: camera-space depth of the hit, −Peye.z, positive in front of the camera, camera-space units (the same values as depth); 0 where nothing is hit",
+    ),
+    ("Peye", "Hydra's Peye: camera-space position of the hit (z < 0 in front of the camera), camera-space units; 0 where nothing is hit"),
+    ("normal", "world-space unit shading normal at the hit (normal-mapped), facing the camera; 0 where nothing is hit"),
+    ("primId", "index of the patch hit within its mesh; −1 where nothing is hit"),
+    ("instanceId", "the scene's id of the instance hit; −1 where nothing is hit"),
+    (
+        "beamWidth",
+        "world-space width of the ray beam (render units) at the hit that ends the camera ray's specular chain (the paper's figure 2)",
+    ),
+    ("tessRate", "effective tessellation rate at that hit: quads per side of its root subpatch (1, 2, 4, 8, 16, 16·2^depth when split)"),
+    ("ao", "unoccluded fraction of the cosine-weighted hemisphere within aoDistance, in [0, 1]; 0 when ambient occlusion is off"),
+    (
+        "tessError",
+        "distance along the camera ray between its hit on the tessellation and the exact limit surface (render units), and that distance over the beam width there (unitless)",
+    ),
+    ("position", "world-space position of the hit, render units; 0 where nothing is hit"),
+    ("elementId", "Hydra's elementId: the control (base) face of the mesh hit; −1 where nothing is hit"),
+    ("Neye", "Hydra's Neye: the shading normal in camera space, unit, facing the camera; 0 where nothing is hit"),
+    ("albedo", "diffuse reflectance of the hit toward the camera, linear RGB in [0, 1]"),
+    ("emission", "radiance emitted toward the camera (emissive surfaces, lights seen directly, a dome as the background), linear RGB"),
+    ("directDiffuse", "the lights' direct light reflected by the hit's diffuse lobe, linear RGB radiance"),
+    (
+        "indirectDiffuse",
+        "light from other surfaces (and the ambient-occlusion sky) reflected by the hit's diffuse lobe, linear RGB radiance",
+    ),
+    ("specular", "everything the hit's non-diffuse lobes reflect or refract toward the camera, linear RGB radiance"),
+];
+
+/// What AOV `name` holds, its units and space ([`AOV_MEANINGS`]), or `None` for an unknown name.
+pub fn aov_meaning(name: &str) -> Option<&'static str> {
+    AOV_MEANINGS.iter().find(|(n, _)| *n == name).map(|(_, m)| *m)
+}
 
 /// The AOVs holding linear RGB (radiance or reflectance): averaged over a pixel's samples and
 /// stored as half floats with `.R`, `.G`, `.B` channels.
@@ -157,8 +209,10 @@ mod tests {
     #[test]
     fn every_aov_has_one_name_and_file_channels() {
         assert_eq!(AOVS.len(), AOV_NAMES.len());
-        for (&(name, channels), &listed) in AOVS.iter().zip(AOV_NAMES) {
+        assert_eq!(AOVS.len(), AOV_MEANINGS.len());
+        for ((&(name, channels), &listed), &(described, _)) in AOVS.iter().zip(AOV_NAMES).zip(AOV_MEANINGS) {
             assert_eq!(name, listed);
+            assert_eq!(name, described);
             let files = file_channel_names(name, channels);
             assert_eq!(files.len(), channels, "{name}");
         }
@@ -166,5 +220,17 @@ mod tests {
         assert_eq!(file_channel_names("Neye", 3), ["Neye.x", "Neye.y", "Neye.z"]);
         assert_eq!(default_format("directDiffuse"), ChannelFormat::Half);
         assert_eq!(default_format("position"), ChannelFormat::Float);
+        assert_eq!(file_channel_names("Peye", 3), ["Peye.x", "Peye.y", "Peye.z"]);
+        assert_eq!(file_channel_names("cameraDepth", 1), ["cameraDepth"]);
+        assert_eq!((default_format("cameraDepth"), default_format("Peye")), (ChannelFormat::Float, ChannelFormat::Float));
+    }
+
+    #[test]
+    fn the_readme_lists_every_aov_with_its_meaning() {
+        let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md")).unwrap();
+        for (name, meaning) in AOV_MEANINGS {
+            let row = format!("| `{name}` | {} | {meaning} |", aov_channels(name).unwrap());
+            assert!(readme.contains(&row), "README.md has no row {row}");
+        }
     }
 }

@@ -329,6 +329,31 @@ impl Material {
     pub fn calls(&self) -> SurfaceCalls {
         self.surface.calls(&|i| self.texture(i).is_some())
     }
+
+    /// `opacityThreshold` may cut this material out somewhere: a threshold above 0 and either a
+    /// constant opacity below it or a texture feeding opacity. False: every hit on it is a
+    /// surface, and visibility rays need not look closer.
+    pub fn may_cut_out(&self) -> bool {
+        let s = &self.surface;
+        s.opacity_threshold > 0.0 && (s.opacity < s.opacity_threshold || self.texture(Input::Opacity).is_some())
+    }
+
+    /// Whether the material is cut out at a hit: [`ResolvedSurface::cut_out`] of
+    /// [`Material::resolve`] with the same arguments, reading only the opacity texture (what a
+    /// visibility ray needs).
+    pub fn cut_out_at(&self, surface: &dyn LimitSurface, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> bool {
+        if !self.may_cut_out() {
+            return false;
+        }
+        let mut opacity = self.surface.opacity;
+        // The last texture feeding opacity wins, as in `resolve`.
+        if let Some((_, tex)) = self.textures.iter().rev().find(|(i, _)| *i == Input::Opacity) {
+            let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
+            let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
+            opacity = unit_input(site.lookup(tex, 1).x);
+        }
+        opacity < self.surface.opacity_threshold
+    }
 }
 
 /// UsdPreviewSurface's inputs at one shading point, and the shading normal there: what
@@ -418,7 +443,7 @@ impl Material {
         }
         let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
         let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
-        let unit = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        let unit = unit_input;
         for (input, tex) in &self.textures {
             match input {
                 Input::DiffuseColor => inputs.diffuse_color = clamp_color(site.lookup(tex, 3)),
@@ -477,6 +502,15 @@ fn normal_mapped(sp: &ShadingPoint, t: Vec3A, dst: Option<([f32; 2], [f32; 2])>)
         n
     } else {
         (n + sp.ng * (MIN_COS - c)).try_normalize().unwrap_or(sp.ng)
+    }
+}
+
+/// A float input's texture value in its range [0, 1] (NaN to 0).
+fn unit_input(v: f32) -> f32 {
+    if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(0.0, 1.0)
     }
 }
 

@@ -295,6 +295,8 @@ fn render_tile(
                 v.tess_error = [0.0; 2];
                 dropped += 1;
                 v.depth = cam.clipping_range.1;
+                v.camera_depth = 0.0;
+                v.peye = glam::Vec3A::ZERO;
                 v.normal = glam::Vec3A::ZERO;
                 v.neye = glam::Vec3A::ZERO;
                 v.position = glam::Vec3A::ZERO;
@@ -324,6 +326,8 @@ fn write_tile(film: &mut Film, r: &TileResult) {
                     "color" => px.copy_from_slice(&v.color.to_array()),
                     "alpha" => px[0] = v.alpha,
                     "depth" => px[0] = v.depth,
+                    "cameraDepth" => px[0] = v.camera_depth,
+                    "Peye" => px.copy_from_slice(&v.peye.to_array()),
                     "normal" => px.copy_from_slice(&v.normal.to_array()),
                     "primId" => px[0] = v.prim_id,
                     "instanceId" => px[0] = v.instance_id,

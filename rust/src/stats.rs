@@ -66,6 +66,8 @@ pub fn collect(
             "rate_tests_by_ray": by_kind,
             "finer_than_fine_tests": counters.finer_than_fine,
             "differential_clamps": counters.differential_clamps,
+            "cutout_passes": counters.cutout_passes,
+            "cutout_limit_rays": counters.cutout_limit,
             "dropped_samples": figures.dropped_samples,
         },
         "geometry_cache": serde_json::to_value(tracer.cache.stats().since(cache_before)).unwrap_or(Value::Null),

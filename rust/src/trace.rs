@@ -47,6 +47,12 @@ pub struct TraceCounters {
     /// Ray differentials clamped to finite values (grazing hits, degenerate footprints, total
     /// internal reflection, zero densities): see [`crate::differential`].
     pub differential_clamps: u64,
+    /// Opacity cut-outs rays passed through (`opacityThreshold` masks; see
+    /// [`crate::integrator::visibility`]).
+    pub cutout_passes: u64,
+    /// Rays that met more than [`crate::integrator::visibility::MAX_CUTOUTS`] cut-outs and were
+    /// stopped there (a visibility ray taken as blocked, a camera or bounce ray as ended).
+    pub cutout_limit: u64,
 }
 
 impl TraceCounters {
@@ -60,6 +66,8 @@ impl TraceCounters {
         self.ray_subpatch_tests += o.ray_subpatch_tests;
         self.finer_than_fine += o.finer_than_fine;
         self.differential_clamps += o.differential_clamps;
+        self.cutout_passes += o.cutout_passes;
+        self.cutout_limit += o.cutout_limit;
         for (a, b) in self.rate_tests_by_kind.iter_mut().zip(o.rate_tests_by_kind) {
             for (x, y) in a.iter_mut().zip(b) {
                 *x += y;
@@ -326,6 +334,12 @@ impl<'s> Tracer<'s> {
     /// [`Tracer::intersect_from`]).
     pub fn occluded_from(&self, ray: &Ray, from: &Hit, counters: &mut TraceCounters) -> bool {
         self.trace(ray, counters, true, Some(Origin::of(from, ray))).is_some()
+    }
+
+    /// As [`Tracer::occluded_from`], returning the hit that blocks: any one in range, not
+    /// necessarily the closest (what a visibility query through cut-outs checks first).
+    pub fn any_hit_from(&self, ray: &Ray, from: &Hit, counters: &mut TraceCounters) -> Option<Hit> {
+        self.trace(ray, counters, true, Some(Origin::of(from, ray)))
     }
 
     fn kind_index(kind: RayKind) -> usize {

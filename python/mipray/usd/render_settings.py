@@ -46,6 +46,8 @@ KNOWN_AOVS = (
     "color",
     "alpha",
     "depth",
+    "cameraDepth",
+    "Peye",
     "normal",
     "primId",
     "instanceId",

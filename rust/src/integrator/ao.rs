@@ -12,16 +12,13 @@ use crate::effects::{enabled, Effect};
 use crate::error::RenderError;
 use crate::options::RenderOptions;
 use crate::progress::Progress;
-use crate::ray::{offset_origin, Ray};
+use crate::ray::Ray;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::trace::{TraceCounters, Tracer};
 
-use super::hemisphere::Hemisphere;
-use super::{shading_point, tessellation_error, Integrator, SampleValue, ShadingPoint};
-
-/// Cutout surfaces a camera ray passes through before it gives up (a bound, not physics).
-const MAX_CUTOUTS: u32 = 64;
+use super::hemisphere::{visible, Hemisphere};
+use super::{tessellation_error, Integrator, SampleValue};
 
 /// Ambient occlusion only. Construct with [`AmbientOcclusion::new`].
 pub struct AmbientOcclusion<'a> {
@@ -52,41 +49,21 @@ impl<'a> AmbientOcclusion<'a> {
     /// Radiance and AOV values along a camera ray.
     pub fn sample(&self, camera_ray: &Ray, sampler: &mut Sampler, counters: &mut TraceCounters) -> SampleValue {
         let mut out = SampleValue::miss(self.scene.camera.clipping_range.1);
-        let mut ray = *camera_ray;
-        let mut from = None;
-        for _ in 0..=MAX_CUTOUTS {
-            let hit = match &from {
-                None => self.tracer.intersect(&ray, counters),
-                Some(f) => self.tracer.intersect_from(&ray, f, counters),
-            };
-            let Some(hit) = hit else { break };
-            let sp = shading_point(self.tracer, self.scene, &ray, &hit);
-            let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
-            counters.differential_clamps += u64::from(clamped);
-            let mesh = &self.scene.meshes[hit.mesh as usize];
-            let material = self.scene.material_at(hit.mesh as usize, hit.patch as usize);
-            let surface = material.resolve(mesh.surface.as_ref(), &hit, &sp, &footprint);
-            if surface.cut_out() {
-                // No surface here: the same ray goes on from the hit, its beam as it arrived.
-                let o = offset_origin(sp.p, hit.p_error, sp.ng, ray.d);
-                ray = Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..ray };
-                from = Some(hit);
-                continue;
-            }
-            let sp = ShadingPoint { ns: surface.ns, ..sp };
-            out.set_hit(self.scene, &hit, sp.ns);
-            out.albedo = crate::bsdf::Scattering::diffuse_albedo(&surface.bsdf(&sp), -ray.d);
-            out.ao = self.ao.occlusion(self.tracer, &sp, &hit, &footprint, sampler, counters);
+        // The surface the camera ray sees, past opacity cut-outs.
+        if let Some(v) = visible(self.tracer, self.scene, *camera_ray, None, counters) {
+            let (ray, hit) = (&v.ray, &v.hit);
+            out.set_hit(self.scene, hit, v.sp.ns);
+            out.albedo = v.diffuse_albedo();
+            out.ao = self.ao.occlusion(self.tracer, &v.sp, hit, &v.footprint, sampler, counters);
             out.indirect_diffuse = out.albedo * (self.intensity * out.ao);
-            out.emission = surface.inputs.emissive_color;
+            out.emission = v.surface.inputs.emissive_color;
             out.beam_width = ray.beam_width(hit.t);
             out.tess_rate = hit.quads as f32;
             if self.tess_error {
-                let err = tessellation_error(self.tracer, self.scene, &ray, &hit);
+                let err = tessellation_error(self.tracer, self.scene, ray, hit);
                 let width = ray.beam_width(hit.t);
                 out.tess_error = [err, if width > 0.0 { err / width } else { 0.0 }];
             }
-            break;
         }
         out.set_color_from_parts();
         out

@@ -29,7 +29,9 @@
 //!
 //! **Opacity cutouts** (`opacityThreshold` > 0, opacity below it): there is no surface; every ray
 //! continues through (keeping its kind and its differential), up to [`MAX_CUTOUTS`] surfaces.
-//! Shadow rays are not told: a cutout still casts a shadow.
+//! Shadow and ambient-occlusion rays pass through too ([`super::visibility`]): a leaf card
+//! shadows only where its mask leaves a leaf. Glass (`opacity` < 1 with no threshold) is a
+//! surface to them: it blocks shadow rays, as refracting glass does in a classic ray tracer.
 
 use glam::Vec3A;
 
@@ -45,11 +47,8 @@ use crate::trace::{Hit, TraceCounters, Tracer};
 
 use super::direct::DirectLight;
 use super::hemisphere::Hemisphere;
+pub use super::visibility::MAX_CUTOUTS;
 use super::{shading_point, tessellation_error, Integrator, SampleValue, ShadingPoint};
-
-/// Most cutout surfaces one ray passes through before it is taken as blocked (a stack of
-/// leaves cards, say): a bound so a degenerate scene cannot loop.
-pub const MAX_CUTOUTS: u32 = 64;
 
 /// A delta branch weaker than this (all channels) is not traced: it could not change a pixel
 /// by more than that fraction of what it sees.
@@ -194,7 +193,9 @@ impl<'a> DirectLighting<'a> {
             // No surface here: the same ray goes on from the hit, its beam as it arrived.
             ray = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, ray.d), t_max: ray.t_max - hit.t, diff: footprint, t_min: 0.0, ..ray };
             from = Some(hit);
+            counters.cutout_passes += 1;
         }
+        counters.cutout_limit += 1;
         None
     }
 

@@ -31,7 +31,9 @@
 //! (§4.3); a light sample of a wide light spreads over the solid angle it stands for,
 //! 1 / (P_j p_j), shared by the N rays (§4.5: "the relative size of the light divided by the
 //! number of shadow rays"); a BSDF sample's over 1 / (n_B p_B) (§4.6's rule for importance-sampled
-//! rays).
+//! rays). Shadow rays pass through opacity cut-outs (`opacityThreshold`) and are blocked by
+//! everything else, glass of `opacity` < 1 without a threshold included (see
+//! [`super::visibility`]).
 
 use std::sync::Arc;
 
@@ -46,7 +48,7 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
 
-use super::ShadingPoint;
+use super::{visibility, ShadingPoint};
 
 /// Direct light at a point, split as the AOVs need it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -325,7 +327,8 @@ impl DirectLight {
                 d
             }
         };
-        tracer.occluded_from(&self.shadow_ray(sp, hit, wi, distance, diff), hit, counters)
+        // Through opacity cut-outs: a leaf card shadows only where its mask leaves a leaf.
+        visibility::occluded_from(tracer, &self.shadow_ray(sp, hit, wi, distance, diff), hit, counters)
     }
 
     /// A shadow ray toward a light at `distance`, stopping just short of it (a light is not
@@ -362,14 +365,15 @@ impl DirectLight {
         let (diff, clamped) = footprint.hemisphere_checked(wi, pdf, n.max(1));
         counters.differential_clamps += u64::from(clamped);
         let ray = self.shadow_ray(sp, hit, wi, far, diff);
+        // Both through opacity cut-outs, as light samples' shadow rays.
         if casting.len() == 1 {
-            if tracer.occluded_from(&ray, hit, counters) {
+            if visibility::occluded_from(tracer, &ray, hit, counters) {
                 0.0
             } else {
                 f32::INFINITY
             }
         } else {
-            tracer.intersect_from(&ray, hit, counters).map_or(f32::INFINITY, |h| (h.p - sp.p).length())
+            visibility::first_opaque_from(tracer, &ray, hit, counters).map_or(f32::INFINITY, |b| (b.hit.p - sp.p).length())
         }
     }
 }

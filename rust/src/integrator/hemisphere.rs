@@ -19,14 +19,12 @@ use crate::sampling::{frame, Sampler};
 use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
 
+use super::visibility::{self, MAX_CUTOUTS};
 use super::{shading_point, ShadingPoint};
 
 /// Mixed into the seed for the random streams of the irradiance cache's records, so they are
 /// independent of the camera samples' streams of the same pixel.
 pub const RECORD_STREAM: u64 = 0x1CAC_4E00_D15C_0BA1;
-
-/// Surfaces a ray passes through where `opacityThreshold` cuts them out, before giving up.
-const MAX_CUTOUTS: u32 = 64;
 
 /// The surface a ray sees: its hit, the shading point there (with the material's normal-mapped
 /// shading normal), the ray's differential transferred to it, and the material's inputs there.
@@ -50,7 +48,7 @@ impl Visible {
 
 /// The first surface along `ray` that is not cut out, from the camera (`from` = `None`) or
 /// leaving the surface at `from`. A cut-out surface lets the same ray go on, its beam as it
-/// arrived.
+/// arrived; past [`MAX_CUTOUTS`] of them the ray ends (counted in the stats).
 pub fn visible(tracer: &Tracer<'_>, scene: &Scene, mut ray: Ray, mut from: Option<Hit>, counters: &mut TraceCounters) -> Option<Visible> {
     for _ in 0..=MAX_CUTOUTS {
         let hit = match &from {
@@ -59,9 +57,13 @@ pub fn visible(tracer: &Tracer<'_>, scene: &Scene, mut ray: Ray, mut from: Optio
         };
         match resolve(tracer, scene, ray, hit, counters) {
             Resolved::Surface(v) => return Some(v),
-            Resolved::CutOut(next, at) => (ray, from) = (next, Some(at)),
+            Resolved::CutOut(next, at) => {
+                counters.cutout_passes += 1;
+                (ray, from) = (next, Some(at));
+            }
         }
     }
+    counters.cutout_limit += 1;
     None
 }
 
@@ -93,7 +95,10 @@ fn resolve(tracer: &Tracer<'_>, scene: &Scene, ray: Ray, hit: Hit, counters: &mu
 pub fn visible_at(tracer: &Tracer<'_>, scene: &Scene, ray: Ray, hit: Hit, counters: &mut TraceCounters) -> Option<Visible> {
     match resolve(tracer, scene, ray, hit, counters) {
         Resolved::Surface(v) => Some(v),
-        Resolved::CutOut(next, at) => visible(tracer, scene, next, Some(at), counters),
+        Resolved::CutOut(next, at) => {
+            counters.cutout_passes += 1;
+            visible(tracer, scene, next, Some(at), counters)
+        }
     }
 }
 
@@ -135,7 +140,8 @@ impl Hemisphere {
     /// The unoccluded fraction of the cosine-weighted hemisphere within `ao_distance`: from the
     /// occlusion cache where one of its records is valid, otherwise from [`Strata::for_rays`]
     /// (`ao_samples`) stratified rays whose spread is √(1/(N·p(ω))) (the paper's §4.6): wide near
-    /// the horizon, narrower at the pole. Rays below the geometric surface count as occluded.
+    /// the horizon, narrower at the pole. Rays below the geometric surface count as occluded;
+    /// opacity cut-outs do not occlude ([`visibility::occluded_from`]).
     pub fn occlusion(
         &self,
         tracer: &Tracer<'_>,
@@ -162,7 +168,7 @@ impl Hemisphere {
                     continue;
                 }
                 let r = hemisphere_ray(sp, hit, footprint, d, pdf, strata, self.distance, RayKind::Ao, counters);
-                if !tracer.occluded_from(&r, hit, counters) {
+                if !visibility::occluded_from(tracer, &r, hit, counters) {
                     open += 1;
                 }
             }
@@ -264,11 +270,12 @@ pub fn hemisphere_ray(
 }
 
 /// Traces the stratified hemisphere rays of `strata` above the shading point (cosine-weighted,
-/// jittered by `sampler`, two numbers a ray) to their closest hits within `distance`, and
-/// returns what each found in [`Strata::index`] order: its local direction, hit distance
-/// (`distance` itself when it hits nothing), and `shade(hit, ray, sampler, counters)` — the
-/// value it brings back. Rays below the geometric surface are not traced: value 0, distance
-/// infinite.
+/// jittered by `sampler`, two numbers a ray) to their closest hits within `distance` that are
+/// not cut out ([`visibility::first_opaque_from`]), and returns what each found in
+/// [`Strata::index`] order: its local direction, hit distance (`distance` itself when it hits
+/// nothing), and `shade(hit, ray, sampler, counters)` — the value it brings back, `ray` being
+/// the segment that made the hit (past any cut-outs). Rays below the geometric surface are not
+/// traced: value 0, distance infinite.
 #[allow(clippy::too_many_arguments)]
 pub fn gather(
     tracer: &Tracer<'_>,
@@ -294,12 +301,15 @@ pub fn gather(
                 continue;
             }
             let r = hemisphere_ray(sp, hit, footprint, d, pdf, strata, distance, kind, counters);
-            let found = tracer.intersect_from(&r, hit, counters);
+            let found = visibility::first_opaque_from(tracer, &r, hit, counters);
             // A ray that reaches nothing within a finite `distance` (ambient occlusion's) counts
             // as reaching that far: what lies beyond does not change the integral until it
             // comes within reach, so the reach is the length scale the record is valid over.
-            slot.distance = found.as_ref().map_or(distance, |h| h.t);
-            slot.value = shade(found.as_ref(), &r, sampler, counters);
+            slot.distance = found.as_ref().map_or(distance, |b| b.distance);
+            slot.value = match &found {
+                Some(b) => shade(Some(&b.hit), &b.ray, sampler, counters),
+                None => shade(None, &r, sampler, counters),
+            };
         }
     }
     out

@@ -8,7 +8,8 @@
 //! - [`surface`]: the shading point at a hit (exact limit surface), shared by all;
 //! - [`direct`]: light from the scene's lights at a shading point;
 //! - [`hemisphere`]: hemisphere integrals (ambient occlusion) at a shading point;
-//! - [`bleed`]: one-bounce color bleeding, with the irradiance cache when asked.
+//! - [`bleed`]: one-bounce color bleeding, with the irradiance cache when asked;
+//! - [`visibility`]: shadow, occlusion and hemisphere rays through opacity cut-outs.
 
 use glam::Vec3A;
 
@@ -25,6 +26,7 @@ pub mod hemisphere;
 pub mod path;
 pub mod select;
 pub mod surface;
+pub mod visibility;
 
 pub use ao::AmbientOcclusion;
 pub use bleed::ColorBleeding;
@@ -40,8 +42,15 @@ pub struct SampleValue {
     pub color: Vec3A,
     /// 1 where a surface was hit.
     pub alpha: f32,
-    /// Camera-space depth along the view axis, scene units (the far clip when nothing is hit).
+    /// Camera-space depth along the view axis, camera-space units (the far clip when nothing is
+    /// hit): the `depth` AOV, EXR's `Z`.
     pub depth: f32,
+    /// Hydra's `cameraDepth`: the same camera-space depth, −`peye.z`, but 0 where nothing is hit
+    /// (Hydra's clear value).
+    pub camera_depth: f32,
+    /// Hydra's `Peye`: the hit's position in camera space (USD's camera looks down −z, so z < 0
+    /// in front of it), camera-space units; 0 where nothing is hit.
+    pub peye: Vec3A,
     /// World-space unit shading normal, facing the camera.
     pub normal: Vec3A,
     /// Patch index within the mesh (−1 for none).
@@ -89,6 +98,8 @@ impl Default for SampleValue {
             color: Vec3A::ZERO,
             alpha: 0.0,
             depth: 0.0,
+            camera_depth: 0.0,
+            peye: Vec3A::ZERO,
             normal: Vec3A::ZERO,
             prim_id: 0.0,
             instance_id: 0.0,
@@ -115,12 +126,14 @@ impl SampleValue {
         SampleValue { depth: far, prim_id: -1.0, instance_id: -1.0, ..Default::default() }
     }
 
-    /// Sets the AOVs that describe the surface a camera ray hit — alpha, depth, position,
-    /// `normal` (world, the shading normal `normal` facing the camera), `Neye`, and the ids —
-    /// the same way for every integrator.
+    /// Sets the AOVs that describe the surface a camera ray hit — alpha, depth, `cameraDepth`,
+    /// position, `Peye`, `normal` (world, the shading normal `normal` facing the camera), `Neye`,
+    /// and the ids — the same way for every integrator.
     pub fn set_hit(&mut self, scene: &Scene, hit: &crate::trace::Hit, normal: Vec3A) {
         self.alpha = 1.0;
-        self.depth = scene.camera.depth(hit.p);
+        self.peye = scene.camera.camera_from_render(hit.p);
+        self.depth = -self.peye.z;
+        self.camera_depth = -self.peye.z;
         self.position = hit.p;
         self.normal = normal;
         // Normals go by the inverse transpose of camera-from-render: the transpose of
@@ -198,6 +211,8 @@ impl SampleValue {
     /// The non-averaged AOVs are finite (depth, normals, position, debug values).
     pub fn geometry_finite(&self) -> bool {
         self.depth.is_finite()
+            && self.camera_depth.is_finite()
+            && self.peye.is_finite()
             && self.normal.is_finite()
             && self.neye.is_finite()
             && self.position.is_finite()

@@ -14,6 +14,10 @@
 //! (`emissiveColor`) are not lights: no light sample finds them, so every path that hits one
 //! counts its emission in full, whatever bounce reached it.
 //!
+//! **Cut-outs** (`opacityThreshold`): a ray meeting a cut-out goes on through it as the same ray,
+//! so the lights it meets are weighted from the vertex that sampled it, over its whole length;
+//! next-event estimation's shadow rays pass the same cut-outs ([`super::visibility`]).
+//!
 //! **Length.** `max_depth` bounces after the camera hit, every vertex lit by next-event
 //! estimation: `max_depth = 0` is direct lighting. After `russian_roulette_depth` bounces a
 //! path continues with probability q = min(1, max component of its throughput) and is divided
@@ -47,11 +51,8 @@ use crate::trace::{Hit, TraceCounters, Tracer};
 
 use super::direct::DirectLight;
 use super::hemisphere::Hemisphere;
+use super::visibility::MAX_CUTOUTS;
 use super::{shading_point, tessellation_error, Integrator, SampleValue, ShadingPoint};
-
-/// Cutout surfaces (`opacity` < `opacityThreshold`) a path may pass straight through before it
-/// is ended: a bound for stacks of cards, not a physical limit.
-const MAX_CUTOUTS: u32 = 64;
 
 /// The path tracer. Construct with [`PathTracer::new`]; chosen by `integrator = path`
 /// ([`crate::integrator::select`]).
@@ -75,9 +76,17 @@ pub struct PathTracer<'a> {
 
 /// Where a path is: the ray it travels, the surface it left, and what its light is worth.
 struct Segment {
+    /// The ray, or its part beyond the opacity cut-outs it has passed.
     ray: Ray,
     /// The hit and shading point the ray left (`None`: the camera ray).
     from: Option<(Hit, ShadingPoint)>,
+    /// Where the ray started, for the lights it meets ([`DirectLight::emitted`]): the shading
+    /// point it left, or the camera's position.
+    eye: ShadingPoint,
+    /// The last cut-out the ray passed, which `ray` leaves, and the distance along the ray
+    /// from `eye` to it (render units): the ray goes on as one ray, so lights are weighted from
+    /// where it was sampled, over its whole length.
+    through: Option<(Hit, f32)>,
     /// The product of the BSDF weights `f·|cos|/pdf` and Russian-roulette factors so far.
     throughput: Vec3A,
     /// The BSDF density the ray's direction was drawn with, for the multiple-importance weight
@@ -113,47 +122,62 @@ impl<'a> PathTracer<'a> {
     pub fn sample(&self, camera_ray: &Ray, sampler: &mut Sampler, counters: &mut TraceCounters) -> SampleValue {
         let far = self.scene.camera.clipping_range.1;
         let mut out = SampleValue::miss(far);
-        let mut seg = Segment { ray: *camera_ray, from: None, throughput: Vec3A::ONE, bsdf_pdf: None, specular_chain: true };
+        let mut seg = Segment {
+            ray: *camera_ray,
+            from: None,
+            eye: camera_point(camera_ray),
+            through: None,
+            throughput: Vec3A::ONE,
+            bsdf_pdf: None,
+            specular_chain: true,
+        };
         // Where light found after the camera hit goes, by the lobe of the first bounce.
         let mut first_lobe: Option<Lobe> = None;
         let mut bounce = 0u32;
         let mut cutouts = 0u32;
         loop {
-            let hit = match &seg.from {
-                None => self.tracer.intersect(&seg.ray, counters),
-                Some((from, _)) => self.tracer.intersect_from(&seg.ray, from, counters),
+            let hit = match (&seg.through, &seg.from) {
+                (Some((cut, _)), _) | (None, Some((cut, _))) => self.tracer.intersect_from(&seg.ray, cut, counters),
+                (None, None) => self.tracer.intersect(&seg.ray, counters),
             };
+            let ray = seg.ray;
+            let passed = seg.through.map_or(0.0, |(_, t)| t);
+            let mut found = None;
+            if let Some(hit) = hit {
+                let sp = shading_point(self.tracer, self.scene, &ray, &hit);
+                let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
+                counters.differential_clamps += u64::from(clamped);
+                let mesh = &self.scene.meshes[hit.mesh as usize];
+                let material = self.scene.material_at(hit.mesh as usize, hit.patch as usize);
+                let surface = material.resolve(mesh.surface.as_ref(), &hit, &sp, &footprint);
+                if surface.cut_out() {
+                    // No surface here: the same ray goes on from the hit, its beam as it arrived.
+                    cutouts += 1;
+                    if cutouts > MAX_CUTOUTS {
+                        counters.cutout_limit += 1;
+                        break;
+                    }
+                    counters.cutout_passes += 1;
+                    let o = offset_origin(sp.p, hit.p_error, sp.ng, ray.d);
+                    seg.ray = Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..ray };
+                    seg.through = Some((hit, passed + hit.t));
+                    continue;
+                }
+                found = Some((hit, sp, footprint, surface));
+            }
             // The lights this ray meets before its hit: next-event estimation at the vertex it
             // left found them too, so they are weighted against it (or count in full from the
-            // camera and after delta bounces).
-            let from_sp = seg.from.as_ref().map_or_else(|| camera_point(&seg.ray), |(_, sp)| *sp);
-            let t_hit = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            let lights = seg.throughput * self.direct.emitted(self.scene, &from_sp, seg.ray.d, t_hit, seg.bsdf_pdf);
+            // camera and after delta bounces). Measured from where the ray started, past any
+            // cut-outs: one ray, one weight.
+            let t_hit = found.as_ref().map_or(f32::INFINITY, |(h, ..)| passed + h.t);
+            let lights = seg.throughput * self.direct.emitted(self.scene, &seg.eye, ray.d, t_hit, seg.bsdf_pdf);
             match first_lobe {
                 None => out.emission += lights,
                 // The first BSDF ray's share of the camera hit's direct light.
                 Some(Lobe::Diffuse) if bounce == 1 => out.direct_diffuse += lights,
                 Some(lobe) => *part(&mut out, lobe) += lights,
             }
-            let Some(hit) = hit else { break };
-            let ray = seg.ray;
-            let sp = shading_point(self.tracer, self.scene, &ray, &hit);
-            let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
-            counters.differential_clamps += u64::from(clamped);
-            let mesh = &self.scene.meshes[hit.mesh as usize];
-            let material = self.scene.material_at(hit.mesh as usize, hit.patch as usize);
-            let surface = material.resolve(mesh.surface.as_ref(), &hit, &sp, &footprint);
-            if surface.cut_out() {
-                // No surface here: the same ray goes on from the hit, its beam as it arrived.
-                cutouts += 1;
-                if cutouts > MAX_CUTOUTS {
-                    break;
-                }
-                let o = offset_origin(sp.p, hit.p_error, sp.ng, ray.d);
-                seg.ray = Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..ray };
-                seg.from = Some((hit, sp));
-                continue;
-            }
+            let Some((hit, sp, footprint, surface)) = found else { break };
             // Shade with the (normal-mapped) shading normal from here on.
             let sp = ShadingPoint { ns: surface.ns, ..sp };
             let bsdf = surface.bsdf(&sp);
@@ -211,6 +235,8 @@ impl<'a> PathTracer<'a> {
             seg = Segment {
                 ray: next,
                 from: Some((hit, sp)),
+                eye: sp,
+                through: None,
                 throughput,
                 bsdf_pdf: (!bs.delta).then_some(bs.pdf),
                 specular_chain: seg.specular_chain && bs.delta,
