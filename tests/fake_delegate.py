@@ -232,6 +232,8 @@ class FakeRenderDelegate:
         aovs: list[str],
         settings: dict[str, object],
         progress: Callable[[int, int], object] | None = None,
+        *,
+        on_update: Callable[[int, bool, dict[str, NDArray[np.float32]]], object] | None = None,
     ) -> tuple[dict[str, NDArray[np.float32]], str]:
         if camera not in self.prims or self.prims[camera].method != "set_camera":
             raise ValueError(f"unknown camera {camera}")
@@ -246,6 +248,16 @@ class FakeRenderDelegate:
         if progress is not None:
             for done in (0, height // 2, height):
                 progress(done, height)
+        if on_update is not None:
+            # The real delegate's passes: 1, 2, 4, ... samples, or one pass; each pass's
+            # arrays the ramp scaled by its share of the samples, so passes differ.
+            samples = int(settings.get("samples", 1))  # type: ignore[call-overload]
+            done = 0
+            while done < samples:
+                done = (
+                    samples if not settings.get("progressive") else min(max(1, 2 * done), samples)
+                )
+                on_update(done, done == samples, {k: v * (done / samples) for k, v in out.items()})
         self.renders.append(
             {
                 "camera": camera,

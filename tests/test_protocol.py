@@ -87,7 +87,9 @@ def test_stub_declares_the_protocol() -> None:
         "aovs",
         "settings",
         "progress",
+        "on_update",
     ]
+    assert ("on_update", "keyword", True) in sigs["RenderDelegate.render"]
 
 
 def test_fake_delegate_matches_the_stub() -> None:

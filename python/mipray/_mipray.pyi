@@ -295,11 +295,13 @@ class RenderDelegate:
         aovs: list[str],
         settings: dict[str, object],
         progress: Callable[[int, int], object] | None = None,
+        *,
+        on_update: Callable[[int, bool, dict[str, NDArray[np.float32]]], object] | None = None,
     ) -> tuple[dict[str, NDArray[np.float32]], str]:
         """Render the scene through ``camera`` and return its AOVs.
 
-        Releases the GIL for the whole render (re-taking it only to call
-        ``progress``).
+        Releases the GIL for the whole render; the render thread re-takes it
+        only to call ``progress`` and ``on_update``.
 
         Args:
             camera: path of a camera set with :meth:`set_camera`.
@@ -318,10 +320,23 @@ class RenderDelegate:
                 factor: larger is coarser), ``"geometryCacheMb"`` (float),
                 ``"cacheMode"`` (``"multires"``, ``"single"``,
                 ``"unbounded"`` or ``"none"``), ``"displacementBound"``
-                (float, scene units). The module may know more; it
-                rejects unknown keys with ``ValueError``.
+                (float, scene units), ``"progressive"`` (0 or 1: render in
+                passes of 1, 2, 4, ... samples per pixel up to ``"samples"``;
+                the final image is bit-identical to a one-pass render with
+                the same seed). The module may know more; it rejects unknown
+                keys with ``ValueError``.
             progress: called as ``progress(done, total)`` about every 1% of
-                the work; a pending ``KeyboardInterrupt`` cancels the render.
+                the work (units: pixel samples, over all passes); a pending
+                ``KeyboardInterrupt`` cancels the render.
+            on_update: called as ``on_update(samples, converged, aovs)`` after
+                each pass, in order, from a render thread: ``samples`` is the
+                samples per pixel so far, ``converged`` is True for the last
+                pass only, and ``aovs`` maps each AOV asked for to a new
+                H×W×C float32 array (linear, averaged over the samples so
+                far; the caller may keep it). Without ``"progressive"`` there
+                is one pass, so one call. An exception raised in it cancels
+                the render (no further pass starts) and is raised by
+                ``render`` as it was raised; the delegate stays usable.
 
         Returns:
             ``(aovs, stats_json)``: each AOV an H×W×C float32 array, and the
@@ -330,6 +345,7 @@ class RenderDelegate:
         Raises:
             ValueError: unknown camera or AOV, or an invalid setting.
             KeyboardInterrupt: the render was interrupted (Ctrl-C).
+            BaseException: whatever ``on_update`` raised.
         """
 
 def write_image(

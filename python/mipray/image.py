@@ -108,6 +108,7 @@ def write_aovs(
     formats: Mapping[str, str] | None = None,
     color_correction: str = "sRGB",
     metadata: Mapping[str, Any] | None = None,
+    atomic: bool = False,
 ) -> None:
     """Write AOVs to one image file, creating its directory if needed.
 
@@ -120,6 +121,10 @@ def write_aovs(
         color_correction: ``"sRGB"`` or ``"disabled"``; affects 8-bit files only.
         metadata: extra image attributes (strings, numbers, 4×4 matrices as 16
             floats).
+        atomic: write a hidden temporary file in the same directory (same
+            extension, so the same image type) and rename it over ``path``,
+            so a reader of ``path`` sees the old image or the new one, never
+            a half-written file; the temporary file is removed on failure.
 
     Raises:
         OutputError: the file cannot be written; the message names it.
@@ -143,18 +148,42 @@ def write_aovs(
     except OSError as exc:
         raise OutputError(f"{path}: cannot create directory: {exc.strerror}", path=path) from exc
     extra = dict(metadata or {})
+    target = _temporary_path(path) if atomic else path
     try:
         try:
-            _mipray.write_image(path, pixels, order_out, chosen or None, extra or None)
+            _mipray.write_image(target, pixels, order_out, chosen or None, extra or None)
         except TypeError:
             # A binding that takes only scalar attributes: keep what it can store.
             scalars = _scalar_metadata(extra)
             if scalars == extra:
                 raise
             _log.debug("mipray: %s: writing without matrix metadata", path)
-            _mipray.write_image(path, pixels, order_out, chosen or None, scalars or None)
+            _mipray.write_image(target, pixels, order_out, chosen or None, scalars or None)
+        if atomic:
+            os.replace(target, path)
     except (OSError, ValueError, TypeError, RuntimeError) as exc:
+        if atomic:
+            _remove_quietly(target)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        reason = reason.replace(target, path)
         if path not in reason:
             reason = f"{path}: {reason}"
         raise OutputError(f"cannot write image {reason}", path=path) from exc
+
+
+def _temporary_path(path: str) -> str:
+    """A hidden file beside ``path`` with its extension (OpenImageIO picks the type by it).
+
+    The same directory, so the rename is atomic (one file system); the process
+    id, so two processes writing one path do not write one temporary file.
+    """
+    directory, name = os.path.split(os.path.abspath(path))
+    stem, ext = os.path.splitext(name)
+    return os.path.join(directory, f".{stem}.mipray-{os.getpid()}.tmp{ext}")
+
+
+def _remove_quietly(path: str) -> None:
+    try:
+        os.remove(path)
+    except OSError:
+        pass

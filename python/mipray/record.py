@@ -10,7 +10,9 @@ Where usdrecord's options apply they are spelled and behave the same
 ``--renderSettingsPrimPath``, ...); renderer options are mipray's own. A
 UsdRender.Settings prim (the one named, else the stage's
 ``renderSettingsPrimPath``) supplies the resolution, camera, purposes and AOVs
-that the command line does not give explicitly. Output paths go to stdout, one per line; warnings
+that the command line does not give explicitly. With ``--progressive`` the
+output image is rewritten (atomically) after each pass of 1, 2, 4, ... samples
+per pixel. Output paths go to stdout, one per line; warnings
 and one-line errors (``mipray-record: ...``) to stderr. Exit status: 0 when
 every image was written (even if some prims were skipped with errors), 1 on
 failure.
@@ -25,10 +27,12 @@ import math
 import os
 import sys
 import time as time_module
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NoReturn, TextIO
 
+import numpy as np
+from numpy.typing import NDArray
 from pxr import Usd
 
 from .errors import MiprayError, RenderSettingsError
@@ -39,13 +43,13 @@ from .frames import (
     frames_precision,
     parse_frame_spec,
 )
-from .image import COLOR_CORRECTION_MODES, is_eight_bit
+from .image import COLOR_CORRECTION_MODES, is_eight_bit, write_aovs
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
 from .stats import format_stats_table
 from .usd.render_settings import read_render_settings
 from .usd.scene_delegate import PURPOSES
 
-__all__ = ["COMPLEXITY_TESS_FACTOR", "build_parser", "main", "render_settings"]
+__all__ = ["COMPLEXITY_TESS_FACTOR", "build_parser", "main", "pass_samples", "render_settings"]
 
 PROG = "mipray-record"
 
@@ -108,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
             "  mipray-record --camera /World/cam -w 640 --aovs color,depth scene.usda out.exr\n"
             "  mipray-record --frames 1:24 scene.usda out.####.exr\n"
             "  mipray-record --stats - --cache-mode unbounded scene.usda out.png\n"
+            "  mipray-record --progressive --samples 64 scene.usda out.exr  # refines in place\n"
             "\n"
             "Prints each output image path on stdout. Exit status 0 when every image\n"
             "was written, even if some prims were skipped (each is reported on\n"
@@ -238,6 +243,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="camera rays per pixel (default: 1)",
     )
     ren.add_argument(
+        "--progressive",
+        action="store_true",
+        help=(
+            "render in passes of 1, 2, 4, ... samples per pixel up to --samples and "
+            "rewrite the output image after each pass, so a viewer watching the file "
+            "sees it refine (each write goes to a hidden temporary file in the same "
+            "directory, renamed over the output: never a half-written image). The "
+            "final image is the same as without --progressive; the same as "
+            "--setting progressive=1"
+        ),
+    )
+    ren.add_argument(
         "--tess-factor",
         type=_positive_float,
         metavar="F",
@@ -329,6 +346,7 @@ def render_settings(args: argparse.Namespace) -> dict[str, object]:
         ("geometryCacheMb", args.geometry_cache_mb),
         ("cacheMode", args.cache_mode),
         ("integrator", args.integrator),
+        ("progressive", 1 if args.progressive else None),
     ):
         if value is not None:
             settings[key] = value
@@ -426,8 +444,22 @@ def _validate(args: argparse.Namespace) -> list[Any]:
     return frames
 
 
+def pass_samples(samples: int) -> list[int]:
+    """Samples per pixel at the end of each progressive pass: 1, 2, 4, ..., ``samples``."""
+    ends = []
+    done = 0
+    while done < samples:
+        done = min(max(1, 2 * done), samples)
+        ends.append(done)
+    return ends
+
+
 class _Progress:
-    """A progress bar on stderr, only when stderr is a terminal: frame, bar, percent, ETA."""
+    """A progress bar on stderr, only when stderr is a terminal: frame, pass, bar, percent, ETA.
+
+    The bar and ETA cover the whole frame (every pass); with passes, the pass
+    being rendered is shown as ``pass k/P (S spp)``, S its samples per pixel.
+    """
 
     WIDTH = 24
 
@@ -436,18 +468,38 @@ class _Progress:
         self.total = total
         self.enabled = stream.isatty()
         self.prefix = ""
+        self.passes: list[int] = []
+        self.passes_done = 0
+        self.last = (0, 0)
         self.started = time_module.monotonic()
 
-    def start(self, index: int, time: Usd.TimeCode) -> None:
+    def start(self, index: int, time: Usd.TimeCode, passes: Sequence[int] = ()) -> None:
+        self.passes = list(passes)
+        self.passes_done = 0
+        self.last = (0, 0)
         if self.enabled:
             when = "default time" if time.IsDefault() else f"time {time.GetValue():g}"
             self.prefix = f"{PROG}: frame {index}/{self.total} ({when})"
             self.started = time_module.monotonic()
-            self.stream.write(f"\r\033[K{self.prefix}...")
+            self.stream.write(f"\r\033[K{self.label()}...")
             self.stream.flush()
+
+    def label(self) -> str:
+        """The frame, and the pass now rendering when there are several."""
+        if len(self.passes) < 2:
+            return self.prefix
+        k = min(self.passes_done, len(self.passes) - 1)
+        return f"{self.prefix} pass {k + 1}/{len(self.passes)} ({self.passes[k]} spp)"
+
+    def pass_finished(self, samples: int) -> None:
+        """A pass ending at ``samples`` samples per pixel is done."""
+        self.passes_done = sum(1 for s in self.passes if s <= samples)
+        if self.last[1]:
+            self.update(*self.last)
 
     def update(self, done: int, total: int) -> None:
         """The renderer's callback: ``done`` of ``total`` units of work."""
+        self.last = (done, total)
         if self.enabled and total > 0:
             filled = self.WIDTH * done // total
             bar = "#" * filled + "." * (self.WIDTH - filled)
@@ -456,7 +508,7 @@ class _Progress:
             if 0 < done < total:
                 left = int(elapsed * (total - done) / done)
                 eta = f" ETA {left // 60}:{left % 60:02d}"
-            self.stream.write(f"\r\033[K{self.prefix} [{bar}] {100 * done // total:3d}%{eta}")
+            self.stream.write(f"\r\033[K{self.label()} [{bar}] {100 * done // total:3d}%{eta}")
             self.stream.flush()
 
     def clear(self) -> None:
@@ -561,9 +613,16 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
     plan = _plan(args, stage, times[0])
     extra = {"mipray:renderSettings": plan.settings_path} if plan.settings_path else None
     progress = _Progress(err, len(times))
+    progressive = bool(settings.get("progressive"))
+    passes = pass_samples(_samples(settings)) if progressive else []
     with RenderSession(stage, purposes=plan.purposes, time=times[0]) as session:
         for index, time in enumerate(times, start=1):
-            progress.start(index, time)
+            progress.start(index, time, passes)
+            value = 0.0 if time.IsDefault() else time.GetValue()
+            path = format_frame_path(args.outputImagePath, value)
+            on_update = (
+                _pass_writer(path, plan.aovs, args, extra, progress) if progressive else None
+            )
             try:
                 result = session.render(
                     plan.camera,
@@ -574,14 +633,14 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
                     camera_light=not args.disableCameraLight,
                     height=plan.height,
                     progress=progress.update if progress.enabled else None,
+                    on_update=on_update,
                 )
-                value = 0.0 if time.IsDefault() else time.GetValue()
-                path = format_frame_path(args.outputImagePath, value)
                 result.write(
                     path,
                     plan.aovs,
                     color_correction=args.colorCorrectionMode,
                     metadata=extra,
+                    atomic=progressive,
                 )
             finally:
                 progress.clear()
@@ -591,6 +650,50 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
                 title = f"mipray stats: {path}"
                 _write_stats(args.stats, value, result.stats, title, out)
     return 0
+
+
+def _samples(settings: dict[str, object]) -> int:
+    """The samples per pixel ``settings`` ask for (the renderer's default 1; it checks them)."""
+    try:
+        return max(1, int(float(settings.get("samples", 1))))  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return 1
+
+
+def _pass_writer(
+    path: str,
+    aovs: list[str],
+    args: argparse.Namespace,
+    extra: dict[str, Any] | None,
+    progress: _Progress,
+) -> Callable[[int, bool, dict[str, NDArray[np.float32]]], None]:
+    """The ``on_update`` of a progressive render: each pass but the last rewrites ``path``.
+
+    The last pass's image is the result, written once the render returns with
+    the full metadata (the stats). A write that fails raises, which stops the
+    render.
+    """
+    from . import __version__
+
+    def on_update(samples: int, converged: bool, pixels: dict[str, NDArray[np.float32]]) -> None:
+        progress.pass_finished(samples)
+        if converged:
+            return
+        metadata: dict[str, Any] = {
+            "software": f"mipray {__version__}",
+            "mipray:progressiveSamples": samples,
+            **(extra or {}),
+        }
+        write_aovs(
+            path,
+            pixels,
+            aovs,
+            color_correction=args.colorCorrectionMode,
+            metadata=metadata,
+            atomic=True,
+        )
+
+    return on_update
 
 
 def main(argv: Sequence[str] | None = None) -> int:

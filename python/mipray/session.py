@@ -33,11 +33,16 @@ __all__ = [
     "SETTINGS",
     "RenderResult",
     "RenderSession",
+    "UpdateCallback",
     "open_stage",
     "render",
 ]
 
 _log = logging.getLogger(__name__)
+
+#: ``on_update(samples, converged, aovs)``: one progressive pass's image (see
+#: :meth:`RenderSession.render`).
+UpdateCallback = Callable[[int, bool, dict[str, NDArray[np.float32]]], object]
 
 #: Image width when none is given (usdrecord's default).
 DEFAULT_WIDTH = 960
@@ -51,6 +56,7 @@ SETTINGS: dict[str, str] = {
     "geometryCacheMb": "geometry cache budget in MB, split over the tiers in multires mode",
     "cacheMode": "multires | single | unbounded | none",
     "displacementBound": "displacement bound in scene units (float)",
+    "progressive": "render in passes of 1, 2, 4, ... samples per pixel (0 or 1, default 0)",
 }
 
 
@@ -164,6 +170,7 @@ class RenderResult:
         formats: Mapping[str, str] | None = None,
         color_correction: str = "sRGB",
         metadata: Mapping[str, Any] | None = None,
+        atomic: bool = False,
     ) -> None:
         """Write AOVs to an image file through OpenImageIO.
 
@@ -176,6 +183,8 @@ class RenderResult:
             formats: per-AOV pixel format overrides.
             color_correction: ``"sRGB"`` or ``"disabled"``.
             metadata: extra attributes, added to :meth:`metadata`.
+            atomic: write a temporary file beside ``path`` and rename it
+                over ``path`` (readers never see a half-written image).
 
         Raises:
             OutputError: the file cannot be written.
@@ -190,6 +199,7 @@ class RenderResult:
             formats=formats,
             color_correction=color_correction,
             metadata=data,
+            atomic=atomic,
         )
 
 
@@ -260,6 +270,8 @@ class RenderSession:
         camera_light: bool = True,
         height: int | None = None,
         progress: Callable[[int, int], object] | None = None,
+        progressive: bool | None = None,
+        on_update: UpdateCallback | None = None,
     ) -> RenderResult:
         """Sync what changed and render one image.
 
@@ -274,11 +286,29 @@ class RenderSession:
             time: time code to render at (default: the session's current one).
             camera_light: light the stage from the camera if it has no light.
             height: image height, overriding the aspect ratio.
-            progress: called as ``progress(done, total)`` while rendering.
+            progress: called as ``progress(done, total)`` while rendering,
+                in pixel samples (pixels × samples per pixel, all passes).
+            progressive: render in passes of 1, 2, 4, ... samples per pixel
+                up to ``settings["samples"]`` (the ``"progressive"`` setting;
+                None leaves it as ``settings`` has it, default off). The
+                final image is bit-identical to a one-pass render with the
+                same seed and sample count.
+            on_update: called as ``on_update(samples, converged, aovs)`` after
+                each pass, in order: ``samples`` is the samples per pixel so
+                far (int), ``converged`` is True for the last pass only (its
+                arrays equal the result's), and ``aovs`` maps each AOV asked
+                for to a new H×W×C float32 array, linear, averaged over the
+                samples so far (yours to keep). A render without
+                ``progressive`` has one pass, so one call. It runs on a
+                render thread with the GIL held, while no pixel is being
+                rendered; the GIL is released in between. An exception it
+                raises stops the render before the next pass and is raised
+                here unchanged; the session stays usable.
 
         Raises:
             PrimError: the camera is missing or unusable.
             RenderSettingsError: a bad size, AOV list or setting.
+            BaseException: whatever ``on_update`` raised.
 
         """
         width = DEFAULT_WIDTH if width is None else int(width)
@@ -295,16 +325,32 @@ class RenderSession:
         self.scene.update_camera_light(camera_path, camera_light)
         self.scene.update_motion(camera_path)
         h = int(height) if height is not None else image_height(width, camera_args)
+        chosen = dict(settings or {})
+        if progressive is not None:
+            chosen["progressive"] = int(bool(progressive))
+        kwargs: dict[str, Any] = {}
+        if progress is not None:
+            kwargs["progress"] = progress
+        # The callback's own exceptions pass through as they are, not as setting errors.
+        raised: list[BaseException] = []
+        if on_update is not None:
+            callback = on_update
+
+            def forward(samples: int, converged: bool, aovs: dict[str, Any]) -> None:
+                try:
+                    callback(samples, converged, aovs)
+                except BaseException as exc:
+                    raised.append(exc)
+                    raise
+
+            kwargs["on_update"] = forward
         try:
-            if progress is None:
-                pixels, stats_json = self.delegate.render(
-                    camera_path, width, h, aov_list, dict(settings or {})
-                )
-            else:
-                pixels, stats_json = self.delegate.render(
-                    camera_path, width, h, aov_list, dict(settings or {}), progress=progress
-                )
+            pixels, stats_json = self.delegate.render(
+                camera_path, width, h, aov_list, chosen, **kwargs
+            )
         except ValueError as exc:
+            if raised and exc is raised[0]:
+                raise
             raise RenderSettingsError(str(exc).splitlines()[0]) from exc
         try:
             stats = json.loads(stats_json) if stats_json else {}
@@ -330,6 +376,9 @@ def render(
     settings: Mapping[str, object] | None = None,
     time: Usd.TimeCode | float | None = None,
     purposes: Sequence[str] | None = None,
+    *,
+    progressive: bool | None = None,
+    on_update: UpdateCallback | None = None,
 ) -> RenderResult:
     """Render a USD file or a live ``Usd.Stage`` once.
 
@@ -347,6 +396,13 @@ def render(
         time: time code (default: the stage's start time code).
         purposes: purposes to render besides ``"default"`` (default
             ``("render",)``).
+        progressive: render in passes of 1, 2, 4, ... samples per pixel up
+            to ``settings["samples"]``, ending bit-identical to a one-pass
+            render (see :meth:`RenderSession.render`).
+        on_update: called as ``on_update(samples, converged, aovs)`` after
+            each pass: samples per pixel so far, whether it is the last pass,
+            and AOV name → new H×W×C float32 array (linear); see
+            :meth:`RenderSession.render`.
 
     Returns:
         A :class:`RenderResult` with ``.aovs`` (name → H×W×C float32),
@@ -361,10 +417,17 @@ def render(
         result = mipray.render("shot.usda", width=320, aovs=("color", "depth"))
         result.write("shot.exr")
 
+        def show(samples, converged, aovs):
+            print(samples, "samples per pixel:", aovs["color"].mean())
+
+        mipray.render("shot.usda", settings={"samples": 16}, progressive=True, on_update=show)
+
     """
     if isinstance(path_or_stage, Usd.Stage):
         stage = path_or_stage
     else:
         stage = open_stage(path_or_stage)
     with RenderSession(stage, purposes=purposes, time=time) as session:
-        return session.render(camera, width, aovs, settings)
+        return session.render(
+            camera, width, aovs, settings, progressive=progressive, on_update=on_update
+        )

@@ -1,13 +1,14 @@
 //! `mipray._mipray`: the render delegate for Python (pyo3). A thin layer: argument conversion,
 //! errors as Python exceptions with the prim path in the message, and the GIL released for the
-//! whole render.
+//! whole render (`render.rs`: the render and its progress and per-pass callbacks).
 
 // No unwrap across the FFI boundary: a panic here would abort a render host (STYLE.md).
 #![cfg_attr(not(test), warn(clippy::unwrap_used))]
 
+mod render;
+
 use std::collections::HashMap;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
@@ -20,13 +21,12 @@ use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::camera::{Camera, Projection};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
-use mipray::progress::Progress;
 use mipray::texture::{Interpolation, Primvar2, Wrap};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 use mipray_bridge::OiioImageIo;
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -57,7 +57,7 @@ impl log::Log for Collector {
 static COLLECTOR: Collector = Collector(std::sync::Mutex::new(Vec::new()));
 
 /// Replays collected records into `logging.getLogger("mipray")`.
-fn forward_logs(py: Python<'_>) {
+pub(crate) fn forward_logs(py: Python<'_>) {
     let records: Vec<(log::Level, String)> = match COLLECTOR.0.lock() {
         Ok(mut v) => std::mem::take(&mut *v),
         Err(_) => return,
@@ -134,63 +134,6 @@ fn vec_i32(a: Option<PyReadonlyArray1<'_, i32>>) -> Vec<i32> {
 
 fn vec_f32(a: Option<PyReadonlyArray1<'_, f32>>) -> Vec<f32> {
     a.map(|a| a.as_array().to_vec()).unwrap_or_default()
-}
-
-fn py_to_json(v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
-    if let Ok(b) = v.extract::<bool>() {
-        return Ok(b.into());
-    }
-    if let Ok(i) = v.extract::<i64>() {
-        return Ok(i.into());
-    }
-    if let Ok(f) = v.extract::<f64>() {
-        return Ok(f.into());
-    }
-    if let Ok(s) = v.extract::<String>() {
-        return Ok(s.into());
-    }
-    Err(PyValueError::new_err(format!("setting value {v} must be a bool, number or string")))
-}
-
-/// Forwards progress to a Python callable `(done, total)` about every 1%, and turns Ctrl-C
-/// (a pending KeyboardInterrupt) into cancellation.
-struct PyProgress {
-    callback: Option<Py<PyAny>>,
-    total: AtomicU64,
-    done: AtomicU64,
-    last: AtomicU64,
-    cancelled: AtomicBool,
-}
-
-impl Progress for PyProgress {
-    fn start(&self, total: u64) {
-        self.total.store(total, Ordering::Relaxed);
-    }
-
-    fn advance(&self, n: u64) {
-        let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
-        let total = self.total.load(Ordering::Relaxed).max(1);
-        let last = self.last.load(Ordering::Relaxed);
-        if done * 100 / total == last * 100 / total && done < total {
-            return;
-        }
-        self.last.store(done, Ordering::Relaxed);
-        Python::attach(|py| {
-            if py.check_signals().is_err() {
-                self.cancelled.store(true, Ordering::Relaxed);
-                return;
-            }
-            if let Some(cb) = &self.callback {
-                if let Err(e) = cb.call1(py, (done, total)) {
-                    log::warn!("progress callback failed: {e}");
-                }
-            }
-        });
-    }
-
-    fn cancelled(&self) -> bool {
-        self.cancelled.load(Ordering::Relaxed)
-    }
 }
 
 /// The render delegate. Prims are inserted or updated with `set_*`, removed with `remove`, and
@@ -514,8 +457,9 @@ impl RenderDelegate {
         self.inner.instancer(path).map(|i| i.updates)
     }
 
-    /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL.
-    #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None))]
+    /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL; calls
+    /// `on_update(samples, converged, {aov: array})` after each pass (see `render.rs`).
+    #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None, *, on_update=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &mut self,
@@ -526,42 +470,18 @@ impl RenderDelegate {
         aovs: Vec<String>,
         settings: Option<&Bound<'py, PyDict>>,
         progress: Option<Py<PyAny>>,
+        on_update: Option<Py<PyAny>>,
     ) -> PyResult<(Bound<'py, PyDict>, String)> {
         let mut pairs = Vec::new();
         if let Some(s) = settings {
             for (k, v) in s.iter() {
-                pairs.push((k.extract::<String>()?, py_to_json(&v)?));
+                pairs.push((k.extract::<String>()?, render::py_to_json(&v)?));
             }
         }
         let settings =
             RenderSettings::from_pairs(pairs.iter().map(|(k, v)| (k.as_str(), v))).map_err(|e| PyValueError::new_err(e.to_string()))?;
         let pass = RenderPass { camera: camera.to_string(), width, height, aovs, settings };
-        let prog = PyProgress {
-            callback: progress,
-            total: AtomicU64::new(0),
-            done: AtomicU64::new(0),
-            last: AtomicU64::new(0),
-            cancelled: AtomicBool::new(false),
-        };
-        let inner = &mut self.inner;
-        let result = py.detach(|| pass.execute(inner, &prog));
-        forward_logs(py);
-        let result = match result {
-            Ok(r) => r,
-            Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Cancelled)) => {
-                return Err(PyKeyboardInterrupt::new_err("render cancelled"))
-            }
-            Err(e @ hd_mipray::DelegateError::Prim { .. }) => return Err(PyValueError::new_err(e.to_string())),
-            Err(e @ hd_mipray::DelegateError::Setting { .. }) => return Err(PyValueError::new_err(e.to_string())),
-            Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
-        };
-        let dict = PyDict::new(py);
-        for b in result.buffers {
-            let arr =
-                Array3::from_shape_vec((b.height, b.width, b.channels), b.data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-            dict.set_item(b.aov, arr.into_pyarray(py))?;
-        }
-        Ok((dict, result.stats.to_string()))
+        render::render(py, &mut self.inner, &pass, progress, on_update)
     }
 }
 
