@@ -6,15 +6,16 @@ from __future__ import annotations
 import logging
 import math
 
-import mipray
 import numpy as np
 import pytest
+from pxr import Gf, Usd, UsdGeom, UsdLux
+
+import mipray
 from mipray.usd.light import (
     area_light_arguments,
     blackbody_rgb,
     distant_light_arguments,
 )
-from pxr import Gf, Usd, UsdGeom, UsdLux
 
 #: The default material's diffuse reflectance (UsdPreviewSurface's fallback).
 ALBEDO = 0.18
@@ -34,13 +35,9 @@ def ground_stage() -> Usd.Stage:
     return stage
 
 
-def render(
-    stage: Usd.Stage, width: int = 16, **settings: object
-) -> mipray.RenderResult:
+def render(stage: Usd.Stage, width: int = 16, **settings: object) -> mipray.RenderResult:
     with mipray.RenderSession(stage) as session:
-        return session.render(
-            "/World/Cam", width=width, settings=settings, camera_light=False
-        )
+        return session.render("/World/Cam", width=width, settings=settings, camera_light=False)
 
 
 def mean_color(result: mipray.RenderResult) -> np.ndarray:
@@ -84,12 +81,8 @@ def test_distant_angle_outside_usdlux_range_is_clipped_with_one_warning(caplog) 
         args = distant_light_arguments(sun, Usd.TimeCode.Default(), np.eye(4))
         distant_light_arguments(sun, Usd.TimeCode.Default(), np.eye(4))
     assert args["angle"] == 0.0
-    warnings = [
-        r.getMessage() for r in caplog.records if "inputs:angle" in r.getMessage()
-    ]
-    assert (
-        len(warnings) == 1 and "/World/Sun" in warnings[0] and "\n" not in warnings[0]
-    )
+    warnings = [r.getMessage() for r in caplog.records if "inputs:angle" in r.getMessage()]
+    assert len(warnings) == 1 and "/World/Sun" in warnings[0] and "\n" not in warnings[0]
 
 
 # ------------------------------------------------------------------------ color temperature
@@ -107,9 +100,7 @@ def test_blackbody_colors_are_usdlux_s_and_6500k_is_white() -> None:
     assert b > g > r, "cool"
 
 
-def test_color_temperature_multiplies_the_color_only_when_enabled(
-    native, caplog
-) -> None:
+def test_color_temperature_multiplies_the_color_only_when_enabled(native, caplog) -> None:
     stage = ground_stage()
     light = UsdLux.RectLight.Define(stage, "/World/Key")
     light.AddTranslateOp().Set(Gf.Vec3d(0, 0, 3))
@@ -134,12 +125,8 @@ def test_color_temperature_multiplies_the_color_only_when_enabled(
     with caplog.at_level(logging.WARNING, logger="mipray"):
         args = area_light_arguments(prim, Usd.TimeCode.Default(), np.eye(4))
     assert args is not None
-    np.testing.assert_allclose(
-        args["color"], np.array(blackbody_rgb(10000.0)) * (1.0, 0.5, 1.0)
-    )
-    warnings = [
-        r.getMessage() for r in caplog.records if "colorTemperature" in r.getMessage()
-    ]
+    np.testing.assert_allclose(args["color"], np.array(blackbody_rgb(10000.0)) * (1.0, 0.5, 1.0))
+    warnings = [r.getMessage() for r in caplog.records if "colorTemperature" in r.getMessage()]
     assert len(warnings) == 1 and "/World/Key" in warnings[0]
 
 
@@ -157,9 +144,7 @@ def test_each_area_light_lights_the_ground_as_its_closed_form_says(native) -> No
         stage = ground_stage()
         cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
         cam.ClearXformOpOrder()
-        look = Gf.Matrix4d().SetLookAt(
-            Gf.Vec3d(6, 0, 1), Gf.Vec3d(0, 0, 0), Gf.Vec3d(0, 0, 1)
-        )
+        look = Gf.Matrix4d().SetLookAt(Gf.Vec3d(6, 0, 1), Gf.Vec3d(0, 0, 0), Gf.Vec3d(0, 0, 1))
         cam.AddTransformOp().Set(look.GetInverse())
         cam.CreateHorizontalApertureAttr(0.1)
         cam.CreateVerticalApertureAttr(0.1)
@@ -180,16 +165,10 @@ def test_treat_as_point_is_a_hint_the_sphere_keeps_its_radius() -> None:
     light.CreateRadiusAttr(0.3)
     light.CreateTreatAsPointAttr(True)
     args = area_light_arguments(light.GetPrim(), Usd.TimeCode.Default(), np.eye(4))
-    assert (
-        args is not None
-        and args["kind"] == "sphere"
-        and args["radius"] == pytest.approx(0.3)
-    )
+    assert args is not None and args["kind"] == "sphere" and args["radius"] == pytest.approx(0.3)
 
 
-def test_a_broken_light_is_skipped_naming_it_and_the_others_still_light(
-    native, caplog
-) -> None:
+def test_a_broken_light_is_skipped_naming_it_and_the_others_still_light(native, caplog) -> None:
     stage = ground_stage()
     good = UsdLux.DistantLight.Define(stage, "/World/Sun")
     good.CreateAngleAttr(0.0)
@@ -204,9 +183,7 @@ def test_a_broken_light_is_skipped_naming_it_and_the_others_still_light(
     messages = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
     assert any("/World/Broken" in m and "intensity" in m for m in messages)
     assert all("\n" not in m for m in messages)
-    np.testing.assert_allclose(
-        result.aovs["color"][..., :3], ALBEDO / math.pi, rtol=1e-5
-    )
+    np.testing.assert_allclose(result.aovs["color"][..., :3], ALBEDO / math.pi, rtol=1e-5)
 
 
 # --------------------------------------------------------------------------------------- dome
@@ -256,18 +233,10 @@ def test_an_unsupported_dome_layout_is_read_as_latlong_with_one_warning(caplog) 
     dome.CreateTextureFormatAttr("mirroredBall")
     with caplog.at_level(logging.WARNING, logger="mipray"):
         for _ in range(2):
-            args = area_light_arguments(
-                dome.GetPrim(), Usd.TimeCode.Default(), np.eye(4)
-            )
+            args = area_light_arguments(dome.GetPrim(), Usd.TimeCode.Default(), np.eye(4))
     assert args is not None and args["texture"].endswith("probe.exr")
-    warnings = [
-        r.getMessage() for r in caplog.records if "texture:format" in r.getMessage()
-    ]
-    assert (
-        len(warnings) == 1
-        and "/World/Probe" in warnings[0]
-        and "mirroredBall" in warnings[0]
-    )
+    warnings = [r.getMessage() for r in caplog.records if "texture:format" in r.getMessage()]
+    assert len(warnings) == 1 and "/World/Probe" in warnings[0] and "mirroredBall" in warnings[0]
 
 
 def test_a_small_sun_in_the_dome_is_importance_sampled(native, tmp_path) -> None:

@@ -11,7 +11,11 @@ from mipray.usd import UsdSceneDelegate
 
 from stages import add_cube, new_stage
 
-QUAD = dict(points=[(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)], counts=[4], indices=[0, 1, 2, 3])
+QUAD = dict(
+    points=[(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)],
+    counts=[4],
+    indices=[0, 1, 2, 3],
+)
 
 
 def sliding_stage(shutter: tuple[float, float] | None) -> Usd.Stage:

@@ -92,7 +92,9 @@ def test_the_stages_default_settings_and_product_overrides() -> None:
         ),
         (
             lambda s: (
-                UsdRender.Var(s.GetPrimAtPath("/Render/Vars/z")).GetSourceNameAttr().Set("subsurface")
+                UsdRender.Var(s.GetPrimAtPath("/Render/Vars/z"))
+                .GetSourceNameAttr()
+                .Set("subsurface")
             ),
             "/Render/Vars/z: sourceName 'subsurface' is not an AOV mipray renders",
         ),

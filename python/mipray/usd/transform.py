@@ -94,7 +94,9 @@ def motion_samples(
     t0 = time.GetValue() + shutter[0]
     t1 = time.GetValue() + shutter[1]
     times = {t0, t1}
-    times.update(t0 + (t1 - t0) * k / (MOTION_SUBSAMPLES + 1) for k in range(1, MOTION_SUBSAMPLES + 1))
+    times.update(
+        t0 + (t1 - t0) * k / (MOTION_SUBSAMPLES + 1) for k in range(1, MOTION_SUBSAMPLES + 1)
+    )
     interval = Gf.Interval(t0, t1)
     p = prim
     while p and not p.IsPseudoRoot():
@@ -103,9 +105,7 @@ def motion_samples(
             times.update(t for t in xf.GetTimeSamplesInInterval(interval) if t0 < t < t1)
         p = p.GetParent()
     ordered = sorted(times)
-    mats = np.stack(
-        [world_transform(UsdGeom.XformCache(Usd.TimeCode(t)), prim) for t in ordered]
-    )
+    mats = np.stack([world_transform(UsdGeom.XformCache(Usd.TimeCode(t)), prim) for t in ordered])
     if np.all(mats == mats[0]):
         return None
     fractions = np.array([(t - t0) / (t1 - t0) for t in ordered], dtype=np.float32)
