@@ -82,6 +82,10 @@ BASE = {"aoSamples": 8, "samples": 4}
 PAIRED = {"samples": 4, "seed": 0}
 #: The control scene, written into the work directory by :func:`convex_ball`.
 BALL = "convex_ball"
+#: The geometry-cache benchmark's scene at its full size (480 blobs, 486,720 control faces, a
+#: third displaced), written as USD into the work directory by ``make_cache_scene.py --grid
+#: 24x20 --face-res 13 --displace-every 3`` (``--grid 6x4 --face-res 4`` with --quick).
+BENCH = "bench_scene"
 
 
 @dataclass
@@ -169,6 +173,49 @@ def experiments(quick: bool) -> list[Experiment]:
             {"tessFactorIncoherent": [1, 4, 16] if not quick else [1, 16]},
             runs=1,
         ),
+        Experiment(
+            "cache-irradiance",
+            cache,
+            "irradiance (occlusion) caching on, by its error bound",
+            {"irradianceCacheError": [0.4, 0.2, 0.1, 0.05] if not quick else [0.4, 0.1]},
+            runs=runs,
+            base={**BASE, "irradianceCache": 1},
+        ),
+        Experiment(
+            "forest-all",
+            "forest",
+            "tessFactor (every ray)",
+            {"tessFactor": [0.25, 1, 4, 16] if not quick else [0.25, 16]},
+            runs=1,
+        ),
+        Experiment(
+            "textured-all",
+            "textured",
+            "tessFactor (every ray; texture displacement at each tier's spacing)",
+            {"tessFactor": [0.25, 1, 4, 16] if not quick else [0.25, 16]},
+            runs=1,
+        ),
+        Experiment(
+            "textured-filter",
+            "textured",
+            "texture filtering: by the ray differentials, or the finest MIP level forced",
+            {"textureFilter": ["differentials", "finest"]},
+            runs=runs,
+        ),
+        Experiment(
+            "bench-incoherent",
+            BENCH,
+            "tessFactorIncoherent (AO rays only)",
+            {"tessFactorIncoherent": [1, 16] if not quick else [16]},
+            runs=1,
+        ),
+        Experiment(
+            "bench-all",
+            BENCH,
+            "tessFactor (every ray; tessFactorIncoherent 1)",
+            {"tessFactor": [1, 16]},
+            runs=1,
+        ),
     ]
 
 
@@ -201,6 +248,24 @@ def convex_ball(path: Path) -> None:
     stage.GetRootLayer().Save()
 
 
+def bench_scene(work: Path, quick: bool) -> Path:
+    """Write the cache benchmark's scene as USD into ``work`` (once) and return its path."""
+    path = work / f"{BENCH}.usda"
+    if not path.exists():
+        out = work / "bench_scene_dir"
+        size = (
+            ["--grid", "6x4", "--face-res", "4"]
+            if quick
+            else ["--grid", "24x20", "--face-res", "13"]
+        )
+        size += ["--displace-every", "3"]
+        subprocess.run(
+            [sys.executable, str(HERE / "make_cache_scene.py"), str(out), *size], check=True
+        )
+        (out / "cache_scene.usda").replace(path)
+    return path
+
+
 # --- running -------------------------------------------------------------------------
 
 
@@ -220,6 +285,8 @@ def run_all(quick: bool, work: Path, width: int, converged_samples: int) -> dict
         if exp.scene == BALL:
             scene = work / f"{BALL}.usda"
             convex_ball(scene)
+        elif exp.scene == BENCH:
+            scene = bench_scene(work, quick)
         ref_key = (exp.scene, exp.reference)
         reference = references.get(ref_key, "auto")
         overrides = PAIRED if exp.reference == "paired" and reference == "auto" else None
@@ -319,16 +386,28 @@ _COLS = (
 )
 
 
-def _table_md(table: dict[str, Any]) -> str:
+#: Columns some tables add after recomputed vertices.
+_EXTRA_COLS = {
+    "hemisphere_rays": ("hemisphere rays", "hemisphere_rays", "{:,}"),
+    "texture_tiles_read": ("texture tiles read", "texture_tiles_read", "{:,}"),
+}
+
+
+def _table_md(table: dict[str, Any], extra: tuple[str, ...] = ()) -> str:
+    cols = list(_COLS)
+    for key in extra:
+        cols.insert(5, _EXTRA_COLS[key])
     lines = [
-        "| " + " | ".join(c[0] for c in _COLS) + " |",
-        "|" + "|".join("---" if c[1] == "label" else "---:" for c in _COLS) + "|",
+        "| " + " | ".join(c[0] for c in cols) + " |",
+        "|" + "|".join("---" if c[1] == "label" else "---:" for c in cols) + "|",
     ]
     for row in table["rows"]:
         cells = []
-        for _, key, fmt in _COLS:
+        for _, key, fmt in cols:
             value = row.get(key)
-            if fmt == "mb":
+            if value is None:
+                cells.append("–")
+            elif fmt == "mb":
                 cells.append(f"{value / 1e6:,.0f}")
             elif fmt == "mark":
                 cells.append("★" if value else "")
@@ -430,7 +509,7 @@ def _change(new: float, old: float) -> str:
 
 def _figures(tables: dict[str, Any], images: Path, work: Path) -> dict[str, str]:
     figures: dict[str, str] = {}
-    for scene in ("cache", "showcase"):
+    for scene in ("cache", "showcase", "bench"):
         png = images / f"accuracy-{scene}-claim.png"
         if claim_figure(tables, scene, png):
             figures[scene] = f"images/{png.name}"
@@ -478,8 +557,18 @@ def _claim_section(tables: dict[str, Any], scene: str, name: str, figure: str | 
     c = claim(tables, scene)
     f, base, ci, ca = c["factor"], c["base"], c["coarse_inc"], c["coarse_all"]
     stats = tables[f"{scene}-incoherent"].get("scene_stats", {})
-    parts = [f"### examples/{name}\n"]
-    if scene == "cache":
+    parts = [f"### {name}\n"]
+    if scene == "bench":
+        parts.append(
+            f"The geometry-cache benchmark's own scene at full size "
+            f"({stats.get('control_faces', 0):,} control faces in 480 individually modelled "
+            "blobs, half chrome, a third displaced; every subpatch at 17×17 would take "
+            f"{stats.get('full_tessellation_bytes', 0) / 1e9:.2f} GB), written as USD by "
+            "`examples/make_cache_scene.py --grid 24x20 --face-res 13 --displace-every 3`, "
+            f"rendered in the default 30 MB cache; fixed settings {_setting_text(BASE)}, one "
+            "run per setting.\n"
+        )
+    elif scene == "cache":
         parts.append(
             f"{stats.get('control_faces', 0):,} control faces in lumpy Catmull-Clark blobs, no "
             "two alike (the geometry-cache benchmark scene's kind, written by "
@@ -543,41 +632,44 @@ def _claim_section(tables: dict[str, Any], scene: str, name: str, figure: str | 
 
 
 def _self_occlusion_section(tables: dict[str, Any]) -> str:
-    """Both ways a tessellation mismatch at a ray's origin shows, from the sweeps' numbers."""
-    parts = ["### Where the AO-only error comes from: self-occlusion at the ray origin\n"]
+    """The control for self-occlusion at a ray's origin, from the sweeps' numbers."""
+    parts = ["### Self-occlusion at the ray origin: the control\n"]
     ball = tables.get("ball-incoherent")
     if ball:
         one = _row(ball, tessFactorIncoherent=1.0)
         top = max(ball["rows"], key=lambda r: r["setting"]["tessFactorIncoherent"])
         f = top["setting"]["tessFactorIncoherent"]
-        if top["color_rmse"] > 2.0 * one["color_rmse"] + 0.001:
+        mechanism = (
+            "An AO ray starts on the camera ray's fine tessellation. Near a coarser "
+            "tessellation's vertices, where its facets touch the limit surface and the fine "
+            "chords sag below it, the ray's origin lies *inside* the coarser polyhedron, and "
+            "the ray would hit it on the way out. So a secondary ray ignores, within the two "
+            "grids' chord errors along it, the other tessellations of its own subpatch and of "
+            "every subpatch of the same surface whose box holds its origin (its neighbours "
+            "across a patch edge; `Tracer::intersect_from` in `rust/src/trace.rs`), and the "
+            "seam boxes that close cracks between rates stand off the surface only as far as "
+            "its edge curves do (`rust/src/seam.rs`). Before the neighbour rule, this control "
+            "read RMSE 0.0187 at tessFactorIncoherent 16 (largest error 0.41, darker), as large "
+            "as the AO-only error on the scenes above."
+        )
+        intro = (
+            "One smooth, white, convex object alone (a subdivided cube, no ground), where "
+            "exact geometry cannot occlude itself, so every AO ray should escape. "
+        )
+        if top["color_rmse"] > 2.0 * one["color_rmse"] + 0.002:
             parts.append(
-                "A control: one smooth, white, convex object alone (a subdivided cube, no "
-                "ground), where exact geometry cannot occlude itself, so every AO ray should "
-                "escape. Coarsening its AO rays still changes it: RMSE "
-                f"{one['color_rmse']:.4f} at tessFactorIncoherent 1, {top['color_rmse']:.4f} at "
-                f"{f:g}, largest error {top['color_max_abs']:.2f}, mean difference "
-                f"{top['color_mean_diff']:+.4f} (darker). All of that is self-occlusion, and it "
-                "is of the same order as the AO-only error on the scenes above, so much of that "
-                "error is likely the renderer's rather than the coarse tessellation's. The "
-                "mechanism: an AO ray starts on the camera ray's (fine) tessellation; near the "
-                "coarse tessellation's vertices, where the coarse surface touches the limit "
-                "surface and the fine chords lie just below it, the origin is *inside* the "
-                "coarse polyhedron, and the ray hits the surface on the way out. A secondary "
-                "ray now ignores its own subpatch within the two grids' chord errors "
-                "(`Tracer::intersect_from` in `rust/src/trace.rs`), which removed most of this "
-                "on the showcase scene; what is left comes from neighbouring subpatches' coarse "
-                "grids near patch boundaries. The paper notes that hemisphere rays are narrow "
-                "near their origin and are hit-tested with fine (coherent) geometry there "
-                "(§4.6); `tessFactorIncoherent` scales the rate along the whole ray, origin "
-                "included.\n"
+                intro + f"Coarsening its AO rays still changes it: RMSE {one['color_rmse']:.4f} "
+                f"at tessFactorIncoherent 1, {top['color_rmse']:.4f} at {f:g} (largest error "
+                f"{top['color_max_abs']:.2f}, mean difference {top['color_mean_diff']:+.4f}): "
+                "self-occlusion the renderer still has. " + mechanism + "\n"
             )
         else:
             parts.append(
-                "A control: one smooth, white, convex object alone, where exact geometry "
-                "cannot occlude itself. Coarsening its AO rays leaves it as it was (RMSE "
-                f"{one['color_rmse']:.4f} → {top['color_rmse']:.4f} at {f:g}): no "
-                "self-occlusion at the ray origin.\n"
+                intro + "Coarsening its AO rays leaves it as it was: RMSE "
+                f"{one['color_rmse']:.4f} at tessFactorIncoherent 1, {top['color_rmse']:.4f} "
+                f"at {f:g} (largest error {top['color_max_abs']:.3f}, mean difference "
+                f"{top['color_mean_diff']:+.4f}). The AO-only errors above are the coarse "
+                "tessellations' own, not the renderer's. " + mechanism + "\n"
             )
     coh = tables.get("cache-coherent")
     if coh:
@@ -589,11 +681,12 @@ def _self_occlusion_section(tables: dict[str, Any]) -> str:
                 "The other way round is worse. Holding the AO rays' rate while only the camera "
                 "rays coarsen (`--zip --knob tessFactor=1,2,4,8,16 --knob "
                 "tessFactorIncoherent=1,0.5,0.25,0.125,0.0625`) was meant to isolate the "
-                f"narrow rays' share; instead RMSE jumps from {first['color_rmse']:.4f} to "
+                f"narrow rays' share; instead RMSE goes from {first['color_rmse']:.4f} to "
                 f"{worst['color_rmse']:.3f} at {worst['label']} (mean difference "
                 f"{worst['color_mean_diff']:+.3f}), against {same['color_rmse']:.4f} when "
                 "every ray coarsens by as much: from a point on coarse chords, deep inside the "
-                "surface, AO rays tested against a *finer* tessellation hit it at once.\n"
+                "surface, AO rays tested against a *finer* tessellation of the neighbourhood "
+                "beyond the skipped band hit it. Keep `tessFactorIncoherent` at 1 or above.\n"
             )
         else:
             parts.append(
@@ -601,15 +694,105 @@ def _self_occlusion_section(tables: dict[str, Any]) -> str:
                 f"RMSE {first['color_rmse']:.4f} → {worst['color_rmse']:.4f} at "
                 f"{worst['label']}, against {same['color_rmse']:.4f} when every ray coarsens.\n"
             )
-    parts.append(
-        "A fix, for whoever takes it: offset secondary-ray origins by the chord error of the "
-        "coarsest tessellation they may be tested against near the origin (what `tessError` "
-        "measures for the camera rays), or start them on the exact limit surface and ignore "
-        "hits on their own subpatch closer than that error. Until then, keep "
-        "`tessFactorIncoherent` ≥ 1 and modest, and read the AO-only numbers above as an "
-        "upper bound on what coarse tessellations for wide rays cost.\n"
-    )
     return "\n".join(parts)
+
+
+def _examples_section(tables: dict[str, Any]) -> str:
+    """The tess factor on the other examples, and texture filtering."""
+    parts = [
+        "## The other examples\n",
+        "`tessFactor` on every ray, one run per setting, against the paired reference at tess "
+        f"factor 0.25 ({_setting_text(BASE)}).\n",
+    ]
+    for key, name, what in (
+        (
+            "forest-all",
+            "examples/forest.usda",
+            "3,000 PointInstancer instances of three subdivision prototypes",
+        ),
+        (
+            "textured-all",
+            "examples/textured.usda",
+            "a UsdUVTexture on diffuseColor and on displacement",
+        ),
+    ):
+        table = tables.get(key)
+        if not table:
+            continue
+        base = _row(table, tessFactor=1.0)
+        coarse = max(table["rows"], key=lambda r: r["setting"]["tessFactor"])
+        finest = min(table["rows"], key=lambda r: r["setting"]["tessFactor"])
+        parts.append(
+            f"**{name}** ({what}): tess factor 1 against {finest['setting']['tessFactor']:g}: "
+            f"CPU time {_change(base['cpu_s'], finest['cpu_s'])} for RMSE "
+            f"{base['color_rmse']:.4f} and {base['tess_error_rel_mean']:.1e} beam widths of "
+            f"camera-ray geometric error; at {coarse['setting']['tessFactor']:g}, "
+            f"{_change(coarse['cpu_s'], finest['cpu_s'])} for RMSE {coarse['color_rmse']:.4f} "
+            f"({coarse['tess_error_rel_mean']:.1e} beam widths).\n"
+        )
+        parts.append(_table_md(table) + "\n")
+    filt = tables.get("textured-filter")
+    if filt:
+        diff = _row(filt, textureFilter="differentials")
+        fine = _row(filt, textureFilter="finest")
+        if diff.get("texture_tiles_read"):
+            tiles = (
+                f"{fine['texture_tiles_read'] / diff['texture_tiles_read']:.0f}× the texture "
+                f"tiles ({diff['texture_tiles_read']:,} → {fine['texture_tiles_read']:,})"
+            )
+        else:
+            tiles = f"{fine.get('texture_tiles_read')} texture tiles against none"
+        parts.append(
+            "### Texture filtering by the ray differentials (the paper's §6.3.3)\n\n"
+            "On `examples/textured.usda`, the finest MIP level forced for every lookup "
+            f"(`textureFilter=finest`) reads {tiles} that filtering by the differentials reads, "
+            f"and moves the image by RMSE {diff['color_rmse']:.4f} → {fine['color_rmse']:.4f} "
+            "against the (filtered) reference: the aliasing of unfiltered texels. CPU time "
+            f"{_change(fine['cpu_s'], diff['cpu_s'])}.\n"
+        )
+        parts.append(_table_md(filt, ("texture_tiles_read",)) + "\n")
+    return "\n".join(parts)
+
+
+def _irradiance_section(tables: dict[str, Any]) -> str:
+    """Irradiance (occlusion) caching on the cache scene: time, rays and error by its bound."""
+    table = tables.get("cache-irradiance")
+    if not table:
+        return ""
+    off = _row(tables["cache-all"], tessFactor=1.0)
+    rows = sorted(table["rows"], key=lambda r: -r["setting"]["irradianceCacheError"])
+
+    def cells(label: str, r: dict[str, Any]) -> str:
+        return (
+            f"| {label} | {r['cpu_s']:.3g} | {_speed(r['cpu_s'], off['cpu_s'])} | "
+            f"{r.get('hemisphere_rays') or 0:,} | {r['color_rmse']:.4f} | "
+            f"{r['color_max_abs']:.3f} | {r['color_mean_diff']:+.4f} |"
+        )
+
+    lines = [
+        "| irradianceCacheError | CPU s | speed-up | hemisphere rays | RMSE | max abs | "
+        "mean diff |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
+        cells("off", off),
+    ]
+    lines += [cells(f"{r['setting']['irradianceCacheError']:g}", r) for r in rows]
+    best = min(rows, key=lambda r: r["cpu_s"])
+    return "\n".join(
+        [
+            "## Irradiance (occlusion) caching (the paper's §5.1)\n",
+            "On the cache scene with the same settings, AO interpolated from records with "
+            "gradients (`irradianceCache=1`) instead of sampled at every shading point, by the "
+            "cache's error bound (Ward's a). \"off\" is the tess factor 1 row above; the RMSE is "
+            "against the same paired reference, so it holds the interpolation's error and the "
+            f"change of noise. At a = {best['setting']['irradianceCacheError']:g}: "
+            f"{_speed(best['cpu_s'], off['cpu_s'])} less CPU time and "
+            f"{off.get('hemisphere_rays') or 0:,} → {best.get('hemisphere_rays') or 0:,} "
+            f"hemisphere rays, for RMSE {off['color_rmse']:.4f} → {best['color_rmse']:.4f}. "
+            "`docs/irradiance-cache.md` measures it against a converged reference on a scene "
+            "built for it.\n",
+            "\n".join(lines) + "\n",
+        ]
+    )
 
 
 def _budget_verdict(fine_n: int, coarse_n: int) -> str:
@@ -727,7 +910,7 @@ def write_page(tables: dict[str, Any], docs: Path, work: Path, width: int, quick
         "<!-- Generated by `make accuracy` (examples/accuracy_report.py): do not edit. -->\n",
         "Every number, figure and verdict on this page was measured by `mipray-sweep` "
         "(`python/mipray/sweep.py`) and is regenerated by one command:\n",
-        "```\nmake accuracy    # = python examples/accuracy_report.py, about 5 minutes on "
+        "```\nmake accuracy    # = python examples/accuracy_report.py, about 15 minutes on "
         "2 cores\n```\n",
         f"This run: commit `{commit}` plus the working tree, {size[0]}×{size[1]} pixels, "
         f"median of {runs} run(s) per setting (the zipped and samples sweeps: 1), all cores, "
@@ -769,11 +952,16 @@ def write_page(tables: dict[str, Any], docs: Path, work: Path, width: int, quick
         "camera and mirror rays need a fine one. Here `tessFactorIncoherent` multiplies the "
         "tess factor of AO, diffuse and glossy rays only; `tessFactor` sets every ray's. Each "
         "scene renders with 8 AO rays per shading point, so the incoherent rays matter.\n",
-        _claim_section(tables, "cache", "cache_scene.usda", figures.get("cache")),
-        _claim_section(tables, "showcase", "subdiv_showcase.usda", figures.get("showcase")),
+        _claim_section(tables, "cache", "examples/cache_scene.usda", figures.get("cache")),
+        _claim_section(
+            tables, "showcase", "examples/subdiv_showcase.usda", figures.get("showcase")
+        ),
+        _claim_section(tables, "bench", "The cache benchmark scene", figures.get("bench")),
     ]
     parts.append(_self_occlusion_section(tables))
     parts.append(_defaults_section(tables, figures))
+    parts.append(_irradiance_section(tables))
+    parts.append(_examples_section(tables))
     parts += [
         "## Limits of these measurements\n",
         "- Small images on a shared 2-core machine: compare CPU times within a table; wall "
@@ -781,9 +969,14 @@ def write_page(tables: dict[str, Any], docs: Path, work: Path, width: int, quick
         + _chrome_note(tables)
         + "- `tessError` is measured for camera rays only; the AO rays' geometric error shows "
         "only through the color RMSE.\n"
-        "- Only the tessellation, cache and sample knobs are swept here; `mipray-sweep "
-        "--list-knobs` shows every knob this build offers, and refuses the ones it does not "
-        f"have yet ({', '.join(sw.unavailable_knobs())}) with a message saying so.\n",
+        "- Swept here: the tessellation, cache, sample, irradiance-cache and texture-filter "
+        "knobs; `mipray-sweep --list-knobs` shows every knob this build offers"
+        + (
+            f", and refuses the ones it does not have yet ({', '.join(sw.unavailable_knobs())}) "
+            "with a message saying so.\n"
+            if sw.unavailable_knobs()
+            else ".\n"
+        ),
         "## One sweep by hand\n",
         "```\n"
         "mipray-sweep examples/cache_scene.usda --set aoSamples=8 --set samples=4 \\\n"

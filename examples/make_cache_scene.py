@@ -2,6 +2,7 @@
 """Write examples/cache_scene.usda: a small USD cousin of the geometry-cache benchmark scene.
 
     python examples/make_cache_scene.py [OUTPUT_DIR] [--grid 6x4] [--face-res 4]
+        [--displace-every N]
 
 The benchmark scene of the paper's §6.3.2 (``plugin/src/bench_scene.rs``, built
 in Rust only) is many individually modelled Catmull-Clark objects, half chrome
@@ -99,9 +100,17 @@ def _round(points: list[tuple[float, float, float]]) -> list[Gf.Vec3f]:
 
 
 def cache_scene(
-    path: Path, grid: tuple[int, int] = (6, 4), face_res: int = 4, seed: int = 2003
+    path: Path,
+    grid: tuple[int, int] = (6, 4),
+    face_res: int = 4,
+    seed: int = 2003,
+    displace_every: int = 0,
 ) -> None:
-    """Write the scene to ``path``: ``grid`` blobs of ``6·face_res²`` control faces each."""
+    """Write the scene to ``path``: ``grid`` blobs of ``6·face_res²`` control faces each.
+
+    With ``displace_every`` N > 0, every Nth blob carries mipray's procedural displacement
+    (fBm of amplitude 0.03, frequency 3, 4 octaves, gain 0.5, bound 0.06: the benchmark's).
+    """
     rng = random.Random(seed)
     stage = Usd.Stage.CreateNew(str(path))
     stage.GetRootLayer().documentation = (
@@ -146,6 +155,16 @@ def cache_scene(
             lo = [round(min(p[c] for p in points), 6) for c in range(3)]
             hi = [round(max(p[c] for p in points), 6) for c in range(3)]
             mesh.CreateExtentAttr([Gf.Vec3f(*lo), Gf.Vec3f(*hi)])
+            if displace_every > 0 and k % displace_every == 0:
+                prim = mesh.GetPrim()
+                for name, value in (("amplitude", 0.03), ("frequency", 3.0), ("gain", 0.5)):
+                    prim.CreateAttribute(
+                        f"mipray:displacement:{name}", Sdf.ValueTypeNames.Float
+                    ).Set(value)
+                prim.CreateAttribute("mipray:displacement:octaves", Sdf.ValueTypeNames.Int).Set(4)
+                UsdGeom.PrimvarsAPI(prim).CreatePrimvar(
+                    "displacementBound", Sdf.ValueTypeNames.Float, UsdGeom.Tokens.constant
+                ).Set(0.06)
             look = chrome if (i + j) % 2 == 0 else mattes[k % len(mattes)]
             UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(look)
             x = (i - (grid[0] - 1) / 2) * spacing + rng.uniform(-0.3, 0.3)
@@ -186,11 +205,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--face-res", type=int, default=4, help="quads per cube-face side of each blob (default: 4)"
     )
+    parser.add_argument(
+        "--displace-every",
+        type=int,
+        default=0,
+        metavar="N",
+        help="give every Nth blob procedural displacement, as the benchmark does with 3 "
+        "(default: 0, none)",
+    )
     args = parser.parse_args(argv)
     nx, _, ny = args.grid.partition("x")
     out = Path(args.output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cache_scene(out / NAME, (int(nx), int(ny)), args.face_res)
+    cache_scene(out / NAME, (int(nx), int(ny)), args.face_res, displace_every=args.displace_every)
     print(out / NAME)
     return 0
 

@@ -320,3 +320,17 @@ def test_progress_is_drawn_on_a_terminal_only() -> None:
     quiet.update(1, 2)
     quiet.clear()
     assert pipe.text == ""
+
+
+def test_list_settings_prints_every_renderer_setting(native, capsys) -> None:
+    # No scene or output needed, as with --help: one line per setting the renderer takes.
+    code, out, err = run(["--list-settings"], capsys)
+    assert code == 0 and err == ""
+    lines = out.splitlines()
+    rows = native.render_settings()
+    assert len(lines) == len(rows)
+    for line, (key, default, description) in zip(lines, rows):
+        words = line.split()
+        assert words[0] == key and words[1] == (default or "(unset)"), line
+        assert line.endswith(description), line
+    assert any(line.split()[0] == "irradianceCache" for line in lines)

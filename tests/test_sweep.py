@@ -471,3 +471,42 @@ def test_committed_cache_scene_is_what_its_generator_writes(tmp_path: Path) -> N
     assert fresh == (examples / "cache_scene.usda").read_text(), (
         "examples/cache_scene.usda is stale: run `python examples/make_cache_scene.py`"
     )
+
+
+def test_progress_names_the_reference_then_each_row_and_run(
+    scene_file: Path, tmp_path: Path
+) -> None:
+    # What mipray-sweep draws on a terminal: one status line per step, in order, with the
+    # renderer's own completion for the run under way.
+    _, width, height = sw.image_size(str(scene_file), WIDTH)
+    lines: list[str] = []
+
+    def runner(request: sw.RowRequest, progress) -> sw.Rendered:
+        for run in range(1, request.runs + 1):
+            if progress is not None:
+                progress(run, 1, 2)
+                progress(run, 2, 2)
+        return fake_rendered(height, width)
+
+    sw.sweep(
+        scene_file,
+        {"tessFactor": [1, 4]},
+        width=WIDTH,
+        runs=2,
+        out=tmp_path / "p",
+        runner=runner,
+        plot=False,
+        progress=lines.append,
+    )
+    starts = [line for line in lines if line.endswith(" ...")]
+    assert starts[0].startswith("reference (") and starts[1:] == [
+        "[1/2] tessFactor=1 ...",
+        "[2/2] tessFactor=4 ...",
+    ]
+    row2 = lines[lines.index("[2/2] tessFactor=4 ...") + 1 :]
+    assert row2 == [
+        "[2/2] tessFactor=4 run 1/2  50%",
+        "[2/2] tessFactor=4 run 1/2 100%",
+        "[2/2] tessFactor=4 run 2/2  50%",
+        "[2/2] tessFactor=4 run 2/2 100%",
+    ]

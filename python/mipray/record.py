@@ -318,8 +318,30 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     ren.add_argument("--verbose", "-v", action="store_true", help="log every prim synced")
+    ren.add_argument(
+        "--list-settings",
+        action=_ListSettings,
+        help="print every renderer setting --setting takes, with its default, and exit",
+    )
     ren.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     return parser
+
+
+class _ListSettings(argparse.Action):
+    """``--list-settings``: the renderer's settings table, then exit (like ``--version``)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
+        from . import _mipray
+
+        rows = _mipray.render_settings()
+        width = max(len(key) for key, _, _ in rows)
+        for key, default, description in rows:
+            shown = default if default else "(unset)"
+            sys.stdout.write(f"{key:<{width}}  {shown:<9} {description}\n")
+        parser.exit(0)
 
 
 def _version() -> str:

@@ -157,6 +157,14 @@ def _check_same_build(
         )
 
 
+def _hemisphere_rays(stats: Mapping[str, Any]) -> int | None:
+    """render.rays.ao + render.rays.diffuse: what irradiance caching saves."""
+    rays = (stats.get("render") or {}).get("rays") or {}
+    if "ao" not in rays and "diffuse" not in rays:
+        return None
+    return int(rays.get("ao", 0)) + int(rays.get("diffuse", 0))
+
+
 def _row(
     setting: dict[str, object],
     settings: dict[str, object],
@@ -176,6 +184,8 @@ def _row(
         "peak_rss_bytes": stats.get("memory", {}).get("peak_rss_bytes"),
         "recomputed_vertices": cache.get("recomputed_vertices"),
         "ray_subpatch_tests": stats.get("render", {}).get("ray_subpatch_tests"),
+        "hemisphere_rays": _hemisphere_rays(stats),
+        "texture_tiles_read": (stats.get("texture_cache") or {}).get("tiles_read"),
     }
     row.update(image_errors(rendered.aovs["color"], reference))
     if "tessError" in rendered.aovs:

@@ -55,6 +55,10 @@ ROW_FIELDS: dict[str, str] = {
     "recomputed_vertices": "geometry_cache.recomputed_vertices: vertices tessellated again "
     "after eviction (the cache's cost)",
     "ray_subpatch_tests": "render.ray_subpatch_tests",
+    "hemisphere_rays": "render.rays.ao + render.rays.diffuse: the hemisphere integrals' rays "
+    "(irradiance caching's pre-pass included), what irradiance caching saves",
+    "texture_tiles_read": "texture_cache.tiles_read: tiles OpenImageIO read from texture files "
+    "(None without textures)",
     "color_rmse": "root mean square of (color - reference color) over every pixel and channel",
     "color_max_abs": "largest |color - reference color| over every pixel and channel",
     "color_mean_diff": "mean of (color - reference color): below 0, the row is darker on the "
