@@ -41,8 +41,17 @@ fn usage() -> ! {
 }
 
 fn parse(args: &[String]) -> Args {
-    let mut a =
-        Args { out: "docs/cache-benchmark".into(), width: 200, height: 134, ao: 16, runs: 3, single_runs: 1, grid: (24, 20), face_res: 13, configs: None };
+    let mut a = Args {
+        out: "docs/cache-benchmark".into(),
+        width: 200,
+        height: 134,
+        ao: 16,
+        runs: 3,
+        single_runs: 1,
+        grid: (24, 20),
+        face_res: 13,
+        configs: None,
+    };
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
