@@ -329,7 +329,7 @@ def test_list_settings_prints_every_renderer_setting(native, capsys) -> None:
     lines = out.splitlines()
     rows = native.render_settings()
     assert len(lines) == len(rows)
-    for line, (key, default, description) in zip(lines, rows):
+    for line, (key, default, description) in zip(lines, rows, strict=True):
         words = line.split()
         assert words[0] == key and words[1] == (default or "(unset)"), line
         assert line.endswith(description), line
