@@ -388,6 +388,13 @@ def read_image(path: str) -> tuple[NDArray[np.float32], list[str]]:
 def version() -> str:
     """The version of the compiled module, e.g. ``"0.1.0"``."""
 
+def render_settings() -> list[tuple[str, str, str]]:
+    """Every render setting the delegate accepts, as ``(key, default, description)``; the
+    default is ``""`` for a setting unset unless given (``mipray-record --list-settings``)."""
+
+def aov_names() -> list[str]:
+    """Every AOV the delegate can render (README's AOV table says what each holds)."""
+
 def subdiv_compare(
     name: str,
     *,
