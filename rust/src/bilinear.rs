@@ -47,14 +47,14 @@ impl BilinearSurface {
             if !holes.contains(&(face as i32)) {
                 if n == 4 {
                     corners.push([fv[0], fv[1], fv[2], fv[3]]);
-                    params.push(root_param(face as u32, ptex));
+                    params.push(PatchParam::root(face as u32, ptex, PatchKind::Bilinear));
                 } else {
                     let centroid = fv.iter().copied().sum::<Vec3A>() / n as f32;
                     for i in 0..n {
                         let next = fv[(i + 1) % n];
                         let prev = fv[(i + n - 1) % n];
                         corners.push([fv[i], (fv[i] + next) * 0.5, centroid, (fv[i] + prev) * 0.5]);
-                        params.push(root_param(face as u32, ptex + i as u32));
+                        params.push(PatchParam::root(face as u32, ptex + i as u32, PatchKind::Bilinear));
                     }
                 }
             }
@@ -76,20 +76,6 @@ impl BilinearSurface {
             self.primvars.push(BaseFacePrimvar::new(topology, point_count, p)?);
         }
         Ok(self)
-    }
-}
-
-fn root_param(base_face: u32, ptex_face: u32) -> PatchParam {
-    PatchParam {
-        base_face,
-        ptex_face,
-        u0: 0.0,
-        v0: 0.0,
-        size: 1.0,
-        depth: 0,
-        boundary_mask: 0,
-        transition_mask: 0,
-        kind: PatchKind::Bilinear,
     }
 }
 

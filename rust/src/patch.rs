@@ -59,6 +59,12 @@ pub struct PatchParam {
 }
 
 impl PatchParam {
+    /// A patch that is its whole control face (no adaptive refinement, no boundary or
+    /// transition edges), of kind `kind`: what a polygonal or analytic surface has.
+    pub const fn root(base_face: u32, ptex_face: u32, kind: PatchKind) -> PatchParam {
+        PatchParam { base_face, ptex_face, u0: 0.0, v0: 0.0, size: 1.0, depth: 0, boundary_mask: 0, transition_mask: 0, kind }
+    }
+
     /// Maps the patch's own (u, v) to the ptex face's (u, v).
     pub fn to_face_uv(&self, u: f32, v: f32) -> (f32, f32) {
         (self.u0 + u * self.size, self.v0 + v * self.size)

@@ -565,17 +565,7 @@ mod tests {
             1
         }
         fn patch_param(&self, _patch: usize) -> crate::patch::PatchParam {
-            crate::patch::PatchParam {
-                base_face: 0,
-                ptex_face: 0,
-                u0: 0.0,
-                v0: 0.0,
-                size: 1.0,
-                depth: 0,
-                boundary_mask: 0,
-                transition_mask: 0,
-                kind: crate::patch::PatchKind::Other,
-            }
+            crate::patch::PatchParam::root(0, 0, crate::patch::PatchKind::Other)
         }
         fn patch_bounds(&self, _patch: usize) -> crate::bounds::Bounds3 {
             crate::bounds::Bounds3::from_points((0..=8).flat_map(|j| (0..=8).map(move |i| (self.0)(i as f32 / 8.0, j as f32 / 8.0))))

@@ -27,17 +27,7 @@ impl LimitSurface for Sphere {
         8
     }
     fn patch_param(&self, patch: usize) -> PatchParam {
-        PatchParam {
-            base_face: patch as u32,
-            ptex_face: patch as u32,
-            u0: 0.0,
-            v0: 0.0,
-            size: 1.0,
-            depth: 0,
-            boundary_mask: 0,
-            transition_mask: 0,
-            kind: PatchKind::Other,
-        }
+        PatchParam::root(patch as u32, patch as u32, PatchKind::Other)
     }
     fn patch_bounds(&self, _patch: usize) -> Bounds3 {
         Bounds3 { min: Vec3A::splat(-self.r), max: Vec3A::splat(self.r) }

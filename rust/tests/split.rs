@@ -21,17 +21,7 @@ impl LimitSurface for Sphere {
         8
     }
     fn patch_param(&self, patch: usize) -> PatchParam {
-        PatchParam {
-            base_face: patch as u32,
-            ptex_face: patch as u32,
-            u0: 0.0,
-            v0: 0.0,
-            size: 1.0,
-            depth: 0,
-            boundary_mask: 0,
-            transition_mask: 0,
-            kind: PatchKind::Other,
-        }
+        PatchParam::root(patch as u32, patch as u32, PatchKind::Other)
     }
     /// The patch's own box (as a control hull would bound it): from a dense sampling, grown by
     /// more than the sampling's chord error, so neighbouring patches' boxes overlap only near

@@ -38,7 +38,6 @@ use glam::Vec3A;
 use crate::bsdf::{BsdfSample, Lobe, PreviewSurfaceBsdf, Scattering};
 use crate::differential::{dndu_dndv, RayDifferential, UvDifferentials};
 use crate::effects::{enabled, Effect};
-use crate::material::ResolvedSurface;
 use crate::options::RenderOptions;
 use crate::ray::{offset_origin, Ray, RayKind};
 use crate::sampling::Sampler;
@@ -46,9 +45,9 @@ use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
 
 use super::direct::DirectLight;
-use super::hemisphere::Hemisphere;
+use super::hemisphere::{self, Hemisphere, Visible};
 pub use super::visibility::MAX_CUTOUTS;
-use super::{shading_point, tessellation_error, Integrator, SampleValue, ShadingPoint};
+use super::{tessellation_error, Integrator, SampleValue, ShadingPoint};
 
 /// A delta branch weaker than this (all channels) is not traced: it could not change a pixel
 /// by more than that fraction of what it sees.
@@ -100,16 +99,6 @@ struct Shade {
     normal: Vec3A,
     beam_width: f32,
     quads: u32,
-}
-
-/// A surface a ray sees, past any cutouts: the ray that reached it (its last segment), the hit,
-/// the shading point, the ray's differential transferred there, and the material's inputs.
-struct Visible {
-    ray: Ray,
-    hit: Hit,
-    sp: ShadingPoint,
-    footprint: RayDifferential,
-    surface: ResolvedSurface,
 }
 
 /// How a ray came to a surface, which decides what is gathered there.
@@ -173,30 +162,9 @@ impl<'a> DirectLighting<'a> {
     }
 
     /// The first surface along `ray` that is not cut out, from hit `from` (secondary rays) or
-    /// from the camera.
-    fn visible(&self, mut ray: Ray, from: Option<Hit>, counters: &mut TraceCounters) -> Option<Visible> {
-        let mut from = from;
-        for _ in 0..=MAX_CUTOUTS {
-            let hit = match &from {
-                Some(f) => self.tracer.intersect_from(&ray, f, counters)?,
-                None => self.tracer.intersect(&ray, counters)?,
-            };
-            let sp = shading_point(self.tracer, self.scene, &ray, &hit);
-            let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
-            counters.differential_clamps += u64::from(clamped);
-            let mesh = &self.scene.meshes[hit.mesh as usize];
-            let material = self.scene.material_at(hit.mesh as usize, hit.patch as usize);
-            let surface = material.resolve(mesh.surface.as_ref(), &hit, &sp, &footprint);
-            if !surface.cut_out() {
-                return Some(Visible { ray, hit, sp, footprint, surface });
-            }
-            // No surface here: the same ray goes on from the hit, its beam as it arrived.
-            ray = Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, ray.d), t_max: ray.t_max - hit.t, diff: footprint, t_min: 0.0, ..ray };
-            from = Some(hit);
-            counters.cutout_passes += 1;
-        }
-        counters.cutout_limit += 1;
-        None
+    /// from the camera ([`hemisphere::visible`]).
+    fn visible(&self, ray: Ray, from: Option<Hit>, counters: &mut TraceCounters) -> Option<Visible> {
+        hemisphere::visible(self.tracer, self.scene, ray, from, counters)
     }
 
     fn shade(&self, v: &Visible, depth: u32, path: Path, sampler: &mut Sampler, counters: &mut TraceCounters) -> Shade {
