@@ -30,6 +30,12 @@ if str(TESTS) not in sys.path:
 
 from fake_delegate import FakeRenderDelegate, fake_module  # noqa: E402
 
+# Linear copies of sRGB textures go to a directory of this run, not the user's ~/.cache.
+if not os.environ.get("MIPRAY_TEXTURE_CACHE"):
+    import tempfile
+
+    os.environ["MIPRAY_TEXTURE_CACHE"] = tempfile.mkdtemp(prefix="mipray-tx-")
+
 
 def _native_module() -> tuple[types.ModuleType | None, str]:
     try:

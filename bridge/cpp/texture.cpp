@@ -6,11 +6,15 @@
 #include <algorithm>
 #include <atomic>
 #include <mutex>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imagecache.h>
+#include <OpenImageIO/imageio.h>
 #include <OpenImageIO/texture.h>
 #include <OpenImageIO/typedesc.h>
 #include <OpenImageIO/ustring.h>
@@ -338,5 +342,74 @@ rust::String OiioTexSys::report(int32_t level) const {
 }
 
 rust::String OiioTexSys::take_error() const { return rust::String(one_line(impl->ts->geterror())); }
+
+bool oiio_auto_is_srgb(rust::Str path_in) {
+  try {
+    const std::string path(path_in.data(), path_in.size());
+    auto in = OIIO::ImageInput::open(path);
+    if (!in) {
+      std::string err = one_line(OIIO::geterror());
+      throw std::runtime_error(err.empty() ? "cannot read the image header" : err);
+    }
+    const OIIO::ImageSpec& spec = in->spec();
+    // HioOIIO_Image::IsColorSpaceSRGB: the file's own colour-space metadata is not consulted.
+    const bool srgb = (spec.nchannels == 3 || spec.nchannels == 4) &&
+                      spec.format == OIIO::TypeDesc::UINT8;
+    in->close();
+    return srgb;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while reading the image header");
+  }
+}
+
+void oiio_make_linear_texture(rust::Str src_in, rust::Str dst_in) {
+  try {
+    const std::string src(src_in.data(), src_in.size());
+    const std::string dst(dst_in.data(), dst_in.size());
+    // Read with an ImageInput, not ImageBuf(filename): that would go through OpenImageIO's
+    // shared ImageCache, which keeps the file's old header and tiles when the file is edited.
+    auto in = OIIO::ImageInput::open(src);
+    if (!in) {
+      std::string err = one_line(OIIO::geterror());
+      throw std::runtime_error(err.empty() ? "cannot read the image" : err);
+    }
+    OIIO::ImageSpec spec = in->spec();
+    spec.set_format(OIIO::TypeDesc::FLOAT);
+    OIIO::ImageBuf encoded(spec);
+    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, encoded.localpixels())) {
+      std::string err = one_line(in->geterror());
+      throw std::runtime_error(err.empty() ? "cannot read the image" : err);
+    }
+    in->close();
+    // Decoded here rather than by make_texture's maketx:incolorspace, which in OpenImageIO 2.4
+    // insists on an OCIO config file; colorconvert falls back to the built-in sRGB curve.
+    OIIO::ImageBuf linear;
+    if (!OIIO::ImageBufAlgo::colorconvert(linear, encoded, "sRGB", "linear")) {
+      std::string err = one_line(linear.geterror());
+      throw std::runtime_error(err.empty() ? "cannot decode from sRGB" : err);
+    }
+    OIIO::ImageSpec config;
+    config.tile_width = 64;
+    config.tile_height = 64;
+    config.tile_depth = 1;
+    // Half keeps the 8-bit source's dark steps (linear 8-bit would band them).
+    config.set_format(OIIO::TypeDesc::HALF);
+    config.attribute("maketx:fileformatname", "tiff");
+    config.attribute("maketx:filtername", "box");
+    std::ostringstream log;
+    if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, linear, dst, config,
+                                          &log)) {
+      std::string err = one_line(OIIO::geterror());
+      if (err.empty()) err = one_line(log.str());
+      throw std::runtime_error(err.empty() ? "maketx failed" : err);
+    }
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while making the linear texture");
+  }
+}
 
 }  // namespace mipray_bridge

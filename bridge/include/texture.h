@@ -55,4 +55,13 @@ class OiioTexSys {
 
 std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& options);
 
+// Whether UsdUVTexture's sourceColorSpace `auto` reads the file as sRGB: Hydra's Storm rule
+// (8-bit integer channels, 3 or 4 of them), so images match usdview. Throws naming the reason
+// when the header cannot be read.
+bool oiio_auto_is_srgb(rust::Str path);
+// Writes `dst`: `src` decoded from sRGB (colour channels; alpha as stored) into a linear,
+// half-float, tiled MIP map, as `maketx --colorconvert sRGB linear -d half` would. Throws with
+// OpenImageIO's reason. The caller writes to a temporary name and renames.
+void oiio_make_linear_texture(rust::Str src, rust::Str dst);
+
 }  // namespace mipray_bridge

@@ -242,6 +242,10 @@ pub(crate) mod bridge {
         fn report(self: &OiioTexSys, level: i32) -> Result<String>;
         /// This thread's pending OpenImageIO error, cleared.
         fn take_error(self: &OiioTexSys) -> Result<String>;
+        /// Whether sourceColorSpace `auto` decodes the file as sRGB (8-bit, 3 or 4 channels).
+        fn oiio_auto_is_srgb(path: &str) -> Result<bool>;
+        /// Writes `dst`, a linear half-float tiled MIP map of the sRGB-encoded `src`.
+        fn oiio_make_linear_texture(src: &str, dst: &str) -> Result<()>;
     }
 }
 

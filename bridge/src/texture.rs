@@ -12,11 +12,12 @@
 //! per step; the flip to OpenImageIO's t-down is done in C++.
 
 use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use mipray::texture::serde_json::{json, Map, Value};
-use mipray::texture::{texels_by_lookups, FilterMode, Lookup, Texels, TextureError, TextureHandle, TextureSampler, Wrap};
+use mipray::texture::{texels_by_lookups, FilterMode, Lookup, SourceColorSpace, Texels, TextureError, TextureHandle, TextureSampler, Wrap};
 
 use crate::ffi::bridge as ffi;
 
@@ -64,6 +65,10 @@ pub struct OiioTextureSystem {
     /// Path → handle, and handle → path (for stats), written under the lock; lookups never take
     /// it.
     opened: Mutex<(HashMap<String, TextureHandle>, Vec<String>)>,
+    /// Handle → the sRGB file a linear copy was made from (the handle's path is the copy's).
+    decoded_from: Mutex<HashMap<u32, String>>,
+    /// Where linear copies of sRGB files go ([`OiioTextureSystem::linear_cache_dir`]).
+    linear_cache: PathBuf,
     lookups: AtomicU64,
     failed: AtomicU64,
     warned: AtomicBool,
@@ -112,10 +117,56 @@ impl OiioTextureSystem {
             sys,
             options,
             opened: Mutex::new((HashMap::new(), Vec::new())),
+            decoded_from: Mutex::new(HashMap::new()),
+            linear_cache: default_linear_cache_dir(),
             lookups: AtomicU64::new(0),
             failed: AtomicU64::new(0),
             warned: AtomicBool::new(false),
         })
+    }
+
+    /// Puts linear copies of sRGB textures in `dir` instead of the default (see
+    /// [`OiioTextureSystem::linear_cache_dir`]).
+    pub fn with_linear_cache_dir(mut self, dir: impl Into<PathBuf>) -> Self {
+        self.linear_cache = dir.into();
+        self
+    }
+
+    /// Where sRGB-encoded textures are converted to (once per file version): `$MIPRAY_TEXTURE_CACHE`
+    /// if set, else `$XDG_CACHE_HOME/mipray/textures`, else `~/.cache/mipray/textures`, else the
+    /// system temporary directory's `mipray-textures`. Each copy is a half-float tiled MIP map
+    /// named after the source and a hash of its absolute path, size and modification time, so an
+    /// edited source gets a new copy and two renders share one.
+    pub fn linear_cache_dir(&self) -> &Path {
+        &self.linear_cache
+    }
+
+    /// The linear copy of the sRGB-encoded `path` in the cache, made if it is not there yet.
+    fn linear_copy(&self, path: &str) -> Result<String, TextureError> {
+        let err = |message: String| TextureError { path: path.to_string(), message };
+        let source = Path::new(path);
+        let meta = std::fs::metadata(source).map_err(|e| err(format!("cannot read: {e}")))?;
+        let absolute = std::fs::canonicalize(source).unwrap_or_else(|_| source.to_path_buf());
+        let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
+        let key = format!("linear-v1\0{}\0{}\0{modified}", absolute.display(), meta.len());
+        let stem = source.file_stem().and_then(|s| s.to_str()).unwrap_or("texture");
+        let copy = self.linear_cache.join(format!("{stem}-{:016x}.linear.tx", fnv1a(key.as_bytes())));
+        if copy.is_file() {
+            return Ok(copy.to_string_lossy().into_owned());
+        }
+        std::fs::create_dir_all(&self.linear_cache)
+            .map_err(|e| err(format!("cannot create the linear texture cache {}: {e}", self.linear_cache.display())))?;
+        // Another render may be converting the same file: each writes its own temporary file
+        // and the rename is atomic, so a reader sees a whole copy or none.
+        let partial = copy.with_extension(format!("{}.partial.tx", std::process::id()));
+        let (src, tmp) = (source.to_string_lossy(), partial.to_string_lossy());
+        log::info!("texture {path}: sRGB-encoded; writing its linear MIP map {}", copy.display());
+        if let Err(e) = ffi::oiio_make_linear_texture(&src, &tmp) {
+            let _ = std::fs::remove_file(&partial);
+            return Err(err(format!("cannot convert from sRGB: {}", e.what())));
+        }
+        std::fs::rename(&partial, &copy).map_err(|e| err(format!("cannot write {}: {e}", copy.display())))?;
+        Ok(copy.to_string_lossy().into_owned())
     }
 
     /// The options it was made with.
@@ -165,6 +216,33 @@ impl TextureSampler for OiioTextureSystem {
         let h = TextureHandle::new(index);
         guard.0.insert(path.to_string(), h);
         guard.1.push(path.to_string());
+        Ok(h)
+    }
+
+    /// `Raw` opens the file as it is. `Srgb` opens a linear copy, made once per file version in
+    /// [`OiioTextureSystem::linear_cache_dir`] (OpenImageIO 2.4's TextureSystem cannot decode
+    /// while it filters, and decoding after filtering would darken minified lookups). `Auto` is
+    /// `Srgb` for 8-bit files of 3 or 4 channels, `Raw` otherwise (Hydra's rule).
+    ///
+    /// # Errors
+    /// [`TextureError`] naming the path: unreadable, or the copy cannot be made.
+    fn handle_encoded(&self, path: &str, space: SourceColorSpace) -> Result<TextureHandle, TextureError> {
+        let srgb = match space {
+            SourceColorSpace::Raw => false,
+            SourceColorSpace::Srgb => true,
+            SourceColorSpace::Auto => {
+                ffi::oiio_auto_is_srgb(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?
+            }
+        };
+        if !srgb {
+            return self.handle(path);
+        }
+        let copy = self.linear_copy(path)?;
+        let h = self.handle(&copy)?;
+        match self.decoded_from.lock() {
+            Ok(mut g) => g.insert(h.index(), path.to_string()),
+            Err(poisoned) => poisoned.into_inner().insert(h.index(), path.to_string()),
+        };
         Ok(h)
     }
 
@@ -236,7 +314,9 @@ impl TextureSampler for OiioTextureSystem {
     ///   `file_size_bytes`, `fileio_time_s`, `fileopen_time_s`, `file_locking_time_s`,
     ///   `tile_locking_time_s`, `find_file_time_s`, `find_tile_time_s`;
     /// - `files[]`, one per texture: `path`, `tiles_read`, `bytes_read`, `redundant_tiles`
-    ///   (tiles read again after eviction), `redundant_bytes_read`, `times_opened`, `io_time_s`.
+    ///   (tiles read again after eviction), `redundant_bytes_read`, `times_opened`, `io_time_s`,
+    ///   `source_color_space` (`raw`, or `sRGB` for the linear copy of an sRGB file, whose path
+    ///   is then `decoded_from`).
     fn stats(&self) -> Value {
         let mut m = Map::new();
         m.insert("kind".into(), json!("oiio"));
@@ -255,6 +335,14 @@ impl TextureSampler for OiioTextureSystem {
             .map(|(i, path)| {
                 let mut f = Map::new();
                 f.insert("path".into(), json!(path));
+                let source = match self.decoded_from.lock() {
+                    Ok(g) => g.get(&(i as u32)).cloned(),
+                    Err(poisoned) => poisoned.into_inner().get(&(i as u32)).cloned(),
+                };
+                f.insert("source_color_space".into(), json!(if source.is_some() { "sRGB" } else { "raw" }));
+                if let Some(source) = source {
+                    f.insert("decoded_from".into(), json!(source));
+                }
                 for s in self.sys.file_stats(i as u32).unwrap_or_default() {
                     f.insert(s.name, number(s.value));
                 }
@@ -276,4 +364,22 @@ fn number(v: f64) -> Value {
     } else {
         json!(v)
     }
+}
+
+/// See [`OiioTextureSystem::linear_cache_dir`].
+fn default_linear_cache_dir() -> PathBuf {
+    let var = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    if let Some(dir) = var("MIPRAY_TEXTURE_CACHE") {
+        return dir;
+    }
+    if let Some(dir) = var("XDG_CACHE_HOME").or_else(|| var("HOME").map(|h| h.join(".cache"))) {
+        return dir.join("mipray").join("textures");
+    }
+    std::env::temp_dir().join("mipray-textures")
+}
+
+/// 64-bit FNV-1a: a cache file name stable across builds and Rust versions (std's hasher is not
+/// promised to be).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3))
 }

@@ -86,17 +86,19 @@ impl LightPrim {
                         normal,
                     },
                     AreaKind::Dome { texture } => {
-                        let env = texture.as_ref().zip(textures).and_then(|(file, sampler)| match sampler.handle(file) {
-                            // The light's rotation only: directions, and densities over them, must
-                            // not be distorted by a scale.
-                            Ok(handle) => Some(mipray::light::EnvTexture::new(
-                                sampler.clone(),
-                                handle,
-                                glam::Mat3A::from_quat(m.to_scale_rotation_translation().1),
-                            )),
-                            Err(e) => {
-                                log::warn!("{}: cannot read dome texture {file}: {}; lighting with its colour", self.path, e.message);
-                                None
+                        let env = texture.as_ref().zip(textures).and_then(|(file, sampler)| {
+                            match sampler.handle_encoded(file, mipray::texture::SourceColorSpace::Auto) {
+                                // The light's rotation only: directions, and densities over them, must
+                                // not be distorted by a scale.
+                                Ok(handle) => Some(mipray::light::EnvTexture::new(
+                                    sampler.clone(),
+                                    handle,
+                                    glam::Mat3A::from_quat(m.to_scale_rotation_translation().1),
+                                )),
+                                Err(e) => {
+                                    log::warn!("{}: cannot read dome texture {file}: {}; lighting with its colour", self.path, e.message);
+                                    None
+                                }
                             }
                         });
                         LightShape::Dome(env)

@@ -62,6 +62,8 @@ pub struct TextureInput {
     pub wrap_t: mipray::texture::Wrap,
     /// The output connected: 0 = r (or rgb), 1 = g, 2 = b, 3 = a.
     pub channel: u32,
+    /// UsdUVTexture `sourceColorSpace`: how the file encodes its values (lookups are linear).
+    pub color_space: mipray::texture::SourceColorSpace,
 }
 
 impl TextureInput {

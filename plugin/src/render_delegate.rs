@@ -296,7 +296,7 @@ impl RenderDelegate {
         let problem = match self.sampler() {
             // prepare_textures makes a texture system whenever a mesh has a texture input.
             None => "no texture system".to_string(),
-            Some(sampler) => match sampler.handle(&tex.file) {
+            Some(sampler) => match sampler.handle_encoded(&tex.file, tex.color_space) {
                 Ok(texture) => {
                     let (scale, bias, fallback) = tex.affine(input);
                     return Some(TexturedColor {
@@ -347,7 +347,7 @@ impl RenderDelegate {
     /// A texture displacement for `input`, or `None` (warned once) when unreadable.
     fn texture_displacement(&self, path: &str, input: &crate::material::TextureInput) -> Option<DisplacementShader> {
         let sampler = self.sampler()?;
-        match TextureDisplacement::new(sampler, &input.file, 0) {
+        match TextureDisplacement::new_encoded(sampler, &input.file, input.color_space, 0) {
             Ok(mut d) => {
                 let c = (input.channel as usize).min(3);
                 d.lookup = input.lookup();

@@ -50,6 +50,7 @@ fn texture(file: &str, channel: u32) -> TextureInput {
         wrap_s: Wrap::Clamp,
         wrap_t: Wrap::Clamp,
         channel,
+        color_space: mipray::texture::SourceColorSpace::Auto,
     }
 }
 

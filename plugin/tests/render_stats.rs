@@ -43,6 +43,7 @@ fn delegate(texture_file: &str) -> RenderDelegate {
         wrap_s: Wrap::Clamp,
         wrap_t: Wrap::Clamp,
         channel: 0,
+        color_space: mipray::texture::SourceColorSpace::Auto,
     };
     d.set_mesh(
         "/quad",

@@ -110,7 +110,11 @@ class RenderDelegate:
             st_interpolation: the primvar's USD interpolation.
             diffuse_texture: a UsdUVTexture feeding ``diffuseColor``: ``{"file",
                 "scale", "bias", "fallback" (4 floats each), "wrapS", "wrapT",
-                "channel" (0-3)}``; filtered by the ray differentials. For a mesh
+                "sourceColorSpace" (``auto``, the default: 8-bit files of 3 or 4
+                channels are sRGB, as in Hydra; ``raw``; ``sRGB``), "channel"
+                (0-3)}``; sRGB files are decoded into a linear MIP map once
+                (``$MIPRAY_TEXTURE_CACHE``, else ``~/.cache/mipray/textures``)
+                and filtered by the ray differentials. For a mesh
                 without a ``material`` (with one, use its ``"textures"``).
             displacement_texture: the same for ``displacement``, along the
                 limit normal at tessellation time, filtered at the grid's

@@ -21,7 +21,7 @@ use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::camera::{Camera, Projection};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
-use mipray::texture::{Interpolation, Primvar2, Wrap};
+use mipray::texture::{Interpolation, Primvar2, SourceColorSpace, Wrap};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 use mipray_bridge::OiioImageIo;
 use numpy::ndarray::Array3;
@@ -545,7 +545,7 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 }
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats
-/// each, optional), "wrapS", "wrapT" (USD tokens), "channel" (0–3)}`.
+/// each, optional), "wrapS", "wrapT", "sourceColorSpace" (USD tokens), "channel" (0–3)}`.
 fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<TextureInput> {
     let file: String = d.get_item("file")?.ok_or_else(|| value_error(path, format!("{input} texture has no file")))?.extract()?;
     let four = |key: &str, default: [f32; 4]| -> PyResult<[f32; 4]> {
@@ -582,6 +582,14 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
     if channel > 3 {
         return Err(value_error(path, format!("{input} texture channel {channel} is not 0–3")));
     }
+    let color_space = match d.get_item("sourceColorSpace")? {
+        None => SourceColorSpace::Auto,
+        Some(v) => {
+            let t: String = v.extract()?;
+            SourceColorSpace::from_usd(&t)
+                .ok_or_else(|| value_error(path, format!("{input} texture sourceColorSpace '{t}' is not auto, raw or sRGB")))?
+        }
+    };
     Ok(TextureInput {
         file,
         scale: four("scale", [1.0; 4])?,
@@ -590,6 +598,7 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
         wrap_s: wrap("wrapS")?,
         wrap_t: wrap("wrapT")?,
         channel,
+        color_space,
     })
 }
 

@@ -21,7 +21,7 @@ use std::sync::Arc;
 use glam::Vec3A;
 
 use crate::patch::{LimitSurface, UvRect};
-use crate::texture::{Lookup, TextureError, TextureHandle, TextureSampler};
+use crate::texture::{Lookup, SourceColorSpace, TextureError, TextureHandle, TextureSampler};
 
 /// fBm displacement: `amplitude · Σ gainⁱ · noise(2ⁱ · frequency · p)`, i < octaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -132,7 +132,21 @@ impl TextureDisplacement {
     /// The sampler's [`TextureError`] (naming the path) when the texture cannot be read: the
     /// caller drops the displacement (or uses `fallback` as a constant) and warns.
     pub fn new(sampler: Arc<dyn TextureSampler>, path: &str, st_channel: usize) -> Result<Self, TextureError> {
-        let texture = sampler.handle(path)?;
+        Self::new_encoded(sampler, path, SourceColorSpace::Raw, st_channel)
+    }
+
+    /// [`TextureDisplacement::new`] for a file whose values are encoded as `space` says
+    /// (UsdUVTexture `sourceColorSpace`; the displacement is the decoded, linear value).
+    ///
+    /// # Errors
+    /// As [`TextureDisplacement::new`].
+    pub fn new_encoded(
+        sampler: Arc<dyn TextureSampler>,
+        path: &str,
+        space: SourceColorSpace,
+        st_channel: usize,
+    ) -> Result<Self, TextureError> {
+        let texture = sampler.handle_encoded(path, space)?;
         Ok(TextureDisplacement {
             sampler,
             texture,

@@ -94,6 +94,55 @@ impl Wrap {
     }
 }
 
+/// How a texture file encodes its values: UsdUVTexture's `sourceColorSpace`.
+///
+/// Lookups always return linear values: a sampler decodes an sRGB-encoded file before it filters
+/// (OpenImageIO's, by converting the file once into a linear MIP map, see the bridge), because
+/// filtering encoded values and decoding the result darkens every minified lookup — exactly the
+/// wide, incoherent lookups this renderer makes coarse. The transfer curve applies to colour
+/// channels (r, g, b), never to alpha.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum SourceColorSpace {
+    /// Decide from the file as Hydra's Storm does (so images match usdview): 8-bit images with 3
+    /// or 4 channels are sRGB, everything else is raw. The UsdPreviewSurface default.
+    #[default]
+    Auto,
+    /// Values as stored (linear data: heights, roughness, normals, float colour).
+    Raw,
+    /// sRGB transfer curve, no other colour-space change.
+    Srgb,
+}
+
+impl SourceColorSpace {
+    /// UsdUVTexture's token: `auto`, `raw`, `sRGB`.
+    pub fn from_usd(token: &str) -> Option<SourceColorSpace> {
+        match token {
+            "auto" => Some(SourceColorSpace::Auto),
+            "raw" => Some(SourceColorSpace::Raw),
+            "sRGB" => Some(SourceColorSpace::Srgb),
+            _ => None,
+        }
+    }
+
+    /// The USD token.
+    pub const fn usd_name(self) -> &'static str {
+        match self {
+            SourceColorSpace::Auto => "auto",
+            SourceColorSpace::Raw => "raw",
+            SourceColorSpace::Srgb => "sRGB",
+        }
+    }
+}
+
+/// The sRGB transfer curve, encoded value → linear (IEC 61966-2-1).
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// Which MIP level a lookup reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub enum FilterMode {
@@ -173,6 +222,24 @@ pub trait TextureSampler: Send + Sync {
     /// [`TextureError`] naming the path when the texture cannot be read (missing, unreadable, not
     /// an image). The caller falls back and warns; it should not retry per lookup.
     fn handle(&self, path: &str) -> Result<TextureHandle, TextureError>;
+
+    /// [`TextureSampler::handle`] for a file whose values are encoded as `space` says, so that
+    /// lookups return linear values. The same path in two encodings is two handles.
+    ///
+    /// The default serves samplers whose values are linear by construction (procedural ones):
+    /// `Auto` and `Raw` open the path as it is, `Srgb` is refused.
+    ///
+    /// # Errors
+    /// As [`TextureSampler::handle`]; also when the sampler cannot decode `space`, or cannot write
+    /// the decoded copy.
+    fn handle_encoded(&self, path: &str, space: SourceColorSpace) -> Result<TextureHandle, TextureError> {
+        match space {
+            SourceColorSpace::Auto | SourceColorSpace::Raw => self.handle(path),
+            SourceColorSpace::Srgb => {
+                Err(TextureError { path: path.to_string(), message: "this texture sampler cannot decode sRGB".into() })
+            }
+        }
+    }
 
     /// Filtered value of `out.len()` channels (from `lookup.first_channel`) at `st`, over the
     /// footprint spanned by `dst_dx = (ds/dx, dt/dx)` and `dst_dy = (ds/dy, dt/dy)` (texture-space
@@ -740,5 +807,24 @@ mod tests {
         let (v, du, _) = p.at_patch(&param, 1.0, 0.0).unwrap();
         assert_eq!((v, du), ([0.375, 0.5], [0.125, 0.0]));
         assert!(p.at_face(9, 0.0, 0.0).is_none());
+    }
+
+    #[test]
+    fn srgb_curve_and_tokens() {
+        // The curve's published anchors: 0 and 1 are fixed, 8-bit 128 is 0.2158.
+        assert_eq!(srgb_to_linear(0.0), 0.0);
+        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
+        assert!((srgb_to_linear(128.0 / 255.0) - 0.215_861).abs() < 1e-5);
+        // Continuous at the knee.
+        assert!((srgb_to_linear(0.04045) - srgb_to_linear(0.040_451)).abs() < 1e-6);
+        for s in [SourceColorSpace::Auto, SourceColorSpace::Raw, SourceColorSpace::Srgb] {
+            assert_eq!(SourceColorSpace::from_usd(s.usd_name()), Some(s));
+        }
+        assert_eq!(SourceColorSpace::from_usd("srgb"), None);
+        // A procedural sampler has nothing to decode: raw and auto open, sRGB is refused by name.
+        let c = CheckerSampler::new("c", 64, 8, FilterMode::Differentials);
+        assert!(c.handle_encoded("c", SourceColorSpace::Auto).is_ok());
+        let e = c.handle_encoded("c", SourceColorSpace::Srgb).unwrap_err();
+        assert!(e.to_string().contains("texture c") && e.to_string().contains("sRGB"), "{e}");
     }
 }

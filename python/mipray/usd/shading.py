@@ -14,7 +14,8 @@ Read from the ``UsdPreviewSurface`` of the bound material (``full`` purpose, as
   Values go as authored: the renderer clamps out-of-range ones with one warning
   naming the material.
 - What feeds an input: a ``UsdUVTexture`` (``file``, ``scale``, ``bias``,
-  ``fallback``, ``wrapS``, ``wrapT`` and the connected output's channel), its
+  ``fallback``, ``wrapS``, ``wrapT``, ``sourceColorSpace`` and the connected
+  output's channel), its
   ``st`` read by a ``UsdPrimvarReader_float2`` (``varname``, default ``st``),
   optionally through a ``UsdTransform2d``; or a ``UsdPrimvarReader_*`` reading
   a primvar of the mesh (its value if constant, else its mean, with one
@@ -57,6 +58,10 @@ _log = logging.getLogger(__name__)
 _warned: set[str] = set()
 
 _CHANNELS = {"rgb": 0, "r": 0, "g": 1, "b": 2, "a": 3}
+#: UsdUVTexture ``sourceColorSpace`` tokens. ``auto`` (the fallback) reads 8-bit files of 3 or 4
+#: channels as sRGB and everything else as raw, as Hydra's Storm does; the renderer decodes sRGB
+#: files into linear MIP maps before filtering (``mipray_bridge``'s texture system).
+_COLOR_SPACES = ("auto", "raw", "sRGB")
 
 #: Colour inputs (three floats, linear RGB).
 COLOR_INPUTS = ("diffuseColor", "emissiveColor", "specularColor")
@@ -231,6 +236,15 @@ def _texture(
         v = _const(shader, key, time)
         if v:
             desc[key] = str(v)
+    space = _const(shader, "sourceColorSpace", time)
+    if space:
+        if str(space) in _COLOR_SPACES:
+            desc["sourceColorSpace"] = str(space)
+        else:
+            _warn_once(
+                f"{owner}: {what} texture {shader.GetPath()} has sourceColorSpace '{space}', "
+                f"not one of {', '.join(_COLOR_SPACES)}; using auto"
+            )
     varname = "st"
     transform: Transform2d | None = None
     st_src = _source(shader, "st")
