@@ -114,6 +114,12 @@ def test_what_mitsuba_cannot_render_alike_is_refused_naming_the_prim() -> None:
     UsdLux.DistantLight(soft.GetPrimAtPath("/World/Sun")).GetAngleAttr().Set(2.0)
     with pytest.raises(mipray.PrimError, match=r"/World/Sun.*angle"):
         mitsuba.scene_dict(mitsuba.capture(soft), 8)
+    # Textured inputs other than a lambertian diffuseColor.
+    with pytest.raises(mipray.PrimError, match=r"/m.*textured inputs \(roughness\)"):
+        mitsuba.material_mapping("/m", {"textures": {"roughness": {"file": "r.png"}}})
+    glossy = {"roughness": 0.3, "textures": {"diffuseColor": {"file": "c.png"}}}
+    with pytest.raises(mipray.PrimError, match=r"/m.*only on a lambertian surface"):
+        mitsuba.material_mapping("/m", glossy)
 
 
 def test_lights_and_materials_map_with_usdlux_units() -> None:

@@ -38,7 +38,10 @@ What maps how (render space is USD world space in both renderers):
   ``emissiveColor`` → an ``area`` emitter on the mesh, and on a turned-over
   copy a hair behind it (mipray's emission is two-sided, Mitsuba's
   one-sided). A cutout (opacityThreshold > 0) below its threshold removes the
-  mesh. Textured inputs are refused.
+  mesh. A textured ``diffuseColor`` on a lambertian surface → ``diffuse`` with
+  a ``bitmap`` of the same file, decoded by Mitsuba (``raw`` off where mipray
+  reads the file as sRGB), the mesh's ``st`` as its texture coordinates; other
+  textured inputs are refused.
 
 Everything Mitsuba cannot represent the way mipray renders it raises
 :class:`~mipray.errors.PrimError` naming the prim, rather than rendering a
@@ -187,6 +190,48 @@ def _spectrum(rgb: tuple[float, float, float]) -> dict[str, Any]:
     return {"type": "rgb", "value": list(rgb)}
 
 
+#: The model name of a lambertian surface with a textured diffuseColor.
+TEXTURED_DIFFUSE = "diffuse (textured)"
+
+#: UsdUVTexture wrap tokens → Mitsuba's bitmap ``wrap_mode`` (``black`` has none).
+_WRAP = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp", None: "repeat"}
+
+
+def _bitmap(path: str, tex: dict[str, Any]) -> dict[str, Any]:
+    """A UsdUVTexture feeding diffuseColor as Mitsuba's ``bitmap``.
+
+    The file is Mitsuba's to read and decode: ``raw`` off where mipray decodes sRGB
+    (``sourceColorSpace`` sRGB, or auto on an 8-bit file of 3 or 4 channels, Hydra's rule), so
+    the two renderers' decodings are independent. Mitsuba interpolates the finest level
+    bilinearly (no MIP map); mipray filters by the ray differentials: the same image when the
+    texture varies slowly across a pixel. Texture coordinates go as Mitsuba's (v down the
+    image): see :func:`_mesh`.
+    """
+    mi = _mitsuba()
+    if tex.get("channel", 0) != 0:
+        raise PrimError(path, "a diffuseColor texture read from a single channel is not exported")
+    for key, identity in (("scale", 1.0), ("bias", 0.0)):
+        if any(abs(float(v) - identity) > 1e-6 for v in list(tex.get(key, [identity] * 4))[:3]):
+            raise PrimError(path, f"a diffuseColor texture with a {key} is not exported")
+    wraps = {tex.get("wrapS"), tex.get("wrapT")}
+    if len(wraps) != 1 or next(iter(wraps)) not in _WRAP:
+        raise PrimError(path, f"texture wrap modes {sorted(map(str, wraps))} are not exported")
+    file = str(tex["file"])
+    bitmap = mi.Bitmap(file)
+    eight_bit = bitmap.component_format() == mi.Struct.Type.UInt8
+    space = tex.get("sourceColorSpace", "auto")
+    srgb = space == "sRGB" or (space == "auto" and eight_bit and bitmap.channel_count() in (3, 4))
+    if srgb and not bitmap.srgb_gamma():
+        raise PrimError(path, f"{file}: Mitsuba does not read it as sRGB-encoded")
+    return {
+        "type": "bitmap",
+        "filename": file,
+        "raw": not srgb,
+        "filter_type": "bilinear",
+        "wrap_mode": _WRAP[next(iter(wraps))],
+    }
+
+
 def _surface(material: dict[str, Any] | None, albedo: Any) -> dict[str, Any]:
     """UsdPreviewSurface's inputs with fallbacks, clamped as the core clamps them."""
     m = material or {}
@@ -224,9 +269,13 @@ def material_mapping(
         PrimError: a textured input (Mitsuba would need the mesh's st).
 
     """
-    if material and material.get("textures"):
-        inputs = ", ".join(sorted(material["textures"]))
-        raise PrimError(path, f"textured inputs ({inputs}) are not exported to Mitsuba")
+    textures = dict((material or {}).get("textures") or {})
+    diffuse_texture = textures.pop("diffuseColor", None)
+    if textures:
+        inputs = ", ".join(sorted(textures))
+        raise PrimError(
+            path, f"textured inputs ({inputs}) are not exported to Mitsuba (diffuseColor is)"
+        )
     s = _surface(material, albedo)
     emission = s["emissiveColor"] if max(s["emissiveColor"]) > 0.0 else None
     rough = s["roughness"]
@@ -258,7 +307,16 @@ def material_mapping(
         dielectric = ((1.0 - s["ior"]) / (1.0 + s["ior"])) ** 2
         f0 = max((1.0 - metallic) * dielectric + metallic * c for c in diffuse)
     bsdf: dict[str, Any]
-    if s["clearcoat"] <= 0.0 and f0 <= 0.0:
+    if diffuse_texture is not None:
+        if s["clearcoat"] > 0.0 or f0 > 0.0 or s["opacity"] < 1.0:
+            raise PrimError(
+                path,
+                "a textured diffuseColor is exported only on a lambertian surface "
+                "(no specular, clearcoat or transmission)",
+            )
+        bsdf = {"type": "diffuse", "reflectance": _bitmap(path, diffuse_texture)}
+        model, exact = TEXTURED_DIFFUSE, True
+    elif s["clearcoat"] <= 0.0 and f0 <= 0.0:
         bsdf = {"type": "diffuse", "reflectance": _spectrum(diffuse)}
         model, exact = "diffuse", True
     elif s["clearcoat"] <= 0.0 and metallic >= 1.0 and smooth:
@@ -312,7 +370,11 @@ def _world_points(args: dict[str, Any]) -> NDArray[np.float64]:
 
 
 def _triangles(path: str, args: dict[str, Any], points: NDArray[np.float64]) -> NDArray[np.int64]:
-    """Fan triangles of every planar face (F', 3), with the face each came from as column 3."""
+    """Fan triangles of every planar face, as an (F', 7) array.
+
+    Columns: three point indices, the face each came from, and its corners' face-vertex
+    positions (for face-varying st).
+    """
     scheme = args.get("scheme", "catmullClark")
     if scheme != "none":
         raise PrimError(
@@ -324,15 +386,16 @@ def _triangles(path: str, args: dict[str, Any], points: NDArray[np.float64]) -> 
     indices = np.asarray(args["face_vertex_indices"], dtype=np.int64)
     holes = set(np.asarray(args.get("hole_indices") or [], dtype=np.int64).tolist())
     left = bool(args.get("left_handed", False))
-    out: list[tuple[int, int, int, int]] = []
+    out: list[tuple[int, int, int, int, int, int, int]] = []
     start = 0
     for face, n in enumerate(counts.tolist()):
         idx = indices[start : start + n]
+        fv = np.arange(start, start + n)
         start += n
         if face in holes or n < 3:
             continue
         if left:
-            idx = idx[::-1]
+            idx, fv = idx[::-1], fv[::-1]
         poly = points[idx]
         if n > 3:
             # Newell's normal; every corner must lie on the plane through the centroid.
@@ -352,19 +415,71 @@ def _triangles(path: str, args: dict[str, Any], points: NDArray[np.float64]) -> 
                         "it as a bilinear patch, Mitsuba would render triangles",
                     )
         for i in range(1, n - 1):
-            out.append((int(idx[0]), int(idx[i]), int(idx[i + 1]), face))
-    return np.asarray(out, dtype=np.int64).reshape(-1, 4)
+            corners = (int(idx[0]), int(idx[i]), int(idx[i + 1]))
+            out.append((*corners, face, int(fv[0]), int(fv[i]), int(fv[i + 1])))
+    return np.asarray(out, dtype=np.int64).reshape(-1, 7)
+
+
+def _face_vertex_st(path: str, args: dict[str, Any]) -> NDArray[np.float64] | None:
+    """The mesh's ``st`` at every face-vertex (F_v, 2), or None without one."""
+    if args.get("st_values") is None:
+        return None
+    values = np.asarray(args["st_values"], dtype=np.float64).reshape(-1, 2)
+    if args.get("st_indices") is not None:
+        values = values[np.asarray(args["st_indices"], dtype=np.int64)]
+    counts = np.asarray(args["face_vertex_counts"], dtype=np.int64)
+    indices = np.asarray(args["face_vertex_indices"], dtype=np.int64)
+    how = args.get("st_interpolation", "faceVarying")
+    if how == "faceVarying":
+        per = values
+    elif how in ("vertex", "varying"):
+        per = values[indices]
+    elif how == "uniform":
+        per = np.repeat(values, counts, axis=0)
+    elif how == "constant":
+        per = np.repeat(values[:1], len(indices), axis=0)
+    else:
+        raise PrimError(path, f"st interpolation '{how}' is not exported to Mitsuba")
+    if len(per) != len(indices):
+        raise PrimError(path, f"st has {len(per)} values for {len(indices)} face-vertices")
+    return per
 
 
 def _mesh(
-    mi: Any, name: str, points: NDArray[np.float64], tris: NDArray[np.int64], props: Any
+    mi: Any,
+    name: str,
+    points: NDArray[np.float64],
+    tris: NDArray[np.int64],
+    props: Any,
+    st: NDArray[np.float64] | None = None,
 ) -> Any:
-    """A Mitsuba mesh of the triangles, without vertex normals (flat-shaded, as mipray)."""
-    used, inverse = np.unique(tris[:, :3].reshape(-1), return_inverse=True)
-    mesh = mi.Mesh(name, len(used), len(tris), props=props, has_vertex_normals=False)
+    """A Mitsuba mesh of the triangles, without vertex normals (flat-shaded, as mipray).
+
+    With ``st`` (per face-vertex), every triangle corner is its own vertex carrying its
+    texture coordinate, v = 1 - t: Mitsuba's v runs down the image (its mesh loaders flip
+    t on reading), USD's t up.
+    """
+    if st is None:
+        used, inverse = np.unique(tris[:, :3].reshape(-1), return_inverse=True)
+        positions, faces, uv = points[used], inverse, None
+    else:
+        positions = points[tris[:, :3].reshape(-1)]
+        faces = np.arange(3 * len(tris))
+        uv = st[tris[:, 4:7].reshape(-1)].copy()
+        uv[:, 1] = 1.0 - uv[:, 1]
+    mesh = mi.Mesh(
+        name,
+        len(positions),
+        len(tris),
+        props=props,
+        has_vertex_normals=False,
+        has_vertex_texcoords=uv is not None,
+    )
     params = mi.traverse(mesh)
-    params["vertex_positions"] = points[used].astype(np.float32).reshape(-1)
-    params["faces"] = inverse.astype(np.uint32).reshape(-1)
+    params["vertex_positions"] = positions.astype(np.float32).reshape(-1)
+    params["faces"] = faces.astype(np.uint32).reshape(-1)
+    if uv is not None:
+        params["vertex_texcoords"] = uv.astype(np.float32).reshape(-1)
     params.update()
     return mesh
 
@@ -605,7 +720,12 @@ def scene_dict(
                     {"type": "area", "radiance": _spectrum(mapping.emission)}
                 )
                 scene[f"mesh_{k}_{g + 1}_back"] = _mesh(mi, f"{path}[{g}] back", *back, back_props)
-            scene[f"mesh_{k}_{g + 1}"] = _mesh(mi, f"{path}[{g}]", points, sel, props)
+            st = None
+            if mapping.model == TEXTURED_DIFFUSE:
+                st = _face_vertex_st(path, args)
+                if st is None:
+                    raise PrimError(path, "a textured diffuseColor on a mesh without st")
+            scene[f"mesh_{k}_{g + 1}"] = _mesh(mi, f"{path}[{g}]", points, sel, props, st)
     return scene
 
 
@@ -625,7 +745,7 @@ def _back_faces(
     size = float(np.ptp(corners.reshape(-1, 3), axis=0).max())
     moved = corners[:, ::-1] - (1e-5 * size) * n[:, None, :]
     idx = np.arange(3 * len(tris), dtype=np.int64).reshape(-1, 3)
-    faces = np.hstack([idx, tris[:, 3:4]])
+    faces = np.hstack([idx, tris[:, 3:]])
     return moved.reshape(-1, 3), faces
 
 

@@ -21,6 +21,7 @@ that compute the same integral:
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -108,10 +109,15 @@ def _mesh(
     return mesh
 
 
-def ground(stage: Usd.Stage, material: UsdShade.Material, half: float = 4.0) -> None:
-    """A square at y = 0, facing +Y."""
+def ground(
+    stage: Usd.Stage, material: UsdShade.Material, half: float = 4.0, st: bool = False
+) -> None:
+    """A square at y = 0, facing +Y.
+
+    With ``st``: face-varying st over [0, 1]², s along +X and t along -Z (away from the camera).
+    """
     h = half
-    _mesh(
+    mesh = _mesh(
         stage,
         "/World/Ground",
         [(-h, 0, h), (h, 0, h), (h, 0, -h), (-h, 0, -h)],
@@ -119,6 +125,11 @@ def ground(stage: Usd.Stage, material: UsdShade.Material, half: float = 4.0) -> 
         [0, 1, 2, 3],
         material,
     )
+    if st:
+        primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+            "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
+        )
+        primvar.Set([(0, 0), (1, 0), (1, 1), (0, 1)])
 
 
 def box(stage: Usd.Stage, path: str, lo: Vec3, hi: Vec3, material: UsdShade.Material) -> None:
@@ -290,6 +301,85 @@ def _mirror() -> Usd.Stage:
     return stage
 
 
+def texture_file() -> str:
+    """An 8-bit sRGB PNG that varies slowly and differently along s and t.
+
+    Red waves along s, green rises with t, blue waves along both, so a flipped or swapped
+    coordinate shows. Written once under the temporary directory (its content never changes;
+    a new version of it gets a new name).
+    """
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+
+    path = Path(tempfile.gettempdir()) / "mipray-reference" / "waves-v1.png"
+    if not path.exists():
+        from mipray import _mipray
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        n = 128
+        t, s = np.mgrid[0:n, 0:n].astype(np.float32)
+        s, t = (s + 0.5) / n, 1.0 - (t + 0.5) / n  # rows run down the image, t up
+        rgb = np.stack(
+            [
+                0.5 + 0.35 * np.sin(2 * np.pi * 2 * s),
+                0.15 + 0.7 * t,
+                0.5 + 0.3 * np.cos(2 * np.pi * (s + 1.5 * t)),
+            ],
+            axis=-1,
+        )
+        codes = (np.round(rgb * 255.0) / 255.0).astype(np.float32)
+        # Written aside and renamed: a concurrent run sees the whole file or none.
+        partial = path.with_name(f"{path.stem}.{os.getpid()}.png")
+        _mipray.write_image(str(partial), {"color": codes}, ["color"], {"color": "uint8"})
+        os.replace(partial, path)
+    return str(path)
+
+
+def textured_lambert(stage: Usd.Stage, name: str, file: str) -> UsdShade.Material:
+    """A lambertian UsdPreviewSurface whose diffuseColor is a UsdUVTexture of ``file``.
+
+    The texture reads ``st``; its ``sourceColorSpace`` is left to auto.
+    """
+    material = lambert(stage, name, (0.0, 0.0, 0.0))
+    shader = UsdShade.Shader(stage.GetPrimAtPath(f"/World/Looks/{name}/Surface"))
+    tex = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Texture")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+    for wrap in ("wrapS", "wrapT"):
+        tex.CreateInput(wrap, Sdf.ValueTypeNames.Token).Set("repeat")
+    reader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Reader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    )
+    shader.GetInput("diffuseColor").ConnectToSource(
+        tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    )
+    return material
+
+
+def _textured() -> Usd.Stage:
+    stage = _stage()
+    ground(stage, textured_lambert(stage, "Waves", texture_file()), st=True)
+    box(
+        stage,
+        "/World/Box",
+        (-1.6, 0.0, -0.8),
+        (-0.4, 1.2, 0.4),
+        lambert(stage, "Red", (0.7, 0.15, 0.1)),
+    )
+    uv_sphere(stage, "/World/Ball", (0.9, 0.8, 0.3), 0.8, lambert(stage, "Blue", (0.15, 0.3, 0.7)))
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    _set(sun, 3.0, (1.0, 0.95, 0.9))
+    sun.CreateAngleAttr(0.0)
+    _place(sun, (3.0, 5.0, 2.0), (0.0, 0.0, 0.0))
+    return stage
+
+
 def _bulb(stage: Usd.Stage, intensity: float = 60.0) -> None:
     light = UsdLux.SphereLight.Define(stage, "/World/Bulb")
     _set(light, intensity, (1.0, 0.9, 0.8))
@@ -407,6 +497,14 @@ SCENES: tuple[Scene, ...] = (
         _dome,
         settings={"shadowSamples": 4},
         integrator=_direct(4),
+    ),
+    Scene(
+        "textured",
+        "the still life on a ground whose diffuseColor is an 8-bit sRGB PNG (UsdUVTexture, "
+        "sourceColorSpace auto): texture coordinates, sRGB decoding and filtering; Mitsuba "
+        "decodes the file itself",
+        _textured,
+        settings={},
     ),
     Scene(
         "mirror",
