@@ -134,3 +134,31 @@ def test_source_color_space_reaches_set_mesh(fake) -> None:
         "sourceColorSpace"
         not in fake.meshes()["/World/Quad"]["material"]["textures"]["diffuseColor"]
     )
+
+
+def test_auto_decoding_a_file_that_feeds_data_warns_once_naming_prim_input_and_file(
+    files, caplog
+) -> None:
+    def stage_with(color_space: str | None):
+        stage = new_stage()
+        mesh = quad(stage, half=1.6)
+        material, shader = surface(stage, "/World/Looks/M", useSpecularWorkflow=1)
+        bind(mesh.GetPrim(), material)
+        tex = texture(stage, "/World/Looks/M", shader, "roughness", files["png"], "r")
+        if color_space is not None:
+            tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(color_space)
+        add_camera(stage, "/World/Camera")
+        return stage
+
+    def warnings(color_space: str | None) -> list[str]:
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            mipray.render(stage_with(color_space), width=16, aovs=("color",))
+        return [r.getMessage() for r in caplog.records if "as sRGB" in r.getMessage()]
+
+    # An 8-bit RGB file on roughness: Hydra's auto decodes it, which only its author can say
+    # is wrong, so the renderer says what it did and how to change it.
+    got = warnings(None)
+    assert len(got) == 1, got
+    assert all(w in got[0] for w in ("/World/Quad", "roughness", "ramp.png", "raw")), got
+    assert warnings("raw") == [] and warnings("sRGB") == []

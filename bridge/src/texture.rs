@@ -246,6 +246,13 @@ impl TextureSampler for OiioTextureSystem {
         Ok(h)
     }
 
+    fn decoded_from_srgb(&self, handle: TextureHandle) -> bool {
+        match self.decoded_from.lock() {
+            Ok(g) => g.contains_key(&handle.index()),
+            Err(poisoned) => poisoned.into_inner().contains_key(&handle.index()),
+        }
+    }
+
     fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool {
         self.lookups.fetch_add(1, Ordering::Relaxed);
         let (dx, dy) = self.options.filter.widths(dst_dx, dst_dy);

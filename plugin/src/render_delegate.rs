@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use mipray::displacement::{DisplacementShader, TextureDisplacement};
 use mipray::material::{Input, Material, TexturedColor};
-use mipray::texture::TextureSampler;
+use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
 use glam::Mat4;
@@ -22,7 +22,7 @@ use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
 use crate::light::{AreaKind, DistantLightData, LightPrim};
-use crate::material::{mesh_material, set_input, SurfaceInputs, TextureInput};
+use crate::material::{is_color, mesh_material, set_input, SurfaceInputs, TextureInput};
 use crate::mesh::{MeshData, MeshPrim};
 
 /// Rprim types the delegate renders.
@@ -298,6 +298,9 @@ impl RenderDelegate {
             None => "no texture system".to_string(),
             Some(sampler) => match sampler.handle_encoded(&tex.file, tex.color_space) {
                 Ok(texture) => {
+                    if !is_color(input) {
+                        self.warn_data_decoded(path, input.usd_name(), tex, sampler.as_ref(), texture);
+                    }
                     let (scale, bias, fallback) = tex.affine(input);
                     return Some(TexturedColor {
                         sampler,
@@ -344,11 +347,28 @@ impl RenderDelegate {
         material
     }
 
+    /// One warning when `auto` read a file that feeds data (normal, roughness, displacement, …)
+    /// as sRGB: Hydra's rule decodes every 8-bit RGB file, which bends normals and heights, and
+    /// only the author knows the file holds data.
+    fn warn_data_decoded(&self, path: &str, input: &str, tex: &TextureInput, sampler: &dyn TextureSampler, handle: TextureHandle) {
+        if tex.color_space == SourceColorSpace::Auto && sampler.decoded_from_srgb(handle) {
+            self.warn_once(
+                format!("{path} {} srgb", tex.file),
+                format!(
+                    "{path}: {input} texture {} is 8-bit RGB, so sourceColorSpace auto reads it as sRGB (Hydra's rule); \
+                     author sourceColorSpace = \"raw\" if it holds data rather than colour",
+                    tex.file
+                ),
+            );
+        }
+    }
+
     /// A texture displacement for `input`, or `None` (warned once) when unreadable.
     fn texture_displacement(&self, path: &str, input: &crate::material::TextureInput) -> Option<DisplacementShader> {
         let sampler = self.sampler()?;
-        match TextureDisplacement::new_encoded(sampler, &input.file, input.color_space, 0) {
+        match TextureDisplacement::new_encoded(sampler.clone(), &input.file, input.color_space, 0) {
             Ok(mut d) => {
+                self.warn_data_decoded(path, "displacement", input, sampler.as_ref(), d.texture());
                 let c = (input.channel as usize).min(3);
                 d.lookup = input.lookup();
                 d.scale = input.scale[c];

@@ -162,6 +162,11 @@ impl TextureDisplacement {
         })
     }
 
+    /// The texture's handle in its sampler.
+    pub fn texture(&self) -> TextureHandle {
+        self.texture
+    }
+
     /// The texture's path, as given.
     pub fn path(&self) -> &str {
         &self.path

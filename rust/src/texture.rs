@@ -241,6 +241,12 @@ pub trait TextureSampler: Send + Sync {
         }
     }
 
+    /// Whether `handle` reads a linear copy decoded from an sRGB file (so a caller can warn when
+    /// `auto` decoded a file that feeds data rather than colour). The default: never.
+    fn decoded_from_srgb(&self, _handle: TextureHandle) -> bool {
+        false
+    }
+
     /// Filtered value of `out.len()` channels (from `lookup.first_channel`) at `st`, over the
     /// footprint spanned by `dst_dx = (ds/dx, dt/dx)` and `dst_dy = (ds/dy, dt/dy)` (texture-space
     /// units per step; see the module doc), as the sampler's [`FilterMode`] says. Returns false,
