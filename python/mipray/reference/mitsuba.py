@@ -40,8 +40,9 @@ What maps how (render space is USD world space in both renderers):
   one-sided). A cutout (opacityThreshold > 0) below its threshold removes the
   mesh. A textured ``diffuseColor`` on a lambertian surface → ``diffuse`` with
   a ``bitmap`` of the same file, decoded by Mitsuba (``raw`` off where mipray
-  reads the file as sRGB), the mesh's ``st`` as its texture coordinates; other
-  textured inputs are refused.
+  reads the file as sRGB), the mesh's ``st`` as its texture coordinates; a
+  normal map (raw, scale 2, bias −1) on a lambertian surface → ``normalmap``
+  around ``diffuse``; other textured inputs are refused.
 
 Everything Mitsuba cannot represent the way mipray renders it raises
 :class:`~mipray.errors.PrimError` naming the prim, rather than rendering a
@@ -193,12 +194,15 @@ def _spectrum(rgb: tuple[float, float, float]) -> dict[str, Any]:
 #: The model name of a lambertian surface with a textured diffuseColor.
 TEXTURED_DIFFUSE = "diffuse (textured)"
 
+#: The model name of a lambertian surface with a tangent-space normal map.
+NORMAL_MAPPED = "diffuse (normal map)"
+
 #: UsdUVTexture wrap tokens → Mitsuba's bitmap ``wrap_mode`` (``black`` has none).
 _WRAP = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp", None: "repeat"}
 
 
-def _bitmap(path: str, tex: dict[str, Any]) -> dict[str, Any]:
-    """A UsdUVTexture feeding diffuseColor as Mitsuba's ``bitmap``.
+def _bitmap(path: str, tex: dict[str, Any], normal: bool = False) -> dict[str, Any]:
+    """A UsdUVTexture feeding diffuseColor (or, with ``normal``, normal) as Mitsuba's ``bitmap``.
 
     The file is Mitsuba's to read and decode: ``raw`` off where mipray decodes sRGB
     (``sourceColorSpace`` sRGB, or auto on an 8-bit file of 3 or 4 channels, Hydra's rule), so
@@ -206,13 +210,21 @@ def _bitmap(path: str, tex: dict[str, Any]) -> dict[str, Any]:
     bilinearly (no MIP map); mipray filters by the ray differentials: the same image when the
     texture varies slowly across a pixel. Texture coordinates go as Mitsuba's (v down the
     image): see :func:`_mesh`.
+
+    A normal map goes to Mitsuba's ``normalmap``, which decodes texels as 2·texel − 1 in the
+    frame (dP/du made tangent, n × that, n): mipray's frame (dP/ds, ±n × dP/ds, n) wherever st
+    is right-handed about the normal, so only UsdUVTexture's usual scale 2 and bias −1 on a
+    raw file are exported.
     """
     mi = _mitsuba()
+    what = "normal" if normal else "diffuseColor"
     if tex.get("channel", 0) != 0:
-        raise PrimError(path, "a diffuseColor texture read from a single channel is not exported")
-    for key, identity in (("scale", 1.0), ("bias", 0.0)):
+        raise PrimError(path, f"a {what} texture read from a single channel is not exported")
+    for key, identity in (("scale", 2.0 if normal else 1.0), ("bias", -1.0 if normal else 0.0)):
         if any(abs(float(v) - identity) > 1e-6 for v in list(tex.get(key, [identity] * 4))[:3]):
-            raise PrimError(path, f"a diffuseColor texture with a {key} is not exported")
+            raise PrimError(
+                path, f"a {what} texture with {key} other than {identity} is not exported"
+            )
     wraps = {tex.get("wrapS"), tex.get("wrapT")}
     if len(wraps) != 1 or next(iter(wraps)) not in _WRAP:
         raise PrimError(path, f"texture wrap modes {sorted(map(str, wraps))} are not exported")
@@ -223,6 +235,8 @@ def _bitmap(path: str, tex: dict[str, Any]) -> dict[str, Any]:
     srgb = space == "sRGB" or (space == "auto" and eight_bit and bitmap.channel_count() in (3, 4))
     if srgb and not bitmap.srgb_gamma():
         raise PrimError(path, f"{file}: Mitsuba does not read it as sRGB-encoded")
+    if normal and srgb:
+        raise PrimError(path, f"{file}: a normal map read as sRGB is not exported (author raw)")
     return {
         "type": "bitmap",
         "filename": file,
@@ -271,10 +285,12 @@ def material_mapping(
     """
     textures = dict((material or {}).get("textures") or {})
     diffuse_texture = textures.pop("diffuseColor", None)
+    normal_texture = textures.pop("normal", None)
     if textures:
         inputs = ", ".join(sorted(textures))
         raise PrimError(
-            path, f"textured inputs ({inputs}) are not exported to Mitsuba (diffuseColor is)"
+            path,
+            f"textured inputs ({inputs}) are not exported to Mitsuba (diffuseColor and normal are)",
         )
     s = _surface(material, albedo)
     emission = s["emissiveColor"] if max(s["emissiveColor"]) > 0.0 else None
@@ -316,6 +332,19 @@ def material_mapping(
             )
         bsdf = {"type": "diffuse", "reflectance": _bitmap(path, diffuse_texture)}
         model, exact = TEXTURED_DIFFUSE, True
+    elif normal_texture is not None:
+        if s["clearcoat"] > 0.0 or f0 > 0.0 or s["opacity"] < 1.0:
+            raise PrimError(
+                path,
+                "a normal map is exported only on a lambertian surface "
+                "(no specular, clearcoat or transmission)",
+            )
+        bsdf = {
+            "type": "normalmap",
+            "normalmap": _bitmap(path, normal_texture, normal=True),
+            "bsdf": {"type": "diffuse", "reflectance": _spectrum(diffuse)},
+        }
+        model, exact = NORMAL_MAPPED, True
     elif s["clearcoat"] <= 0.0 and f0 <= 0.0:
         bsdf = {"type": "diffuse", "reflectance": _spectrum(diffuse)}
         model, exact = "diffuse", True
@@ -721,10 +750,10 @@ def scene_dict(
                 )
                 scene[f"mesh_{k}_{g + 1}_back"] = _mesh(mi, f"{path}[{g}] back", *back, back_props)
             st = None
-            if mapping.model == TEXTURED_DIFFUSE:
+            if mapping.model in (TEXTURED_DIFFUSE, NORMAL_MAPPED):
                 st = _face_vertex_st(path, args)
                 if st is None:
-                    raise PrimError(path, "a textured diffuseColor on a mesh without st")
+                    raise PrimError(path, "a texture on a mesh without st")
             scene[f"mesh_{k}_{g + 1}"] = _mesh(mi, f"{path}[{g}]", points, sel, props, st)
     return scene
 

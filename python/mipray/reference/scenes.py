@@ -337,6 +337,79 @@ def texture_file() -> str:
     return str(path)
 
 
+def normal_map_file() -> str:
+    """An 8-bit tangent-space normal map (raw, 2·texel − 1) of gentle crossed waves.
+
+    Heights h = a·sin(2π·3s)·sin(2π·2t): normals (−∂h/∂s, −∂h/∂t, 1) normalized, tilting at
+    most about 25°, so both renderers' shading stays away from the horizon.
+    """
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+
+    path = Path(tempfile.gettempdir()) / "mipray-reference" / "waves-normal-v1.png"
+    if not path.exists():
+        from mipray import _mipray
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        n = 256
+        t, s = np.mgrid[0:n, 0:n].astype(np.float64)
+        s, t = (s + 0.5) / n, 1.0 - (t + 0.5) / n
+        a = 0.018
+        dhds = a * 2 * np.pi * 3 * np.cos(2 * np.pi * 3 * s) * np.sin(2 * np.pi * 2 * t)
+        dhdt = a * 2 * np.pi * 2 * np.sin(2 * np.pi * 3 * s) * np.cos(2 * np.pi * 2 * t)
+        nrm = np.stack([-dhds, -dhdt, np.ones_like(s)], axis=-1)
+        nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+        codes = (np.round((nrm * 0.5 + 0.5) * 255.0) / 255.0).astype(np.float32)
+        partial = path.with_name(f"{path.stem}.{os.getpid()}.png")
+        _mipray.write_image(str(partial), {"color": codes}, ["color"], {"color": "uint8"})
+        os.replace(partial, path)
+    return str(path)
+
+
+def _uv_texture(
+    stage: Usd.Stage, material: str, name: str, file: str, **inputs: Any
+) -> UsdShade.Shader:
+    """A UsdUVTexture of ``file`` reading ``st``, wrapping with repeat, with extra inputs."""
+    tex = UsdShade.Shader.Define(stage, f"{material}/{name}")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+    for wrap in ("wrapS", "wrapT"):
+        tex.CreateInput(wrap, Sdf.ValueTypeNames.Token).Set("repeat")
+    for key, value in inputs.items():
+        if isinstance(value, str):
+            tex.CreateInput(key, Sdf.ValueTypeNames.Token).Set(value)
+        else:
+            tex.CreateInput(key, Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*value))
+    reader = UsdShade.Shader.Define(stage, f"{material}/{name}Reader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    )
+    return tex
+
+
+def normal_mapped_lambert(stage: Usd.Stage, name: str, color: Vec3, file: str) -> UsdShade.Material:
+    """A lambertian UsdPreviewSurface with a tangent-space normal map (raw, scale 2, bias −1)."""
+    material = lambert(stage, name, color)
+    shader = UsdShade.Shader(stage.GetPrimAtPath(f"/World/Looks/{name}/Surface"))
+    tex = _uv_texture(
+        stage,
+        f"/World/Looks/{name}",
+        "NormalTexture",
+        file,
+        sourceColorSpace="raw",
+        scale=(2.0, 2.0, 2.0, 1.0),
+        bias=(-1.0, -1.0, -1.0, 0.0),
+    )
+    shader.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
+        tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    )
+    return material
+
+
 def textured_lambert(stage: Usd.Stage, name: str, file: str) -> UsdShade.Material:
     """A lambertian UsdPreviewSurface whose diffuseColor is a UsdUVTexture of ``file``.
 
@@ -377,6 +450,28 @@ def _textured() -> Usd.Stage:
     _set(sun, 3.0, (1.0, 0.95, 0.9))
     sun.CreateAngleAttr(0.0)
     _place(sun, (3.0, 5.0, 2.0), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _normal_mapped() -> Usd.Stage:
+    stage = _stage()
+    ground(
+        stage, normal_mapped_lambert(stage, "Bumps", (0.6, 0.6, 0.6), normal_map_file()), st=True
+    )
+    box(
+        stage,
+        "/World/Box",
+        (-1.6, 0.0, -0.8),
+        (-0.4, 1.2, 0.4),
+        lambert(stage, "Red", (0.7, 0.15, 0.1)),
+    )
+    uv_sphere(stage, "/World/Ball", (0.9, 0.8, 0.3), 0.8, lambert(stage, "Blue", (0.15, 0.3, 0.7)))
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+    # A low sun, so the bumps' tilt changes the shading a lot.
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    _set(sun, 3.0, (1.0, 0.95, 0.9))
+    sun.CreateAngleAttr(0.0)
+    _place(sun, (4.0, 2.5, 1.0), (0.0, 0.0, 0.0))
     return stage
 
 
@@ -504,6 +599,14 @@ SCENES: tuple[Scene, ...] = (
         "sourceColorSpace auto): texture coordinates, sRGB decoding and filtering; Mitsuba "
         "decodes the file itself",
         _textured,
+        settings={},
+    ),
+    Scene(
+        "normal_mapped",
+        "the still life on a ground with a tangent-space normal map (8-bit, raw, scale 2, "
+        "bias -1) under a low distant light: the tangent frame from st and the mapped "
+        "shading normal",
+        _normal_mapped,
         settings={},
     ),
     Scene(
