@@ -142,6 +142,8 @@ impl OiioTextureSystem {
     }
 
     /// The linear copy of the sRGB-encoded `path` in the cache, made if it is not there yet.
+    /// A cache directory that cannot be written is warned about once and the system temporary
+    /// directory used instead, so an unwritable `$HOME` never costs a render its textures.
     fn linear_copy(&self, path: &str) -> Result<String, TextureError> {
         let err = |message: String| TextureError { path: path.to_string(), message };
         let source = Path::new(path);
@@ -150,23 +152,41 @@ impl OiioTextureSystem {
         let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
         let key = format!("linear-v1\0{}\0{}\0{modified}", absolute.display(), meta.len());
         let stem = source.file_stem().and_then(|s| s.to_str()).unwrap_or("texture");
-        let copy = self.linear_cache.join(format!("{stem}-{:016x}.linear.tx", fnv1a(key.as_bytes())));
-        if copy.is_file() {
-            return Ok(copy.to_string_lossy().into_owned());
+        let name = format!("{stem}-{:016x}.linear.tx", fnv1a(key.as_bytes()));
+        let fallback = std::env::temp_dir().join("mipray-textures");
+        let mut dirs = vec![self.linear_cache.clone()];
+        if fallback != self.linear_cache {
+            dirs.push(fallback);
         }
-        std::fs::create_dir_all(&self.linear_cache)
-            .map_err(|e| err(format!("cannot create the linear texture cache {}: {e}", self.linear_cache.display())))?;
-        // Another render may be converting the same file: each writes its own temporary file
-        // and the rename is atomic, so a reader sees a whole copy or none.
-        let partial = copy.with_extension(format!("{}.partial.tx", std::process::id()));
-        let (src, tmp) = (source.to_string_lossy(), partial.to_string_lossy());
-        log::info!("texture {path}: sRGB-encoded; writing its linear MIP map {}", copy.display());
-        if let Err(e) = ffi::oiio_make_linear_texture(&src, &tmp) {
-            let _ = std::fs::remove_file(&partial);
-            return Err(err(format!("cannot convert from sRGB: {}", e.what())));
+        let mut problem = String::new();
+        for dir in &dirs {
+            let copy = dir.join(&name);
+            if copy.is_file() {
+                return Ok(copy.to_string_lossy().into_owned());
+            }
+            // Another render may be converting the same file: each writes its own temporary
+            // file and the rename is atomic, so a reader sees a whole copy or none.
+            let partial = copy.with_extension(format!("{}.partial.tx", std::process::id()));
+            let written = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&partial, b""));
+            if let Err(e) = written {
+                problem = format!("cannot write the linear texture cache {}: {e}", dir.display());
+                log::warn!("{problem}; trying the next place");
+                continue;
+            }
+            log::info!("texture {path}: sRGB-encoded; writing its linear MIP map {}", copy.display());
+            if let Err(e) = ffi::oiio_make_linear_texture(&source.to_string_lossy(), &partial.to_string_lossy()) {
+                let _ = std::fs::remove_file(&partial);
+                return Err(err(format!("cannot convert from sRGB: {}", e.what())));
+            }
+            match std::fs::rename(&partial, &copy) {
+                Ok(()) => return Ok(copy.to_string_lossy().into_owned()),
+                Err(e) => {
+                    let _ = std::fs::remove_file(&partial);
+                    problem = format!("cannot write {}: {e}", copy.display());
+                }
+            }
         }
-        std::fs::rename(&partial, &copy).map_err(|e| err(format!("cannot write {}: {e}", copy.display())))?;
-        Ok(copy.to_string_lossy().into_owned())
+        Err(err(problem))
     }
 
     /// The options it was made with.
@@ -237,12 +257,14 @@ impl TextureSampler for OiioTextureSystem {
         if !srgb {
             return self.handle(path);
         }
+        // Held while converting: two threads opening one file make one copy.
+        let mut decoded = match self.decoded_from.lock() {
+            Ok(g) => g,
+            Err(poisoned) => poisoned.into_inner(),
+        };
         let copy = self.linear_copy(path)?;
         let h = self.handle(&copy)?;
-        match self.decoded_from.lock() {
-            Ok(mut g) => g.insert(h.index(), path.to_string()),
-            Err(poisoned) => poisoned.into_inner().insert(h.index(), path.to_string()),
-        };
+        decoded.insert(h.index(), path.to_string());
         Ok(h)
     }
 

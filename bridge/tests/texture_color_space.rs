@@ -180,3 +180,35 @@ fn unreadable_srgb_files_are_refused_naming_the_path() {
     let cache = dir.join("cache");
     assert!(!cache.exists() || copies(&cache).is_empty(), "{:?}", copies(&cache));
 }
+
+#[test]
+fn an_unwritable_cache_falls_back_to_the_temporary_directory() {
+    let dir = scratch_dir("unwritable");
+    let png = dir.join("fallback.png");
+    write_u8(&png, 16, 3, |_, _, _| 96);
+    // A plain file where the cache directory should be: it cannot be created.
+    let blocked = dir.join("not-a-dir");
+    std::fs::write(&blocked, "file").unwrap();
+    let ts = system(&blocked.join("cache"));
+    let h = ts.handle_encoded(png.to_str().unwrap(), SourceColorSpace::Srgb).unwrap();
+    assert!((at(&ts, h, [0.5, 0.5], 0, 1)[0] - srgb_to_linear(96.0 / 255.0)).abs() < 1e-3);
+    let stats = ts.stats();
+    let path = stats["files"][0]["path"].as_str().unwrap().to_string();
+    assert!(path.starts_with(std::env::temp_dir().join("mipray-textures").to_str().unwrap()), "{path}");
+}
+
+#[test]
+fn threads_opening_one_srgb_file_share_one_copy_and_handle() {
+    let dir = scratch_dir("threads");
+    let cache = dir.join("cache");
+    let png = dir.join("shared.png");
+    write_u8(&png, 64, 3, |x, _, _| (x * 4) as u8);
+    let ts = system(&cache);
+    let p = png.to_str().unwrap();
+    let handles: Vec<TextureHandle> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..4).map(|_| scope.spawn(|| ts.handle_encoded(p, SourceColorSpace::Auto).unwrap())).collect();
+        workers.into_iter().map(|w| w.join().unwrap()).collect()
+    });
+    assert!(handles.iter().all(|&h| h == handles[0]), "{handles:?}");
+    assert_eq!(copies(&cache).len(), 1, "{:?}", copies(&cache));
+}
