@@ -323,22 +323,16 @@ def material_mapping(
         dielectric = ((1.0 - s["ior"]) / (1.0 + s["ior"])) ** 2
         f0 = max((1.0 - metallic) * dielectric + metallic * c for c in diffuse)
     bsdf: dict[str, Any]
+    if (diffuse_texture or normal_texture) and (s["clearcoat"] > 0.0 or f0 > 0.0):
+        what = "a textured diffuseColor" if diffuse_texture else "a normal map"
+        raise PrimError(
+            path,
+            f"{what} is exported only on a lambertian surface (no specular or clearcoat)",
+        )
     if diffuse_texture is not None:
-        if s["clearcoat"] > 0.0 or f0 > 0.0 or s["opacity"] < 1.0:
-            raise PrimError(
-                path,
-                "a textured diffuseColor is exported only on a lambertian surface "
-                "(no specular, clearcoat or transmission)",
-            )
         bsdf = {"type": "diffuse", "reflectance": _bitmap(path, diffuse_texture)}
         model, exact = TEXTURED_DIFFUSE, True
     elif normal_texture is not None:
-        if s["clearcoat"] > 0.0 or f0 > 0.0 or s["opacity"] < 1.0:
-            raise PrimError(
-                path,
-                "a normal map is exported only on a lambertian surface "
-                "(no specular, clearcoat or transmission)",
-            )
         bsdf = {
             "type": "normalmap",
             "normalmap": _bitmap(path, normal_texture, normal=True),

@@ -214,9 +214,19 @@ def _set(light: Any, intensity: float, color: Vec3 = (1.0, 1.0, 1.0), **inputs: 
         light.GetPrim().CreateAttribute(f"inputs:{key}", Sdf.ValueTypeNames.Float).Set(value)
 
 
-def _still_life(stage: Usd.Stage, sphere_material: UsdShade.Material | None = None) -> None:
-    """Ground, a box and a sphere (lambertian unless ``sphere_material``), a camera."""
-    ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+def _still_life(
+    stage: Usd.Stage,
+    sphere_material: UsdShade.Material | None = None,
+    ground_material: UsdShade.Material | None = None,
+) -> None:
+    """Ground, a box and a sphere (lambertian unless given materials), a camera.
+
+    A ``ground_material`` comes with st on the ground (it is textured).
+    """
+    if ground_material is None:
+        ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+    else:
+        ground(stage, ground_material, st=True)
     box(
         stage,
         "/World/Box",
@@ -240,10 +250,7 @@ def _still_life(stage: Usd.Stage, sphere_material: UsdShade.Material | None = No
 def _distant() -> Usd.Stage:
     stage = _stage()
     _still_life(stage)
-    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
-    _set(sun, 3.0, (1.0, 0.95, 0.9))
-    sun.CreateAngleAttr(0.0)
-    _place(sun, (3.0, 5.0, 2.0), (0.0, 0.0, 0.0))
+    _sun(stage, (3.0, 5.0, 2.0))
     return stage
 
 
@@ -417,61 +424,34 @@ def textured_lambert(stage: Usd.Stage, name: str, file: str) -> UsdShade.Materia
     """
     material = lambert(stage, name, (0.0, 0.0, 0.0))
     shader = UsdShade.Shader(stage.GetPrimAtPath(f"/World/Looks/{name}/Surface"))
-    tex = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Texture")
-    tex.CreateIdAttr("UsdUVTexture")
-    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
-    for wrap in ("wrapS", "wrapT"):
-        tex.CreateInput(wrap, Sdf.ValueTypeNames.Token).Set("repeat")
-    reader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Reader")
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
-    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-        reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-    )
+    tex = _uv_texture(stage, f"/World/Looks/{name}", "Texture", file)
     shader.GetInput("diffuseColor").ConnectToSource(
         tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
     )
     return material
 
 
-def _textured() -> Usd.Stage:
-    stage = _stage()
-    ground(stage, textured_lambert(stage, "Waves", texture_file()), st=True)
-    box(
-        stage,
-        "/World/Box",
-        (-1.6, 0.0, -0.8),
-        (-0.4, 1.2, 0.4),
-        lambert(stage, "Red", (0.7, 0.15, 0.1)),
-    )
-    uv_sphere(stage, "/World/Ball", (0.9, 0.8, 0.3), 0.8, lambert(stage, "Blue", (0.15, 0.3, 0.7)))
-    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+def _sun(stage: Usd.Stage, eye: Vec3) -> None:
+    """A distant light (angle 0) shining from ``eye`` toward the origin."""
     sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
     _set(sun, 3.0, (1.0, 0.95, 0.9))
     sun.CreateAngleAttr(0.0)
-    _place(sun, (3.0, 5.0, 2.0), (0.0, 0.0, 0.0))
+    _place(sun, eye, (0.0, 0.0, 0.0))
+
+
+def _textured() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage, ground_material=textured_lambert(stage, "Waves", texture_file()))
+    _sun(stage, (3.0, 5.0, 2.0))
     return stage
 
 
 def _normal_mapped() -> Usd.Stage:
     stage = _stage()
-    ground(
-        stage, normal_mapped_lambert(stage, "Bumps", (0.6, 0.6, 0.6), normal_map_file()), st=True
-    )
-    box(
-        stage,
-        "/World/Box",
-        (-1.6, 0.0, -0.8),
-        (-0.4, 1.2, 0.4),
-        lambert(stage, "Red", (0.7, 0.15, 0.1)),
-    )
-    uv_sphere(stage, "/World/Ball", (0.9, 0.8, 0.3), 0.8, lambert(stage, "Blue", (0.15, 0.3, 0.7)))
-    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+    bumps = normal_mapped_lambert(stage, "Bumps", (0.6, 0.6, 0.6), normal_map_file())
+    _still_life(stage, ground_material=bumps)
     # A low sun, so the bumps' tilt changes the shading a lot.
-    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
-    _set(sun, 3.0, (1.0, 0.95, 0.9))
-    sun.CreateAngleAttr(0.0)
-    _place(sun, (4.0, 2.5, 1.0), (0.0, 0.0, 0.0))
+    _sun(stage, (4.0, 2.5, 1.0))
     return stage
 
 
