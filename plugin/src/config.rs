@@ -42,6 +42,7 @@ pub const SETTINGS: &[SettingDescriptor] = &[
     SettingDescriptor { key: "irradianceCacheError", default: "0.2", description: "the irradiance cache's error bound (Ward's a); smaller is more accurate" },
     SettingDescriptor { key: "russianRouletteDepth", default: "3", description: "path tracing: bounces before Russian roulette may end a path (maxDepth or more: never)" },
     SettingDescriptor { key: "progressive", default: "0", description: "render in passes of 1, 2, 4, ... samples per pixel, reporting each; the final image is the same: 0 or 1" },
+    SettingDescriptor { key: "seams", default: "1", description: "seam boxes closing cracks between tessellation rates (docs/cracks.md); 0 only to measure them: rays then slip through cracks" },
 ];
 
 /// The settings a render was asked for, validated.
@@ -71,6 +72,7 @@ pub struct RenderSettings {
     pub irradiance_cache_error: f32,
     pub russian_roulette_depth: u32,
     pub progressive: bool,
+    pub seams: bool,
 }
 
 impl Default for RenderSettings {
@@ -99,6 +101,7 @@ impl Default for RenderSettings {
             irradiance_cache_error: 0.2,
             russian_roulette_depth: 3,
             progressive: false,
+            seams: true,
         }
     }
 }
@@ -226,6 +229,12 @@ impl RenderSettings {
                     s.irradiance_cache_error = x as f32;
                 }
                 "russianRouletteDepth" => s.russian_roulette_depth = as_f64(k, v)?.clamp(0.0, 64.0) as u32,
+                "seams" => {
+                    s.seams = match v {
+                        Value::Bool(b) => *b,
+                        _ => as_f64(k, v)? != 0.0,
+                    }
+                }
                 "progressive" => {
                     s.progressive = match v {
                         Value::Bool(b) => *b,
@@ -289,6 +298,7 @@ impl RenderSettings {
             irradiance_cache_error: self.irradiance_cache_error,
             russian_roulette_depth: self.russian_roulette_depth,
             progressive: self.progressive,
+            seams: self.seams,
         }
     }
 }
@@ -306,6 +316,10 @@ mod tests {
         assert_eq!(s.cache_mode, CacheMode::Single);
         assert_eq!(s.tess_factor, 2.0);
         assert_eq!(s.seed, 0);
+        assert!(s.seams && s.to_options(1, 1, &[]).seams, "seam boxes are on by default");
+        let off = json!({"seams": 0});
+        let s = RenderSettings::from_pairs(off.as_object().unwrap().iter().map(|(k, v)| (k.as_str(), v))).unwrap();
+        assert!(!s.to_options(1, 1, &[]).seams);
     }
 
     #[test]

@@ -680,6 +680,34 @@ fn coarse_grids_of_a_surface_do_not_shadow_the_rays_leaving_it() {
 }
 
 #[test]
+fn the_seams_setting_shows_what_seam_boxes_add_to_coarse_occluders() {
+    // The cube above at tessFactorIncoherent 16: the few AO rays still stopped are grazing rays
+    // meeting far subpatches' seam boxes, which stand up to the coarse chord error off the
+    // surface. `seams: false` (the `seams` render setting, for measuring) removes the boxes, so
+    // those pixels clear; it is how docs/cracks.md measures what the boxes change in an image.
+    let mut scene = scene_of(osd("/cube", common::cube()));
+    scene.camera = Camera::perspective(Camera::look_at(Vec3::new(3.0, 2.5, 4.0), Vec3::ZERO, Vec3::Y), 50.0);
+    let occluded = |seams: bool| {
+        let opts = RenderOptions {
+            width: 40,
+            height: 30,
+            ao_samples: 32,
+            ao_distance: 100.0,
+            tess_factor_incoherent: 16.0,
+            seams,
+            aovs: vec!["ao".into(), "alpha".into()],
+            ..Default::default()
+        };
+        let out = render(&scene, &opts, &NoProgress).unwrap();
+        let (ao, alpha) = (&out.film.aov("ao").unwrap().data, &out.film.aov("alpha").unwrap().data);
+        ao.iter().zip(alpha).filter(|(o, a)| **a > 0.0 && **o < 1.0).count()
+    };
+    let (with, without) = (occluded(true), occluded(false));
+    println!("pixels with an AO ray stopped: {with} with seam boxes, {without} without");
+    assert!(with > 0 && without < with, "seams {with}, no seams {without}");
+}
+
+#[test]
 fn a_flat_subdivision_surface_has_zero_tessellation_error_at_every_rate() {
     // A Catmull-Clark grid whose control points lie in z = 0 but are unevenly spaced: its limit
     // surface is that plane, every patch is flat but not a parallelogram (so it is tessellated at

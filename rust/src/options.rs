@@ -68,6 +68,10 @@ pub struct RenderOptions {
     /// a one-pass render (a tile's samples together) reuses — on `examples/subdiv_showcase.usda`
     /// at 160 px, 16 path-traced samples, 30 MB: 18× the cache misses and about 2× the time.
     pub progressive: bool,
+    /// Seam boxes close the cracks between neighbouring subpatches tested at different rates
+    /// ([`crate::seam`], docs/cracks.md). On by default; off only to measure what they cost and
+    /// what they change in an image, since rays then slip through the cracks.
+    pub seams: bool,
 }
 
 /// The `integrator` render setting.
@@ -137,6 +141,7 @@ impl Default for RenderOptions {
             irradiance_cache_error: 0.2,
             russian_roulette_depth: 3,
             progressive: false,
+            seams: true,
         }
     }
 }

@@ -127,6 +127,7 @@ pub fn render_with_cache(
             None => Tracer::new(scene, options.cache, options.tess_factor),
         };
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
+        tracer.set_seams(options.seams);
         let cache_before = tracer.cache.stats();
         let fx = select::effects(scene, options);
         let motion_blur = effects::enabled(&fx, "motion_blur");
