@@ -256,7 +256,7 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let at = |i: usize, j: usize| Vec3A::from(verts[j * n + i]);
     let max_abs = verts.iter().fold(0.0f32, |m, v| m.max(v[0].abs()).max(v[1].abs()).max(v[2].abs()));
     let q = (n - 1) as f32;
-    let (mut dev, mut below, mut above): (f32, f32, f32) = (0.0, 0.0, 0.0);
+    let (mut dev_sq, mut below, mut above): (f32, f32, f32) = (0.0, 0.0, 0.0);
     let edges = SeamEdges::ALL.within(GridDomain::of(surface.patch_param(patch).kind, &rect));
     for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
         for k in 0..n - 1 {
@@ -285,10 +285,9 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
             if !ok {
                 continue;
             }
-            for step in 0..=FIT_STEPS {
-                let tau = step as f32 / FIT_STEPS as f32;
-                let d = quadratic_through_probes(&g, tau) * (tau * (1.0 - tau));
-                dev = dev.max(d.length());
+            for &[l0, l1, l2, bump] in &FIT_TABLE {
+                let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
+                dev_sq = dev_sq.max(d.length_squared());
                 // Along the normal, from the chord's line: a box spans the chord's length (and
                 // `r` beyond its ends) whatever the curve's position along it.
                 match frame {
@@ -302,6 +301,7 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
             }
         }
     }
+    let dev = dev_sq.sqrt();
     let margin = seam_margin(max_abs);
     let r = SEAM_SAFETY * dev + margin;
     // The probes can miss a shallow dip to the side the curve barely crosses to (near a chord's
@@ -316,15 +316,25 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
 /// most 4 % of it: [`SEAM_SAFETY`] covers that.
 const FIT_STEPS: usize = 32;
 
-/// The quadratic through `g` at τ = ¼, ½, ¾, evaluated at `tau` (Lagrange form).
-#[inline]
-fn quadratic_through_probes(g: &[Vec3A; SEAM_PROBES], tau: f32) -> Vec3A {
+/// For each inner sample τ = step / [`FIT_STEPS`] (the ends, where the deviation is zero, left
+/// out): the Lagrange weights of the quadratic through τ = ¼, ½, ¾, and τ(1 − τ). The same for
+/// every chord of every grid, so made once, at compile time.
+const FIT_TABLE: [[f32; 4]; FIT_STEPS - 1] = {
     let (x0, x1, x2) = (0.25f32, 0.5f32, 0.75f32);
-    let l0 = (tau - x1) * (tau - x2) / ((x0 - x1) * (x0 - x2));
-    let l1 = (tau - x0) * (tau - x2) / ((x1 - x0) * (x1 - x2));
-    let l2 = (tau - x0) * (tau - x1) / ((x2 - x0) * (x2 - x1));
-    g[0] * l0 + g[1] * l1 + g[2] * l2
-}
+    let mut table = [[0.0f32; 4]; FIT_STEPS - 1];
+    let mut step = 1;
+    while step < FIT_STEPS {
+        let tau = step as f32 / FIT_STEPS as f32;
+        table[step - 1] = [
+            (tau - x1) * (tau - x2) / ((x0 - x1) * (x0 - x2)),
+            (tau - x0) * (tau - x2) / ((x1 - x0) * (x1 - x2)),
+            (tau - x0) * (tau - x1) / ((x2 - x0) * (x2 - x1)),
+            tau * (1.0 - tau),
+        ];
+        step += 1;
+    }
+    table
+};
 
 /// A seam box: around the chord from `a` to `b`, oriented along it, `r` beyond its ends and on
 /// either side across it (`e2`), and from `below` under it to `above` over it along its normal
