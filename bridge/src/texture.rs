@@ -14,7 +14,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use mipray::texture::serde_json::{json, Map, Value};
 use mipray::texture::{texels_by_lookups, FilterMode, Lookup, SourceColorSpace, Texels, TextureError, TextureHandle, TextureSampler, Wrap};
@@ -65,8 +65,8 @@ pub struct OiioTextureSystem {
     /// Path → handle, and handle → path (for stats), written under the lock; lookups never take
     /// it.
     opened: Mutex<(HashMap<String, TextureHandle>, Vec<String>)>,
-    /// Handle → the sRGB file a linear copy was made from (the handle's path is the copy's).
-    decoded_from: Mutex<HashMap<u32, String>>,
+    /// What [`TextureSampler::handle_encoded`] answered, and which handles are linear copies.
+    encoded: Mutex<Encoded>,
     /// Where linear copies of sRGB files go ([`OiioTextureSystem::linear_cache_dir`]).
     linear_cache: PathBuf,
     lookups: AtomicU64,
@@ -117,7 +117,7 @@ impl OiioTextureSystem {
             sys,
             options,
             opened: Mutex::new((HashMap::new(), Vec::new())),
-            decoded_from: Mutex::new(HashMap::new()),
+            encoded: Mutex::new(Encoded::default()),
             linear_cache: default_linear_cache_dir(),
             lookups: AtomicU64::new(0),
             failed: AtomicU64::new(0),
@@ -201,10 +201,7 @@ impl OiioTextureSystem {
 
     /// Paths opened so far, in handle order.
     pub fn paths(&self) -> Vec<String> {
-        match self.opened.lock() {
-            Ok(g) => g.1.clone(),
-            Err(poisoned) => poisoned.into_inner().1.clone(),
-        }
+        lock(&self.opened).1.clone()
     }
 
     fn note_failure(&self, handle: TextureHandle) {
@@ -225,10 +222,7 @@ impl TextureSampler for OiioTextureSystem {
     /// # Errors
     /// [`TextureError`] naming the path, with OpenImageIO's reason.
     fn handle(&self, path: &str) -> Result<TextureHandle, TextureError> {
-        let mut guard = match self.opened.lock() {
-            Ok(g) => g,
-            Err(poisoned) => poisoned.into_inner(),
-        };
+        let mut guard = lock(&self.opened);
         if let Some(&h) = guard.0.get(path) {
             return Ok(h);
         }
@@ -247,6 +241,13 @@ impl TextureSampler for OiioTextureSystem {
     /// # Errors
     /// [`TextureError`] naming the path: unreadable, or the copy cannot be made.
     fn handle_encoded(&self, path: &str, space: SourceColorSpace) -> Result<TextureHandle, TextureError> {
+        // Held throughout: two threads opening one file make one copy, and a file asked for
+        // again (every mesh that binds it, every render) reads neither its header nor the cache.
+        let mut encoded = lock(&self.encoded);
+        let request = (path.to_string(), space);
+        if let Some(&h) = encoded.requests.get(&request) {
+            return Ok(h);
+        }
         let srgb = match space {
             SourceColorSpace::Raw => false,
             SourceColorSpace::Srgb => true,
@@ -254,25 +255,19 @@ impl TextureSampler for OiioTextureSystem {
                 ffi::oiio_auto_is_srgb(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?
             }
         };
-        if !srgb {
-            return self.handle(path);
-        }
-        // Held while converting: two threads opening one file make one copy.
-        let mut decoded = match self.decoded_from.lock() {
-            Ok(g) => g,
-            Err(poisoned) => poisoned.into_inner(),
+        let h = if srgb {
+            let h = self.handle(&self.linear_copy(path)?)?;
+            encoded.decoded_from.insert(h.index(), path.to_string());
+            h
+        } else {
+            self.handle(path)?
         };
-        let copy = self.linear_copy(path)?;
-        let h = self.handle(&copy)?;
-        decoded.insert(h.index(), path.to_string());
+        encoded.requests.insert(request, h);
         Ok(h)
     }
 
     fn decoded_from_srgb(&self, handle: TextureHandle) -> bool {
-        match self.decoded_from.lock() {
-            Ok(g) => g.contains_key(&handle.index()),
-            Err(poisoned) => poisoned.into_inner().contains_key(&handle.index()),
-        }
+        lock(&self.encoded).decoded_from.contains_key(&handle.index())
     }
 
     fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool {
@@ -364,10 +359,7 @@ impl TextureSampler for OiioTextureSystem {
             .map(|(i, path)| {
                 let mut f = Map::new();
                 f.insert("path".into(), json!(path));
-                let source = match self.decoded_from.lock() {
-                    Ok(g) => g.get(&(i as u32)).cloned(),
-                    Err(poisoned) => poisoned.into_inner().get(&(i as u32)).cloned(),
-                };
+                let source = lock(&self.encoded).decoded_from.get(&(i as u32)).cloned();
                 f.insert("source_color_space".into(), json!(if source.is_some() { "sRGB" } else { "raw" }));
                 if let Some(source) = source {
                     f.insert("decoded_from".into(), json!(source));
@@ -393,6 +385,21 @@ fn number(v: f64) -> Value {
     } else {
         json!(v)
     }
+}
+
+/// [`TextureSampler::handle_encoded`]'s answers, and the linear copies among the handles.
+#[derive(Default)]
+struct Encoded {
+    /// (path, encoding) → handle.
+    requests: HashMap<(String, SourceColorSpace), TextureHandle>,
+    /// Handle → the sRGB file its linear copy was made from (the handle's path is the copy's).
+    decoded_from: HashMap<u32, String>,
+}
+
+/// Locks `m`, taking over a lock a panicking thread left: every write under these locks is one
+/// insert or push, so the tables are whole either way.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// See [`OiioTextureSystem::linear_cache_dir`].

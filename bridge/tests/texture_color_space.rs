@@ -212,3 +212,21 @@ fn threads_opening_one_srgb_file_share_one_copy_and_handle() {
     assert!(handles.iter().all(|&h| h == handles[0]), "{handles:?}");
     assert_eq!(copies(&cache).len(), 1, "{:?}", copies(&cache));
 }
+
+#[test]
+fn a_file_asked_for_again_is_not_read_again() {
+    // Every mesh binding a texture asks for it at every render: the second request answers from
+    // the first, without reading the file's header (auto) or looking for its copy (sRGB). The
+    // source is removed after the first request, so any second read would fail.
+    let dir = scratch_dir("again");
+    let png = dir.join("once.png");
+    write_u8(&png, 16, 3, |_, _, _| 160);
+    let ts = system(&dir.join("cache"));
+    let p = png.to_str().unwrap();
+    let first = [SourceColorSpace::Auto, SourceColorSpace::Srgb, SourceColorSpace::Raw].map(|s| ts.handle_encoded(p, s).unwrap());
+    std::fs::remove_file(&png).unwrap();
+    let again = [SourceColorSpace::Auto, SourceColorSpace::Srgb, SourceColorSpace::Raw].map(|s| ts.handle_encoded(p, s).unwrap());
+    assert_eq!(first, again);
+    assert_eq!(first[0], first[1], "auto on 8-bit RGB is the sRGB copy");
+    assert!(ts.decoded_from_srgb(first[0]) && !ts.decoded_from_srgb(first[2]));
+}
