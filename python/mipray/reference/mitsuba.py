@@ -61,6 +61,7 @@ from pxr import Usd
 
 from ..errors import MiprayError, PrimError
 from ..usd.camera import image_height
+from ..usd.primvars import INTERPOLATIONS, per_face_vertex
 from ..usd.scene_delegate import UsdSceneDelegate
 
 __all__ = [
@@ -453,16 +454,9 @@ def _face_vertex_st(path: str, args: dict[str, Any]) -> NDArray[np.float64] | No
     counts = np.asarray(args["face_vertex_counts"], dtype=np.int64)
     indices = np.asarray(args["face_vertex_indices"], dtype=np.int64)
     how = args.get("st_interpolation", "faceVarying")
-    if how == "faceVarying":
-        per = values
-    elif how in ("vertex", "varying"):
-        per = values[indices]
-    elif how == "uniform":
-        per = np.repeat(values, counts, axis=0)
-    elif how == "constant":
-        per = np.repeat(values[:1], len(indices), axis=0)
-    else:
+    if how not in INTERPOLATIONS:
         raise PrimError(path, f"st interpolation '{how}' is not exported to Mitsuba")
+    per = per_face_vertex(values, how, counts, indices)
     if len(per) != len(indices):
         raise PrimError(path, f"st has {len(per)} values for {len(indices)} face-vertices")
     return per

@@ -308,27 +308,43 @@ def _mirror() -> Usd.Stage:
     return stage
 
 
-def texture_file() -> str:
-    """An 8-bit sRGB PNG that varies slowly and differently along s and t.
+def _png_once(name: str, n: int, dtype: Any, texels: Callable[[Any, Any], Any]) -> str:
+    """An n×n 8-bit RGB PNG of ``texels(s, t)`` (values in [0, 1], H×W×3), written once.
 
-    Red waves along s, green rises with t, blue waves along both, so a flipped or swapped
-    coordinate shows. Written once under the temporary directory (its content never changes;
-    a new version of it gets a new name).
+    It goes under the temporary directory as ``name`` (a new version of a texture gets a new
+    name, so a file there is always whole and current); ``s`` and ``t`` are texel centres of
+    ``dtype``, t up the image. Written aside and renamed: a concurrent run sees the whole file
+    or none.
     """
     import tempfile
     from pathlib import Path
 
     import numpy as np
 
-    path = Path(tempfile.gettempdir()) / "mipray-reference" / "waves-v1.png"
+    path = Path(tempfile.gettempdir()) / "mipray-reference" / name
     if not path.exists():
         from mipray import _mipray
 
         path.parent.mkdir(parents=True, exist_ok=True)
-        n = 128
-        t, s = np.mgrid[0:n, 0:n].astype(np.float32)
+        t, s = np.mgrid[0:n, 0:n].astype(dtype)
         s, t = (s + 0.5) / n, 1.0 - (t + 0.5) / n  # rows run down the image, t up
-        rgb = np.stack(
+        codes = (np.round(texels(s, t) * 255.0) / 255.0).astype(np.float32)
+        partial = path.with_name(f"{path.stem}.{os.getpid()}.png")
+        _mipray.write_image(str(partial), {"color": codes}, ["color"], {"color": "uint8"})
+        os.replace(partial, path)
+    return str(path)
+
+
+def texture_file() -> str:
+    """An 8-bit sRGB PNG that varies slowly and differently along s and t.
+
+    Red waves along s, green rises with t, blue waves along both, so a flipped or swapped
+    coordinate shows.
+    """
+    import numpy as np
+
+    def waves(s: Any, t: Any) -> Any:
+        return np.stack(
             [
                 0.5 + 0.35 * np.sin(2 * np.pi * 2 * s),
                 0.15 + 0.7 * t,
@@ -336,12 +352,8 @@ def texture_file() -> str:
             ],
             axis=-1,
         )
-        codes = (np.round(rgb * 255.0) / 255.0).astype(np.float32)
-        # Written aside and renamed: a concurrent run sees the whole file or none.
-        partial = path.with_name(f"{path.stem}.{os.getpid()}.png")
-        _mipray.write_image(str(partial), {"color": codes}, ["color"], {"color": "uint8"})
-        os.replace(partial, path)
-    return str(path)
+
+    return _png_once("waves-v1.png", 128, np.float32, waves)
 
 
 def normal_map_file() -> str:
@@ -350,29 +362,17 @@ def normal_map_file() -> str:
     Heights h = a·sin(2π·3s)·sin(2π·2t): normals (−∂h/∂s, −∂h/∂t, 1) normalized, tilting at
     most about 25°, so both renderers' shading stays away from the horizon.
     """
-    import tempfile
-    from pathlib import Path
-
     import numpy as np
 
-    path = Path(tempfile.gettempdir()) / "mipray-reference" / "waves-normal-v1.png"
-    if not path.exists():
-        from mipray import _mipray
-
-        path.parent.mkdir(parents=True, exist_ok=True)
-        n = 256
-        t, s = np.mgrid[0:n, 0:n].astype(np.float64)
-        s, t = (s + 0.5) / n, 1.0 - (t + 0.5) / n
+    def normals(s: Any, t: Any) -> Any:
         a = 0.018
         dhds = a * 2 * np.pi * 3 * np.cos(2 * np.pi * 3 * s) * np.sin(2 * np.pi * 2 * t)
         dhdt = a * 2 * np.pi * 2 * np.sin(2 * np.pi * 3 * s) * np.cos(2 * np.pi * 2 * t)
         nrm = np.stack([-dhds, -dhdt, np.ones_like(s)], axis=-1)
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
-        codes = (np.round((nrm * 0.5 + 0.5) * 255.0) / 255.0).astype(np.float32)
-        partial = path.with_name(f"{path.stem}.{os.getpid()}.png")
-        _mipray.write_image(str(partial), {"color": codes}, ["color"], {"color": "uint8"})
-        os.replace(partial, path)
-    return str(path)
+        return nrm * 0.5 + 0.5
+
+    return _png_once("waves-normal-v1.png", 256, np.float64, normals)
 
 
 def _uv_texture(

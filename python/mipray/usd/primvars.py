@@ -25,7 +25,13 @@ from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
 
-__all__ = ["INTERPOLATIONS", "DisplayPrimvar", "per_face", "read_display_primvar"]
+__all__ = [
+    "INTERPOLATIONS",
+    "DisplayPrimvar",
+    "per_face",
+    "per_face_vertex",
+    "read_display_primvar",
+]
 
 #: The interpolation tokens UsdGeom defines for primvars.
 INTERPOLATIONS = ("constant", "uniform", "vertex", "varying", "faceVarying")
@@ -124,6 +130,27 @@ def read_display_primvar(
     return DisplayPrimvar(name, values, interpolation, might_vary)
 
 
+def per_face_vertex(
+    values: NDArray[Any],
+    interpolation: str,
+    counts: NDArray[Any],
+    face_vertex_indices: NDArray[Any],
+) -> NDArray[Any]:
+    """One value per face-vertex of flattened (not indexed) ``values``.
+
+    A constant repeated, a face's value at each of its corners, a point's at each corner on
+    it, face-varying values as they are. Sizes are the caller's to have checked.
+    """
+    if interpolation == "constant":
+        return np.repeat(values[:1], len(face_vertex_indices), axis=0)
+    if interpolation == "uniform":
+        return np.repeat(values, counts, axis=0)
+    if interpolation in ("vertex", "varying"):
+        corners: NDArray[Any] = values[face_vertex_indices]
+        return corners
+    return values
+
+
 def per_face(
     primvar: DisplayPrimvar, counts: NDArray[np.int32], face_vertex_indices: NDArray[np.int32]
 ) -> NDArray[np.float32]:
@@ -142,9 +169,7 @@ def per_face(
         return np.repeat(values[:1], n_faces, axis=0)
     if primvar.interpolation == "uniform":
         return values
-    corners: NDArray[Any] = (
-        values[face_vertex_indices] if primvar.interpolation in ("vertex", "varying") else values
-    )
+    corners = per_face_vertex(values, primvar.interpolation, counts, face_vertex_indices)
     if n_faces == 0:
         return np.zeros((0, values.shape[1]), np.float32)
     starts = np.concatenate(([0], np.cumsum(counts[:-1], dtype=np.int64)))
