@@ -64,24 +64,32 @@ impl WatertightRay {
     /// Watertight ray–triangle test. Returns (t, b0, b1, b2) with barycentrics of a, b, c.
     #[inline]
     pub fn hit_triangle(&self, a: Vec3A, b: Vec3A, c: Vec3A, t_max: f32) -> Option<(f32, f32, f32, f32)> {
-        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
-        let a = a - self.o;
-        let b = b - self.o;
-        let c = c - self.o;
-        let ax = a[kx] - self.sx * a[kz];
-        let ay = a[ky] - self.sy * a[kz];
-        let bx = b[kx] - self.sx * b[kz];
-        let by = b[ky] - self.sy * b[kz];
-        let cx = c[kx] - self.sx * c[kz];
-        let cy = c[ky] - self.sy * c[kz];
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
+        let (a, b, c) = (self.shear(a.as_ref()), self.shear(b.as_ref()), self.shear(c.as_ref()));
+        self.finish_triangle(a, b, c, edge(c, b), edge(a, c), edge(b, a), t_max)
+    }
+
+    /// `p` in the ray's sheared frame: relative to the origin, permuted so the ray runs along
+    /// z, sheared so it is the z axis, z scaled so the ray's t is z.
+    #[inline]
+    fn shear(&self, p: &[f32; 3]) -> Sheared {
+        let o: &[f32; 3] = self.o.as_ref();
+        let az = p[self.kz] - o[self.kz];
+        Sheared { x: (p[self.kx] - o[self.kx]) - self.sx * az, y: (p[self.ky] - o[self.ky]) - self.sy * az, z: self.sz * az }
+    }
+
+    /// The rest of the watertight test for sheared `a`, `b`, `c` whose edge functions
+    /// `u = edge(c, b)`, `v = edge(a, c)`, `w = edge(b, a)` the caller computed (a grid computes
+    /// each of its edges' once and shares it, negated, with the neighbouring triangle: the same
+    /// bits as computing it again, since `edge(q, p) = −edge(p, q)` exactly in IEEE arithmetic).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn finish_triangle(&self, a: Sheared, b: Sheared, c: Sheared, u: f32, v: f32, w: f32, t_max: f32) -> Option<(f32, f32, f32, f32)> {
+        let (mut u, mut v, mut w) = (u, v, w);
         if u == 0.0 || v == 0.0 || w == 0.0 {
             // Fall back to double precision on edges so shared edges are decided consistently.
-            u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
-            v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
-            w = (bx as f64 * ay as f64 - by as f64 * ax as f64) as f32;
+            u = (c.x as f64 * b.y as f64 - c.y as f64 * b.x as f64) as f32;
+            v = (a.x as f64 * c.y as f64 - a.y as f64 * c.x as f64) as f32;
+            w = (b.x as f64 * a.y as f64 - b.y as f64 * a.x as f64) as f32;
         }
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
@@ -90,10 +98,7 @@ impl WatertightRay {
         if det == 0.0 {
             return None;
         }
-        let az = self.sz * a[kz];
-        let bz = self.sz * b[kz];
-        let cz = self.sz * c[kz];
-        let t_scaled = u * az + v * bz + w * cz;
+        let t_scaled = u * a.z + v * b.z + w * c.z;
         // t = t_scaled / det must lie in (0, t_max]; compare without dividing, by the sign of det.
         if (det < 0.0 && (t_scaled >= 0.0 || t_scaled < t_max * det)) || (det > 0.0 && (t_scaled <= 0.0 || t_scaled > t_max * det)) {
             return None;
@@ -101,6 +106,20 @@ impl WatertightRay {
         let inv = 1.0 / det;
         Some((t_scaled * inv, u * inv, v * inv, w * inv))
     }
+}
+
+/// A vertex in a ray's sheared frame (see [`WatertightRay::shear`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Sheared {
+    x: f32,
+    y: f32,
+    z: f32,
+}
+
+/// The edge function of Woop et al. for the edge from `q` to `p`, as their test computes it.
+#[inline]
+fn edge(p: Sheared, q: Sheared) -> f32 {
+    p.x * q.y - p.y * q.x
 }
 
 /// Where a ray hit a tessellation: distance, the subpatch-local (u, v) in [0, 1]², and the
@@ -113,7 +132,14 @@ pub struct GridHit {
     pub ng: Vec3A,
 }
 
+/// Most vertices a grid row has (a fine grid's 17).
+const MAX_ROW: usize = 17;
+
 /// Tests quads `[i0, i1) × [j0, j1)` (in stride units) of `tess` read with vertex `stride`.
+///
+/// Each vertex is sheared into the ray's frame once per call (not once per triangle that uses
+/// it) and the diagonal's edge function is shared by a quad's two triangles: the arithmetic of
+/// every triangle is what [`WatertightRay::hit_triangle`] does, so the hits are the same bits.
 fn hit_quads(
     ray: &WatertightRay,
     tess: &Tessellation,
@@ -126,22 +152,47 @@ fn hit_quads(
     let q = (tess.n - 1) / stride;
     let inv_q = 1.0 / q as f32;
     let (i0, i1, j0, j1) = range;
+    if i1 <= i0 || j1 <= j0 {
+        return;
+    }
+    let verts: &[[f32; 3]] = &tess.verts;
+    let n = tess.n;
     let triangle = tess.domain == GridDomain::LowerTriangle;
+    let width = i1 - i0 + 1;
+    if width > MAX_ROW {
+        // Wider than any tier's grid: test it in column strips.
+        let mid = i0 + (MAX_ROW - 1);
+        hit_quads(ray, tess, stride, (i0, mid, j0, j1), t_min, best, t_max);
+        hit_quads(ray, tess, stride, (mid, i1, j0, j1), t_min, best, t_max);
+        return;
+    }
+    let shear_row = |j: usize, row: &mut [Sheared; MAX_ROW]| {
+        let base = j * stride * n;
+        for (k, s) in row.iter_mut().take(width).enumerate() {
+            *s = ray.shear(&verts[base + (i0 + k) * stride]);
+        }
+    };
+    let mut lo = [Sheared::default(); MAX_ROW];
+    let mut hi = [Sheared::default(); MAX_ROW];
+    shear_row(j0, &mut lo);
     for j in j0..j1 {
+        shear_row(j + 1, &mut hi);
         for i in i0..i1 {
             if triangle && i + j + 1 > q {
                 // Beyond a triangle patch's diagonal its basis only extrapolates.
                 continue;
             }
-            let p00 = tess.vert(i * stride, j * stride);
-            let p10 = tess.vert((i + 1) * stride, j * stride);
-            let p11 = tess.vert((i + 1) * stride, (j + 1) * stride);
-            let p01 = tess.vert(i * stride, (j + 1) * stride);
+            let k = i - i0;
+            let (s00, s10, s01, s11) = (lo[k], lo[k + 1], hi[k], hi[k + 1]);
+            let corner = |di: usize, dj: usize| Vec3A::from(verts[(j + dj) * stride * n + (i + di) * stride]);
             if triangle && i + j + 1 == q {
                 // On the diagonal: the half (p00, p10, p01), corners (0,0), (1,0), (0,1).
-                if let Some((t, _b0, b1, b2)) = ray.hit_triangle(p00, p10, p01, *t_max) {
+                if let Some((t, _b0, b1, b2)) =
+                    ray.finish_triangle(s00, s10, s01, edge(s01, s10), edge(s00, s01), edge(s10, s00), *t_max)
+                {
                     if t > t_min {
                         *t_max = t;
+                        let (p00, p10, p01) = (corner(0, 0), corner(1, 0), corner(0, 1));
                         *best =
                             Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng: (p10 - p00).cross(p01 - p00) });
                     }
@@ -149,22 +200,26 @@ fn hit_quads(
                 continue;
             }
             // Triangles (p00, p10, p11) and (p00, p11, p01): in (u, v) the corners are
-            // (0,0), (1,0), (1,1) and (0,0), (1,1), (0,1).
-            if let Some((t, _b0, b1, b2)) = ray.hit_triangle(p00, p10, p11, *t_max) {
+            // (0,0), (1,0), (1,1) and (0,0), (1,1), (0,1). They share the diagonal's edge.
+            let diagonal = edge(s00, s11);
+            if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s11, edge(s11, s10), diagonal, edge(s10, s00), *t_max) {
                 if t > t_min {
                     *t_max = t;
                     let (lu, lv) = (b1 + b2, b2);
+                    let (p00, p10, p11) = (corner(0, 0), corner(1, 0), corner(1, 1));
                     *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng: (p10 - p00).cross(p11 - p00) });
                 }
             }
-            if let Some((t, _b0, b1, b2)) = ray.hit_triangle(p00, p11, p01, *t_max) {
+            if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s11, s01, edge(s01, s11), edge(s00, s01), -diagonal, *t_max) {
                 if t > t_min {
                     *t_max = t;
                     let (lu, lv) = (b1, b1 + b2);
+                    let (p00, p11, p01) = (corner(0, 0), corner(1, 1), corner(0, 1));
                     *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng: (p11 - p00).cross(p01 - p00) });
                 }
             }
         }
+        std::mem::swap(&mut lo, &mut hi);
     }
 }
 
@@ -261,6 +316,82 @@ mod tests {
         }
         t.domain = GridDomain::Empty;
         assert!(intersect_tessellation(&WatertightRay::new(Vec3A::new(0.1, 0.1, 1.0), Vec3A::NEG_Z), &t, 1, 0.0, f32::INFINITY).is_none());
+    }
+
+    /// The grid test as it was before it shared sheared vertices and edges: every quad's two
+    /// triangles through [`WatertightRay::hit_triangle`], vertex by vertex.
+    fn per_triangle(ray: &WatertightRay, tess: &Tessellation, stride: usize, t_max: f32) -> Option<GridHit> {
+        let q = (tess.n - 1) / stride;
+        let inv_q = 1.0 / q as f32;
+        let (mut best, mut t_best) = (None, t_max);
+        let triangle = tess.domain == GridDomain::LowerTriangle;
+        for j in 0..q {
+            for i in 0..q {
+                let v = |di: usize, dj: usize| tess.vert((i + di) * stride, (j + dj) * stride);
+                let (p00, p10, p11, p01) = (v(0, 0), v(1, 0), v(1, 1), v(0, 1));
+                let mut tris = vec![(p00, p10, p11, 0), (p00, p11, p01, 1)];
+                if triangle && i + j + 1 > q {
+                    continue;
+                }
+                if triangle && i + j + 1 == q {
+                    tris = vec![(p00, p10, p01, 2)];
+                }
+                for (a, b, c, which) in tris {
+                    if let Some((t, _, b1, b2)) = ray.hit_triangle(a, b, c, t_best) {
+                        if t > 0.0 {
+                            t_best = t;
+                            let (lu, lv) = match which {
+                                0 => (b1 + b2, b2),
+                                1 => (b1, b1 + b2),
+                                _ => (b1, b2),
+                            };
+                            best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng: (b - a).cross(c - a) });
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn the_grid_test_gives_the_same_bits_as_testing_each_triangle_alone() {
+        // Bumpy grids of every tier's size, rays from everywhere, through vertices and edges too.
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rand = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut compared = 0;
+        let mut hits = 0;
+        for n in [2usize, 5, 17] {
+            for domain in [GridDomain::Square, GridDomain::LowerTriangle] {
+                let mut t = flat_grid(n);
+                t.domain = domain;
+                let bumps: Vec<[f32; 3]> = t.verts.iter().map(|p| [p[0], p[1], 0.2 * (rand() - 0.5)]).collect();
+                t.verts = bumps.into();
+                for _ in 0..400 {
+                    // Aim at a grid vertex or edge midpoint half the time: the shared-edge cases.
+                    let halves = (n - 1) as f32 * 2.0;
+                    let (x, y, snap_x, snap_y) = (rand(), rand(), rand() < 0.5, rand() < 0.5);
+                    let snap = |x: f32, on: bool| if on { (x * halves).round() / halves } else { x };
+                    let target = Vec3A::new(snap(x, snap_x), snap(y, snap_y), 0.0);
+                    let (ox, oy, oz, below) = (rand() * 4.0 - 2.0, rand() * 4.0 - 2.0, 0.5 + rand() * 2.0, rand() < 0.3);
+                    let o = Vec3A::new(ox, oy, if below { -oz } else { oz });
+                    let r = WatertightRay::new(o, target - o);
+                    for stride in [1usize, 2].into_iter().filter(|s| (n - 1) % s == 0) {
+                        let got = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY);
+                        let want = per_triangle(&r, &t, stride, f32::INFINITY);
+                        assert_eq!(got.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())), want.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())), "n {n} {domain:?} stride {stride} o {o} target {target}");
+                        compared += 1;
+                        hits += usize::from(got.is_some());
+                    }
+                }
+            }
+        }
+        assert!(hits > compared / 3, "most rays should hit: {hits} of {compared}");
     }
 
     #[test]
