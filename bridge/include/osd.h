@@ -39,6 +39,8 @@ class OsdMesh {
   bool evaluate_grid(std::size_t patch, float u0, float v0, float u1, float v1, std::size_t n,
                      rust::Slice<float> p, rust::Slice<float> du,
                      rust::Slice<float> dv) const noexcept;
+  bool evaluate_points(std::size_t patch, rust::Slice<const float> uv,
+                       rust::Slice<float> p) const noexcept;
   int64_t find_patch(int32_t ptex_face, float u, float v, rust::Slice<float> local_uv) const noexcept;
   std::size_t fvar_channel_count() const noexcept;
   std::size_t vertex_primvar_count() const noexcept;

@@ -171,6 +171,10 @@ pub(crate) mod bridge {
             du: &mut [f32],
             dv: &mut [f32],
         ) -> bool;
+        /// Positions only (3 floats each into `p`) at the patch's local (u, v) pairs `uv`: what
+        /// `evaluate` gives as its first three floats, without the derivatives. Returns false for
+        /// a bad index or wrongly sized outputs.
+        fn evaluate_points(self: &OsdMesh, patch: usize, uv: &[f32], p: &mut [f32]) -> bool;
         /// `Far::PatchMap`: the patch holding (u, v) of a ptex face (its index, or -1 when there
         /// is none: a hole, or out of range), and the patch's local (u, v) there in `local_uv`.
         fn find_patch(self: &OsdMesh, ptex_face: i32, u: f32, v: f32, local_uv: &mut [f32]) -> i64;

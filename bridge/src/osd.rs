@@ -438,6 +438,17 @@ impl LimitSurface for OsdSurface {
         assert!(ok, "{}: patch {patch} out of range ({} patches)", self.name, self.params.len());
     }
 
+    /// One call into C++ for all the points; positions only.
+    ///
+    /// # Panics
+    /// If `patch >= patch_count()`.
+    fn evaluate_points(&self, patch: usize, uv: &[[f32; 2]], out: &mut Vec<[f32; 3]>) {
+        out.clear();
+        out.resize(uv.len(), [0.0; 3]);
+        let ok = self.mesh.evaluate_points(patch, uv.as_flattened(), out.as_flattened_mut());
+        assert!(ok, "{}: patch {patch} out of range ({} patches)", self.name, self.params.len());
+    }
+
     fn control_face_count(&self) -> usize {
         self.control_faces
     }

@@ -10,7 +10,7 @@
 //! |---|---|
 //! | position vs limit stencils | 1e-5 · diag |
 //! | first derivatives vs limit stencils (mapped to the ptex face) | 1e-4 · (diag + max abs derivative) |
-//! | `evaluate_grid` vs `evaluate` | 1e-6 · diag |
+//! | `evaluate_grid` and `evaluate_points` vs `evaluate` | 1e-6 · diag |
 //! | first derivatives vs central differences (h = 1e-2) | 2e-3 · (local derivative scale) + rounding floor |
 //! | second derivatives vs differences of first (h = 1e-2) | 2e-2 · (local second + first derivative scale) + rounding floor |
 //! | the same on Gregory patches (OpenSubdiv's approximate derivatives) | 0.25 · scale + rounding floor |
@@ -125,6 +125,9 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         let tri = pp.kind.is_triangle();
         let bounds = surface.patch_bounds(patch);
         surface.evaluate_grid(patch, UvRect::UNIT, side, true, &mut grid);
+        let uv: Vec<[f32; 2]> = (0..side * side).map(|k| UvRect::UNIT.grid_uv(k % side, k / side, side)).map(|(u, v)| [u, v]).collect();
+        let mut points = Vec::new();
+        surface.evaluate_points(patch, &uv, &mut points);
         for j in 0..side {
             for i in 0..side {
                 let (u, v) = UvRect::UNIT.grid_uv(i, j, side);
@@ -133,6 +136,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
                 let g = Vec3A::from(grid.p[k]);
                 let gd = Vec3A::from(grid.dpdu[k]);
                 stats.grid_err = stats.grid_err.max(max_abs(g - sp.p)).max(max_abs(gd - sp.dpdu));
+                stats.grid_err = stats.grid_err.max(max_abs(Vec3A::from(points[k]) - sp.p));
                 if tri && u + v > 1.0 + 1e-6 {
                     // Outside the triangle's domain: the basis extrapolates there.
                     continue;

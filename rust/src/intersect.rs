@@ -187,9 +187,7 @@ fn hit_quads(
             let corner = |di: usize, dj: usize| Vec3A::from(verts[(j + dj) * stride * n + (i + di) * stride]);
             if triangle && i + j + 1 == q {
                 // On the diagonal: the half (p00, p10, p01), corners (0,0), (1,0), (0,1).
-                if let Some((t, _b0, b1, b2)) =
-                    ray.finish_triangle(s00, s10, s01, edge(s01, s10), edge(s00, s01), edge(s10, s00), *t_max)
-                {
+                if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s01, edge(s01, s10), edge(s00, s01), edge(s10, s00), *t_max) {
                     if t > t_min {
                         *t_max = t;
                         let (p00, p10, p01) = (corner(0, 0), corner(1, 0), corner(0, 1));
@@ -384,7 +382,11 @@ mod tests {
                     for stride in [1usize, 2].into_iter().filter(|s| (n - 1) % s == 0) {
                         let got = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY);
                         let want = per_triangle(&r, &t, stride, f32::INFINITY);
-                        assert_eq!(got.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())), want.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())), "n {n} {domain:?} stride {stride} o {o} target {target}");
+                        assert_eq!(
+                            got.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())),
+                            want.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())),
+                            "n {n} {domain:?} stride {stride} o {o} target {target}"
+                        );
                         compared += 1;
                         hits += usize::from(got.is_some());
                     }

@@ -151,6 +151,14 @@ pub trait LimitSurface: Send + Sync {
         }
     }
 
+    /// Positions at the patch's own (u, v) pairs `uv`, into `out` (cleared first): the `p` of
+    /// [`LimitSurface::evaluate`] without the derivatives, in one call (the bridge crosses into
+    /// C++ once for all of them). May differ from `evaluate` by the rounding of the result.
+    fn evaluate_points(&self, patch: usize, uv: &[[f32; 2]], out: &mut Vec<[f32; 3]>) {
+        out.clear();
+        out.extend(uv.iter().map(|&[u, v]| <[f32; 3]>::from(self.evaluate(patch, u, v).p)));
+    }
+
     /// Number of control (base) faces of the mesh.
     fn control_face_count(&self) -> usize;
 

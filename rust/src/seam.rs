@@ -258,46 +258,52 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let q = (n - 1) as f32;
     let (mut dev_sq, mut below, mut above): (f32, f32, f32) = (0.0, 0.0, 0.0);
     let edges = SeamEdges::ALL.within(GridDomain::of(surface.patch_param(patch).kind, &rect));
-    for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
-        for k in 0..n - 1 {
-            let frame = chord_frame(at, e, k, n, 1);
-            let (ia, ja) = edge_vertex(e, k, n);
-            let (ib, jb) = edge_vertex(e, k + 1, n);
-            // The edge curve's deviation from the chord, D(τ) = c(τ) − (a + (b − a)τ) over the
-            // chord's own parameter τ ∈ [0, 1], vanishes at both ends: D = τ(1 − τ)·G(τ). For a
-            // polynomial edge of degree ≤ 4 G is a quadratic, which the three probes determine;
-            // its extremes bound the curve's, including where the probes miss (a maximum
-            // between them, a dip near an end).
-            let (a, b) = (at(ia, ja), at(ib, jb));
-            let mut g = [Vec3A::ZERO; SEAM_PROBES];
-            let mut ok = true;
-            for (p, gp) in g.iter_mut().enumerate() {
-                let tau = (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
-                let t = (k as f32 + tau) / q;
-                let (lu, lv) = edge_uv(e, t);
-                let u = rect.u0 + (rect.u1 - rect.u0) * lu;
-                let v = rect.v0 + (rect.v1 - rect.v0) * lv;
-                let c = surface.evaluate(patch, u, v).p;
-                let d = c - (a + (b - a) * tau);
-                ok &= d.is_finite();
-                *gp = d / (tau * (1.0 - tau));
-            }
-            if !ok {
-                continue;
-            }
-            for &[l0, l1, l2, bump] in &FIT_TABLE {
-                let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
-                dev_sq = dev_sq.max(d.length_squared());
-                // Along the normal, from the chord's line: a box spans the chord's length (and
-                // `r` beyond its ends) whatever the curve's position along it.
-                match frame {
-                    Some(f) => {
-                        let h = d.dot(f.e1);
-                        below = below.max(-h);
-                        above = above.max(h);
-                    }
-                    None => (below, above) = (below.max(d.length()), above.max(d.length())),
+    let chords = || (0..=DIAGONAL).filter(move |&e| edges.contains(e)).flat_map(move |e| (0..n - 1).map(move |k| (e, k)));
+    let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
+    // Every probe of every chord in one evaluation: positions only.
+    let uv: Vec<[f32; 2]> = chords()
+        .flat_map(|(e, k)| {
+            (0..SEAM_PROBES).map(move |p| {
+                let (lu, lv) = edge_uv(e, (k as f32 + tau(p)) / q);
+                [rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv]
+            })
+        })
+        .collect();
+    let mut probes = Vec::with_capacity(uv.len());
+    surface.evaluate_points(patch, &uv, &mut probes);
+    for ((e, k), curve) in chords().zip(probes.chunks_exact(SEAM_PROBES)) {
+        let frame = chord_frame(at, e, k, n, 1);
+        let (ia, ja) = edge_vertex(e, k, n);
+        let (ib, jb) = edge_vertex(e, k + 1, n);
+        // The edge curve's deviation from the chord, D(τ) = c(τ) − (a + (b − a)τ) over the
+        // chord's own parameter τ ∈ [0, 1], vanishes at both ends: D = τ(1 − τ)·G(τ). For a
+        // polynomial edge of degree ≤ 4 G is a quadratic, which the three probes determine;
+        // its extremes bound the curve's, including where the probes miss (a maximum between
+        // them, a dip near an end).
+        let (a, b) = (at(ia, ja), at(ib, jb));
+        let mut g = [Vec3A::ZERO; SEAM_PROBES];
+        let mut ok = true;
+        for (p, (gp, c)) in g.iter_mut().zip(curve).enumerate() {
+            let tau = tau(p);
+            let d = Vec3A::from(*c) - (a + (b - a) * tau);
+            ok &= d.is_finite();
+            *gp = d / (tau * (1.0 - tau));
+        }
+        if !ok {
+            continue;
+        }
+        for &[l0, l1, l2, bump] in &FIT_TABLE {
+            let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
+            dev_sq = dev_sq.max(d.length_squared());
+            // Along the normal, from the chord's line: a box spans the chord's length (and `r`
+            // beyond its ends) whatever the curve's position along it.
+            match frame {
+                Some(f) => {
+                    let h = d.dot(f.e1);
+                    below = below.max(-h);
+                    above = above.max(h);
                 }
+                None => (below, above) = (below.max(d.length()), above.max(d.length())),
             }
         }
     }
@@ -473,21 +479,24 @@ pub fn intersect_seams(
     }
     let mut best: Option<GridHit> = None;
     let mut t_best = t_max;
+    let verts: &[[f32; 3]] = &tess.verts;
+    let origin_margin = seam_margin(ray.o.abs().max_element());
     for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
-        // Cull the edge first, cheaply: every box lies within its chord's radius plus the
-        // skipped vertices' distance (merged rates), and √3 times that bounds how far it reaches
-        // from its chord in any axis direction.
         let vert = |k: usize| {
             let (i, j) = edge_vertex(e, k, n);
-            tess.vert(i, j)
+            Vec3A::from(verts[j * n + i])
         };
+        // How far chord k's box reaches from the chord: the radius, plus (merged rates) the
+        // skipped vertices' distance from the long chord.
+        let reach =
+            |k: usize, a: Vec3A, b: Vec3A| (1..stride).fold(base, |r, m| r.max(base + point_segment_distance(vert(k * stride + m), a, b)));
+        // Cull the edge first, cheaply: every box lies within its chord's reach, and √3 times
+        // that bounds how far it reaches from its chord in any axis direction.
         let mut edge_box = crate::bounds::Bounds3::EMPTY;
         let mut r_max: f32 = base;
         for k in 0..q {
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
-            for m in 1..stride {
-                r_max = r_max.max(base + point_segment_distance(vert(k * stride + m), a, b));
-            }
+            r_max = r_max.max(reach(k, a, b));
             edge_box.grow(a);
             edge_box.grow(b);
         }
@@ -495,9 +504,15 @@ pub fn intersect_seams(
             continue;
         }
         for k in 0..q {
+            // Then each chord by the same bound, before building its box.
+            let (a, b) = (vert(k * stride), vert((k + 1) * stride));
+            let chord = crate::bounds::Bounds3 { min: a.min(b), max: a.max(b) };
+            if ray.hit_box(&chord.expanded(1.8 * reach(k, a, b)), t_min, t_best).is_none() {
+                continue;
+            }
             let Some((sb, ng)) = seam_box(tess, e, k, stride) else { continue };
             // A ray that starts in (or on) the box leaves a surface near this seam: skip it.
-            let start_grow = 1e-3 * sb.r + seam_margin(ray.o.abs().max_element());
+            let start_grow = 1e-3 * sb.r + origin_margin;
             if sb.contains(ray.o, start_grow) {
                 continue;
             }

@@ -478,23 +478,28 @@ fn probe_chord_error(surface: &dyn LimitSurface, sub: &Subpatch, t: &Tessellatio
     let quads = t.n - 1;
     let q = quads as f32;
     let k = quads.min(4);
-    let mut err: f32 = 0.0;
-    for b in 0..k * k {
-        let (i, j) = ((b % k) * quads / k + (quads / k) / 2, (b / k) * quads / k + (quads / k) / 2);
-        let inside = match t.domain {
+    // The probed quads (i, j) and where on the patch their middles are, evaluated in one call.
+    let probes: Vec<(usize, usize)> = (0..k * k)
+        .map(|b| ((b % k) * quads / k + (quads / k) / 2, (b / k) * quads / k + (quads / k) / 2))
+        .filter(|&(i, j)| match t.domain {
             GridDomain::Square => true,
             GridDomain::LowerTriangle => (i + j + 1) as f32 <= q,
             GridDomain::Empty => false,
-        };
-        if !inside {
-            continue;
-        }
-        let (lu, lv) = ((i as f32 + 0.5) / q, (j as f32 + 0.5) / q);
-        let u = sub.rect.u0 + (sub.rect.u1 - sub.rect.u0) * lu;
-        let v = sub.rect.v0 + (sub.rect.v1 - sub.rect.v0) * lv;
-        let s = surface.evaluate(sub.patch as usize, u, v).p;
+        })
+        .collect();
+    let uv: Vec<[f32; 2]> = probes
+        .iter()
+        .map(|&(i, j)| {
+            let (lu, lv) = ((i as f32 + 0.5) / q, (j as f32 + 0.5) / q);
+            [sub.rect.u0 + (sub.rect.u1 - sub.rect.u0) * lu, sub.rect.v0 + (sub.rect.v1 - sub.rect.v0) * lv]
+        })
+        .collect();
+    let mut surface_points = Vec::with_capacity(uv.len());
+    surface.evaluate_points(sub.patch as usize, &uv, &mut surface_points);
+    let mut err: f32 = 0.0;
+    for (&(i, j), s) in probes.iter().zip(&surface_points) {
         let quad = (t.vert(i, j) + t.vert(i + 1, j) + t.vert(i + 1, j + 1) + t.vert(i, j + 1)) * 0.25;
-        err = err.max((s - quad).length());
+        err = err.max((Vec3A::from(*s) - quad).length());
     }
     if err.is_finite() {
         err
