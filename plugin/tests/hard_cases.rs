@@ -681,18 +681,21 @@ fn coarse_grids_of_a_surface_do_not_shadow_the_rays_leaving_it() {
 
 #[test]
 fn the_seams_setting_shows_what_seam_boxes_add_to_coarse_occluders() {
-    // The cube above at tessFactorIncoherent 16: the few AO rays still stopped are grazing rays
-    // meeting far subpatches' seam boxes, which stand up to the coarse chord error off the
-    // surface. `seams: false` (the `seams` render setting, for measuring) removes the boxes, so
-    // those pixels clear; it is how docs/cracks.md measures what the boxes change in an image.
+    // The cube above, AO rays at tessFactorIncoherent 16 and camera rays at finer rates than the
+    // default (where the cube's AO rays used to meet far subpatches' seam boxes, which stand up to
+    // the coarse chord error off the surface: 5 pixels had a ray stopped with seams, 0 without).
+    // A ray leaving a surface now ignores its own instance within the two grids' chord errors
+    // (a merged stride's error scaled by the stride squared), seam boxes included: with or
+    // without them (`seams`, the render setting for measuring), no pixel shadows itself.
     let mut scene = scene_of(osd("/cube", common::cube()));
     scene.camera = Camera::perspective(Camera::look_at(Vec3::new(3.0, 2.5, 4.0), Vec3::ZERO, Vec3::Y), 50.0);
-    let occluded = |seams: bool| {
+    let occluded = |seams: bool, tess_factor: f32| {
         let opts = RenderOptions {
             width: 40,
             height: 30,
             ao_samples: 32,
             ao_distance: 100.0,
+            tess_factor,
             tess_factor_incoherent: 16.0,
             seams,
             aovs: vec!["ao".into(), "alpha".into()],
@@ -700,11 +703,16 @@ fn the_seams_setting_shows_what_seam_boxes_add_to_coarse_occluders() {
         };
         let out = render(&scene, &opts, &NoProgress).unwrap();
         let (ao, alpha) = (&out.film.aov("ao").unwrap().data, &out.film.aov("alpha").unwrap().data);
-        ao.iter().zip(alpha).filter(|(o, a)| **a > 0.0 && **o < 1.0).count()
+        let stopped = ao.iter().zip(alpha).filter(|(o, a)| **a > 0.0 && **o < 1.0).count();
+        let seam_rates = out.stats["render"]["rate_tests_by_ray"]["ao"]["1"].as_u64().unwrap();
+        (stopped, seam_rates)
     };
-    let (with, without) = (occluded(true), occluded(false));
-    println!("pixels with an AO ray stopped: {with} with seam boxes, {without} without");
-    assert!(with > 0 && without < with, "seams {with}, no seams {without}");
+    for tess_factor in [0.25, 0.5] {
+        let ((with, rates_with), (without, rates_without)) = (occluded(true, tess_factor), occluded(false, tess_factor));
+        println!("tessFactor {tess_factor}: pixels with an AO ray stopped: {with} with seam boxes, {without} without");
+        assert!(rates_with > 0 && rates_without > 0, "AO rays used coarse grids");
+        assert_eq!((with, without), (0, 0), "tessFactor {tess_factor}: seams {with}, no seams {without}");
+    }
 }
 
 #[test]

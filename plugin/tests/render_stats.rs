@@ -170,7 +170,16 @@ fn each_render_s_stats_have_every_named_field_and_agree() {
             width: WIDTH,
             height: HEIGHT,
             aovs: vec!["color".into()],
-            settings: RenderSettings { samples: SAMPLES, threads: 1, geometry_cache_mb: mb, ..RenderSettings::default() },
+            // tessFactor 0.25: quads a quarter of the beam wide, so camera rays reach the fine
+            // tier at this small size (at the default, rates sized by the patches' own extent
+            // stay in the coarse and medium tiers here) and 60 kB evicts fine entries too.
+            settings: RenderSettings {
+                samples: SAMPLES,
+                threads: 1,
+                geometry_cache_mb: mb,
+                tess_factor: 0.25,
+                ..RenderSettings::default()
+            },
         };
         let first = pass.execute(&mut d, &NoProgress).unwrap();
         let second = pass.execute(&mut d, &NoProgress).unwrap();

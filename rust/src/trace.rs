@@ -109,13 +109,12 @@ pub struct Hit {
     pub time: f32,
 }
 
-/// The surface a secondary ray starts on: hits on the same instance's root subpatch it starts
-/// from, or on one whose box holds the origin, closer than the two tessellations' chord errors
-/// (along the ray) are the surface meeting itself at another rate, not an occluder.
+/// The surface a secondary ray starts on: hits on the instance it starts from closer than the
+/// two tessellations' chord errors (along the ray) are the surface meeting itself at another
+/// rate, not an occluder.
 #[derive(Clone, Copy, Debug)]
 struct Origin {
     instance: u32,
-    subpatch: u32,
     /// Render units.
     chord_error: f32,
     /// 1 / |cos| between the ray and the surface (capped): a gap across the surface is this
@@ -126,7 +125,7 @@ struct Origin {
 impl Origin {
     fn of(hit: &Hit, ray: &Ray) -> Origin {
         let cos = ray.d.dot(hit.ng).abs().max(0.05);
-        Origin { instance: hit.instance, subpatch: hit.subpatch, chord_error: hit.chord_error, inv_cos: 1.0 / cos }
+        Origin { instance: hit.instance, chord_error: hit.chord_error, inv_cos: 1.0 / cos }
     }
 }
 
@@ -322,7 +321,7 @@ impl<'s> Tracer<'s> {
     }
 
     /// As [`Tracer::intersect`], for a ray leaving the surface at `from`: where it meets the
-    /// subpatch it starts on again, closer than the two tessellations' chord errors (over the
+    /// surface it starts on (the same instance) again, closer than the two tessellations' chord errors (over the
     /// ray's cosine to the surface), that is the surface at another rate, not an occluder. Rays
     /// of different widths test one subpatch at different rates; without this a coarse grid
     /// of a concave surface shadows the fine grid a camera ray hit.
@@ -410,12 +409,15 @@ impl<'s> Tracer<'s> {
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
             let kind = Self::kind_index(ray.kind);
-            // Near the ray's origin, skip the surface's own other tessellations: on the subpatch
-            // it starts from, and on any other subpatch of the same surface whose box holds the
-            // origin (its neighbours across a patch edge). A coarser grid there stands up to its
-            // chord error above the fine grid the ray starts on (a facet touching the limit
-            // surface at its corners, where the fine chords sag below it), and would shadow it.
-            let own = origin.filter(|org| org.instance == ii as u32 && (org.subpatch == si as u32 || sp.bounds.contains(o)));
+            // Near the ray's origin, skip the surface's own other tessellations: closer than the
+            // two tessellations' chord errors (along the ray), a hit on the instance the ray
+            // starts from is the surface meeting itself at another rate. A coarser grid there
+            // stands up to its chord error above the fine grid the ray starts on (a facet
+            // touching the limit surface at its corners, where the fine chords sag below it),
+            // and would shadow it. Only subpatches near the origin can be hit that close, so
+            // this is the rule "the origin's own subpatch and the neighbours whose boxes hold
+            // it" without a box test (and without depending on how tight the boxes are).
+            let own = origin.filter(|org| org.instance == ii as u32);
             let t_min_for = |chord_error: f32| match own {
                 Some(o) => ray.t_min.max((o.chord_error + chord_error * inst.scale) * o.inv_cos),
                 None => ray.t_min,
@@ -441,13 +443,16 @@ impl<'s> Tracer<'s> {
                 let (tier, stride) = rate.tier_and_stride();
                 let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(instance.mesh, geom, cell, tier);
-                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), t_min_for(tess.chord_error), t_best).map(|h| LocalHit {
+                // The grid's chord error was probed at its own spacing; read at a merged stride
+                // its quads are `stride` times wider, and a chord's sag grows with its square.
+                let chord_error = tess.chord_error * (stride * stride) as f32;
+                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), t_min_for(chord_error), t_best).map(|h| LocalHit {
                     t: h.t,
                     uv: (h.u, h.v),
                     rect: sp.rect,
                     ng: h.ng,
                     quads: rate.quads() as u32,
-                    chord_error: tess.chord_error,
+                    chord_error,
                 })
             };
             match found {
