@@ -31,12 +31,14 @@ struct Args {
     single_runs: usize,
     grid: (usize, usize),
     face_res: usize,
+    /// The render's tessFactor (1: quads as wide as the beam).
+    tess_factor: f32,
     /// Only these configurations, e.g. `unbounded,multires:30` (default: all eleven).
     configs: Option<Vec<(String, f64)>>,
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)");
+    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)");
     std::process::exit(2)
 }
 
@@ -50,6 +52,7 @@ fn parse(args: &[String]) -> Args {
         single_runs: 1,
         grid: (24, 20),
         face_res: 13,
+        tess_factor: 1.0,
         configs: None,
     };
     let mut it = args.iter();
@@ -63,6 +66,7 @@ fn parse(args: &[String]) -> Args {
             "--runs" => a.runs = v().parse().unwrap_or_else(|_| usage()),
             "--single-runs" => a.single_runs = v().parse().unwrap_or_else(|_| usage()),
             "--face-res" => a.face_res = v().parse().unwrap_or_else(|_| usage()),
+            "--tess-factor" => a.tess_factor = v().parse().unwrap_or_else(|_| usage()),
             "--configs" => {
                 let list = v()
                     .split(',')
@@ -121,6 +125,7 @@ fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
         height: a.height,
         ao_samples: a.ao,
         ao_distance: 6.0,
+        tess_factor: a.tess_factor,
         cache,
         aovs: vec!["color".into()],
         ..Default::default()
@@ -216,6 +221,8 @@ fn main() {
                 &a.face_res.to_string(),
                 "--grid",
                 &format!("{},{}", a.grid.0, a.grid.1),
+                "--tess-factor",
+                &a.tess_factor.to_string(),
             ]);
             let out = match cmd.output() {
                 Ok(o) if o.status.success() => o,
