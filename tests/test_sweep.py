@@ -229,7 +229,7 @@ def test_sweep_one_knob_on_a_tiny_scene(native, scene_file: Path, tmp_path: Path
         [
             scene_file,
             "--knob",
-            "tessFactor=1,8",
+            "tessFactor=0.25,8",
             "--width",
             WIDTH,
             "--reference-samples",
@@ -249,14 +249,14 @@ def test_sweep_one_knob_on_a_tiny_scene(native, scene_file: Path, tmp_path: Path
     assert table["schema"] == SCHEMA
     assert table["complete"] is True and table["stopped"] is None
     assert table["image_size"][0] == WIDTH and table["image_size"][1] >= 1
-    assert table["knobs"] == {"tessFactor": [1.0, 8.0]}
+    assert table["knobs"] == {"tessFactor": [0.25, 8.0]}
     assert table["reference"]["source"] == "auto"
     assert table["reference"]["settings"]["cacheMode"] == "unbounded"
     assert table["reference"]["settings"]["samples"] == 2
     assert Path(table["reference"]["written"]).exists()
     assert table["planned_rows"] == 2
     rows = table["rows"]
-    assert [r["setting"] for r in rows] == [{"tessFactor": 1.0}, {"tessFactor": 8.0}]
+    assert [r["setting"] for r in rows] == [{"tessFactor": 0.25}, {"tessFactor": 8.0}]
     for row in rows:
         assert set(row) == set(ROW_FIELDS)
         assert len(row["wall_s_runs"]) == 2 and row["wall_s"] > 0
@@ -271,8 +271,8 @@ def test_sweep_one_knob_on_a_tiny_scene(native, scene_file: Path, tmp_path: Path
     assert coarse["tess_error_max"] > fine["tess_error_max"]
     # The Markdown table and the command's output list the same rows.
     md = Path(f"{prefix}.md").read_text()
-    assert "| tessFactor=1 |" in md and "| tessFactor=8 |" in md
-    assert "| tessFactor=1 |" in out
+    assert "| tessFactor=0.25 |" in md and "| tessFactor=8 |" in md
+    assert "| tessFactor=0.25 |" in out
     assert out.strip().splitlines()[-1] == f"{prefix}.reference.exr"
     assert not Path(f"{prefix}.png").exists()
 
@@ -428,7 +428,9 @@ def test_every_run_starts_cold(native) -> None:
     # A delegate kept between renders carries the cache's recomputed-vertex count over;
     # the sweep renders each run with a new one, so the last run's stats are one run's.
     scene = str(Path(__file__).resolve().parent.parent / "examples" / "subdiv_showcase.usda")
-    settings = {"geometryCacheMb": 0.01}
+    # tessFactor 0.1: at 8 pixels the default rates stay in the coarse tier, which 10 kB holds
+    # whole; quads a tenth of the beam reach the fine tier, whose working set outgrows it.
+    settings = {"geometryCacheMb": 0.01, "tessFactor": 0.1}
     one = sw.render_in_process(sw.RowRequest(scene, settings, WIDTH, runs=1))
     two = sw.render_in_process(sw.RowRequest(scene, settings, WIDTH, runs=2))
     recomputed = one.stats["geometry_cache"]["recomputed_vertices"]

@@ -491,23 +491,35 @@ pub fn intersect_seams(
         let reach =
             |k: usize, a: Vec3A, b: Vec3A| (1..stride).fold(base, |r, m| r.max(base + point_segment_distance(vert(k * stride + m), a, b)));
         // Cull the edge first, cheaply: every box lies within its chord's reach, and √3 times
-        // that bounds how far it reaches from its chord in any axis direction.
+        // that bounds how far it reaches from its chord in any axis direction. The reaches are
+        // kept for the chords' own culls below (on the stack: a tier's grid has at most 16
+        // chords an edge).
         let mut edge_box = crate::bounds::Bounds3::EMPTY;
         let mut r_max: f32 = base;
-        for k in 0..q {
+        let (mut on_stack, mut on_heap) = ([base; 16], Vec::new());
+        let reaches: &mut [f32] = if q <= on_stack.len() {
+            &mut on_stack[..q]
+        } else {
+            on_heap.resize(q, base);
+            &mut on_heap
+        };
+        for (k, r) in reaches.iter_mut().enumerate() {
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
-            r_max = r_max.max(reach(k, a, b));
+            if stride > 1 {
+                *r = reach(k, a, b);
+            }
+            r_max = r_max.max(*r);
             edge_box.grow(a);
             edge_box.grow(b);
         }
         if ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
             continue;
         }
-        for k in 0..q {
+        for (k, &r) in reaches.iter().enumerate() {
             // Then each chord by the same bound, before building its box.
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
             let chord = crate::bounds::Bounds3 { min: a.min(b), max: a.max(b) };
-            if ray.hit_box(&chord.expanded(1.8 * reach(k, a, b)), t_min, t_best).is_none() {
+            if ray.hit_box(&chord.expanded(1.8 * r), t_min, t_best).is_none() {
                 continue;
             }
             let Some((sb, ng)) = seam_box(tess, e, k, stride) else { continue };

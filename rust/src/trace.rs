@@ -388,6 +388,7 @@ impl<'s> Tracer<'s> {
         let blas = geom.bvh.as_ref()?;
         let mesh = &self.scene.meshes[instance.mesh];
         let inst = instance.pose(ray.time);
+        let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         let wray = WatertightRay::new(o, d);
@@ -405,7 +406,10 @@ impl<'s> Tracer<'s> {
                 return f32::INFINITY;
             };
             counters.ray_subpatch_tests += 1;
-            let size = sp.bounds.diagonal().max_element() * inst.scale;
+            // The rate is sized by the patch itself: its box less the displacement bound it was
+            // grown by (displacement finer than the grid is filtered to its spacing, so the
+            // bound is no reason to tessellate finer).
+            let size = (sp.bounds.diagonal().max_element() - displacement_pad).max(0.0) * inst.scale;
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
             let kind = Self::kind_index(ray.kind);
