@@ -486,10 +486,14 @@ pub fn intersect_seams(
             let (i, j) = edge_vertex(e, k, n);
             Vec3A::from(verts[j * n + i])
         };
-        // How far chord k's box reaches from the chord: the radius, plus (merged rates) the
-        // skipped vertices' distance from the long chord.
-        let reach =
-            |k: usize, a: Vec3A, b: Vec3A| (1..stride).fold(base, |r, m| r.max(base + point_segment_distance(vert(k * stride + m), a, b)));
+        // At most how far chord k's box reaches from the chord: the radius, plus (merged rates)
+        // a bound on the skipped vertices' distance from the long chord — their L1 distance from
+        // its middle, which costs no square root or division per vertex (the box itself, built
+        // only for chords the cull lets through, measures the distance exactly).
+        let reach = |k: usize, a: Vec3A, b: Vec3A| {
+            let mid = (a + b) * 0.5;
+            (1..stride).fold(base, |r, m| r.max(base + (vert(k * stride + m) - mid).abs().element_sum()))
+        };
         // Cull the edge first, cheaply: every box lies within its chord's reach, and √3 times
         // that bounds how far it reaches from its chord in any axis direction. The reaches are
         // kept for the chords' own culls below (on the stack: a tier's grid has at most 16
