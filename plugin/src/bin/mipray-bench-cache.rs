@@ -38,7 +38,7 @@ struct Args {
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)");
+    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)\n       mipray-bench-cache report PREFIX   (PREFIX.md again from PREFIX.json)");
     std::process::exit(2)
 }
 
@@ -170,6 +170,27 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() {
     let argv: Vec<String> = std::env::args().skip(1).collect();
+    if argv.first().map(String::as_str) == Some("report") {
+        // `report PREFIX`: rewrite PREFIX.md from PREFIX.json (a changed report, no re-run).
+        let Some(prefix) = argv.get(1) else { usage() };
+        let doc: Value = match std::fs::read_to_string(format!("{prefix}.json")).map(|t| serde_json::from_str(&t)) {
+            Ok(Ok(d)) => d,
+            Ok(Err(e)) => {
+                eprintln!("mipray-bench-cache: {prefix}.json: {e}");
+                std::process::exit(1);
+            }
+            Err(e) => {
+                eprintln!("mipray-bench-cache: {prefix}.json: {e}");
+                std::process::exit(1);
+            }
+        };
+        if let Err(e) = std::fs::write(format!("{prefix}.md"), markdown(&doc)) {
+            eprintln!("mipray-bench-cache: {prefix}.md: {e}");
+            std::process::exit(1);
+        }
+        println!("{prefix}.md");
+        return;
+    }
     if argv.first().map(String::as_str) == Some("run") {
         if argv.len() < 4 {
             usage();
@@ -256,7 +277,7 @@ fn main() {
         r["bit_identical_to_unbounded"] = json!(img == reference);
     }
     let _ = std::fs::remove_dir_all(&tmp);
-    let doc = json!({"width": a.width, "height": a.height, "ao_samples": a.ao, "runs": a.runs, "single_runs": a.single_runs, "elapsed_s": t_all.elapsed().as_secs_f64(), "grid": [a.grid.0, a.grid.1], "face_res": a.face_res, "rows": rows});
+    let doc = json!({"width": a.width, "height": a.height, "ao_samples": a.ao, "runs": a.runs, "single_runs": a.single_runs, "elapsed_s": t_all.elapsed().as_secs_f64(), "grid": [a.grid.0, a.grid.1], "face_res": a.face_res, "tess_factor": a.tess_factor, "rows": rows});
     let json_path = format!("{}.json", a.out);
     if let Err(e) = std::fs::write(&json_path, serde_json::to_string_pretty(&doc).unwrap_or_default()) {
         eprintln!("mipray-bench-cache: {json_path}: {e}");
@@ -301,6 +322,10 @@ fn markdown(doc: &Value) -> String {
         doc["runs"],
         doc["single_runs"],
         doc["elapsed_s"].as_f64().unwrap_or(0.0) / 60.0,
+    );
+    let tess_factor = doc["tess_factor"].as_f64().unwrap_or(1.0);
+    s += &format!(
+        "Rates: tessFactor {tess_factor} (1: quads as wide as the beam, with each patch sized by its own Bézier hull; before that the control-point hulls sized patches 2–3× too large, so rates were that much finer and the fine tier was busy: the table of 4a6d22c is in this file's history). `--tess-factor 0.33` asks for about the old rates.\n\n"
     );
     let rays = &first["render"]["rays"];
     s += &format!(
@@ -368,8 +393,13 @@ fn targets(rows: &[Value]) -> String {
     let rv = |r: &Value| r["stats"]["geometry_cache"]["recomputed_vertices"].as_f64().unwrap_or(0.0);
     let (ratio_text, ratio_ok) = match find("single", 30.0) {
         Some(single) => {
-            let ratio = rv(single) / rv(multi).max(1.0);
-            (format!("single/multires = {ratio:.0}×"), if ratio >= 20.0 { "met" } else { "NOT met" })
+            if rv(multi) == 0.0 {
+                // Nothing to divide by: every tier held its working set.
+                (format!("single recomputes {}, multires none", fmt_count(rv(single))), "met")
+            } else {
+                let ratio = rv(single) / rv(multi);
+                (format!("single/multires = {ratio:.0}×"), if ratio >= 20.0 { "met" } else { "NOT met" })
+            }
         }
         None => ("single not run".to_string(), "—"),
     };
