@@ -1,0 +1,776 @@
+"""``make bench-throughput``: mipray's rays/s by ray type against Embree's, same geometry and rays.
+
+    .venv/bin/python -m mipray.tools.throughput [--width 512] [--runs 3]
+        [--baseline-record /work/baseline-4a6d22c/.venv/bin/mipray-record]
+        [--embree-bin out/throughput/embree_throughput] [--out docs/throughput.md]
+
+For each scene of :mod:`mipray.tools.throughput_scenes` (*plain*: creased cars; *displaced*:
+texture-displaced blobs) it
+
+1. writes the scene (USD) and its export for the Embree harness
+   (``scripts/bench/embree_throughput.cpp``), and runs the harness: camera, AO, shadow and
+   reflection rays, each timed on its own;
+2. renders the scene with ``mipray-record`` in one configuration per ray type, every run a new
+   process, configurations interleaved run by run:
+
+   ============  ==========================================================================
+   camera        ``--integrator direct``, lights off (a session layer deactivates them):
+                 one camera ray per pixel and its shading, nothing else
+   ao            ``--integrator ao --setting aoSamples=N``, lights off
+   shadow        ``--integrator direct --setting shadowSamples=1`` with the sun (angle 0, a
+                 delta light: one shadow ray per lit camera hit)
+   reflection    ``--integrator direct --setting maxDepth=1``, lights off, every
+                 UsdPreviewSurface made a mirror (metallic 1, roughness 0; session layer)
+   ============  ==========================================================================
+
+   Rays of each type are the stats' ``render.rays.<type>``; a configuration's time is the
+   stats' ``render.wall_s`` (the render, tessellation included, not the USD reading and scene
+   sync). The time of the camera rays is the camera configuration's; the time of another
+   type's rays is its configuration's time **minus** the camera configuration's time of the
+   same run (median over runs of that difference): it is honest only as long as the camera
+   rays and their shading cost the same in both, which the checks below the tables state;
+3. with ``--baseline-record``, does 2 again with another build's ``mipray-record`` (the issue's
+   starting commit) for a before/after table;
+4. profiles the ``ao`` configuration of the current build with ``perf record -g`` and lists the
+   functions with the most samples (self time; skipped with a note if ``perf`` is absent);
+5. writes ``docs/throughput.md``: the machine, the command, the date, the tables.
+
+Everything goes through the command line of ``mipray-record``, so any build of it can be
+measured. Exit status 0 when the report was written, 1 on an error (one line,
+``throughput: ...``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pxr import Sdf, Usd, UsdLux, UsdShade
+
+from .throughput_scenes import (
+    SCENES,
+    ExportError,
+    export_stage,
+    write_displaced,
+    write_height_texture,
+    write_plain,
+)
+
+__all__ = ["RAY_TYPES", "Config", "configs", "main", "prepare_scene"]
+
+PROG = "throughput"
+#: Ray types in table order; each is also the name of the mipray configuration isolating it.
+RAY_TYPES = ("camera", "ao", "shadow", "reflection")
+#: Stats ray counters (``render.rays.*``) that no configuration here should make.
+OTHER_RAYS = ("refraction", "glossy", "diffuse")
+TEXTURE = "throughput_height.tx"
+
+
+class ThroughputError(Exception):
+    """A step that failed; the message is the one-line report."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """A ``mipray-record`` configuration isolating one ray type."""
+
+    ray_type: str
+    args: tuple[str, ...]
+    #: Session layer: ``dark`` (lights off), ``mirror`` (lights off, every surface a mirror),
+    #: or None.
+    session: str | None
+
+
+def configs(ao_samples: int, ao_distance: float | None) -> tuple[Config, ...]:
+    """The four configurations, in :data:`RAY_TYPES` order."""
+    ao = ["--integrator", "ao", "--setting", f"aoSamples={ao_samples}"]
+    if ao_distance is not None:
+        ao += ["--setting", f"aoDistance={ao_distance}"]
+    return (
+        Config("camera", ("--integrator", "direct"), "dark"),
+        Config("ao", tuple(ao), "dark"),
+        Config("shadow", ("--integrator", "direct", "--setting", "shadowSamples=1"), None),
+        Config("reflection", ("--integrator", "direct", "--setting", "maxDepth=1"), "mirror"),
+    )
+
+
+# --- scenes ---------------------------------------------------------------------------------
+
+
+@dataclass
+class PreparedScene:
+    """A generated scene: its USD, the harness's export and the session layers."""
+
+    name: str
+    usd: Path
+    export: Path
+    sessions: dict[str, Path]
+    control_faces: int
+
+
+def _session_layers(usd: Path) -> dict[str, Path]:
+    """Write ``<scene>.dark.usda`` and ``<scene>.mirror.usda`` beside ``usd``."""
+    stage = Usd.Stage.Open(str(usd))
+    lights = [p.GetPath() for p in stage.Traverse() if p.HasAPI(UsdLux.LightAPI)]
+    surfaces = [
+        p.GetPath()
+        for p in stage.Traverse()
+        if p.IsA(UsdShade.Shader) and UsdShade.Shader(p).GetIdAttr().Get() == "UsdPreviewSurface"
+    ]
+    out: dict[str, Path] = {}
+    for name, mirror in (("dark", False), ("mirror", True)):
+        path = usd.with_suffix(f".{name}.usda")
+        layer = Sdf.Layer.CreateAnonymous()
+        for light in lights:
+            Sdf.CreatePrimInLayer(layer, light).active = False
+        if mirror:
+            for surface in surfaces:
+                spec = Sdf.CreatePrimInLayer(layer, surface)
+                for attr, value in (("inputs:metallic", 1.0), ("inputs:roughness", 0.0)):
+                    Sdf.AttributeSpec(spec, attr, Sdf.ValueTypeNames.Float).default = value
+        layer.Export(str(path))
+        out[name] = path
+    return out
+
+
+def prepare_scene(name: str, work: Path, small: bool = False) -> PreparedScene:
+    """Write scene ``name`` (``plain`` or ``displaced``) into ``work`` and export it.
+
+    ``small`` writes a tiny version (for tests): 2×1 cars, or 2×1 blobs of 2² quads a side.
+    """
+    work.mkdir(parents=True, exist_ok=True)
+    usd = work / f"{name}.usda"
+    if usd.exists():
+        usd.unlink()  # Usd.Stage.CreateNew refuses an existing file
+    if name == "plain":
+        write_plain(usd, grid=(2, 1) if small else (6, 3))
+    elif name == "displaced":
+        texture = work / TEXTURE
+        if not texture.exists():
+            write_height_texture(texture, size=64 if small else 1024)
+        if small:
+            write_displaced(usd, TEXTURE, grid=(2, 1), face_res=2)
+        else:
+            write_displaced(usd, TEXTURE)
+    else:
+        raise ThroughputError(f"unknown scene {name!r}; the scenes are {', '.join(SCENES)}")
+    export = usd.with_suffix(".bin")
+    scene = export_stage(usd, export)
+    faces = sum(len(m.counts) for m in scene.meshes)
+    return PreparedScene(name, usd, export, _session_layers(usd), faces)
+
+
+# --- running --------------------------------------------------------------------------------
+
+
+def _run(cmd: Sequence[str], what: str, env: dict[str, str] | None = None) -> str:
+    """Run ``cmd``; its stdout, or ThroughputError naming ``what`` with stderr's last line."""
+    proc = subprocess.run(list(cmd), capture_output=True, text=True, env=env, check=False)
+    if proc.returncode != 0:
+        last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise ThroughputError(f"{what} failed (exit {proc.returncode}): {last}")
+    return proc.stdout
+
+
+@dataclass
+class Measured:
+    """Runs of one configuration: wall seconds and ray counts per run."""
+
+    wall_s: list[float] = field(default_factory=list)
+    rays: list[dict[str, int]] = field(default_factory=list)
+
+
+def record_command(
+    record: str, scene: PreparedScene, config: Config, width: int, threads: int, out: Path
+) -> list[str]:
+    """The ``mipray-record`` command line of ``config`` on ``scene``."""
+    cmd = [record, "--imageWidth", str(width), "--threads", str(threads), "--disableCameraLight"]
+    cmd += ["--stats", str(out.with_suffix(".stats.json"))]
+    if config.session:
+        cmd += ["--sessionLayer", str(scene.sessions[config.session])]
+    cmd += [*config.args, str(scene.usd), str(out)]
+    return cmd
+
+
+def measure_mipray(
+    record: str,
+    scene: PreparedScene,
+    cfgs: Sequence[Config],
+    width: int,
+    threads: int,
+    runs: int,
+    work: Path,
+    log: Any,
+) -> dict[str, Measured]:
+    """Render every configuration ``runs`` times, interleaved run by run."""
+    measured = {c.ray_type: Measured() for c in cfgs}
+    for run in range(runs):
+        for config in cfgs:
+            out = work / f"{scene.name}.{config.ray_type}.exr"
+            cmd = record_command(record, scene, config, width, threads, out)
+            _run(cmd, f"{record} ({scene.name}, {config.ray_type})")
+            stats = json.loads(out.with_suffix(".stats.json").read_text())
+            render = stats["render"]
+            rays = {k: int(v) for k, v in render["rays"].items()}
+            measured[config.ray_type].wall_s.append(float(render["wall_s"]))
+            measured[config.ray_type].rays.append(rays)
+            log(
+                f"  {scene.name} {config.ray_type} run {run + 1}/{runs}: "
+                f"{render['wall_s']:.2f} s, {rays.get(config.ray_type, 0):,} rays"
+            )
+    return measured
+
+
+@dataclass
+class Rate:
+    """Rays of one type, the seconds they took, and the checks that held."""
+
+    rays: int
+    seconds: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def per_s(self) -> float:
+        """Rays per second (0 when the time is not positive)."""
+        return self.rays / self.seconds if self.seconds > 0 else 0.0
+
+
+def mipray_rates(measured: dict[str, Measured]) -> dict[str, Rate]:
+    """Rays/s per type: camera from its own configuration, the others by subtraction."""
+    camera = measured["camera"]
+    camera_rays = camera.rays[0].get("camera", 0)
+    rates = {"camera": Rate(camera_rays, statistics.median(camera.wall_s))}
+    for ray_type, m in measured.items():
+        notes: list[str] = []
+        counts = {r.get(ray_type, 0) for r in m.rays}
+        if len(counts) > 1:
+            notes.append(f"{ray_type} rays differ between runs: {sorted(counts)}")
+        for r in m.rays[:1]:
+            if r.get("camera", 0) != camera_rays:
+                notes.append(f"{r.get('camera', 0):,} camera rays, not {camera_rays:,}")
+            others = {
+                k: v for k, v in r.items() if v and k not in ("camera", ray_type) and k != "total"
+            }
+            if others:
+                notes.append("also traced " + ", ".join(f"{v:,} {k}" for k, v in others.items()))
+        if ray_type == "camera":
+            rates["camera"].notes = notes
+            continue
+        diffs = [w - c for w, c in zip(m.wall_s, camera.wall_s, strict=True)]
+        rates[ray_type] = Rate(m.rays[0].get(ray_type, 0), statistics.median(diffs), notes)
+    return rates
+
+
+def run_embree(
+    binary: Path,
+    scene: PreparedScene,
+    width: int,
+    ao_samples: int,
+    ao_distance: float | None,
+    threads: int,
+    runs: int,
+    edge_level: int,
+) -> dict[str, Any]:
+    """The harness's JSON for ``scene``."""
+    cmd = [str(binary), str(scene.export), "--width", str(width), "--height", str(width)]
+    cmd += ["--ao-samples", str(ao_samples), "--threads", str(threads), "--runs", str(runs)]
+    cmd += ["--edge-level", str(edge_level)]
+    if ao_distance is not None:
+        cmd += ["--ao-distance", str(ao_distance)]
+    cmd += ["--image", str(scene.usd.with_suffix(".embree_ao.pgm"))]
+    return dict(json.loads(_run(cmd, f"{binary} ({scene.name})")))
+
+
+# --- profile --------------------------------------------------------------------------------
+
+_PERF_LINE = re.compile(r"^\s*([0-9.]+)%\s+(.*\S)\s*$")
+
+
+def parse_perf_report(text: str, limit: int) -> list[tuple[float, str]]:
+    """``(percent, name)`` of the first ``limit`` entries of ``perf report --stdio`` output."""
+    rows: list[tuple[float, str]] = []
+    for line in text.splitlines():
+        if line.startswith("#") or not line.strip():
+            continue
+        match = _PERF_LINE.match(line)
+        if not match:
+            continue
+        # "[.] name   <padding and call-graph rules>": the name ends at the first wide gap.
+        name = re.split(r"\s{2,}", re.sub(r"^\[[.kgu]\]\s+", "", match.group(2)))[0]
+        rows.append((float(match.group(1)), name))
+        if len(rows) >= limit:
+            break
+    return rows
+
+
+def _render_threads(perf: str, data: Path, threads: int) -> list[str]:
+    """The ``threads`` busiest thread ids of ``data`` other than the process's main thread.
+
+    The main thread reads the USD stage and syncs the scene (outside ``render.wall_s``) and
+    then waits while the render's worker pool traces, so the pool's threads are the render.
+    """
+    # The first sample's "pid/tid" names the process; read one line, not the whole script.
+    with subprocess.Popen(
+        [perf, "script", "-i", str(data), "-F", "pid,tid"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    ) as proc:
+        first = proc.stdout.readline() if proc.stdout else ""
+        proc.kill()
+    pid = first.split("/", 1)[0].strip()
+    text = _run(
+        [
+            perf,
+            "report",
+            "-i",
+            str(data),
+            "--no-children",
+            "--stdio",
+            "-g",
+            "none",
+            "--sort",
+            "pid",
+        ],
+        "perf report --sort pid",
+    )
+    tids = [name.split(":", 1)[0] for _, name in parse_perf_report(text, 64)]
+    return [t for t in tids if t != pid][:threads]
+
+
+def profile(
+    record: str, scene: PreparedScene, config: Config, width: int, threads: int, work: Path
+) -> dict[str, Any]:
+    """``perf record -g`` of one render: the render threads' top symbols and shared objects."""
+    perf = shutil.which("perf")
+    if perf is None:
+        return {"skipped": "perf is not installed (apt-get install linux-perf)"}
+    data = work / f"{scene.name}.{config.ray_type}.perf.data"
+    out = work / f"{scene.name}.{config.ray_type}.perf.exr"
+    cmd = [perf, "record", "-g", "-q", "-o", str(data), "--"]
+    cmd += record_command(record, scene, config, width, threads, out)
+    try:
+        _run(cmd, f"perf record ({scene.name})")
+        tids = _render_threads(perf, data, threads)
+    except ThroughputError as e:
+        return {"skipped": str(e)}
+    result: dict[str, Any] = {"threads": len(tids)}
+    for key, sort, limit in (("symbols", "symbol", 20), ("objects", "dso", 8)):
+        report = [perf, "report", "-i", str(data), "--no-children", "--stdio", "-g", "none"]
+        report += ["--sort", sort, "--percent-limit", "0.5", "--percentage", "relative"]
+        if tids:
+            report += ["--tid", ",".join(tids)]
+        result[key] = parse_perf_report(_run(report, "perf report"), limit)
+    return result
+
+
+# --- the report -----------------------------------------------------------------------------
+
+
+def _git_label(record: str) -> str:
+    """``<commit>`` (``+dirty``) of the worktree whose ``.venv`` holds ``record``, else ''."""
+    path = Path(record).resolve()
+    for parent in path.parents:
+        if parent.name == ".venv":
+            root = parent.parent
+            try:
+                commit = subprocess.run(
+                    ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                ).stdout.strip()
+                dirty = subprocess.run(
+                    ["git", "-C", str(root), "status", "--porcelain", "-uno"],
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                ).stdout.strip()
+            except (OSError, subprocess.CalledProcessError):
+                return ""
+            return commit + ("+dirty" if dirty else "")
+    return ""
+
+
+def _machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    system = f"{platform.system()} {platform.release()}"
+    return f"{model}, {os.cpu_count()} logical CPUs, {system}; load average at start {load}"
+
+
+def _embree_rate(em: dict[str, Any], ray_type: str) -> float:
+    """Embree's rays/s of ``ray_type`` (median time), 0 if the time is not positive."""
+    e = em["types"][ray_type]
+    return float(e["rays"] / e["median_s"]) if e["median_s"] > 0 else 0.0
+
+
+def _m(rate: float) -> str:
+    return f"{rate / 1e6:.3f}" if rate > 0 else "—"
+
+
+def _ratio(a: float, b: float) -> str:
+    return f"{a / b:.3g}×" if a > 0 and b > 0 else "—"
+
+
+@dataclass
+class Results:
+    """Everything the report needs."""
+
+    args: argparse.Namespace
+    command: str
+    started: str
+    machine: str
+    scenes: dict[str, PreparedScene] = field(default_factory=dict)
+    embree: dict[str, dict[str, Any]] = field(default_factory=dict)
+    current: dict[str, dict[str, Rate]] = field(default_factory=dict)
+    baseline: dict[str, dict[str, Rate]] = field(default_factory=dict)
+    profiles: dict[str, dict[str, Any]] = field(default_factory=dict)
+    labels: dict[str, str] = field(default_factory=dict)
+    elapsed_s: float = 0.0
+
+
+def report(r: Results) -> str:
+    """``docs/throughput.md``."""
+    a = r.args
+    cur, base = r.labels["current"], r.labels.get("baseline", "")
+    lines = [
+        "# Ray throughput: mipray against Embree on the same geometry and rays",
+        "",
+        "Written by `make bench-throughput` (`python -m mipray.tools.throughput`, issue 14 part "
+        "3): rays per second by ray type for mipray and, in the same run on the same geometry "
+        "and rays, for Embree through the project's harness `scripts/bench/embree_throughput.cpp`.",
+        "",
+        f"- Date: {r.started} (took {r.elapsed_s / 60:.1f} min)",
+        f"- Machine: {r.machine}",
+        f"- Command: `{r.command}`",
+        f"- mipray: {cur}" + (f"; baseline: {base}" if base else ""),
+        f"- Image {a.width}×{a.width}, {a.threads} threads for both renderers, "
+        f"{a.ao_samples} AO rays per camera hit, AO distance "
+        f"{'infinite' if a.ao_distance is None else a.ao_distance}; "
+        f"mipray: median of {a.runs} runs per configuration, each a new process, "
+        f"configurations interleaved; Embree: median of {a.embree_runs} runs per ray type.",
+        "",
+        "## Scenes",
+        "",
+        "Generated by `mipray/tools/throughput_scenes.py` into the work directory "
+        f"(`{a.work}`), deterministic:",
+        "",
+    ]
+    for name, s in r.scenes.items():
+        what = {
+            "plain": "creased Catmull-Clark cars (box body and cabin with creased edges, four "
+            "wheels with creased rims and 16-gon caps) on a one-quad ground, a sun of angle 0",
+            "displaced": "lumpy Catmull-Clark blobs, UsdPreviewSurface displacement from a "
+            "1024² height texture (maketx MIP map) on vertex st, on a one-quad ground, a sun "
+            "of angle 0",
+        }[name]
+        lines.append(f"- **{name}**: {s.control_faces:,} control faces; {what}.")
+    lines += [
+        "",
+        "## Rays per second by ray type",
+        "",
+        "M rays/s. mipray's time for a type other than camera is its configuration's render "
+        "time minus the camera-only configuration's (see *How* below); Embree's excludes its "
+        "BVH build (all geometry tessellated and displaced up front: *build s*), mipray's "
+        "includes its lazy tessellation, which is how it renders.",
+        "",
+    ]
+    for name in r.scenes:
+        em = r.embree.get(name)
+        lines += [f"### {name}", ""]
+        header = "| ray type | mipray rays | mipray s | mipray M rays/s |"
+        rule = "|---|---:|---:|---:|"
+        if em:
+            header += " Embree rays | Embree s | Embree M rays/s | mipray / Embree |"
+            rule += "---:|---:|---:|---:|"
+        lines += [header, rule]
+        for t in RAY_TYPES:
+            m = r.current[name][t]
+            row = f"| {t} | {m.rays:,} | {m.seconds:.2f} | {_m(m.per_s)} |"
+            if em:
+                e, e_rate = em["types"][t], _embree_rate(em, t)
+                row += f" {e['rays']:,} | {e['median_s']:.3f} | {_m(e_rate)} |"
+                row += f" {_ratio(m.per_s, e_rate)} |"
+            lines.append(row)
+        if em:
+            lines += [
+                "",
+                f"Embree {em['embree_version']}: build {em['build_s']:.2f} s "
+                f"(edge level {em['edge_level']}), {em['hits']:,} camera hits of "
+                f"{em['pixels']:,} pixels, mean unoccluded AO fraction "
+                f"{em['ao_unoccluded_mean']:.3f}.",
+            ]
+        notes = [f"{t}: {n}" for t in RAY_TYPES for n in r.current[name][t].notes]
+        lines += [
+            "",
+            "Checks: "
+            + (
+                "; ".join(notes)
+                if notes
+                else "every configuration traced "
+                "only its own ray type besides the same camera rays, the same counts in every "
+                "run."
+            ),
+            "",
+        ]
+    if r.baseline:
+        lines += [
+            "## Before and after",
+            "",
+            f"M rays/s; before: {base}, after: {cur}. Embree's rays/s from the same run, "
+            "and the after/Embree ratio against the issue's target of 0.5.",
+            "",
+            "| scene | ray type | before | after | after / before | Embree | after / Embree |",
+            "|---|---|---:|---:|---:|---:|---:|",
+        ]
+        for name in r.scenes:
+            em = r.embree.get(name)
+            for t in RAY_TYPES:
+                before, after = r.baseline[name][t].per_s, r.current[name][t].per_s
+                e_rate = _embree_rate(em, t) if em else 0.0
+                lines.append(
+                    f"| {name} | {t} | {_m(before)} | {_m(after)} | {_ratio(after, before)} | "
+                    f"{_m(e_rate)} | {_ratio(after, e_rate)} |"
+                )
+        notes = [
+            f"{n}: {t}: {x}" for n in r.baseline for t in RAY_TYPES for x in r.baseline[n][t].notes
+        ]
+        if notes:
+            lines += ["", "Checks (before): " + "; ".join(notes)]
+        lines.append("")
+    lines += ["## Profile", ""]
+    for name, p in r.profiles.items():
+        lines += [f"### {name}, `ao` configuration", ""]
+        if "skipped" in p:
+            lines += [f"Skipped: {p['skipped']}", ""]
+            continue
+        lines += [
+            f"`perf record -g` of one render; self time (`perf report --no-children --sort "
+            f"symbol`) in its {p['threads']} render threads (the main thread, which reads the "
+            "stage and syncs the scene before `render.wall_s` starts, left out), as a share of "
+            "their samples; functions with at least 0.5 %.",
+            "",
+            "| % | function |",
+            "|---:|---|",
+        ]
+        lines += [f"| {pct:.1f} | `{sym[:120]}` |" for pct, sym in p["symbols"]]
+        lines += [
+            "",
+            "By shared object: " + ", ".join(f"{o} {pct:.1f} %" for pct, o in p["objects"]),
+            "",
+        ]
+    lines += [
+        "## How",
+        "",
+        "- **Same geometry**: the harness reads an export of the very USD stage mipray renders "
+        "(points, face counts and indices, crease edges and sharpness, vertex st, the "
+        "displacement texture with its scale and bias), builds `RTC_GEOMETRY_TYPE_SUBDIVISION` "
+        "at edge level 16 (mipray's finest rate is 16 quads per subpatch side) with corners "
+        "pinned (USD's `edgeAndCorner`), and for the displaced scene a displacement callback "
+        "that reads the same texture through OpenImageIO at the vertex's st with a filter of "
+        "one grid step, as mipray does.",
+        "- **Same rays**: the camera (one ray per pixel centre), then from each camera hit "
+        f"{a.ao_samples} cosine-distributed AO rays, one shadow ray toward the sun where the "
+        "surface faces it, one mirror reflection ray. Single rays (`rtcIntersect1`, "
+        f"`rtcOccluded1`) on {a.threads} `std::thread`s taking chunks of 64 hits; Embree's "
+        "TBB threads (limited to the same count) only build.",
+        "- **mipray's configurations** (each `mipray-record --threads "
+        f"{a.threads} --disableCameraLight --stats`): camera = `--integrator direct` with the "
+        "lights off (a session layer); ao = `--integrator ao --setting aoSamples=N`, lights "
+        "off; shadow = `--integrator direct --setting shadowSamples=1` with the sun; reflection "
+        "= `--integrator direct --setting maxDepth=1`, lights off, every UsdPreviewSurface "
+        "metallic 1 and roughness 0 (a mirror; session layer). Rays from the stats' "
+        "`render.rays`, time from `render.wall_s`.",
+        "- **The subtraction**: a type's time is its configuration's `render.wall_s` minus the "
+        "camera configuration's, run by run, median over runs. It counts the camera rays and "
+        "their shading once, so it is honest only if they cost the same in both "
+        "configurations: the checks above confirm the camera ray counts match, but the "
+        "tessellation the camera rays leave in the cache serves the secondary rays too, so "
+        "secondary rays get the cache warm. Noise of either time lands in the difference: a "
+        "type whose rays take little time (shadow, reflection) has a large relative error.",
+        "- **Before/after**: the baseline is another build's `mipray-record`, run with the "
+        "same command lines (`--baseline-record`); built once in its own worktree: "
+        "`git worktree add --detach /work/baseline-4a6d22c 4a6d22c && cd /work/baseline-4a6d22c "
+        "&& MIPRAY_SKIP_APT=1 MIPRAY_SKIP_BUILD=1 bash scripts/setup.sh && VIRTUAL_ENV=$PWD/.venv "
+        "PATH=$PWD/.venv/bin:$PATH .venv/bin/maturin develop --release -m python/Cargo.toml`.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+# --- command line ---------------------------------------------------------------------------
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line (documented by ``--help``)."""
+    venv_bin = Path(sys.executable).parent
+    p = argparse.ArgumentParser(
+        prog="python -m mipray.tools.throughput",
+        description=__doc__.split("\n\n")[0] if __doc__ else None,
+    )
+    p.add_argument("--width", type=_positive, default=512, help="image width and height (512)")
+    p.add_argument("--runs", type=_positive, default=3, help="mipray runs per configuration (3)")
+    p.add_argument("--embree-runs", type=_positive, default=5, help="Embree runs per ray type (5)")
+    p.add_argument("--threads", type=_positive, default=2, help="render threads, both (2)")
+    p.add_argument("--ao-samples", type=_positive, default=64, help="AO rays per hit (64)")
+    p.add_argument(
+        "--ao-distance",
+        type=float,
+        default=None,
+        help="AO ray length in world units (default: infinite, mipray's default aoDistance)",
+    )
+    p.add_argument("--edge-level", type=_positive, default=16, help="Embree's edge level (16)")
+    p.add_argument("--scenes", default=",".join(SCENES), help="scenes to run (plain,displaced)")
+    p.add_argument(
+        "--record",
+        default=str(venv_bin / "mipray-record"),
+        help="the mipray-record to measure (default: this venv's)",
+    )
+    p.add_argument("--baseline-record", help="another build's mipray-record: before/after table")
+    p.add_argument(
+        "--embree-bin",
+        type=Path,
+        help="the compiled harness (make bench-throughput builds it); without it no Embree column",
+    )
+    p.add_argument("--no-profile", action="store_true", help="skip the perf profile")
+    p.add_argument("--work", type=Path, default=Path("out/throughput"), help="scratch directory")
+    p.add_argument("--out", type=Path, default=Path("docs/throughput.md"), help="the report")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the benchmark and write the report; the exit status."""
+    args = build_parser().parse_args(argv)
+    started = time.monotonic()
+
+    def log(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    shown = ["python -m mipray.tools.throughput", *(sys.argv[1:] if argv is None else argv)]
+    results = Results(
+        args=args,
+        command=" ".join(shown),
+        started=datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        machine=_machine(),
+    )
+    try:
+        for record in filter(None, (args.record, args.baseline_record)):
+            if not (Path(record).is_file() and os.access(record, os.X_OK)):
+                raise ThroughputError(f"{record}: not an executable mipray-record")
+        if args.embree_bin is not None and not args.embree_bin.is_file():
+            raise ThroughputError(
+                f"{args.embree_bin}: no such harness (make bench-throughput builds it)"
+            )
+        version = _run([args.record, "--version"], "mipray-record --version").strip()
+        results.labels["current"] = (
+            f"`{args.record}` ({version}, {_git_label(args.record) or 'commit unknown'})"
+        )
+        if args.baseline_record:
+            bversion = _run([args.baseline_record, "--version"], "baseline --version").strip()
+            results.labels["baseline"] = (
+                f"`{args.baseline_record}` ({bversion}, "
+                f"{_git_label(args.baseline_record) or 'commit unknown'})"
+            )
+        cfgs = configs(args.ao_samples, args.ao_distance)
+        names = [n.strip() for n in args.scenes.split(",") if n.strip()]
+        for name in names:
+            log(f"{PROG}: writing the {name} scene")
+            scene = prepare_scene(name, args.work)
+            results.scenes[name] = scene
+            if args.embree_bin is not None:
+                log(f"{PROG}: Embree on {name}")
+                results.embree[name] = run_embree(
+                    args.embree_bin,
+                    scene,
+                    args.width,
+                    args.ao_samples,
+                    args.ao_distance,
+                    args.threads,
+                    args.embree_runs,
+                    args.edge_level,
+                )
+            log(f"{PROG}: mipray on {name}")
+            results.current[name] = mipray_rates(
+                measure_mipray(
+                    args.record, scene, cfgs, args.width, args.threads, args.runs, args.work, log
+                )
+            )
+            if args.baseline_record:
+                log(f"{PROG}: baseline on {name}")
+                results.baseline[name] = mipray_rates(
+                    measure_mipray(
+                        args.baseline_record,
+                        scene,
+                        cfgs,
+                        args.width,
+                        args.threads,
+                        args.runs,
+                        args.work,
+                        log,
+                    )
+                )
+            if not args.no_profile:
+                log(f"{PROG}: profiling {name}")
+                results.profiles[name] = profile(
+                    args.record, scene, cfgs[1], args.width, args.threads, args.work
+                )
+        results.elapsed_s = time.monotonic() - started
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(report(results))
+        raw = args.work / "throughput.json"
+        raw.write_text(json.dumps(_raw(results), indent=1))
+    except (ThroughputError, ExportError, OSError, KeyError, ValueError) as e:
+        print(f"{PROG}: {e}", file=sys.stderr)
+        return 1
+    print(args.out)
+    return 0
+
+
+def _raw(r: Results) -> dict[str, Any]:
+    """The figures as JSON (the work directory's ``throughput.json``)."""
+
+    def rates(d: dict[str, dict[str, Rate]]) -> dict[str, Any]:
+        return {
+            n: {t: {"rays": x.rays, "seconds": x.seconds, "notes": x.notes} for t, x in v.items()}
+            for n, v in d.items()
+        }
+
+    return {
+        "labels": r.labels,
+        "embree": r.embree,
+        "current": rates(r.current),
+        "baseline": rates(r.baseline),
+        "profiles": r.profiles,
+    }
+
+
+if __name__ == "__main__":
+    sys.exit(main())
