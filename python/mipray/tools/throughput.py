@@ -441,7 +441,8 @@ class Results:
     command: str
     started: str
     machine: str
-    scenes: dict[str, PreparedScene] = field(default_factory=dict)
+    #: Control faces per scene, in run order.
+    faces: dict[str, int] = field(default_factory=dict)
     embree: dict[str, dict[str, Any]] = field(default_factory=dict)
     current: dict[str, dict[str, Rate]] = field(default_factory=dict)
     baseline: dict[str, dict[str, Rate]] = field(default_factory=dict)
@@ -477,7 +478,7 @@ def report(r: Results) -> str:
         f"(`{a.work}`), deterministic:",
         "",
     ]
-    for name, s in r.scenes.items():
+    for name, faces in r.faces.items():
         what = {
             "plain": "creased Catmull-Clark cars (box body and cabin with creased edges, four "
             "wheels with creased rims and 16-gon caps) on a one-quad ground, a sun of angle 0",
@@ -485,7 +486,7 @@ def report(r: Results) -> str:
             "1024² height texture (maketx MIP map) on vertex st, on a one-quad ground, a sun "
             "of angle 0",
         }[name]
-        lines.append(f"- **{name}**: {s.control_faces:,} control faces; {what}.")
+        lines.append(f"- **{name}**: {faces:,} control faces; {what}.")
     lines += [
         "",
         "## Rays per second by ray type",
@@ -496,7 +497,7 @@ def report(r: Results) -> str:
         "includes its lazy tessellation, which is how it renders.",
         "",
     ]
-    for name in r.scenes:
+    for name in r.faces:
         em = r.embree.get(name)
         lines += [f"### {name}", ""]
         header = "| ray type | mipray rays | mipray s | mipray M rays/s |"
@@ -544,7 +545,7 @@ def report(r: Results) -> str:
             "| scene | ray type | before | after | after / before | Embree | after / Embree |",
             "|---|---|---:|---:|---:|---:|---:|",
         ]
-        for name in r.scenes:
+        for name in r.faces:
             em = r.embree.get(name)
             for t in RAY_TYPES:
                 before, after = r.baseline[name][t].per_s, r.current[name][t].per_s
@@ -663,12 +664,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-profile", action="store_true", help="skip the perf profile")
     p.add_argument("--work", type=Path, default=Path("out/throughput"), help="scratch directory")
     p.add_argument("--out", type=Path, default=Path("docs/throughput.md"), help="the report")
+    p.add_argument(
+        "--report-only",
+        type=Path,
+        metavar="JSON",
+        help="write the report from a run's throughput.json (in --work) without measuring",
+    )
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark and write the report; the exit status."""
     args = build_parser().parse_args(argv)
+    if args.report_only is not None:
+        try:
+            args.out.write_text(report(load(args.report_only)))
+        except (OSError, KeyError, ValueError, TypeError) as e:
+            print(f"{PROG}: {args.report_only}: {e}", file=sys.stderr)
+            return 1
+        print(args.out)
+        return 0
     started = time.monotonic()
 
     def log(message: str) -> None:
@@ -704,7 +719,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for name in names:
             log(f"{PROG}: writing the {name} scene")
             scene = prepare_scene(name, args.work)
-            results.scenes[name] = scene
+            results.faces[name] = scene.control_faces
             if args.embree_bin is not None:
                 log(f"{PROG}: Embree on {name}")
                 results.embree[name] = run_embree(
@@ -742,11 +757,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 results.profiles[name] = profile(
                     args.record, scene, cfgs[1], args.width, args.threads, args.work
                 )
-        results.elapsed_s = time.monotonic() - started
+            results.elapsed_s = time.monotonic() - started
+            # After every scene, so a failure later keeps the figures (see --report-only).
+            save(results, args.work / "throughput.json")
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(report(results))
-        raw = args.work / "throughput.json"
-        raw.write_text(json.dumps(_raw(results), indent=1))
     except (ThroughputError, ExportError, OSError, KeyError, ValueError) as e:
         print(f"{PROG}: {e}", file=sys.stderr)
         return 1
@@ -754,8 +769,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _raw(r: Results) -> dict[str, Any]:
-    """The figures as JSON (the work directory's ``throughput.json``)."""
+def save(r: Results, path: Path) -> None:
+    """Write ``r`` as JSON (the work directory's ``throughput.json``; :func:`load` reads it)."""
 
     def rates(d: dict[str, dict[str, Rate]]) -> dict[str, Any]:
         return {
@@ -763,13 +778,43 @@ def _raw(r: Results) -> dict[str, Any]:
             for n, v in d.items()
         }
 
-    return {
+    data = {
+        "args": {k: str(v) if isinstance(v, Path) else v for k, v in vars(r.args).items()},
+        "command": r.command,
+        "started": r.started,
+        "machine": r.machine,
+        "elapsed_s": r.elapsed_s,
+        "faces": r.faces,
         "labels": r.labels,
         "embree": r.embree,
         "current": rates(r.current),
         "baseline": rates(r.baseline),
         "profiles": r.profiles,
     }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1))
+
+
+def load(path: Path) -> Results:
+    """Results :func:`save` wrote."""
+    data = json.loads(Path(path).read_text())
+
+    def rates(d: dict[str, Any]) -> dict[str, dict[str, Rate]]:
+        return {n: {t: Rate(**x) for t, x in v.items()} for n, v in d.items()}
+
+    return Results(
+        args=argparse.Namespace(**data["args"]),
+        command=data["command"],
+        started=data["started"],
+        machine=data["machine"],
+        faces=data["faces"],
+        embree=data["embree"],
+        current=rates(data["current"]),
+        baseline=rates(data["baseline"]),
+        profiles=data["profiles"],
+        labels=data["labels"],
+        elapsed_s=data["elapsed_s"],
+    )
 
 
 if __name__ == "__main__":
