@@ -121,8 +121,10 @@ def box_cage(
     cage.counts = [4] * (len(indices) // 4)
     cage.indices = indices
 
-    def extreme_axes(p: Point) -> set[int]:
-        return {k for k in range(3) if abs(abs(p[k]) - 1.0) < 1e-9}
+    def on_box_edge(p: Point, q: Point) -> bool:
+        # Both ends on the same two faces of the cube (the same ±1 in two coordinates).
+        same = [k for k in range(3) if abs(abs(p[k]) - 1.0) < 1e-9 and p[k] == q[k]]
+        return len(same) >= 2
 
     seen: set[tuple[int, int]] = set()
     for f in range(0, len(indices), 4):
@@ -133,9 +135,7 @@ def box_cage(
             if edge in seen:
                 continue
             seen.add(edge)
-            shared = extreme_axes(cube[a]) & extreme_axes(cube[b])
-            # Both ends on the same two faces of the cube: the edge lies on a box edge.
-            if len(shared) >= 2 and all(cube[a][k] == cube[b][k] for k in shared):
+            if on_box_edge(cube[a], cube[b]):
                 cage.creases.append((edge[0], edge[1], sharpness))
     return cage
 

@@ -217,7 +217,8 @@ def height_image(size: int) -> NDArray[np.float32]:
     bumps = np.sin(np.pi * ((8 * x) % 1.0)) * np.sin(np.pi * ((8 * y) % 1.0))
     ripple = 0.5 + 0.5 * np.sin(2 * np.pi * (32 * x + 16 * y))
     height = 0.75 * bumps**2 + 0.25 * ripple
-    return height[..., None].astype(np.float32)
+    out: NDArray[np.float32] = height[..., None].astype(np.float32)
+    return out
 
 
 def write_height_texture(path: Path, size: int = 1024) -> Path:
