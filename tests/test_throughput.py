@@ -21,7 +21,14 @@ import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 from mipray.tools.shapes import blob_cage, box_cage, wheel_cage
-from mipray.tools.throughput import Measured, mipray_rates, parse_perf_report, prepare_scene
+from mipray.tools.throughput import (
+    Measured,
+    depth_agreement,
+    mipray_rates,
+    parse_perf_report,
+    prepare_scene,
+    read_pfm,
+)
 from mipray.tools.throughput_scenes import ExportError, crease_edges, read_export
 
 
@@ -275,3 +282,17 @@ def test_parse_perf_report():
         (56.27, "22858:mipray-record"),
     ]
     assert parse_perf_report(text, 1) == rows[:1]
+
+
+def test_depth_agreement_reads_pfm_and_compares_hits(tmp_path):
+    # A 3×2 PFM, rows stored bottom-up: the top row of the image is the file's last.
+    top, bottom = [1.0, 2.0, 0.0], [4.0, 0.0, 6.0]
+    pfm = tmp_path / "d.pfm"
+    pfm.write_bytes(b"Pf\n3 2\n-1.0\n" + np.asarray(bottom + top, "<f4").tobytes())
+    embree = read_pfm(pfm)
+    assert embree.tolist() == [top, bottom]
+    mipray = np.array([[1.0, 2.02, 3.0], [4.0, 5.0, 0.0]], np.float32)
+    got = depth_agreement(embree, mipray)
+    assert (got["both"], got["only_embree"], got["only_mipray"]) == (3, 1, 2)
+    assert got["over_1pct"] == 0 and got["median_rel"] == 0.0
+    assert got["p99_rel"] == pytest.approx(0.02 / 2.02 * 0.98, rel=1e-3)

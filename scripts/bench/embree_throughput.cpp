@@ -3,6 +3,7 @@
 //
 //   embree_throughput SCENE.bin [--width 512] [--height 512] [--ao-samples 64]
 //       [--ao-distance inf] [--edge-level 16] [--threads 2] [--runs 5] [--image ao.pgm]
+//       [--depth depth.pfm]
 //
 // SCENE.bin is written by `python -m mipray.tools.throughput` (mipray/tools/throughput_scenes.py,
 // export_stage: the layout is in its docstring): world-space Catmull-Clark control meshes with
@@ -24,7 +25,9 @@
 //   shadow      per camera hit facing the sun, one occlusion ray toward it (angle 0);
 //   reflection  per camera hit, one closest-hit ray in the mirror direction.
 // Each type is timed on its own, `--runs` times; the JSON on stdout has every run's seconds and
-// the median. Origins of secondary rays are offset along the geometric normal by 1e-4 of the
+// the median. `--image` writes the unoccluded AO fraction per pixel (8-bit PGM), `--depth` the
+// camera-space depth of each camera hit (PFM, 0 where nothing is hit: mipray's `depth` AOV), to
+// check against mipray's images that both trace the same scene. Origins of secondary rays are offset along the geometric normal by 1e-4 of the
 // hit's distance scale.
 
 #include <embree3/rtcore.h>
@@ -424,7 +427,7 @@ void json_timing(const char* name, const Timing& t, bool last) {
   std::fprintf(stderr,
                "embree_throughput: %s\nusage: embree_throughput SCENE.bin [--width N] [--height N] "
                "[--ao-samples N] [--ao-distance D] [--edge-level L] [--threads T] [--runs R] "
-               "[--image AO.pgm]\n",
+               "[--image AO.pgm] [--depth DEPTH.pfm]\n",
                why.c_str());
   std::exit(2);
 }
@@ -432,7 +435,7 @@ void json_timing(const char* name, const Timing& t, bool last) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string scene_path, image_path;
+  std::string scene_path, image_path, depth_path;
   int width = 512, height = 512, ao_samples = 64, threads = 2, runs = 5;
   float ao_distance = std::numeric_limits<float>::infinity();
   for (int i = 1; i < argc; ++i) {
@@ -450,6 +453,7 @@ int main(int argc, char** argv) {
       else if (a == "--threads") threads = std::stoi(value());
       else if (a == "--runs") runs = std::stoi(value());
       else if (a == "--image") image_path = value();
+      else if (a == "--depth") depth_path = value();
       else if (!a.empty() && a[0] == '-') usage("unknown option " + a);
       else scene_path = a;
     } catch (const std::logic_error&) {
@@ -549,6 +553,17 @@ int main(int argc, char** argv) {
       out << "P5\n" << width << " " << height << "\n255\n";
       out.write(reinterpret_cast<const char*>(img.data()), std::streamsize(img.size()));
       if (!out) throw std::runtime_error(image_path + ": cannot write");
+    }
+    if (!depth_path.empty()) {
+      // PFM: one float channel, rows from the bottom up, little-endian (negative scale).
+      std::vector<float> depth(pixels, 0.0f);
+      for (size_t i = 0; i < hits.size(); ++i) depth[hit_pixel[i]] = dot(hits[i].p - s.eye, normalize(s.forward));
+      std::ofstream out(depth_path, std::ios::binary);
+      out << "Pf\n" << width << " " << height << "\n-1.0\n";
+      for (int y = height - 1; y >= 0; --y)
+        out.write(reinterpret_cast<const char*>(depth.data() + size_t(y) * size_t(width)),
+                  std::streamsize(sizeof(float) * size_t(width)));
+      if (!out) throw std::runtime_error(depth_path + ": cannot write");
     }
     double ao_mean = 0.0;
     for (float v : ao) ao_mean += v;

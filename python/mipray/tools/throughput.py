@@ -58,6 +58,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdLux, UsdShade
 
 from .throughput_scenes import (
@@ -100,7 +102,9 @@ def configs(ao_samples: int, ao_distance: float | None) -> tuple[Config, ...]:
     if ao_distance is not None:
         ao += ["--setting", f"aoDistance={ao_distance}"]
     return (
-        Config("camera", ("--integrator", "direct"), "dark"),
+        # The depth AOV (written after the render, outside render.wall_s) is checked against
+        # the harness's: the two trace the same surfaces (depth_agreement).
+        Config("camera", ("--integrator", "direct", "--aovs", "color,depth"), "dark"),
         Config("ao", tuple(ao), "dark"),
         Config("shadow", ("--integrator", "direct", "--setting", "shadowSamples=1"), None),
         Config("reflection", ("--integrator", "direct", "--setting", "maxDepth=1"), "mirror"),
@@ -291,7 +295,47 @@ def run_embree(
     if ao_distance is not None:
         cmd += ["--ao-distance", str(ao_distance)]
     cmd += ["--image", str(scene.usd.with_suffix(".embree_ao.pgm"))]
+    cmd += ["--depth", str(scene.usd.with_suffix(".embree_depth.pfm"))]
     return dict(json.loads(_run(cmd, f"{binary} ({scene.name})")))
+
+
+def read_pfm(path: Path) -> NDArray[np.float32]:
+    """A one-channel PFM (``Pf``) as an H×W array, first row at the top."""
+    data = Path(path).read_bytes()
+    magic, size, scale, pixels = data.split(b"\n", 3)
+    if magic != b"Pf":
+        raise ThroughputError(f"{path}: not a one-channel PFM")
+    width, height = (int(v) for v in size.split())
+    order = "<f4" if float(scale) < 0 else ">f4"
+    image = np.frombuffer(pixels, order, width * height).reshape(height, width)
+    return np.ascontiguousarray(image[::-1], dtype=np.float32)
+
+
+def depth_agreement(embree: NDArray[np.float32], mipray: NDArray[np.float32]) -> dict[str, Any]:
+    """How far the two renderers' camera-hit depths (0 = no hit) agree, pixel by pixel."""
+    if embree.shape != mipray.shape:
+        raise ThroughputError(f"depth images of {embree.shape} and {mipray.shape} pixels")
+    e_hit, m_hit = embree > 0, mipray > 0
+    both = e_hit & m_hit
+    rel = np.abs(embree[both] - mipray[both]) / mipray[both]
+    return {
+        "both": int(both.sum()),
+        "only_embree": int((e_hit & ~m_hit).sum()),
+        "only_mipray": int((m_hit & ~e_hit).sum()),
+        "median_rel": float(np.median(rel)) if rel.size else 0.0,
+        "p99_rel": float(np.percentile(rel, 99)) if rel.size else 0.0,
+        "over_1pct": int((rel > 0.01).sum()),
+    }
+
+
+def _mipray_depth(path: Path) -> NDArray[np.float32]:
+    from .. import _mipray
+
+    pixels, channels = _mipray.read_image(str(path))
+    for name in ("Z", "depth", "depth.Z"):
+        if name in channels:
+            return np.ascontiguousarray(pixels[..., channels.index(name)], dtype=np.float32)
+    raise ThroughputError(f"{path}: no depth channel among {channels}")
 
 
 # --- profile --------------------------------------------------------------------------------
@@ -447,6 +491,8 @@ class Results:
     current: dict[str, dict[str, Rate]] = field(default_factory=dict)
     baseline: dict[str, dict[str, Rate]] = field(default_factory=dict)
     profiles: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: Per scene, :func:`depth_agreement` of the harness's and mipray's camera hits.
+    depth: dict[str, dict[str, Any]] = field(default_factory=dict)
     labels: dict[str, str] = field(default_factory=dict)
     elapsed_s: float = 0.0
 
@@ -522,6 +568,16 @@ def report(r: Results) -> str:
                 f"{em['pixels']:,} pixels, mean unoccluded AO fraction "
                 f"{em['ao_unoccluded_mean']:.3f}.",
             ]
+        dep = r.depth.get(name)
+        if dep:
+            lines += [
+                "",
+                f"Same surfaces: the camera hits' depth (mipray's `depth` AOV against the "
+                f"harness's) differs by a median {100 * dep['median_rel']:.2g} % and at the 99th "
+                f"percentile {100 * dep['p99_rel']:.2g} % over the {dep['both']:,} pixels both "
+                f"hit ({dep['over_1pct']:,} by more than 1 %); pixels only Embree hit: "
+                f"{dep['only_embree']:,}, only mipray: {dep['only_mipray']:,}.",
+            ]
         notes = [f"{t}: {n}" for t in RAY_TYPES for n in r.current[name][t].notes]
         lines += [
             "",
@@ -545,7 +601,7 @@ def report(r: Results) -> str:
             "| scene | ray type | before | after | after / before | Embree | after / Embree |",
             "|---|---|---:|---:|---:|---:|---:|",
         ]
-        for name in r.faces:
+        for name in r.baseline:
             em = r.embree.get(name)
             for t in RAY_TYPES:
                 before, after = r.baseline[name][t].per_s, r.current[name][t].per_s
@@ -716,9 +772,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         cfgs = configs(args.ao_samples, args.ao_distance)
         names = [n.strip() for n in args.scenes.split(",") if n.strip()]
+
+        def checkpoint() -> None:
+            # After every step, so a failure or an interruption keeps the figures so far
+            # (--report-only writes the report from them).
+            results.elapsed_s = time.monotonic() - started
+            save(results, args.work / "throughput.json")
+
+        # The current build on every scene first, then the profiles, then the baseline: the
+        # figures that matter most are in before a long run is cut short.
+        scenes: dict[str, PreparedScene] = {}
         for name in names:
             log(f"{PROG}: writing the {name} scene")
-            scene = prepare_scene(name, args.work)
+            scene = scenes[name] = prepare_scene(name, args.work)
             results.faces[name] = scene.control_faces
             if args.embree_bin is not None:
                 log(f"{PROG}: Embree on {name}")
@@ -738,6 +804,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                     args.record, scene, cfgs, args.width, args.threads, args.runs, args.work, log
                 )
             )
+            if args.embree_bin is not None:
+                results.depth[name] = depth_agreement(
+                    read_pfm(scene.usd.with_suffix(".embree_depth.pfm")),
+                    _mipray_depth(args.work / f"{name}.camera.exr"),
+                )
+            checkpoint()
+        for name, scene in scenes.items():
+            if not args.no_profile:
+                log(f"{PROG}: profiling {name}")
+                results.profiles[name] = profile(
+                    args.record, scene, cfgs[1], args.width, args.threads, args.work
+                )
+                checkpoint()
+        for name, scene in scenes.items():
             if args.baseline_record:
                 log(f"{PROG}: baseline on {name}")
                 results.baseline[name] = mipray_rates(
@@ -752,14 +832,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         log,
                     )
                 )
-            if not args.no_profile:
-                log(f"{PROG}: profiling {name}")
-                results.profiles[name] = profile(
-                    args.record, scene, cfgs[1], args.width, args.threads, args.work
-                )
-            results.elapsed_s = time.monotonic() - started
-            # After every scene, so a failure later keeps the figures (see --report-only).
-            save(results, args.work / "throughput.json")
+                checkpoint()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(report(results))
     except (ThroughputError, ExportError, OSError, KeyError, ValueError) as e:
@@ -790,6 +863,7 @@ def save(r: Results, path: Path) -> None:
         "current": rates(r.current),
         "baseline": rates(r.baseline),
         "profiles": r.profiles,
+        "depth": r.depth,
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=1))
@@ -812,6 +886,7 @@ def load(path: Path) -> Results:
         current=rates(data["current"]),
         baseline=rates(data["baseline"]),
         profiles=data["profiles"],
+        depth=data.get("depth", {}),
         labels=data["labels"],
         elapsed_s=data["elapsed_s"],
     )
