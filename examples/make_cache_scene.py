@@ -30,6 +30,7 @@ from pathlib import Path
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 from mipray.tools.shapes import blob_cage
+from mipray.tools.stage import look_at
 
 HERE = Path(__file__).resolve().parent
 NAME = "cache_scene.usda"
@@ -135,10 +136,7 @@ def cache_scene(
     camera.CreateClippingRangeAttr(Gf.Vec2f(0.1, 500.0))
     eye = Gf.Vec3d(0.0, 0.6 * depth + 4.5, 7.0)
     target = Gf.Vec3d(0.0, 0.4, -0.45 * depth)
-    view = Gf.Matrix4d().SetLookAt(eye, target, Gf.Vec3d(0, 1, 0))
-    camera.AddTransformOp().Set(
-        Gf.Matrix4d([[round(v, 6) + 0.0 for v in row] for row in view.GetInverse()])
-    )
+    camera.AddTransformOp().Set(look_at(eye, target))
 
     sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
     sun.CreateIntensityAttr(2.5)

@@ -430,19 +430,15 @@ def _git_label(record: str) -> str:
     for parent in path.parents:
         if parent.name == ".venv":
             root = parent.parent
+
+            def git(*args: str, root: Path = root) -> str:
+                return subprocess.run(
+                    ["git", "-C", str(root), *args], capture_output=True, text=True, check=True
+                ).stdout.strip()
+
             try:
-                commit = subprocess.run(
-                    ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-                    capture_output=True,
-                    text=True,
-                    check=True,
-                ).stdout.strip()
-                dirty = subprocess.run(
-                    ["git", "-C", str(root), "status", "--porcelain", "-uno"],
-                    capture_output=True,
-                    text=True,
-                    check=True,
-                ).stdout.strip()
+                commit = git("rev-parse", "--short", "HEAD")
+                dirty = git("status", "--porcelain", "-uno")
             except (OSError, subprocess.CalledProcessError):
                 return ""
             return commit + ("+dirty" if dirty else "")

@@ -36,6 +36,7 @@ from ..usd.camera import camera_arguments
 from ..usd.mesh import mesh_arguments
 from ..usd.transform import world_transform
 from .shapes import Cage, blob_cage, box_cage, wheel_cage
+from .stage import look_at, new_stage
 
 __all__ = [
     "MAGIC",
@@ -78,12 +79,7 @@ def _round(points: list[tuple[float, float, float]] | NDArray[Any]) -> list[Gf.V
 
 
 def _stage(path: Path, doc: str) -> Usd.Stage:
-    stage = Usd.Stage.CreateNew(str(path))
-    stage.GetRootLayer().documentation = doc
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    world = UsdGeom.Xform.Define(stage, "/World")
-    stage.SetDefaultPrim(world.GetPrim())
+    stage = new_stage(path, doc)
     UsdGeom.Scope.Define(stage, "/World/Looks")
     UsdGeom.Scope.Define(stage, "/World/Geo")
     return stage
@@ -136,10 +132,7 @@ def _camera_and_sun(stage: Usd.Stage, eye: Gf.Vec3d, target: Gf.Vec3d, focal: fl
     camera.CreateHorizontalApertureAttr(36.0)
     camera.CreateVerticalApertureAttr(36.0)
     camera.CreateClippingRangeAttr(Gf.Vec2f(0.1, 1000.0))
-    view = Gf.Matrix4d().SetLookAt(eye, target, Gf.Vec3d(0, 1, 0))
-    camera.AddTransformOp().Set(
-        Gf.Matrix4d([[round(v, 6) + 0.0 for v in row] for row in view.GetInverse()])
-    )
+    camera.AddTransformOp().Set(look_at(eye, target))
     sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
     sun.CreateIntensityAttr(3.0)
     # Angle 0: a delta light, one shadow ray per lit point in mipray, as in the harness.
