@@ -24,13 +24,14 @@
 //               `--ao-distance` (mipray's aoDistance; infinite by default);
 //   shadow      per camera hit facing the sun, one occlusion ray toward it (angle 0);
 //   reflection  per camera hit, one closest-hit ray in the mirror direction.
-// Each type is timed on its own, `--runs` times; the JSON on stdout has every run's seconds and
-// the median. `--image` writes the unoccluded AO fraction per pixel (8-bit PGM), `--depth` the
+// Each type is timed on its own, `--runs` times; the JSON on stdout has every run's wall and
+// process CPU seconds and their medians. `--image` writes the unoccluded AO fraction per pixel (8-bit PGM), `--depth` the
 // camera-space depth of each camera hit (PFM, 0 where nothing is hit: mipray's `depth` AOV), to
 // check against mipray's images that both trace the same scene. Origins of secondary rays are offset along the geometric normal by 1e-4 of the
 // hit's distance scale.
 
 #include <embree3/rtcore.h>
+#include <sys/resource.h>
 
 #include <OpenImageIO/texture.h>
 #include <OpenImageIO/ustring.h>
@@ -395,9 +396,16 @@ V3 cosine_direction(V3 n, float u1, float u2) {
 }
 
 struct Timing {
-  std::vector<double> seconds;
+  std::vector<double> seconds, cpu_seconds;
   uint64_t rays = 0;
 };
+
+// User + system CPU seconds of the whole process so far (every thread).
+double process_cpu_s() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -410,16 +418,20 @@ Timing timed(int runs, F body) {
   Timing t;
   for (int r = 0; r < runs; ++r) {
     auto start = std::chrono::steady_clock::now();
+    double cpu = process_cpu_s();
     t.rays = body();
     t.seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    t.cpu_seconds.push_back(process_cpu_s() - cpu);
   }
   return t;
 }
 
 void json_timing(const char* name, const Timing& t, bool last) {
-  std::printf("    \"%s\": {\"rays\": %llu, \"median_s\": %.6f, \"seconds\": [", name,
-              (unsigned long long)t.rays, median(t.seconds));
+  std::printf("    \"%s\": {\"rays\": %llu, \"median_s\": %.6f, \"median_cpu_s\": %.6f, \"seconds\": [",
+              name, (unsigned long long)t.rays, median(t.seconds), median(t.cpu_seconds));
   for (size_t i = 0; i < t.seconds.size(); ++i) std::printf("%s%.6f", i ? ", " : "", t.seconds[i]);
+  std::printf("], \"cpu_seconds\": [");
+  for (size_t i = 0; i < t.cpu_seconds.size(); ++i) std::printf("%s%.6f", i ? ", " : "", t.cpu_seconds[i]);
   std::printf("]}%s\n", last ? "" : ",");
 }
 

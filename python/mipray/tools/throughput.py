@@ -48,6 +48,7 @@ import json
 import os
 import platform
 import re
+import resource
 import shutil
 import statistics
 import subprocess
@@ -191,10 +192,18 @@ def _run(cmd: Sequence[str], what: str, env: dict[str, str] | None = None) -> st
 
 @dataclass
 class Measured:
-    """Runs of one configuration: wall seconds and ray counts per run."""
+    """Runs of one configuration: render seconds, ray counts and process CPU seconds per run."""
 
     wall_s: list[float] = field(default_factory=list)
     rays: list[dict[str, int]] = field(default_factory=list)
+    #: User + system CPU seconds of the whole ``mipray-record`` process (USD reading and sync
+    #: included: the same in every configuration, so they cancel in a difference).
+    cpu_s: list[float] = field(default_factory=list)
+
+
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def record_command(
@@ -225,7 +234,9 @@ def measure_mipray(
         for config in cfgs:
             out = work / f"{scene.name}.{config.ray_type}.exr"
             cmd = record_command(record, scene, config, width, threads, out)
+            cpu_before = _children_cpu_s()
             _run(cmd, f"{record} ({scene.name}, {config.ray_type})")
+            measured[config.ray_type].cpu_s.append(_children_cpu_s() - cpu_before)
             stats = json.loads(out.with_suffix(".stats.json").read_text())
             render = stats["render"]
             rays = {k: int(v) for k, v in render["rays"].items()}
@@ -243,8 +254,16 @@ class Rate:
     """Rays of one type, the seconds they took, and the checks that held."""
 
     rays: int
+    #: Seconds of these rays: the camera configuration's render, or another configuration's
+    #: render minus the camera configuration's (median over runs of the run-by-run difference).
     seconds: float
     notes: list[str] = field(default_factory=list)
+    #: The configuration's own render time (median over runs).
+    config_s: float | None = None
+    #: CPU seconds of these rays (types other than camera): the configuration's process CPU
+    #: time minus the camera configuration's, run by run, median. Less sensitive than wall
+    #: time to other work on the machine.
+    cpu_s: float | None = None
 
     @property
     def per_s(self) -> float:
@@ -256,7 +275,8 @@ def mipray_rates(measured: dict[str, Measured]) -> dict[str, Rate]:
     """Rays/s per type: camera from its own configuration, the others by subtraction."""
     camera = measured["camera"]
     camera_rays = camera.rays[0].get("camera", 0)
-    rates = {"camera": Rate(camera_rays, statistics.median(camera.wall_s))}
+    camera_s = statistics.median(camera.wall_s)
+    rates = {"camera": Rate(camera_rays, camera_s, config_s=camera_s)}
     for ray_type, m in measured.items():
         notes: list[str] = []
         counts = {r.get(ray_type, 0) for r in m.rays}
@@ -274,7 +294,14 @@ def mipray_rates(measured: dict[str, Measured]) -> dict[str, Rate]:
             rates["camera"].notes = notes
             continue
         diffs = [w - c for w, c in zip(m.wall_s, camera.wall_s, strict=True)]
-        rates[ray_type] = Rate(m.rays[0].get(ray_type, 0), statistics.median(diffs), notes)
+        cpu_diffs = [w - c for w, c in zip(m.cpu_s, camera.cpu_s, strict=True)]
+        rates[ray_type] = Rate(
+            m.rays[0].get(ray_type, 0),
+            statistics.median(diffs),
+            notes,
+            config_s=statistics.median(m.wall_s),
+            cpu_s=statistics.median(cpu_diffs) if cpu_diffs else None,
+        )
     return rates
 
 
@@ -533,24 +560,28 @@ def report(r: Results) -> str:
         "",
         "## Rays per second by ray type",
         "",
-        "M rays/s. mipray's time for a type other than camera is its configuration's render "
-        "time minus the camera-only configuration's (see *How* below); Embree's excludes its "
-        "BVH build (all geometry tessellated and displaced up front: *build s*), mipray's "
-        "includes its lazy tessellation, which is how it renders.",
+        "*config. render s* is the median `render.wall_s` of the configuration isolating the "
+        "ray type; *mipray s* is the rays' share of it: the configuration's time minus the "
+        "camera-only configuration's, run by run (see *How* below). Where that difference is "
+        "not positive the type's rays cost less than the run-to-run noise of the renders (on "
+        "a machine shared with other work) and no rate is given (—). Embree's times exclude "
+        "its BVH build (all geometry tessellated and displaced up front: *build s*); mipray's "
+        "include its lazy tessellation, which is how it renders.",
         "",
     ]
     for name in r.faces:
         em = r.embree.get(name)
         lines += [f"### {name}", ""]
-        header = "| ray type | mipray rays | mipray s | mipray M rays/s |"
-        rule = "|---|---:|---:|---:|"
+        header = "| ray type | mipray rays | config. render s | mipray s | mipray M rays/s |"
+        rule = "|---|---:|---:|---:|---:|"
         if em:
             header += " Embree rays | Embree s | Embree M rays/s | mipray / Embree |"
             rule += "---:|---:|---:|---:|"
         lines += [header, rule]
         for t in RAY_TYPES:
             m = r.current[name][t]
-            row = f"| {t} | {m.rays:,} | {m.seconds:.2f} | {_m(m.per_s)} |"
+            config_s = "—" if m.config_s is None else f"{m.config_s:.2f}"
+            row = f"| {t} | {m.rays:,} | {config_s} | {m.seconds:.2f} | {_m(m.per_s)} |"
             if em:
                 e, e_rate = em["types"][t], _embree_rate(em, t)
                 row += f" {e['rays']:,} | {e['median_s']:.3f} | {_m(e_rate)} |"
@@ -843,7 +874,16 @@ def save(r: Results, path: Path) -> None:
 
     def rates(d: dict[str, dict[str, Rate]]) -> dict[str, Any]:
         return {
-            n: {t: {"rays": x.rays, "seconds": x.seconds, "notes": x.notes} for t, x in v.items()}
+            n: {
+                t: {
+                    "rays": x.rays,
+                    "seconds": x.seconds,
+                    "notes": x.notes,
+                    "config_s": x.config_s,
+                    "cpu_s": x.cpu_s,
+                }
+                for t, x in v.items()
+            }
             for n, v in d.items()
         }
 
