@@ -241,8 +241,8 @@ def test_read_export_rejects_other_files(tmp_path):
 def test_rates_subtract_the_camera_pass_run_by_run():
     camera = {"camera": 100}
     measured = {
-        "camera": Measured([2.0, 3.0, 2.5], [camera] * 3),
-        "ao": Measured([10.0, 12.0, 10.5], [{**camera, "ao": 6400}] * 3),
+        "camera": Measured([2.0, 3.0, 2.5], [camera] * 3, [6.0, 7.0, 5.0]),
+        "ao": Measured([10.0, 12.0, 10.5], [{**camera, "ao": 6400}] * 3, [30.0, 31.0, 33.0]),
         "shadow": Measured([2.5, 3.5, 3.0], [{**camera, "shadow": 90}] * 3),
         # A reflection pass that also traced shadow rays, and counts that moved: both noted.
         "reflection": Measured(
@@ -258,6 +258,10 @@ def test_rates_subtract_the_camera_pass_run_by_run():
     assert rates["camera"].rays == 100 and rates["camera"].seconds == 2.5
     assert rates["ao"].seconds == pytest.approx(8.0)  # median of 8, 9, 8
     assert rates["ao"].per_s == pytest.approx(800.0)
+    # CPU seconds by the same run-by-run difference: median of 24, 24, 28.
+    assert rates["ao"].cpu_s == pytest.approx(24.0)
+    assert rates["ao"].per_cpu_s == pytest.approx(6400 / 24.0)
+    assert rates["camera"].cpu_s is None and rates["shadow"].cpu_s is None
     assert rates["shadow"].seconds == pytest.approx(0.5)
     assert rates["ao"].notes == [] and rates["shadow"].notes == []
     notes = " ".join(rates["reflection"].notes)
