@@ -25,6 +25,7 @@ from mipray.tools.throughput import (
     Measured,
     depth_agreement,
     mipray_rates,
+    parse_dso_symbols,
     parse_perf_report,
     prepare_scene,
     read_pfm,
@@ -300,3 +301,21 @@ def test_depth_agreement_reads_pfm_and_compares_hits(tmp_path):
     assert (got["both"], got["only_embree"], got["only_mipray"]) == (3, 1, 2)
     assert got["over_1pct"] == 0 and got["median_rel"] == 0.0
     assert got["p99_rel"] == pytest.approx(0.02 / 2.02 * 0.98, rel=1e-3)
+
+
+def test_parse_dso_symbols_sums_objects():
+    pad = " " * 40 + "-      -  "
+    text = (
+        "# Overhead  Shared Object  Symbol\n"
+        f"    60.00%  _mipray.so   [.] mipray::seam::intersect_seams{pad}\n"
+        f"    20.00%  libosdCPU.so [.] OpenSubdiv::Far::EvalBasisBSpline<double>{pad}\n"
+        f"    19.70%  _mipray.so   [.] mipray::trace::Tracer::trace{pad}\n"
+        "     0.30%  libc.so.6    [.] memcpy\n"
+    )
+    symbols, objects = parse_dso_symbols(text)
+    assert symbols == [
+        (60.0, "mipray::seam::intersect_seams"),
+        (20.0, "OpenSubdiv::Far::EvalBasisBSpline<double>"),
+        (19.7, "mipray::trace::Tracer::trace"),
+    ]
+    assert objects == [(79.7, "_mipray.so"), (20.0, "libosdCPU.so")]

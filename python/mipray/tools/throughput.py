@@ -378,6 +378,9 @@ def _mipray_depth(path: Path) -> NDArray[np.float32]:
 # --- profile --------------------------------------------------------------------------------
 
 _PERF_LINE = re.compile(r"^\s*([0-9.]+)%\s+(.*\S)\s*$")
+#: A ``--sort dso,symbol`` line: percentage, shared object, ``[.]`` or ``[k]``, symbol (which
+#: ends at the first wide gap: call-graph columns may follow).
+_PERF_DSO_SYMBOL = re.compile(r"^\s*([0-9.]+)%\s+(\S+)\s+\[[.kgu]\]\s+(.*?)(?:\s{2,}|\s*$)")
 
 
 def parse_perf_report(text: str, limit: int) -> list[tuple[float, str]]:
@@ -445,17 +448,45 @@ def profile(
     cmd += record_command(record, scene, config, width, threads, out)
     try:
         _run(cmd, f"perf record ({scene.name})")
-        tids = _render_threads(perf, data, threads)
+        return summarize_perf(perf, data, threads)
     except ThroughputError as e:
         return {"skipped": str(e)}
-    result: dict[str, Any] = {"threads": len(tids)}
-    for key, sort, limit in (("symbols", "symbol", 20), ("objects", "dso", 8)):
-        report = [perf, "report", "-i", str(data), "--no-children", "--stdio", "-g", "none"]
-        report += ["--sort", sort, "--percent-limit", "0.5", "--percentage", "relative"]
-        if tids:
-            report += ["--tid", ",".join(tids)]
-        result[key] = parse_perf_report(_run(report, "perf report"), limit)
-    return result
+
+
+def summarize_perf(perf: str, data: Path, threads: int) -> dict[str, Any]:
+    """The render threads' top symbols (self time, at least 0.5 %) and shared objects.
+
+    One ``perf report --sort dso,symbol`` restricted to the render threads, shares relative to
+    their samples; the shared objects' shares are sums over their symbols (perf's own
+    ``--sort dso`` miscounts once ``--tid`` filters).
+    """
+    tids = _render_threads(perf, data, threads)
+    report = [perf, "report", "-i", str(data), "--no-children", "--stdio", "-g", "none"]
+    report += ["--sort", "dso,symbol", "--percent-limit", "0", "--percentage", "relative"]
+    if tids:
+        report += ["--tid", ",".join(tids)]
+    symbols, objects = parse_dso_symbols(_run(report, "perf report"))
+    return {"threads": len(tids), "symbols": symbols[:20], "objects": objects[:8]}
+
+
+def parse_dso_symbols(text: str) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
+    """``perf report --sort dso,symbol`` output as (symbols, shared objects).
+
+    Symbols with at least 0.5 %, in the report's order; shared objects with at least 0.5 %,
+    their symbols' shares summed, largest first.
+    """
+    symbols: list[tuple[float, str]] = []
+    objects: dict[str, float] = {}
+    for line in text.splitlines():
+        match = _PERF_DSO_SYMBOL.match(line)
+        if not match:
+            continue
+        pct, dso, symbol = float(match.group(1)), match.group(2), match.group(3)
+        objects[dso] = objects.get(dso, 0.0) + pct
+        if pct >= 0.5:
+            symbols.append((pct, symbol))
+    ranked = sorted(((round(p, 2), o) for o, p in objects.items() if p >= 0.5), reverse=True)
+    return symbols, ranked
 
 
 # --- the report -----------------------------------------------------------------------------
@@ -655,9 +686,10 @@ def report(r: Results) -> str:
             "## Before and after",
             "",
             f"M rays/s (wall); before: {base}, after: {cur}. *after / before (CPU)*: the same "
-            "speed-up from CPU seconds (before's over after's, for the same rays; not for "
-            "camera rays, whose process CPU time includes reading the scene). Embree's rays/s "
-            "from the same run, and the after/Embree ratio against the issue's target of 0.5.",
+            "speed-up in rays per CPU second, which the machine's other work moves least (not "
+            "for camera rays, whose process CPU time includes reading the scene). Embree's "
+            "rays/s from the same run, and the after/Embree ratio against the issue's target "
+            "of 0.5.",
             "",
             "| scene | ray type | before | after | after / before | after / before (CPU) "
             "| Embree | after / Embree |",
@@ -673,6 +705,13 @@ def report(r: Results) -> str:
                     f"| {name} | {t} | {_m(b.per_s)} | {_m(c.per_s)} | {_ratio(c.per_s, b.per_s)} "
                     f"| {cpu_ratio} | {_m(e_rate)} | {_ratio(c.per_s, e_rate)} |"
                 )
+        missing = [n for n in r.faces if n not in r.baseline]
+        if missing:
+            lines += [
+                "",
+                f"Not measured with the baseline (the run was stopped before): "
+                f"{', '.join(missing)}.",
+            ]
         notes = [
             f"{n}: {t}: {x}" for n in r.baseline for t in RAY_TYPES for x in r.baseline[n][t].notes
         ]
@@ -687,7 +726,7 @@ def report(r: Results) -> str:
             continue
         lines += [
             f"`perf record -g` of one render; self time (`perf report --no-children --sort "
-            f"symbol`) in its {p['threads']} render threads (the main thread, which reads the "
+            f"dso,symbol`) in its {p['threads']} render threads (the main thread, which reads the "
             "stage and syncs the scene before `render.wall_s` starts, left out), as a share of "
             "their samples; functions with at least 0.5 %.",
             "",
