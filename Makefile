@@ -110,3 +110,26 @@ mitsuba: setup ## mipray against Mitsuba 3 on the same scenes: docs/mitsuba-comp
 .PHONY: bench-irradiance
 bench-irradiance: ## Irradiance/occlusion cache: time and error against its error bound: docs/irradiance-cache.{md,json}
 	cargo run --release -p hd-mipray --bin mipray-irradiance-bench -- --out docs/irradiance-cache
+
+# The Embree harness of bench-throughput, built against Debian's libembree-dev (installed here if
+# missing, never by scripts/setup.sh: CI does not need it) and OpenImageIO.
+EMBREE_HARNESS := $(OUT)/throughput/embree_throughput
+THROUGHPUT_ARGS ?=
+
+$(EMBREE_HARNESS): scripts/bench/embree_throughput.cpp
+	@dpkg -s libembree-dev >/dev/null 2>&1 || { \
+		SUDO=$$( [ "$$(id -u)" -eq 0 ] || echo sudo ); \
+		echo "bench-throughput: installing libembree-dev" >&2; \
+		$$SUDO apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends libembree-dev; }
+	@mkdir -p $(@D)
+	g++ -O2 -std=c++17 -Wall -Wextra -o $@ $< -lembree3 $$(pkg-config --cflags --libs OpenImageIO) -pthread
+
+.PHONY: bench-throughput
+bench-throughput: $(EMBREE_HARNESS) ## mipray's rays/s by ray type against Embree's: docs/throughput.md
+	@MIPRAY_SKIP_BUILD=1 bash scripts/setup.sh
+	@# Timings need the release extension (setup.sh builds the dev profile).
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH="$(abspath $(VENV))/bin:$$PATH" \
+		$(VENV)/bin/maturin develop --release -q -m python/Cargo.toml
+	$(PY) -m mipray.tools.throughput --embree-bin $(EMBREE_HARNESS) --work $(OUT)/throughput \
+		$(THROUGHPUT_ARGS)

@@ -24,62 +24,16 @@ The output is deterministic (coordinates rounded to 6 decimals).
 from __future__ import annotations
 
 import argparse
-import math
 import random
 from pathlib import Path
 
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
+from mipray.tools.shapes import blob_cage
+from mipray.tools.stage import look_at
+
 HERE = Path(__file__).resolve().parent
 NAME = "cache_scene.usda"
-
-# The six cube faces as (normal, a, b) with a × b = normal, so quads wind outward.
-_FACES = (
-    ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
-    ((-1, 0, 0), (0, 0, 1), (0, 1, 0)),
-    ((0, 1, 0), (0, 0, 1), (1, 0, 0)),
-    ((0, -1, 0), (1, 0, 0), (0, 0, 1)),
-    ((0, 0, 1), (1, 0, 0), (0, 1, 0)),
-    ((0, 0, -1), (0, 1, 0), (1, 0, 0)),
-)
-
-
-def blob_cage(n: int, rng: random.Random) -> tuple[list[tuple[float, float, float]], list[int]]:
-    """A closed lumpy control cage: ``6·n²`` quads, as (points, face-vertex indices)."""
-    lumps = []
-    for _ in range(5):
-        d = [rng.uniform(-0.5, 0.5) for _ in range(3)]
-        length = math.sqrt(sum(c * c for c in d)) or 1.0
-        lumps.append(([c / length for c in d], 0.5 * (rng.random() - 0.4)))
-    points: list[tuple[float, float, float]] = []
-    index: dict[tuple[int, int, int], int] = {}
-
-    def vertex(p: tuple[float, float, float]) -> int:
-        key = (round(p[0] * 4096), round(p[1] * 4096), round(p[2] * 4096))
-        if key not in index:
-            length = math.sqrt(sum(c * c for c in p))
-            s = [c / length for c in p]
-            r = 1.0 + sum(
-                a * math.exp(-(1.0 - sum(si * di for si, di in zip(s, d, strict=True))) * 4.0)
-                for d, a in lumps
-            )
-            points.append((s[0] * r, s[1] * r, s[2] * r))
-            index[key] = len(points) - 1
-        return index[key]
-
-    def at(face: tuple[tuple[int, ...], ...], i: int, j: int) -> tuple[float, float, float]:
-        nrm, a, b = face
-        u, v = 2.0 * i / n - 1.0, 2.0 * j / n - 1.0
-        x, y, z = (nrm[k] + a[k] * u + b[k] * v for k in range(3))
-        return (x, y, z)
-
-    indices: list[int] = []
-    for face in _FACES:
-        for j in range(n):
-            for i in range(n):
-                corners = ((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1))
-                indices += [vertex(at(face, ci, cj)) for ci, cj in corners]
-    return points, indices
 
 
 def _preview(
@@ -182,10 +136,7 @@ def cache_scene(
     camera.CreateClippingRangeAttr(Gf.Vec2f(0.1, 500.0))
     eye = Gf.Vec3d(0.0, 0.6 * depth + 4.5, 7.0)
     target = Gf.Vec3d(0.0, 0.4, -0.45 * depth)
-    view = Gf.Matrix4d().SetLookAt(eye, target, Gf.Vec3d(0, 1, 0))
-    camera.AddTransformOp().Set(
-        Gf.Matrix4d([[round(v, 6) + 0.0 for v in row] for row in view.GetInverse()])
-    )
+    camera.AddTransformOp().Set(look_at(eye, target))
 
     sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
     sun.CreateIntensityAttr(2.5)

@@ -1,0 +1,1 @@
+"""Benchmark tools: generated scenes and the drivers of ``make bench-throughput``."""
