@@ -14,7 +14,9 @@ that the command line does not give explicitly. With ``--progressive`` the
 output image is rewritten (atomically) after each pass of 1, 2, 4, ... samples
 per pixel. Output paths go to stdout, one per line; warnings
 and one-line errors (``mipray-record: ...``) to stderr. Exit status: 0 when
-every image was written (even if some prims were skipped with errors), 1 on
+every image was written (even if prims with bad data were skipped, each named);
+2 when every image was written but a prim was dropped after an internal error
+(a renderer bug, named on stderr and in the stats' ``prim_errors``); 1 on
 failure.
 """
 
@@ -637,6 +639,7 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
     progress = _Progress(err, len(times))
     progressive = bool(settings.get("progressive"))
     passes = pass_samples(_samples(settings)) if progressive else []
+    internal_errors = 0
     with RenderSession(stage, purposes=plan.purposes, time=times[0]) as session:
         for index, time in enumerate(times, start=1):
             progress.start(index, time, passes)
@@ -671,6 +674,13 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
             if args.stats:
                 title = f"mipray stats: {path}"
                 _write_stats(args.stats, value, result.stats, title, out)
+            internal_errors += int(result.stats.get("internal_errors", 0))
+    if internal_errors:
+        err.write(
+            f"{PROG}: images written, but {internal_errors} prim(s) were dropped after internal "
+            "errors (named above)\n"
+        )
+        return 2
     return 0
 
 

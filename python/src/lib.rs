@@ -801,12 +801,22 @@ fn subdiv_compare(
     .map_err(PyValueError::new_err)
 }
 
+/// Panics are caught where a prim's work is isolated and reported there in one line naming the
+/// prim; the default hook would also print several lines of its own to the host's stderr for
+/// each. Kept when `RUST_BACKTRACE` asks for the backtrace.
+fn quiet_panics() {
+    if std::env::var_os("RUST_BACKTRACE").is_none() {
+        std::panic::set_hook(Box::new(|info| log::debug!("panic: {info}")));
+    }
+}
+
 #[pymodule]
 fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // Another extension may have installed a logger already; then ours is not needed.
     if log::set_logger(&COLLECTOR).is_ok() {
         log::set_max_level(log::LevelFilter::Warn);
     }
+    quiet_panics();
     m.add_class::<RenderDelegate>()?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;

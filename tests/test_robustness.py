@@ -1,0 +1,171 @@
+"""Hostile but realistic input never takes a render down (issue 16).
+
+Each stage here once crashed the whole render (a Rust panic surfacing in Python as
+``PanicException``, or OpenImageIO aborting the process). Now the bad prim is named in one
+line and left out (or, for a flattened object, drawn as the flat shape it is), the other prims
+render, and the stats list what was dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
+
+import mipray
+
+from stages import add_camera, add_cube, add_distant_light, new_stage
+from test_end_to_end import pixel_of, record_command, subprocess_env
+from test_materials import scene, texture
+
+
+def _render(stage: Usd.Stage, width: int = 24, **settings: object) -> mipray.RenderResult:
+    return mipray.render(stage, width=width, settings={"samples": 1, "seed": 1, **settings})
+
+
+def _stage_with(build) -> Usd.Stage:
+    """A lit stage with a camera at z = 10, a cube /World/Ok down and left of the centre, and
+    whatever ``build(stage)`` adds."""
+    stage = new_stage()
+    add_cube(stage, "/World/Ok", translate=(-1.4, -0.9, 0.0))
+    add_camera(stage, "/World/Cam", eye=(0.0, 0.0, 10.0))
+    add_distant_light(stage, "/World/Sun")
+    build(stage)
+    return stage
+
+
+def _ok_is_drawn(stage: Usd.Stage, result: mipray.RenderResult) -> None:
+    color = result.aovs["color"]
+    assert np.isfinite(color).all()
+    row, col = pixel_of(stage, "/World/Ok", result.width, result.height, Usd.TimeCode.Default())
+    assert color[row, col].sum() > 0.0, "the good prim is missing"
+
+
+def _scaled_parent(scale: tuple[float, float, float]):
+    def build(stage: Usd.Stage) -> None:
+        parent = UsdGeom.Xform.Define(stage, "/World/Parent")
+        parent.AddScaleOp().Set(Gf.Vec3f(*scale))
+        add_cube(stage, "/World/Parent/Bad")
+
+    return build
+
+
+@pytest.mark.parametrize(
+    "scale", [(0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1e-30, 1e-30, 1e-30), (1e20, 1e20, 1e20)]
+)
+def test_degenerate_scales_drop_the_prim_by_name(native, caplog, scale) -> None:
+    stage = _stage_with(_scaled_parent(scale))
+    with caplog.at_level(logging.WARNING):
+        result = _render(stage)
+    _ok_is_drawn(stage, result)
+    dropped = result.stats["dropped_prims"]
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Parent/Bad: transform "), dropped
+    assert any("/World/Parent/Bad: transform" in r.getMessage() for r in caplog.records)
+    assert result.stats["internal_errors"] == 0
+
+
+def test_an_object_scaled_flat_renders_as_the_flat_shape_it_is(native) -> None:
+    # Scaled to zero along the view axis: the cube is a square facing the camera.
+    stage = _stage_with(_scaled_parent((2.0, 2.0, 0.0)))
+    result = _render(stage, width=32)
+    assert result.stats["dropped_prims"] == []
+    depth = result.aovs["depth"] if "depth" in result.aovs else None
+    color = result.aovs["color"]
+    h, w = color.shape[:2]
+    assert color[h // 2, w // 2].sum() > 0.0
+    assert depth is None or depth[h // 2, w // 2, 0] == pytest.approx(10.0, abs=1e-3)
+
+
+def test_a_point_instancer_with_scale_zero_names_the_prototype(native) -> None:
+    def build(stage: Usd.Stage) -> None:
+        inst = UsdGeom.PointInstancer.Define(stage, "/World/Forest")
+        add_cube(stage, "/World/Forest/Protos/Tree")
+        inst.CreatePrototypesRel().SetTargets([Sdf.Path("/World/Forest/Protos/Tree")])
+        inst.CreateProtoIndicesAttr([0, 0, 0])
+        inst.CreatePositionsAttr([(-2, 0, 0), (0, 0, 0), (2, 0, 0)])
+        inst.CreateScalesAttr([(0, 0, 0), (1, 1, 1), (0, 0, 0)])
+        UsdGeom.Imageable(stage.GetPrimAtPath("/World/Forest/Protos")).MakeInvisible()
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    dropped = result.stats["dropped_prims"]
+    assert len(dropped) == 1 and "/World/Forest/Protos/Tree" in dropped[0], dropped
+    assert "(2 instances)" in dropped[0]
+    color = result.aovs["color"]
+    h, w = color.shape[:2]
+    assert color[h // 2, w // 2].sum() > 0.0, "the instance of scale 1 is drawn"
+
+
+@pytest.mark.parametrize("far", [1e30, 3e38])
+def test_points_beyond_the_traceable_range_drop_the_mesh_by_name(native, far) -> None:
+    def build(stage: Usd.Stage) -> None:
+        points = [(x, y, z) for x, y, z in [(-0.5, -0.5, 0.5), (far, -0.5, 0.5)]]
+        points += [(-0.5, 0.5, 0.5), (0.5, 0.5, 0.5), (-0.5, 0.5, -0.5), (0.5, 0.5, -0.5)]
+        points += [(-0.5, -0.5, -0.5), (0.5, -0.5, -0.5)]
+        add_cube(stage, "/World/Far", points=points, scheme="none")
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    dropped = result.stats["dropped_prims"]
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Far: "), dropped
+
+
+def test_a_face_whose_indices_are_all_one_vertex(native) -> None:
+    def build(stage: Usd.Stage) -> None:
+        mesh = add_cube(stage, "/World/Bad")
+        mesh.CreateFaceVertexIndicesAttr([0, 0, 0, 0] + [2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4])
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+
+
+def test_a_huge_displacement_scale_drops_the_mesh_by_name(native) -> None:
+    def build(stage: Usd.Stage) -> None:
+        mesh = add_cube(stage, "/World/Bumpy")
+        prim = mesh.GetPrim()
+        prim.CreateAttribute("mipray:displacement:amplitude", Sdf.ValueTypeNames.Float).Set(1e30)
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    dropped = result.stats["dropped_prims"]
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Bumpy: "), dropped
+
+
+def test_many_coincident_faces_render(native) -> None:
+    # A production mesh with duplicated points: thousands of quads on the same four points
+    # (obvhs built a BVH deeper than its traversal stack).
+    def build(stage: Usd.Stage) -> None:
+        n = 40_000
+        mesh = UsdGeom.Mesh.Define(stage, "/World/Dup")
+        mesh.CreatePointsAttr([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)])
+        mesh.CreateFaceVertexCountsAttr([4] * n)
+        mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3] * n)
+        mesh.CreateSubdivisionSchemeAttr("none")
+
+    result = _render(_stage_with(build))
+    color = result.aovs["color"]
+    h, w = color.shape[:2]
+    assert color[h // 2, w // 2].sum() > 0.0
+    assert result.stats["dropped_prims"] == []
+
+
+def test_a_projective_transform_drops_the_prim_by_name(native) -> None:
+    def build(stage: Usd.Stage) -> None:
+        mesh = add_cube(stage, "/World/Proj")
+        m = Gf.Matrix4d(1.0)
+        m.SetColumn(3, Gf.Vec4d(0.0, 0.0, 0.3, 1.0))
+        mesh.AddTransformOp().Set(m)
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    dropped = result.stats["dropped_prims"]
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Proj: transform is projective"), dropped
