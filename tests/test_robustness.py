@@ -169,3 +169,81 @@ def test_a_projective_transform_drops_the_prim_by_name(native) -> None:
     _ok_is_drawn(stage, result)
     dropped = result.stats["dropped_prims"]
     assert len(dropped) == 1 and dropped[0].startswith("/World/Proj: transform is projective"), dropped
+
+
+def _texture_file(native, path: Path, texel: tuple[float, ...]) -> str:
+    """An 8×8 float EXR whose every texel is ``texel`` (as many channels as values)."""
+    values = np.ascontiguousarray(np.broadcast_to(np.array(texel, np.float32), (8, 8, len(texel))))
+    native.write_image(str(path), {"map": values}, ["map"], {"map": "float"})
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    ("texel", "expected"),
+    [
+        ((0.25,), (0.25, 0.25, 0.25)),  # grey: r = g = b
+        ((0.25, 0.5), (0.25, 0.25, 0.25)),  # grey and alpha: the grey in r, g and b
+        ((0.1, 0.2, 0.3), (0.1, 0.2, 0.3)),
+    ],
+)
+def test_rgb_of_files_with_fewer_channels_follows_usd_uv_texture(native, tmp_path, texel, expected):
+    stage, shader = scene(diffuseColor=(0.0, 0.0, 0.0), useSpecularWorkflow=1)
+    file = _texture_file(native, tmp_path / "map.exr", texel)
+    texture(stage, "/World/Looks/M", shader, "emissiveColor", file)
+    with mipray.RenderSession(stage) as session:
+        result = session.render("/World/Camera", width=16, settings={"samples": 1}, camera_light=False)
+    color = result.aovs["color"]
+    h, w = color.shape[:2]
+    np.testing.assert_allclose(color[h // 2, w // 2, :3], expected, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("texel", "alpha"),
+    [((0.25,), 1.0), ((0.1, 0.2, 0.3), 1.0), ((0.25, 0.5), 0.0), ((0.1, 0.2, 0.3, 0.75), 1.0)],
+)
+def test_outputs_a_of_a_file_without_alpha_is_one(native, tmp_path, texel, alpha):
+    # OpenImageIO aborted the process (sample_bilinear: offset < tile_bytes) when asked for a
+    # channel the file lacks. A cut-out at 0.6 shows the alpha read: 1 for a file without
+    # alpha, the second channel (0.5: cut) of a grey-and-alpha file, the fourth of an RGBA one.
+    stage, shader = scene(
+        diffuseColor=(0.0, 0.0, 0.0),
+        emissiveColor=(1.0, 1.0, 1.0),
+        useSpecularWorkflow=1,
+        opacityThreshold=0.6,
+    )
+    file = _texture_file(native, tmp_path / "map.exr", texel)
+    texture(stage, "/World/Looks/M", shader, "opacity", file, output="a")
+    with mipray.RenderSession(stage) as session:
+        result = session.render(
+            "/World/Camera",
+            width=16,
+            aovs=["color", "alpha"],
+            settings={"samples": 1},
+            camera_light=False,
+        )
+    a = result.aovs["alpha"]
+    h, w = a.shape[:2]
+    assert a[h // 2, w // 2, 0] == pytest.approx(alpha, abs=1e-4)
+
+
+def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, tmp_path) -> None:
+    # An emissive 1e5: half float's largest value is 65504, so the EXR held Inf.
+    stage, _ = scene(diffuseColor=(0.0, 0.0, 0.0), emissiveColor=(1e5, 1e5, 1e5), useSpecularWorkflow=1)
+    usd = tmp_path / "bright.usda"
+    stage.GetRootLayer().Export(str(usd))
+    out = tmp_path / "bright.exr"
+    done = subprocess.run(
+        [*record_command(), str(usd), str(out), "--imageWidth", "16", "--camera", "/World/Camera"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 0, done.stderr
+    pixels, names = native.read_image(str(out))
+    assert np.isfinite(pixels).all()
+    h, w = pixels.shape[:2]
+    assert pixels[h // 2, w // 2, names.index("R")] == 65504.0
+    warned = [line for line in done.stderr.splitlines() if "clamped" in line]
+    assert len(warned) == 1 and str(out) in warned[0], done.stderr

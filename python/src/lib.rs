@@ -671,7 +671,10 @@ fn write_image(
         }
     }
     let refs: Vec<&RenderBuffer> = buffers.iter().collect();
-    py.detach(|| write_buffers(Path::new(path), &refs, &fmts, &meta)).map_err(|e| PyOSError::new_err(e.to_string()))
+    let written = py.detach(|| write_buffers(Path::new(path), &refs, &fmts, &meta));
+    // Values clamped to the file's range are warned about: the warning reaches Python now.
+    forward_logs(py);
+    written.map_err(|e| PyOSError::new_err(e.to_string()))
 }
 
 /// Reads an image: (H×W×C float32 array, channel names).
