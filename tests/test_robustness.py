@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
+from pxr import Gf, Sdf, Usd, UsdGeom
+from test_end_to_end import pixel_of, record_command, subprocess_env
+from test_materials import scene, texture
 
 import mipray
 
-from stages import add_camera, add_cube, add_distant_light, new_stage
-from test_end_to_end import pixel_of, record_command, subprocess_env
-from test_materials import scene, texture
+from stages import CUBE_INDICES, add_camera, add_cube, add_distant_light, new_stage
 
 
 def _render(stage: Usd.Stage, width: int = 24, **settings: object) -> mipray.RenderResult:
@@ -119,7 +119,7 @@ def test_points_beyond_the_traceable_range_drop_the_mesh_by_name(native, far) ->
 def test_a_face_whose_indices_are_all_one_vertex(native) -> None:
     def build(stage: Usd.Stage) -> None:
         mesh = add_cube(stage, "/World/Bad")
-        mesh.CreateFaceVertexIndicesAttr([0, 0, 0, 0] + [2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4])
+        mesh.CreateFaceVertexIndicesAttr([0, 0, 0, 0, *CUBE_INDICES[4:]])
 
     stage = _stage_with(build)
     result = _render(stage)
@@ -168,7 +168,9 @@ def test_a_projective_transform_drops_the_prim_by_name(native) -> None:
     result = _render(stage)
     _ok_is_drawn(stage, result)
     dropped = result.stats["dropped_prims"]
-    assert len(dropped) == 1 and dropped[0].startswith("/World/Proj: transform is projective"), dropped
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Proj: transform is projective"), (
+        dropped
+    )
 
 
 def _texture_file(native, path: Path, texel: tuple[float, ...]) -> str:
@@ -191,7 +193,9 @@ def test_rgb_of_files_with_fewer_channels_follows_usd_uv_texture(native, tmp_pat
     file = _texture_file(native, tmp_path / "map.exr", texel)
     texture(stage, "/World/Looks/M", shader, "emissiveColor", file)
     with mipray.RenderSession(stage) as session:
-        result = session.render("/World/Camera", width=16, settings={"samples": 1}, camera_light=False)
+        result = session.render(
+            "/World/Camera", width=16, settings={"samples": 1}, camera_light=False
+        )
     color = result.aovs["color"]
     h, w = color.shape[:2]
     np.testing.assert_allclose(color[h // 2, w // 2, :3], expected, atol=1e-4)
@@ -228,7 +232,9 @@ def test_outputs_a_of_a_file_without_alpha_is_one(native, tmp_path, texel, alpha
 
 def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, tmp_path) -> None:
     # An emissive 1e5: half float's largest value is 65504, so the EXR held Inf.
-    stage, _ = scene(diffuseColor=(0.0, 0.0, 0.0), emissiveColor=(1e5, 1e5, 1e5), useSpecularWorkflow=1)
+    stage, _ = scene(
+        diffuseColor=(0.0, 0.0, 0.0), emissiveColor=(1e5, 1e5, 1e5), useSpecularWorkflow=1
+    )
     usd = tmp_path / "bright.usda"
     stage.GetRootLayer().Export(str(usd))
     out = tmp_path / "bright.exr"
@@ -247,3 +253,20 @@ def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, t
     assert pixels[h // 2, w // 2, names.index("R")] == 65504.0
     warned = [line for line in done.stderr.splitlines() if "clamped" in line]
     assert len(warned) == 1 and str(out) in warned[0], done.stderr
+
+
+def test_a_point_instancer_whose_prototype_holds_it_is_reported_in_one_line(native) -> None:
+    # Its prototype is its own parent: expanding it met itself again, without end (a 2,663-line
+    # RecursionError).
+    def build(stage: Usd.Stage) -> None:
+        inst = UsdGeom.PointInstancer.Define(stage, "/World/Group/Forest")
+        add_cube(stage, "/World/Group/Tree")
+        inst.CreatePrototypesRel().SetTargets([Sdf.Path("/World/Group")])
+        inst.CreateProtoIndicesAttr([0])
+        inst.CreatePositionsAttr([(3.0, 0.0, 0.0)])
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    said = [str(e) for e in result.errors]
+    assert said == ["/World/Group/Forest: its prototypes hold this PointInstancer itself (a cycle)"], said
