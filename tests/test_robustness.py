@@ -269,4 +269,6 @@ def test_a_point_instancer_whose_prototype_holds_it_is_reported_in_one_line(nati
     result = _render(stage)
     _ok_is_drawn(stage, result)
     said = [str(e) for e in result.errors]
-    assert said == ["/World/Group/Forest: its prototypes hold this PointInstancer itself (a cycle)"], said
+    assert said == [
+        "/World/Group/Forest: its prototypes hold this PointInstancer itself (a cycle)"
+    ], said
