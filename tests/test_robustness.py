@@ -272,3 +272,29 @@ def test_a_point_instancer_whose_prototype_holds_it_is_reported_in_one_line(nati
     assert said == [
         "/World/Group/Forest: its prototypes hold this PointInstancer itself (a cycle)"
     ], said
+
+
+def test_an_unusable_stage_camera_is_reported_not_replaced(native, tmp_path) -> None:
+    # It was silently replaced by a camera framing the stage (exit status 0).
+    stage = new_stage()
+    add_cube(stage, "/World/Cube")
+    add_camera(stage, "/World/Cam").CreateFocalLengthAttr(-5.0)
+    with pytest.raises(
+        mipray.PrimError, match=r"^/World/Cam: cannot render through it: focalLength"
+    ):
+        _render(stage)
+    usd = tmp_path / "bad_camera.usda"
+    stage.GetRootLayer().Export(str(usd))
+    done = subprocess.run(
+        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 1
+    assert (
+        done.stderr.strip().splitlines()[-1].startswith("mipray-record: /World/Cam: cannot render")
+    )
+    assert not (tmp_path / "out.exr").exists()
