@@ -9,6 +9,7 @@ render, and the stats list what was dropped.
 from __future__ import annotations
 
 import logging
+import os
 import subprocess
 from pathlib import Path
 
@@ -298,3 +299,33 @@ def test_an_unusable_stage_camera_is_reported_not_replaced(native, tmp_path) -> 
         done.stderr.strip().splitlines()[-1].startswith("mipray-record: /World/Cam: cannot render")
     )
     assert not (tmp_path / "out.exr").exists()
+
+
+@pytest.mark.parametrize("problem", ["directory", "device", "missing directory"])
+def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_path, problem):
+    # Frame 2's output cannot be written: nothing renders (frame 1's image was written, and
+    # only frame 2's write failed, after its render).
+    stage = _stage_with(lambda stage: None)
+    usd = tmp_path / "shot.usda"
+    stage.GetRootLayer().Export(str(usd))
+    if problem == "directory":
+        (tmp_path / "out.2.exr").mkdir()
+        pattern = str(tmp_path / "out.#.exr")
+    elif problem == "device":
+        os.symlink("/dev/full", tmp_path / "out.2.exr")
+        pattern = str(tmp_path / "out.#.exr")
+    else:
+        pattern = str(tmp_path / "frame#" / "out.exr")
+        (tmp_path / "frame1").mkdir()
+    done = subprocess.run(
+        [*record_command(), str(usd), pattern, "--frames", "1:2", "--imageWidth", "8"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 1
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("mipray-record: ") and "2" in last, last
+    assert done.stdout == "", "a frame was rendered and written first"

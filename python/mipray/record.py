@@ -45,7 +45,7 @@ from .frames import (
     frames_precision,
     parse_frame_spec,
 )
-from .image import COLOR_CORRECTION_MODES, is_eight_bit, write_aovs
+from .image import COLOR_CORRECTION_MODES, check_output, is_eight_bit, write_aovs
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
 from .stats import format_stats_table
 from .usd.render_settings import read_render_settings
@@ -639,6 +639,13 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
     progress = _Progress(err, len(times))
     progressive = bool(settings.get("progressive"))
     passes = pass_samples(_samples(settings)) if progressive else []
+    # Every frame's output is checked before the first render, not found unwritable after it.
+    for time in times:
+        check_output(
+            format_frame_path(args.outputImagePath, 0.0 if time.IsDefault() else time.GetValue()),
+            plan.aovs,
+            args.colorCorrectionMode,
+        )
     internal_errors = 0
     with RenderSession(stage, purposes=plan.purposes, time=times[0]) as session:
         for index, time in enumerate(times, start=1):

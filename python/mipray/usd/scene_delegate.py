@@ -766,9 +766,7 @@ class UsdSceneDelegate:
         named = [p for p in cameras if Sdf.Path(p).name == "main_cam"]
         # A stage camera that could not be read is the one meant, not a reason to frame the
         # stage with a camera of our own: say what is wrong with it.
-        broken = sorted(
-            p for p in self._errors if self.stage.GetPrimAtPath(p).IsA(UsdGeom.Camera)
-        )
+        broken = sorted(p for p in self._errors if self.stage.GetPrimAtPath(p).IsA(UsdGeom.Camera))
         broken_main = [p for p in broken if Sdf.Path(p).name == "main_cam"]
         if (broken_main and not named) or (broken and not cameras):
             path = (broken_main or broken)[0]
