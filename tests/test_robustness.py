@@ -301,7 +301,7 @@ def test_an_unusable_stage_camera_is_reported_not_replaced(native, tmp_path) -> 
     assert not (tmp_path / "out.exr").exists()
 
 
-@pytest.mark.parametrize("problem", ["directory", "device", "missing directory"])
+@pytest.mark.parametrize("problem", ["directory", "device", "file as folder"])
 def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_path, problem):
     # Frame 2's output cannot be written: nothing renders (frame 1's image was written, and
     # only frame 2's write failed, after its render).
@@ -316,7 +316,7 @@ def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_pa
         pattern = str(tmp_path / "out.#.exr")
     else:
         pattern = str(tmp_path / "frame#" / "out.exr")
-        (tmp_path / "frame1").mkdir()
+        (tmp_path / "frame2").write_text("a file where frame 2's folder would be made")
     done = subprocess.run(
         [*record_command(), str(usd), pattern, "--frames", "1:2", "--imageWidth", "8"],
         capture_output=True,

@@ -101,8 +101,9 @@ def check_output(path: str, aov_names: Sequence[str], color_correction: str = "s
 
     Raises:
         OutputError: as :func:`output_plan`; or ``path`` is a directory or
-            another non-regular file (a device, a FIFO), or its directory is
-            missing or not writable.
+            another non-regular file (a device, a FIFO), or its directory
+            cannot be made (missing folders are made when the image is
+            written) or written to.
 
     """
     output_plan(path, aov_names, color_correction)
@@ -111,8 +112,10 @@ def check_output(path: str, aov_names: Sequence[str], color_correction: str = "s
     if os.path.lexists(path) and not os.path.isfile(path):
         raise OutputError(f"{path}: not a regular file", path=path)
     folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.lexists(folder):
+        folder = os.path.dirname(folder)
     if not os.path.isdir(folder):
-        raise OutputError(f"{path}: no such directory {folder}", path=path)
+        raise OutputError(f"{path}: {folder} is not a directory", path=path)
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(f"{path}: directory {folder} is not writable", path=path)
 
