@@ -262,6 +262,19 @@ bool OiioTexSys::resolution(uint32_t handle, rust::Slice<int32_t> out) const noe
   }
 }
 
+int32_t OiioTexSys::channels(uint32_t handle) const noexcept {
+  try {
+    const Impl& m = *impl;
+    TextureSystem::TextureHandle* h = m.get(handle);
+    int n = 0;
+    if (!h || !m.ts->get_texture_info(h, m.perthread(), 0, OIIO::ustring("channels"), OIIO::TypeDesc::INT, &n))
+      return 0;
+    return n;
+  } catch (...) {
+    return 0;
+  }
+}
+
 rust::Vec<float> OiioTexSys::texels(uint32_t handle, uint32_t max_width, uint32_t channels,
                                    rust::Slice<int32_t> dims) const {
   try {

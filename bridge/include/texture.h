@@ -35,6 +35,8 @@ class OiioTexSys {
   bool sample(const OiioLookup& lookup, rust::Slice<float> out) const noexcept;
   // Resolution of the finest level into out[0..2]; false if unknown.
   bool resolution(uint32_t handle, rust::Slice<int32_t> out) const noexcept;
+  // Channels the file has; 0 if unknown.
+  int32_t channels(uint32_t handle) const noexcept;
   // The whole first MIP level at most `max_width` texels wide (the coarsest there is if none
   // is), up to `channels` channels from channel 0, as floats, scanlines top first; its width,
   // height and channel count into dims[0..3]. Throws naming the reason.

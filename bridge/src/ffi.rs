@@ -237,6 +237,8 @@ pub(crate) mod bridge {
         fn sample(self: &OiioTexSys, lookup: &OiioLookup, out: &mut [f32]) -> bool;
         /// Finest-level resolution into `out[0..2]`; false if unknown.
         fn resolution(self: &OiioTexSys, handle: u32, out: &mut [i32]) -> bool;
+        /// Channels the file has; 0 if unknown.
+        fn channels(self: &OiioTexSys, handle: u32) -> i32;
         /// The first MIP level at most `max_width` wide (up to `channels` channels), scanlines
         /// top first; width, height, channels into `dims[0..3]`.
         fn texels(self: &OiioTexSys, handle: u32, max_width: u32, channels: u32, dims: &mut [i32]) -> Result<Vec<f32>>;

@@ -13,11 +13,13 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use mipray::texture::serde_json::{json, Map, Value};
-use mipray::texture::{texels_by_lookups, FilterMode, Lookup, SourceColorSpace, Texels, TextureError, TextureHandle, TextureSampler, Wrap};
+use mipray::texture::{
+    texels_by_lookups, usd_uv_channel, FilterMode, Lookup, SourceColorSpace, Texels, TextureError, TextureHandle, TextureSampler, Wrap,
+};
 
 use crate::ffi::bridge as ffi;
 
@@ -69,6 +71,9 @@ pub struct OiioTextureSystem {
     encoded: Mutex<Encoded>,
     /// Where linear copies of sRGB files go ([`OiioTextureSystem::linear_cache_dir`]).
     linear_cache: PathBuf,
+    /// Per handle, the channels its file has (0 until opened), read by every lookup without a
+    /// lock: what UsdUVTexture's rules for missing channels need.
+    file_channels: Box<[AtomicU8]>,
     lookups: AtomicU64,
     failed: AtomicU64,
     warned: AtomicBool,
@@ -119,6 +124,7 @@ impl OiioTextureSystem {
             opened: Mutex::new((HashMap::new(), Vec::new())),
             encoded: Mutex::new(Encoded::default()),
             linear_cache: default_linear_cache_dir(),
+            file_channels: (0..options.max_textures).map(|_| AtomicU8::new(0)).collect(),
             lookups: AtomicU64::new(0),
             failed: AtomicU64::new(0),
             warned: AtomicBool::new(false),
@@ -204,6 +210,38 @@ impl OiioTextureSystem {
         lock(&self.opened).1.clone()
     }
 
+    /// One OpenImageIO lookup of `out.len()` channels from `lookup.first_channel`, all of which
+    /// the file must have; a failure is counted and its first message logged.
+    fn sample_file(
+        &self,
+        handle: TextureHandle,
+        st: [f32; 2],
+        dst_dx: [f32; 2],
+        dst_dy: [f32; 2],
+        lookup: &Lookup,
+        out: &mut [f32],
+    ) -> bool {
+        let (dx, dy) = self.options.filter.widths(dst_dx, dst_dy);
+        let raw = ffi::OiioLookup {
+            handle: handle.index(),
+            s: st[0],
+            t: st[1],
+            dsdx: dx[0],
+            dtdx: dx[1],
+            dsdy: dy[0],
+            dtdy: dy[1],
+            first_channel: i32::try_from(lookup.first_channel).unwrap_or(i32::MAX),
+            wrap_s: wrap_code(lookup.wrap_s),
+            wrap_t: wrap_code(lookup.wrap_t),
+            fill: lookup.fill,
+        };
+        let ok = st[0].is_finite() && st[1].is_finite() && self.sys.sample(&raw, out);
+        if !ok {
+            self.note_failure(handle);
+        }
+        ok
+    }
+
     fn note_failure(&self, handle: TextureHandle) {
         self.failed.fetch_add(1, Ordering::Relaxed);
         // Read (and so clear) this thread's error either way; log only the first.
@@ -228,6 +266,9 @@ impl TextureSampler for OiioTextureSystem {
         }
         let index = self.sys.open(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?;
         let h = TextureHandle::new(index);
+        if let Some(c) = self.file_channels.get(index as usize) {
+            c.store(u8::try_from(self.sys.channels(index).clamp(0, 255)).unwrap_or(0), Ordering::Relaxed);
+        }
         guard.0.insert(path.to_string(), h);
         guard.1.push(path.to_string());
         Ok(h)
@@ -270,27 +311,33 @@ impl TextureSampler for OiioTextureSystem {
         lock(&self.encoded).decoded_from.contains_key(&handle.index())
     }
 
+    /// Channels a file lacks follow UsdUVTexture's rule ([`usd_uv_channel`]): OpenImageIO is
+    /// only ever asked for channels the file has (asked for more, 2.4 reads past a tile and
+    /// aborts the process).
     fn sample(&self, handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool {
         self.lookups.fetch_add(1, Ordering::Relaxed);
-        let (dx, dy) = self.options.filter.widths(dst_dx, dst_dy);
-        let raw = ffi::OiioLookup {
-            handle: handle.index(),
-            s: st[0],
-            t: st[1],
-            dsdx: dx[0],
-            dtdx: dx[1],
-            dsdy: dy[0],
-            dtdy: dy[1],
-            first_channel: i32::try_from(lookup.first_channel).unwrap_or(i32::MAX),
-            wrap_s: wrap_code(lookup.wrap_s),
-            wrap_t: wrap_code(lookup.wrap_t),
-            fill: lookup.fill,
-        };
-        let ok = st[0].is_finite() && st[1].is_finite() && self.sys.sample(&raw, out);
-        if !ok {
-            self.note_failure(handle);
+        let n = self.file_channels.get(handle.index() as usize).map_or(0, |c| u32::from(c.load(Ordering::Relaxed)));
+        let first = lookup.first_channel;
+        let direct = (first..first + out.len() as u32).all(|c| usd_uv_channel(n, c) == Some(c));
+        if direct || out.len() > 4 {
+            return self.sample_file(handle, st, dst_dx, dst_dy, lookup, out);
         }
-        ok
+        // Every channel the file has (at most rgba), then each output from its source.
+        let mut texel = [0.0f32; 4];
+        let have = n.min(4) as usize;
+        let whole = Lookup { first_channel: 0, ..*lookup };
+        if !self.sample_file(handle, st, dst_dx, dst_dy, &whole, &mut texel[..have]) {
+            return false;
+        }
+        for (k, o) in out.iter_mut().enumerate() {
+            let c = first + k as u32;
+            *o = match usd_uv_channel(n, c) {
+                Some(source) => texel[source as usize],
+                None if c == 3 => 1.0,
+                None => lookup.fill,
+            };
+        }
+        true
     }
 
     fn resolution(&self, handle: TextureHandle) -> Option<[u32; 2]> {

@@ -58,6 +58,53 @@ pub fn write_buffers(
             pixels.extend_from_slice(&b.data[p * b.channels..(p + 1) * b.channels]);
         }
     }
+    let clamped = fit_to_formats(&mut pixels, &chan_formats);
+    if clamped > 0 {
+        log::warn!(
+            "{}: {clamped} values the file cannot hold (NaN, infinite, or beyond half float's ±65504) clamped to its range",
+            path.display()
+        );
+    }
     let image = ImageBuf { width: w, height: h, channels, pixels, metadata: Vec::new() };
     OiioImageIo.write(path, &image, &chan_formats, metadata)
+}
+
+/// The largest finite half float: anything larger becomes Inf when stored as half.
+pub const HALF_MAX: f32 = 65504.0;
+
+/// Makes interleaved `pixels` (channel `c` of each pixel stored as `formats[c]`) representable:
+/// NaN becomes 0, and values beyond a channel's finite range are clamped to it (±65504 for half,
+/// ±`f32::MAX` for float; 8-bit channels are clamped to [0, 1] by the conversion itself). A
+/// written image never holds Inf or NaN. Returns how many values changed.
+pub fn fit_to_formats(pixels: &mut [f32], formats: &[ChannelFormat]) -> u64 {
+    if formats.is_empty() {
+        return 0;
+    }
+    let mut changed = 0;
+    for (k, v) in pixels.iter_mut().enumerate() {
+        let limit = match formats[k % formats.len()] {
+            ChannelFormat::Half => HALF_MAX,
+            ChannelFormat::Float | ChannelFormat::U8 => f32::MAX,
+        };
+        let fitted = if v.is_nan() { 0.0 } else { v.clamp(-limit, limit) };
+        if fitted.to_bits() != v.to_bits() && !(fitted == 0.0 && *v == 0.0) {
+            changed += 1;
+        }
+        *v = fitted;
+    }
+    changed
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_a_format_cannot_hold_are_clamped_and_counted() {
+        use ChannelFormat::{Float, Half, U8};
+        let mut px = vec![1e5, -1e5, 65504.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.5, f32::NAN, -0.0];
+        let changed = fit_to_formats(&mut px, &[Half, Half, Half, Float, Float, Float, U8, U8, Half]);
+        assert_eq!(px, [65504.0, -65504.0, 65504.0, 0.0, f32::MAX, f32::MIN, 0.5, 0.0, -0.0]);
+        assert_eq!(changed, 5);
+    }
 }

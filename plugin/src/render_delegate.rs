@@ -221,7 +221,14 @@ impl RenderDelegate {
             if m.dirty.is_clean() {
                 continue;
             }
-            match m.sync() {
+            // A panic in one prim's sync (its patch tables, its primvars) drops that prim only.
+            let synced = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| m.sync())).unwrap_or_else(|payload| {
+                m.surface = None;
+                let e = DelegateError::internal(&m.path, mipray::dropped::panic_message(payload.as_ref()));
+                m.error = Some(e.to_string());
+                Err(e)
+            });
+            match synced {
                 Ok(true) => {
                     // New points or topology: this mesh's tessellations are stale, nobody else's.
                     if let Some((_, cache)) = &self.cache {

@@ -67,7 +67,15 @@ impl RenderPass {
         let out = render_with_cache(&scene, &options, Some(cache), progress)?;
         let mut stats = out.stats;
         if let Some(obj) = stats.as_object_mut() {
-            obj.insert("prim_errors".into(), Value::from(prim_errors.iter().map(|e| e.to_string()).collect::<Vec<_>>()));
+            // Every prim left out, whether its sync failed or the tracer refused or dropped it.
+            let mut listed: Vec<Value> = prim_errors.iter().map(|e| Value::from(e.to_string())).collect();
+            if let Some(Value::Array(dropped)) = obj.get("dropped_prims") {
+                listed.extend(dropped.iter().cloned());
+            }
+            obj.insert("prim_errors".into(), Value::from(listed));
+            let sync_internal = prim_errors.iter().filter(|e| matches!(e, DelegateError::Internal { .. })).count() as u64;
+            let traced_internal = obj.get("internal_errors").and_then(Value::as_u64).unwrap_or(0);
+            obj.insert("internal_errors".into(), Value::from(sync_internal + traced_internal));
         }
         Ok(PassResult { buffers: buffers_from_film(out.film), stats, prim_errors })
     }

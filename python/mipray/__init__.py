@@ -22,11 +22,19 @@ from __future__ import annotations
 import logging
 from importlib import metadata as _metadata
 
-from .errors import MiprayError, OutputError, PrimError, RenderSettingsError, StageError
+from .errors import (
+    InternalError,
+    MiprayError,
+    OutputError,
+    PrimError,
+    RenderSettingsError,
+    StageError,
+)
 from .session import SETTINGS, RenderResult, RenderSession, open_stage, render
 
 __all__ = [
     "SETTINGS",
+    "InternalError",
     "MiprayError",
     "OutputError",
     "PrimError",

@@ -7,6 +7,7 @@ pipeline log shows what to fix without a traceback.
 from __future__ import annotations
 
 __all__ = [
+    "InternalError",
     "MiprayError",
     "OutputError",
     "PrimError",
@@ -41,6 +42,14 @@ class PrimError(MiprayError):
 
 class RenderSettingsError(MiprayError):
     """A render setting (image size, AOV, sample count, ...) is invalid."""
+
+
+class InternalError(MiprayError):
+    """The renderer failed outside any one prim's work (a bug); the message says where.
+
+    A failure inside one prim's work drops that prim instead: the render completes and the
+    stats' ``prim_errors`` name it (``internal_errors`` counts them).
+    """
 
 
 class OutputError(MiprayError):

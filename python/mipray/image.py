@@ -96,6 +96,30 @@ def output_plan(
     return order, None, False
 
 
+def check_output(path: str, aov_names: Sequence[str], color_correction: str = "sRGB") -> None:
+    """Refuse, before anything renders, an output the write would refuse after the render.
+
+    Raises:
+        OutputError: as :func:`output_plan`; or ``path`` is a directory or
+            another non-regular file (a device, a FIFO), or its directory
+            cannot be made (missing folders are made when the image is
+            written) or written to.
+
+    """
+    output_plan(path, aov_names, color_correction)
+    if os.path.isdir(path):
+        raise OutputError(f"{path}: is a directory", path=path)
+    if os.path.lexists(path) and not os.path.isfile(path):
+        raise OutputError(f"{path}: not a regular file", path=path)
+    folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.lexists(folder):
+        folder = os.path.dirname(folder)
+    if not os.path.isdir(folder):
+        raise OutputError(f"{path}: {folder} is not a directory", path=path)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"{path}: directory {folder} is not writable", path=path)
+
+
 def _scalar_metadata(metadata: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in metadata.items() if isinstance(v, (str, int, float))}
 

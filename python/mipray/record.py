@@ -14,7 +14,9 @@ that the command line does not give explicitly. With ``--progressive`` the
 output image is rewritten (atomically) after each pass of 1, 2, 4, ... samples
 per pixel. Output paths go to stdout, one per line; warnings
 and one-line errors (``mipray-record: ...``) to stderr. Exit status: 0 when
-every image was written (even if some prims were skipped with errors), 1 on
+every image was written (even if prims with bad data were skipped, each named);
+2 when every image was written but a prim was dropped after an internal error
+(a renderer bug, named on stderr and in the stats' ``prim_errors``); 1 on
 failure.
 """
 
@@ -43,7 +45,7 @@ from .frames import (
     frames_precision,
     parse_frame_spec,
 )
-from .image import COLOR_CORRECTION_MODES, is_eight_bit, write_aovs
+from .image import COLOR_CORRECTION_MODES, check_output, is_eight_bit, write_aovs
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
 from .stats import format_stats_table
 from .usd.render_settings import read_render_settings
@@ -637,6 +639,14 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
     progress = _Progress(err, len(times))
     progressive = bool(settings.get("progressive"))
     passes = pass_samples(_samples(settings)) if progressive else []
+    # Every frame's output is checked before the first render, not found unwritable after it.
+    for time in times:
+        check_output(
+            format_frame_path(args.outputImagePath, 0.0 if time.IsDefault() else time.GetValue()),
+            plan.aovs,
+            args.colorCorrectionMode,
+        )
+    internal_errors = 0
     with RenderSession(stage, purposes=plan.purposes, time=times[0]) as session:
         for index, time in enumerate(times, start=1):
             progress.start(index, time, passes)
@@ -671,6 +681,13 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
             if args.stats:
                 title = f"mipray stats: {path}"
                 _write_stats(args.stats, value, result.stats, title, out)
+            internal_errors += int(result.stats.get("internal_errors", 0))
+    if internal_errors:
+        err.write(
+            f"{PROG}: images written, but {internal_errors} prim(s) were dropped after internal "
+            "errors (named above)\n"
+        )
+        return 2
     return 0
 
 

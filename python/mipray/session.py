@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Sdf, Tf, Usd
 
-from .errors import MiprayError, RenderSettingsError, StageError
+from .errors import InternalError, MiprayError, RenderSettingsError, StageError
 from .image import write_aovs
 from .usd.camera import camera_matrices, image_height
 from .usd.scene_delegate import SyncError, UsdSceneDelegate
@@ -308,6 +308,7 @@ class RenderSession:
         Raises:
             PrimError: the camera is missing or unusable.
             RenderSettingsError: a bad size, AOV list or setting.
+            InternalError: the renderer failed outside any one prim's work.
             BaseException: whatever ``on_update`` raised.
 
         """
@@ -348,9 +349,11 @@ class RenderSession:
             pixels, stats_json = self.delegate.render(
                 camera_path, width, h, aov_list, chosen, **kwargs
             )
-        except ValueError as exc:
+        except (ValueError, RuntimeError) as exc:
             if raised and exc is raised[0]:
                 raise
+            if isinstance(exc, RuntimeError):
+                raise InternalError(str(exc).splitlines()[0]) from exc
             raise RenderSettingsError(str(exc).splitlines()[0]) from exc
         try:
             stats = json.loads(stats_json) if stats_json else {}
@@ -409,7 +412,8 @@ def render(
         ``.stats`` (dict) and ``.write(path)``.
 
     Raises:
-        StageError, PrimError, RenderSettingsError: see :mod:`mipray.errors`.
+        StageError, PrimError, RenderSettingsError, InternalError: see
+        :mod:`mipray.errors`.
 
     Example::
 

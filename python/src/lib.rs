@@ -671,7 +671,10 @@ fn write_image(
         }
     }
     let refs: Vec<&RenderBuffer> = buffers.iter().collect();
-    py.detach(|| write_buffers(Path::new(path), &refs, &fmts, &meta)).map_err(|e| PyOSError::new_err(e.to_string()))
+    let written = py.detach(|| write_buffers(Path::new(path), &refs, &fmts, &meta));
+    // Values clamped to the file's range are warned about: the warning reaches Python now.
+    forward_logs(py);
+    written.map_err(|e| PyOSError::new_err(e.to_string()))
 }
 
 /// Reads an image: (H×W×C float32 array, channel names).
@@ -801,12 +804,22 @@ fn subdiv_compare(
     .map_err(PyValueError::new_err)
 }
 
+/// Panics are caught where a prim's work is isolated and reported there in one line naming the
+/// prim; the default hook would also print several lines of its own to the host's stderr for
+/// each. Kept when `RUST_BACKTRACE` asks for the backtrace.
+fn quiet_panics() {
+    if std::env::var_os("RUST_BACKTRACE").is_none() {
+        std::panic::set_hook(Box::new(|info| log::debug!("panic: {info}")));
+    }
+}
+
 #[pymodule]
 fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // Another extension may have installed a logger already; then ours is not needed.
     if log::set_logger(&COLLECTOR).is_ok() {
         log::set_max_level(log::LevelFilter::Warn);
     }
+    quiet_panics();
     m.add_class::<RenderDelegate>()?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;

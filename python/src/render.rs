@@ -131,7 +131,7 @@ fn deliver(on_update: &Py<PyAny>, update: PassUpdate, progress: &PyProgress, fai
 /// # Errors
 /// `ValueError` for bad prims or settings, `KeyboardInterrupt` when cancelled by Ctrl-C, the
 /// callback's own exception when `on_update` raised (even on the last pass), else
-/// `RuntimeError`.
+/// `RuntimeError` (an internal error: a panic outside any one prim's work).
 pub(crate) fn render<'py>(
     py: Python<'py>,
     delegate: &mut Delegate,
@@ -141,13 +141,18 @@ pub(crate) fn render<'py>(
 ) -> PyResult<(Bound<'py, PyDict>, String)> {
     let prog = PyProgress::new(progress);
     let failed: Mutex<Option<PyErr>> = Mutex::new(None);
-    let result = match &on_update {
+    // The last line of defence: a panic that escaped the per-prim isolation (sync, tracing) is
+    // one error line, never a `PanicException` (which is not an `Exception`) in the host.
+    let run = std::panic::AssertUnwindSafe(|| match &on_update {
         None => py.detach(|| pass.execute(delegate, &prog)),
         Some(cb) => {
             let on_pass = |u: PassUpdate| deliver(cb, u, &prog, &failed);
             py.detach(|| pass.execute_with_updates(delegate, &prog, &on_pass))
         }
-    };
+    });
+    let result = std::panic::catch_unwind(run).unwrap_or_else(|payload| {
+        Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Internal(mipray::dropped::panic_message(payload.as_ref()))))
+    });
     forward_logs(py);
     if let Some(e) = failed.into_inner().unwrap_or_else(PoisonError::into_inner) {
         return Err(e);

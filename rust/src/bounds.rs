@@ -85,7 +85,21 @@ impl Bounds3 {
     pub fn max_abs(&self) -> f32 {
         self.min.abs().max(self.max.abs()).max_element()
     }
+
+    /// True when the box can be traced: not empty and within [`MAX_COORDINATE`] on every axis
+    /// (so finite). Anything else is refused before a BVH is built over it (see
+    /// [`MAX_COORDINATE`]).
+    pub fn is_traceable(&self) -> bool {
+        !self.is_empty() && self.max_abs() <= MAX_COORDINATE
+    }
 }
+
+/// The largest coordinate (object or render units) geometry may have. The BVH builder's
+/// surface-area costs sum box areas over every node: at 1e12 a node's half area is at most
+/// 1.2e25, so a billion nodes stay finite, where beyond about 1e18 a few dozen overflow to Inf
+/// and leave the builder no decision. Ray tests multiply coordinates too, and obvhs's compressed
+/// nodes quantise them. A 1,000 km scene in micrometres is 1e12.
+pub const MAX_COORDINATE: f32 = 1e12;
 
 impl From<Bounds3> for obvhs::aabb::Aabb {
     fn from(b: Bounds3) -> Self {
@@ -106,5 +120,14 @@ mod tests {
         assert!(c.cmpge(t.min - 1e-5).all() && c.cmple(t.max + 1e-5).all());
         assert!(Bounds3::EMPTY.is_empty());
         assert!(!t.is_empty());
+    }
+
+    #[test]
+    fn only_finite_boxes_within_the_coordinate_limit_are_traceable() {
+        let b = |min: f32, max: f32| Bounds3 { min: Vec3A::splat(min), max: Vec3A::new(max, 1.0, 1.0) };
+        assert!(b(-1.0, 1.0).is_traceable() && b(-MAX_COORDINATE, MAX_COORDINATE).is_traceable());
+        for bad in [b(0.0, 1e30), b(0.0, f32::INFINITY), b(0.0, f32::NAN), b(f32::NAN, 1.0), Bounds3::EMPTY] {
+            assert!(!bad.is_traceable(), "{bad:?}");
+        }
     }
 }

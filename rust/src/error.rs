@@ -39,4 +39,7 @@ pub enum RenderError {
     Image(#[from] ImageError),
     #[error("render cancelled")]
     Cancelled,
+    /// A panic in the renderer outside any one prim's work (a bug); the render stopped.
+    #[error("internal error: {0}")]
+    Internal(String),
 }

@@ -53,7 +53,12 @@ impl WatertightRay {
     pub fn hit_box(&self, b: &Bounds3, t_min: f32, t_max: f32) -> Option<(f32, f32)> {
         let t0 = (b.min - self.o) * self.inv_d;
         let t1 = (b.max - self.o) * self.inv_d;
-        // NaN (0·∞ on a slab plane) is dropped by min/max's preference for the number.
+        // A ray parallel to a slab and exactly in its plane makes 0·∞ = NaN there. SIMD min and
+        // max do not prefer the number (they return the second operand), so the NaN would pick
+        // an arbitrary side: a ray along an edge two boxes share (a camera centred on it) then
+        // missed both. The closed slab holds the ray for all t.
+        let t0 = Vec3A::select(t0.is_nan_mask(), Vec3A::NEG_INFINITY, t0);
+        let t1 = Vec3A::select(t1.is_nan_mask(), Vec3A::INFINITY, t1);
         let near = t0.min(t1).max_element().max(t_min);
         // Robust slab exit: scale by 1 + 2γ(3) so grazing hits at box faces are kept (Ize 2013).
         let far = t0.max(t1).min_element() * (1.0 + 2.0 * crate::ray::gamma(3));
@@ -405,5 +410,25 @@ mod tests {
         assert!(grazing.hit_box(&b, 0.0, 10.0).is_some());
         let miss = WatertightRay::new(Vec3A::new(-1.0, 1.5, 0.5), Vec3A::X);
         assert!(miss.hit_box(&b, 0.0, 10.0).is_none());
+    }
+
+    #[test]
+    fn a_ray_in_a_face_plane_of_a_box_hits_it_on_either_side() {
+        // Parallel to the box's min and max planes of every axis and lying in one: 0·∞ = NaN in
+        // that slab, which must count as inside (two boxes sharing the plane both hold the ray).
+        let b = Bounds3 { min: Vec3A::ZERO, max: Vec3A::ONE };
+        for axis in 0..3 {
+            for plane in [0.0, 1.0] {
+                for d in [Vec3A::X, Vec3A::Y, Vec3A::Z, -Vec3A::X, -Vec3A::Y, -Vec3A::Z] {
+                    if d[axis] != 0.0 {
+                        continue;
+                    }
+                    let mut o = Vec3A::splat(0.5) - d * 2.0;
+                    o[axis] = plane;
+                    let r = WatertightRay::new(o, d + Vec3A::ZERO);
+                    assert!(r.hit_box(&b, 0.0, 10.0).is_some(), "axis {axis} plane {plane} d {d}");
+                }
+            }
+        }
     }
 }

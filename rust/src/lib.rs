@@ -34,6 +34,7 @@ pub mod bvh;
 pub mod camera;
 pub mod differential;
 pub mod displacement;
+pub mod dropped;
 pub mod effects;
 pub mod error;
 pub mod film;
@@ -61,6 +62,7 @@ pub mod tessellate;
 pub mod texture;
 pub mod topology;
 pub mod trace;
+pub mod transform;
 
 /// The names most users need.
 pub mod prelude {

@@ -134,28 +134,38 @@ pub fn render_with_cache(
         let integrator = select::select(&tracer, scene, &fx, options)?;
         // E.g. the irradiance cache's records: made once, before any pixel, in a fixed order.
         let prepass_counters = integrator.prepass(options, progress)?;
-        let mut states: Vec<TileState> = tiles
-            .iter()
-            .map(|&tile| TileState { tile, sums: Vec::new(), n_ok: Vec::new(), counters: TraceCounters::default(), dropped: 0 })
-            .collect();
-        let mut film = Film::new(w, h, &options.aovs);
-        let mut reset = 0;
-        for (pass, samples) in passes(options.samples, options.progressive).into_iter().enumerate() {
-            if progress.cancelled() {
-                return Err(RenderError::Cancelled);
+        let mut failures = tracer.dropped.failures();
+        let (film, states, reset) = loop {
+            let mut states: Vec<TileState> = tiles
+                .iter()
+                .map(|&tile| TileState { tile, sums: Vec::new(), n_ok: Vec::new(), counters: TraceCounters::default(), dropped: 0 })
+                .collect();
+            let mut film = Film::new(w, h, &options.aovs);
+            let mut reset = 0;
+            for (pass, samples) in passes(options.samples, options.progressive).into_iter().enumerate() {
+                if progress.cancelled() {
+                    return Err(RenderError::Cancelled);
+                }
+                // Odd passes run the tiles backwards, so a pass starts where the last one ended,
+                // on the geometry the cache still holds.
+                let results =
+                    render_pass(integrator.as_ref(), options, &mut states, samples.clone(), pass % 2 == 1, motion_blur, threads, progress)?;
+                reset = 0;
+                for r in &results {
+                    reset += r.dropped;
+                    write_tile(&mut film, r);
+                }
+                progress.pass_finished(samples.end, &film);
             }
-            // Odd passes run the tiles backwards, so a pass starts where the last one ended,
-            // on the geometry the cache still holds.
-            let results =
-                render_pass(integrator.as_ref(), options, &mut states, samples.clone(), pass % 2 == 1, motion_blur, threads, progress)
-                    .ok_or(RenderError::Cancelled)?;
-            reset = 0;
-            for r in &results {
-                reset += r.dropped;
-                write_tile(&mut film, r);
+            // A prim whose work panicked was in some pixels and not in others: render again
+            // without it (rays skip it from now on) so that it is left out of every pixel alike.
+            // Each round drops at least one more mesh, so this ends.
+            let now = tracer.dropped.failures();
+            if now == failures {
+                break (film, states, reset);
             }
-            progress.pass_finished(samples.end, &film);
-        }
+            failures = now;
+        };
         let mut counters = prepass_counters;
         let mut dropped = reset;
         for s in &states {
@@ -175,8 +185,13 @@ pub fn render_with_cache(
         };
         let control_faces = scene.meshes.iter().map(|m| m.surface.control_face_count()).sum();
         let mut stats = collect(&tracer, &counters, &fx, &figures, control_faces, scene.instances.len(), &cache_before);
-        if let (Some(ic), Some(obj)) = (integrator.cache_stats(), stats.as_object_mut()) {
-            obj.insert("irradiance_cache".into(), ic);
+        if let Some(obj) = stats.as_object_mut() {
+            if let Some(ic) = integrator.cache_stats() {
+                obj.insert("irradiance_cache".into(), ic);
+            }
+            let left_out = tracer.dropped.list();
+            obj.insert("dropped_prims".into(), Value::from(left_out.iter().map(ToString::to_string).collect::<Vec<_>>()));
+            obj.insert("internal_errors".into(), Value::from(left_out.iter().filter(|d| d.internal).count()));
         }
         Ok(RenderOutput { film, stats })
     });
@@ -199,10 +214,13 @@ fn render_pass(
     motion_blur: bool,
     threads: usize,
     progress: &dyn Progress,
-) -> Option<Vec<TileResult>> {
+) -> Result<Vec<TileResult>, RenderError> {
     let n = states.len();
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
+    // A panic outside any one prim's ray tests (those are isolated per prim by the tracer): the
+    // render stops with one error line rather than unwinding into the caller (a Python host).
+    let panicked: Mutex<Option<String>> = Mutex::new(None);
     // One lock per tile, never contended: the queue hands each tile to one worker.
     let cells: Vec<Mutex<(&mut TileState, Option<TileResult>)>> = states.iter_mut().map(|s| Mutex::new((s, None))).collect();
     rayon::scope(|scope| {
@@ -215,17 +233,27 @@ fn render_pass(
                 let i = if backwards { n - 1 - k } else { k };
                 let mut cell = cells[i].lock().unwrap_or_else(PoisonError::into_inner);
                 let (state, out) = &mut *cell;
-                match render_tile(integrator, options, state, samples.clone(), motion_blur, progress) {
-                    Some(r) => {
+                let tile = std::panic::AssertUnwindSafe(|| render_tile(integrator, options, state, samples.clone(), motion_blur, progress));
+                match std::panic::catch_unwind(tile) {
+                    Ok(Some(r)) => {
                         progress.advance((state.tile.2 * state.tile.3) as u64 * u64::from(samples.end - samples.start));
                         *out = Some(r);
                     }
-                    None => stop.store(true, Ordering::Relaxed),
+                    Ok(None) => stop.store(true, Ordering::Relaxed),
+                    Err(payload) => {
+                        let (x, y, _, _) = state.tile;
+                        let message = format!("tile at pixel ({x}, {y}): {}", crate::dropped::panic_message(payload.as_ref()));
+                        panicked.lock().unwrap_or_else(PoisonError::into_inner).get_or_insert(message);
+                        stop.store(true, Ordering::Relaxed);
+                    }
                 }
             });
         }
     });
-    cells.into_iter().map(|c| c.into_inner().unwrap_or_else(PoisonError::into_inner).1).collect()
+    if let Some(message) = panicked.into_inner().unwrap_or_else(PoisonError::into_inner) {
+        return Err(RenderError::Internal(message));
+    }
+    cells.into_iter().map(|c| c.into_inner().unwrap_or_else(PoisonError::into_inner).1).collect::<Option<_>>().ok_or(RenderError::Cancelled)
 }
 
 /// Renders samples `samples` of every pixel of a tile into its running sums and returns the

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use obvhs::cwbvh::CwBvh;
 use parking_lot::Mutex;
 
-use crate::bounds::Bounds3;
+use crate::bounds::{Bounds3, MAX_COORDINATE};
 use crate::bvh::build_bvh;
 use crate::geometry_cache::SplitIds;
 use crate::patch::UvRect;
@@ -121,7 +121,11 @@ pub struct MeshGeometry {
 impl MeshGeometry {
     /// Builds the root subpatches and their BVH. `split_ids(roots)` is the geometry cache's
     /// table of split children's ids for this mesh and generation, given its root count.
-    pub fn build(mesh: &Mesh, split_ids: impl FnOnce(u32) -> Arc<SplitIds>) -> Self {
+    ///
+    /// # Errors
+    /// A subpatch's bounds (with the displacement bound) are not finite or reach beyond
+    /// [`MAX_COORDINATE`]: the message says how far.
+    pub fn build(mesh: &Mesh, split_ids: impl FnOnce(u32) -> Arc<SplitIds>) -> Result<Self, String> {
         let s = &mesh.surface;
         let grow = mesh.displacement_bound.max(0.0);
         let mut subpatches: Vec<Subpatch> = (0..s.patch_count())
@@ -133,13 +137,25 @@ impl MeshGeometry {
             })
             .filter(|sp| !sp.bounds.is_empty())
             .collect();
+        if let Some(sp) = subpatches.iter().find(|sp| !sp.bounds.is_traceable()) {
+            return Err(format!(
+                "patch {} reaches {:e} (displacement bound {grow:e}), beyond the traceable ±{MAX_COORDINATE:e}",
+                sp.patch,
+                sp.bounds.max_abs()
+            ));
+        }
         // Collected through a filter, the vector may hold twice its length: give it back.
         subpatches.shrink_to_fit();
         let bounds = subpatches.iter().fold(Bounds3::EMPTY, |b, sp| b.union(&sp.bounds));
         let boxes: Vec<Bounds3> = subpatches.iter().map(|s| s.bounds).collect();
         let bvh = build_bvh(&boxes);
         let child_ids = ChildIds::new(split_ids(subpatches.len() as u32));
-        MeshGeometry { subpatches, bvh, bounds, child_ids }
+        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids })
+    }
+
+    /// A mesh left out of the render: nothing to hit.
+    pub fn empty() -> Self {
+        MeshGeometry { subpatches: Vec::new(), bvh: None, bounds: Bounds3::EMPTY, child_ids: ChildIds::new(Arc::new(SplitIds::new(0))) }
     }
 }
 

@@ -203,6 +203,22 @@ impl Lookup {
     pub const DEFAULT: Lookup = Lookup { first_channel: 0, wrap_s: Wrap::FromFile, wrap_t: Wrap::FromFile, fill: 0.0 };
 }
 
+/// Where UsdUVTexture reads output channel `channel` (r = 0, g = 1, b = 2, a = 3) of a file with
+/// `file_channels` channels, by the UsdPreviewSurface specification's rule for channels a file
+/// lacks: a one-channel (grey) file gives its channel as r, g and b; a two-channel (grey and
+/// alpha) file gives its first channel as r, g and b and its second as a; a file without alpha
+/// gives a = 1. `Some(c)`: the file's channel `c`; `None`: a constant, 1 for alpha and the
+/// lookup's fill beyond it. `file_channels` 0 (unknown) reads the channel as asked.
+pub fn usd_uv_channel(file_channels: u32, channel: u32) -> Option<u32> {
+    match (file_channels, channel) {
+        (0, c) => Some(c),
+        (1 | 2, 0..=2) => Some(0),
+        (2, 3) => Some(1),
+        (n, c) if c < n.min(4) => Some(c),
+        _ => None,
+    }
+}
+
 impl Default for Lookup {
     fn default() -> Self {
         Self::DEFAULT
@@ -709,6 +725,23 @@ impl BaseFacePrimvar {
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
+    #[test]
+    fn missing_channels_follow_usd_uv_texture() {
+        // (file channels, [r, g, b, a] sources)
+        let cases = [
+            (1, [Some(0), Some(0), Some(0), None]),
+            (2, [Some(0), Some(0), Some(0), Some(1)]),
+            (3, [Some(0), Some(1), Some(2), None]),
+            (4, [Some(0), Some(1), Some(2), Some(3)]),
+            (0, [Some(0), Some(1), Some(2), Some(3)]),
+        ];
+        for (n, want) in cases {
+            let got: Vec<Option<u32>> = (0..4).map(|c| usd_uv_channel(n, c)).collect();
+            assert_eq!(got, want, "{n} channels");
+        }
+        assert_eq!(usd_uv_channel(4, 4), None);
+    }
+
     use super::*;
 
     #[test]

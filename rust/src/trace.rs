@@ -11,6 +11,7 @@ use obvhs::ray::{Ray as BvhRay, RayHit};
 
 use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
+use crate::dropped::DroppedPrims;
 use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
 use crate::intersect::WatertightRay;
 use crate::patch::{GridSamples, UvRect};
@@ -204,6 +205,8 @@ pub struct Tracer<'s> {
     pub bounds: Bounds3,
     /// Displaced vertices found outside their subpatch's bounds (warned about once).
     pub displaced_outside: AtomicU64,
+    /// Prims left out: geometry that cannot be traced, and meshes whose work panicked.
+    pub dropped: DroppedPrims,
 }
 
 impl<'s> Tracer<'s> {
@@ -219,29 +222,61 @@ impl<'s> Tracer<'s> {
     /// hit again by the next render.
     pub fn with_cache(scene: &'s Scene, cache: Arc<GeometryCache<Tessellation>>, single: bool, tess_factor: f32) -> Self {
         use rayon::prelude::*;
+        let dropped = DroppedPrims::new(scene.meshes.len());
         let meshes: Vec<MeshGeometry> = scene
             .meshes
             .par_iter()
             .enumerate()
-            .map(|(i, m)| MeshGeometry::build(m, |roots| cache.split_ids(Self::cache_mesh(m, i), m.generation, roots)))
+            .map(|(i, m)| {
+                let split_ids = |roots| cache.split_ids(Self::cache_mesh(m, i), m.generation, roots);
+                match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| MeshGeometry::build(m, split_ids))) {
+                    Ok(Ok(g)) => g,
+                    Ok(Err(reason)) => {
+                        dropped.refuse(&m.name, reason);
+                        MeshGeometry::empty()
+                    }
+                    Err(payload) => {
+                        dropped.fail(i, &m.name, payload.as_ref());
+                        MeshGeometry::empty()
+                    }
+                }
+            })
             .collect();
         let mut boxes = Vec::new();
         let mut instances = Vec::new();
         for inst in &scene.instances {
             let Some(g) = meshes.get(inst.mesh) else { continue };
-            if g.bvh.is_none() || !inst.render_from_object.is_finite() {
+            if g.bvh.is_none() {
                 continue;
             }
-            boxes.push(match &inst.motion {
+            let name = &scene.meshes[inst.mesh].name;
+            // Rays enter the instance through the inverse transform: refuse what has none.
+            let render_from_object = match crate::transform::traceable(inst.render_from_object) {
+                Ok(m) => m,
+                Err(e) => {
+                    dropped.refuse(name, e);
+                    continue;
+                }
+            };
+            let keys_ok = inst
+                .motion
+                .as_ref()
+                .is_none_or(|m| m.keys().iter().all(|k| crate::transform::traceable(k.render_from_object) == Ok(k.render_from_object)));
+            if !keys_ok {
+                dropped.refuse(name, "a motion key's transform is degenerate (zero or absurd scale, or projective)");
+                continue;
+            }
+            let bounds = match &inst.motion {
                 Some(m) => m.swept_bounds(&g.bounds),
-                None => g.bounds.transformed(&inst.render_from_object),
-            });
-            instances.push(InstanceData {
-                id: inst.id,
-                mesh: inst.mesh,
-                pose: Pose::of(inst.render_from_object),
-                motion: inst.motion.clone(),
-            });
+                None => g.bounds.transformed(&render_from_object),
+            };
+            if !bounds.is_traceable() {
+                dropped
+                    .refuse(name, format!("placed at {:e}, beyond the traceable ±{:e}", bounds.max_abs(), crate::bounds::MAX_COORDINATE));
+                continue;
+            }
+            boxes.push(bounds);
+            instances.push(InstanceData { id: inst.id, mesh: inst.mesh, pose: Pose::of(render_from_object), motion: inst.motion.clone() });
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
@@ -257,6 +292,7 @@ impl<'s> Tracer<'s> {
             seams: true,
             bounds,
             displaced_outside: AtomicU64::new(0),
+            dropped,
         }
     }
 
@@ -361,7 +397,7 @@ impl<'s> Tracer<'s> {
                 return f32::INFINITY;
             }
             let ii = tlas.primitive_indices[id] as usize;
-            if let Some(h) = self.trace_instance(ii, ray, t_best, counters, any_hit, origin) {
+            if let Some(h) = self.test_instance(ii, ray, t_best, counters, any_hit, origin) {
                 t_best = h.t;
                 best = Some(h);
                 if any_hit {
@@ -372,6 +408,29 @@ impl<'s> Tracer<'s> {
             f32::INFINITY
         });
         best
+    }
+
+    /// [`Tracer::trace_instance`], isolated: a panic in the instance's work (its tessellation,
+    /// its ray tests) drops its mesh from the render (see [`crate::dropped`]) instead of taking
+    /// the render down; a dropped mesh is skipped.
+    fn test_instance(
+        &self,
+        ii: usize,
+        ray: &Ray,
+        t_max: f32,
+        counters: &mut TraceCounters,
+        any_hit: bool,
+        origin: Option<Origin>,
+    ) -> Option<Hit> {
+        let mesh = self.instances[ii].mesh;
+        if self.dropped.has_failed(mesh) {
+            return None;
+        }
+        let test = std::panic::AssertUnwindSafe(|| self.trace_instance(ii, ray, t_max, counters, any_hit, origin));
+        std::panic::catch_unwind(test).unwrap_or_else(|payload| {
+            self.dropped.fail(mesh, &self.scene.meshes[mesh].name, payload.as_ref());
+            None
+        })
     }
 
     fn trace_instance(
@@ -391,6 +450,10 @@ impl<'s> Tracer<'s> {
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
+        if !(o.is_finite() && d.is_finite()) {
+            // A render-space ray far beyond the scene can overflow in a small object's space.
+            return None;
+        }
         let wray = WatertightRay::new(o, d);
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;

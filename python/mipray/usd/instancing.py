@@ -164,6 +164,8 @@ class _Walk:
     material_paths: set[str] = field(default_factory=set)
     might_vary: bool = False
     member_prims: set[str] = field(default_factory=set)
+    #: The PointInstancers being expanded, outermost first: one met again is a cycle.
+    expanding: set[str] = field(default_factory=set)
 
 
 def _expand(
@@ -329,11 +331,17 @@ class Instancing:
         path = str(prim.GetPath())
         walk.member_prims.add(path)
         try:
+            if path in walk.expanding:
+                raise PrimError(path, "its prototypes hold this PointInstancer itself (a cycle)")
             arrays = read_point_instancer(UsdGeom.PointInstancer(prim), walk.time)
-            groups = [
-                self._collect(r, self._root_prefix(path, dpath, i, r), walk)
-                for i, r in enumerate(arrays.roots)
-            ]
+            walk.expanding.add(path)
+            try:
+                groups = [
+                    self._collect(r, self._root_prefix(path, dpath, i, r), walk)
+                    for i, r in enumerate(arrays.roots)
+                ]
+            finally:
+                walk.expanding.discard(path)
             flat, indices, transforms = _expand(
                 groups, arrays.proto_indices, arrays.transforms @ self._relative(prim, root, walk)
             )
@@ -524,7 +532,7 @@ class Instancing:
         roots = tuple(str(r.GetPath()) for r in arrays.roots)
         state = previous
         if members or state is None or roots != state.roots:
-            walk = _Walk(path, time, xform_cache, unsupported)
+            walk = _Walk(path, time, xform_cache, unsupported, expanding={path})
             groups = [
                 self._collect(r, self._root_prefix(path, path, i, r), walk)
                 for i, r in enumerate(arrays.roots)

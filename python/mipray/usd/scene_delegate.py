@@ -745,7 +745,9 @@ class UsdSceneDelegate:
 
         Raises:
             PrimError: the requested camera is missing, not a camera, or its
-                data is unusable.
+                data is unusable; or, with none requested, the camera that
+                would be chosen (``main_cam``, else the stage's only ones)
+                is unusable.
 
         """
         if self.is_dirty:
@@ -762,6 +764,13 @@ class UsdSceneDelegate:
                 raise PrimError(path, self._errors[path].message)
             return path
         named = [p for p in cameras if Sdf.Path(p).name == "main_cam"]
+        # A stage camera that could not be read is the one meant, not a reason to frame the
+        # stage with a camera of our own: say what is wrong with it.
+        broken = sorted(p for p in self._errors if self.stage.GetPrimAtPath(p).IsA(UsdGeom.Camera))
+        broken_main = [p for p in broken if Sdf.Path(p).name == "main_cam"]
+        if (broken_main and not named) or (broken and not cameras):
+            path = (broken_main or broken)[0]
+            raise PrimError(path, f"cannot render through it: {self._errors[path].message}")
         if named:
             return min(named, key=lambda p: cameras[p].order)
         if cameras:

@@ -38,7 +38,7 @@ pub struct SplitIds {
 }
 
 impl SplitIds {
-    pub(super) fn new(first: u32) -> Self {
+    pub(crate) fn new(first: u32) -> Self {
         SplitIds { first, ids: Mutex::new(HashMap::default()) }
     }
 
