@@ -12,6 +12,8 @@ use mipray::bounds::Bounds3;
 use mipray::bsdf::{PreviewSurfaceBsdf, Scattering};
 use mipray::light::LightShape;
 use mipray::material::{Material, PreviewSurface};
+use mipray::motion::{MotionKey, MotionTransform};
+use mipray::options::IntegratorKind;
 use mipray::patch::{LimitSurface, PatchKind, PatchParam, SurfacePoint};
 use mipray::prelude::*;
 use mipray::sampling::Sampler;
@@ -314,4 +316,57 @@ fn a_rough_glass_sheet_in_a_uniform_dome_shows_its_reflectance_plus_transmittanc
     let mean = data.iter().step_by(3).sum::<f32>() / 64.0;
     assert!((mean - albedo).abs() < 0.015 * albedo, "mean {mean} vs albedo {albedo}");
     assert!(out.stats["render"]["rays"]["refraction"].as_u64().unwrap() > 0, "rough refraction rays");
+}
+
+#[test]
+fn a_curved_mirror_on_a_moving_instance_widens_beams_by_its_pose_at_the_rays_time() {
+    // A unit mirror sphere seen from above reflects a lit ceiling. Moving: three times its size
+    // at shutter open, its rest pose from a ten-thousandth of the shutter on, so (almost) every
+    // ray sees the rest pose. The beam widths on the ceiling come from the sphere's curvature
+    // (its normal differentials); at the ray's time they are those of the same sphere at rest.
+    // With the pose at shutter open they would follow a sphere three times as large.
+    let render_with = |motion: Option<MotionTransform>, integrator: IntegratorKind| {
+        let mut scene = Scene::default();
+        let chrome = scene.add_material(Material::mirror("/chrome", Vec3A::ZERO, Vec3A::splat(0.8)));
+        let mut sphere = Mesh::new("/sphere", Arc::new(Sphere { r: 1.0 }));
+        sphere.material = chrome;
+        let m = scene.add_mesh(sphere);
+        match motion {
+            Some(motion) => scene.add_moving_instance(m, motion),
+            None => scene.add_instance(m, Mat4::IDENTITY),
+        };
+        add(
+            &mut scene,
+            "/ceiling",
+            quad([[-50.0, -50.0, 20.0], [-50.0, 50.0, 20.0], [50.0, 50.0, 20.0], [50.0, -50.0, 20.0]]),
+            Material::lambertian("/white", Vec3A::ONE).0,
+        );
+        let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
+        light.casts_shadows = false;
+        scene.lights.push(light);
+        scene.camera = top_camera(2.4);
+        let aovs = ["color", "beamWidth"].map(String::from).to_vec();
+        render(&scene, &RenderOptions { width: 24, height: 24, aovs, integrator, ..Default::default() }, &NoProgress).unwrap()
+    };
+    let keys = vec![
+        MotionKey { time: 0.0, render_from_object: Mat4::from_scale(Vec3::splat(3.0)) },
+        MotionKey { time: 1e-4, render_from_object: Mat4::IDENTITY },
+        MotionKey { time: 1.0, render_from_object: Mat4::IDENTITY },
+    ];
+    for integrator in [IntegratorKind::Direct, IntegratorKind::Path] {
+        let still = render_with(None, integrator);
+        let moving = render_with(Some(MotionTransform::new(keys.clone()).unwrap()), integrator);
+        let (a, b) = (&still.film.aov("beamWidth").unwrap().data, &moving.film.aov("beamWidth").unwrap().data);
+        let mut checked = 0;
+        for (i, (w0, w1)) in a.iter().zip(b.iter()).enumerate() {
+            // Pixels whose camera ray reflects off the sphere onto the ceiling: wider beams than
+            // the camera's (a flat view of the ceiling's distance).
+            if *w0 <= 0.0 {
+                continue;
+            }
+            assert!((w1 - w0).abs() <= 1e-3 * w0, "{integrator:?} pixel {i}: moving {w1} vs still {w0}");
+            checked += 1;
+        }
+        assert!(checked > 100, "{integrator:?}: {checked} pixels checked");
+    }
 }

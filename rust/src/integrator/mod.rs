@@ -32,7 +32,7 @@ pub use ao::AmbientOcclusion;
 pub use bleed::ColorBleeding;
 pub use classic::DirectLighting;
 pub use path::PathTracer;
-pub use surface::{shading_point, tessellation_error, ShadingPoint};
+pub use surface::{normal_differentials, shading_point, tessellation_error, ShadingPoint};
 
 /// Everything one camera sample yields, one field per AOV. The default is all zeros except
 /// `element_id`, −1 (no face); see [`SampleValue::miss`] for a camera ray that hits nothing.
