@@ -83,6 +83,20 @@ fn uniform_dome(radiance: f32) -> Light {
 }
 
 /// Looking straight down −z from above, orthographic, `size` scene units across.
+/// A white ceiling at height `z` facing down, lit from below by a distant light of radiance 2
+/// that casts no shadows: what a mirror facing up reflects.
+fn add_lit_ceiling(scene: &mut Scene, z: f32) {
+    add(
+        scene,
+        "/ceiling",
+        quad([[-50.0, -50.0, z], [-50.0, 50.0, z], [50.0, 50.0, z], [50.0, -50.0, z]]),
+        Material::lambertian("/white", Vec3A::ONE).0,
+    );
+    let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
+    light.casts_shadows = false;
+    scene.lights.push(light);
+}
+
 fn top_camera(size: f32) -> Camera {
     Camera::orthographic(Mat4::from_translation(Vec3::new(0.0, 0.0, 10.0)), size * 10.0, size * 10.0)
 }
@@ -263,15 +277,7 @@ fn roughness_1e3_renders_what_the_mirror_does() {
             s.roughness = roughness;
         });
         add(&mut scene, "/floor", quad([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]]), metal);
-        add(
-            &mut scene,
-            "/ceiling",
-            quad([[-50.0, -50.0, 10.0], [-50.0, 50.0, 10.0], [50.0, 50.0, 10.0], [50.0, -50.0, 10.0]]),
-            Material::lambertian("/white", Vec3A::ONE).0,
-        );
-        let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
-        light.casts_shadows = false;
-        scene.lights.push(light);
+        add_lit_ceiling(&mut scene, 10.0);
         scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, 40.0);
         render(&scene, &RenderOptions { width: 8, height: 8, ..Default::default() }, &NoProgress).unwrap()
     };
@@ -335,15 +341,7 @@ fn a_curved_mirror_on_a_moving_instance_widens_beams_by_its_pose_at_the_rays_tim
             Some(motion) => scene.add_moving_instance(m, motion),
             None => scene.add_instance(m, Mat4::IDENTITY),
         };
-        add(
-            &mut scene,
-            "/ceiling",
-            quad([[-50.0, -50.0, 20.0], [-50.0, 50.0, 20.0], [50.0, 50.0, 20.0], [50.0, -50.0, 20.0]]),
-            Material::lambertian("/white", Vec3A::ONE).0,
-        );
-        let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
-        light.casts_shadows = false;
-        scene.lights.push(light);
+        add_lit_ceiling(&mut scene, 20.0);
         scene.camera = top_camera(2.4);
         let aovs = ["color", "beamWidth"].map(String::from).to_vec();
         render(&scene, &RenderOptions { width: 24, height: 24, aovs, integrator, ..Default::default() }, &NoProgress).unwrap()
