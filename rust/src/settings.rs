@@ -440,9 +440,17 @@ macro_rules! settings_table {
                 Some(())
             }
 
-            /// Copies the settings the core's options hold.
-            fn copy_into(&self, options: &mut RenderOptions) {
-                $($(options.$option = self.$field.clone();)?)*
+            /// The core's options for a render of `width`×`height` pixels with `aovs`: every
+            /// field of [`RenderOptions`] but these, the geometry cache's and the AOVs is a
+            /// setting's (the compiler holds the table to that).
+            pub fn to_options(&self, width: usize, height: usize, aovs: &[String]) -> RenderOptions {
+                RenderOptions {
+                    width,
+                    height,
+                    cache: self.cache_config(),
+                    aovs: aovs.to_vec(),
+                    $($($option: self.$field.clone(),)?)*
+                }
             }
         }
 
@@ -563,36 +571,6 @@ impl RenderSettings {
             CacheMode::Unbounded => CacheConfig::unbounded(),
             CacheMode::None => CacheConfig::none(),
         }
-    }
-
-    /// The core's options for a render of `width`×`height` pixels with `aovs`.
-    pub fn to_options(&self, width: usize, height: usize, aovs: &[String]) -> RenderOptions {
-        let mut options = RenderOptions {
-            width,
-            height,
-            samples: 0,
-            seed: 0,
-            threads: 0,
-            tess_factor: 0.0,
-            tess_factor_incoherent: 0.0,
-            cache: self.cache_config(),
-            aovs: aovs.to_vec(),
-            ao_samples: 0,
-            ao_distance: 0.0,
-            ao_intensity: 0.0,
-            max_depth: 0,
-            shadow_samples: 0,
-            glossy_samples: 0,
-            integrator: IntegratorKind::Auto,
-            indirect_samples: 0,
-            irradiance_cache: false,
-            irradiance_cache_error: 0.0,
-            russian_roulette_depth: 0,
-            progressive: false,
-            seams: false,
-        };
-        self.copy_into(&mut options);
-        options
     }
 }
 
