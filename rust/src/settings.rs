@@ -3,7 +3,7 @@
 //! their parsing and validation, the core's [`RenderOptions`] and its
 //! [`RenderOptions::validate`], the delegate's descriptors, and through `_mipray.settings()` the
 //! Python side (`mipray.SETTINGS`, `mipray-record`'s flags and `--list-settings`, the sweep's
-//! knobs). Adding a setting is one row of [`settings_table!`]'s invocation below (plus the code
+//! knobs). Adding a setting is one row of the `settings_table!` invocation below (plus the code
 //! that reads it).
 //!
 //! One set of rules for every form a value arrives in: a JSON number, a JSON string holding a
@@ -98,7 +98,7 @@ pub enum SettingError {
 pub const AO_NEEDS_SAMPLES: &str = "integrator=ao needs aoSamples > 0 (ambient-occlusion rays per shading point)";
 
 impl SettingType {
-    /// The values it takes, for messages and listings: `integer, 1 ≤ x ≤ 1000000`,
+    /// The values it takes, for messages and listings: `integer, 1 ≤ x ≤ 1e+06`,
     /// `number, 0 < x ≤ 10`, `0 or 1`, `one of multires, single`.
     pub fn describe(&self) -> String {
         match *self {
