@@ -79,7 +79,10 @@ def test_stub_declares_the_protocol() -> None:
         "read_image",
         "version",
         "render_settings",
+        "settings",
+        "parse_setting",
         "aov_names",
+        "aovs",
         "subdiv_compare",
     }
     assert [p[0] for p in sigs["RenderDelegate.render"]] == [
@@ -98,7 +101,14 @@ def test_fake_delegate_matches_the_stub() -> None:
     module = fake_module()
     module.RenderDelegate = FakeRenderDelegate  # type: ignore[attr-defined]
     for name, expected in stub_signatures().items():
-        if name in ("subdiv_compare", "render_settings", "aov_names"):
+        if name in (
+            "subdiv_compare",
+            "render_settings",
+            "settings",
+            "parse_setting",
+            "aov_names",
+            "aovs",
+        ):
             # A tool (mipray-subdiv-compare) and the renderer's own tables, not part of the
             # scene delegate's protocol.
             continue

@@ -1,6 +1,6 @@
 //! AOV descriptors (Hydra's `HdAovDescriptor`): the format, clear value and file channels of
 //! each AOV the delegate can render, and what it holds — its meaning, units and space
-//! ([`mipray::film::AOV_MEANINGS`]). Names are Hydra's (`HdAovTokens`) where Hydra has one:
+//! ([`mipray::aov::AOV_TABLE`]). Names are Hydra's (`HdAovTokens`) where Hydra has one:
 //! `color`, `depth`, `cameraDepth`, `Peye`, `normal`, `Neye`, `primId`, `instanceId`,
 //! `elementId`. Two differ from Hydra on purpose: `depth` is camera-space depth along the view
 //! axis (EXR's `Z`), not Hydra's clip-space depth in [0, 1] — `cameraDepth` holds the same
@@ -9,7 +9,7 @@
 //! axis by 1 / cos); and `primId` is the patch index within the mesh hit, not a render-index
 //! id.
 
-use mipray::film::{aov_channels, aov_meaning, default_format, file_channel_names, AOV_NAMES};
+use mipray::aov::Aov;
 use mipray::image_io::ChannelFormat;
 
 /// How an AOV is stored and cleared.
@@ -25,31 +25,35 @@ pub struct AovDescriptor {
     pub file_channels: Vec<String>,
 }
 
+impl From<Aov> for AovDescriptor {
+    /// The descriptor is the core's row for the AOV ([`mipray::aov::AOV_TABLE`]).
+    fn from(aov: Aov) -> Self {
+        let info = aov.info();
+        AovDescriptor {
+            name: info.name,
+            meaning: info.meaning,
+            channels: info.channels,
+            format: info.format,
+            clear_value: info.clear,
+            file_channels: aov.file_channel_names(),
+        }
+    }
+}
+
 /// The descriptor of a named AOV, or `None` for an unknown name.
 pub fn default_aov_descriptor(name: &str) -> Option<AovDescriptor> {
-    let &name = AOV_NAMES.iter().find(|n| **n == name)?;
-    let channels = aov_channels(name)?;
-    Some(AovDescriptor {
-        name,
-        meaning: aov_meaning(name)?,
-        channels,
-        format: default_format(name),
-        clear_value: match name {
-            "primId" | "instanceId" | "elementId" => -1.0,
-            _ => 0.0,
-        },
-        file_channels: file_channel_names(name, channels),
-    })
+    Aov::from_name(name).map(AovDescriptor::from)
 }
 
 /// Every AOV the delegate supports.
 pub fn supported_aovs() -> Vec<AovDescriptor> {
-    AOV_NAMES.iter().filter_map(|n| default_aov_descriptor(n)).collect()
+    Aov::ALL.into_iter().map(AovDescriptor::from).collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mipray::film::AOV_NAMES;
 
     #[test]
     fn every_aov_says_what_it_holds_and_hydras_geometric_ones_are_there() {

@@ -11,8 +11,8 @@ pub enum DelegateError {
     #[error("{path}: internal error, prim dropped: {message}")]
     Internal { path: String, message: String },
     /// A render setting with a bad name or value.
-    #[error("render setting {name}: {message}")]
-    Setting { name: String, message: String },
+    #[error(transparent)]
+    Setting(#[from] mipray::settings::SettingError),
     /// The render pass could not run.
     #[error(transparent)]
     Render(#[from] mipray::error::RenderError),

@@ -60,7 +60,7 @@ impl RenderPass {
 
     fn render(&self, delegate: &mut RenderDelegate, progress: &dyn Progress) -> Result<PassResult, DelegateError> {
         let prim_errors = delegate.sync();
-        delegate.prepare_textures(self.settings.texture_options())?;
+        delegate.prepare_textures(crate::config::texture_options(&self.settings))?;
         let scene = delegate.build_scene(&self.camera, self.settings.displacement_bound)?;
         let options = self.settings.to_options(self.width, self.height, &self.aovs);
         let cache = delegate.geometry_cache(options.cache);

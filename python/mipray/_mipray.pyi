@@ -18,7 +18,7 @@ Conventions
 """
 
 from collections.abc import Callable
-from typing import final
+from typing import Any, final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -396,8 +396,25 @@ def render_settings() -> list[tuple[str, str, str]]:
     """Every render setting the delegate accepts, as ``(key, default, description)``; the
     default is ``""`` for a setting unset unless given (``mipray-record --list-settings``)."""
 
+def settings() -> list[dict[str, Any]]:
+    """The settings table, one dict a row: ``key``, ``type`` (``int``, ``float``, ``bool``,
+    ``choice``), ``min``, ``max``, ``min_open``, ``max_open`` (numbers; None for a choice),
+    ``choices``, ``default`` (None when unset), ``range`` (the values it takes, in words),
+    ``help``, ``scope`` (``render``, ``geometryCache``, ``textures``, ``scene``); see
+    :class:`mipray.settings.SettingRow`."""
+
+def parse_setting(key: str, value: bool | int | float | str) -> int | float | str:
+    """``value`` (a number, or text as typed) checked as setting ``key``'s, as the renderer
+    holds it (on/off settings as 0 or 1). Raises ValueError naming the setting, the value and
+    the range, or listing the valid keys."""
+
 def aov_names() -> list[str]:
     """Every AOV the delegate can render (README's AOV table says what each holds)."""
+
+def aovs() -> list[dict[str, Any]]:
+    """The AOV table, one dict an AOV: ``name``, ``channels``, ``meaning``, ``averaged``,
+    ``clear``, ``file_channels``, ``format`` (``"half"`` or ``"float"``); see
+    :class:`mipray.aovs.AovRow`."""
 
 def subdiv_compare(
     name: str,

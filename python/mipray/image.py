@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .aovs import exr_format
 from .errors import OutputError
 
 __all__ = [
@@ -35,9 +36,6 @@ COLOR_CORRECTION_MODES = ("sRGB", "disabled")
 #: File extensions whose images hold 8 bits per channel.
 EIGHT_BIT_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tga", ".ppm", ".webp"})
 _FLOAT_EXTENSIONS = frozenset({".exr", ".tif", ".tiff", ".hdr", ".pfm"})
-# Per-AOV pixel formats for EXR: half is plenty for color and normals, depth
-# needs float to keep precision far from the camera.
-_EXR_FORMATS = {"color": "half", "normal": "half", "depth": "float"}
 
 
 def is_eight_bit(path: str) -> bool:
@@ -90,7 +88,7 @@ def output_plan(
         return ["color"], {"color": "uint8"}, color_correction == "sRGB"
     order = list(aov_names)
     if ext == ".exr":
-        return order, {a: _EXR_FORMATS.get(a, "float") for a in order}, False
+        return order, {a: exr_format(a) for a in order}, False
     if ext in _FLOAT_EXTENSIONS:
         return order, {a: "float" for a in order}, False
     return order, None, False

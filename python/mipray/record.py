@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import os
 import sys
 import time as time_module
@@ -47,6 +46,7 @@ from .frames import (
 )
 from .image import COLOR_CORRECTION_MODES, check_output, is_eight_bit, write_aovs
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
+from .settings import TABLE, parse
 from .stats import format_stats_table
 from .usd.render_settings import read_render_settings
 from .usd.scene_delegate import PURPOSES
@@ -58,8 +58,18 @@ PROG = "mipray-record"
 #: usdrecord's ``--complexity`` levels as tess factors (a subpatch edge this
 #: many ray beam widths long; smaller is finer).
 COMPLEXITY_TESS_FACTOR = {"low": 4.0, "medium": 2.0, "high": 1.0, "veryhigh": 0.5}
-CACHE_MODES = ("multires", "single", "unbounded", "none")
-INTEGRATORS = ("auto", "direct", "ao", "colorBleeding", "path")
+#: Flags that set a renderer setting: flag → setting key. Each flag's type, range,
+#: choices and help come from the settings table (:mod:`mipray.settings`), so a flag
+#: and ``--setting key=value`` accept and refuse the same values.
+SETTING_FLAGS = {
+    "--samples": "samples",
+    "--tess-factor": "tessFactor",
+    "--geometry-cache-mb": "geometryCacheMb",
+    "--cache-mode": "cacheMode",
+    "--integrator": "integrator",
+    "--threads": "threads",
+    "--seed": "seed",
+}
 
 _log = logging.getLogger("mipray")
 
@@ -80,23 +90,37 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _non_negative_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
-    return value
+def _setting_type(key: str) -> Callable[[str], object]:
+    """An argparse ``type`` that checks a flag's value as setting ``key``'s."""
+
+    def check(text: str) -> object:
+        try:
+            return parse(key, text)
+        except RenderSettingsError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from exc
+
+    check.__name__ = key
+    return check
 
 
-def _positive_float(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
+def _add_setting_flag(group: Any, flag: str, metavar: str, extra: str = "") -> None:
+    """A flag for setting ``SETTING_FLAGS[flag]``: type, choices and help from its row."""
+    key = SETTING_FLAGS[flag]
+    row = TABLE.get(key)
+    if row is None:  # no compiled module: the renderer checks the value when it renders
+        group.add_argument(flag, metavar=metavar, help=f"the {key} setting")
+        return
+    default = extra or f"default: {row['default']}"
+    group.add_argument(
+        flag,
+        type=None if row["choices"] else _setting_type(key),
+        choices=row["choices"] or None,
+        metavar=None if row["choices"] else metavar,
+        help=f"{row['help']}; {row['range']} ({default}; the {key} setting)".replace("%", "%%"),
+    )
 
 
 _positive_int.__name__ = "integer >= 1"
-_non_negative_int.__name__ = "integer >= 0"
-_positive_float.__name__ = "positive number"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -238,12 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
             "offers (default: the render settings' RenderVars, else color)"
         ),
     )
-    ren.add_argument(
-        "--samples",
-        type=_positive_int,
-        metavar="N",
-        help="camera rays per pixel (default: 1)",
-    )
+    _add_setting_flag(ren, "--samples", "N")
     ren.add_argument(
         "--progressive",
         action="store_true",
@@ -256,39 +275,10 @@ def build_parser() -> argparse.ArgumentParser:
             "--setting progressive=1"
         ),
     )
-    ren.add_argument(
-        "--tess-factor",
-        type=_positive_float,
-        metavar="F",
-        help=(
-            "tess factor: subpatch edges are tessellated to about F ray beam widths "
-            "(default: from --complexity)"
-        ),
-    )
-    ren.add_argument(
-        "--geometry-cache-mb",
-        type=_positive_float,
-        metavar="MB",
-        help="geometry cache budget in MB, split over the tiers (default: the renderer's, 30)",
-    )
-    ren.add_argument(
-        "--cache-mode",
-        choices=CACHE_MODES,
-        help=(
-            "geometry cache: multires (three tiers, the paper's), single (17x17 "
-            "only), unbounded (never evicts), none (retessellate every test) "
-            "(default: multires)"
-        ),
-    )
-    ren.add_argument(
-        "--integrator",
-        choices=INTEGRATORS,
-        help=(
-            "auto (what the scene calls for: direct light, specular, glossy, and ambient "
-            "occlusion when aoSamples is set), direct, ao, colorBleeding (one diffuse "
-            "bounce) or path (path tracing with Russian roulette) (default: auto)"
-        ),
-    )
+    _add_setting_flag(ren, "--tess-factor", "F", "default: from --complexity")
+    _add_setting_flag(ren, "--geometry-cache-mb", "MB")
+    _add_setting_flag(ren, "--cache-mode", "MODE")
+    _add_setting_flag(ren, "--integrator", "NAME")
     ren.add_argument(
         "--setting",
         action="append",
@@ -299,18 +289,8 @@ def build_parser() -> argparse.ArgumentParser:
             "an unknown key is an error listing the valid ones); wins over the flags above"
         ),
     )
-    ren.add_argument(
-        "--threads",
-        type=_non_negative_int,
-        metavar="N",
-        help="render threads; 0 uses every core (default: 0)",
-    )
-    ren.add_argument(
-        "--seed",
-        type=_non_negative_int,
-        metavar="N",
-        help="random seed; the image is the same for any thread count (default: 0)",
-    )
+    _add_setting_flag(ren, "--threads", "N")
+    _add_setting_flag(ren, "--seed", "N")
     ren.add_argument(
         "--stats",
         metavar="FILE",
@@ -340,9 +320,13 @@ class _ListSettings(argparse.Action):
 
         rows = _mipray.render_settings()
         width = max(len(key) for key, _, _ in rows)
-        for key, default, description in rows:
-            shown = default if default else "(unset)"
-            sys.stdout.write(f"{key:<{width}}  {shown:<9} {description}\n")
+        shown = {key: default if default else "(unset)" for key, default, _ in rows}
+        dwidth = max(len(d) for d in shown.values())
+        takes = max(len(row["range"]) for row in TABLE.values())
+        for key, _, description in rows:
+            values = TABLE[key]["range"]
+            line = f"{key:<{width}}  {shown[key]:<{dwidth}}  {values:<{takes}}  {description}"
+            sys.stdout.write(line + "\n")
         parser.exit(0)
 
 
@@ -378,20 +362,8 @@ def render_settings(args: argparse.Namespace) -> dict[str, object]:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise RenderSettingsError(f"--setting {item!r} is not KEY=VALUE")
-        settings[key.strip()] = _setting_value(value.strip())
+        settings[key.strip()] = parse(key.strip(), value.strip())
     return settings
-
-
-def _setting_value(text: str) -> object:
-    """A --setting value as the renderer takes it: a number where it reads as one, else text."""
-    try:
-        return int(text)
-    except ValueError:
-        pass
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 class _Formatter(logging.Formatter):

@@ -22,6 +22,7 @@ from pxr import Sdf, Tf, Usd
 
 from .errors import InternalError, MiprayError, RenderSettingsError, StageError
 from .image import write_aovs
+from .settings import TABLE, describe
 from .usd.camera import camera_matrices, image_height
 from .usd.scene_delegate import SyncError, UsdSceneDelegate
 
@@ -46,18 +47,10 @@ UpdateCallback = Callable[[int, bool, dict[str, NDArray[np.float32]]], object]
 
 #: Image width when none is given (usdrecord's default).
 DEFAULT_WIDTH = 960
-#: The render settings every renderer build takes (the compiled module may take
-#: more, e.g. ambient occlusion; it rejects unknown keys).
-SETTINGS: dict[str, str] = {
-    "samples": "camera rays per pixel (int, default 1)",
-    "seed": "random seed (int, default 0); the image depends on it alone",
-    "threads": "render threads (int, 0 = all cores)",
-    "tessFactor": "tess factor: tessellated quad size in ray beam widths (larger is coarser)",
-    "geometryCacheMb": "geometry cache budget in MB, split over the tiers in multires mode",
-    "cacheMode": "multires | single | unbounded | none",
-    "displacementBound": "displacement bound in scene units (float)",
-    "progressive": "render in passes of 1, 2, 4, ... samples per pixel (0 or 1, default 0)",
-}
+#: Every render setting, key → what it does, the values it takes and its default:
+#: the renderer's settings table (:data:`mipray.settings.TABLE`), empty without the
+#: compiled module.
+SETTINGS: dict[str, str] = {key: describe(key) for key in TABLE}
 
 
 def open_stage(

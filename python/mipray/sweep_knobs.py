@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import functools
 import itertools
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from .errors import MiprayError
+from .errors import MiprayError, RenderSettingsError
+from .settings import TABLE
+from .settings import parse as parse_setting
 
 __all__ = [
     "DEFAULT_REFERENCE_SAMPLES",
@@ -48,27 +49,21 @@ class SweepError(MiprayError):
 
 @dataclass(frozen=True)
 class Knob:
-    """A render setting a sweep can vary, and the values it takes."""
+    """A render setting a sweep can vary: its row of the settings table."""
 
-    #: The render setting's name (as in ``mipray._mipray.render_settings()``).
+    #: The render setting's name (a key of :data:`mipray.settings.TABLE`).
     name: str
-    #: ``"float"``, ``"int"`` or ``"choice"``.
+    #: ``"float"``, ``"int"``, ``"bool"`` or ``"choice"``.
     kind: str
     #: What it changes, for ``--list-knobs``.
     help: str
-    low: float = 0.0
-    high: float = math.inf
-    #: Whether ``low`` itself is excluded (``0 < x`` rather than ``0 ≤ x``).
-    low_open: bool = False
+    #: The values it takes, in words (``"integer, 0 ≤ x ≤ 64"``).
+    range: str
     choices: tuple[str, ...] = ()
 
     def describe(self) -> str:
-        """The values it takes, e.g. ``'number, 0 < x ≤ 1000'``."""
-        if self.kind == "choice":
-            return " | ".join(self.choices)
-        what = "number" if self.kind == "float" else "integer"
-        low_op = "<" if self.low_open else "≤"
-        return f"{what}, {self.low:g} {low_op} x ≤ {self.high:g}"
+        """The values it takes, e.g. ``'number, 0 < x ≤ 10'``."""
+        return self.range
 
     def parse(self, value: object) -> object:
         """``value`` (text, or a number from Python) as this knob's type.
@@ -78,92 +73,42 @@ class Knob:
                 every knob and its range.
 
         """
-        text = str(value).strip()
-        if self.kind == "choice":
-            if text in self.choices:
-                return text
-            raise _bad_value(self, text, f"not one of {', '.join(self.choices)}")
         try:
-            number = float(text)
-        except ValueError:
-            number = math.nan
-        if not math.isfinite(number) or isinstance(value, bool):
-            raise _bad_value(self, text, "not a finite number")
-        if self.kind == "int" and not number.is_integer():
-            raise _bad_value(self, text, "not an integer")
-        too_low = number <= self.low if self.low_open else number < self.low
-        if too_low or number > self.high:
-            raise _bad_value(self, text, "out of range")
-        return int(number) if self.kind == "int" else number
+            return parse_setting(self.name, value.strip() if isinstance(value, str) else value)
+        except RenderSettingsError as exc:
+            raise SweepError(f"{exc}. Valid knobs: {_valid_knobs()}") from exc
 
 
-#: The knobs a sweep varies, by render-setting name.
-KNOBS: dict[str, Knob] = {
-    k.name: k
-    for k in (
-        Knob(
-            "tessFactor",
-            "float",
-            "tessellated quad size in ray beam widths (larger is coarser)",
-            0.0,
-            1000.0,
-            low_open=True,
-        ),
-        Knob(
-            "tessFactorIncoherent",
-            "float",
-            "extra tess factor for AO, diffuse and glossy rays (on top of tessFactor)",
-            0.0,
-            1000.0,
-            low_open=True,
-        ),
-        Knob("geometryCacheMb", "float", "geometry cache budget, MB (all tiers)", 0.0, 1e6),
-        Knob("geometryCacheCoarseMb", "float", "multires coarse-tier budget, MB", 0.0, 1e6),
-        Knob("geometryCacheMediumMb", "float", "multires medium-tier budget, MB", 0.0, 1e6),
-        Knob("geometryCacheFineMb", "float", "multires fine-tier budget, MB", 0.0, 1e6),
-        Knob(
-            "cacheMode",
-            "choice",
-            "geometry cache mode",
-            choices=("multires", "single", "unbounded", "none"),
-        ),
-        Knob("samples", "int", "camera rays per pixel", 1, 1_000_000),
-        Knob("aoSamples", "int", "ambient-occlusion rays per shading point", 0, 65_536),
-        Knob("maxDepth", "int", "longest chain of mirror bounces", 0, 64),
+def _knobs(names: Sequence[str]) -> dict[str, Knob]:
+    rows = [TABLE[n] for n in names if n in TABLE]
+    return {
+        r["key"]: Knob(r["key"], r["type"], r["help"], r["range"], tuple(r["choices"]))
+        for r in rows
+    }
+
+
+#: The knobs a sweep varies, by render-setting name: what a setting takes is the
+#: settings table's (:mod:`mipray.settings`); which settings are knobs is the sweep's.
+KNOBS: dict[str, Knob] = _knobs(
+    (
+        "tessFactor",
+        "tessFactorIncoherent",
+        "geometryCacheMb",
+        "geometryCacheCoarseMb",
+        "geometryCacheMediumMb",
+        "geometryCacheFineMb",
+        "cacheMode",
+        "samples",
+        "aoSamples",
+        "maxDepth",
     )
-}
+)
 
-#: Knobs the renderer does not have yet: refused with a message saying so.
 #: Knobs for settings that newer builds of the renderer have: offered when
 #: ``mipray._mipray.render_settings()`` lists the setting, refused otherwise.
-OPTIONAL_KNOBS: dict[str, Knob] = {
-    k.name: k
-    for k in (
-        Knob(
-            "textureFilter",
-            "choice",
-            "texture MIP level: from the ray differentials, or the finest level forced",
-            choices=("differentials", "finest"),
-        ),
-        Knob("textureCacheMb", "float", "texture cache budget, MB", 0.0, 1e6, low_open=True),
-        Knob("shadowSamples", "int", "shadow rays toward each area light", 1, 4096),
-        Knob(
-            "irradianceCache",
-            "int",
-            "irradiance and occlusion caching with gradients: 0 off, 1 on (AO, color bleeding)",
-            0,
-            1,
-        ),
-        Knob(
-            "irradianceCacheError",
-            "float",
-            "the irradiance cache's error bound, Ward's a (smaller is more accurate)",
-            0.0,
-            10.0,
-            low_open=True,
-        ),
-    )
-}
+OPTIONAL_KNOBS: dict[str, Knob] = _knobs(
+    ("textureFilter", "textureCacheMb", "shadowSamples", "irradianceCache", "irradianceCacheError")
+)
 
 #: Knobs the renderer does not have yet: refused with a message saying so (none at present).
 RESERVED_KNOBS: dict[str, str] = {}
@@ -196,13 +141,6 @@ def unavailable_knobs() -> dict[str, str]:
 
 def _valid_knobs() -> str:
     return "; ".join(f"{k.name} ({k.describe()})" for k in available_knobs().values())
-
-
-def _bad_value(knob: Knob, text: str, why: str) -> SweepError:
-    return SweepError(
-        f"{knob.name}={text}: {why}; {knob.name} takes {knob.describe()}. "
-        f"Valid knobs: {_valid_knobs()}"
-    )
 
 
 def _check_knob_name(name: str) -> Knob:
@@ -330,15 +268,6 @@ def auto_reference_settings(
     return ref
 
 
-def _setting_value(text: str) -> object:
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def check_base(settings: Mapping[str, object] | Sequence[str] | None) -> dict[str, object]:
     """Fixed settings (``--set KEY=VALUE`` or a mapping), checked against the renderer's."""
     base: dict[str, object] = {}
@@ -362,3 +291,16 @@ def check_base(settings: Mapping[str, object] | Sequence[str] | None) -> dict[st
         if knob is not None:
             base[key] = knob.parse(given)
     return base
+
+
+def _setting_value(text: str) -> object:
+    """A fixed setting's value as typed: a number where it reads as one, else text.
+
+    Its range is the renderer's to check, in the run that uses it.
+    """
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text

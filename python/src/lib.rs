@@ -21,6 +21,7 @@ use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::camera::{Camera, Projection};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
+use mipray::settings::{SettingType, SettingValue, SETTINGS};
 use mipray::texture::{Interpolation, Primvar2, SourceColorSpace, Wrap};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 use mipray_bridge::OiioImageIo;
@@ -603,12 +604,8 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
 }
 
 fn parse_format(s: &str) -> PyResult<ChannelFormat> {
-    Ok(match s {
-        "half" => ChannelFormat::Half,
-        "float" => ChannelFormat::Float,
-        "uint8" => ChannelFormat::U8,
-        _ => return Err(PyValueError::new_err(format!("format '{s}' is not one of half, float, uint8"))),
-    })
+    ChannelFormat::from_name(s)
+        .ok_or_else(|| PyValueError::new_err(format!("format '{s}' is not one of {}", ChannelFormat::NAMES.join(", "))))
 }
 
 fn meta_value(v: &Bound<'_, PyAny>) -> PyResult<MetaValue> {
@@ -686,16 +683,92 @@ fn read_image<'py>(py: Python<'py>, path: &str) -> PyResult<(Bound<'py, PyArray3
     Ok((arr.into_pyarray(py), img.channels))
 }
 
-/// The render settings the delegate accepts: [(key, default, description)].
+/// The render settings the delegate accepts: [(key, default, description)], the default `""`
+/// for a setting unset unless given.
 #[pyfunction]
-fn render_settings() -> Vec<(&'static str, &'static str, &'static str)> {
-    hd_mipray::config::SETTINGS.iter().map(|s| (s.key, s.default, s.description)).collect()
+fn render_settings() -> Vec<(&'static str, String, &'static str)> {
+    SETTINGS.iter().map(|s| (s.key, s.default_text(), s.help)).collect()
+}
+
+/// A checked setting value as Python holds it: int, float or str; on/off settings as 0 or 1
+/// (the form `--setting` and the sweep's knobs take), unset as None.
+fn setting_to_py<'py>(py: Python<'py>, value: &SettingValue) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        SettingValue::Int(x) => x.into_pyobject(py)?.into_any(),
+        SettingValue::Float(x) => x.into_pyobject(py)?.into_any(),
+        SettingValue::Bool(b) => u8::from(*b).into_pyobject(py)?.into_any(),
+        SettingValue::Choice(c) => c.into_pyobject(py)?.into_any(),
+        SettingValue::Unset => py.None().into_bound(py),
+    })
+}
+
+/// The settings table (`mipray::settings::SETTINGS`), one dict a row: key, type (`int`,
+/// `float`, `bool`, `choice`), min, max, min_open, max_open (numbers; None otherwise), choices,
+/// default (None when unset), range (the values it takes, in words), help, scope.
+#[pyfunction]
+fn settings(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
+    let defaults = RenderSettings::default();
+    let rows = PyList::empty(py);
+    for s in SETTINGS {
+        let d = PyDict::new(py);
+        d.set_item("key", s.key)?;
+        let (kind, min, max, min_open, max_open, choices): (_, Option<f64>, Option<f64>, bool, bool, &[&str]) = match s.ty {
+            SettingType::Int { min, max } => ("int", Some(min as f64), Some(max as f64), false, false, &[]),
+            SettingType::Float { min, min_open, max, max_open } => ("float", Some(min), Some(max), min_open, max_open, &[]),
+            SettingType::Bool => ("bool", Some(0.0), Some(1.0), false, false, &[]),
+            SettingType::Choice(names) => ("choice", None, None, false, false, names),
+        };
+        d.set_item("type", kind)?;
+        d.set_item("min", min)?;
+        d.set_item("max", max)?;
+        d.set_item("min_open", min_open)?;
+        d.set_item("max_open", max_open)?;
+        d.set_item("choices", choices.to_vec())?;
+        let default = defaults.value(s.key).unwrap_or(SettingValue::Unset);
+        d.set_item("default", setting_to_py(py, &default)?)?;
+        d.set_item("range", s.ty.describe())?;
+        d.set_item("help", s.help)?;
+        d.set_item("scope", s.scope.name())?;
+        rows.append(d)?;
+    }
+    Ok(rows)
+}
+
+/// `value` (a number, or text as on a command line) checked as setting `key`'s and returned as
+/// Python holds it; ValueError naming the setting, the value and the range otherwise. The
+/// delegate applies the same check to every setting a render is given.
+#[pyfunction]
+fn parse_setting<'py>(py: Python<'py>, key: &str, value: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let json = render::py_to_json(value)?;
+    let parsed = mipray::settings::parse(key, &json).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    setting_to_py(py, &parsed)
 }
 
 /// The AOVs the delegate can render.
 #[pyfunction]
 fn aov_names(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
-    PyList::new(py, mipray::film::AOV_NAMES)
+    PyList::new(py, mipray::aov::AOV_NAMES)
+}
+
+/// The AOV table (`mipray::aov::AOV_TABLE`), one dict an AOV: name, channels, meaning,
+/// averaged (over a pixel's samples, else the pixel centre's), clear, file_channels, format
+/// (`half` or `float`, the EXR pixel type).
+#[pyfunction]
+fn aovs(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
+    let rows = PyList::empty(py);
+    for aov in mipray::aov::Aov::ALL {
+        let info = aov.info();
+        let d = PyDict::new(py);
+        d.set_item("name", info.name)?;
+        d.set_item("channels", info.channels)?;
+        d.set_item("meaning", info.meaning)?;
+        d.set_item("averaged", aov.averaged())?;
+        d.set_item("clear", info.clear)?;
+        d.set_item("file_channels", aov.file_channel_names())?;
+        d.set_item("format", info.format.name())?;
+        rows.append(d)?;
+    }
+    Ok(rows)
 }
 
 /// The package version.
@@ -824,7 +897,10 @@ fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(render_settings, m)?)?;
+    m.add_function(wrap_pyfunction!(settings, m)?)?;
+    m.add_function(wrap_pyfunction!(parse_setting, m)?)?;
     m.add_function(wrap_pyfunction!(aov_names, m)?)?;
+    m.add_function(wrap_pyfunction!(aovs, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(subdiv_compare, m)?)?;
     Ok(())

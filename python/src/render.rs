@@ -163,7 +163,7 @@ pub(crate) fn render<'py>(
             return Err(PyKeyboardInterrupt::new_err("render cancelled"))
         }
         Err(e @ hd_mipray::DelegateError::Prim { .. }) => return Err(PyValueError::new_err(e.to_string())),
-        Err(e @ hd_mipray::DelegateError::Setting { .. }) => return Err(PyValueError::new_err(e.to_string())),
+        Err(e @ hd_mipray::DelegateError::Setting(_)) => return Err(PyValueError::new_err(e.to_string())),
         Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
     };
     Ok((buffers_dict(py, result.buffers)?, result.stats.to_string()))

@@ -13,6 +13,22 @@ pub enum ChannelFormat {
     U8,
 }
 
+impl ChannelFormat {
+    /// Every format, in the order of [`ChannelFormat::NAMES`].
+    pub const ALL: [ChannelFormat; 3] = [ChannelFormat::Half, ChannelFormat::Float, ChannelFormat::U8];
+    /// The names Python and the AOV table use: `half`, `float`, `uint8`.
+    pub const NAMES: [&'static str; 3] = ["half", "float", "uint8"];
+
+    pub const fn name(self) -> &'static str {
+        Self::NAMES[self as usize]
+    }
+
+    /// Parses [`ChannelFormat::name`].
+    pub fn from_name(name: &str) -> Option<ChannelFormat> {
+        Self::NAMES.iter().position(|n| *n == name).map(|i| Self::ALL[i])
+    }
+}
+
 /// A metadata value attached to an image (EXR header attributes, TIFF tags, PNG text).
 #[derive(Clone, Debug, PartialEq)]
 pub enum MetaValue {

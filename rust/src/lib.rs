@@ -27,6 +27,7 @@
 //! assert!((c[0] - 0.18 / std::f32::consts::PI).abs() < 1e-3);
 //! ```
 
+pub mod aov;
 pub mod bilinear;
 pub mod bounds;
 pub mod bsdf;
@@ -56,6 +57,7 @@ pub mod render;
 pub mod sampling;
 pub mod scene;
 pub mod seam;
+pub mod settings;
 pub mod stats;
 pub mod subpatch;
 pub mod tessellate;

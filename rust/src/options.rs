@@ -26,7 +26,7 @@ pub struct RenderOptions {
     /// The geometry cache: mode and per-tier budgets. Default: multires, 30 MB (10 MB a tier,
     /// the paper's).
     pub cache: CacheConfig,
-    /// AOVs to produce, by name (see [`crate::film::AOV_NAMES`]).
+    /// AOVs to produce, by name (see [`crate::aov::Aov`]).
     pub aovs: Vec<String>,
     /// Ambient-occlusion rays per shading point (0: no ambient occlusion). AO lights diffuse
     /// surfaces as a uniform white sky of radiance `ao_intensity`, occluded within `ao_distance`.
@@ -96,53 +96,25 @@ pub enum IntegratorKind {
 }
 
 impl IntegratorKind {
+    /// The setting's tokens, in variant order.
     pub const NAMES: &'static [&'static str] = &["auto", "direct", "ao", "colorBleeding", "path"];
 
     /// The setting's token.
     pub const fn name(self) -> &'static str {
-        match self {
-            IntegratorKind::Auto => "auto",
-            IntegratorKind::Direct => "direct",
-            IntegratorKind::Ao => "ao",
-            IntegratorKind::ColorBleeding => "colorBleeding",
-            IntegratorKind::Path => "path",
-        }
+        Self::NAMES[self as usize]
     }
 
     /// Parses [`IntegratorKind::name`].
     pub fn from_name(name: &str) -> Option<Self> {
-        [IntegratorKind::Auto, IntegratorKind::Direct, IntegratorKind::Ao, IntegratorKind::ColorBleeding, IntegratorKind::Path]
-            .into_iter()
-            .find(|k| k.name() == name)
+        use crate::settings::Named;
+        Self::NAMES.iter().position(|n| *n == name).map(|i| Self::ALL[i])
     }
 }
 
+/// The defaults of [`crate::settings::RenderSettings`], at 320×240 pixels, the colour AOV.
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions {
-            width: 320,
-            height: 240,
-            samples: 1,
-            seed: 0,
-            threads: 0,
-            tess_factor: 1.0,
-            tess_factor_incoherent: 1.0,
-            cache: CacheConfig::multires(30_000_000),
-            aovs: vec!["color".into()],
-            ao_samples: 0,
-            ao_distance: f32::INFINITY,
-            ao_intensity: 1.0,
-            max_depth: 4,
-            shadow_samples: 4,
-            glossy_samples: 4,
-            integrator: IntegratorKind::Auto,
-            indirect_samples: 16,
-            irradiance_cache: false,
-            irradiance_cache_error: 0.2,
-            russian_roulette_depth: 3,
-            progressive: false,
-            seams: true,
-        }
+        crate::settings::RenderSettings::default().to_options(320, 240, &["color".into()])
     }
 }
 
@@ -155,45 +127,10 @@ impl RenderOptions {
         if self.width == 0 || self.height == 0 || self.width > 65_536 || self.height > 65_536 {
             return Err(RenderError::Settings(format!("resolution {}x{} must be within 1..=65536 on each side", self.width, self.height)));
         }
-        if self.samples == 0 {
-            return Err(RenderError::Settings("samples must be at least 1".into()));
-        }
-        if !(self.tess_factor.is_finite() && self.tess_factor > 0.0) {
-            return Err(RenderError::Settings(format!("tessFactor {} must be a positive number", self.tess_factor)));
-        }
-        if !(self.tess_factor_incoherent.is_finite() && self.tess_factor_incoherent > 0.0) {
-            return Err(RenderError::Settings(format!("tessFactorIncoherent {} must be a positive number", self.tess_factor_incoherent)));
-        }
-        if !(self.ao_distance > 0.0) || !(self.ao_intensity.is_finite() && self.ao_intensity >= 0.0) {
-            return Err(RenderError::Settings(format!(
-                "aoDistance {} must be positive and aoIntensity {} a non-negative number",
-                self.ao_distance, self.ao_intensity
-            )));
-        }
-        if self.ao_samples > 65_536 || self.max_depth > 64 {
-            return Err(RenderError::Settings(format!(
-                "aoSamples {} must be at most 65536 and maxDepth {} at most 64",
-                self.ao_samples, self.max_depth
-            )));
-        }
-        if self.glossy_samples == 0 || self.glossy_samples > 65_536 {
-            return Err(RenderError::Settings(format!("glossySamples {} must be within 1..=65536", self.glossy_samples)));
-        }
-        if self.indirect_samples > 65_536 {
-            return Err(RenderError::Settings(format!("indirectSamples {} must be at most 65536", self.indirect_samples)));
-        }
-        if self.russian_roulette_depth > 64 {
-            return Err(RenderError::Settings(format!("russianRouletteDepth {} must be at most 64", self.russian_roulette_depth)));
-        }
-        if self.integrator == IntegratorKind::Ao && self.ao_samples == 0 {
-            return Err(RenderError::Settings("integrator = ao needs aoSamples > 0 (ambient-occlusion rays per shading point)".into()));
-        }
-        if !(self.irradiance_cache_error.is_finite() && self.irradiance_cache_error > 0.0 && self.irradiance_cache_error <= 10.0) {
-            return Err(RenderError::Settings(format!("irradianceCacheError {} must be within (0, 10]", self.irradiance_cache_error)));
-        }
+        crate::settings::check(self).map_err(|e| RenderError::Settings(e.to_string()))?;
         for a in &self.aovs {
-            if crate::film::aov_channels(a).is_none() {
-                return Err(RenderError::Settings(format!("unknown AOV '{a}'; valid AOVs: {}", crate::film::AOV_NAMES.join(", "))));
+            if crate::aov::Aov::from_name(a).is_none() {
+                return Err(RenderError::Settings(format!("unknown AOV '{a}'; valid AOVs: {}", crate::aov::AOV_NAMES.join(", "))));
             }
         }
         Ok(())

@@ -345,35 +345,13 @@ fn render_tile(
 fn write_tile(film: &mut Film, r: &TileResult) {
     let (x0, y0, tw, th) = r.tile;
     let width = film.width;
-    for aov in &mut film.aovs {
+    for buffer in &mut film.aovs {
+        // The film holds only AOVs it knows (Film::new).
+        let Some(aov) = crate::aov::Aov::from_name(&buffer.name) else { continue };
         for ty in 0..th {
             for tx in 0..tw {
-                let v = &r.values[ty * tw + tx];
-                let dst = ((y0 + ty) * width + x0 + tx) * aov.channels;
-                let px = &mut aov.data[dst..dst + aov.channels];
-                match aov.name.as_str() {
-                    "color" => px.copy_from_slice(&v.color.to_array()),
-                    "alpha" => px[0] = v.alpha,
-                    "depth" => px[0] = v.depth,
-                    "cameraDepth" => px[0] = v.camera_depth,
-                    "Peye" => px.copy_from_slice(&v.peye.to_array()),
-                    "normal" => px.copy_from_slice(&v.normal.to_array()),
-                    "primId" => px[0] = v.prim_id,
-                    "instanceId" => px[0] = v.instance_id,
-                    "beamWidth" => px[0] = v.beam_width,
-                    "ao" => px[0] = v.ao,
-                    "tessError" => px.copy_from_slice(&v.tess_error),
-                    "tessRate" => px[0] = v.tess_rate,
-                    "position" => px.copy_from_slice(&v.position.to_array()),
-                    "elementId" => px[0] = v.element_id,
-                    "Neye" => px.copy_from_slice(&v.neye.to_array()),
-                    "albedo" => px.copy_from_slice(&v.albedo.to_array()),
-                    "emission" => px.copy_from_slice(&v.emission.to_array()),
-                    "directDiffuse" => px.copy_from_slice(&v.direct_diffuse.to_array()),
-                    "indirectDiffuse" => px.copy_from_slice(&v.indirect_diffuse.to_array()),
-                    "specular" => px.copy_from_slice(&v.specular.to_array()),
-                    _ => {}
-                }
+                let dst = ((y0 + ty) * width + x0 + tx) * buffer.channels;
+                buffer.data[dst..dst + buffer.channels].copy_from_slice(r.values[ty * tw + tx].channels(aov));
             }
         }
     }

@@ -12,6 +12,8 @@ use mipray::bounds::Bounds3;
 use mipray::bsdf::{PreviewSurfaceBsdf, Scattering};
 use mipray::light::LightShape;
 use mipray::material::{Material, PreviewSurface};
+use mipray::motion::{MotionKey, MotionTransform};
+use mipray::options::IntegratorKind;
 use mipray::patch::{LimitSurface, PatchKind, PatchParam, SurfacePoint};
 use mipray::prelude::*;
 use mipray::sampling::Sampler;
@@ -81,6 +83,20 @@ fn uniform_dome(radiance: f32) -> Light {
 }
 
 /// Looking straight down −z from above, orthographic, `size` scene units across.
+/// A white ceiling at height `z` facing down, lit from below by a distant light of radiance 2
+/// that casts no shadows: what a mirror facing up reflects.
+fn add_lit_ceiling(scene: &mut Scene, z: f32) {
+    add(
+        scene,
+        "/ceiling",
+        quad([[-50.0, -50.0, z], [-50.0, 50.0, z], [50.0, 50.0, z], [50.0, -50.0, z]]),
+        Material::lambertian("/white", Vec3A::ONE).0,
+    );
+    let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
+    light.casts_shadows = false;
+    scene.lights.push(light);
+}
+
 fn top_camera(size: f32) -> Camera {
     Camera::orthographic(Mat4::from_translation(Vec3::new(0.0, 0.0, 10.0)), size * 10.0, size * 10.0)
 }
@@ -261,15 +277,7 @@ fn roughness_1e3_renders_what_the_mirror_does() {
             s.roughness = roughness;
         });
         add(&mut scene, "/floor", quad([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]]), metal);
-        add(
-            &mut scene,
-            "/ceiling",
-            quad([[-50.0, -50.0, 10.0], [-50.0, 50.0, 10.0], [50.0, 50.0, 10.0], [50.0, -50.0, 10.0]]),
-            Material::lambertian("/white", Vec3A::ONE).0,
-        );
-        let mut light = Light::distant("/up", Vec3A::Z, Vec3A::splat(2.0));
-        light.casts_shadows = false;
-        scene.lights.push(light);
+        add_lit_ceiling(&mut scene, 10.0);
         scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, 40.0);
         render(&scene, &RenderOptions { width: 8, height: 8, ..Default::default() }, &NoProgress).unwrap()
     };
@@ -314,4 +322,49 @@ fn a_rough_glass_sheet_in_a_uniform_dome_shows_its_reflectance_plus_transmittanc
     let mean = data.iter().step_by(3).sum::<f32>() / 64.0;
     assert!((mean - albedo).abs() < 0.015 * albedo, "mean {mean} vs albedo {albedo}");
     assert!(out.stats["render"]["rays"]["refraction"].as_u64().unwrap() > 0, "rough refraction rays");
+}
+
+#[test]
+fn a_curved_mirror_on_a_moving_instance_widens_beams_by_its_pose_at_the_rays_time() {
+    // A unit mirror sphere seen from above reflects a lit ceiling. Moving: three times its size
+    // at shutter open, its rest pose from a ten-thousandth of the shutter on, so (almost) every
+    // ray sees the rest pose. The beam widths on the ceiling come from the sphere's curvature
+    // (its normal differentials); at the ray's time they are those of the same sphere at rest.
+    // With the pose at shutter open they would follow a sphere three times as large.
+    let render_with = |motion: Option<MotionTransform>, integrator: IntegratorKind| {
+        let mut scene = Scene::default();
+        let chrome = scene.add_material(Material::mirror("/chrome", Vec3A::ZERO, Vec3A::splat(0.8)));
+        let mut sphere = Mesh::new("/sphere", Arc::new(Sphere { r: 1.0 }));
+        sphere.material = chrome;
+        let m = scene.add_mesh(sphere);
+        match motion {
+            Some(motion) => scene.add_moving_instance(m, motion),
+            None => scene.add_instance(m, Mat4::IDENTITY),
+        };
+        add_lit_ceiling(&mut scene, 20.0);
+        scene.camera = top_camera(2.4);
+        let aovs = ["color", "beamWidth"].map(String::from).to_vec();
+        render(&scene, &RenderOptions { width: 24, height: 24, aovs, integrator, ..Default::default() }, &NoProgress).unwrap()
+    };
+    let keys = vec![
+        MotionKey { time: 0.0, render_from_object: Mat4::from_scale(Vec3::splat(3.0)) },
+        MotionKey { time: 1e-4, render_from_object: Mat4::IDENTITY },
+        MotionKey { time: 1.0, render_from_object: Mat4::IDENTITY },
+    ];
+    for integrator in [IntegratorKind::Direct, IntegratorKind::Path] {
+        let still = render_with(None, integrator);
+        let moving = render_with(Some(MotionTransform::new(keys.clone()).unwrap()), integrator);
+        let (a, b) = (&still.film.aov("beamWidth").unwrap().data, &moving.film.aov("beamWidth").unwrap().data);
+        let mut checked = 0;
+        for (i, (w0, w1)) in a.iter().zip(b.iter()).enumerate() {
+            // Pixels whose camera ray reflects off the sphere onto the ceiling: wider beams than
+            // the camera's (a flat view of the ceiling's distance).
+            if *w0 <= 0.0 {
+                continue;
+            }
+            assert!((w1 - w0).abs() <= 1e-3 * w0, "{integrator:?} pixel {i}: moving {w1} vs still {w0}");
+            checked += 1;
+        }
+        assert!(checked > 100, "{integrator:?}: {checked} pixels checked");
+    }
 }

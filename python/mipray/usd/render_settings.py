@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 from pxr import Gf, Usd, UsdGeom, UsdRender
 
+from ..aovs import TABLE as AOV_TABLE
 from ..errors import RenderSettingsError
 
 __all__ = [
@@ -41,28 +42,8 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-#: The AOVs the renderer produces (``mipray._mipray.aov_names()``).
-KNOWN_AOVS = (
-    "color",
-    "alpha",
-    "depth",
-    "cameraDepth",
-    "Peye",
-    "normal",
-    "primId",
-    "instanceId",
-    "beamWidth",
-    "tessRate",
-    "ao",
-    "position",
-    "elementId",
-    "Neye",
-    "albedo",
-    "emission",
-    "directDiffuse",
-    "indirectDiffuse",
-    "specular",
-)
+#: The AOVs the renderer produces (:data:`mipray.aovs.TABLE`).
+KNOWN_AOVS = tuple(AOV_TABLE)
 #: RenderVar source names other renderers use, and the AOV they mean here.
 AOV_ALIASES = {
     "Ci": "color",

@@ -36,7 +36,7 @@
 use glam::Vec3A;
 
 use crate::bsdf::{BsdfSample, Lobe, PreviewSurfaceBsdf, Scattering};
-use crate::differential::{dndu_dndv, RayDifferential, UvDifferentials};
+use crate::differential::RayDifferential;
 use crate::effects::{enabled, Effect};
 use crate::options::RenderOptions;
 use crate::ray::{offset_origin, Ray, RayKind};
@@ -47,7 +47,7 @@ use crate::trace::{Hit, TraceCounters, Tracer};
 use super::direct::DirectLight;
 use super::hemisphere::{self, Hemisphere, Visible};
 pub use super::visibility::MAX_CUTOUTS;
-use super::{tessellation_error, Integrator, SampleValue, ShadingPoint};
+use super::{normal_differentials, tessellation_error, Integrator, SampleValue, ShadingPoint};
 
 /// A delta branch weaker than this (all channels) is not traced: it could not change a pixel
 /// by more than that fraction of what it sees.
@@ -188,7 +188,7 @@ impl<'a> DirectLighting<'a> {
         let (mut beam_width, mut quads) = (ray.beam_width(hit.t), hit.quads);
         if depth < self.max_depth {
             let calls = v.surface.inputs.calls(&|_| false);
-            let (dndx, dndy) = self.normal_differentials(hit, &sp, &v.footprint);
+            let (dndx, dndy) = normal_differentials(self.tracer, self.scene, hit, &sp, &v.footprint);
             // Delta lobes: trace every one (reflection and refraction), strongest chain's
             // beam width reported.
             let mut strongest = 0.0;
@@ -284,22 +284,6 @@ impl<'a> DirectLighting<'a> {
         let (diff, clamped) = footprint.reflect_checked(ray.d, sp.ns, dndx, dndy);
         counters.differential_clamps += u64::from(clamped);
         diff
-    }
-
-    /// dN/dx, dN/dy at the hit from the limit surface's second derivatives (Weingarten) and
-    /// the footprint: what makes convex mirrors widen beams (the paper's §4.2).
-    fn normal_differentials(&self, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> (Vec3A, Vec3A) {
-        let mesh = &self.scene.meshes[hit.mesh as usize];
-        let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
-        let m = self.tracer.render_from_object(hit.instance);
-        let w = |v: Vec3A| m.transform_vector3a(v);
-        let (mut dndu, mut dndv) = dndu_dndv(sp.dpdu, sp.dpdv, w(s.dpduu), w(s.dpduv), w(s.dpdvv));
-        // dndu_dndv belongs to the normal dpdu × dpdv; the shading normal may be its negative.
-        if sp.dpdu.cross(sp.dpdv).dot(sp.ns) < 0.0 {
-            dndu = -dndu;
-            dndv = -dndv;
-        }
-        UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv).chain(dndu, dndv)
     }
 }
 

@@ -13,6 +13,7 @@
 
 use glam::Vec3A;
 
+use crate::aov::{Aov, Averaging};
 use crate::ray::Ray;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -32,7 +33,7 @@ pub use ao::AmbientOcclusion;
 pub use bleed::ColorBleeding;
 pub use classic::DirectLighting;
 pub use path::PathTracer;
-pub use surface::{shading_point, tessellation_error, ShadingPoint};
+pub use surface::{normal_differentials, shading_point, tessellation_error, ShadingPoint};
 
 /// Everything one camera sample yields, one field per AOV. The default is all zeros except
 /// `element_id`, −1 (no face); see [`SampleValue::miss`] for a camera ray that hits nothing.
@@ -90,6 +91,57 @@ pub struct SampleValue {
     /// light through glossy lobes, and whatever mirror, glass, glossy and refraction rays bring
     /// back (`specular`).
     pub specular: Vec3A,
+}
+
+/// How many AOVs are averaged over a pixel's samples ([`crate::aov::Averaging::Mean`]).
+const AVERAGED_COUNT: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < Aov::ALL.len() {
+        n += matches!(Aov::ALL[i].info().averaging, Averaging::Mean) as usize;
+        i += 1;
+    }
+    n
+};
+
+/// The AOVs averaged over a pixel's samples, in [`Aov`]'s order (read from the table).
+const AVERAGED: [Aov; AVERAGED_COUNT] = {
+    let mut out = [Aov::Color; AVERAGED_COUNT];
+    let (mut i, mut n) = (0, 0);
+    while i < Aov::ALL.len() {
+        if matches!(Aov::ALL[i].info().averaging, Averaging::Mean) {
+            out[n] = Aov::ALL[i];
+            n += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// `channels` and `channels_mut` of [`SampleValue`] from one list of AOV → field (`f`: an f32,
+/// `v3`: a Vec3A's x, y, z, `a`: an array).
+macro_rules! sample_channels {
+    ($($aov:ident => $field:ident: $kind:ident),* $(,)?) => {
+        /// The channels of `aov` in this sample: the one place an [`Aov`] meets its field.
+        pub fn channels(&self, aov: Aov) -> &[f32] {
+            match aov {
+                $(Aov::$aov => sample_channels!(@ref $kind, self.$field),)*
+            }
+        }
+
+        /// The channels of `aov` in this sample, mutable.
+        pub fn channels_mut(&mut self, aov: Aov) -> &mut [f32] {
+            match aov {
+                $(Aov::$aov => sample_channels!(@mut $kind, self.$field),)*
+            }
+        }
+    };
+    (@ref f, $e:expr) => { std::slice::from_ref(&$e) };
+    (@ref v3, $e:expr) => { AsRef::<[f32; 3]>::as_ref(&$e) };
+    (@ref a, $e:expr) => { &$e };
+    (@mut f, $e:expr) => { std::slice::from_mut(&mut $e) };
+    (@mut v3, $e:expr) => { AsMut::<[f32; 3]>::as_mut(&mut $e) };
+    (@mut a, $e:expr) => { &mut $e };
 }
 
 impl Default for SampleValue {
@@ -151,73 +203,53 @@ impl SampleValue {
         self.color = self.emission + self.direct_diffuse + self.indirect_diffuse + self.specular;
     }
 
-    /// A copy whose averaged AOVs (colour and its parts, alpha, ao, albedo) are 0: what a pixel's
-    /// running sums start from, keeping sample 0's other values (depth, normal, ids: never
-    /// blends of two surfaces).
+    sample_channels! {
+        Color => color: v3, Alpha => alpha: f, Depth => depth: f, CameraDepth => camera_depth: f, Peye => peye: v3,
+        Normal => normal: v3, PrimId => prim_id: f, InstanceId => instance_id: f, BeamWidth => beam_width: f,
+        TessRate => tess_rate: f, Ao => ao: f, TessError => tess_error: a, Position => position: v3,
+        ElementId => element_id: f, Neye => neye: v3, Albedo => albedo: v3, Emission => emission: v3,
+        DirectDiffuse => direct_diffuse: v3, IndirectDiffuse => indirect_diffuse: v3, Specular => specular: v3,
+    }
+
+    /// A copy whose averaged AOVs are 0: what a pixel's running sums start from, keeping sample
+    /// 0's other values (depth, normal, ids: never blends of two surfaces).
     pub fn without_averaged(&self) -> Self {
-        SampleValue {
-            color: Vec3A::ZERO,
-            alpha: 0.0,
-            ao: 0.0,
-            albedo: Vec3A::ZERO,
-            emission: Vec3A::ZERO,
-            direct_diffuse: Vec3A::ZERO,
-            indirect_diffuse: Vec3A::ZERO,
-            specular: Vec3A::ZERO,
-            ..*self
+        let mut out = *self;
+        for aov in AVERAGED {
+            out.channels_mut(aov).fill(0.0);
         }
+        out
     }
 
     /// Every averaged AOV is finite (a sample that is not is dropped whole, so the parts still
     /// add up to the colour).
     pub fn averaged_finite(&self) -> bool {
-        self.color.is_finite()
-            && self.alpha.is_finite()
-            && self.ao.is_finite()
-            && self.albedo.is_finite()
-            && self.emission.is_finite()
-            && self.direct_diffuse.is_finite()
-            && self.indirect_diffuse.is_finite()
-            && self.specular.is_finite()
+        AVERAGED.iter().all(|&a| self.channels(a).iter().all(|x| x.is_finite()))
     }
 
     /// Adds `v`'s averaged AOVs into these sums.
     pub fn add_averaged(&mut self, v: &SampleValue) {
-        self.color += v.color;
-        self.alpha += v.alpha;
-        self.ao += v.ao;
-        self.albedo += v.albedo;
-        self.emission += v.emission;
-        self.direct_diffuse += v.direct_diffuse;
-        self.indirect_diffuse += v.indirect_diffuse;
-        self.specular += v.specular;
+        for aov in AVERAGED {
+            for (s, x) in self.channels_mut(aov).iter_mut().zip(v.channels(aov)) {
+                *s += x;
+            }
+        }
     }
 
     /// These sums times `inv` (1 / the number of samples summed) in the averaged AOVs.
     pub fn averaged(&self, inv: f32) -> Self {
-        SampleValue {
-            color: self.color * inv,
-            alpha: self.alpha * inv,
-            ao: self.ao * inv,
-            albedo: self.albedo * inv,
-            emission: self.emission * inv,
-            direct_diffuse: self.direct_diffuse * inv,
-            indirect_diffuse: self.indirect_diffuse * inv,
-            specular: self.specular * inv,
-            ..*self
+        let mut out = *self;
+        for aov in AVERAGED {
+            for x in out.channels_mut(aov) {
+                *x *= inv;
+            }
         }
+        out
     }
 
     /// The non-averaged AOVs are finite (depth, normals, position, debug values).
     pub fn geometry_finite(&self) -> bool {
-        self.depth.is_finite()
-            && self.camera_depth.is_finite()
-            && self.peye.is_finite()
-            && self.normal.is_finite()
-            && self.neye.is_finite()
-            && self.position.is_finite()
-            && self.beam_width.is_finite()
-            && self.tess_error.iter().all(|e| e.is_finite())
+        Aov::ALL.iter().filter(|a| !a.averaged()).all(|&a| self.channels(a).iter().all(|x| x.is_finite()))
     }
 }
 
@@ -246,5 +278,27 @@ pub trait Integrator: Sync {
     /// integrator caches hemisphere integrals.
     fn cache_stats(&self) -> Option<serde_json::Value> {
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_aov_reads_and_writes_its_own_channels() {
+        let mut v = SampleValue::default();
+        for (i, aov) in Aov::ALL.into_iter().enumerate() {
+            assert_eq!(v.channels(aov).len(), aov.channels(), "{}", aov.name());
+            v.channels_mut(aov).fill(i as f32 + 1.0);
+        }
+        for (i, aov) in Aov::ALL.into_iter().enumerate() {
+            assert!(v.channels(aov).iter().all(|x| *x == i as f32 + 1.0), "{} shares a field", aov.name());
+        }
+        let cleared = v.without_averaged();
+        for aov in Aov::ALL {
+            let zero = cleared.channels(aov).iter().all(|x| *x == 0.0);
+            assert_eq!(zero, aov.averaged(), "{}", aov.name());
+        }
     }
 }

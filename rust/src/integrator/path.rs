@@ -39,7 +39,7 @@
 use glam::Vec3A;
 
 use crate::bsdf::{BsdfSample, Lobe, Scattering};
-use crate::differential::{dndu_dndv, RayDifferential, UvDifferentials};
+use crate::differential::RayDifferential;
 use crate::effects::{enabled, Effect};
 use crate::error::RenderError;
 use crate::options::RenderOptions;
@@ -52,7 +52,7 @@ use crate::trace::{Hit, TraceCounters, Tracer};
 use super::direct::DirectLight;
 use super::hemisphere::Hemisphere;
 use super::visibility::MAX_CUTOUTS;
-use super::{shading_point, tessellation_error, Integrator, SampleValue, ShadingPoint};
+use super::{normal_differentials, shading_point, tessellation_error, Integrator, SampleValue, ShadingPoint};
 
 /// The path tracer. Construct with [`PathTracer::new`]; chosen by `integrator = path`
 /// ([`crate::integrator::select`]).
@@ -349,20 +349,4 @@ impl Integrator for PathTracer<'_> {
     fn cache_stats(&self) -> Option<serde_json::Value> {
         self.ao.cache_stats()
     }
-}
-
-/// dN/dx, dN/dy at the hit, render space, from the limit surface's second derivatives
-/// (Weingarten) and the footprint: curved mirrors and lenses widen or narrow beams (§4.2).
-fn normal_differentials(tracer: &Tracer<'_>, scene: &Scene, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> (Vec3A, Vec3A) {
-    let mesh = &scene.meshes[hit.mesh as usize];
-    let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
-    let m = tracer.hit_render_from_object(hit);
-    let w = |v: Vec3A| m.transform_vector3a(v);
-    let (mut dndu, mut dndv) = dndu_dndv(sp.dpdu, sp.dpdv, w(s.dpduu), w(s.dpduv), w(s.dpdvv));
-    // dndu_dndv belongs to the normal dpdu × dpdv; the shading normal may be its negative.
-    if sp.dpdu.cross(sp.dpdv).dot(sp.ns) < 0.0 {
-        dndu = -dndu;
-        dndv = -dndv;
-    }
-    UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv).chain(dndu, dndv)
 }

@@ -92,7 +92,7 @@ pub fn select<'a>(
         IntegratorKind::Auto | IntegratorKind::Direct => Box::new(DirectLighting::new(tracer, scene, effects, options)),
         IntegratorKind::Ao => {
             if options.ao_samples == 0 {
-                return Err(RenderError::Settings("integrator = ao needs aoSamples > 0 (ambient-occlusion rays per shading point)".into()));
+                return Err(RenderError::Settings(crate::settings::AO_NEEDS_SAMPLES.into()));
             }
             Box::new(AmbientOcclusion::new(tracer, scene, effects, options))
         }

@@ -3,6 +3,7 @@
 
 use glam::Vec3A;
 
+use crate::differential::{dndu_dndv, RayDifferential, UvDifferentials};
 use crate::ray::Ray;
 use crate::scene::Scene;
 use crate::trace::{Hit, Tracer};
@@ -145,4 +146,28 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
     } else {
         off_patch(u, v)
     }
+}
+
+/// dN/dx, dN/dy at the hit, render space, from the limit surface's second derivatives
+/// (Weingarten) and the footprint: curved mirrors and lenses widen or narrow beams (§4.2). The
+/// second derivatives go to render space with the instance's pose at the ray's time, as the
+/// shading point's first derivatives do: a moving mirror curves beams as it is when hit.
+pub fn normal_differentials(
+    tracer: &Tracer<'_>,
+    scene: &Scene,
+    hit: &Hit,
+    sp: &ShadingPoint,
+    footprint: &RayDifferential,
+) -> (Vec3A, Vec3A) {
+    let mesh = &scene.meshes[hit.mesh as usize];
+    let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
+    let m = tracer.hit_render_from_object(hit);
+    let w = |v: Vec3A| m.transform_vector3a(v);
+    let (mut dndu, mut dndv) = dndu_dndv(sp.dpdu, sp.dpdv, w(s.dpduu), w(s.dpduv), w(s.dpdvv));
+    // dndu_dndv belongs to the normal dpdu × dpdv; the shading normal may be its negative.
+    if sp.dpdu.cross(sp.dpdv).dot(sp.ns) < 0.0 {
+        dndu = -dndu;
+        dndv = -dndv;
+    }
+    UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv).chain(dndu, dndv)
 }
