@@ -105,6 +105,6 @@ mod tests {
         let mut px = vec![1e5, -1e5, 65504.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.5, f32::NAN, -0.0];
         let changed = fit_to_formats(&mut px, &[Half, Half, Half, Float, Float, Float, U8, U8, Half]);
         assert_eq!(px, [65504.0, -65504.0, 65504.0, 0.0, f32::MAX, f32::MIN, 0.5, 0.0, -0.0]);
-        assert_eq!(changed, 5);
+        assert_eq!(changed, 6);
     }
 }

@@ -90,7 +90,8 @@ impl Bounds3 {
     /// (so finite). Anything else is refused before a BVH is built over it (see
     /// [`MAX_COORDINATE`]).
     pub fn is_traceable(&self) -> bool {
-        !self.is_empty() && self.max_abs() <= MAX_COORDINATE
+        // Finite first: SIMD max does not propagate NaN, so `max_abs` alone could miss one.
+        self.min.is_finite() && self.max.is_finite() && !self.is_empty() && self.max_abs() <= MAX_COORDINATE
     }
 }
 
