@@ -138,8 +138,10 @@ impl Origin {
     /// the far wall of a closed shell, a bump beside the origin — is crossed the other way, and
     /// blocks at any distance: a ray leaving a closed surface on one side meets it next from
     /// that side.
-    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32) -> bool {
-        t < window && if self.along_ng { cos > 0.0 } else { cos < 0.0 }
+    /// A seam box is no surface to cross: within the window it is passed over either way (it
+    /// stands off the surface by up to the coarse grid's chord error, as the grids do).
+    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, seam: bool) -> bool {
+        t < window && (seam || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
     }
 }
 
@@ -154,6 +156,8 @@ struct LocalHit {
     quads: u32,
     /// Object units.
     chord_error: f32,
+    /// On a seam box ([`crate::intersect::GridHit::seam`]).
+    seam: bool,
 }
 
 struct InstanceData {
@@ -445,7 +449,7 @@ impl<'s> Tracer<'s> {
                 let mut t_from = ray.t_min;
                 loop {
                     let h = search(t_from)?;
-                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng)) {
+                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), h.seam) {
                         return Some(h);
                     }
                     t_from = next_up(h.t);
@@ -487,6 +491,7 @@ impl<'s> Tracer<'s> {
                         ng: h.ng,
                         quads: rate.quads() as u32,
                         chord_error,
+                        seam: h.seam,
                     })
                 })
             };
@@ -591,6 +596,7 @@ impl<'s> Tracer<'s> {
                     ng: h.ng,
                     quads: 16 << cell.depth,
                     chord_error: tess.chord_error,
+                    seam: h.seam,
                 });
             }
             return;
