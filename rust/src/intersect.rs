@@ -135,6 +135,9 @@ pub struct GridHit {
     pub u: f32,
     pub v: f32,
     pub ng: Vec3A,
+    /// Found on a seam box (`seam.rs`), not a triangle: `ng` is then the boundary quad's, and
+    /// the hit is where the ray leaves the box, not a crossing of the surface.
+    pub seam: bool,
 }
 
 /// Most vertices a grid row has (a fine grid's 17).
@@ -196,8 +199,13 @@ fn hit_quads(
                     if t > t_min {
                         *t_max = t;
                         let (p00, p10, p01) = (corner(0, 0), corner(1, 0), corner(0, 1));
-                        *best =
-                            Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng: (p10 - p00).cross(p01 - p00) });
+                        *best = Some(GridHit {
+                            t,
+                            u: (i as f32 + b1) * inv_q,
+                            v: (j as f32 + b2) * inv_q,
+                            ng: (p10 - p00).cross(p01 - p00),
+                            seam: false,
+                        });
                     }
                 }
                 continue;
@@ -210,7 +218,13 @@ fn hit_quads(
                     *t_max = t;
                     let (lu, lv) = (b1 + b2, b2);
                     let (p00, p10, p11) = (corner(0, 0), corner(1, 0), corner(1, 1));
-                    *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng: (p10 - p00).cross(p11 - p00) });
+                    *best = Some(GridHit {
+                        t,
+                        u: (i as f32 + lu) * inv_q,
+                        v: (j as f32 + lv) * inv_q,
+                        ng: (p10 - p00).cross(p11 - p00),
+                        seam: false,
+                    });
                 }
             }
             if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s11, s01, edge(s01, s11), edge(s00, s01), -diagonal, *t_max) {
@@ -218,7 +232,13 @@ fn hit_quads(
                     *t_max = t;
                     let (lu, lv) = (b1, b1 + b2);
                     let (p00, p11, p01) = (corner(0, 0), corner(1, 1), corner(0, 1));
-                    *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng: (p11 - p00).cross(p01 - p00) });
+                    *best = Some(GridHit {
+                        t,
+                        u: (i as f32 + lu) * inv_q,
+                        v: (j as f32 + lv) * inv_q,
+                        ng: (p11 - p00).cross(p01 - p00),
+                        seam: false,
+                    });
                 }
             }
         }
@@ -348,7 +368,13 @@ mod tests {
                                 1 => (b1, b1 + b2),
                                 _ => (b1, b2),
                             };
-                            best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng: (b - a).cross(c - a) });
+                            best = Some(GridHit {
+                                t,
+                                u: (i as f32 + lu) * inv_q,
+                                v: (j as f32 + lv) * inv_q,
+                                ng: (b - a).cross(c - a),
+                                seam: false,
+                            });
                         }
                     }
                 }

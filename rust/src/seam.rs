@@ -540,7 +540,7 @@ pub fn intersect_seams(
             let lambda = ((p - sb.a).dot(sb.axis) / sb.len).clamp(0.0, 1.0);
             let (u, v) = edge_uv(e, (k as f32 + lambda) / q as f32);
             t_best = far;
-            best = Some(GridHit { t: far, u, v, ng });
+            best = Some(GridHit { t: far, u, v, ng, seam: true });
         }
     }
     best

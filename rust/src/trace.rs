@@ -15,7 +15,7 @@ use crate::dropped::DroppedPrims;
 use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
 use crate::intersect::WatertightRay;
 use crate::patch::{GridSamples, UvRect};
-use crate::ray::{gamma, Ray, RayKind};
+use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
 use crate::seam::{intersect_with_seams, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, Subpatch};
@@ -110,9 +110,9 @@ pub struct Hit {
     pub time: f32,
 }
 
-/// The surface a secondary ray starts on: hits on the instance it starts from closer than the
-/// two tessellations' chord errors (along the ray) are the surface meeting itself at another
-/// rate, not an occluder.
+/// The surface a secondary ray starts on: a hit on the instance it starts from, closer than the
+/// two tessellations' chord errors (along the ray) and crossing the surface the way the ray
+/// left it, is the surface meeting itself at another rate, not an occluder.
 #[derive(Clone, Copy, Debug)]
 struct Origin {
     instance: u32,
@@ -121,12 +121,28 @@ struct Origin {
     /// 1 / |cos| between the ray and the surface (capped): a gap across the surface is this
     /// much longer along a slanted ray.
     inv_cos: f32,
+    /// The ray leaves along the side the hit triangle's winding normal points to.
+    along_ng: bool,
 }
 
 impl Origin {
     fn of(hit: &Hit, ray: &Ray) -> Origin {
-        let cos = ray.d.dot(hit.ng).abs().max(0.05);
-        Origin { instance: hit.instance, chord_error: hit.chord_error, inv_cos: 1.0 / cos }
+        let cos = ray.d.dot(hit.ng);
+        Origin { instance: hit.instance, chord_error: hit.chord_error, inv_cos: 1.0 / cos.abs().max(0.05), along_ng: cos > 0.0 }
+    }
+
+    /// A hit on the origin's own instance at `t` whose winding normal has cosine `cos` with the
+    /// ray (both in render space, the normal negated for a left-handed mesh as [`Hit::ng`]) is
+    /// the surface at another rate: within `window` of the origin and crossed the same way the
+    /// ray left the surface. Another tessellation of the surface the ray stands on lies along
+    /// it and is crossed the same way; the same surface met from the side the ray travels in —
+    /// the far wall of a closed shell, a bump beside the origin — is crossed the other way, and
+    /// blocks at any distance: a ray leaving a closed surface on one side meets it next from
+    /// that side.
+    /// A seam box is no surface to cross: within the window it is passed over either way (it
+    /// stands off the surface by up to the coarse grid's chord error, as the grids do).
+    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, seam: bool) -> bool {
+        t < window && (seam || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
     }
 }
 
@@ -141,6 +157,8 @@ struct LocalHit {
     quads: u32,
     /// Object units.
     chord_error: f32,
+    /// On a seam box ([`crate::intersect::GridHit::seam`]).
+    seam: bool,
 }
 
 struct InstanceData {
@@ -474,29 +492,47 @@ impl<'s> Tracer<'s> {
             // bound is no reason to tessellate finer).
             let size = (sp.bounds.diagonal().max_element() - displacement_pad).max(0.0) * inst.scale;
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+            let own = origin.filter(|org| org.instance == ii as u32);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
             let kind = Self::kind_index(ray.kind);
             // Near the ray's origin, skip the surface's own other tessellations: closer than the
             // two tessellations' chord errors (along the ray), a hit on the instance the ray
-            // starts from is the surface meeting itself at another rate. A coarser grid there
-            // stands up to its chord error above the fine grid the ray starts on (a facet
-            // touching the limit surface at its corners, where the fine chords sag below it),
-            // and would shadow it. Only subpatches near the origin can be hit that close, so
-            // this is the rule "the origin's own subpatch and the neighbours whose boxes hold
-            // it" without a box test (and without depending on how tight the boxes are).
-            let own = origin.filter(|org| org.instance == ii as u32);
-            let t_min_for = |chord_error: f32| match own {
-                Some(o) => ray.t_min.max((o.chord_error + chord_error * inst.scale) * o.inv_cos),
-                None => ray.t_min,
+            // starts from that crosses it the way the ray left is the surface meeting itself at
+            // another rate. A coarser grid there stands up to its chord error above the fine
+            // grid the ray starts on (a facet touching the limit surface at its corners, where
+            // the fine chords sag below it), and would shadow it. Only subpatches near the
+            // origin can be hit that close, so this is the rule "the origin's own subpatch and
+            // the neighbours whose boxes hold it" without a box test (and without depending on
+            // how tight the boxes are). A hit crossing the other way is the surface itself in
+            // the ray's path and blocks however near (see `Origin::is_own_other_rate`): without
+            // that, grazing rays left closed shells through the window (issue 23).
+            // The nearest hit at or after `search`'s t_min that is not the surface at another
+            // rate: hits within the window that cross the surface the way the ray left it are
+            // passed over one by one (the next search starts at the hit's t).
+            let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+            let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
+                let Some(o) = own else { return search(ray.t_min) };
+                let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
+                let mut t_from = ray.t_min;
+                loop {
+                    let h = search(t_from)?;
+                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), h.seam) {
+                        return Some(h);
+                    }
+                    t_from = next_up(h.t);
+                }
             };
             let found = if depth > 0 {
                 counters.finer_than_fine += 1;
                 counters.rate_tests_by_kind[kind][5] += 1;
                 let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(instance.mesh, geom, root, Tier::Fine);
-                let mut found = None;
-                self.hit_split(instance.mesh, geom, root, &tess, depth, &wray, t_min_for(tess.chord_error), &mut t_best, &mut found);
-                found
+                let t_limit = t_best;
+                nearest_not_own(tess.chord_error, &mut |t_from| {
+                    let (mut t_max, mut found) = (t_limit, None);
+                    self.hit_split(instance.mesh, geom, root, &tess, depth, &wray, t_from, &mut t_max, &mut found);
+                    found
+                })
             } else {
                 let rate = if self.single {
                     Rate::R16
@@ -513,13 +549,17 @@ impl<'s> Tracer<'s> {
                 // The grid's chord error was probed at its own spacing; read at a merged stride
                 // its quads are `stride` times wider, and a chord's sag grows with its square.
                 let chord_error = tess.chord_error * (stride * stride) as f32;
-                intersect_with_seams(&wray, &tess, stride, self.seam_edges(cell), t_min_for(chord_error), t_best).map(|h| LocalHit {
-                    t: h.t,
-                    uv: (h.u, h.v),
-                    rect: sp.rect,
-                    ng: h.ng,
-                    quads: rate.quads() as u32,
-                    chord_error,
+                let edges = self.seam_edges(cell);
+                nearest_not_own(chord_error, &mut |t_from| {
+                    intersect_with_seams(&wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
+                        t: h.t,
+                        uv: (h.u, h.v),
+                        rect: sp.rect,
+                        ng: h.ng,
+                        quads: rate.quads() as u32,
+                        chord_error,
+                        seam: h.seam,
+                    })
                 })
             };
             match found {
@@ -623,6 +663,7 @@ impl<'s> Tracer<'s> {
                     ng: h.ng,
                     quads: 16 << cell.depth,
                     chord_error: tess.chord_error,
+                    seam: h.seam,
                 });
             }
             return;

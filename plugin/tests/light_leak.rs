@@ -1,0 +1,178 @@
+//! No light crosses a closed surface (issue 23): a camera inside a closed, bumpy shell lit only
+//! from outside sees exactly nothing, and a shell lit only from inside shows nothing outside —
+//! for every integrator, subdivision scheme, displacement and tessellation rate.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::sync::Arc;
+
+use common::cube_sphere;
+use glam::{Mat4, Vec3, Vec3A};
+use mipray::camera::Camera;
+use mipray::displacement::Displacement;
+use mipray::light::LightShape;
+use mipray::material::{Material, PreviewSurface};
+use mipray::options::IntegratorKind;
+use mipray::prelude::*;
+use mipray_bridge::OsdSurface;
+
+/// Radius of the shells, render units.
+const RADIUS: f32 = 3.0;
+
+/// The cube sphere of `m × m` quads a face, scaled to [`RADIUS`] and bumped along the radius by
+/// 8 % (a few waves across each face), so the surface is concave and convex by turns.
+fn bumpy_points(m: usize) -> (mipray::topology::MeshTopology, Vec<[f32; 3]>) {
+    let (topo, pts) = cube_sphere(m, Scheme::CatmullClark);
+    let pts = pts
+        .into_iter()
+        .map(|p| {
+            let v = Vec3A::from(p);
+            let bump = 1.0 + 0.08 * (5.0 * v.x).sin() * (4.0 * v.y).cos() * (3.0 * v.z + 1.0).sin();
+            (v * (RADIUS * bump)).into()
+        })
+        .collect();
+    (topo, pts)
+}
+
+/// The same shell as triangles (each quad cut along a diagonal), for Loop subdivision.
+fn triangulated(topo: &mipray::topology::MeshTopology) -> mipray::topology::MeshTopology {
+    let idx: Vec<i32> = topo.face_vertex_indices.chunks(4).flat_map(|q| [q[0], q[1], q[2], q[0], q[2], q[3]]).collect();
+    mipray::topology::MeshTopology {
+        scheme: Scheme::Loop,
+        face_vertex_counts: vec![3; idx.len() / 3],
+        face_vertex_indices: idx,
+        ..Default::default()
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Shell {
+    CatmullClark,
+    Loop,
+    Displaced,
+}
+
+/// A scene holding one closed shell of a grey, partly glossy material (diffuse, a rough
+/// specular lobe, so light and BSDF samples both count).
+fn shell_scene(shell: Shell) -> Scene {
+    let (topo, pts) = bumpy_points(6);
+    let (topo, displacement) = match shell {
+        Shell::CatmullClark => (topo, None),
+        Shell::Loop => (triangulated(&topo), None),
+        Shell::Displaced => (topo, Some(Displacement { amplitude: 0.15, frequency: 1.5, octaves: 3, gain: 0.5 })),
+    };
+    let surface = Arc::new(OsdSurface::new("/shell", &topo, &pts).unwrap_or_else(|e| panic!("{e}")));
+    let mut scene = Scene::default();
+    let mut mesh = Mesh::new("/shell", surface);
+    if let Some(d) = displacement {
+        mesh.displacement_bound = d.bound();
+        mesh.displacement = Some(d.into());
+    }
+    let surface = PreviewSurface {
+        diffuse_color: Vec3A::splat(0.7),
+        use_specular_workflow: true,
+        specular_color: Vec3A::splat(0.3),
+        roughness: 0.4,
+        ..PreviewSurface::default()
+    };
+    mesh.material = scene.add_material(Material::preview_surface("/grey", surface).0);
+    let m = scene.add_mesh(mesh);
+    scene.add_instance(m, Mat4::IDENTITY);
+    scene
+}
+
+/// Lights all outside the shell (a dome, a sun with a disc, a sphere, a rect facing it).
+fn lights_outside() -> Vec<Light> {
+    let area = |name: &str, shape| Light::usd_area(name, shape, 50.0, 0.0, Vec3A::ONE, false);
+    vec![
+        area("/dome", LightShape::Dome(None)),
+        Light::usd_distant("/sun", &Camera::look_at(Vec3::ZERO, Vec3::new(-0.3, -0.4, -1.0), Vec3::Y), 20.0, 0.0, Vec3A::ONE, 1.0, false),
+        area("/sphere", LightShape::Sphere { center: Vec3A::new(6.0, 2.0, 1.0), radius: 1.0 }),
+        area("/rect", LightShape::Rect { center: Vec3A::new(0.0, -6.0, 0.0), u: Vec3A::X * 2.0, v: Vec3A::Z * 2.0, normal: Vec3A::Y }),
+    ]
+}
+
+/// Lights inside the shell only.
+fn lights_inside() -> Vec<Light> {
+    let area = |name: &str, shape| Light::usd_area(name, shape, 50.0, 0.0, Vec3A::ONE, false);
+    vec![
+        area("/sphere", LightShape::Sphere { center: Vec3A::new(0.5, 0.3, -0.2), radius: 0.5 }),
+        area("/rect", LightShape::Rect { center: Vec3A::new(0.0, -1.5, 0.0), u: Vec3A::X * 0.8, v: Vec3A::Z * 0.8, normal: Vec3A::Y }),
+    ]
+}
+
+/// A 90° camera at `eye` looking at `target`.
+fn camera(eye: Vec3, target: Vec3) -> Camera {
+    let mut c = Camera::perspective(Camera::look_at(eye, target, Vec3::Y), 10.0);
+    c.vertical_aperture = c.horizontal_aperture;
+    c.clipping_range = (1e-3, 1e3);
+    c
+}
+
+/// The brightest colour channel of the render and how many pixels are not exactly 0.
+fn brightest(scene: &Scene, integrator: IntegratorKind, tess_factor: f32, incoherent: f32) -> (f32, usize) {
+    let options = RenderOptions {
+        width: 12,
+        height: 12,
+        samples: 2,
+        threads: 2,
+        tess_factor,
+        tess_factor_incoherent: incoherent,
+        integrator,
+        shadow_samples: 2,
+        indirect_samples: 4,
+        ao_samples: if integrator == IntegratorKind::Ao { 4 } else { 0 },
+        max_depth: 3,
+        ..Default::default()
+    };
+    let out = render(scene, &options, &NoProgress).unwrap_or_else(|e| panic!("{e}"));
+    let c = &out.film.aov("color").unwrap().data;
+    (c.iter().copied().fold(0.0, f32::max), c.chunks(3).filter(|p| p.iter().any(|x| *x != 0.0)).count())
+}
+
+const INTEGRATORS: [IntegratorKind; 4] = [IntegratorKind::Direct, IntegratorKind::Ao, IntegratorKind::ColorBleeding, IntegratorKind::Path];
+
+/// Every (shell, integrator, tess factor) whose render is not exactly 0 everywhere, for
+/// `lights` and the camera placements `views`.
+fn leaks(lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)]) -> Vec<String> {
+    let mut leaks = Vec::new();
+    for shell in [Shell::CatmullClark, Shell::Loop, Shell::Displaced] {
+        let mut scene = shell_scene(shell);
+        scene.lights = lights();
+        for &(eye, target) in views {
+            scene.camera = camera(eye, target);
+            for integrator in INTEGRATORS {
+                for (tess, incoherent) in [(0.25, 1.0), (1.0, 1.0), (4.0, 1.0), (16.0, 1.0), (16.0, 32.0)] {
+                    let (max, lit) = brightest(&scene, integrator, tess, incoherent);
+                    println!("{shell:?} {integrator:?} tess {tess} incoherent {incoherent}: max {max:.3e} over {lit} pixels");
+                    if lit > 0 {
+                        leaks.push(format!("{shell:?} {integrator:?} tess {tess}/{incoherent}: {lit} pixels, max {max:.3e}"));
+                    }
+                }
+            }
+        }
+    }
+    leaks
+}
+
+// Not yet passing (issue 23, see docs/cracks.md): the crossing rule closed most leaks, but
+// rays still get out of the Loop and the displaced shells (and one Catmull-Clark pixel) where a
+// ray leaves a fine grid and runs between it and a coarser grid of the same surface without
+// crossing the coarser one. Run with `--ignored` to see the figures.
+#[test]
+#[ignore = "issue 23: light still leaks through Loop and displaced shells"]
+fn no_light_from_outside_reaches_a_camera_inside_a_closed_shell() {
+    let views = [(Vec3::ZERO, Vec3::new(1.0, 0.2, 0.3)), (Vec3::new(0.5, -0.5, 0.5), Vec3::new(-1.0, 0.3, -0.6))];
+    let leaks = leaks(lights_outside, &views);
+    assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
+}
+
+#[test]
+#[ignore = "issue 23: light still leaks through Loop and displaced shells"]
+fn no_light_from_inside_a_closed_shell_gets_out() {
+    let views = [(Vec3::new(0.0, 2.0, 9.0), Vec3::ZERO), (Vec3::new(-7.0, -3.0, 1.0), Vec3::ZERO)];
+    let leaks = leaks(lights_inside, &views);
+    assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
+}
