@@ -110,6 +110,8 @@ pub fn render_with_cache(
     let threads = if options.threads == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { options.threads };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
+        // Named, so a profile (docs/throughput.md's) can tell the render's threads from the host's.
+        .thread_name(|i| format!("mipray-render-{i}"))
         .build()
         .map_err(|e| RenderError::Settings(format!("cannot start {threads} render threads: {e}")))?;
     let (w, h) = (options.width, options.height);
