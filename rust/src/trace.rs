@@ -686,18 +686,6 @@ impl<'s> Tracer<'s> {
         }
     }
 
-    /// The normal matrix (inverse transpose of the linear part) of an instance at shutter open;
-    /// for a hit on a moving instance use [`Tracer::hit_normal_matrix`].
-    pub fn normal_matrix(&self, instance: u32) -> Mat3A {
-        self.instances[instance as usize].pose.normal_from_object
-    }
-
-    /// Render-from-object transform of an instance at shutter open; for a hit on a moving
-    /// instance use [`Tracer::hit_render_from_object`].
-    pub fn render_from_object(&self, instance: u32) -> Mat4 {
-        self.instances[instance as usize].pose.render_from_object
-    }
-
     /// Render-from-object transform of a hit's instance at the hit's time.
     pub fn hit_render_from_object(&self, hit: &Hit) -> Mat4 {
         self.instances[hit.instance as usize].pose(hit.time).render_from_object
