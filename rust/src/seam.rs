@@ -58,6 +58,9 @@ pub const SEAM_NORMAL_FLOOR: f32 = 0.25;
 /// position far from it.
 pub const SEAM_MARGIN_REL: f32 = 6.0 * f32::EPSILON;
 
+/// √3, rounded up: how far a seam box reaches from its chord, in units of its radius.
+const SQRT_3_UP: f32 = 1.732_051;
+
 /// Square grid edges, in the order of [`SeamEdges`]' bits: v = 0, u = 1, v = 1, u = 0.
 pub const EDGE_COUNT: usize = 4;
 
@@ -507,23 +510,32 @@ pub fn intersect_seams(
             on_heap.resize(q, base);
             &mut on_heap
         };
-        for (k, r) in reaches.iter_mut().enumerate() {
-            let (a, b) = (vert(k * stride), vert((k + 1) * stride));
-            if stride > 1 {
-                *r = reach(k, a, b);
+        if stride > 1 || q > 2 {
+            for (k, r) in reaches.iter_mut().enumerate() {
+                let (a, b) = (vert(k * stride), vert((k + 1) * stride));
+                if stride > 1 {
+                    *r = reach(k, a, b);
+                }
+                r_max = r_max.max(*r);
+                edge_box.grow(a);
+                edge_box.grow(b);
             }
-            r_max = r_max.max(*r);
-            edge_box.grow(a);
-            edge_box.grow(b);
         }
-        if ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
+        // (An edge of one or two chords is culled chord by chord.)
+        if q > 2 && ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
             continue;
         }
         for (k, &r) in reaches.iter().enumerate() {
-            // Then each chord by the same bound, before building its box.
+            // Then each chord, before building its box: every point of the box lies within √3
+            // times its reach of the chord (r beyond an end, and r across both ways), so a ray
+            // that passes farther from the chord in (t_min, t_best) misses the box.
+            // The axis-aligned test is the cheaper, the distance the tighter for chords running
+            // diagonally to the axes: most rays fail the first, most of the rest the second.
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
             let chord = crate::bounds::Bounds3 { min: a.min(b), max: a.max(b) };
-            if ray.hit_box(&chord.expanded(1.8 * r), t_min, t_best).is_none() {
+            if ray.hit_box(&chord.expanded(1.8 * r), t_min, t_best).is_none()
+                || !ray.may_pass_near_segment(a, b, SQRT_3_UP * r, t_min, t_best)
+            {
                 continue;
             }
             let Some((sb, ng)) = seam_box(tess, e, k, stride) else { continue };
