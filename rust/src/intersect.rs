@@ -49,7 +49,19 @@ impl WatertightRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / d[kz];
-        WatertightRay { o, d, inv_d: d.recip(), d_unit: d.normalize_or_zero(), d_len: d.length(), kx, ky, kz, sx: d[kx] * sz, sy: d[ky] * sz, sz }
+        WatertightRay {
+            o,
+            d,
+            inv_d: d.recip(),
+            d_unit: d.normalize_or_zero(),
+            d_len: d.length(),
+            kx,
+            ky,
+            kz,
+            sx: d[kx] * sz,
+            sy: d[ky] * sz,
+            sz,
+        }
     }
 
     /// Whether the ray, between `t_min` and `t_max`, may pass within `reach` of the segment
@@ -518,7 +530,13 @@ mod tests {
                 let along = p.dot(du);
                 let t = along / dl;
                 // Beyond the range: how far from its nearer end, in length units.
-                let off = if t < t_min as f64 { (t_min as f64 - t) * dl } else if t > t_max as f64 { (t - t_max as f64) * dl } else { 0.0 };
+                let off = if t < t_min as f64 {
+                    (t_min as f64 - t) * dl
+                } else if t > t_max as f64 {
+                    (t - t_max as f64) * dl
+                } else {
+                    0.0
+                };
                 nearest = nearest.min((p - du * along).length().max(off));
             }
             let step = (b - a).length() as f64 / 4096.0;
