@@ -133,3 +133,12 @@ bench-throughput: $(EMBREE_HARNESS) ## mipray's rays/s by ray type against Embre
 		$(VENV)/bin/maturin develop --release -q -m python/Cargo.toml
 	$(PY) -m mipray.tools.throughput --embree-bin $(EMBREE_HARNESS) --work $(OUT)/throughput \
 		$(THROUGHPUT_ARGS)
+
+.PHONY: bench-cycles
+bench-cycles: ## mipray against Cycles (bpy) end to end on the plain throughput scene: docs/cycles-comparison.md
+	@MIPRAY_SKIP_BUILD=1 bash scripts/setup.sh
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH="$(abspath $(VENV))/bin:$$PATH" \
+		$(VENV)/bin/maturin develop --release -q -m python/Cargo.toml
+	@[ -f $(OUT)/throughput/plain.usda ] || $(PY) -c 'from pathlib import Path; \
+		from mipray.tools.throughput import prepare_scene; prepare_scene("plain", Path("$(OUT)/throughput"))'
+	$(PY) -m mipray.tools.cycles_peer $(OUT)/throughput/plain.usda $(CYCLES_ARGS)
