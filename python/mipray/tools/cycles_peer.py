@@ -266,6 +266,21 @@ def main(argv: list[str] | None = None) -> int:
             f"Cycles {c.render_s:.2f} / {c.process_s:.2f} / {c.cpu_s:.2f} s "
             "(render / process / CPU)"
         )
+    # The last run's images, halved, beside the doc.
+    images = a.doc.parent / "images"
+    images.mkdir(parents=True, exist_ok=True)
+    for name in ("mipray", "cycles"):
+        src, dst = work / f"peer.{name}.png", images / f"cycles-peer-{name}.png"
+        half = f"{a.width // 2}x{a.width // 2}"
+        subprocess.run(
+            ["oiiotool", str(src), "--ch", "R,G,B", "--resize", half, "-o", str(dst)], check=False
+        )
+    lines += [
+        "",
+        "The last run's images (halved; mipray left, Cycles right):",
+        "",
+        "![mipray](images/cycles-peer-mipray.png) ![Cycles](images/cycles-peer-cycles.png)",
+    ]
     a.doc.parent.mkdir(parents=True, exist_ok=True)
     a.doc.write_text("\n".join(lines) + "\n")
     print(a.doc)
