@@ -48,7 +48,11 @@ proptest! {
     }
 
     /// A fan of triangles around a shared vertex, closed all the way round: a ray through the
-    /// vertex itself hits at least one triangle.
+    /// vertex itself hits at least one triangle. The ray's origin is rounded, so it passes
+    /// within rounding of the vertex: the fan must cover the vertex's neighbourhood as the ray
+    /// sees it, i.e. not fold over (a steep saddle seen from the side: some triangle then faces
+    /// the ray the other way, and a ray just beside the vertex can pass between the layers;
+    /// every failure seen of this test, 49 in 3 million fans, was such a fold).
     #[test]
     fn a_ray_through_a_shared_vertex_hits_its_fan(center in v3(), n in 3usize..12, radius in 0.5f32..5.0, lift in -1.0f32..1.0, dir_xy in (-0.5f32..0.5, -0.5f32..0.5), dist in 0.5f32..50.0) {
         let ring: Vec<Vec3A> = (0..n).map(|k| {
@@ -56,6 +60,8 @@ proptest! {
             center + Vec3A::new(radius * a.cos(), radius * a.sin(), lift * (k % 2) as f32)
         }).collect();
         let dir = Vec3A::new(dir_xy.0, dir_xy.1, -1.0).normalize();
+        let facing: Vec<f32> = (0..n).map(|k| (ring[k] - center).cross(ring[(k + 1) % n] - center).dot(dir)).collect();
+        prop_assume!(facing.iter().all(|f| *f < 0.0) || facing.iter().all(|f| *f > 0.0), "the fan folds over as the ray sees it");
         let ray = WatertightRay::new(center - dir * dist, dir);
         let hit = (0..n).any(|k| ray.hit_triangle(center, ring[k], ring[(k + 1) % n], f32::INFINITY).is_some());
         prop_assert!(hit, "slipped through the fan's centre");
