@@ -359,7 +359,7 @@ def fake_module() -> types.ModuleType:
         formats: dict[str, str] | None = None,
         metadata: dict[str, object] | None = None,
         *,
-        color_correction: str = "sRGB",
+        color_correction: str = "disabled",
         atomic: bool = False,
     ) -> None:
         names = list(order) if order is not None else list(aovs)

@@ -91,6 +91,7 @@ def test_sigint_stops_mipray_record_with_130_no_image_and_one_line(native, tmp_p
         if proc.poll() is None:
             proc.kill()
         os.close(master)
+    print(f"mipray-record: SIGINT to exit {elapsed:.2f} s")  # shown with pytest -s
     assert code == 130, (before + after).decode(errors="replace")
     assert elapsed < BOUND_S, f"exited {elapsed:.2f} s after SIGINT"
     assert not out.exists() and not (out.parent.exists() and any(out.parent.iterdir()))
@@ -135,6 +136,7 @@ def test_keyboard_interrupt_reaches_the_api_caller_while_the_render_runs(
     )
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout.strip().splitlines()[-1])
+    print(f"API: SIGINT to KeyboardInterrupt {report['elapsed']:.2f} s")  # shown with pytest -s
     assert report["outcome"] == "KeyboardInterrupt", report
     assert report["elapsed"] < BOUND_S, report
     assert report["again"] == 8

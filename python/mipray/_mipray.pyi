@@ -376,7 +376,7 @@ def write_image(
     formats: dict[str, str] | None = None,
     metadata: dict[str, object] | None = None,
     *,
-    color_correction: str = "sRGB",
+    color_correction: str = "disabled",
     atomic: bool = False,
 ) -> None:
     """Write AOVs as the channels of one image: the renderer's one image writer.
@@ -398,7 +398,9 @@ def write_image(
         metadata: extra image attributes: ``str``, ``int`` and ``float`` values,
             and 4×4 matrices given as 16 floats, row by row (``matrix44``).
         color_correction: ``"sRGB"`` (8-bit files hold the color AOV
-            sRGB-encoded) or ``"disabled"``.
+            sRGB-encoded) or ``"disabled"`` (the values as given, the
+            default: this function writes what it is handed;
+            ``mipray.image.write_aovs`` defaults to ``"sRGB"``).
         atomic: write a hidden temporary file beside ``path`` and rename it
             over ``path``; it is removed when the write fails.
 

@@ -660,12 +660,13 @@ pub(crate) fn metadata(m: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, M
 
 /// Writes AOV arrays (H×W×C float32, all one size) into one image file through the core's
 /// writer (`mipray::image_output`): `order` (default: every array, as given), the file type's
-/// pixel types unless `formats` names others, the colour sRGB-encoded in 8-bit files unless
-/// `color_correction` is `disabled`, `metadata` as image attributes, and with `atomic` a
+/// pixel types unless `formats` names others, the colour sRGB-encoded in 8-bit files with
+/// `color_correction="sRGB"` (raw values by default, as this function always wrote them;
+/// `mipray.image.write_aovs` defaults to sRGB, as usdrecord), `metadata` as image attributes, and with `atomic` a
 /// temporary file renamed over `path`. The arrays are read where they are (no copy) unless one
 /// is not C-contiguous. The GIL is released while writing.
 #[pyfunction]
-#[pyo3(signature = (path, aovs, order=None, formats=None, metadata=None, *, color_correction="sRGB", atomic=false))]
+#[pyo3(signature = (path, aovs, order=None, formats=None, metadata=None, *, color_correction="disabled", atomic=false))]
 #[allow(clippy::too_many_arguments)]
 fn write_image(
     py: Python<'_>,

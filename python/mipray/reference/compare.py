@@ -195,8 +195,8 @@ def picture(results: Sequence[Comparison], path: str | os.PathLike[str]) -> None
     width = max(row.shape[1] for row in rows)
     rows = [np.pad(row, ((0, 0), (0, width - row.shape[1]), (0, 0))) for row in rows]
     linear = np.concatenate(rows, axis=0)
-    # The writer encodes an 8-bit file's colour with the sRGB curve.
-    _mipray.write_image(os.fspath(path), {"color": np.ascontiguousarray(linear, dtype=np.float32)})
+    colors = {"color": np.ascontiguousarray(linear, dtype=np.float32)}
+    _mipray.write_image(os.fspath(path), colors, color_correction="sRGB")
 
 
 def exact_scenes() -> list[Scene]:

@@ -329,7 +329,7 @@ def _png_once(name: str, n: int, dtype: Any, texels: Callable[[Any, Any], Any]) 
         s, t = (s + 0.5) / n, 1.0 - (t + 0.5) / n  # rows run down the image, t up
         codes = (np.round(texels(s, t) * 255.0) / 255.0).astype(np.float32)
         # The codes as they are (no sRGB curve), replaced atomically: another process may read it.
-        _mipray.write_image(str(path), {"color": codes}, color_correction="disabled", atomic=True)
+        _mipray.write_image(str(path), {"color": codes}, atomic=True)
     return str(path)
 
 
