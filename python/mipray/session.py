@@ -315,6 +315,8 @@ class RenderSession:
             PrimError: the camera is missing or unusable.
             RenderSettingsError: a bad size, AOV list or setting.
             InternalError: the renderer failed outside any one prim's work.
+            OutputError: a pass could not be written to ``pass_output``.
+            KeyboardInterrupt: Ctrl-C stopped the sync or the render.
             BaseException: whatever ``on_update`` raised.
 
         """
