@@ -73,7 +73,7 @@ fmt: ## Format Rust and Python sources
 			--config python/pyproject.toml python/mipray tests examples; \
 	else echo "ruff not installed (pip install ruff): Python not formatted"; fi
 
-lint: ## cargo fmt --check, clippy -D warnings, ruff and mypy if installed
+lint: ## cargo fmt --check, clippy -D warnings, ruff, mypy and stubtest (_mipray.pyi) if installed
 	cargo fmt --all --check
 	cargo clippy --workspace --all-targets -- -D warnings
 	@RUFF=$$( [ -x $(VENV)/bin/ruff ] && echo $(VENV)/bin/ruff || command -v ruff || true ); \
@@ -83,6 +83,9 @@ lint: ## cargo fmt --check, clippy -D warnings, ruff and mypy if installed
 	else echo "ruff not installed (pip install ruff): Python not linted"; fi
 	@if [ -x $(VENV)/bin/mypy ]; then cd python && ../$(VENV)/bin/mypy; \
 	else echo "mypy not installed in $(VENV): Python not type-checked"; fi
+	@if [ -x $(VENV)/bin/stubtest ] && $(VENV)/bin/python -c "import mipray._mipray" 2>/dev/null; then \
+		cd python && ../$(VENV)/bin/python -m mypy.stubtest mipray._mipray --allowlist ../tests/stubtest_allowlist.txt; \
+	else echo "stubtest or the extension missing in $(VENV): _mipray.pyi not checked"; fi
 
 clean: ## Remove build outputs and renders (keeps .venv)
 	cargo clean

@@ -11,6 +11,7 @@ delegate, ``write_image``, ``read_image`` and ``version``, to stand in for
 from __future__ import annotations
 
 import json
+import os
 import types
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -47,6 +48,8 @@ class FakeRenderDelegate:
         #: Paths whose ``set_mesh`` should raise ValueError, as the real one does on bad data.
         self.reject: set[str] = set()
         self.renders: list[dict[str, Any]] = []
+        #: ``(samples, pass_output)`` of every pass the real delegate would have written.
+        self.pass_writes: list[tuple[int, dict[str, Any]]] = []
 
     def _set(self, method: str, path: str, kwargs: dict[str, Any]) -> None:
         transform = kwargs["transform"]
@@ -230,13 +233,15 @@ class FakeRenderDelegate:
         width: int,
         height: int,
         aovs: list[str],
-        settings: dict[str, object],
+        settings: dict[str, object] | None = None,
         progress: Callable[[int, int], object] | None = None,
         *,
         on_update: Callable[[int, bool, dict[str, NDArray[np.float32]]], object] | None = None,
+        pass_output: dict[str, Any] | None = None,
     ) -> tuple[dict[str, NDArray[np.float32]], str]:
         if camera not in self.prims or self.prims[camera].method != "set_camera":
             raise ValueError(f"unknown camera {camera}")
+        settings = settings or {}
         channels = {"color": 3, "depth": 1, "normal": 3}
         out: dict[str, NDArray[np.float32]] = {}
         for aov in aovs:
@@ -248,7 +253,7 @@ class FakeRenderDelegate:
         if progress is not None:
             for done in (0, height // 2, height):
                 progress(done, height)
-        if on_update is not None:
+        if on_update is not None or pass_output is not None:
             # The real delegate's passes: 1, 2, 4, ... samples, or one pass; each pass's
             # arrays the ramp scaled by its share of the samples, so passes differ.
             samples = int(settings.get("samples", 1))  # type: ignore[call-overload]
@@ -257,7 +262,11 @@ class FakeRenderDelegate:
                 done = (
                     samples if not settings.get("progressive") else min(max(1, 2 * done), samples)
                 )
-                on_update(done, done == samples, {k: v * (done / samples) for k, v in out.items()})
+                pixels = {k: v * (done / samples) for k, v in out.items()}
+                if pass_output is not None and done < samples:
+                    self.pass_writes.append((done, dict(pass_output)))
+                if on_update is not None:
+                    on_update(done, done == samples, pixels)
         self.renders.append(
             {
                 "camera": camera,
@@ -330,30 +339,49 @@ def locals_without_self(values: dict[str, Any]) -> dict[str, Any]:
 def fake_module() -> types.ModuleType:
     """A module object standing in for ``mipray._mipray``.
 
-    ``write_image`` records its arguments in ``module.written`` (path → dict)
-    and writes a small JSON file at the path so tests can see it exists.
+    ``write_image`` records what the real writer would write in
+    ``module.written`` (path → dict: the AOVs in the file's order, their pixel
+    types, the pixels as they go into the file, sRGB-encoded for 8-bit types,
+    and the metadata) and writes a small JSON file at the path so tests can
+    see it exists. What goes into the file is the real module's plan
+    (``output_plan``, ``srgb_encode``: the compiled writer's rules), so the
+    fake stands in for OpenImageIO only.
     """
+    from mipray import _mipray as native
+
     module = types.ModuleType("mipray._mipray")
     written: dict[str, dict[str, Any]] = {}
 
     def write_image(
         path: str,
         aovs: dict[str, NDArray[np.float32]],
-        order: list[str],
+        order: list[str] | None = None,
         formats: dict[str, str] | None = None,
         metadata: dict[str, object] | None = None,
+        *,
+        color_correction: str = "disabled",
+        atomic: bool = False,
     ) -> None:
-        for name in order:
+        names = list(order) if order is not None else list(aovs)
+        for name in names:
             if name not in aovs:
-                raise ValueError(f"no AOV {name}")
+                raise OSError(f"{path}: no AOV named '{name}' was rendered")
+        plan_order, plan_formats, encode = native.output_plan(path, names, color_correction)
+        plan_formats.update(formats or {})
+        pixels = {name: aovs[name] for name in plan_order}
+        if encode:
+            pixels["color"] = native.srgb_encode(pixels["color"])
         written[path] = {
-            "aovs": aovs,
-            "order": list(order),
-            "formats": formats,
-            "metadata": metadata,
+            "aovs": pixels,
+            "order": plan_order,
+            "formats": plan_formats,
+            # The writer's own attribute (OpenImageIO's ``Software``), as every file has it.
+            "metadata": {**(metadata or {}), "software": f"mipray {native.version()}"},
+            "atomic": atomic,
         }
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         with open(path, "w", encoding="utf-8") as handle:
-            json.dump({"order": list(order), "formats": formats}, handle)
+            json.dump({"order": plan_order, "formats": plan_formats}, handle)
 
     def read_image(path: str) -> tuple[NDArray[np.float32], list[str]]:
         raise OSError(f"{path}: the fake module cannot read images")
@@ -361,6 +389,14 @@ def fake_module() -> types.ModuleType:
     module.RenderDelegate = FakeRenderDelegate  # type: ignore[attr-defined]
     module.write_image = write_image  # type: ignore[attr-defined]
     module.read_image = read_image  # type: ignore[attr-defined]
+
+    def read_metadata(path: str) -> dict[str, str]:
+        raise OSError(f"{path}: the fake module cannot read images")
+
+    module.read_metadata = read_metadata  # type: ignore[attr-defined]
+    # The writer's rules are the compiled module's own.
+    module.output_plan = native.output_plan  # type: ignore[attr-defined]
+    module.srgb_encode = native.srgb_encode  # type: ignore[attr-defined]
     module.version = lambda: "0.0.0-fake"  # type: ignore[attr-defined]
     module.written = written  # type: ignore[attr-defined]
     return module

@@ -8,10 +8,8 @@ line's own logic (pass labels, atomic writes) with the fake module.
 from __future__ import annotations
 
 import io
-import os
 import threading
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -19,8 +17,6 @@ from pxr import Usd
 
 import mipray
 from mipray import record
-from mipray.errors import OutputError
-from mipray.image import write_aovs
 
 from stages import add_camera, add_cube, add_distant_light, new_stage
 
@@ -181,28 +177,32 @@ def test_record_progressive_rewrites_the_image_each_pass(
     common = ["-w", str(WIDTH), "--aovs", "color,depth", "--samples", "8", "--seed", "3"]
     assert record.main([*common, str(scene), str(plain)]) == 0
 
-    # What a viewer watching the file would see: the image after every rename onto it.
-    seen: list[tuple[str, np.ndarray]] = []
-    real_replace = os.replace
+    # What a viewer watching the file would see: the renderer writes each pass (a temporary
+    # file renamed onto it) before the command hears of the pass.
+    seen: list[tuple[int, np.ndarray, list[str], str]] = []
+    real_pass_finished = record._Progress.pass_finished
 
-    def replace(src: Any, dst: Any) -> None:
-        real_replace(src, dst)
-        seen.append((str(src), native.read_image(str(dst))[0]))
+    def pass_finished(self: record._Progress, samples: int) -> None:
+        real_pass_finished(self, samples)
+        if samples < 8:
+            tagged = native.read_metadata(str(out))["mipray:progressiveSamples"]
+            listing = sorted(p.name for p in out_dir.iterdir())
+            seen.append((samples, native.read_image(str(out))[0], listing, tagged))
 
-    monkeypatch.setattr(os, "replace", replace)
+    monkeypatch.setattr(record._Progress, "pass_finished", pass_finished)
     code = record.main(["--progressive", *common, str(scene), str(out)])
-    monkeypatch.setattr(os, "replace", real_replace)
+    monkeypatch.setattr(record._Progress, "pass_finished", real_pass_finished)
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert captured.out.splitlines()[-1] == str(out)
     # Passes 1, 2, 4 written as they finish, then the final image with its stats.
-    assert len(seen) == 4
-    for src, _ in seen:
-        assert Path(src).parent == out_dir and Path(src).name.startswith(".")
-        assert src.endswith(".exr")
+    assert [(s, tagged) for s, _, _, tagged in seen] == [(1, "1"), (2, "2"), (4, "4")]
+    for _, _, listing, _ in seen:
+        assert listing == ["shot.exr"], "the temporary file is renamed before the pass is told"
     final, names = native.read_image(str(out))
     assert names == ["R", "G", "B", "Z"]
-    np.testing.assert_array_equal(seen[-1][1], final)
+    assert "mipray:progressiveSamples" not in native.read_metadata(str(out))
+    assert not np.array_equal(seen[-1][1], final), "the last pass is the result, written after"
     assert np.abs(seen[0][1][..., :3] - final[..., :3]).max() > 1e-3, "pass 1 is rougher"
     assert sorted(p.name for p in out_dir.iterdir()) == ["shot.exr"], "no temporary files"
     # The same image as without --progressive (both went through the same half conversion).
@@ -243,23 +243,6 @@ def test_progress_bar_shows_the_pass() -> None:
     one.start(1, Usd.TimeCode(1.0))
     one.update(1, 2)
     assert "pass" not in plain.getvalue()
-
-
-def test_atomic_write_that_fails_leaves_no_temporary_file(fake_native, tmp_path: Path) -> None:
-    target = tmp_path / "img.exr"
-    target.write_text("the previous image")
-
-    def failing_write(path: str, *args: object) -> None:
-        Path(path).write_text("half written")
-        raise OSError(f"{path}: disk full")
-
-    fake_native.write_image = failing_write
-    color = np.zeros((2, 3, 3), np.float32)
-    with pytest.raises(OutputError) as info:
-        write_aovs(str(target), {"color": color}, atomic=True)
-    assert str(target) in str(info.value) and ".tmp" not in str(info.value)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["img.exr"]
-    assert target.read_text() == "the previous image", "a failed write keeps the old image"
 
 
 def test_session_passes_on_update_through_the_protocol(fake_native, tmp_path: Path) -> None:

@@ -74,9 +74,14 @@ def test_stub_declares_the_protocol() -> None:
         "RenderDelegate.set_light",
         "RenderDelegate.remove",
         "RenderDelegate.prim_paths",
+        "RenderDelegate.mesh_sync_count",
+        "RenderDelegate.instancer_update_count",
         "RenderDelegate.render",
         "write_image",
+        "output_plan",
+        "srgb_encode",
         "read_image",
+        "read_metadata",
         "version",
         "render_settings",
         "settings",
@@ -93,8 +98,10 @@ def test_stub_declares_the_protocol() -> None:
         "settings",
         "progress",
         "on_update",
+        "pass_output",
     ]
     assert ("on_update", "keyword", True) in sigs["RenderDelegate.render"]
+    assert ("pass_output", "keyword", True) in sigs["RenderDelegate.render"]
 
 
 def test_fake_delegate_matches_the_stub() -> None:
@@ -108,8 +115,11 @@ def test_fake_delegate_matches_the_stub() -> None:
             "parse_setting",
             "aov_names",
             "aovs",
+            "RenderDelegate.mesh_sync_count",
+            "RenderDelegate.instancer_update_count",
         ):
-            # A tool (mipray-subdiv-compare) and the renderer's own tables, not part of the
+            # A tool (mipray-subdiv-compare), the renderer's own tables and the compiled
+            # delegate's sync counters (what tests of incremental sync read), not part of the
             # scene delegate's protocol.
             continue
         assert runtime_params(resolve(module, name)) == expected, name

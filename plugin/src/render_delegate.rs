@@ -216,10 +216,23 @@ impl RenderDelegate {
     /// Instancers whose prototypes are missing are reported on every sync, as they stay broken
     /// until a prototype appears.
     pub fn sync(&mut self) -> Vec<DelegateError> {
+        // NoProgress never cancels.
+        self.sync_or_cancel(&mipray::progress::NoProgress).unwrap_or_default()
+    }
+
+    /// As [`RenderDelegate::sync`], stopping between two meshes when `progress` is cancelled
+    /// (Ctrl-C during a long sync); the meshes not synced stay dirty for the next render.
+    ///
+    /// # Errors
+    /// [`RenderError::Cancelled`](mipray::error::RenderError::Cancelled).
+    pub fn sync_or_cancel(&mut self, progress: &dyn mipray::progress::Progress) -> Result<Vec<DelegateError>, mipray::error::RenderError> {
         let mut errors = Vec::new();
         for m in self.meshes.values_mut() {
             if m.dirty.is_clean() {
                 continue;
+            }
+            if progress.cancelled() {
+                return Err(mipray::error::RenderError::Cancelled);
             }
             // A panic in one prim's sync (its patch tables, its primvars) drops that prim only.
             let synced = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| m.sync())).unwrap_or_else(|payload| {
@@ -247,7 +260,7 @@ impl RenderDelegate {
             log::error!("{e}");
             errors.push(e);
         }
-        errors
+        Ok(errors)
     }
 
     /// The flat scene for a render from camera `camera_path`. Unsynced or failed meshes are

@@ -19,7 +19,7 @@ pub struct RenderPass {
     pub camera: String,
     pub width: usize,
     pub height: usize,
-    pub aovs: Vec<String>,
+    pub aovs: Vec<mipray::aov::Aov>,
     pub settings: RenderSettings,
 }
 
@@ -59,7 +59,7 @@ impl RenderPass {
     }
 
     fn render(&self, delegate: &mut RenderDelegate, progress: &dyn Progress) -> Result<PassResult, DelegateError> {
-        let prim_errors = delegate.sync();
+        let prim_errors = delegate.sync_or_cancel(progress)?;
         delegate.prepare_textures(crate::config::texture_options(&self.settings))?;
         let scene = delegate.build_scene(&self.camera, self.settings.displacement_bound)?;
         let options = self.settings.to_options(self.width, self.height, &self.aovs);

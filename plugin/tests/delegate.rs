@@ -6,6 +6,7 @@ mod common;
 use glam::{Mat4, Vec3};
 use hd_mipray::mesh::MeshData;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
+use mipray::aov::Aov;
 use mipray::progress::NoProgress;
 use mipray::topology::{MeshTopology, Scheme};
 use serde_json::Value;
@@ -34,7 +35,7 @@ fn pass(aovs: &[&str]) -> RenderPass {
         camera: "/cam".into(),
         width: 32,
         height: 32,
-        aovs: aovs.iter().map(|s| s.to_string()).collect(),
+        aovs: aovs.iter().map(|s| Aov::from_name(s).unwrap()).collect(),
         settings: RenderSettings::default(),
     }
 }
@@ -134,4 +135,34 @@ fn each_render_reports_its_own_cache_figures() {
     assert_eq!(cold(&second.stats), 0, "everything was tessellated by the first render");
     assert_eq!(lookups(&second.stats), lookups(&first.stats), "the same picture needs the same lookups");
     assert_eq!(second.stats["geometry_cache"]["recomputed_vertices"].as_u64(), Some(0));
+}
+
+/// Cancels once `cancelled` has been asked `after` times: a Ctrl-C arriving mid-sync.
+struct CancelAfter {
+    after: usize,
+    asked: std::sync::atomic::AtomicUsize,
+}
+
+impl mipray::progress::Progress for CancelAfter {
+    fn cancelled(&self) -> bool {
+        self.asked.fetch_add(1, std::sync::atomic::Ordering::Relaxed) >= self.after
+    }
+}
+
+#[test]
+fn a_cancel_during_sync_stops_between_meshes_and_the_rest_sync_next_time() {
+    let mut d = delegate_with_camera(Vec3::new(0.0, 0.0, 8.0), Vec3::ZERO);
+    let (t, p) = cube();
+    let paths: Vec<String> = (0..6).map(|i| format!("/m{i}")).collect();
+    for (i, path) in paths.iter().enumerate() {
+        d.set_mesh(path, data(t.clone(), p.clone(), Mat4::from_translation(Vec3::new(i as f32, 0.0, 0.0))));
+    }
+    let synced = |d: &RenderDelegate| paths.iter().filter(|p| d.mesh(p).unwrap().surface_syncs > 0).count();
+    let cancel = CancelAfter { after: 2, asked: Default::default() };
+    let e = pass(&["color"]).execute(&mut d, &cancel).err().expect("a cancelled sync is an error");
+    assert!(matches!(e, hd_mipray::DelegateError::Render(mipray::error::RenderError::Cancelled)), "{e}");
+    assert_eq!(synced(&d), 2, "the sync stopped at the third mesh");
+    let r = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    assert_eq!(synced(&d), 6, "the meshes left dirty sync on the next render");
+    assert!(r.buffers[0].data.iter().any(|a| *a > 0.5));
 }

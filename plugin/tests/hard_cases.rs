@@ -12,6 +12,7 @@ use std::sync::Arc;
 use common::{beam_ray, boxed, cube_sphere, grid, quad_pole, triangle_fan, Rng};
 use glam::{Mat4, Vec3, Vec3A};
 use hd_mipray::subdiv_compare::{compare, CompareOptions};
+use mipray::aov::Aov;
 use mipray::bilinear::BilinearSurface;
 use mipray::camera::Camera;
 use mipray::differential::RayDifferential;
@@ -37,8 +38,13 @@ fn scene_of(surface: Arc<dyn LimitSurface>) -> Scene {
 }
 
 fn render_of(scene: &Scene, size: usize, aovs: &[&str]) -> (Film, Value) {
-    let options =
-        RenderOptions { width: size, height: size, threads: 2, aovs: aovs.iter().map(|s| s.to_string()).collect(), ..Default::default() };
+    let options = RenderOptions {
+        width: size,
+        height: size,
+        threads: 2,
+        aovs: aovs.iter().map(|s| Aov::from_name(s).unwrap()).collect(),
+        ..Default::default()
+    };
     let out = render(scene, &options, &NoProgress).unwrap_or_else(|e| panic!("{e}"));
     (out.film, out.stats)
 }
@@ -590,7 +596,7 @@ fn no_pixel_is_ever_non_finite_and_dropped_samples_are_counted() {
             height: 16,
             samples: spp,
             threads: 2,
-            aovs: vec!["color".into(), "alpha".into(), "depth".into(), "normal".into()],
+            aovs: vec![Aov::Color, Aov::Alpha, Aov::Depth, Aov::Normal],
             ..Default::default()
         };
         let out = render(&scene, &options, &NoProgress).unwrap();
@@ -657,7 +663,7 @@ fn coarse_grids_of_a_surface_do_not_shadow_the_rays_leaving_it() {
             ao_samples: 32,
             ao_distance: 100.0,
             tess_factor_incoherent: factor,
-            aovs: vec!["ao".into(), "alpha".into()],
+            aovs: vec![Aov::Ao, Aov::Alpha],
             ..Default::default()
         };
         let out = render(&scene, &opts, &NoProgress).unwrap();
@@ -698,7 +704,7 @@ fn the_seams_setting_shows_what_seam_boxes_add_to_coarse_occluders() {
             tess_factor,
             tess_factor_incoherent: 16.0,
             seams,
-            aovs: vec!["ao".into(), "alpha".into()],
+            aovs: vec![Aov::Ao, Aov::Alpha],
             ..Default::default()
         };
         let out = render(&scene, &opts, &NoProgress).unwrap();
@@ -732,7 +738,7 @@ fn a_flat_subdivision_surface_has_zero_tessellation_error_at_every_rate() {
     for tess_factor in [0.02f32, 0.08, 0.3, 1.0, 4.0, 16.0, 64.0] {
         let mut scene = scene0.clone();
         scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.4, -3.0, 2.5), Vec3::ZERO, Vec3::Z), 35.0);
-        let aovs = vec!["tessError".into(), "tessRate".into(), "alpha".into()];
+        let aovs = vec![Aov::TessError, Aov::TessRate, Aov::Alpha];
         let out = render(&scene, &RenderOptions { width: 32, height: 24, tess_factor, aovs, ..Default::default() }, &NoProgress).unwrap();
         let (e, rate, alpha) = (out.film.aov("tessError").unwrap(), out.film.aov("tessRate").unwrap(), out.film.aov("alpha").unwrap());
         let covered = alpha.data.iter().filter(|a| **a > 0.0).count();

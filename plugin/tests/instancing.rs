@@ -9,6 +9,7 @@ use hd_mipray::material::FaceAlbedo;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_pass::PassResult;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
+use mipray::aov::Aov;
 use mipray::progress::NoProgress;
 use mipray::topology::{MeshTopology, Scheme};
 
@@ -39,7 +40,7 @@ fn render(d: &mut RenderDelegate, aovs: &[&str]) -> PassResult {
         camera: "/cam".into(),
         width: 32,
         height: 32,
-        aovs: aovs.iter().map(|s| s.to_string()).collect(),
+        aovs: aovs.iter().map(|s| Aov::from_name(s).unwrap()).collect(),
         settings: RenderSettings::default(),
     };
     pass.execute(d, &NoProgress).expect("render")

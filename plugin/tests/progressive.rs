@@ -9,6 +9,7 @@ use glam::{Mat4, Vec3};
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_pass::PassUpdate;
 use hd_mipray::{RenderPass, RenderSettings};
+use mipray::aov::Aov;
 use mipray::options::IntegratorKind;
 use mipray::progress::NoProgress;
 use serde_json::json;
@@ -20,7 +21,7 @@ fn settings(pairs: serde_json::Value) -> RenderSettings {
 #[test]
 fn the_settings_parse_and_reach_the_core() {
     let s = settings(json!({"progressive": 1, "russianRouletteDepth": 5, "integrator": "path"}));
-    let o = s.to_options(8, 8, &["color".to_string()]);
+    let o = s.to_options(8, 8, &[Aov::Color]);
     assert!(o.progressive);
     assert_eq!(o.russian_roulette_depth, 5);
     assert_eq!(o.integrator, IntegratorKind::Path);
@@ -45,7 +46,7 @@ fn each_pass_reaches_the_caller_as_render_buffers() {
         camera: "/cam".into(),
         width: 24,
         height: 20,
-        aovs: vec!["color".into(), "depth".into()],
+        aovs: vec![Aov::Color, Aov::Depth],
         settings: RenderSettings { samples: 8, integrator: IntegratorKind::Path, progressive, ..RenderSettings::default() },
     };
     let seen: Mutex<Vec<PassUpdate>> = Mutex::new(Vec::new());

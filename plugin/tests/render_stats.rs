@@ -11,6 +11,7 @@ use glam::{Mat4, Vec3};
 use hd_mipray::material::TextureInput;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
+use mipray::aov::Aov;
 use mipray::image_io::{ChannelFormat, ImageBuf, ImageIo};
 use mipray::progress::NoProgress;
 use mipray::texture::{Interpolation, Primvar2, Wrap};
@@ -169,7 +170,7 @@ fn each_render_s_stats_have_every_named_field_and_agree() {
             camera: "/cam".into(),
             width: WIDTH,
             height: HEIGHT,
-            aovs: vec!["color".into()],
+            aovs: vec![Aov::Color],
             // tessFactor 0.25: quads a quarter of the beam wide, so camera rays reach the fine
             // tier at this small size (at the default, rates sized by the patches' own extent
             // stay in the coarse and medium tiers here) and 60 kB evicts fine entries too.

@@ -10,6 +10,7 @@ use hd_mipray::camera::Camera;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_pass::PassResult;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
+use mipray::aov::Aov;
 use mipray::progress::NoProgress;
 use mipray::topology::Scheme;
 
@@ -46,7 +47,7 @@ fn render(d: &mut RenderDelegate, dir: Vec3, size: usize, threads: usize) -> Pas
         camera: "/cam".into(),
         width: size,
         height: size,
-        aovs: vec!["color".into(), "depth".into(), "normal".into(), "alpha".into()],
+        aovs: vec![Aov::Color, Aov::Depth, Aov::Normal, Aov::Alpha],
         settings: RenderSettings { samples: 2, threads, ..RenderSettings::default() },
     };
     let out = pass.execute(d, &NoProgress).unwrap();

@@ -55,11 +55,11 @@ class RenderDelegate:
         hole_indices: NDArray[np.int32] | None = None,
         left_handed: bool = False,
         double_sided: bool = False,
-        albedo: tuple[float, float, float] = (0.18, 0.18, 0.18),
+        albedo: tuple[float, float, float] = ...,  # (0.18, 0.18, 0.18)
         prototype: bool = False,
         face_albedos: NDArray[np.float32] | None = None,
         face_albedo_indices: NDArray[np.int32] | None = None,
-        mirror: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        mirror: tuple[float, float, float] = ...,  # (0.0, 0.0, 0.0)
         displacement_bound: float | None = None,
         displacement: tuple[float, float, int, float] | None = None,
         st_values: NDArray[np.float32] | None = None,
@@ -217,7 +217,7 @@ class RenderDelegate:
         vertical_aperture: float = 15.2908,
         horizontal_aperture_offset: float = 0.0,
         vertical_aperture_offset: float = 0.0,
-        clipping_range: tuple[float, float] = (1.0, 1e6),
+        clipping_range: tuple[float, float] = ...,  # (1.0, 1e6)
         f_stop: float = 0.0,
         focus_distance: float = 0.0,
     ) -> None:
@@ -239,7 +239,7 @@ class RenderDelegate:
         transform: NDArray[np.float64],
         intensity: float = 1.0,
         exposure: float = 0.0,
-        color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        color: tuple[float, float, float] = ...,  # (1.0, 1.0, 1.0)
         normalize: bool = False,
         shadow_enable: bool = True,
         angle: float = 0.53,
@@ -270,7 +270,7 @@ class RenderDelegate:
         transform: NDArray[np.float64],
         intensity: float = 1.0,
         exposure: float = 0.0,
-        color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        color: tuple[float, float, float] = ...,  # (1.0, 1.0, 1.0)
         angle: float = 0.53,
         normalize: bool = False,
         shadow_enable: bool = True,
@@ -291,16 +291,23 @@ class RenderDelegate:
     def prim_paths(self) -> list[str]:
         """The paths of every prim the delegate holds, sorted."""
 
+    def mesh_sync_count(self, path: str) -> int | None:
+        """How many times the mesh's surface has been (re)built or updated; None if unknown."""
+
+    def instancer_update_count(self, path: str) -> int | None:
+        """How many times the instancer has been set; None if there is none."""
+
     def render(
         self,
         camera: str,
         width: int,
         height: int,
         aovs: list[str],
-        settings: dict[str, object],
+        settings: dict[str, object] | None = None,
         progress: Callable[[int, int], object] | None = None,
         *,
         on_update: Callable[[int, bool, dict[str, NDArray[np.float32]]], object] | None = None,
+        pass_output: dict[str, Any] | None = None,
     ) -> tuple[dict[str, NDArray[np.float32]], str]:
         """Render the scene through ``camera`` and return its AOVs.
 
@@ -330,8 +337,7 @@ class RenderDelegate:
                 the same seed). The module may know more; it rejects unknown
                 keys with ``ValueError``.
             progress: called as ``progress(done, total)`` about every 1% of
-                the work (units: pixel samples, over all passes); a pending
-                ``KeyboardInterrupt`` cancels the render.
+                the work (units: pixel samples, over all passes).
             on_update: called as ``on_update(samples, converged, aovs)`` after
                 each pass, in order, from a render thread: ``samples`` is the
                 samples per pixel so far, ``converged`` is True for the last
@@ -341,6 +347,17 @@ class RenderDelegate:
                 is one pass, so one call. An exception raised in it cancels
                 the render (no further pass starts) and is raised by
                 ``render`` as it was raised; the delegate stays usable.
+            pass_output: ``{"path": str, "aovs": [names], "color_correction":
+                str, "metadata": dict}`` (as :func:`write_image`): every pass
+                but the last is written there atomically by the render
+                thread, with ``mipray:progressiveSamples``, before
+                ``on_update`` is called for it. A failed write cancels the
+                render and raises ``OSError``.
+
+        Ctrl-C cancels the render: while it runs, the calling thread runs
+        Python's signal handlers every 20 ms, and what they raise
+        (``KeyboardInterrupt``) stops the sync, the pre-pass and the tiles
+        and is raised here once the render threads have stopped.
 
         Returns:
             ``(aovs, stats_json)``: each AOV an H×W×C float32 array, and the
@@ -355,35 +372,75 @@ class RenderDelegate:
 def write_image(
     path: str,
     aovs: dict[str, NDArray[np.float32]],
-    order: list[str],
+    order: list[str] | None = None,
     formats: dict[str, str] | None = None,
     metadata: dict[str, object] | None = None,
+    *,
+    color_correction: str = "disabled",
+    atomic: bool = False,
 ) -> None:
-    """Write AOVs as the channels of one image through OpenImageIO.
+    """Write AOVs as the channels of one image: the renderer's one image writer.
 
-    The file type comes from the extension (``exr``, ``png``, ``tif``, ...).
+    The file type comes from the extension (``exr``, ``png``, ``tif``, ...);
+    :func:`output_plan` says which AOVs go in and with which pixel types.
     Channel names: color → ``R,G,B``; depth → ``Z``; normal → ``N.x,N.y,N.z``;
-    any other AOV ``name.c`` for each channel c.
+    any other AOV ``name.c`` for each channel c. Values a pixel type cannot
+    hold (NaN, infinities, beyond half float's range) are clamped, with a
+    warning. Every file says ``Software = "mipray <version>"``. The arrays
+    are read in place; the GIL is released while writing.
 
     Args:
-        path: output file.
+        path: output file; missing folders are made.
         aovs: H×W×C float32 arrays, all of the same H and W.
-        order: which AOVs to write, in channel order.
+        order: which AOVs to write, in channel order (default: all, as given).
         formats: per-AOV pixel format, ``"half"``, ``"float"`` or ``"uint8"``;
             the file type's default for an AOV not named.
         metadata: extra image attributes: ``str``, ``int`` and ``float`` values,
             and 4×4 matrices given as 16 floats, row by row (``matrix44``).
+        color_correction: ``"sRGB"`` (8-bit files hold the color AOV
+            sRGB-encoded) or ``"disabled"`` (the values as given, the
+            default: this function writes what it is handed;
+            ``mipray.image.write_aovs`` defaults to ``"sRGB"``).
+        atomic: write a hidden temporary file beside ``path`` and rename it
+            over ``path``; it is removed when the write fails.
 
     Raises:
-        OSError: the file cannot be written.
-        ValueError: an AOV in ``order`` is missing or shapes disagree.
+        OSError: the file cannot be written, an AOV in ``order`` is missing,
+            or the path has no extension or an 8-bit type lacks the color AOV.
+        ValueError: an array is not H×W×C float32, shapes disagree, or a
+            format or color correction mode is unknown.
     """
+
+def output_plan(
+    path: str, aovs: list[str], color_correction: str = "sRGB"
+) -> tuple[list[str], dict[str, str], bool]:
+    """How :func:`write_image` writes ``aovs`` to ``path``.
+
+    Returns:
+        ``(order, formats, encode_srgb)``: the AOVs the file holds in channel
+        order (8-bit types: ``color`` only), each one's pixel type, and
+        whether the color is sRGB-encoded.
+
+    Raises:
+        ValueError: no extension, an 8-bit type without the color AOV, or an
+            unknown color correction mode; the message names the path.
+    """
+
+def srgb_encode(linear: NDArray[np.float32]) -> NDArray[np.float32]:
+    """The sRGB transfer curve of linear values clamped to [0, 1] (NaN as 0), as written."""
 
 def read_image(path: str) -> tuple[NDArray[np.float32], list[str]]:
     """Read an image through OpenImageIO.
 
     Returns:
         ``(pixels, channel_names)`` with pixels an H×W×C float32 array.
+
+    Raises:
+        OSError: the file cannot be read.
+    """
+
+def read_metadata(path: str) -> dict[str, str]:
+    """An image's string attributes (``Software``, ``mipray:camera``, ...).
 
     Raises:
         OSError: the file cannot be read.

@@ -2,8 +2,8 @@
 
 :data:`TABLE` maps each AOV's name to its row (``mipray._mipray.aovs()``):
 channels, meaning, whether a pixel averages its samples, clear value, file
-channel names and EXR pixel type. RenderVar source names and the pixel types
-``mipray-record`` writes come from it. The package imports without the compiled
+channel names and EXR pixel type. RenderVar source names come from it (the image writer reads
+the pixel types in Rust). The package imports without the compiled
 module; the table is then empty (rendering needs the module anyway).
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import TypedDict, cast
 
-__all__ = ["TABLE", "AovRow", "exr_format"]
+__all__ = ["TABLE", "AovRow"]
 
 
 class AovRow(TypedDict):
@@ -40,9 +40,3 @@ def _rows() -> list[AovRow]:
 
 #: Every AOV the renderer produces, by name, in the table's order.
 TABLE: dict[str, AovRow] = {row["name"]: row for row in _rows()}
-
-
-def exr_format(name: str) -> str:
-    """The EXR pixel type of AOV ``name``: the table's, ``"float"`` for a name it lacks."""
-    row = TABLE.get(name)
-    return row["format"] if row is not None else "float"

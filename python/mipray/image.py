@@ -1,15 +1,16 @@
-"""Writing AOVs to image files: channel layout, pixel formats, color correction.
+"""Writing AOVs to image files: Python's names for the core's one image writer.
 
-The pixels stay linear in floating-point files (EXR, TIFF). 8-bit files (PNG,
-JPEG, ...) hold the color AOV only, encoded with the sRGB transfer curve unless
-color correction is disabled, as usdrecord's ``--colorCorrectionMode sRGB``
-does. The file itself is written by ``mipray._mipray.write_image``
-(OpenImageIO).
+Format choice (each AOV's EXR pixel type from the AOV table, 32-bit float in
+other float types, the color AOV only in 8-bit types), the sRGB transfer curve
+for 8-bit files (unless color correction is disabled, as usdrecord's
+``--colorCorrectionMode sRGB``), values a pixel type cannot hold clamped, the
+atomic replace and the ``Software`` attribute all live in Rust
+(``mipray::image_output``, OpenImageIO through the bridge); this module passes
+paths, arrays and options, and turns failures into :class:`OutputError`.
 """
 
 from __future__ import annotations
 
-import logging
 import os
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -17,25 +18,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .aovs import exr_format
 from .errors import OutputError
 
 __all__ = [
     "COLOR_CORRECTION_MODES",
     "EIGHT_BIT_EXTENSIONS",
+    "check_output",
     "is_eight_bit",
     "output_plan",
     "srgb_encode",
     "write_aovs",
 ]
 
-_log = logging.getLogger(__name__)
-
 #: usdrecord's ``--colorCorrectionMode`` values that mipray supports.
 COLOR_CORRECTION_MODES = ("sRGB", "disabled")
 #: File extensions whose images hold 8 bits per channel.
 EIGHT_BIT_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tga", ".ppm", ".webp"})
-_FLOAT_EXTENSIONS = frozenset({".exr", ".tif", ".tiff", ".hdr", ".pfm"})
 
 
 def is_eight_bit(path: str) -> bool:
@@ -44,54 +42,34 @@ def is_eight_bit(path: str) -> bool:
 
 
 def srgb_encode(linear: NDArray[np.float32]) -> NDArray[np.float32]:
-    """Apply the sRGB transfer curve (IEC 61966-2-1) to linear values, clamped to [0, 1]."""
-    x = np.clip(np.nan_to_num(linear, nan=0.0), 0.0, 1.0).astype(np.float32)
-    low = x * np.float32(12.92)
-    high = np.float32(1.055) * np.power(x, np.float32(1.0 / 2.4)) - np.float32(0.055)
-    return np.where(x <= np.float32(0.0031308), low, high).astype(np.float32)
+    """Apply the sRGB transfer curve (IEC 61966-2-1) to linear values, clamped to [0, 1].
+
+    The writer's own curve (``mipray::image_output::srgb_encode``); NaN becomes 0.
+    """
+    from . import _mipray
+
+    return _mipray.srgb_encode(np.ascontiguousarray(linear, dtype=np.float32))
 
 
 def output_plan(
     path: str,
     aov_names: Sequence[str],
     color_correction: str = "sRGB",
-) -> tuple[list[str], dict[str, str] | None, bool]:
-    """How to write ``aov_names`` to ``path``: ``(order, formats, encode_srgb)``.
+) -> tuple[list[str], dict[str, str], bool]:
+    """How the writer writes ``aov_names`` to ``path``: ``(order, formats, encode_srgb)``.
 
     Raises:
-        OutputError: the extension names no image type, or an 8-bit file is
-            asked for without a color AOV.
+        OutputError: the extension names no image type, an 8-bit file is
+            asked for without a color AOV, or the color correction mode is
+            unknown.
 
     """
-    if color_correction not in COLOR_CORRECTION_MODES:
-        raise OutputError(
-            f"unknown color correction mode '{color_correction}'; "
-            f"use {' or '.join(COLOR_CORRECTION_MODES)}",
-            path=path,
-        )
-    ext = os.path.splitext(path)[1].lower()
-    if not ext:
-        raise OutputError(
-            f"{path}: no file extension to choose the image type (use .exr, .png, .tif...)",
-            path=path,
-        )
-    if ext in EIGHT_BIT_EXTENSIONS:
-        if "color" not in aov_names:
-            raise OutputError(f"{path}: an 8-bit image needs the color AOV", path=path)
-        others = [a for a in aov_names if a != "color"]
-        if others:
-            _log.warning(
-                "mipray: %s holds only the color AOV; write an EXR to keep %s",
-                path,
-                ", ".join(others),
-            )
-        return ["color"], {"color": "uint8"}, color_correction == "sRGB"
-    order = list(aov_names)
-    if ext == ".exr":
-        return order, {a: exr_format(a) for a in order}, False
-    if ext in _FLOAT_EXTENSIONS:
-        return order, {a: "float" for a in order}, False
-    return order, None, False
+    from . import _mipray
+
+    try:
+        return _mipray.output_plan(path, list(aov_names), color_correction)
+    except ValueError as exc:
+        raise OutputError(str(exc).splitlines()[0], path=path) from exc
 
 
 def check_output(path: str, aov_names: Sequence[str], color_correction: str = "sRGB") -> None:
@@ -118,12 +96,8 @@ def check_output(path: str, aov_names: Sequence[str], color_correction: str = "s
         raise OutputError(f"{path}: directory {folder} is not writable", path=path)
 
 
-def _scalar_metadata(metadata: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in metadata.items() if isinstance(v, (str, int, float))}
-
-
 def write_aovs(
-    path: str,
+    path: str | os.PathLike[str],
     aovs: Mapping[str, NDArray[np.float32]],
     order: Sequence[str] | None = None,
     *,
@@ -132,7 +106,10 @@ def write_aovs(
     metadata: Mapping[str, Any] | None = None,
     atomic: bool = False,
 ) -> None:
-    """Write AOVs to one image file, creating its directory if needed.
+    """Write AOV arrays to one image file, creating its directory if needed.
+
+    The arrays are read where they are (a render's arrays are Rust's own
+    buffers), not copied back.
 
     Args:
         path: output file; its extension chooses the type (see the module doc).
@@ -142,7 +119,7 @@ def write_aovs(
             defaults for the file type.
         color_correction: ``"sRGB"`` or ``"disabled"``; affects 8-bit files only.
         metadata: extra image attributes (strings, numbers, 4×4 matrices as 16
-            floats).
+            floats); ``Software`` is the writer's.
         atomic: write a hidden temporary file in the same directory (same
             extension, so the same image type) and rename it over ``path``,
             so a reader of ``path`` sees the old image or the new one, never
@@ -154,58 +131,19 @@ def write_aovs(
     """
     from . import _mipray
 
-    names = list(order) if order is not None else list(aovs)
-    missing = [n for n in names if n not in aovs]
-    if missing:
-        raise OutputError(f"{path}: no AOV named {missing[0]!r} was rendered", path=path)
-    order_out, default_formats, encode = output_plan(path, names, color_correction)
-    pixels = dict(aovs)
-    if encode:
-        pixels["color"] = srgb_encode(pixels["color"])
-    chosen = dict(default_formats or {})
-    chosen.update(formats or {})
-    directory = os.path.dirname(os.path.abspath(path))
+    target = os.fspath(path)
     try:
-        os.makedirs(directory, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot create directory: {exc.strerror}", path=path) from exc
-    extra = dict(metadata or {})
-    target = _temporary_path(path) if atomic else path
-    try:
-        try:
-            _mipray.write_image(target, pixels, order_out, chosen or None, extra or None)
-        except TypeError:
-            # A binding that takes only scalar attributes: keep what it can store.
-            scalars = _scalar_metadata(extra)
-            if scalars == extra:
-                raise
-            _log.debug("mipray: %s: writing without matrix metadata", path)
-            _mipray.write_image(target, pixels, order_out, chosen or None, scalars or None)
-        if atomic:
-            os.replace(target, path)
-    except (OSError, ValueError, TypeError, RuntimeError) as exc:
-        if atomic:
-            _remove_quietly(target)
+        _mipray.write_image(
+            target,
+            dict(aovs),
+            list(order) if order is not None else None,
+            dict(formats) if formats else None,
+            dict(metadata) if metadata else None,
+            color_correction=color_correction,
+            atomic=atomic,
+        )
+    except (OSError, ValueError, TypeError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        reason = reason.replace(target, path)
-        if path not in reason:
-            reason = f"{path}: {reason}"
-        raise OutputError(f"cannot write image {reason}", path=path) from exc
-
-
-def _temporary_path(path: str) -> str:
-    """A hidden file beside ``path`` with its extension (OpenImageIO picks the type by it).
-
-    The same directory, so the rename is atomic (one file system); the process
-    id, so two processes writing one path do not write one temporary file.
-    """
-    directory, name = os.path.split(os.path.abspath(path))
-    stem, ext = os.path.splitext(name)
-    return os.path.join(directory, f".{stem}.mipray-{os.getpid()}.tmp{ext}")
-
-
-def _remove_quietly(path: str) -> None:
-    try:
-        os.remove(path)
-    except OSError:
-        pass
+        if target not in reason:
+            reason = f"{target}: {reason}"
+        raise OutputError(f"cannot write image {reason}", path=target) from exc

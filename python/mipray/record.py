@@ -44,7 +44,7 @@ from .frames import (
     frames_precision,
     parse_frame_spec,
 )
-from .image import COLOR_CORRECTION_MODES, check_output, is_eight_bit, write_aovs
+from .image import COLOR_CORRECTION_MODES, check_output, is_eight_bit
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
 from .settings import TABLE, parse
 from .stats import format_stats_table
@@ -624,8 +624,16 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
             progress.start(index, time, passes)
             value = 0.0 if time.IsDefault() else time.GetValue()
             path = format_frame_path(args.outputImagePath, value)
-            on_update = (
-                _pass_writer(path, plan.aovs, args, extra, progress) if progressive else None
+            # Each pass but the last is written by the renderer itself, atomically.
+            pass_output = (
+                {
+                    "path": path,
+                    "aovs": plan.aovs,
+                    "color_correction": args.colorCorrectionMode,
+                    "metadata": extra or {},
+                }
+                if progressive
+                else None
             )
             try:
                 result = session.render(
@@ -637,7 +645,8 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
                     camera_light=not args.disableCameraLight,
                     height=plan.height,
                     progress=progress.update if progress.enabled else None,
-                    on_update=on_update,
+                    on_update=_pass_counter(progress) if progressive else None,
+                    pass_output=pass_output,
                 )
                 result.write(
                     path,
@@ -671,38 +680,18 @@ def _samples(settings: dict[str, object]) -> int:
         return 1
 
 
-def _pass_writer(
-    path: str,
-    aovs: list[str],
-    args: argparse.Namespace,
-    extra: dict[str, Any] | None,
+def _pass_counter(
     progress: _Progress,
 ) -> Callable[[int, bool, dict[str, NDArray[np.float32]]], None]:
-    """The ``on_update`` of a progressive render: each pass but the last rewrites ``path``.
+    """The ``on_update`` of a progressive render: the bar's pass label follows the passes.
 
-    The last pass's image is the result, written once the render returns with
-    the full metadata (the stats). A write that fails raises, which stops the
-    render.
+    The passes' images are written by the renderer (``pass_output``); the last
+    pass's image is the result, written once the render returns with the full
+    metadata (the stats).
     """
-    from . import __version__
 
     def on_update(samples: int, converged: bool, pixels: dict[str, NDArray[np.float32]]) -> None:
         progress.pass_finished(samples)
-        if converged:
-            return
-        metadata: dict[str, Any] = {
-            "software": f"mipray {__version__}",
-            "mipray:progressiveSamples": samples,
-            **(extra or {}),
-        }
-        write_aovs(
-            path,
-            pixels,
-            aovs,
-            color_correction=args.colorCorrectionMode,
-            metadata=metadata,
-            atomic=True,
-        )
 
     return on_update
 

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Sdf, Tf, Usd
 
-from .errors import InternalError, MiprayError, RenderSettingsError, StageError
+from .errors import InternalError, MiprayError, OutputError, RenderSettingsError, StageError
 from .image import write_aovs
 from .settings import TABLE, describe
 from .usd.camera import camera_matrices, image_height
@@ -134,16 +134,13 @@ class RenderResult:
         return int(next(iter(self.aovs.values())).shape[0]) if self.aovs else 0
 
     def metadata(self) -> dict[str, Any]:
-        """Image attributes written with the pixels.
+        """Image attributes written with the pixels (the writer adds ``Software``).
 
-        ``software``, ``mipray:stats`` (the stats as JSON), ``mipray:camera``,
-        and the camera's ``worldtocamera`` / ``worldtoscreen`` matrices (USD
+        ``mipray:stats`` (the stats as JSON), ``mipray:camera``, and the
+        camera's ``worldtocamera`` / ``worldtoscreen`` matrices (USD
         conventions, 16 floats each, row by row).
         """
-        from . import __version__
-
         data: dict[str, Any] = {
-            "software": f"mipray {__version__}",
             "mipray:stats": json.dumps(self.stats, sort_keys=True),
             "mipray:camera": self.camera,
         }
@@ -165,7 +162,10 @@ class RenderResult:
         metadata: Mapping[str, Any] | None = None,
         atomic: bool = False,
     ) -> None:
-        """Write AOVs to an image file through OpenImageIO.
+        """Write AOVs to an image file through the renderer's image writer.
+
+        The pixels go from the render's buffers to the file without a copy
+        through Python.
 
         Args:
             path: output file; ``.exr`` keeps every AOV linear (color and
@@ -265,6 +265,7 @@ class RenderSession:
         progress: Callable[[int, int], object] | None = None,
         progressive: bool | None = None,
         on_update: UpdateCallback | None = None,
+        pass_output: Mapping[str, Any] | None = None,
     ) -> RenderResult:
         """Sync what changed and render one image.
 
@@ -297,11 +298,25 @@ class RenderSession:
                 rendered; the GIL is released in between. An exception it
                 raises stops the render before the next pass and is raised
                 here unchanged; the session stays usable.
+            pass_output: with ``progressive``, write each pass but the last
+                to an image file as the renderer finishes it, atomically (a
+                reader sees one whole pass or the next), before ``on_update``
+                hears of it: ``{"path": str, "aovs": [names],
+                "color_correction": "sRGB" or "disabled", "metadata": {...}}``
+                (as :meth:`RenderResult.write`; each file also says
+                ``mipray:progressiveSamples``). The last pass is the result,
+                for the caller to write with its stats.
+
+        Ctrl-C (SIGINT on the main thread) stops the render within a fraction
+        of a second, whether it is syncing or rendering: ``KeyboardInterrupt``
+        is raised and no further pass is written.
 
         Raises:
             PrimError: the camera is missing or unusable.
             RenderSettingsError: a bad size, AOV list or setting.
             InternalError: the renderer failed outside any one prim's work.
+            OutputError: a pass could not be written to ``pass_output``.
+            KeyboardInterrupt: Ctrl-C stopped the sync or the render.
             BaseException: whatever ``on_update`` raised.
 
         """
@@ -338,13 +353,17 @@ class RenderSession:
                     raise
 
             kwargs["on_update"] = forward
+        if pass_output is not None:
+            kwargs["pass_output"] = dict(pass_output)
         try:
             pixels, stats_json = self.delegate.render(
                 camera_path, width, h, aov_list, chosen, **kwargs
             )
-        except (ValueError, RuntimeError) as exc:
+        except (ValueError, RuntimeError, OSError) as exc:
             if raised and exc is raised[0]:
                 raise
+            if isinstance(exc, OSError):
+                raise OutputError(f"cannot write image {str(exc).splitlines()[0]}") from exc
             if isinstance(exc, RuntimeError):
                 raise InternalError(str(exc).splitlines()[0]) from exc
             raise RenderSettingsError(str(exc).splitlines()[0]) from exc

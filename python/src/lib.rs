@@ -16,17 +16,21 @@ use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
 use hd_mipray::material::{input_from_usd, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::MeshData;
-use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
+use mipray::aov::Aov;
 use mipray::camera::{Camera, Projection};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
+use mipray::image_output::{self, write_layers, ColorCorrection, Layer, WriteOptions};
 use mipray::settings::{SettingType, SettingValue, SETTINGS};
 use mipray::texture::{Interpolation, Primvar2, SourceColorSpace, Wrap};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 use mipray_bridge::OiioImageIo;
 use numpy::ndarray::Array3;
-use numpy::{IntoPyArray, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -459,8 +463,9 @@ impl RenderDelegate {
     }
 
     /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL; calls
-    /// `on_update(samples, converged, {aov: array})` after each pass (see `render.rs`).
-    #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None, *, on_update=None))]
+    /// `on_update(samples, converged, {aov: array})` after each pass and writes every pass but
+    /// the last to `pass_output` (see `render.rs`); Ctrl-C cancels it.
+    #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None, *, on_update=None, pass_output=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &mut self,
@@ -472,7 +477,11 @@ impl RenderDelegate {
         settings: Option<&Bound<'py, PyDict>>,
         progress: Option<Py<PyAny>>,
         on_update: Option<Py<PyAny>>,
+        pass_output: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<(Bound<'py, PyDict>, String)> {
+        // Names become AOVs here, at the boundary: the render never sees an unknown one.
+        let aovs = aovs.iter().map(|a| Aov::parse(a)).collect::<Result<Vec<_>, _>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let pass_output = pass_output.map(render::PassOutput::from_py).transpose()?;
         let mut pairs = Vec::new();
         if let Some(s) = settings {
             for (k, v) in s.iter() {
@@ -482,7 +491,7 @@ impl RenderDelegate {
         let settings =
             RenderSettings::from_pairs(pairs.iter().map(|(k, v)| (k.as_str(), v))).map_err(|e| PyValueError::new_err(e.to_string()))?;
         let pass = RenderPass { camera: camera.to_string(), width, height, aovs, settings };
-        render::render(py, &mut self.inner, &pass, progress, on_update)
+        render::render(py, &mut self.inner, &pass, progress, on_update, pass_output)
     }
 }
 
@@ -633,45 +642,103 @@ fn meta_value(v: &Bound<'_, PyAny>) -> PyResult<MetaValue> {
     Err(PyValueError::new_err(format!("metadata value {v} must be a string, number or 16 numbers")))
 }
 
-/// Writes AOV arrays (H×W×C float32) in `order` into one image through OpenImageIO.
-#[pyfunction]
-#[pyo3(signature = (path, aovs, order, formats=None, metadata=None))]
-fn write_image(
-    py: Python<'_>,
-    path: &str,
-    aovs: &Bound<'_, PyDict>,
-    order: Vec<String>,
-    formats: Option<HashMap<String, String>>,
-    metadata: Option<&Bound<'_, PyDict>>,
-) -> PyResult<()> {
-    let mut buffers = Vec::new();
-    let mut fmts = Vec::new();
-    for name in &order {
-        let arr =
-            aovs.get_item(name)?.ok_or_else(|| PyValueError::new_err(format!("{path}: AOV '{name}' is not among the arrays given")))?;
-        let arr = arr
-            .cast_into::<PyArray3<f32>>()
-            .map_err(|_| PyValueError::new_err(format!("{path}: AOV '{name}' must be an H×W×C float32 array")))?;
-        let ro = arr.readonly();
-        let shape = ro.shape().to_vec();
-        let data: Vec<f32> = ro.as_array().iter().copied().collect();
-        buffers.push(RenderBuffer { aov: name.clone(), width: shape[1], height: shape[0], channels: shape[2], data });
-        fmts.push(match formats.as_ref().and_then(|f| f.get(name)) {
-            Some(f) => Some(parse_format(f)?),
-            None => None,
-        });
-    }
+/// `color_correction` as the writer takes it; ValueError naming the valid modes.
+pub(crate) fn color_correction(name: &str) -> PyResult<ColorCorrection> {
+    ColorCorrection::from_name(name).map_err(PyValueError::new_err)
+}
+
+/// Image attributes from a dict of strings, numbers and 16-number matrices.
+pub(crate) fn metadata(m: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, MetaValue)>> {
     let mut meta = Vec::new();
-    if let Some(m) = metadata {
+    if let Some(m) = m {
         for (k, v) in m.iter() {
             meta.push((k.extract::<String>()?, meta_value(&v)?));
         }
     }
-    let refs: Vec<&RenderBuffer> = buffers.iter().collect();
-    let written = py.detach(|| write_buffers(Path::new(path), &refs, &fmts, &meta));
+    Ok(meta)
+}
+
+/// Writes AOV arrays (H×W×C float32, all one size) into one image file through the core's
+/// writer (`mipray::image_output`): `order` (default: every array, as given), the file type's
+/// pixel types unless `formats` names others, the colour sRGB-encoded in 8-bit files with
+/// `color_correction="sRGB"` (raw values by default, as this function always wrote them;
+/// `mipray.image.write_aovs` defaults to sRGB, as usdrecord), `metadata` as image attributes, and with `atomic` a
+/// temporary file renamed over `path`. The arrays are read where they are (no copy) unless one
+/// is not C-contiguous. The GIL is released while writing.
+#[pyfunction]
+#[pyo3(signature = (path, aovs, order=None, formats=None, metadata=None, *, color_correction="disabled", atomic=false))]
+#[allow(clippy::too_many_arguments)]
+fn write_image(
+    py: Python<'_>,
+    path: &str,
+    aovs: &Bound<'_, PyDict>,
+    order: Option<Vec<String>>,
+    formats: Option<HashMap<String, String>>,
+    metadata: Option<&Bound<'_, PyDict>>,
+    color_correction: &str,
+    atomic: bool,
+) -> PyResult<()> {
+    let mut arrays = Vec::new();
+    for (k, v) in aovs.iter() {
+        let name: String = k.extract()?;
+        let arr = v
+            .cast_into::<PyArray3<f32>>()
+            .map_err(|_| PyValueError::new_err(format!("{path}: AOV '{name}' must be an H×W×C float32 array")))?;
+        arrays.push((name, arr.readonly()));
+    }
+    let (height, width) = arrays.first().map_or((0, 0), |(_, a)| (a.shape()[0], a.shape()[1]));
+    if let Some((name, a)) = arrays.iter().find(|(_, a)| (a.shape()[0], a.shape()[1]) != (height, width)) {
+        return Err(PyValueError::new_err(format!("{path}: AOV '{name}' is {:?}, the image is {height}×{width}", a.shape())));
+    }
+    // Non-contiguous arrays (a slice, a transpose) are copied once into standard layout.
+    let owned: Vec<Option<Vec<f32>>> =
+        arrays.iter().map(|(_, a)| if a.as_slice().is_ok() { None } else { Some(a.as_array().iter().copied().collect()) }).collect();
+    let layers: Vec<Layer<'_>> = arrays
+        .iter()
+        .zip(&owned)
+        .map(|((name, a), copy)| Layer { name, channels: a.shape()[2], data: copy.as_deref().or(a.as_slice().ok()).unwrap_or_default() })
+        .collect();
+    let mut chosen = Vec::new();
+    for (name, f) in formats.unwrap_or_default() {
+        chosen.push((name, parse_format(&f)?));
+    }
+    let options = WriteOptions {
+        order: order.unwrap_or_default(),
+        formats: chosen,
+        color_correction: self::color_correction(color_correction)?,
+        metadata: self::metadata(metadata)?,
+        atomic,
+    };
+    let written = py.detach(|| write_layers(&OiioImageIo, Path::new(path), width, height, &layers, &options));
     // Values clamped to the file's range are warned about: the warning reaches Python now.
     forward_logs(py);
     written.map_err(|e| PyOSError::new_err(e.to_string()))
+}
+
+/// How `write_image` writes `aovs` to `path`: `(order, {aov: pixel type}, encode_srgb)`.
+/// ValueError naming the path when it cannot (no extension, an 8-bit file without colour).
+#[pyfunction]
+#[pyo3(signature = (path, aovs, color_correction="sRGB"))]
+fn output_plan(
+    py: Python<'_>,
+    path: &str,
+    aovs: Vec<String>,
+    color_correction: &str,
+) -> PyResult<(Vec<String>, HashMap<String, &'static str>, bool)> {
+    let names: Vec<&str> = aovs.iter().map(String::as_str).collect();
+    let plan = image_output::plan(Path::new(path), &names, self::color_correction(color_correction)?);
+    // The AOVs an 8-bit file leaves out are warned about: the warning reaches Python now.
+    forward_logs(py);
+    let plan = plan.map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let formats = plan.aovs.iter().cloned().zip(plan.formats.iter().map(|f| f.name())).collect();
+    Ok((plan.aovs, formats, plan.encode_srgb))
+}
+
+/// The sRGB transfer curve (`mipray::image_output::srgb_encode`) of linear values, clamped to
+/// [0, 1], NaN as 0: a new float32 array of the same shape.
+#[pyfunction]
+fn srgb_encode<'py>(py: Python<'py>, linear: PyReadonlyArrayDyn<'py, f32>) -> Bound<'py, PyArrayDyn<f32>> {
+    linear.as_array().mapv(image_output::srgb_encode).into_pyarray(py)
 }
 
 /// Reads an image: (H×W×C float32 array, channel names).
@@ -681,6 +748,13 @@ fn read_image<'py>(py: Python<'py>, path: &str) -> PyResult<(Bound<'py, PyArray3
     let nc = img.channels.len();
     let arr = Array3::from_shape_vec((img.height, img.width, nc), img.pixels).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok((arr.into_pyarray(py), img.channels))
+}
+
+/// An image's string attributes, as OpenImageIO reads them (`Software`, `mipray:camera`, ...).
+#[pyfunction]
+fn read_metadata(py: Python<'_>, path: &str) -> PyResult<HashMap<String, String>> {
+    let img = py.detach(|| OiioImageIo.read(Path::new(path))).map_err(|e| PyOSError::new_err(e.to_string()))?;
+    Ok(img.metadata.into_iter().collect())
 }
 
 /// The render settings the delegate accepts: [(key, default, description)], the default `""`
@@ -895,7 +969,10 @@ fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     quiet_panics();
     m.add_class::<RenderDelegate>()?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
+    m.add_function(wrap_pyfunction!(output_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(srgb_encode, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(read_metadata, m)?)?;
     m.add_function(wrap_pyfunction!(render_settings, m)?)?;
     m.add_function(wrap_pyfunction!(settings, m)?)?;
     m.add_function(wrap_pyfunction!(parse_setting, m)?)?;

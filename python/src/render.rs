@@ -1,21 +1,31 @@
 //! `RenderDelegate.render` for Python: settings from a dict, the render with the GIL released,
 //! and Python callables told of the progress and handed each pass's image.
 //!
-//! The render runs on a rayon thread while the calling thread waits without the GIL; the
+//! The render runs on a thread of its own while the calling thread, without the GIL, watches
+//! for Ctrl-C: Python runs signal handlers only on its main thread, so the render threads cannot
+//! see a KeyboardInterrupt; the caller's thread polls them (`PyErr_CheckSignals`) every
+//! [`SIGNAL_POLL`], and a pending KeyboardInterrupt cancels the render (sync, pre-pass and
+//! tiles check the flag) and is raised as soon as the render threads have stopped. The
 //! callables are called from the render thread, which takes the GIL only for the call. An
 //! exception in the `on_update` callable is kept, cancels the render (no further pass starts),
-//! and is raised to `render`'s caller as it was raised: nothing unwinds through Rust.
+//! and is raised to `render`'s caller as it was raised: nothing unwinds through Rust. With
+//! `pass_output`, each pass but the last is written to an image file by the render thread
+//! ([`hd_mipray::render_buffer::write_buffers`]), with no Python in between.
 
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
 
-use hd_mipray::render_buffer::RenderBuffer;
+use hd_mipray::render_buffer::{write_buffers, RenderBuffer};
 use hd_mipray::render_pass::PassUpdate;
 use hd_mipray::{RenderDelegate as Delegate, RenderPass};
+use mipray::image_io::MetaValue;
+use mipray::image_output::WriteOptions;
 use mipray::progress::Progress;
 use numpy::ndarray::Array3;
 use numpy::IntoPyArray;
-use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -38,8 +48,13 @@ pub(crate) fn py_to_json(v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
     Err(PyValueError::new_err(format!("setting value {v} must be a bool, number or string")))
 }
 
-/// Forwards progress to a Python callable `(done, total)` about every 1%, and turns Ctrl-C
-/// (a pending KeyboardInterrupt) into cancellation.
+/// How often the calling thread runs Python's signal handlers while a render runs: Ctrl-C
+/// stops a render within this plus the time a render thread takes to reach its next check (a
+/// pixel's samples, a mesh's sync).
+pub(crate) const SIGNAL_POLL: Duration = Duration::from_millis(20);
+
+/// Forwards progress to a Python callable `(done, total)` about every 1%; cancelled by Ctrl-C
+/// (see [`run_watched`]) or a failed `on_update` or pass write.
 struct PyProgress {
     callback: Option<Py<PyAny>>,
     total: AtomicU64,
@@ -77,17 +92,13 @@ impl Progress for PyProgress {
             return;
         }
         self.last.store(done, Ordering::Relaxed);
-        Python::attach(|py| {
-            if py.check_signals().is_err() {
-                self.cancel();
-                return;
-            }
-            if let Some(cb) = &self.callback {
+        if let Some(cb) = &self.callback {
+            Python::attach(|py| {
                 if let Err(e) = cb.call1(py, (done, total)) {
                     log::warn!("progress callback failed: {e}");
                 }
-            }
-        });
+            });
+        }
     }
 
     fn cancelled(&self) -> bool {
@@ -106,13 +117,66 @@ fn buffers_dict(py: Python<'_>, buffers: Vec<RenderBuffer>) -> PyResult<Bound<'_
     Ok(dict)
 }
 
-/// Hands one pass to `on_update` as `(samples, converged, {aov: array})`, from the render
-/// thread. The first exception is kept in `failed` and cancels the render; after it (or after
+/// Where `render`'s `pass_output` writes each pass but the last.
+pub(crate) struct PassOutput {
+    pub path: PathBuf,
+    /// `atomic`: a reader of the file never sees half an image.
+    pub options: WriteOptions,
+}
+
+impl PassOutput {
+    /// `{"path": str, "aovs": [names] (default: all rendered), "color_correction": "sRGB" or
+    /// "disabled", "metadata": {name: value}}`, as `write_image` takes them.
+    pub(crate) fn from_py(d: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let mut path = None;
+        let mut options = WriteOptions { atomic: true, ..Default::default() };
+        for (k, v) in d.iter() {
+            let key: String = k.extract()?;
+            match key.as_str() {
+                "path" => path = Some(PathBuf::from(v.extract::<String>()?)),
+                "aovs" => options.order = v.extract()?,
+                "color_correction" => options.color_correction = crate::color_correction(&v.extract::<String>()?)?,
+                "metadata" => options.metadata = crate::metadata(Some(v.cast::<PyDict>()?))?,
+                _ => {
+                    return Err(PyValueError::new_err(format!("pass_output: unknown key '{key}' (path, aovs, color_correction, metadata)")))
+                }
+            }
+        }
+        let path = path.ok_or_else(|| PyValueError::new_err("pass_output needs a 'path'"))?;
+        Ok(PassOutput { path, options })
+    }
+
+    /// Writes pass `update` (not the last: that one is the caller's to write with the render's
+    /// stats), tagged with its samples per pixel.
+    fn write(&self, update: &PassUpdate) -> Result<(), mipray::error::ImageError> {
+        let mut options = self.options.clone();
+        options.metadata.push(("mipray:progressiveSamples".into(), MetaValue::Int(i64::from(update.samples))));
+        write_buffers(&self.path, &update.buffers, &options)
+    }
+}
+
+/// Hands one pass to `pass_output` (written from the render thread, no GIL) and to `on_update`
+/// as `(samples, converged, {aov: array})`. The first failure (an exception of `on_update`, an
+/// `OSError` of the write) is kept in `failed` and cancels the render; after it (or after
 /// Ctrl-C) no further update is delivered.
-fn deliver(on_update: &Py<PyAny>, update: PassUpdate, progress: &PyProgress, failed: &Mutex<Option<PyErr>>) {
+fn deliver(
+    on_update: Option<&Py<PyAny>>,
+    output: Option<&PassOutput>,
+    update: PassUpdate,
+    progress: &PyProgress,
+    failed: &Mutex<Option<PyErr>>,
+) {
     if progress.cancelled() {
         return;
     }
+    if let Some(out) = output.filter(|_| !update.converged) {
+        if let Err(e) = out.write(&update) {
+            failed.lock().unwrap_or_else(PoisonError::into_inner).get_or_insert(PyOSError::new_err(e.to_string()));
+            progress.cancel();
+            return;
+        }
+    }
+    let Some(on_update) = on_update else { return };
     Python::attach(|py| {
         // Warnings of the passes so far reach Python's logging while the render converges.
         forward_logs(py);
@@ -124,36 +188,71 @@ fn deliver(on_update: &Py<PyAny>, update: PassUpdate, progress: &PyProgress, fai
     });
 }
 
+/// Runs `work` on a thread of its own while this thread (the caller's, without the GIL) runs
+/// Python's signal handlers every [`SIGNAL_POLL`] until it ends: the first exception they raise
+/// (KeyboardInterrupt for Ctrl-C) is kept in `interrupted` and cancels `progress`, so the work
+/// stops at its next check. Returns the work's result, or its panic's payload.
+fn run_watched<T: Send>(
+    work: impl FnOnce() -> T + Send,
+    progress: &PyProgress,
+    interrupted: &Mutex<Option<PyErr>>,
+) -> std::thread::Result<T> {
+    std::thread::scope(|scope| {
+        let worker = scope.spawn(work);
+        while !worker.is_finished() {
+            std::thread::park_timeout(SIGNAL_POLL);
+            if interrupted.lock().unwrap_or_else(PoisonError::into_inner).is_some() {
+                continue;
+            }
+            Python::attach(|py| {
+                if let Err(e) = py.check_signals() {
+                    interrupted.lock().unwrap_or_else(PoisonError::into_inner).get_or_insert(e);
+                    progress.cancel();
+                }
+            });
+        }
+        worker.join()
+    })
+}
+
 /// Runs `pass` on `delegate` with the GIL released; returns `({aov: H×W×C float32}, stats
 /// JSON)`. With `on_update`, it is called after every pass (one for a render of fixed sample
-/// count; 1, 2, 4, … samples with the `progressive` setting), the last with `converged` true.
+/// count; 1, 2, 4, … samples with the `progressive` setting), the last with `converged` true;
+/// with `pass_output`, every pass but the last is written to its file.
 ///
 /// # Errors
-/// `ValueError` for bad prims or settings, `KeyboardInterrupt` when cancelled by Ctrl-C, the
-/// callback's own exception when `on_update` raised (even on the last pass), else
-/// `RuntimeError` (an internal error: a panic outside any one prim's work).
+/// `KeyboardInterrupt` (or what another signal handler raised) when Ctrl-C stopped the render,
+/// `ValueError` for bad prims or settings, the callback's own exception when `on_update` raised
+/// (even on the last pass), `OSError` when a pass could not be written, else `RuntimeError` (an
+/// internal error: a panic outside any one prim's work).
 pub(crate) fn render<'py>(
     py: Python<'py>,
     delegate: &mut Delegate,
     pass: &RenderPass,
     progress: Option<Py<PyAny>>,
     on_update: Option<Py<PyAny>>,
+    pass_output: Option<PassOutput>,
 ) -> PyResult<(Bound<'py, PyDict>, String)> {
     let prog = PyProgress::new(progress);
     let failed: Mutex<Option<PyErr>> = Mutex::new(None);
+    let interrupted: Mutex<Option<PyErr>> = Mutex::new(None);
+    let work = || {
+        if on_update.is_none() && pass_output.is_none() {
+            return pass.execute(delegate, &prog);
+        }
+        let on_pass = |u: PassUpdate| deliver(on_update.as_ref(), pass_output.as_ref(), u, &prog, &failed);
+        pass.execute_with_updates(delegate, &prog, &on_pass)
+    };
     // The last line of defence: a panic that escaped the per-prim isolation (sync, tracing) is
     // one error line, never a `PanicException` (which is not an `Exception`) in the host.
-    let run = std::panic::AssertUnwindSafe(|| match &on_update {
-        None => py.detach(|| pass.execute(delegate, &prog)),
-        Some(cb) => {
-            let on_pass = |u: PassUpdate| deliver(cb, u, &prog, &failed);
-            py.detach(|| pass.execute_with_updates(delegate, &prog, &on_pass))
-        }
-    });
-    let result = std::panic::catch_unwind(run).unwrap_or_else(|payload| {
+    let result = py.detach(|| run_watched(work, &prog, &interrupted)).unwrap_or_else(|payload| {
         Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Internal(mipray::dropped::panic_message(payload.as_ref()))))
     });
     forward_logs(py);
+    // Ctrl-C first: whatever else happened to the render, the user asked it to stop.
+    if let Some(e) = interrupted.into_inner().unwrap_or_else(PoisonError::into_inner) {
+        return Err(e);
+    }
     if let Some(e) = failed.into_inner().unwrap_or_else(PoisonError::into_inner) {
         return Err(e);
     }

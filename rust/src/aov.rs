@@ -261,6 +261,14 @@ impl Aov {
         Aov::ALL.into_iter().find(|a| a.name() == name)
     }
 
+    /// The AOV called `name`, where names come in (a render's AOV list, a RenderVar).
+    ///
+    /// # Errors
+    /// [`UnknownAov`], naming it and listing the valid names.
+    pub fn parse(name: &str) -> Result<Aov, UnknownAov> {
+        Aov::from_name(name).ok_or_else(|| UnknownAov(name.to_string()))
+    }
+
     /// The channel names in a file: color → R, G, B; alpha → A; depth → Z; normal → N.x, N.y,
     /// N.z; colour-like AOVs `name.R`, ...; vectors `name.x`, ...; one channel its name.
     pub fn file_channel_names(self) -> Vec<String> {
@@ -271,6 +279,11 @@ impl Aov {
         }
     }
 }
+
+/// An AOV name the renderer does not know.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown AOV '{0}'; valid AOVs: {names}", names = AOV_NAMES.join(", "))]
+pub struct UnknownAov(pub String);
 
 /// `[N]` names of [`AOV_TABLE`]'s rows, computed at compile time.
 const fn names() -> [&'static str; 20] {
@@ -300,5 +313,7 @@ mod tests {
         let names: std::collections::HashSet<_> = AOV_NAMES.iter().collect();
         assert_eq!(names.len(), AOV_NAMES.len(), "names are unique");
         assert_eq!(Aov::from_name("nonsense"), None);
+        let e = Aov::parse("colour").unwrap_err().to_string();
+        assert!(e.starts_with("unknown AOV 'colour'; valid AOVs: color, alpha,") && e.ends_with("specular"), "{e}");
     }
 }

@@ -2,7 +2,7 @@
 //! [`crate::image_io::ImageIo`] or to Python as arrays. Non-finite samples never reach it: they
 //! are counted and dropped.
 
-use crate::image_io::{ChannelFormat, ImageBuf};
+use crate::image_io::ChannelFormat;
 
 use crate::aov::{Aov, AOV_NAMES as AOV_NAME_ARRAY};
 
@@ -61,7 +61,7 @@ pub fn default_format(aov: &str) -> ChannelFormat {
 /// One AOV: `height × width × channels` f32, row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AovBuffer {
-    pub name: String,
+    pub aov: Aov,
     pub channels: usize,
     pub data: Vec<f32>,
 }
@@ -75,21 +75,19 @@ pub struct Film {
 }
 
 impl Film {
-    /// A film with zeroed buffers for the named AOVs (unknown names are skipped; validate first).
-    pub fn new(width: usize, height: usize, names: &[String]) -> Self {
-        let aovs = names
-            .iter()
-            .filter_map(|n| aov_channels(n).map(|c| AovBuffer { name: n.clone(), channels: c, data: vec![0.0; width * height * c] }))
-            .collect();
+    /// A film with zeroed buffers for `aovs`.
+    pub fn new(width: usize, height: usize, aovs: &[Aov]) -> Self {
+        let aovs =
+            aovs.iter().map(|&aov| AovBuffer { aov, channels: aov.channels(), data: vec![0.0; width * height * aov.channels()] }).collect();
         Film { width, height, aovs }
     }
 
     pub fn aov(&self, name: &str) -> Option<&AovBuffer> {
-        self.aovs.iter().find(|a| a.name == name)
+        self.aovs.iter().find(|a| a.aov.name() == name)
     }
 
     pub fn aov_mut(&mut self, name: &str) -> Option<&mut AovBuffer> {
-        self.aovs.iter_mut().find(|a| a.name == name)
+        self.aovs.iter_mut().find(|a| a.aov.name() == name)
     }
 
     /// The channels of AOV `name` at pixel (x, y).
@@ -100,25 +98,6 @@ impl Film {
         let a = self.aov(name).unwrap_or_else(|| panic!("AOV {name} is not on the film"));
         let i = (y * self.width + x) * a.channels;
         &a.data[i..i + a.channels]
-    }
-
-    /// The AOVs `names` interleaved into one image with file channel names.
-    pub fn to_image(&self, names: &[String]) -> ImageBuf {
-        let sel: Vec<&AovBuffer> = names.iter().filter_map(|n| self.aov(n)).collect();
-        let nc: usize = sel.iter().map(|a| a.channels).sum();
-        let mut pixels = Vec::with_capacity(self.width * self.height * nc);
-        for p in 0..self.width * self.height {
-            for a in &sel {
-                pixels.extend_from_slice(&a.data[p * a.channels..(p + 1) * a.channels]);
-            }
-        }
-        ImageBuf {
-            width: self.width,
-            height: self.height,
-            channels: sel.iter().flat_map(|a| file_channel_names(&a.name, a.channels)).collect(),
-            pixels,
-            metadata: Vec::new(),
-        }
     }
 }
 

@@ -26,8 +26,8 @@ pub struct RenderOptions {
     /// The geometry cache: mode and per-tier budgets. Default: multires, 30 MB (10 MB a tier,
     /// the paper's).
     pub cache: CacheConfig,
-    /// AOVs to produce, by name (see [`crate::aov::Aov`]).
-    pub aovs: Vec<String>,
+    /// AOVs to produce (parsed where names come in: an unknown name never gets this far).
+    pub aovs: Vec<crate::aov::Aov>,
     /// Ambient-occlusion rays per shading point (0: no ambient occlusion). AO lights diffuse
     /// surfaces as a uniform white sky of radiance `ao_intensity`, occluded within `ao_distance`.
     pub ao_samples: u32,
@@ -114,7 +114,7 @@ impl IntegratorKind {
 /// The defaults of [`crate::settings::RenderSettings`], at 320×240 pixels, the colour AOV.
 impl Default for RenderOptions {
     fn default() -> Self {
-        crate::settings::RenderSettings::default().to_options(320, 240, &["color".into()])
+        crate::settings::RenderSettings::default().to_options(320, 240, &[crate::aov::Aov::Color])
     }
 }
 
@@ -127,12 +127,6 @@ impl RenderOptions {
         if self.width == 0 || self.height == 0 || self.width > 65_536 || self.height > 65_536 {
             return Err(RenderError::Settings(format!("resolution {}x{} must be within 1..=65536 on each side", self.width, self.height)));
         }
-        crate::settings::check(self).map_err(|e| RenderError::Settings(e.to_string()))?;
-        for a in &self.aovs {
-            if crate::aov::Aov::from_name(a).is_none() {
-                return Err(RenderError::Settings(format!("unknown AOV '{a}'; valid AOVs: {}", crate::aov::AOV_NAMES.join(", "))));
-            }
-        }
-        Ok(())
+        crate::settings::check(self).map_err(|e| RenderError::Settings(e.to_string()))
     }
 }

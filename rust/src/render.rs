@@ -123,6 +123,9 @@ pub fn render_with_cache(
     }
     progress.start((w * h) as u64 * u64::from(options.samples));
     let out = pool.install(|| {
+        if progress.cancelled() {
+            return Err(RenderError::Cancelled);
+        }
         let single = options.cache.mode == CacheMode::Single;
         let mut tracer = match cache {
             Some(c) => Tracer::with_cache(scene, c, single, options.tess_factor),
@@ -131,6 +134,10 @@ pub fn render_with_cache(
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
         tracer.set_seams(options.seams);
         let cache_before = tracer.cache.stats();
+        // The BVH over a large scene takes a while: a cancel during it is seen here.
+        if progress.cancelled() {
+            return Err(RenderError::Cancelled);
+        }
         let fx = select::effects(scene, options);
         let motion_blur = effects::enabled(&fx, "motion_blur");
         let integrator = select::select(&tracer, scene, &fx, options)?;
@@ -284,10 +291,11 @@ fn render_tile(
     let cam = &integrator.scene().camera;
     let dof = integrator.depth_of_field();
     for y in y0..y0 + th {
-        if progress.cancelled() {
-            return None;
-        }
         for x in x0..x0 + tw {
+            // Per pixel, so that a slow pixel (many samples, deep paths) delays a cancel by one.
+            if progress.cancelled() {
+                return None;
+            }
             let pixel = (y * options.width + x) as u64;
             let i = (y - y0) * tw + (x - x0);
             let sum = &mut state.sums[i];
@@ -348,8 +356,7 @@ fn write_tile(film: &mut Film, r: &TileResult) {
     let (x0, y0, tw, th) = r.tile;
     let width = film.width;
     for buffer in &mut film.aovs {
-        // The film holds only AOVs it knows (Film::new).
-        let Some(aov) = crate::aov::Aov::from_name(&buffer.name) else { continue };
+        let aov = buffer.aov;
         for ty in 0..th {
             for tx in 0..tw {
                 let dst = ((y0 + ty) * width + x0 + tx) * buffer.channels;

@@ -443,7 +443,7 @@ macro_rules! settings_table {
             /// The core's options for a render of `width`×`height` pixels with `aovs`: every
             /// field of [`RenderOptions`] but these, the geometry cache's and the AOVs is a
             /// setting's (the compiler holds the table to that).
-            pub fn to_options(&self, width: usize, height: usize, aovs: &[String]) -> RenderOptions {
+            pub fn to_options(&self, width: usize, height: usize, aovs: &[crate::aov::Aov]) -> RenderOptions {
                 RenderOptions {
                     width,
                     height,

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 
 use glam::{Mat4, Quat, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::prelude::*;
 
 fn topo1() -> MeshTopology {
@@ -39,7 +40,7 @@ fn depth_camera_depth_and_peye_match_a_plane_at_a_known_distance() {
         ..Default::default()
     };
     let (w, h) = (9usize, 7usize);
-    let opts = RenderOptions { width: w, height: h, aovs: AOVS.iter().map(|s| s.to_string()).collect(), ..Default::default() };
+    let opts = RenderOptions { width: w, height: h, aovs: AOVS.iter().map(|s| Aov::from_name(s).unwrap()).collect(), ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let normal_world = render_from_camera.transform_vector3(Vec3::Z);
     let mut off_axis_gap = 0.0f32;
@@ -84,7 +85,7 @@ fn peye_x_follows_the_window_when_the_image_is_wider_than_the_aperture() {
     scene.add_instance(mesh, Mat4::IDENTITY);
     scene.camera = Camera { focal_length: 20.0, horizontal_aperture: 20.0, vertical_aperture: 20.0, ..Default::default() };
     let (w, h) = (8usize, 4usize);
-    let opts = RenderOptions { width: w, height: h, aovs: vec!["Peye".into(), "cameraDepth".into()], ..Default::default() };
+    let opts = RenderOptions { width: w, height: h, aovs: vec![Aov::Peye, Aov::CameraDepth], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     for py in 0..h {
         for px in 0..w {
@@ -99,7 +100,7 @@ fn peye_x_follows_the_window_when_the_image_is_wider_than_the_aperture() {
 #[test]
 fn where_nothing_is_hit_depth_is_the_far_clip_and_camera_depth_and_peye_are_zero() {
     let scene = Scene { camera: Camera { clipping_range: (0.5, 250.0), ..Default::default() }, ..Default::default() };
-    let opts = RenderOptions { width: 4, height: 4, aovs: AOVS.iter().map(|s| s.to_string()).collect(), ..Default::default() };
+    let opts = RenderOptions { width: 4, height: 4, aovs: AOVS.iter().map(|s| Aov::from_name(s).unwrap()).collect(), ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     for y in 0..4 {
         for x in 0..4 {

@@ -8,6 +8,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::bounds::Bounds3;
 use mipray::bsdf::{PreviewSurfaceBsdf, Scattering};
 use mipray::light::LightShape;
@@ -110,7 +111,7 @@ fn a_lambertian_sphere_under_a_distant_light_has_the_analytic_radiance() {
     let to_light = Vec3A::new(0.4, -0.3, 0.8).normalize();
     scene.lights.push(Light::distant("/sun", -to_light, Vec3A::splat(e)));
     scene.camera = top_camera(2.4);
-    let aovs = ["color", "position", "albedo", "directDiffuse", "specular", "normal"].map(String::from).to_vec();
+    let aovs = ["color", "position", "albedo", "directDiffuse", "specular", "normal"].map(|s| Aov::from_name(s).unwrap()).to_vec();
     let out = render(&scene, &RenderOptions { width: 48, height: 48, aovs, ..Default::default() }, &NoProgress).unwrap();
     let mut checked = 0;
     for y in 0..48 {
@@ -169,7 +170,7 @@ fn a_smooth_glass_slab_transmits_fresnels_share() {
     sun.casts_shadows = false;
     scene.lights.push(sun);
     scene.camera = top_camera(8.0);
-    let opts = RenderOptions { width: 16, height: 16, max_depth: 8, aovs: vec!["color".into(), "specular".into()], ..Default::default() };
+    let opts = RenderOptions { width: 16, height: 16, max_depth: 8, aovs: vec![Aov::Color, Aov::Specular], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let (r, t) = (0.04f32, 0.96f32);
     let through = t * t / (1.0 - r * r);
@@ -197,7 +198,7 @@ fn a_glass_sphere_in_a_uniform_dome_is_invisible() {
     add(&mut scene, "/ball", Arc::new(Sphere { r: 1.0 }), glass);
     scene.lights.push(uniform_dome(1.0));
     scene.camera = top_camera(2.4);
-    let opts = RenderOptions { width: 24, height: 24, max_depth: 12, aovs: vec!["color".into(), "position".into()], ..Default::default() };
+    let opts = RenderOptions { width: 24, height: 24, max_depth: 12, aovs: vec![Aov::Color, Aov::Position], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let mut checked = 0;
     for y in 0..24 {
@@ -233,7 +234,7 @@ fn a_white_rough_metal_in_a_uniform_dome_reflects_its_directional_albedo() {
         height: 16,
         samples: 4,
         shadow_samples: 64,
-        aovs: vec!["color".into(), "position".into(), "specular".into()],
+        aovs: vec![Aov::Color, Aov::Position, Aov::Specular],
         ..Default::default()
     };
     let out = render(&scene, &opts, &NoProgress).unwrap();
@@ -343,7 +344,7 @@ fn a_curved_mirror_on_a_moving_instance_widens_beams_by_its_pose_at_the_rays_tim
         };
         add_lit_ceiling(&mut scene, 20.0);
         scene.camera = top_camera(2.4);
-        let aovs = ["color", "beamWidth"].map(String::from).to_vec();
+        let aovs = ["color", "beamWidth"].map(|s| Aov::from_name(s).unwrap()).to_vec();
         render(&scene, &RenderOptions { width: 24, height: 24, aovs, integrator, ..Default::default() }, &NoProgress).unwrap()
     };
     let keys = vec![

@@ -8,6 +8,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::light::LightShape;
 use mipray::material::{Input, Material, PreviewSurface, TexturedColor};
 use mipray::options::IntegratorKind;
@@ -198,7 +199,7 @@ fn ambient_occlusion_sees_through_a_fully_cut_out_card() {
                 ao_samples: 32,
                 max_depth: 0,
                 irradiance_cache,
-                aovs: vec!["ao".into()],
+                aovs: vec![Aov::Ao],
                 ..Default::default()
             };
             let bare = render_with(&with_card(None), &opts);

@@ -6,6 +6,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::error::RenderError;
 use mipray::light::LightShape;
 use mipray::material::Material;
@@ -96,14 +97,14 @@ fn options(integrator: IntegratorKind, threads: usize, progressive: bool) -> Ren
         max_depth: 5,
         russian_roulette_depth: 1,
         progressive,
-        aovs: AOVS.iter().map(|s| s.to_string()).collect(),
+        aovs: AOVS.iter().map(|s| Aov::from_name(s).unwrap()).collect(),
         ..Default::default()
     }
 }
 
 /// Every AOV's bytes.
 fn bytes(out: &RenderOutput) -> Vec<(String, Vec<u32>)> {
-    out.film.aovs.iter().map(|a| (a.name.clone(), a.data.iter().map(|v| v.to_bits()).collect())).collect()
+    out.film.aovs.iter().map(|a| (a.aov.name().to_string(), a.data.iter().map(|v| v.to_bits()).collect())).collect()
 }
 
 const INTEGRATORS: [IntegratorKind; 5] =

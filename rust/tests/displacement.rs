@@ -4,6 +4,7 @@
 use std::sync::{Arc, Mutex};
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::displacement::Displacement;
 use mipray::geometry_cache::{CacheConfig, CacheKey, GeometryCache, Tier};
 use mipray::prelude::*;
@@ -31,11 +32,11 @@ fn displaced_surface_moves_within_its_bound_and_shades_by_its_own_normal() {
     let d = Displacement { amplitude: 0.1, frequency: 1.5, octaves: 4, gain: 0.5 };
     let flat = render(
         &scene(None, 0.0),
-        &RenderOptions { width: 32, height: 32, aovs: vec!["color".into(), "depth".into(), "normal".into()], ..Default::default() },
+        &RenderOptions { width: 32, height: 32, aovs: vec![Aov::Color, Aov::Depth, Aov::Normal], ..Default::default() },
         &NoProgress,
     )
     .unwrap();
-    let opts = RenderOptions { width: 32, height: 32, aovs: vec!["color".into(), "depth".into(), "normal".into()], ..Default::default() };
+    let opts = RenderOptions { width: 32, height: 32, aovs: vec![Aov::Color, Aov::Depth, Aov::Normal], ..Default::default() };
     let bumpy = render(&scene(Some(d), d.bound()), &opts, &NoProgress).unwrap();
     let depth = &bumpy.film.aov("depth").unwrap().data;
     let moved = depth.iter().filter(|z| (**z - 5.0).abs() > 1e-3).count();
@@ -83,14 +84,8 @@ fn a_bound_too_small_is_counted_not_clipped() {
     scene.meshes[0].name = name.into();
     // An unbounded cache builds each tessellation once and keeps it: afterwards it holds every
     // displaced vertex the render made, to compare with the displacement's own formula.
-    let opts = RenderOptions {
-        width: 16,
-        height: 16,
-        threads: 2,
-        cache: CacheConfig::unbounded(),
-        aovs: vec!["depth".into()],
-        ..Default::default()
-    };
+    let opts =
+        RenderOptions { width: 16, height: 16, threads: 2, cache: CacheConfig::unbounded(), aovs: vec![Aov::Depth], ..Default::default() };
     let cache = Arc::new(GeometryCache::new(CacheConfig::unbounded()));
     let out = render_with_cache(&scene, &opts, Some(cache.clone()), &NoProgress).unwrap();
     let counted = out.stats["scene"]["displaced_vertices_outside_bounds"].as_u64().unwrap();

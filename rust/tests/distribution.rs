@@ -5,6 +5,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::material::Material;
 use mipray::prelude::*;
 use mipray::topology::{MeshTopology, Scheme};
@@ -33,7 +34,7 @@ fn ambient_occlusion_beside_an_infinite_wall_is_one_half() {
     add(&mut scene, "/ground", quad([[-big, -big, 0.0], [big, -big, 0.0], [big, big, 0.0], [-big, big, 0.0]]), Material::default());
     add(&mut scene, "/wall", quad([[0.0, -big, 0.0], [0.0, big, 0.0], [0.0, big, big], [0.0, -big, big]]), Material::default());
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(2.0, 0.0, 10.0), Vec3::new(2.0, 0.0, 0.0), Vec3::Y), 20.0, 20.0);
-    let opts = RenderOptions { width: 16, height: 16, ao_samples: 64, aovs: vec!["ao".into(), "color".into()], ..Default::default() };
+    let opts = RenderOptions { width: 16, height: 16, ao_samples: 64, aovs: vec![Aov::Ao, Aov::Color], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let ao = &out.film.aov("ao").unwrap().data;
     let mean: f32 = ao.iter().sum::<f32>() / ao.len() as f32;
@@ -71,7 +72,7 @@ fn a_flat_mirror_reflects_the_radiance_above_it() {
     light.casts_shadows = false;
     scene.lights.push(light);
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, 40.0);
-    let opts = RenderOptions { width: 8, height: 8, aovs: vec!["color".into(), "beamWidth".into()], ..Default::default() };
+    let opts = RenderOptions { width: 8, height: 8, aovs: vec![Aov::Color, Aov::BeamWidth], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let expected = 0.8 * 2.0 / PI;
     for p in out.film.aov("color").unwrap().data.chunks(3) {
@@ -112,13 +113,8 @@ fn grazing_hits_clamp_differentials_count_them_and_stay_finite() {
         clipping_range: (0.1, 1.0e7),
         ..Default::default()
     };
-    let opts = RenderOptions {
-        width: 32,
-        height: 32,
-        ao_samples: 4,
-        aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()],
-        ..Default::default()
-    };
+    let opts =
+        RenderOptions { width: 32, height: 32, ao_samples: 4, aovs: vec![Aov::Color, Aov::BeamWidth, Aov::TessRate], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     assert!(out.stats["render"]["differential_clamps"].as_u64().unwrap() > 0);
     for a in ["color", "beamWidth", "tessRate"] {
@@ -197,7 +193,7 @@ fn depth_of_field_blurs_only_what_is_out_of_focus() {
         focus_distance: 10.0,
         ..Default::default()
     };
-    let opts = RenderOptions { width: 40, height: 4, samples: 64, aovs: vec!["alpha".into()], ..Default::default() };
+    let opts = RenderOptions { width: 40, height: 4, samples: 64, aovs: vec![Aov::Alpha], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let names: Vec<&str> = out.stats["effects"]["enabled"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
     assert!(names.contains(&"depth_of_field"), "{names:?}");

@@ -7,6 +7,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::integrator::hemisphere::Hemisphere;
 use mipray::integrator::shading_point;
 use mipray::light::LightShape;
@@ -130,7 +131,7 @@ fn the_closed_forms_agree_with_each_other() {
 }
 
 fn ao_options(samples: u32) -> RenderOptions {
-    RenderOptions { width: W, height: H, ao_samples: samples, aovs: vec!["ao".into(), "color".into()], ..Default::default() }
+    RenderOptions { width: W, height: H, ao_samples: samples, aovs: vec![Aov::Ao, Aov::Color], ..Default::default() }
 }
 
 /// (RMSE, max abs error, mean error) of `values` against `truth`.
@@ -266,7 +267,7 @@ fn gradients_cut_the_interpolation_error_of_a_real_cache() {
 fn assert_deterministic_and_finite(scene: &Scene, opts: &RenderOptions) -> RenderOutput {
     let one = render(scene, &RenderOptions { threads: 1, ..opts.clone() }, &NoProgress).unwrap();
     let two = render(scene, &RenderOptions { threads: 2, ..opts.clone() }, &NoProgress).unwrap();
-    for name in &opts.aovs {
+    for name in opts.aovs.iter().map(|a| a.name()) {
         let (a, b) = (&one.film.aov(name).unwrap().data, &two.film.aov(name).unwrap().data);
         assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()), "AOV {name} differs between 1 and 2 threads");
         assert!(a.iter().all(|v| v.is_finite()), "AOV {name} has a non-finite value");
@@ -306,7 +307,7 @@ fn one_bounce_from_an_emissive_wall_matches_the_form_factor() {
     let ps = pixel_points(&scene);
     let truth: Vec<f32> = ps.iter().map(|&p| rho * le * wall_factor(p, h)).collect();
     let n = 256;
-    let opts = RenderOptions { aovs: vec!["color".into(), "indirectDiffuse".into(), "directDiffuse".into()], ..bleed_options(n) };
+    let opts = RenderOptions { aovs: vec![Aov::Color, Aov::IndirectDiffuse, Aov::DirectDiffuse], ..bleed_options(n) };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let red: Vec<f32> = out.film.aov("color").unwrap().data.iter().step_by(3).copied().collect();
     // All of it is the bounce: the indirectDiffuse AOV is the colour, directDiffuse is 0.
@@ -389,7 +390,7 @@ fn white_furnace_a_convex_object_under_a_uniform_dome_reflects_its_albedo() {
                 samples: 4,
                 shadow_samples: 8,
                 irradiance_cache: cache,
-                aovs: vec!["color".into(), "alpha".into()],
+                aovs: vec![Aov::Color, Aov::Alpha],
                 ..bleed_options(16)
             };
             let out = render(&scene, &opts, &NoProgress).unwrap();

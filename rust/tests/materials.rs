@@ -7,6 +7,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::light::LightShape;
 use mipray::material::{Input, Material, PreviewSurface, TexturedColor};
 use mipray::prelude::*;
@@ -97,8 +98,8 @@ fn top_camera(size: f32) -> Camera {
     Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), size * 10.0, size * 10.0)
 }
 
-fn aovs(names: &[&str]) -> Vec<String> {
-    names.iter().map(|s| s.to_string()).collect()
+fn aovs(names: &[&str]) -> Vec<Aov> {
+    names.iter().map(|s| Aov::from_name(s).unwrap()).collect()
 }
 
 #[test]

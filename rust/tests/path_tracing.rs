@@ -7,6 +7,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::bounds::Bounds3;
 use mipray::light::LightShape;
 use mipray::material::{Material, PreviewSurface};
@@ -113,14 +114,8 @@ fn white_furnace_convex_sphere_gives_its_albedo_with_every_integrator() {
         scene.lights.push(furnace_dome());
         scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, -4.0, 1.0), Vec3::ZERO, Vec3::Z), 40.0);
         for integrator in [IntegratorKind::Auto, IntegratorKind::Path] {
-            let opts = RenderOptions {
-                width: 24,
-                height: 24,
-                samples: 4,
-                integrator,
-                aovs: vec!["color".into(), "alpha".into()],
-                ..Default::default()
-            };
+            let opts =
+                RenderOptions { width: 24, height: 24, samples: 4, integrator, aovs: vec![Aov::Color, Aov::Alpha], ..Default::default() };
             let out = render(&scene, &opts, &NoProgress).unwrap();
             let alpha = &out.film.aov("alpha").unwrap().data;
             let c = red(&out);
@@ -149,7 +144,7 @@ fn white_furnace_concave_box_is_one_only_with_path_tracing() {
     add(&mut scene, "/box", open_box(), lambert("/white", 1.0));
     scene.lights.push(furnace_dome());
     scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, -1.2, 5.0), Vec3::new(0.0, 0.0, 0.5), Vec3::Y), 30.0);
-    let base = RenderOptions { width: 24, height: 24, samples: 32, max_depth: 48, aovs: vec!["color".into()], ..Default::default() };
+    let base = RenderOptions { width: 24, height: 24, samples: 32, max_depth: 48, aovs: vec![Aov::Color], ..Default::default() };
     let path = render(&scene, &RenderOptions { integrator: IntegratorKind::Path, ..base.clone() }, &NoProgress).unwrap();
     let c = red(&path);
     let (mean, err) = mean_and_error(&c, |_| true);
@@ -209,7 +204,7 @@ fn russian_roulette_keeps_the_mean() {
         samples: 64,
         max_depth: 48,
         integrator: IntegratorKind::Path,
-        aovs: vec!["color".into()],
+        aovs: vec![Aov::Color],
         ..Default::default()
     };
     let off = render(&scene, &RenderOptions { russian_roulette_depth: 48, ..base.clone() }, &NoProgress).unwrap();
@@ -374,7 +369,7 @@ fn the_ao_integrator_is_occlusion_times_albedo_times_intensity() {
         ao_samples: 64,
         ao_intensity: 2.0,
         integrator: IntegratorKind::Ao,
-        aovs: vec!["color".into(), "ao".into()],
+        aovs: vec![Aov::Color, Aov::Ao],
         ..Default::default()
     };
     let out = render(&scene, &opts, &NoProgress).unwrap();
@@ -407,14 +402,8 @@ fn an_emissive_quad_seen_in_a_mirror_is_f0_times_its_radiance() {
     );
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 1.0), Vec3::ZERO, Vec3::Y), 2.0, 2.0);
     for integrator in [IntegratorKind::Path, IntegratorKind::Auto] {
-        let opts = RenderOptions {
-            width: 8,
-            height: 8,
-            samples: 4,
-            integrator,
-            aovs: vec!["color".into(), "specular".into()],
-            ..Default::default()
-        };
+        let opts =
+            RenderOptions { width: 8, height: 8, samples: 4, integrator, aovs: vec![Aov::Color, Aov::Specular], ..Default::default() };
         let out = render(&scene, &opts, &NoProgress).unwrap();
         for (px, spec) in out.film.aov("color").unwrap().data.chunks(3).zip(out.film.aov("specular").unwrap().data.chunks(3)) {
             for c in 0..3 {
@@ -476,8 +465,10 @@ fn the_path_tracers_aovs_split_its_colour_by_what_the_light_did() {
     add(&mut scene, "/box", open_box(), lambert("/grey", 0.5));
     scene.lights.push(furnace_dome());
     scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, -3.0, 5.0), Vec3::new(0.0, 0.0, 0.5), Vec3::Y), 40.0);
-    let aovs: Vec<String> =
-        ["color", "alpha", "albedo", "emission", "directDiffuse", "indirectDiffuse", "specular"].iter().map(|s| s.to_string()).collect();
+    let aovs: Vec<Aov> = ["color", "alpha", "albedo", "emission", "directDiffuse", "indirectDiffuse", "specular"]
+        .iter()
+        .map(|s| Aov::from_name(s).unwrap())
+        .collect();
     let base = RenderOptions { width: 24, height: 24, samples: 32, max_depth: 16, aovs, ..Default::default() };
     let path = render(&scene, &RenderOptions { integrator: IntegratorKind::Path, ..base.clone() }, &NoProgress).unwrap();
     let classic = render(&scene, &RenderOptions { seed: 5, ..base.clone() }, &NoProgress).unwrap();

@@ -5,6 +5,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::geometry_cache::CacheConfig;
 use mipray::prelude::*;
 
@@ -31,7 +32,7 @@ fn lambertian_plane_under_distant_light_has_the_analytic_radiance() {
         let th = theta_deg.to_radians();
         let dir = -Vec3A::new(th.sin(), 0.0, th.cos());
         let scene = plane_scene(dir, 3.0);
-        let opts = RenderOptions { width: 8, height: 8, aovs: vec!["color".into(), "depth".into(), "normal".into()], ..Default::default() };
+        let opts = RenderOptions { width: 8, height: 8, aovs: vec![Aov::Color, Aov::Depth, Aov::Normal], ..Default::default() };
         let out = render(&scene, &opts, &NoProgress).unwrap();
         let expected = 0.18 / PI * 3.0 * th.cos();
         for y in 0..8 {
@@ -101,7 +102,7 @@ fn cache_modes_give_bit_identical_images() {
     let m = scene.add_mesh(Mesh::new("/bumps", Arc::new(BilinearSurface::new(&topo, &pts).unwrap())));
     scene.add_instance(m, Mat4::IDENTITY);
     scene.camera = Camera::perspective(Camera::look_at(Vec3::new(3.0, -4.0, 6.0), Vec3::ZERO, Vec3::Z), 35.0);
-    let base = RenderOptions { width: 48, height: 36, samples: 2, aovs: vec!["color".into(), "tessRate".into()], ..Default::default() };
+    let base = RenderOptions { width: 48, height: 36, samples: 2, aovs: vec![Aov::Color, Aov::TessRate], ..Default::default() };
     let images: Vec<_> = [CacheConfig::multires(30_000_000), CacheConfig::unbounded(), CacheConfig::none(), CacheConfig::multires(2_000)]
         .into_iter()
         .map(|cache| render(&scene, &RenderOptions { cache, ..base.clone() }, &NoProgress).unwrap())
@@ -119,7 +120,8 @@ fn cache_modes_give_bit_identical_images() {
 #[test]
 fn bad_settings_are_refused_with_the_setting_named() {
     let scene = plane_scene(Vec3A::NEG_Z, 1.0);
-    let e = render(&scene, &RenderOptions { aovs: vec!["colour".into()], ..Default::default() }, &NoProgress).err().unwrap().to_string();
+    // AOV names are parsed where they come in: an unknown one never reaches the render.
+    let e = Aov::parse("colour").unwrap_err().to_string();
     assert!(e.contains("colour") && e.contains("color"), "{e}");
     let e = render(&scene, &RenderOptions { tess_factor: f32::NAN, ..Default::default() }, &NoProgress).err().unwrap().to_string();
     assert!(e.contains("tessFactor"), "{e}");

@@ -6,6 +6,7 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
+use mipray::aov::Aov;
 use mipray::bounds::Bounds3;
 use mipray::patch::{LimitSurface, PatchKind, PatchParam, SurfacePoint};
 use mipray::prelude::*;
@@ -65,7 +66,7 @@ fn magnified_silhouette_is_within_half_a_pixel_of_the_true_sphere() {
         ..Default::default()
     };
     let (w, h) = (20, 20);
-    let opts = RenderOptions { width: w, height: h, aovs: vec!["alpha".into(), "tessRate".into()], ..Default::default() };
+    let opts = RenderOptions { width: w, height: h, aovs: vec![Aov::Alpha, Aov::TessRate], ..Default::default() };
     let out = render(&scene, &opts, &NoProgress).unwrap();
     let pixel = 0.002 / w as f32 * 10.0 / 10.0;
     let (mut checked, mut inside) = (0, 0);
@@ -120,7 +121,7 @@ fn tess_error_aov_is_the_chord_distance_to_the_true_sphere() {
         width: 5,
         height: 5,
         cache: mipray::geometry_cache::CacheConfig::single(30_000_000),
-        aovs: vec!["tessError".into(), "tessRate".into()],
+        aovs: vec![Aov::TessError, Aov::TessRate],
         ..Default::default()
     };
     let out = render(&scene, &opts, &NoProgress).unwrap();
@@ -149,7 +150,7 @@ fn a_flat_patch_has_zero_tessellation_error_at_every_rate() {
         scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.3, -2.0, 3.0), Vec3::ZERO, Vec3::Z), 35.0);
         let out = render(
             &scene,
-            &RenderOptions { width: 24, height: 16, tess_factor, aovs: vec!["tessError".into(), "alpha".into()], ..Default::default() },
+            &RenderOptions { width: 24, height: 16, tess_factor, aovs: vec![Aov::TessError, Aov::Alpha], ..Default::default() },
             &NoProgress,
         )
         .unwrap();
@@ -185,7 +186,7 @@ fn a_coarser_tessellation_of_its_own_surface_does_not_shadow_a_secondary_ray() {
         ao_samples: 16,
         ao_distance: 0.2,
         tess_factor_incoherent: 64.0,
-        aovs: vec!["ao".into()],
+        aovs: vec![Aov::Ao],
         ..Default::default()
     };
     let out = render(&scene, &opts, &NoProgress).unwrap();
@@ -249,8 +250,7 @@ fn tess_error_is_the_closed_form_chord_error_of_a_cylinder_at_every_rate() {
         let dir = Vec3::new(phi.cos(), phi.sin(), 0.0);
         scene.camera = Camera::orthographic(Camera::look_at(dir * 5.0, Vec3::ZERO, Vec3::Z), 10.0 * 5.0 * pixel, 10.0 * 5.0 * pixel);
         let tess_factor = 1.43 * r / (pixel * 0.75 * n as f32);
-        let opts =
-            RenderOptions { width: 5, height: 5, tess_factor, aovs: vec!["tessError".into(), "tessRate".into()], ..Default::default() };
+        let opts = RenderOptions { width: 5, height: 5, tess_factor, aovs: vec![Aov::TessError, Aov::TessRate], ..Default::default() };
         let out = render(&scene, &opts, &NoProgress).unwrap();
         assert_eq!(out.film.pixel("tessRate", 2, 2)[0], n as f32, "tessFactor {tess_factor} picks rate {n}");
         let expected = r * (1.0 - (Cylinder::SPAN / (2.0 * n as f32)).cos());
@@ -278,7 +278,7 @@ fn a_warm_cache_that_split_other_children_gives_the_same_image() {
         clipping_range: (0.1, 100.0),
         ..Default::default()
     };
-    let aovs = vec!["color".into(), "depth".into(), "normal".into()];
+    let aovs = vec![Aov::Color, Aov::Depth, Aov::Normal];
     let opts = |size: usize| RenderOptions { width: size, height: size, threads: 2, aovs: aovs.clone(), ..Default::default() };
     let target = Vec3::new(1.0, 0.4, 0.3);
     scene.camera = view(target);

@@ -12,6 +12,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use hd_mipray::bench_scene::{build, BenchSceneSpec};
+use mipray::aov::Aov;
 use mipray::geometry_cache::CacheConfig;
 use mipray::options::RenderOptions;
 use mipray::progress::NoProgress;
@@ -127,7 +128,7 @@ fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
         ao_distance: 6.0,
         tess_factor: a.tess_factor,
         cache,
-        aovs: vec!["color".into()],
+        aovs: vec![Aov::Color],
         ..Default::default()
     };
     let out = match render(&scene, &opts, &NoProgress) {

@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec3A};
 use hd_mipray::bench_scene::blob_mesh;
+use mipray::aov::Aov;
 use mipray::bilinear::BilinearSurface;
 use mipray::camera::Camera;
 use mipray::image_io::{ChannelFormat, ImageBuf, ImageIo, MetaValue};
@@ -135,7 +136,7 @@ fn main() {
         samples: 4,
         ao_samples: 32,
         ao_distance: 4.0,
-        aovs: vec!["color".into(), "beamWidth".into(), "tessRate".into()],
+        aovs: vec![Aov::Color, Aov::BeamWidth, Aov::TessRate],
         ..Default::default()
     };
     let r = match render(&scene, &opts, &NoProgress) {

@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use glam::{Mat4, Vec3, Vec3A};
 use hd_mipray::bench_scene::blob_mesh;
+use mipray::aov::Aov;
 use mipray::bilinear::BilinearSurface;
 use mipray::camera::Camera;
 use mipray::integrator::hemisphere::{visible, Hemisphere, Visible};
@@ -159,7 +160,7 @@ fn options(a: &Args, kind: IntegratorKind, rays: u32, error: Option<f32>) -> Ren
         threads: a.threads,
         integrator: kind,
         shadow_samples: 4,
-        aovs: vec!["color".into(), "ao".into()],
+        aovs: vec![Aov::Color, Aov::Ao],
         irradiance_cache: error.is_some(),
         irradiance_cache_error: error.unwrap_or(0.2),
         ..Default::default()

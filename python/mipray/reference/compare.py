@@ -194,14 +194,9 @@ def picture(results: Sequence[Comparison], path: str | os.PathLike[str]) -> None
         rows.append(np.concatenate([a, b, np.abs(a - b) * 4.0], axis=1))
     width = max(row.shape[1] for row in rows)
     rows = [np.pad(row, ((0, 0), (0, width - row.shape[1]), (0, 0))) for row in rows]
-    linear = np.clip(np.concatenate(rows, axis=0), 0.0, 1.0)
-    srgb = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
-    _mipray.write_image(
-        os.fspath(path),
-        {"color": np.ascontiguousarray(srgb, dtype=np.float32)},
-        ["color"],
-        {"color": "uint8"},
-    )
+    linear = np.concatenate(rows, axis=0)
+    colors = {"color": np.ascontiguousarray(linear, dtype=np.float32)}
+    _mipray.write_image(os.fspath(path), colors, color_correction="sRGB")
 
 
 def exact_scenes() -> list[Scene]:

@@ -21,7 +21,6 @@ that compute the same integral:
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -329,9 +328,8 @@ def _png_once(name: str, n: int, dtype: Any, texels: Callable[[Any, Any], Any]) 
         t, s = np.mgrid[0:n, 0:n].astype(dtype)
         s, t = (s + 0.5) / n, 1.0 - (t + 0.5) / n  # rows run down the image, t up
         codes = (np.round(texels(s, t) * 255.0) / 255.0).astype(np.float32)
-        partial = path.with_name(f"{path.stem}.{os.getpid()}.png")
-        _mipray.write_image(str(partial), {"color": codes}, ["color"], {"color": "uint8"})
-        os.replace(partial, path)
+        # The codes as they are (no sRGB curve), replaced atomically: another process may read it.
+        _mipray.write_image(str(path), {"color": codes}, atomic=True)
     return str(path)
 
 

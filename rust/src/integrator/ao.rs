@@ -42,7 +42,7 @@ impl<'a> AmbientOcclusion<'a> {
             depth_of_field: enabled(effects, "depth_of_field"),
             ao: Hemisphere::new(options.ao_samples, options),
             intensity: options.ao_intensity,
-            tess_error: options.aovs.iter().any(|a| a == "tessError"),
+            tess_error: options.aovs.contains(&crate::aov::Aov::TessError),
         }
     }
 

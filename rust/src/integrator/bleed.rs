@@ -87,7 +87,7 @@ impl<'a> ColorBleeding<'a> {
             cache_error: (options.irradiance_cache && indirect_samples > 0).then_some(options.irradiance_cache_error),
             cache: OnceLock::new(),
             ao: Hemisphere::new(if enabled(effects, "ao") { options.ao_samples } else { 0 }, options),
-            tess_error: options.aovs.iter().any(|a| a == "tessError"),
+            tess_error: options.aovs.contains(&crate::aov::Aov::TessError),
         }
     }
 

@@ -125,7 +125,7 @@ impl<'a> DirectLighting<'a> {
             ao_intensity: options.ao_intensity,
             max_depth: options.max_depth,
             glossy_samples: options.glossy_samples.max(1),
-            tess_error: options.aovs.iter().any(|a| a == "tessError"),
+            tess_error: options.aovs.contains(&crate::aov::Aov::TessError),
         }
     }
 

@@ -110,7 +110,7 @@ impl<'a> PathTracer<'a> {
             russian_roulette_depth: options.russian_roulette_depth,
             samples: options.samples,
             ao: Hemisphere::new(if enabled(effects, "ao") { options.ao_samples } else { 0 }, options),
-            tess_error: options.aovs.iter().any(|a| a == "tessError"),
+            tess_error: options.aovs.contains(&crate::aov::Aov::TessError),
         }
     }
 
