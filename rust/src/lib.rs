@@ -41,6 +41,7 @@ pub mod error;
 pub mod film;
 pub mod geometry_cache;
 pub mod image_io;
+pub mod implicit;
 pub mod integrator;
 pub mod intersect;
 pub mod irradiance_cache;
