@@ -343,6 +343,12 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().map(|m| m.subpatches.len()).sum()
     }
 
+    /// Root subpatches of surfaces intersected exactly ([`crate::implicit`]), which are never
+    /// tessellated (included in [`Tracer::subpatch_count`]).
+    pub fn exact_patch_count(&self) -> usize {
+        self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.exact().is_some()).map(|(g, _)| g.subpatches.len()).sum()
+    }
+
     /// The scene being traced.
     pub fn scene(&self) -> &'s Scene {
         self.scene
