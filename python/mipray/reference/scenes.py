@@ -522,6 +522,30 @@ def _plastic() -> Usd.Stage:
     return stage
 
 
+def _implicit() -> Usd.Stage:
+    """A diffuse implicit Sphere and Cylinder (axis X) on the ground under a sun."""
+    stage = _stage()
+    ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+    sphere = UsdGeom.Sphere.Define(stage, "/World/Ball")
+    sphere.CreateRadiusAttr(0.8)
+    sphere.AddTranslateOp().Set(Gf.Vec3d(0.9, 0.8, 0.3))
+    UsdShade.MaterialBindingAPI.Apply(sphere.GetPrim()).Bind(
+        lambert(stage, "Blue", (0.15, 0.3, 0.7))
+    )
+    cylinder = UsdGeom.Cylinder.Define(stage, "/World/Log")
+    cylinder.CreateRadiusAttr(0.5)
+    cylinder.CreateHeightAttr(1.6)
+    cylinder.CreateAxisAttr("X")
+    cylinder.AddTranslateOp().Set(Gf.Vec3d(-1.0, 0.5, -0.2))
+    cylinder.AddRotateYOp().Set(30.0)
+    UsdShade.MaterialBindingAPI.Apply(cylinder.GetPrim()).Bind(
+        lambert(stage, "Red", (0.7, 0.15, 0.1))
+    )
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+    _sun(stage, (3.0, 5.0, 2.0))
+    return stage
+
+
 def _direct(samples: int) -> dict[str, Any]:
     """Mitsuba's direct-light integrator with ``samples`` light samples.
 
@@ -543,6 +567,14 @@ SCENES: tuple[Scene, ...] = (
         "distant",
         "lambertian box, sphere and ground under a distant light (angle 0): hard shadows",
         _distant,
+        settings={},
+    ),
+    Scene(
+        "implicit",
+        "an implicit Sphere and a capped Cylinder (axis X, rotated), lambertian, on the ground "
+        "under a distant light: mipray's exact quadrics against Mitsuba's sphere, cylinder "
+        "and disk shapes",
+        _implicit,
         settings={},
     ),
     Scene(
