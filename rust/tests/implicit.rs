@@ -465,3 +465,70 @@ fn a_points_cloud_renders_every_point_at_its_width() {
     let one = PointsSurface::new(vec![[0.0; 3]], &[]).unwrap();
     assert!((one.patch_bounds(0).max.x - 0.5).abs() < 1e-5, "{:?}", one.patch_bounds(0));
 }
+
+#[test]
+fn every_integrator_sees_an_isolated_convex_shape_unoccluded_and_lit_exactly() {
+    // A convex shape alone can neither shadow nor occlude itself nor bounce light onto itself:
+    // AO is 1 everywhere (colour = albedo), and every integrator's colour under an angle-0 sun
+    // is ρ/π · E · max(0, n·l). Any self-intersection (acne) or light leak shows as a pixel
+    // below that. One sample per pixel: the pixel-centre ray the normal AOV also reads.
+    use mipray::options::IntegratorKind;
+    let light = Vec3A::new(-0.3, -0.5, -1.0).normalize();
+    let shapes: [(&str, Arc<dyn LimitSurface>, Mat4); 4] = [
+        ("sphere", Arc::new(ImplicitSurface::new(Shape::Sphere { radius: 1.2 }).unwrap()), Mat4::IDENTITY),
+        ("cube", Arc::new(ImplicitSurface::new(Shape::Cube { size: 1.6 }).unwrap()), Mat4::from_euler(glam::EulerRot::XYZ, 0.5, 0.3, 0.2)),
+        (
+            "capsule",
+            Arc::new(ImplicitSurface::new(Shape::Capsule { radius_bottom: 0.6, radius_top: 0.6, height: 1.0, axis: Axis::Y }).unwrap()),
+            Mat4::from_rotation_z(0.4),
+        ),
+        (
+            "cylinder",
+            Arc::new(ImplicitSurface::new(Shape::Cylinder { radius_bottom: 0.7, radius_top: 0.7, height: 1.5, axis: Axis::X }).unwrap()),
+            Mat4::from_rotation_y(0.6),
+        ),
+    ];
+    for (name, surface, pose) in shapes {
+        let mut scene = Scene::default();
+        let mat = scene.add_material(Material::lambertian("/half", Vec3A::splat(0.5)).0);
+        let mut mesh = Mesh::new(name, surface);
+        mesh.material = mat;
+        let m = scene.add_mesh(mesh);
+        scene.add_instance(m, pose);
+        scene.lights.push(Light::distant("/sun", light, Vec3A::splat(2.0)));
+        scene.camera = Camera::perspective(Camera::look_at(Vec3::new(1.0, 1.5, 6.0), Vec3::ZERO, Vec3::Y), 50.0);
+        let (w, h) = (40, 40);
+        for integrator in [IntegratorKind::Ao, IntegratorKind::Direct, IntegratorKind::ColorBleeding, IntegratorKind::Path] {
+            let opts = RenderOptions {
+                width: w,
+                height: h,
+                samples: 1,
+                integrator,
+                ao_samples: 16,
+                indirect_samples: 8,
+                max_depth: 4,
+                aovs: vec!["color".into(), "normal".into(), "alpha".into()],
+                ..Default::default()
+            };
+            let out = render(&scene, &opts, &NoProgress).unwrap();
+            let mut hits = 0;
+            for y in 0..h {
+                for x in 0..w {
+                    if out.film.pixel("alpha", x, y)[0] == 0.0 {
+                        continue;
+                    }
+                    hits += 1;
+                    let n = Vec3A::from_slice(out.film.pixel("normal", x, y));
+                    let got = out.film.pixel("color", x, y)[0];
+                    let want = match integrator {
+                        IntegratorKind::Ao => 0.5,
+                        _ => 0.5 / std::f32::consts::PI * 2.0 * n.dot(-light).max(0.0),
+                    };
+                    // The normal AOV is half-float: its rounding bounds the lambert term's.
+                    assert!((got - want).abs() < 2e-3, "{name} {integrator:?} ({x}, {y}): {got} vs {want}");
+                }
+            }
+            assert!(hits > 100, "{name}: {hits}");
+        }
+    }
+}
