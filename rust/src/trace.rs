@@ -98,7 +98,7 @@ pub struct Hit {
     /// clockwise, as USD's rightHanded orientation).
     pub ng: Vec3A,
     /// The effective rate the hit was found at, in quads per side of the root subpatch: 1, 2, 4,
-    /// 8, 16, or 16·2^depth after splitting.
+    /// 8, 16, or 16·2^depth after splitting; 0 on a surface intersected exactly ([`crate::implicit`]).
     pub quads: u32,
     /// The root subpatch hit (index in its mesh's subpatches).
     pub subpatch: u32,
