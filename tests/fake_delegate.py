@@ -93,6 +93,7 @@ class FakeRenderDelegate:
         diffuse_texture: dict[str, object] | None = None,
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
+        gprim: dict[str, object] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
         textures = material.get("textures", {}) if material is not None else {}

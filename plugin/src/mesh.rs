@@ -1,10 +1,12 @@
 //! The mesh Rprim: a USD mesh's data as the scene delegate gives it, and its synced state —
-//! the limit surface (OpenSubdiv for subdivision schemes, bilinear patches for `none`).
+//! the limit surface (OpenSubdiv for subdivision schemes, bilinear patches for `none`, the
+//! core's exact surfaces for implicit gprims and points).
 
 use std::sync::Arc;
 
 use glam::Mat4;
 use mipray::bilinear::BilinearSurface;
+use mipray::implicit::{ImplicitSurface, PointsSurface, Shape};
 use mipray::patch::LimitSurface;
 use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::OsdSurface;
@@ -47,6 +49,30 @@ pub struct MeshData {
     pub diffuse_texture: Option<TextureInput>,
     /// `displacement` from a texture (replaces the procedural displacement).
     pub displacement_texture: Option<TextureInput>,
+    /// Set for gprims other than meshes, which are intersected exactly: their shape replaces
+    /// `topology` (and, for an implicit gprim, `points`).
+    pub gprim: Option<Gprim>,
+}
+
+impl MeshData {
+    /// The faces [`MeshData::face_albedo`] indexes: the topology's, or for Points one per
+    /// point (each point's sphere is a patch of its own base face).
+    pub fn face_count(&self) -> usize {
+        match self.gprim {
+            Some(Gprim::Points { .. }) => self.points.len(),
+            _ => self.topology.face_vertex_counts.len(),
+        }
+    }
+}
+
+/// A gprim that is not a polygon or subdivision mesh (see [`mipray::implicit`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Gprim {
+    /// `Sphere`, `Cube`, `Cylinder`, `Cone`, `Capsule`, `Plane` and the `_1` forms.
+    Implicit(Shape),
+    /// `Points`: spheres at [`MeshData::points`] of diameters `widths` (one for all, one per
+    /// point, or none for USD's default width 1).
+    Points { widths: Vec<f32> },
 }
 
 impl Default for MeshData {
@@ -67,6 +93,7 @@ impl Default for MeshData {
             st: None,
             diffuse_texture: None,
             displacement_texture: None,
+            gprim: None,
         }
     }
 }
@@ -76,6 +103,8 @@ impl Default for MeshData {
 pub enum Surface {
     Osd(Arc<OsdSurface>),
     Bilinear(Arc<BilinearSurface>),
+    Implicit(Arc<ImplicitSurface>),
+    Points(Arc<PointsSurface>),
 }
 
 impl Surface {
@@ -83,6 +112,8 @@ impl Surface {
         match self {
             Surface::Osd(s) => s.clone(),
             Surface::Bilinear(s) => s.clone(),
+            Surface::Implicit(s) => s.clone(),
+            Surface::Points(s) => s.clone(),
         }
     }
 }
@@ -124,7 +155,7 @@ impl MeshPrim {
     /// What differs between the current data and `new`.
     pub fn diff(&self, new: &MeshData) -> DirtyBits {
         let mut d = DirtyBits::CLEAN;
-        if self.data.topology != new.topology || self.data.st != new.st {
+        if self.data.topology != new.topology || self.data.st != new.st || self.data.gprim != new.gprim {
             d = d | DirtyBits::TOPOLOGY;
         }
         if self.data.points != new.points {
@@ -167,7 +198,7 @@ impl MeshPrim {
         let dirty = self.dirty;
         self.dirty = DirtyBits::CLEAN;
         if dirty.contains(DirtyBits::MATERIAL) || dirty.contains(DirtyBits::TOPOLOGY) {
-            let faces = self.data.topology.face_vertex_counts.len();
+            let faces = self.data.face_count();
             if let Some(Err(problem)) = self.data.face_albedo.as_ref().map(|f| f.validate(faces)) {
                 // Left out until fixed; the fix rebuilds the surface (a rare case, kept simple).
                 self.surface = None;
@@ -206,6 +237,17 @@ impl MeshPrim {
     fn build(&mut self, dirty: DirtyBits) -> Result<Surface, mipray::error::MeshError> {
         if let Some(d) = &self.data.displacement {
             d.validate().map_err(mipray::error::MeshError::Invalid)?;
+        }
+        match &self.data.gprim {
+            Some(Gprim::Implicit(shape)) => {
+                return Ok(Surface::Implicit(Arc::new(ImplicitSurface::new(*shape).map_err(mipray::error::MeshError::Invalid)?)))
+            }
+            Some(Gprim::Points { widths }) => {
+                return Ok(Surface::Points(Arc::new(
+                    PointsSurface::new(self.data.points.clone(), widths).map_err(mipray::error::MeshError::Invalid)?,
+                )))
+            }
+            None => {}
         }
         let t = &self.data.topology;
         let points_only = !dirty.contains(DirtyBits::TOPOLOGY) && self.data.st.is_none();

@@ -448,6 +448,13 @@ impl RenderDelegate {
         // The authored bound, else the displacement's own (exact) one, else the setting.
         mesh.displacement_bound =
             m.data.displacement_bound.or(mesh.displacement.as_ref().map(DisplacementShader::bound)).unwrap_or(default_displacement_bound);
+        if mesh.surface.exact().is_some() {
+            // Exact surfaces are not tessellated, so there is nothing to displace.
+            if mesh.displacement.take().is_some() {
+                log::warn!("{}: displacement is not applied to implicit prims and points", m.path);
+            }
+            mesh.displacement_bound = 0.0;
+        }
         Some(scene.add_mesh(mesh))
     }
 }

@@ -68,6 +68,7 @@ class RenderDelegate:
         diffuse_texture: dict[str, object] | None = None,
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
+        gprim: dict[str, object] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -131,6 +132,16 @@ class RenderDelegate:
                 tangent-space normal map. Out-of-range values are clamped with
                 one warning naming the material; an unreadable texture renders
                 its ``fallback`` with one warning naming prim and file.
+            gprim: a gprim other than a mesh, intersected exactly (the mesh
+                arguments' topology is then empty): ``{"type": "Sphere",
+                "radius"}``, ``{"type": "Cube", "size"}``, ``{"type":
+                "Cylinder" (also cones: ``radius_top`` 0) or "Capsule",
+                "radius_bottom", "radius_top", "height", "axis"}``, ``{"type":
+                "Plane", "width", "length", "axis"}`` (object units, ``axis``
+                "X", "Y" or "Z"), or ``{"type": "Points", "widths"}``: spheres
+                at ``points`` of diameters ``widths`` (one, one per point, or
+                none for USD's default 1). ``st`` is the surface's (u, v)
+                (see ``mipray::implicit``).
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.

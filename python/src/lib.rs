@@ -15,7 +15,7 @@ use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
 use hd_mipray::material::{input_from_usd, SurfaceInputs, TextureInput};
-use hd_mipray::mesh::MeshData;
+use hd_mipray::mesh::{Gprim, MeshData};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
 use mipray::camera::{Camera, Projection};
@@ -156,7 +156,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -190,7 +190,9 @@ impl RenderDelegate {
         diffuse_texture: Option<&Bound<'_, PyDict>>,
         displacement_texture: Option<&Bound<'_, PyDict>>,
         material: Option<&Bound<'_, PyDict>>,
+        gprim: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<()> {
+        let gprim = gprim.map(|g| read_gprim(path, g)).transpose()?;
         let pts = points.as_array();
         if pts.ncols() != 3 {
             return Err(value_error(path, format!("points must be N×3, got {:?}", pts.shape())));
@@ -212,7 +214,9 @@ impl RenderDelegate {
             left_handed,
         };
         topology.validate(points.len()).map_err(|e| value_error(path, e))?;
-        let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, topology.face_vertex_counts.len())?;
+        // Points colour each point as a face of its own.
+        let faces = if matches!(gprim, Some(Gprim::Points { .. })) { points.len() } else { topology.face_vertex_counts.len() };
+        let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, faces)?;
         let st = match st_values {
             None => None,
             Some(v) => {
@@ -239,6 +243,10 @@ impl RenderDelegate {
         let material = material.map(|d| surface_inputs(path, d)).transpose()?;
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(value_error(path, format!("points[{i}] = {:?} is not finite", points[i])));
+        }
+        if let Some(Gprim::Points { widths }) = &gprim {
+            // Checked now, so bad widths name the prim at once rather than at sync.
+            mipray::implicit::PointsSurface::new(points.clone(), widths).map_err(|e| value_error(path, e))?;
         }
         let transform = matrix(path, &transform)?;
         if !transform.is_finite() {
@@ -270,6 +278,7 @@ impl RenderDelegate {
                 st,
                 diffuse_texture,
                 displacement_texture,
+                gprim,
             },
         );
         Ok(())
@@ -556,6 +565,54 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats
 /// each, optional), "wrapS", "wrapT", "sourceColorSpace" (USD tokens), "channel" (0–3)}`.
+/// `set_mesh`'s `gprim` dict: `type` (Sphere, Cube, Cylinder, Capsule, Plane, Points) and the
+/// shape's sizes (`radius`, `size`, `radius_bottom`, `radius_top`, `height`, `width`,
+/// `length`, `axis`; `widths` for Points). Sizes are checked here, so a bad one names the prim.
+fn read_gprim(path: &str, d: &Bound<'_, PyDict>) -> PyResult<Gprim> {
+    use mipray::implicit::{Axis, ImplicitSurface, Shape};
+    let kind: String = d.get_item("type")?.ok_or_else(|| value_error(path, "gprim has no type"))?.extract()?;
+    let float = |key: &str| -> PyResult<f32> {
+        d.get_item(key)?
+            .ok_or_else(|| value_error(path, format!("{kind} needs {key}")))?
+            .extract::<f32>()
+            .map_err(|_| value_error(path, format!("{key} must be a number")))
+    };
+    let axis = || -> PyResult<Axis> {
+        let token: String = match d.get_item("axis")? {
+            Some(v) => v.extract()?,
+            None => "Z".into(),
+        };
+        Axis::from_usd(&token).ok_or_else(|| value_error(path, format!("axis '{token}' is not X, Y or Z")))
+    };
+    let shape = match kind.as_str() {
+        "Points" => {
+            let widths: Vec<f32> = match d.get_item("widths")? {
+                Some(v) => v.extract().map_err(|_| value_error(path, "widths must be numbers"))?,
+                None => Vec::new(),
+            };
+            return Ok(Gprim::Points { widths });
+        }
+        "Sphere" => Shape::Sphere { radius: float("radius")? },
+        "Cube" => Shape::Cube { size: float("size")? },
+        "Cylinder" => Shape::Cylinder {
+            radius_bottom: float("radius_bottom")?,
+            radius_top: float("radius_top")?,
+            height: float("height")?,
+            axis: axis()?,
+        },
+        "Capsule" => Shape::Capsule {
+            radius_bottom: float("radius_bottom")?,
+            radius_top: float("radius_top")?,
+            height: float("height")?,
+            axis: axis()?,
+        },
+        "Plane" => Shape::Plane { width: float("width")?, length: float("length")?, axis: axis()? },
+        other => return Err(value_error(path, format!("gprim type '{other}' is not an implicit prim or Points"))),
+    };
+    ImplicitSurface::new(shape).map_err(|e| value_error(path, e))?;
+    Ok(Gprim::Implicit(shape))
+}
+
 fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<TextureInput> {
     let file: String = d.get_item("file")?.ok_or_else(|| value_error(path, format!("{input} texture has no file")))?.extract()?;
     let four = |key: &str, default: [f32; 4]| -> PyResult<[f32; 4]> {

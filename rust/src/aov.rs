@@ -166,7 +166,7 @@ pub const AOV_TABLE: [AovInfo; 20] = [
         0.0,
         Name,
         Float,
-        "effective tessellation rate at that hit: quads per side of its root subpatch (1, 2, 4, 8, 16, 16·2^depth when split)",
+        "effective tessellation rate at that hit: quads per side of its root subpatch (1, 2, 4, 8, 16, 16·2^depth when split); 0 on implicit prims and points, which are intersected exactly",
     ),
     row(
         "ao",

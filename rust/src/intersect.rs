@@ -514,7 +514,7 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 40) as f32 / (1u64 << 24) as f32
         };
-        let mut v = |rand: &mut dyn FnMut() -> f32| Vec3A::new(rand() - 0.5, rand() - 0.5, rand() - 0.5);
+        let v = |rand: &mut dyn FnMut() -> f32| Vec3A::new(rand() - 0.5, rand() - 0.5, rand() - 0.5);
         let (mut kept, mut culled) = (0, 0);
         for case in 0..4000 {
             let scale = [1.0f32, 1e-3, 1e3][case % 3];

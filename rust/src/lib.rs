@@ -42,6 +42,7 @@ pub mod film;
 pub mod geometry_cache;
 pub mod image_io;
 pub mod image_output;
+pub mod implicit;
 pub mod integrator;
 pub mod intersect;
 pub mod irradiance_cache;

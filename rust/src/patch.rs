@@ -176,4 +176,11 @@ pub trait LimitSurface: Send + Sync {
     fn face_varying(&self, _channel: usize, _patch: usize, _u: f32, _v: f32) -> Option<([f32; 2], [f32; 2], [f32; 2])> {
         None
     }
+
+    /// The surface's closed-form ray test when it has one (implicit gprims and points,
+    /// [`crate::implicit`]): the tracer then tests each patch exactly instead of tessellating
+    /// it. `None` — the default — for surfaces that are tessellated.
+    fn exact(&self) -> Option<&dyn crate::implicit::ExactSurface> {
+        None
+    }
 }

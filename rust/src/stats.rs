@@ -53,7 +53,9 @@ pub fn collect(
         })
         .collect();
     let subpatches = tracer.subpatch_count() as u64;
-    let full_verts = subpatches * 17 * 17;
+    // Patches intersected exactly (implicit gprims, points) are never tessellated.
+    let exact_patches = tracer.exact_patch_count() as u64;
+    let full_verts = (subpatches - exact_patches) * 17 * 17;
     json!({
         "render": {
             "wall_s": figures.wall_s,
@@ -74,6 +76,7 @@ pub fn collect(
         "scene": {
             "control_faces": control_faces,
             "subpatches": subpatches,
+            "exact_patches": exact_patches,
             "instances": instances,
             "full_tessellation_vertices": full_verts,
             "full_tessellation_bytes": full_verts * 12,

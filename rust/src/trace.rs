@@ -98,7 +98,7 @@ pub struct Hit {
     /// clockwise, as USD's rightHanded orientation).
     pub ng: Vec3A,
     /// The effective rate the hit was found at, in quads per side of the root subpatch: 1, 2, 4,
-    /// 8, 16, or 16·2^depth after splitting.
+    /// 8, 16, or 16·2^depth after splitting; 0 on a surface intersected exactly ([`crate::implicit`]).
     pub quads: u32,
     /// The root subpatch hit (index in its mesh's subpatches).
     pub subpatch: u32,
@@ -343,6 +343,12 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().map(|m| m.subpatches.len()).sum()
     }
 
+    /// Root subpatches of surfaces intersected exactly ([`crate::implicit`]), which are never
+    /// tessellated (included in [`Tracer::subpatch_count`]).
+    pub fn exact_patch_count(&self) -> usize {
+        self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.exact().is_some()).map(|(g, _)| g.subpatches.len()).sum()
+    }
+
     /// The scene being traced.
     pub fn scene(&self) -> &'s Scene {
         self.scene
@@ -472,6 +478,10 @@ impl<'s> Tracer<'s> {
             // A render-space ray far beyond the scene can overflow in a small object's space.
             return None;
         }
+        if let Some(exact) = mesh.surface.exact() {
+            let (h, si) = self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
+            return Some(self.hit(ii, ray, &inst, h, si));
+        }
         let wray = WatertightRay::new(o, d);
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
@@ -575,7 +585,15 @@ impl<'s> Tracer<'s> {
             }
         });
         let (h, si) = best?;
-        let sp = &geom.subpatches[si as usize];
+        Some(self.hit(ii, ray, &inst, h, si))
+    }
+
+    /// The render-space hit of `ray` from its hit `h` on root subpatch `si` of instance `ii`
+    /// (posed `inst` at the ray's time).
+    fn hit(&self, ii: usize, ray: &Ray, inst: &Pose, h: LocalHit, si: u32) -> Hit {
+        let instance = &self.instances[ii];
+        let mesh = &self.scene.meshes[instance.mesh];
+        let sp = &self.meshes[instance.mesh].subpatches[si as usize];
         let u = h.rect.u0 + (h.rect.u1 - h.rect.u0) * h.uv.0;
         let v = h.rect.v0 + (h.rect.v1 - h.rect.v0) * h.uv.1;
         let p = ray.at(h.t);
@@ -586,7 +604,7 @@ impl<'s> Tracer<'s> {
         // The hit point came from o + t·d after a transform: its error is bounded by a few ulps
         // of the larger of the origin's and the point's magnitude (pbrt §6.8, loosely).
         let p_error = Vec3A::splat(gamma(12)) * (p.abs() + ray.o.abs() + Vec3A::splat(h.t * ray.d.abs().max_element()));
-        Some(Hit {
+        Hit {
             t: h.t,
             instance: ii as u32,
             instance_id: instance.id,
@@ -601,7 +619,60 @@ impl<'s> Tracer<'s> {
             subpatch: si,
             chord_error: h.chord_error * inst.scale,
             time: ray.time,
-        })
+        }
+    }
+
+    /// The nearest hit on an exactly intersected surface ([`crate::implicit`]): the bottom-level
+    /// BVH's leaves are its patches, each tested in closed form (no tessellation, no rate:
+    /// `quads` is 0). The hit's chord error is its floating-point error bound, so rays leaving
+    /// the surface skip it only within rounding, by the same rule as tessellated surfaces.
+    #[allow(clippy::too_many_arguments)]
+    fn nearest_exact(
+        &self,
+        ii: usize,
+        exact: &dyn crate::implicit::ExactSurface,
+        o: Vec3A,
+        d: Vec3A,
+        ray: &Ray,
+        t_max: f32,
+        inst: &Pose,
+        counters: &mut TraceCounters,
+        any_hit: bool,
+        origin: Option<Origin>,
+    ) -> Option<(LocalHit, u32)> {
+        let instance = &self.instances[ii];
+        let geom = &self.meshes[instance.mesh];
+        let blas = geom.bvh.as_ref()?;
+        let sign = if self.scene.meshes[instance.mesh].left_handed { -1.0 } else { 1.0 };
+        let own = origin.filter(|org| org.instance == ii as u32);
+        let mut best: Option<(LocalHit, u32)> = None;
+        let mut t_best = t_max;
+        let mut rh = RayHit::none();
+        let mut done = false;
+        blas.ray_traverse(BvhRay::new(o, d, ray.t_min, t_max), &mut rh, |_r, id| {
+            if done {
+                return f32::INFINITY;
+            }
+            let si = blas.primitive_indices[id] as usize;
+            let patch = geom.subpatches[si].patch as usize;
+            counters.ray_subpatch_tests += 1;
+            let mut t_from = ray.t_min;
+            let found = loop {
+                let Some(h) = exact.intersect(patch, o, d, t_from, t_best) else { break None };
+                let window = own.map_or(0.0, |org| (org.chord_error + h.error * inst.scale) * org.inv_cos);
+                match own {
+                    Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), false) => t_from = h.t,
+                    _ => break Some(h),
+                }
+            };
+            let Some(h) = found else { return f32::INFINITY };
+            t_best = h.t;
+            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error, seam: false };
+            best = Some((local, si as u32));
+            done = any_hit;
+            h.t
+        });
+        best
     }
 
     /// The mesh's key in the cache.

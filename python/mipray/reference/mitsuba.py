@@ -44,6 +44,12 @@ What maps how (render space is USD world space in both renderers):
   normal map (raw, scale 2, bias −1) on a lambertian surface → ``normalmap``
   around ``diffuse``; other textured inputs are refused.
 
+- Implicit gprims map to Mitsuba's analytic shapes: ``Sphere`` → ``sphere``,
+  ``Cylinder`` (equal radii) → ``cylinder`` (open) and two ``disk`` caps,
+  ``Plane`` → ``rectangle``, ``Cube`` → ``cube``, ``Points`` → a ``sphere``
+  per point; each ``to_world`` the prim's transform times the shape's own
+  scale and axis. Cones, frustums and capsules (Mitsuba has none) are refused.
+
 Everything Mitsuba cannot represent the way mipray renders it raises
 :class:`~mipray.errors.PrimError` naming the prim, rather than rendering a
 different scene.
@@ -393,6 +399,61 @@ def _world_points(args: dict[str, Any]) -> NDArray[np.float64]:
     return out
 
 
+def _axis_matrix(axis: str) -> NDArray[np.float64]:
+    """Object from canonical (spine +z) coordinates: mipray's cyclic map (``implicit.rs``)."""
+    cols = {"Z": (0, 1, 2), "X": (1, 2, 0), "Y": (2, 0, 1)}[axis]
+    m = np.eye(4)
+    m[:3, :3] = 0.0
+    for canonical, obj in enumerate(cols):
+        m[obj, canonical] = 1.0
+    return m
+
+
+def _analytic_shapes(path: str, args: dict[str, Any]) -> list[dict[str, Any]]:
+    """Mitsuba's analytic shapes (without BSDF) for a ``gprim`` of ``set_mesh`` (module doc)."""
+    g = args["gprim"]
+    world = _column_matrix(args)
+
+    def shape(kind: str, local: NDArray[np.float64]) -> dict[str, Any]:
+        return {"type": kind, "to_world": _mitsuba().ScalarTransform4f((world @ local).tolist())}
+
+    kind = g["type"]
+    if kind == "Points":
+        points = np.asarray(args["points"], dtype=np.float64).reshape(-1, 3)
+        widths = np.asarray(g.get("widths", []), dtype=np.float64).reshape(-1)
+        radii = (
+            np.full(len(points), 0.5)
+            if widths.size == 0
+            else np.broadcast_to(widths / 2, len(points))
+        )
+        return [
+            shape("sphere", np.diag([r, r, r, 1.0]) + np.pad(p[:, None], ((0, 1), (3, 0))))
+            for p, r in zip(points, radii, strict=True)
+            if r > 0
+        ]
+    if kind == "Sphere":
+        r = g["radius"]
+        return [shape("sphere", np.diag([r, r, r, 1.0]))]
+    if kind == "Cube":
+        h = g["size"] / 2
+        return [shape("cube", np.diag([h, h, h, 1.0]))]
+    axis = _axis_matrix(g.get("axis", "Z"))
+    if kind == "Plane":
+        w, length = g["width"], g["length"]
+        a, b = (w, length) if g.get("axis", "Z") == "Z" else (length, w)
+        return [shape("rectangle", axis @ np.diag([a / 2, b / 2, 1.0, 1.0]))]
+    if kind == "Cylinder" and g["radius_bottom"] == g["radius_top"]:
+        r, hh = g["radius_bottom"], g["height"] / 2
+        body = axis @ np.array([[r, 0, 0, 0], [0, r, 0, 0], [0, 0, 2 * hh, -hh], [0, 0, 0, 1.0]])
+        top = axis @ np.array([[r, 0, 0, 0], [0, r, 0, 0], [0, 0, 1, hh], [0, 0, 0, 1.0]])
+        # The bottom cap faces −z: the disk turned over about x.
+        bottom = axis @ np.array([[r, 0, 0, 0], [0, -r, 0, 0], [0, 0, -1, -hh], [0, 0, 0, 1.0]])
+        return [shape("cylinder", body), shape("disk", top), shape("disk", bottom)]
+    raise PrimError(
+        path, f"Mitsuba has no {kind.lower()} of unequal radii (cone, frustum or capsule)"
+    )
+
+
 def _triangles(path: str, args: dict[str, Any], points: NDArray[np.float64]) -> NDArray[np.int64]:
     """Fan triangles of every planar face, as an (F', 7) array.
 
@@ -705,6 +766,14 @@ def scene_dict(
     for k, (path, args) in enumerate(sorted(cap.meshes.items())):
         if args.get("prototype"):
             raise PrimError(path, "instance prototypes are not exported to Mitsuba")
+        if args.get("gprim") is not None:
+            own = material_mapping(path, args.get("material"), args.get("albedo", (0.18,) * 3))
+            cap.materials[path] = own
+            if own.emission is not None or own.model in (TEXTURED_DIFFUSE, NORMAL_MAPPED):
+                raise PrimError(path, "an emissive or textured implicit prim is not exported")
+            for j, shape in enumerate(_analytic_shapes(path, args)):
+                scene[f"mesh_{k}_{j}"] = {**shape, "bsdf": own.bsdf}
+            continue
         points = _world_points(args)
         tris = _triangles(path, args, points)
         if len(tris) == 0:

@@ -520,6 +520,42 @@ def _plastic() -> Usd.Stage:
     return stage
 
 
+def _implicit_still_life(stage: Usd.Stage, ball: UsdShade.Material) -> None:
+    """An implicit Sphere of material ``ball`` and a red Cylinder on the ground, a camera.
+
+    The Cylinder is capped, along X and turned 30° about Y.
+    """
+    ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+    sphere = UsdGeom.Sphere.Define(stage, "/World/Ball")
+    sphere.CreateRadiusAttr(0.8)
+    sphere.AddTranslateOp().Set(Gf.Vec3d(0.9, 0.8, 0.3))
+    UsdShade.MaterialBindingAPI.Apply(sphere.GetPrim()).Bind(ball)
+    cylinder = UsdGeom.Cylinder.Define(stage, "/World/Log")
+    cylinder.CreateRadiusAttr(0.5)
+    cylinder.CreateHeightAttr(1.6)
+    cylinder.CreateAxisAttr("X")
+    cylinder.AddTranslateOp().Set(Gf.Vec3d(-1.0, 0.5, -0.2))
+    cylinder.AddRotateYOp().Set(30.0)
+    red = lambert(stage, "Red", (0.7, 0.15, 0.1))
+    UsdShade.MaterialBindingAPI.Apply(cylinder.GetPrim()).Bind(red)
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+
+
+def _implicit() -> Usd.Stage:
+    stage = _stage()
+    _implicit_still_life(stage, lambert(stage, "Blue", (0.15, 0.3, 0.7)))
+    _sun(stage, (3.0, 5.0, 2.0))
+    return stage
+
+
+def _implicit_glass() -> Usd.Stage:
+    stage = _stage()
+    _implicit_still_life(stage, _material(stage, "Glass", opacity=0.0, ior=1.5, roughness=0.0))
+    sky = UsdLux.DomeLight.Define(stage, "/World/Sky")
+    _set(sky, 1.0, (0.8, 0.9, 1.0))
+    return stage
+
+
 def _direct(samples: int) -> dict[str, Any]:
     """Mitsuba's direct-light integrator with ``samples`` light samples.
 
@@ -542,6 +578,22 @@ SCENES: tuple[Scene, ...] = (
         "lambertian box, sphere and ground under a distant light (angle 0): hard shadows",
         _distant,
         settings={},
+    ),
+    Scene(
+        "implicit",
+        "an implicit Sphere and a capped Cylinder (axis X, rotated), lambertian, on the ground "
+        "under a distant light: mipray's exact quadrics against Mitsuba's sphere, cylinder "
+        "and disk shapes",
+        _implicit,
+        settings={},
+    ),
+    Scene(
+        "implicit_glass",
+        "the implicit still life with a smooth glass Sphere (opacity 0, ior 1.5) under a dome, "
+        "path traced to 8 bounces: refraction into and out of an exact quadric",
+        _implicit_glass,
+        settings={"integrator": "path", "maxDepth": 8},
+        integrator=_path(8),
     ),
     Scene(
         "sphere_light",

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
+from .gprim import is_renderable_gprim
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .transform import matrix_to_numpy
@@ -294,7 +295,7 @@ class Instancing:
                 if included and self._nested_point_instancer(prim, root, dpath, walk):
                     members.append(dpath)
                 continue  # its children render only through it
-            if included and prim.IsA(UsdGeom.Mesh):
+            if included and is_renderable_gprim(prim):
                 if self._prototype_mesh(prim, root, dpath, walk):
                     members.append(dpath)
             elif included and prim.IsA(UsdGeom.Gprim):

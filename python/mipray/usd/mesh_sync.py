@@ -1,7 +1,9 @@
-"""Everything ``set_mesh`` needs for one ``UsdGeom.Mesh``, read in one place.
+"""Everything ``set_mesh`` needs for one ``UsdGeom.Mesh`` (or other gprim), read in one place.
 
 The topology and subdivision tags (:func:`mipray.usd.mesh.mesh_arguments`),
 then the per-face diffuse colours (:func:`mipray.usd.face_albedo.compute_surface_albedo`).
+Implicit gprims and points cross as their shape (:func:`mipray.usd.gprim.gprim_arguments`)
+with one colour.
 Both the scene delegate (meshes rendered in place) and the instancing code
 (prototype meshes) read meshes through :func:`read_mesh`.
 """
@@ -16,6 +18,8 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from .face_albedo import compute_surface_albedo
+from .gprim import gprim_arguments, point_colors
+from .material import compute_albedo
 from .mesh import mesh_arguments
 from .shading import material_might_vary, shading_arguments
 
@@ -47,12 +51,14 @@ def read_mesh(
             prim, or the GeomSubset at fault).
 
     """
-    mesh = UsdGeom.Mesh(prim)
     data_varies = any(
         a.ValueMightBeTimeVarying()
         for a in prim.GetAuthoredAttributes()
         if not a.GetName().startswith("xformOp")
     )
+    if not prim.IsA(UsdGeom.Mesh):
+        return _read_gprim(prim, time, transform, data_varies, prototype=prototype)
+    mesh = UsdGeom.Mesh(prim)
     args = mesh_arguments(mesh, time, transform, (0.18, 0.18, 0.18))
     if args is None:
         return MeshRead(None, (), data_varies)
@@ -65,3 +71,26 @@ def read_mesh(
         args["prototype"] = True
     varies = data_varies or surface.might_vary or material_might_vary(prim)
     return MeshRead(args, surface.material_paths, varies)
+
+
+def _read_gprim(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    transform: NDArray[np.float64],
+    data_varies: bool,
+    *,
+    prototype: bool,
+) -> MeshRead:
+    """:func:`read_mesh` for an implicit gprim or a Points prim: one colour, no subsets."""
+    args = gprim_arguments(prim, time, transform)
+    if args is None:
+        return MeshRead(None, (), data_varies)
+    own = compute_albedo(prim, time)
+    args["albedo"] = own.rgb
+    if prim.IsA(UsdGeom.Points) and own.source != "material":
+        args.update(point_colors(prim, time, len(args["points"])))
+    args.update(shading_arguments(prim, time, surface_st=True))
+    if prototype:
+        args["prototype"] = True
+    paths = (own.material_path,) if own.material_path else ()
+    return MeshRead(args, paths, data_varies or own.might_vary or material_might_vary(prim))

@@ -6,7 +6,9 @@ here, prims cross into the render delegate as numpy arrays through ``set_*``
 calls, and later edits re-sync only what they touched.
 
 * Rprims: ``UsdGeom.Mesh`` (GeomSubset materials and display primvars per
-  face, :mod:`mipray.usd.face_albedo`). Sprims: ``UsdGeom.Camera``,
+  face, :mod:`mipray.usd.face_albedo`), the implicit gprims (``Sphere``,
+  ``Cube``, ``Cylinder``, ``Cone``, ``Capsule``, ``Plane`` and the ``_1``
+  forms) and ``Points``, intersected exactly (:mod:`mipray.usd.gprim`). Sprims: ``UsdGeom.Camera``,
   ``UsdLux.DistantLight``. Other gprims and lights are skipped with one
   warning per type.
 * Instancing shares prototypes (:mod:`mipray.usd.instancing`): a
@@ -43,6 +45,7 @@ from .camera import (
     find_camera_prim,
     framing_camera_arguments,
 )
+from .gprim import is_renderable_gprim
 from .instancing import InstancerState, Instancing
 from .light import (
     AREA_LIGHT_TYPES,
@@ -108,7 +111,7 @@ def _kind(prim: Usd.Prim) -> str:
     """The :class:`_Record` kind ``prim`` is synced as."""
     if prim.IsInstance():
         return "instance"
-    if prim.IsA(UsdGeom.Mesh):
+    if is_renderable_gprim(prim):
         return "mesh"
     if prim.IsA(UsdGeom.PointInstancer):
         return "instancer"
@@ -571,7 +574,7 @@ class UsdSceneDelegate:
     def _is_supported(self, prim: Usd.Prim, unsupported: Counter[str]) -> bool:
         """Whether ``prim`` is synced; counts renderable prims of unsupported types."""
         if (
-            prim.IsA(UsdGeom.Mesh)
+            is_renderable_gprim(prim)
             or prim.IsA(UsdGeom.Camera)
             or prim.IsA(UsdLux.DistantLight)
             or any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES)
@@ -615,7 +618,7 @@ class UsdSceneDelegate:
             if prim.IsInstance():
                 self._instancing.add_instance(path, prim.GetPrototype(), transform)
                 record = _Record("instance", order, in_delegate=False, xform_varies=xform_varies)
-            elif prim.IsA(UsdGeom.Mesh):
+            elif is_renderable_gprim(prim):
                 read = read_mesh(prim, time, transform)
                 record = _Record(
                     "mesh",

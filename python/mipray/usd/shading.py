@@ -421,8 +421,14 @@ def _describe_st(varname: str, transform: Transform2d | None) -> str:
     return f"primvars:{varname}" + ("" if transform is None else f" through {transform}")
 
 
-def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
-    """The ``set_mesh`` keyword arguments for ``prim``'s shading (see the module doc)."""
+def shading_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode, *, surface_st: bool = False
+) -> dict[str, Any]:
+    """The ``set_mesh`` keyword arguments for ``prim``'s shading (see the module doc).
+
+    ``surface_st``: the prim's textures read its surface's own (u, v) (implicit
+    gprims and points), not an ``st`` primvar.
+    """
     args: dict[str, Any] = {}
     path = str(prim.GetPath())
     proc = _procedural(prim, time)
@@ -474,6 +480,13 @@ def shading_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
                     f"{first} reads {_describe_st(st_name, st_transform)}; a mesh's textures "
                     f"share one st: using {first}'s"
                 )
+        if surface_st:
+            if st_transform is not None:
+                _warn_once(
+                    f"{path}: the UsdTransform2d on {first}'s st is not applied to an implicit "
+                    "prim's (u, v)"
+                )
+            return args
         args.update(_st_arguments(prim, st_name, time))
         if st_transform is not None and "st_values" in args:
             # One st channel serves the mesh's textures: the UsdTransform2d applies to its values

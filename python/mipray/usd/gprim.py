@@ -1,0 +1,172 @@
+"""Read implicit gprims and ``UsdGeom.Points`` into ``set_mesh`` arguments.
+
+``Sphere``, ``Cube``, ``Cylinder``, ``Cylinder_1``, ``Cone``, ``Capsule``,
+``Capsule_1`` and ``Plane`` cross as their schema attributes (the ``gprim``
+argument), ``Points`` as its ``points`` and ``widths``; the core intersects
+them exactly (``rust/src/implicit.rs``, which also documents their ``st``).
+``extent`` plays no part in the shape. A size that leaves nothing to render
+(a zero radius, say) is refused with one line naming the prim and attribute.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd, UsdGeom
+
+from ..errors import PrimError
+
+__all__ = ["GPRIM_TYPES", "gprim_arguments", "is_renderable_gprim", "point_colors"]
+
+#: The gprims besides ``Mesh`` that render, by schema class.
+GPRIM_TYPES: tuple[type, ...] = (
+    UsdGeom.Sphere,
+    UsdGeom.Cube,
+    UsdGeom.Cylinder,
+    UsdGeom.Cone,
+    UsdGeom.Capsule,
+    UsdGeom.Plane,
+    UsdGeom.Points,
+    *(t for t in (getattr(UsdGeom, "Cylinder_1", None), getattr(UsdGeom, "Capsule_1", None)) if t),
+)
+
+
+def is_renderable_gprim(prim: Usd.Prim) -> bool:
+    """Whether ``prim`` is a mesh or another gprim the delegate renders."""
+    return prim.IsA(UsdGeom.Mesh) or any(prim.IsA(t) for t in GPRIM_TYPES)
+
+
+def _size(prim: Usd.Prim, name: str, time: Usd.TimeCode, *, zero_ok: bool = False) -> float:
+    """A size attribute's value (its schema fallback when unauthored), checked."""
+    value = prim.GetAttribute(name).Get(time)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise PrimError(str(prim.GetPath()), f"{name} = {value!r} is not a number") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not zero_ok):
+        need = "a non-negative" if zero_ok else "a positive"
+        raise PrimError(str(prim.GetPath()), f"{name} = {v:g} must be {need} number")
+    return v
+
+
+def _axis(prim: Usd.Prim, time: Usd.TimeCode) -> str:
+    axis = str(prim.GetAttribute("axis").Get(time) or "Z")
+    if axis not in ("X", "Y", "Z"):
+        raise PrimError(str(prim.GetPath()), f"axis '{axis}' is not X, Y or Z")
+    return axis
+
+
+def _radii(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float]:
+    """``(radius_bottom, radius_top)`` of a ``_1`` form; one of them may be 0, not both."""
+    bottom = _size(prim, "radiusBottom", time, zero_ok=True)
+    top = _size(prim, "radiusTop", time, zero_ok=True)
+    if bottom == 0 and top == 0:
+        raise PrimError(str(prim.GetPath()), "radiusBottom = radiusTop = 0: nothing to render")
+    return bottom, top
+
+
+def _shape(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
+    """The ``gprim`` argument of an implicit prim."""
+    type_name = prim.GetTypeName()
+    if prim.IsA(UsdGeom.Sphere):
+        return {"type": "Sphere", "radius": _size(prim, "radius", time)}
+    if prim.IsA(UsdGeom.Cube):
+        return {"type": "Cube", "size": _size(prim, "size", time)}
+    if prim.IsA(UsdGeom.Plane):
+        return {
+            "type": "Plane",
+            "width": _size(prim, "width", time),
+            "length": _size(prim, "length", time),
+            "axis": _axis(prim, time),
+        }
+    if prim.IsA(UsdGeom.Cone):
+        bottom, top = _size(prim, "radius", time), 0.0
+    elif type_name in ("Cylinder_1", "Capsule_1"):
+        bottom, top = _radii(prim, time)
+    else:  # Cylinder, Capsule
+        bottom = top = _size(prim, "radius", time)
+    capsule = type_name.startswith("Capsule")
+    return {
+        "type": "Capsule" if capsule else "Cylinder",
+        "radius_bottom": bottom,
+        "radius_top": top,
+        # A capsule of height 0 is still a sphere: only cylinders and cones need height.
+        "height": _size(prim, "height", time, zero_ok=capsule),
+        "axis": _axis(prim, time),
+    }
+
+
+def _points(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
+    """A Points prim's positions and its ``gprim`` argument (widths checked by the delegate)."""
+    points = UsdGeom.Points(prim)
+    positions = np.asarray(points.GetPointsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
+    widths = np.asarray(points.GetWidthsAttr().Get(time) or [], dtype=np.float32).reshape(-1)
+    return positions, {"type": "Points", "widths": widths}
+
+
+def gprim_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
+) -> dict[str, Any] | None:
+    """``set_mesh`` keyword arguments (without path and albedo) of a non-mesh gprim.
+
+    Returns None for a Points prim without points (valid USD that renders nothing).
+
+    Raises:
+        PrimError: a size that is not a positive number (the message names the
+            attribute), or an ``axis`` that is not X, Y or Z.
+
+    """
+    empty_i = np.zeros(0, dtype=np.int32)
+    if prim.IsA(UsdGeom.Points):
+        positions, gprim = _points(prim, time)
+        if len(positions) == 0:
+            return None
+    else:
+        positions, gprim = np.zeros((0, 3), dtype=np.float32), _shape(prim, time)
+    gprim_schema = UsdGeom.Gprim(prim)
+    return {
+        "points": positions,
+        "face_vertex_counts": empty_i,
+        "face_vertex_indices": empty_i,
+        "transform": transform,
+        "scheme": "none",
+        "left_handed": (gprim_schema.GetOrientationAttr().Get(time) or "rightHanded")
+        == "leftHanded",
+        "double_sided": bool(gprim_schema.GetDoubleSidedAttr().Get(time) or False),
+        "gprim": gprim,
+    }
+
+
+def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str, Any]:
+    """Per-point ``displayColor`` of a Points prim as ``set_mesh``'s face table.
+
+    Each point is a "face" of its own; ``{}`` when the prim has one colour
+    (constant, or a single value).
+
+    Raises:
+        PrimError: a per-point ``displayColor`` whose length is not the point count.
+
+    """
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+    if not primvar or not primvar.HasValue():
+        return {}
+    interpolation = primvar.GetInterpolation()
+    if interpolation in (UsdGeom.Tokens.constant, UsdGeom.Tokens.uniform):
+        return {}
+    values = np.asarray(primvar.ComputeFlattened(time) or [], dtype=np.float64).reshape(-1, 3)
+    if len(values) <= 1:
+        return {}
+    if len(values) != n_points:
+        raise PrimError(
+            str(prim.GetPath()),
+            f"primvars:displayColor ({interpolation}) has {len(values)} values "
+            f"for {n_points} points",
+        )
+    unique, inverse = np.unique(np.clip(values, 0.0, 1.0), axis=0, return_inverse=True)
+    return {
+        "face_albedos": np.ascontiguousarray(unique, dtype=np.float32),
+        "face_albedo_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
+    }
