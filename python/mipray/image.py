@@ -3,8 +3,9 @@
 The pixels stay linear in floating-point files (EXR, TIFF). 8-bit files (PNG,
 JPEG, ...) hold the color AOV only, encoded with the sRGB transfer curve unless
 color correction is disabled, as usdrecord's ``--colorCorrectionMode sRGB``
-does. The file itself is written by ``mipray._mipray.write_image``
-(OpenImageIO).
+does; types with an alpha channel (PNG, TGA, WebP) also hold the alpha AOV
+when it was rendered (RGBA, as usdrecord writes; the colour is premultiplied).
+The file itself is written by ``mipray._mipray.write_image`` (OpenImageIO).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from .errors import OutputError
 __all__ = [
     "COLOR_CORRECTION_MODES",
     "EIGHT_BIT_EXTENSIONS",
+    "eight_bit_aovs",
     "is_eight_bit",
     "output_plan",
     "srgb_encode",
@@ -35,12 +37,20 @@ _log = logging.getLogger(__name__)
 COLOR_CORRECTION_MODES = ("sRGB", "disabled")
 #: File extensions whose images hold 8 bits per channel.
 EIGHT_BIT_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tga", ".ppm", ".webp"})
+#: 8-bit types with an alpha channel: they hold the color AOV as RGB and the alpha AOV as A.
+_ALPHA_EXTENSIONS = frozenset({".png", ".tga", ".webp"})
 _FLOAT_EXTENSIONS = frozenset({".exr", ".tif", ".tiff", ".hdr", ".pfm"})
 
 
 def is_eight_bit(path: str) -> bool:
     """Whether ``path``'s extension names an 8-bit image format."""
     return os.path.splitext(path)[1].lower() in EIGHT_BIT_EXTENSIONS
+
+
+def eight_bit_aovs(path: str) -> list[str]:
+    """The AOVs an 8-bit file at ``path`` holds (color, and alpha where the type has it)."""
+    ext = os.path.splitext(path)[1].lower()
+    return ["color", "alpha"] if ext in _ALPHA_EXTENSIONS else ["color"]
 
 
 def srgb_encode(linear: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -78,14 +88,16 @@ def output_plan(
     if ext in EIGHT_BIT_EXTENSIONS:
         if "color" not in aov_names:
             raise OutputError(f"{path}: an 8-bit image needs the color AOV", path=path)
-        others = [a for a in aov_names if a != "color"]
+        held = [a for a in eight_bit_aovs(path) if a in aov_names]
+        others = [a for a in aov_names if a not in held]
         if others:
             _log.warning(
-                "mipray: %s holds only the color AOV; write an EXR to keep %s",
+                "mipray: %s holds only the %s AOV; write an EXR to keep %s",
                 path,
+                " and ".join(held),
                 ", ".join(others),
             )
-        return ["color"], {"color": "uint8"}, color_correction == "sRGB"
+        return held, dict.fromkeys(held, "uint8"), color_correction == "sRGB"
     order = list(aov_names)
     if ext == ".exr":
         return order, {a: exr_format(a) for a in order}, False
