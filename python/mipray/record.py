@@ -3,11 +3,13 @@
     mipray-record scene.usda out.exr
     mipray-record --frames 1:24 --imageWidth 640 --aovs color,depth shot.usda out.####.exr
 
-Where usdrecord's options apply they are spelled and behave the same
+Every option of OpenUSD's usdrecord is accepted, spelled and behaving the same
 (positional ``usdFilePath outputImagePath``, ``--camera``, ``--frames`` with
-``#`` placeholders, ``--imageWidth``, ``--complexity``, ``--purposes``,
-``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``,
-``--renderSettingsPrimPath``, ...); renderer options are mipray's own. A
+``#`` placeholders, ``--imageWidth``, ``--complexity`` (a refinement level),
+``--purposes``, ``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``,
+``--renderer`` (mipray only), ``--enableDomeLightVisibility``,
+``--renderPassPrimPath``, ``--renderSettingsPrimPath``, ...), so its command
+lines run unchanged; renderer options are mipray's own. A
 UsdRender.Settings prim (the one named, else the stage's
 ``renderSettingsPrimPath``) supplies the resolution, camera, purposes and AOVs
 that the command line does not give explicitly. With ``--progressive`` the
@@ -229,8 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PIXELS",
         help=(
             "image width; the height follows the render settings' aspect ratio, else "
-            f"the camera's aperture's, rounded (default: {DEFAULT_WIDTH}, or the render "
-            "settings' resolution)"
+            "the camera's aperture's, truncated as usdrecord does (default: "
+            f"{DEFAULT_WIDTH}, or the render settings' resolution)"
         ),
     )
     usd.add_argument(
