@@ -64,13 +64,20 @@ def _round(points: list[tuple[float, float, float]]) -> list[Gf.Vec3f]:
     return [Gf.Vec3f(*(round(c, 6) + 0.0 for c in p)) for p in points]
 
 
-def _material(stage: Usd.Stage, name: str, rgb: tuple[float, float, float]) -> UsdShade.Material:
+def _material(
+    stage: Usd.Stage, name: str, rgb: tuple[float, float, float], roughness: float | None = 0.6
+) -> UsdShade.Material:
+    """A UsdPreviewSurface material; ``roughness`` None leaves it unauthored.
+
+    A GeomSubset's material renders its diffuseColor only: mipray lists any other input.
+    """
     UsdGeom.Scope.Define(stage, "/World/Looks")
     material = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
     shader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/PreviewSurface")
     shader.CreateIdAttr("UsdPreviewSurface")
     shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*rgb))
-    shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.6)
+    if roughness is not None:
+        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(roughness)
     material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
     return material
 
@@ -371,8 +378,8 @@ def render_settings(path: Path) -> None:
     )
     grey = _material(stage, "Grey", (0.5, 0.5, 0.5))
     blue = _material(stage, "Blue", (0.1, 0.25, 0.7))
-    red = _material(stage, "Red", (0.75, 0.1, 0.06))
-    gold = _material(stage, "Gold", (0.85, 0.62, 0.18))
+    red = _material(stage, "Red", (0.75, 0.1, 0.06), roughness=None)  # on GeomSubsets
+    gold = _material(stage, "Gold", (0.85, 0.62, 0.18), roughness=None)
     UsdGeom.Scope.Define(stage, "/World/Geo")
     _mesh(
         stage,

@@ -243,7 +243,7 @@ class FakeRenderDelegate:
         if camera not in self.prims or self.prims[camera].method != "set_camera":
             raise ValueError(f"unknown camera {camera}")
         settings = settings or {}
-        channels = {"color": 3, "depth": 1, "normal": 3}
+        channels = {"color": 3, "alpha": 1, "depth": 1, "normal": 3}
         out: dict[str, NDArray[np.float32]] = {}
         for aov in aovs:
             if aov not in channels:

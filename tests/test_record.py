@@ -46,7 +46,8 @@ def run(argv: list[str], capsys) -> tuple[int, str, str]:
 )
 def test_complexity_maps_to_tess_factor(level: str, factor: float) -> None:
     args = record.build_parser().parse_args(["in.usda", "out.exr", "--complexity", level])
-    assert record.render_settings(args) == {"tessFactor": factor}
+    # mipray-record hides domes from the camera unless asked, as usdrecord.
+    assert record.render_settings(args) == {"tessFactor": factor, "domeLightCameraVisibility": 0}
 
 
 def test_tess_factor_overrides_complexity_and_flags_become_settings() -> None:
@@ -77,6 +78,7 @@ def test_tess_factor_overrides_complexity_and_flags_become_settings() -> None:
         "threads": 2,
         "geometryCacheMb": 30.0,
         "cacheMode": "single",
+        "domeLightCameraVisibility": 0,
     }
 
 

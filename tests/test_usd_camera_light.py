@@ -116,9 +116,10 @@ def test_framing_camera_for_z_up_stage_looks_along_plus_y(fake) -> None:
 
 
 def test_image_height_follows_aperture_aspect() -> None:
-    assert (
-        image_height(960, {"horizontal_aperture": 20.955, "vertical_aperture": 15.2908}) == 701
-    )  # 700.51
+    # 700.51, truncated as usdrecord's frame recorder does (its SmallObjectTest baseline is
+    # 960x700).
+    assert image_height(960, {"horizontal_aperture": 20.955, "vertical_aperture": 15.2908}) == 700
+    assert image_height(960, {"horizontal_aperture": 36.0, "vertical_aperture": 24.0}) == 640
     assert image_height(320, {"horizontal_aperture": 36.0, "vertical_aperture": 24.0}) == 213
     assert image_height(1, {"horizontal_aperture": 100.0, "vertical_aperture": 1.0}) == 1
 

@@ -429,13 +429,16 @@ def output_plan(
 
     Returns:
         ``(order, formats, encode_srgb)``: the AOVs the file holds in channel
-        order (8-bit types: ``color`` only), each one's pixel type, and
-        whether the color is sRGB-encoded.
+        order (8-bit types: ``color``, and ``alpha`` where the type has it),
+        each one's pixel type, and whether the color is sRGB-encoded.
 
     Raises:
         ValueError: no extension, an 8-bit type without the color AOV, or an
             unknown color correction mode; the message names the path.
     """
+
+def eight_bit_aovs(path: str) -> list[str]:
+    """The AOVs an 8-bit file at ``path`` holds: color, and alpha where the type has alpha."""
 
 def srgb_encode(linear: NDArray[np.float32]) -> NDArray[np.float32]:
     """The sRGB transfer curve of linear values clamped to [0, 1] (NaN as 0), as written."""

@@ -1,7 +1,9 @@
 """Writing AOVs to image files: Python's names for the core's one image writer.
 
 Format choice (each AOV's EXR pixel type from the AOV table, 32-bit float in
-other float types, the color AOV only in 8-bit types), the sRGB transfer curve
+other float types, the color AOV only in 8-bit types, and the alpha AOV too in
+those with an alpha channel: PNG, TGA and WebP are RGBA as usdrecord writes
+them), the sRGB transfer curve
 for 8-bit files (unless color correction is disabled, as usdrecord's
 ``--colorCorrectionMode sRGB``), values a pixel type cannot hold clamped, the
 atomic replace and the ``Software`` attribute all live in Rust
@@ -24,6 +26,7 @@ __all__ = [
     "COLOR_CORRECTION_MODES",
     "EIGHT_BIT_EXTENSIONS",
     "check_output",
+    "eight_bit_aovs",
     "is_eight_bit",
     "output_plan",
     "srgb_encode",
@@ -39,6 +42,13 @@ EIGHT_BIT_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tga
 def is_eight_bit(path: str) -> bool:
     """Whether ``path``'s extension names an 8-bit image format."""
     return os.path.splitext(path)[1].lower() in EIGHT_BIT_EXTENSIONS
+
+
+def eight_bit_aovs(path: str) -> list[str]:
+    """The AOVs an 8-bit file at ``path`` holds: color, and alpha where the type has alpha."""
+    from . import _mipray
+
+    return _mipray.eight_bit_aovs(path)
 
 
 def srgb_encode(linear: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -3,11 +3,13 @@
     mipray-record scene.usda out.exr
     mipray-record --frames 1:24 --imageWidth 640 --aovs color,depth shot.usda out.####.exr
 
-Where usdrecord's options apply they are spelled and behave the same
+Every option of OpenUSD's usdrecord is accepted, spelled and behaving the same
 (positional ``usdFilePath outputImagePath``, ``--camera``, ``--frames`` with
-``#`` placeholders, ``--imageWidth``, ``--complexity``, ``--purposes``,
-``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``,
-``--renderSettingsPrimPath``, ...); renderer options are mipray's own. A
+``#`` placeholders, ``--imageWidth``, ``--complexity`` (a refinement level),
+``--purposes``, ``--colorCorrectionMode``, ``--mask``, ``--sessionLayer``,
+``--renderer`` (mipray only), ``--enableDomeLightVisibility``,
+``--renderPassPrimPath``, ``--renderSettingsPrimPath``, ...), so its command
+lines run unchanged; renderer options are mipray's own. A
 UsdRender.Settings prim (the one named, else the stage's
 ``renderSettingsPrimPath``) supplies the resolution, camera, purposes and AOVs
 that the command line does not give explicitly. With ``--progressive`` the
@@ -34,7 +36,7 @@ from typing import Any, NoReturn, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Usd
+from pxr import Sdf, Usd, UsdLux, UsdRender
 
 from .errors import MiprayError, RenderSettingsError
 from .frames import (
@@ -44,20 +46,38 @@ from .frames import (
     frames_precision,
     parse_frame_spec,
 )
-from .image import COLOR_CORRECTION_MODES, check_output, is_eight_bit
+from .image import COLOR_CORRECTION_MODES, check_output, eight_bit_aovs, is_eight_bit
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
 from .settings import TABLE, parse
 from .stats import format_stats_table
 from .usd.render_settings import read_render_settings
 from .usd.scene_delegate import PURPOSES
+from .usd.unsupported import Unsupported, audit_render_settings, warn_unsupported
 
-__all__ = ["COMPLEXITY_TESS_FACTOR", "build_parser", "main", "pass_samples", "render_settings"]
+__all__ = [
+    "COMPLEXITY_REFINEMENT_LEVEL",
+    "COMPLEXITY_TESS_FACTOR",
+    "RENDERER_NAMES",
+    "build_parser",
+    "main",
+    "pass_samples",
+    "render_settings",
+]
 
 PROG = "mipray-record"
 
-#: usdrecord's ``--complexity`` levels as tess factors (a subpatch edge this
-#: many ray beam widths long; smaller is finer).
-COMPLEXITY_TESS_FACTOR = {"low": 4.0, "medium": 2.0, "high": 1.0, "veryhigh": 0.5}
+#: usdrecord's ``--complexity`` levels are refinement levels (Storm refines a subdivision
+#: surface 0, 1, 2 or 3 times): each level halves the edges of the surface drawn. mipray
+#: always traces the limit surface and chooses a rate per ray, so a level halves the tess
+#: factor instead (a subpatch edge this many ray beam widths long; smaller is finer):
+#: ``tessFactor = 4 / 2**level``. ``high`` (level 2) is the paper's rate, 1.
+COMPLEXITY_REFINEMENT_LEVEL = {"low": 0, "medium": 1, "high": 2, "veryhigh": 3}
+COMPLEXITY_TESS_FACTOR = {
+    name: 4.0 / 2.0**level for name, level in COMPLEXITY_REFINEMENT_LEVEL.items()
+}
+#: What ``-r/--renderer`` accepts: mipray's one renderer (usdrecord takes a Hydra renderer
+#: plugin's display name; mipray's plugin id is the last).
+RENDERER_NAMES = ("mipray", "Mipray", "HdMiprayRendererPlugin")
 #: Flags that set a renderer setting: flag → setting key. Each flag's type, range,
 #: choices and help come from the settings table (:mod:`mipray.settings`), so a flag
 #: and ``--setting key=value`` accept and refuse the same values.
@@ -72,6 +92,8 @@ SETTING_FLAGS = {
 }
 
 _log = logging.getLogger("mipray")
+#: usdrecord's OpenColorIO mode: mipray has no OpenColorIO; its default display is sRGB.
+_OCIO = "openColorIO"
 
 
 class _UsageError(Exception):
@@ -121,6 +143,19 @@ def _add_setting_flag(group: Any, flag: str, metavar: str, extra: str = "") -> N
 
 
 _positive_int.__name__ = "integer >= 1"
+
+
+def _renderer(text: str) -> str:
+    """``-r/--renderer``: mipray's name; any other renderer is a usage error, not a guess."""
+    if text not in RENDERER_NAMES:
+        raise argparse.ArgumentTypeError(
+            f"'{text}' is not a renderer mipray-record has; it renders with mipray only "
+            f"(-r {RENDERER_NAMES[0]}, or leave -r out)"
+        )
+    return text
+
+
+_renderer.__name__ = "renderer"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -190,8 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PIXELS",
         help=(
             "image width; the height follows the render settings' aspect ratio, else "
-            f"the camera's aperture's, rounded (default: {DEFAULT_WIDTH}, or the render "
-            "settings' resolution)"
+            "the camera's aperture's, truncated as usdrecord does (default: "
+            f"{DEFAULT_WIDTH}, or the render settings' resolution)"
         ),
     )
     usd.add_argument(
@@ -200,8 +235,25 @@ def build_parser() -> argparse.ArgumentParser:
         choices=tuple(COMPLEXITY_TESS_FACTOR),
         default="high",
         help=(
-            "refinement level, as a tess factor: low 4, medium 2, high 1, veryhigh 0.5 "
-            "(default: %(default)s; --tess-factor overrides it)"
+            "refinement level, as usdrecord's (low 0, medium 1, high 2, veryhigh 3); each "
+            "level halves the tess factor: low 4, medium 2, high 1, veryhigh 0.5 (default: "
+            "%(default)s, the paper's rate; usdrecord's is low; --tess-factor overrides it)"
+        ),
+    )
+    usd.add_argument(
+        "--renderer",
+        "-r",
+        type=_renderer,
+        metavar="RENDERER",
+        help=f"the Hydra renderer: only {RENDERER_NAMES[0]} (for usdrecord's command lines)",
+    )
+    usd.add_argument(
+        "--enableDomeLightVisibility",
+        action="store_true",
+        help=(
+            "show dome lights as the background; without it a dome lights the scene and "
+            "shows in reflections, and the background is transparent, as usdrecord's "
+            "(the domeLightCameraVisibility setting)"
         ),
     )
     usd.add_argument(
@@ -216,11 +268,21 @@ def build_parser() -> argparse.ArgumentParser:
     usd.add_argument(
         "--colorCorrectionMode",
         "-color",
-        choices=COLOR_CORRECTION_MODES,
+        choices=(*COLOR_CORRECTION_MODES, _OCIO),
         default="sRGB",
         help=(
             "sRGB encodes 8-bit outputs (PNG, JPEG) with the sRGB curve; EXR and "
-            "TIFF stay linear either way (default: %(default)s)"
+            f"TIFF stay linear either way; {_OCIO} is taken as sRGB, with a warning "
+            "(default: %(default)s)"
+        ),
+    )
+    usd.add_argument(
+        "--renderPassPrimPath",
+        "-rp",
+        metavar="PRIMPATH",
+        help=(
+            "UsdRender.Pass prim whose renderSource names the render settings to use, as "
+            "--renderSettingsPrimPath (not both)"
         ),
     )
     usd.add_argument(
@@ -355,6 +417,8 @@ def render_settings(args: argparse.Namespace) -> dict[str, object]:
         ("cacheMode", args.cache_mode),
         ("integrator", args.integrator),
         ("progressive", 1 if args.progressive else None),
+        # usdrecord hides domes from the camera unless asked; so does mipray-record.
+        ("domeLightCameraVisibility", int(args.enableDomeLightVisibility)),
     ):
         if value is not None:
             settings[key] = value
@@ -391,6 +455,8 @@ def _validate(args: argparse.Namespace) -> list[Any]:
     Returns a list of time-code values, or ``[None]`` when the stage's start
     time code is to be used (known only once the stage is open).
     """
+    if args.renderPassPrimPath and args.renderSettingsPrimPath:
+        raise _UsageError("give --renderSettingsPrimPath or --renderPassPrimPath, not both")
     args.aov_list = None if args.aovs is None else list(dict.fromkeys(_split(args.aovs)))
     if args.aov_list is not None and not args.aov_list:
         raise _UsageError("--aovs needs at least one AOV, e.g. color")
@@ -538,6 +604,36 @@ class _Plan:
     aovs: list[str]
     purposes: list[str]
     settings_path: str | None
+    #: What the render settings author that mipray does not render (for the stats).
+    unsupported: list[Unsupported]
+
+
+def _render_pass_settings(stage: Usd.Stage, pass_path: str | None) -> str | None:
+    """The RenderSettings path a UsdRender.Pass's ``renderSource`` names.
+
+    As usdrecord: the first target, with a warning when there are several.
+
+    Raises:
+        RenderSettingsError: no such pass, or it names no render source.
+
+    """
+    if not pass_path:
+        return None
+    prim = stage.GetPrimAtPath(pass_path) if Sdf.Path.IsValidPathString(pass_path) else None
+    if not prim or not prim.IsA(UsdRender.Pass):
+        what = "no prim" if not prim else f"a {prim.GetTypeName() or 'typeless'} prim"
+        raise RenderSettingsError(f"{pass_path}: {what}, not a RenderPass prim")
+    targets = UsdRender.Pass(prim).GetRenderSourceRel().GetForwardedTargets()
+    if not targets:
+        raise RenderSettingsError(f"{pass_path}: the render pass has no renderSource")
+    if len(targets) > 1:
+        _log.warning(
+            "mipray: %s: the render pass has %d render sources; using <%s>",
+            pass_path,
+            len(targets),
+            targets[0],
+        )
+    return str(targets[0])
 
 
 def _plan(args: argparse.Namespace, stage: Usd.Stage, time: Usd.TimeCode) -> _Plan:
@@ -548,10 +644,11 @@ def _plan(args: argparse.Namespace, stage: Usd.Stage, time: Usd.TimeCode) -> _Pl
             resulting AOVs cannot go to the output file.
 
     """
+    named = args.renderSettingsPrimPath or _render_pass_settings(stage, args.renderPassPrimPath)
     try:
-        spec = read_render_settings(stage, args.renderSettingsPrimPath, time)
+        spec = read_render_settings(stage, named, time)
     except RenderSettingsError as exc:
-        if args.renderSettingsPrimPath:
+        if named:
             raise
         # Settings the user did not ask for are not worth failing over.
         _log.warning("mipray: ignoring the stage's render settings: %s", exc)
@@ -564,6 +661,10 @@ def _plan(args: argparse.Namespace, stage: Usd.Stage, time: Usd.TimeCode) -> _Pl
     if args.imageWidth is not None:
         width = args.imageWidth
     aovs = args.aov_list or (spec.aovs if spec is not None and spec.aovs else ["color"])
+    if args.aov_list is None and is_eight_bit(args.outputImagePath) and "color" in aovs:
+        # An 8-bit image with an alpha channel holds the alpha AOV too (RGBA, as usdrecord's);
+        # explicit --aovs say what it holds.
+        aovs = list(dict.fromkeys([*aovs, *eight_bit_aovs(args.outputImagePath)]))
     if args.purpose_list is not None:
         purposes = args.purpose_list
     elif spec is not None:
@@ -588,10 +689,15 @@ def _plan(args: argparse.Namespace, stage: Usd.Stage, time: Usd.TimeCode) -> _Pl
             camera or "(default)",
             ", ".join(aovs),
         )
-    return _Plan(camera, width, height, aovs, purposes, spec.path if spec else None)
+    unsupported = audit_render_settings(stage, spec.path, time) if spec is not None else []
+    warn_unsupported(unsupported, set())
+    return _Plan(camera, width, height, aovs, purposes, spec.path if spec else None, unsupported)
 
 
 def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) -> int:
+    if args.colorCorrectionMode == _OCIO:
+        _log.warning("mipray: --colorCorrectionMode %s is not supported; encoding sRGB", _OCIO)
+        args.colorCorrectionMode = "sRGB"
     stage = open_stage(
         args.usdFilePath,
         population_mask=_split(args.mask) if args.mask else None,
@@ -648,6 +754,9 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
                     on_update=_pass_counter(progress) if progressive else None,
                     pass_output=pass_output,
                 )
+                _add_unsupported(result.stats, plan.unsupported)
+                if args.enableDomeLightVisibility and is_eight_bit(path):
+                    _opaque_over_dome(result.aovs, session.scene)
                 result.write(
                     path,
                     plan.aovs,
@@ -670,6 +779,24 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
         )
         return 2
     return 0
+
+
+def _opaque_over_dome(aovs: dict[str, NDArray[np.float32]], scene: Any) -> None:
+    """With a dome seen as the background, an 8-bit image's alpha is 1 everywhere.
+
+    The dome fills every pixel; usdrecord writes such images opaque. The alpha AOV itself
+    stays the surfaces' coverage.
+    """
+    domes = [p for p in scene.light_paths if scene.stage.GetPrimAtPath(p).IsA(UsdLux.DomeLight)]
+    if domes and "alpha" in aovs:
+        aovs["alpha"] = np.ones_like(aovs["alpha"])
+
+
+def _add_unsupported(stats: dict[str, Any], items: list[Unsupported]) -> None:
+    """Merge what the render settings author that mipray ignores into the stats' list."""
+    if items:
+        listed = [Unsupported(**u) for u in stats.get("unsupported", [])]
+        stats["unsupported"] = [u.as_dict() for u in sorted({*listed, *items})]
 
 
 def _samples(settings: dict[str, object]) -> int:

@@ -8,11 +8,15 @@ they touch. ``mipray-record`` renders its frames through one session.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping, Sequence
+import re
+import sys
+import tempfile
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -72,39 +76,90 @@ def open_stage(
 
     """
     file_path = os.fspath(path)
-    if not os.path.exists(file_path):
-        raise StageError(f"{file_path}: no such file", path=file_path)
+    root = _open_layer(file_path, "")
+    session = _open_layer(session_layer, "session layer ") if session_layer else None
     try:
-        root = Sdf.Layer.FindOrOpen(file_path)
-        if not root:
-            raise StageError(f"{file_path}: cannot open as a USD layer", path=file_path)
-        session = (
-            Sdf.Layer.FindOrOpen(session_layer) if session_layer else Sdf.Layer.CreateAnonymous()
-        )
-        if not session:
-            raise StageError(f"{session_layer}: cannot open session layer", path=session_layer)
-        if population_mask:
-            mask = Usd.StagePopulationMask()
-            for prim_path in population_mask:
-                mask.Add(Sdf.Path(prim_path))
-            stage = Usd.Stage.OpenMasked(root, session, mask)
-        else:
-            stage = Usd.Stage.Open(root, session)
+        session = session or Sdf.Layer.CreateAnonymous()
+        with _usd_diagnostics():
+            if population_mask:
+                mask = Usd.StagePopulationMask()
+                for prim_path in population_mask:
+                    mask.Add(Sdf.Path(prim_path))
+                stage = Usd.Stage.OpenMasked(root, session, mask)
+            else:
+                stage = Usd.Stage.Open(root, session)
     except Tf.ErrorException as exc:
+        # A layer the root brings in (a sublayer) failed: USD's reason names it.
         raise StageError(f"{file_path}: {_tf_reason(exc)}", path=file_path) from exc
     if not stage:
         raise StageError(f"{file_path}: cannot open USD stage", path=file_path)
     return stage
 
 
+def _open_layer(path: str, what: str) -> Sdf.Layer:
+    """Open one layer; a failure is a one-line error naming it (``what``: its role)."""
+    if not os.path.exists(path):
+        raise StageError(f"{path}: no such {what.strip() or 'file'}", path=path)
+    try:
+        layer = Sdf.Layer.FindOrOpen(path)
+    except Tf.ErrorException as exc:
+        raise StageError(
+            f"{path}: cannot open {what}as a USD layer: {_tf_reason(exc)}", path=path
+        ) from exc
+    if not layer:
+        raise StageError(f"{path}: cannot open {what}as a USD layer", path=path)
+    return layer
+
+
+#: The prefix of a warning USD prints itself: where in its source it was issued.
+_TF_WARNING = re.compile(r"^Warning: in \S+ at line \d+ of \S+ -- ")
+
+
+@contextlib.contextmanager
+def _usd_diagnostics() -> Iterator[None]:
+    """Catch what USD's C++ prints on the standard error while opening a stage.
+
+    Its composition errors (a reference to a missing layer, ...) are listed in the stats'
+    ``unsupported`` with USD's reason (:func:`mipray.usd.unsupported.composition_errors`);
+    each other warning is logged in one line, without USD's source location.
+    """
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):
+        yield  # no file descriptor 2 to catch (an embedding host): USD prints as it likes
+        return
+    with tempfile.TemporaryFile(mode="w+b") as caught:
+        os.dup2(caught.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            caught.seek(0)
+            text = caught.read().decode("utf-8", "replace")
+    for line in text.splitlines():
+        message = _TF_WARNING.sub("", line).strip()
+        if not message or (message.startswith("In <") and "Could not open asset" in message):
+            continue  # a composition error: listed in the stats, warned once there
+        _log.warning("mipray: USD: %s", message)
+
+
+#: The prefix USD puts on each error: where in its source it was raised, no use to a user.
+_TF_NOISE = re.compile(r"^Error in '[^']*' at line \d+ in file [^:]*:?\s*:\s*")
+
+
 def _tf_reason(exc: Exception) -> str:
-    """The useful line of a ``Tf.ErrorException`` (its message is multi-line)."""
-    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-    for line in lines:
-        if line.startswith("Error in"):
-            continue
-        return line.strip("'")
-    return lines[-1] if lines else type(exc).__name__
+    """The first reason of a ``Tf.ErrorException``, in one line.
+
+    Its message is multi-line, each line with USD's ``Error in 'pxrInternal_...' at
+    line N in file ...`` prefix, which says nothing to a user.
+    """
+    for line in str(exc).splitlines():
+        reason = _TF_NOISE.sub("", line.strip()).strip().strip("'").strip()
+        if reason:
+            return reason
+    return type(exc).__name__
 
 
 @dataclass
@@ -372,6 +427,8 @@ class RenderSession:
         except json.JSONDecodeError:
             _log.warning("mipray: the renderer returned stats that are not JSON")
             stats = {}
+        # Everything authored that the image lacks (mipray.usd.unsupported), listed in the stats.
+        stats["unsupported"] = [u.as_dict() for u in self.scene.unsupported]
         scene_time = self.scene.time
         return RenderResult(
             aovs=dict(pixels),

@@ -791,6 +791,13 @@ fn output_plan(
     Ok((plan.aovs, formats, plan.encode_srgb))
 }
 
+/// The AOVs an 8-bit file at `path` holds (`mipray::image_output::eight_bit_aovs`): color, and
+/// alpha where the type has an alpha channel; empty for other types.
+#[pyfunction]
+fn eight_bit_aovs(path: &str) -> Vec<&'static str> {
+    image_output::eight_bit_aovs(Path::new(path))
+}
+
 /// The sRGB transfer curve (`mipray::image_output::srgb_encode`) of linear values, clamped to
 /// [0, 1], NaN as 0: a new float32 array of the same shape.
 #[pyfunction]
@@ -1027,6 +1034,7 @@ fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RenderDelegate>()?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(output_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(eight_bit_aovs, m)?)?;
     m.add_function(wrap_pyfunction!(srgb_encode, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_metadata, m)?)?;

@@ -19,6 +19,9 @@ use crate::image_io::{ChannelFormat, ImageBuf, ImageIo, MetaValue};
 
 /// File extensions (lower case, no dot) whose images hold 8 bits per channel.
 pub const EIGHT_BIT_EXTENSIONS: [&str; 8] = ["png", "jpg", "jpeg", "bmp", "gif", "tga", "ppm", "webp"];
+/// 8-bit types with an alpha channel: they hold the colour as RGB and the alpha AOV as A (RGBA,
+/// as usdrecord writes them; the colour is premultiplied).
+const ALPHA_EXTENSIONS: [&str; 3] = ["png", "tga", "webp"];
 /// Extensions of floating-point types without per-channel pixel types: every AOV 32-bit float.
 const FLOAT_EXTENSIONS: [&str; 4] = ["tif", "tiff", "hdr", "pfm"];
 
@@ -67,6 +70,16 @@ pub fn is_eight_bit(path: &Path) -> bool {
     extension(path).is_some_and(|e| EIGHT_BIT_EXTENSIONS.contains(&e.as_str()))
 }
 
+/// The AOVs an 8-bit file at `path` holds, in channel order: the colour, and the alpha where
+/// the type has an alpha channel; none for other types.
+pub fn eight_bit_aovs(path: &Path) -> Vec<&'static str> {
+    match extension(path) {
+        Some(e) if ALPHA_EXTENSIONS.contains(&e.as_str()) => vec![Aov::Color.name(), Aov::Alpha.name()],
+        Some(e) if EIGHT_BIT_EXTENSIONS.contains(&e.as_str()) => vec![Aov::Color.name()],
+        _ => Vec::new(),
+    }
+}
+
 fn extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
 }
@@ -82,7 +95,8 @@ pub struct OutputPlan {
 }
 
 /// The plan for writing `aovs` (in channel order) to `path`. An 8-bit type keeps the colour AOV
-/// only (a warning names what it leaves out).
+/// only, and the alpha where it has an alpha channel ([`eight_bit_aovs`]; a warning names what
+/// it leaves out).
 ///
 /// # Errors
 /// The path has no extension, or an 8-bit file is asked for without the colour AOV.
@@ -94,13 +108,14 @@ pub fn plan(path: &Path, aovs: &[&str], color_correction: ColorCorrection) -> Re
         if !aovs.contains(&color) {
             return Err(err("an 8-bit image needs the color AOV".into()));
         }
-        let others: Vec<&str> = aovs.iter().copied().filter(|a| *a != color).collect();
+        let held: Vec<&str> = eight_bit_aovs(path).into_iter().filter(|a| aovs.contains(a)).collect();
+        let others: Vec<&str> = aovs.iter().copied().filter(|a| !held.contains(a)).collect();
         if !others.is_empty() {
-            log::warn!("{} holds only the color AOV; write an EXR to keep {}", path.display(), others.join(", "));
+            log::warn!("{} holds only the {} AOV; write an EXR to keep {}", path.display(), held.join(" and "), others.join(", "));
         }
         return Ok(OutputPlan {
-            aovs: vec![color.to_string()],
-            formats: vec![ChannelFormat::U8],
+            formats: vec![ChannelFormat::U8; held.len()],
+            aovs: held.into_iter().map(String::from).collect(),
             encode_srgb: color_correction == ColorCorrection::Srgb,
         });
     }
@@ -285,6 +300,13 @@ mod tests {
         assert_eq!(plan(Path::new("a.tif"), &three, ColorCorrection::Srgb).unwrap().formats, [Float; 3]);
         let png = plan(Path::new("d/a.png"), &three, ColorCorrection::Srgb).unwrap();
         assert_eq!((png.aovs, png.formats, png.encode_srgb), (vec!["color".to_string()], vec![U8], true));
+        // RGBA where the type has alpha and the alpha was rendered; RGB in types without.
+        let rgba = plan(Path::new("a.png"), &["alpha", "depth", "color"], ColorCorrection::Srgb).unwrap();
+        assert_eq!((rgba.aovs, rgba.formats), (vec!["color".to_string(), "alpha".to_string()], vec![U8, U8]));
+        let jpg = plan(Path::new("a.jpg"), &["color", "alpha"], ColorCorrection::Srgb).unwrap();
+        assert_eq!(jpg.aovs, ["color"]);
+        assert_eq!(eight_bit_aovs(Path::new("a.TGA")), ["color", "alpha"]);
+        assert!(eight_bit_aovs(Path::new("a.exr")).is_empty());
         assert!(!plan(Path::new("a.jpg"), &["color"], ColorCorrection::Disabled).unwrap().encode_srgb);
         let e = plan(Path::new("image"), &["color"], ColorCorrection::Srgb).unwrap_err();
         assert!(e.to_string().starts_with("image: no file extension"), "{e}");

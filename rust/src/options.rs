@@ -72,6 +72,10 @@ pub struct RenderOptions {
     /// ([`crate::seam`], docs/cracks.md). On by default; off only to measure what they cost and
     /// what they change in an image, since rays then slip through the cracks.
     pub seams: bool,
+    /// Camera rays see a dome light as the background (Hydra's `domeLightCameraVisibility`);
+    /// off, the dome still lights the scene and shows in reflections, and the background is
+    /// black with alpha 0, as usdrecord renders without `--enableDomeLightVisibility`.
+    pub dome_light_camera_visibility: bool,
 }
 
 /// The `integrator` render setting.

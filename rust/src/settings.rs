@@ -515,6 +515,8 @@ settings_table! {
         "render in passes of 1, 2, 4, ... samples per pixel, reporting each; the final image is the same";
     "seams": seams: bool = true, SettingType::Bool, Render => seams,
         "seam boxes closing cracks between tessellation rates (docs/cracks.md); 0 only to measure them: rays then slip through cracks";
+    "domeLightCameraVisibility": dome_light_camera_visibility: bool = true, SettingType::Bool, Render => dome_light_camera_visibility,
+        "camera rays see a dome light as the background (0: it lights the scene and shows in reflections only)";
 }
 
 /// The row of setting `key`.

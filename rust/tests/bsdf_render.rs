@@ -369,3 +369,48 @@ fn a_curved_mirror_on_a_moving_instance_widens_beams_by_its_pose_at_the_rays_tim
         assert!(checked > 100, "{integrator:?}: {checked} pixels checked");
     }
 }
+
+#[test]
+fn a_dome_hidden_from_the_camera_still_shows_through_glass() {
+    // domeLightCameraVisibility off (usdrecord's default): camera rays that escape see black,
+    // while rays refracted through the glass sphere still end on the dome, as with it on.
+    let mut scene = Scene::default();
+    let glass = preview("/glass", |s| {
+        s.opacity = 0.0;
+        s.roughness = 0.0;
+        s.ior = 1.5;
+    });
+    add(&mut scene, "/ball", Arc::new(Sphere { r: 1.0 }), glass);
+    scene.lights.push(uniform_dome(1.0));
+    scene.camera = top_camera(2.4);
+    for integrator in [IntegratorKind::Direct, IntegratorKind::Path, IntegratorKind::ColorBleeding] {
+        let opts = RenderOptions {
+            width: 24,
+            height: 24,
+            max_depth: 12,
+            integrator,
+            aovs: vec![Aov::Color, Aov::Position, Aov::Alpha],
+            ..Default::default()
+        };
+        let seen = render(&scene, &opts, &NoProgress).unwrap();
+        let hidden = render(&scene, &RenderOptions { dome_light_camera_visibility: false, ..opts }, &NoProgress).unwrap();
+        let (mut background, mut through) = (0, 0);
+        for y in 0..24 {
+            for x in 0..24 {
+                let p = Vec3A::from_slice(hidden.film.pixel("position", x, y));
+                let (c, c_seen) = (hidden.film.pixel("color", x, y), seen.film.pixel("color", x, y));
+                if p == Vec3A::ZERO {
+                    assert_eq!(&c[..3], &[0.0; 3], "{integrator:?} ({x}, {y}): the hidden dome behind");
+                    assert_eq!(hidden.film.pixel("alpha", x, y)[0], 0.0);
+                    assert!((c_seen[0] - 1.0).abs() < 1e-6, "{integrator:?}: the dome seen: {}", c_seen[0]);
+                    assert_eq!(seen.film.pixel("alpha", x, y)[0], 0.0, "{integrator:?}: alpha is surface coverage");
+                    background += 1;
+                } else {
+                    assert_eq!(c, c_seen, "{integrator:?} ({x}, {y}): through the glass, the dome as before");
+                    through += 1;
+                }
+            }
+        }
+        assert!(background > 100 && through > 150, "{integrator:?}: {background} {through}");
+    }
+}

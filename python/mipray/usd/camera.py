@@ -166,10 +166,13 @@ def framing_camera_arguments(
 def image_height(width: int, camera_args: dict[str, Any]) -> int:
     """Image height for ``width`` pixels from the camera's aperture aspect ratio.
 
-    Rounded to the nearest pixel, at least 1.
+    Truncated to whole pixels in single precision, at least 1, as usdrecord's frame
+    recorder computes it (so its command lines give its image sizes).
     """
-    aspect = float(camera_args["horizontal_aperture"]) / float(camera_args["vertical_aperture"])
-    return max(1, round(width / aspect))
+    aspect = np.float32(camera_args["horizontal_aperture"]) / np.float32(
+        camera_args["vertical_aperture"]
+    )
+    return max(1, int(np.float32(width) / aspect))
 
 
 def camera_matrices(

@@ -57,6 +57,7 @@ from .light import (
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
+from .unsupported import HEADLIGHT, Unsupported, audit_stage, is_rendered_type, warn_unsupported
 
 __all__ = ["PURPOSES", "SyncError", "UsdSceneDelegate"]
 
@@ -204,6 +205,9 @@ class UsdSceneDelegate:
         self._animated_visibility = False
         self._listener: Tf.Notice.Listener | None = None
         self._warned_types: set[str] = set()
+        self._unsupported: list[Unsupported] = []
+        self._headlight: list[Unsupported] = []  # lights the camera light stands in for
+        self._warned_unsupported: set[Unsupported] = set()
         self._default_camera: dict[str, Any] | None = None
         # Meshes last sent a moving transform (set_motion), so one that stops moving is reset.
         self._moving: set[str] = set()
@@ -224,6 +228,15 @@ class UsdSceneDelegate:
         """
         inside = [SyncError(p, m) for p, m in self._instancing.errors.items()]
         return [*self._errors.values(), *inside]
+
+    @property
+    def unsupported(self) -> list[Unsupported]:
+        """What the rendered prims author that mipray does not render, as of the last sync.
+
+        See :mod:`mipray.usd.unsupported`; the camera light standing in for unsupported
+        lights is listed too.
+        """
+        return sorted((*self._unsupported, *self._headlight))
 
     @property
     def synced_paths(self) -> list[str]:
@@ -411,6 +424,9 @@ class UsdSceneDelegate:
         self._instancing.end_sync(full=full)
 
         self._warn_unsupported(unsupported)
+        if changed:
+            self._unsupported = audit_stage(self.stage, self.time, self.purposes)
+            warn_unsupported(self._unsupported, self._warned_unsupported)
         if changed and self._default_camera is not None:
             self._sync_default_camera()
 
@@ -573,13 +589,7 @@ class UsdSceneDelegate:
 
     def _is_supported(self, prim: Usd.Prim, unsupported: Counter[str]) -> bool:
         """Whether ``prim`` is synced; counts renderable prims of unsupported types."""
-        if (
-            is_renderable_gprim(prim)
-            or prim.IsA(UsdGeom.Camera)
-            or prim.IsA(UsdLux.DistantLight)
-            or any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES)
-            or prim.IsA(UsdGeom.PointInstancer)
-        ):
+        if is_rendered_type(prim):
             return True
         if prim.IsA(UsdGeom.Gprim) or prim.HasAPI(UsdLux.LightAPI):
             unsupported[prim.GetTypeName() or "untyped"] += 1
@@ -811,7 +821,16 @@ class UsdSceneDelegate:
 
         """
         want = enabled and not self.light_paths
+        self._headlight = []
         if want:
+            # Lights of types mipray does not render leave the stage lit by the headlight.
+            self._headlight = [
+                Unsupported(u.prim, HEADLIGHT)
+                for u in self._unsupported
+                if u.what.startswith("prim type")
+                and self.stage.GetPrimAtPath(u.prim).HasAPI(UsdLux.LightAPI)
+            ]
+            warn_unsupported(self._headlight, self._warned_unsupported)
             transform = self.cameras[camera_path]["transform"]
             self.delegate.set_distant_light(CAMERA_LIGHT_PATH, **camera_light_arguments(transform))
             if not self._camera_light:

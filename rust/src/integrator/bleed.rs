@@ -73,7 +73,8 @@ impl<'a> ColorBleeding<'a> {
     /// settings called for (shadow rays only toward lights that cast shadows; hemisphere rays
     /// when `indirect_diffuse` is enabled; the `ao` AOV when `ao` is).
     pub fn new(tracer: &'a Tracer<'a>, scene: &'a Scene, effects: &[Effect], options: &RenderOptions) -> Self {
-        let direct = DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples);
+        let direct = DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
+            .with_camera_sees_dome(options.dome_light_camera_visibility);
         let mut bounce_direct = direct.clone();
         bounce_direct.shadow_samples = 1;
         let indirect_samples = if enabled(effects, "indirect_diffuse") { options.indirect_samples } else { 0 };
@@ -142,7 +143,7 @@ impl<'a> ColorBleeding<'a> {
         // The camera as a "shading point" for lights seen directly (a dome is the background).
         let eye = ShadingPoint { p: ray.o, ng: ray.d, ns: ray.d, dpdu: Vec3A::ZERO, dpdv: Vec3A::ZERO, front: true };
         let Some(v) = visible(self.tracer, self.scene, *ray, None, counters) else {
-            out.emission = self.direct.emitted(self.scene, &eye, ray.d, f32::INFINITY, None);
+            out.emission = self.direct.seen_by_camera(self.scene, &eye, ray.d, f32::INFINITY);
             out.set_color_from_parts();
             return out;
         };
@@ -151,7 +152,7 @@ impl<'a> ColorBleeding<'a> {
         let albedo = bsdf.diffuse_albedo(wo);
         out.set_hit(self.scene, &v.hit, v.sp.ns);
         out.albedo = albedo;
-        out.emission = v.surface.inputs.emissive_color + self.direct.emitted(self.scene, &eye, ray.d, (v.hit.p - ray.o).length(), None);
+        out.emission = v.surface.inputs.emissive_color + self.direct.seen_by_camera(self.scene, &eye, ray.d, (v.hit.p - ray.o).length());
         if albedo.max_element() > 0.0 || bsdf.has_glossy() {
             let d = self.direct.estimate(self.tracer, self.scene, &v.sp, &v.hit, &v.footprint, &bsdf, wo, sampler, counters);
             out.direct_diffuse = d.diffuse;

@@ -120,7 +120,8 @@ impl<'a> DirectLighting<'a> {
             reflection: enabled(effects, "reflection"),
             refraction: enabled(effects, "refraction"),
             glossy: enabled(effects, "glossy"),
-            direct: DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples),
+            direct: DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
+                .with_camera_sees_dome(options.dome_light_camera_visibility),
             ao: Hemisphere::new(if enabled(effects, "ao") { options.ao_samples } else { 0 }, options),
             ao_intensity: options.ao_intensity,
             max_depth: options.max_depth,
@@ -136,12 +137,12 @@ impl<'a> DirectLighting<'a> {
         let eye = eye_point(ray);
         let Some(v) = self.visible(*ray, None, counters) else {
             // Lights the camera looks at directly: a dome is the background.
-            out.emission = self.direct.emitted(self.scene, &eye, ray.d, f32::INFINITY, None);
+            out.emission = self.direct.seen_by_camera(self.scene, &eye, ray.d, f32::INFINITY);
             out.set_color_from_parts();
             return out;
         };
         let shade = self.shade(&v, 0, Path::Specular, sampler, counters);
-        let seen = self.direct.emitted(self.scene, &eye, ray.d, (v.hit.p - ray.o).length(), None);
+        let seen = self.direct.seen_by_camera(self.scene, &eye, ray.d, (v.hit.p - ray.o).length());
         out.set_hit(self.scene, &v.hit, shade.normal);
         out.emission = shade.light.emission + seen;
         out.direct_diffuse = shade.light.direct_diffuse;

@@ -41,7 +41,7 @@ use glam::Vec3A;
 
 use crate::bsdf::Scattering;
 use crate::differential::RayDifferential;
-use crate::light::Light;
+use crate::light::{Light, LightShape};
 use crate::light_sampler::LightSampler;
 use crate::ray::{offset_origin, Ray, RayKind};
 use crate::sampling::Sampler;
@@ -74,6 +74,8 @@ pub struct DirectLight {
     pub shadows: bool,
     /// Light samples (and BSDF samples) per shading point: `shadowSamples`.
     pub shadow_samples: u32,
+    /// Camera rays see dome lights ([`crate::RenderOptions::dome_light_camera_visibility`]).
+    pub camera_sees_dome: bool,
     lights: Arc<LightSampler>,
 }
 
@@ -97,7 +99,17 @@ impl DirectLight {
     /// The scene's lights organised for sampling ([`LightSampler`]); `shadows`: trace shadow
     /// rays (toward lights that cast them); `shadow_samples`: light samples per shading point.
     pub fn new(scene: &Scene, shadows: bool, shadow_samples: u32) -> Self {
-        DirectLight { shadows, shadow_samples: shadow_samples.max(1), lights: Arc::new(LightSampler::new(&scene.lights)) }
+        DirectLight {
+            shadows,
+            shadow_samples: shadow_samples.max(1),
+            camera_sees_dome: true,
+            lights: Arc::new(LightSampler::new(&scene.lights)),
+        }
+    }
+
+    /// The same, with camera rays seeing domes or not ([`DirectLight::camera_sees_dome`]).
+    pub fn with_camera_sees_dome(self, camera_sees_dome: bool) -> Self {
+        DirectLight { camera_sees_dome, ..self }
     }
 
     /// The light sampler (for probabilities of choosing a light at a point).
@@ -156,11 +168,24 @@ impl DirectLight {
     /// the power heuristic against light sampling, and lights that cast no shadows count even
     /// behind `t_hit`, as light sampling counts them.
     pub fn emitted(&self, scene: &Scene, from: &ShadingPoint, wi: Vec3A, t_hit: f32, bsdf_pdf: Option<f32>) -> Vec3A {
+        self.emitted_where(scene, from, wi, t_hit, bsdf_pdf, true)
+    }
+
+    /// As [`DirectLight::emitted`] along a camera ray from `eye`: a dome only when the camera
+    /// sees domes ([`DirectLight::camera_sees_dome`]).
+    pub fn seen_by_camera(&self, scene: &Scene, eye: &ShadingPoint, wi: Vec3A, t_hit: f32) -> Vec3A {
+        self.emitted_where(scene, eye, wi, t_hit, None, self.camera_sees_dome)
+    }
+
+    fn emitted_where(&self, scene: &Scene, from: &ShadingPoint, wi: Vec3A, t_hit: f32, bsdf_pdf: Option<f32>, domes: bool) -> Vec3A {
         let mis = bsdf_pdf.filter(|p| p.is_finite() && *p > 0.0);
         let at = mis.map(|_| self.lights.at(from.p, from.ns));
         let mut sum = Vec3A::ZERO;
         for (j, t, radiance, pdf) in self.crossed(scene, from, wi) {
             let light = &scene.lights[j];
+            if !domes && matches!(light.shape, LightShape::Dome(_)) {
+                continue;
+            }
             let through = mis.is_some() && !(self.shadows && light.casts_shadows);
             // An escaping ray (t_hit infinite) sees the lights at infinity too.
             if !(t < t_hit || t_hit == f32::INFINITY || through) {

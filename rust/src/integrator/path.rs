@@ -105,7 +105,8 @@ impl<'a> PathTracer<'a> {
             tracer,
             scene,
             depth_of_field: enabled(effects, "depth_of_field"),
-            direct: DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples),
+            direct: DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
+                .with_camera_sees_dome(options.dome_light_camera_visibility),
             max_depth: options.max_depth,
             russian_roulette_depth: options.russian_roulette_depth,
             samples: options.samples,
@@ -170,7 +171,12 @@ impl<'a> PathTracer<'a> {
             // camera and after delta bounces). Measured from where the ray started, past any
             // cut-outs: one ray, one weight.
             let t_hit = found.as_ref().map_or(f32::INFINITY, |(h, ..)| passed + h.t);
-            let lights = seg.throughput * self.direct.emitted(self.scene, &seg.eye, ray.d, t_hit, seg.bsdf_pdf);
+            let lights = seg.throughput
+                * if bounce == 0 {
+                    self.direct.seen_by_camera(self.scene, &seg.eye, ray.d, t_hit)
+                } else {
+                    self.direct.emitted(self.scene, &seg.eye, ray.d, t_hit, seg.bsdf_pdf)
+                };
             match first_lobe {
                 None => out.emission += lights,
                 // The first BSDF ray's share of the camera hit's direct light.
