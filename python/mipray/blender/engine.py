@@ -78,7 +78,17 @@ class MiprayRenderEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, p.name, p.channels, p.chan_id, p.type)
 
     def render(self, depsgraph: Any) -> None:
-        """Render ``depsgraph``'s view layer into Blender's render result."""
+        """Render ``depsgraph``'s view layer into Blender's render result.
+
+        Every failure is one error report (``bpy.ops.render.render`` raises it as a
+        RuntimeError); nothing escapes into Blender as a Python traceback.
+        """
+        try:
+            self._render(depsgraph)
+        except Exception as exc:
+            self.report({"ERROR"}, f"mipray: {type(exc).__name__}: {exc}")
+
+    def _render(self, depsgraph: Any) -> None:
         scene = depsgraph.scene
         view_layer = depsgraph.view_layer
         scale = scene.render.resolution_percentage / 100.0

@@ -80,7 +80,9 @@ def export_usd(depsgraph: Any, directory: str) -> str:
     try:
         with bpy.context.temp_override(scene=depsgraph.scene, view_layer=depsgraph.view_layer):
             outcome = operator(filepath=path, **EXPORT_OPTIONS)
-    except RuntimeError as exc:
+    except (RuntimeError, TypeError, ValueError) as exc:
+        # RuntimeError: the exporter reported an error; TypeError / ValueError: it refused an
+        # option's value.
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else "failed"
         raise ExportError(f"USD export to {path} failed: {reason}") from exc
     if "FINISHED" not in outcome or not os.path.exists(path):
