@@ -13,6 +13,7 @@ import subprocess
 import sys
 import zipfile
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -136,6 +137,40 @@ def test_settings_are_the_tables_and_saved_in_the_blend(scene, tmp_path):
     assert saved["samples"] == 7 and saved["cacheMode"] == "single"
     assert saved["tessFactor"] == pytest.approx(2.5) and saved["geometryCacheFineMb"] == 3.0
     assert "geometryCacheCoarseMb" not in saved
+
+
+class _Layout:
+    """Records what a panel's ``draw`` lays out (Blender draws no UI headless)."""
+
+    def __init__(self, shown: list[str]):
+        self.shown = shown
+        self.use_property_split = False
+        self.active = True
+
+    def prop(self, data, name, **kwargs):
+        assert hasattr(data, name), name
+        self.shown.append(name)
+
+    def box(self):
+        return self
+
+    def row(self, **kwargs):
+        return self
+
+    def label(self, **kwargs):
+        pass
+
+
+def test_panels_show_every_setting_and_pass(scene):
+    context = SimpleNamespace(scene=scene, view_layer=bpy.context.view_layer, engine="MIPRAY")
+    for panel, expected in (
+        (mipray_blender.RENDER_PT_mipray, [k for k in TABLE if k not in ENGINE_SETTINGS]),
+        (mipray_blender.VIEWLAYER_PT_mipray_passes, [p.aov for p in blender_passes()]),
+    ):
+        shown: list[str] = []
+        assert panel.poll(context)
+        panel.draw(SimpleNamespace(layout=_Layout(shown)), context)
+        assert sorted(n for n in shown if not n.startswith("use_")) == sorted(expected)
 
 
 def test_passes_hold_mipray_aovs_with_their_shapes(scene, tmp_path):

@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 
 import bpy
 
+from .. import settings as _settings
 from .engine import MiprayRenderEngine
 from .passes import blender_passes
 from .properties import (
@@ -41,25 +42,28 @@ def _group(name: str, specs: list[Any], update: Any = None) -> type:
     return type(name, (bpy.types.PropertyGroup,), {"__annotations__": annotations})
 
 
-class RENDER_PT_mipray(bpy.types.Panel):
-    """mipray's settings, a box per part of the renderer that reads them."""
+class _PropertiesPanel:
+    """What mipray's panels share: the Properties editor, shown while mipray renders."""
 
-    bl_label = "mipray"
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
-    bl_context = "render"
     COMPAT_ENGINES: ClassVar[set[str]] = {MiprayRenderEngine.bl_idname}
 
     @classmethod
     def poll(cls, context: Any) -> bool:
-        return context.engine in cls.COMPAT_ENGINES
+        return bool(context.engine in cls.COMPAT_ENGINES)
+
+
+class RENDER_PT_mipray(_PropertiesPanel, bpy.types.Panel):  # type: ignore[misc]  # no stubs
+    """mipray's settings, a box per part of the renderer that reads them."""
+
+    bl_label = "mipray"
+    bl_context = "render"
 
     def draw(self, context: Any) -> None:
         layout = self.layout
         layout.use_property_split = True
         values = context.scene.mipray
-        from .. import settings as _settings
-
         for scope, label in SCOPE_LABELS.items():
             keys = [
                 s.name
@@ -81,18 +85,11 @@ class RENDER_PT_mipray(bpy.types.Panel):
                     box.prop(values, key)
 
 
-class VIEWLAYER_PT_mipray_passes(bpy.types.Panel):
+class VIEWLAYER_PT_mipray_passes(_PropertiesPanel, bpy.types.Panel):  # type: ignore[misc]
     """mipray's AOVs as passes of this view layer."""
 
     bl_label = "mipray passes"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
     bl_context = "view_layer"
-    COMPAT_ENGINES: ClassVar[set[str]] = {MiprayRenderEngine.bl_idname}
-
-    @classmethod
-    def poll(cls, context: Any) -> bool:
-        return context.engine in cls.COMPAT_ENGINES
 
     def draw(self, context: Any) -> None:
         layout = self.layout

@@ -25,7 +25,7 @@ bl_info = {
 _LIB = os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib")
 
 
-def register():
+def register() -> None:
     """Register mipray's render engine, from the mipray this add-on ships."""
     if _LIB not in sys.path:
         sys.path.insert(0, _LIB)
@@ -34,7 +34,7 @@ def register():
     blender.register()
 
 
-def unregister():
+def unregister() -> None:
     """Unregister what :func:`register` registered."""
     from mipray import blender
 

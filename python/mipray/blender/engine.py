@@ -62,7 +62,7 @@ def _passes(view_layer: Any) -> list[BlenderPass]:
     return [p for p in blender_passes() if switches is not None and getattr(switches, p.aov)]
 
 
-class MiprayRenderEngine(bpy.types.RenderEngine):
+class MiprayRenderEngine(bpy.types.RenderEngine):  # type: ignore[misc]  # bpy has no stubs
     """mipray as a Blender render engine."""
 
     bl_idname = "MIPRAY"
@@ -119,7 +119,7 @@ class MiprayRenderEngine(bpy.types.RenderEngine):
             self.add_pass(p.name, p.channels, p.chan_id, layer=view_layer.name)
         aovs = ["color", "alpha", *(p.aov for p in passes)]
         settings = render_settings(scene.mipray)
-        total_passes = math.ceil(math.log2(max(1, int(settings.get("samples", 1))))) + 1
+        total_passes = math.ceil(math.log2(max(1, scene.mipray.samples))) + 1
         result = self.begin_result(0, 0, width, height, layer=view_layer.name)
         layer = result.layers[0]
         shown = 0
