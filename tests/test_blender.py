@@ -254,6 +254,12 @@ def test_lambertian_cube_under_sun_matches_cycles(scene, tmp_path):
         np.pad(luma, 1, constant_values=np.nan), (3, 3)
     )
     inside = np.ptp(windows, axis=(2, 3)) < 1e-4
+    # The figures of README's Blender section (`pytest -s -k cycles` prints them).
+    print(
+        f"\nmean: mipray {mine[..., :3].mean():.5f}, Cycles {cycles[..., :3].mean():.5f}; "
+        f"face interiors: {inside.sum()} px, max |diff| {diff[inside].max():.2e}; "
+        f"all pixels: max |diff| {diff.max():.3f}, {100 * (diff > 0.05).mean():.2f}% beyond 0.05"
+    )
     assert inside.sum() > 300
     assert diff[inside].max() < 0.01
     # Pixels the cube's edges cross are covered by differing sample positions; they are ~1% of
@@ -294,6 +300,10 @@ def test_subdivision_surface_renders_the_limit_surface_with_creases(scene, tmp_p
     level1 = _coverage(_render(scene, tmp_path / "level1.exr"))
     modifier.render_levels = 5
     level5 = _coverage(_render(scene, tmp_path / "level5.exr"))
+    print(
+        f"\ncoverage in pixels: cube {cube_area:.1f}, mipray limit {limit:.1f}, "
+        f"Cycles level 1 {level1:.1f}, level 5 {level5:.1f}"
+    )
     assert abs(level1 - level5) > 0.03 * level5
     assert abs(limit - level5) < 0.005 * level5
     assert limit < 0.9 * cube_area
@@ -302,6 +312,7 @@ def test_subdivision_surface_renders_the_limit_surface_with_creases(scene, tmp_p
     cube.modifiers.remove(modifier)
     _subdivided_cube(scene, crease=1.0)
     creased = _coverage(_render(scene, tmp_path / "creased.exr"))
+    print(f"all edges creased: {creased:.1f}")
     assert abs(creased - cube_area) < 0.005 * cube_area
 
 
