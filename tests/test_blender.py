@@ -76,12 +76,14 @@ def _render_layers(sc, path: Path) -> dict[str, np.ndarray]:
         ["oiiotool", "--info", "-v", str(path)], capture_output=True, text=True, check=True
     ).stdout
     count = int(m.group(1)) if (m := re.search(r"(\d+) subimages", info)) else 1
+    parts = [path.with_suffix(f".part{index}.exr") for index in range(count)]
+    # One oiiotool for all parts: its start-up is most of its time.
+    command = ["oiiotool"]
+    for index, part in enumerate(parts):
+        command += [str(path), "--subimage", str(index), "-o", str(part)]
+    subprocess.run(command, check=True)
     layers = {}
-    for index in range(count):
-        part = path.with_suffix(f".part{index}.exr")
-        subprocess.run(
-            ["oiiotool", str(path), "--subimage", str(index), "-o", str(part)], check=True
-        )
+    for part in parts:
         pixels, channels = _mipray.read_image(str(part))
         names = {c.split(".")[1] for c in channels}
         assert len(names) == 1, channels
