@@ -29,7 +29,7 @@ import bpy  # noqa: E402
 import mipray  # noqa: E402
 from mipray import _mipray  # noqa: E402
 from mipray import blender as mipray_blender  # noqa: E402
-from mipray.blender import export  # noqa: E402
+from mipray.blender import engine, export  # noqa: E402
 from mipray.blender.passes import blender_passes  # noqa: E402
 from mipray.blender.properties import ENGINE_SETTINGS, render_settings  # noqa: E402
 from mipray.settings import TABLE  # noqa: E402
@@ -213,6 +213,30 @@ def test_progressive_passes_and_stats_line(scene, tmp_path):
     for n, spp in ((1, 1), (2, 2), (3, 4)):
         assert f"pass {n}/3 ({spp} spp)" in text, text
     assert re.search(r"cache hits .*recomputed vertices .*Mrays/s", text), text
+
+
+def test_esc_stops_after_the_pass_in_flight_and_keeps_it(scene, tmp_path, monkeypatch):
+    lines: list[str] = []
+
+    def on_stats(*args):
+        lines.append(" ".join(str(a) for a in args))
+
+    # Esc pressed from the start: Blender's test_break answers True (no keyboard headless).
+    monkeypatch.setattr(engine, "esc_pressed", lambda _engine: True)
+    bpy.app.handlers.render_stats.append(on_stats)
+    try:
+        scene.mipray.samples = 16
+        stopped = _render(scene, tmp_path / "stopped.exr")
+    finally:
+        bpy.app.handlers.render_stats.remove(on_stats)
+    monkeypatch.undo()
+    assert any("cancelled after pass 1/5" in line for line in lines), lines
+    # The image kept is the first pass: one sample per pixel, as a one-sample render has it.
+    scene.mipray.samples = 1
+    one = _render(scene, tmp_path / "one.exr")
+    np.testing.assert_allclose(stopped, one, atol=1e-6)
+    scene.mipray.samples = 16
+    assert np.abs(_render(scene, tmp_path / "all.exr") - one).max() > 1e-3
 
 
 def _lambertian_cube_under_sun(sc):

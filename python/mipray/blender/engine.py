@@ -24,7 +24,7 @@ from . import export
 from .passes import COMBINED, BlenderPass, blender_passes, pass_pixels
 from .properties import render_settings
 
-__all__ = ["MiprayRenderEngine", "stats_line"]
+__all__ = ["MiprayRenderEngine", "esc_pressed", "stats_line"]
 
 
 #: One pass's AOVs: name → H×W×C float32, linear.
@@ -54,6 +54,14 @@ def stats_line(stats: dict[str, Any]) -> str:
         f"{wall:.2f} s",
     ]
     return "mipray | " + " | ".join(p for p in parts if p)
+
+
+def esc_pressed(engine: Any) -> bool:
+    """Whether Blender asks ``engine``'s render to stop (Esc).
+
+    A module function so that tests can press Esc: an RNA method cannot be replaced on the class.
+    """
+    return bool(engine.test_break())
 
 
 def _passes(view_layer: Any) -> list[BlenderPass]:
@@ -130,7 +138,7 @@ class MiprayRenderEngine(bpy.types.RenderEngine):  # type: ignore[misc]  # bpy h
             self.update_result(result)
             shown += 1
             self.update_stats("", f"mipray | pass {shown}/{total_passes} ({samples} spp)")
-            if not converged and self.test_break():
+            if not converged and esc_pressed(self):
                 raise _Cancelled
 
         def progress(done: int, total: int) -> None:
