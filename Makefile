@@ -101,6 +101,10 @@ bench-cache: setup ## The paper's §6.3.2 cache tables: docs/cache-benchmark.{md
 	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
 	$(VENV)/bin/python scripts/plot_cache_bench.py docs/cache-benchmark.json docs/cache-benchmark.png
 
+.PHONY: blender-addon
+blender-addon: setup ## The Blender add-on zip: $(OUT)/mipray_blender.zip (Install from Disk in Blender)
+	$(PY) scripts/make_blender_addon.py $(OUT)/mipray_blender.zip
+
 .PHONY: accuracy
 accuracy: setup ## Accuracy against time (mipray-sweep): docs/accuracy-vs-time.{md,json}, docs/images/accuracy-*.png
 	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
