@@ -133,3 +133,7 @@ bench-throughput: $(EMBREE_HARNESS) ## mipray's rays/s by ray type against Embre
 		$(VENV)/bin/maturin develop --release -q -m python/Cargo.toml
 	$(PY) -m mipray.tools.throughput --embree-bin $(EMBREE_HARNESS) --work $(OUT)/throughput \
 		$(THROUGHPUT_ARGS)
+
+.PHONY: bench-distributed
+bench-distributed: setup ## Frames and tiles on Dask LocalClusters of 1 and 2 workers, warm and cold caches, tile size: docs/distributed.md
+	$(PY) -m mipray.tools.distributed_bench --out docs/distributed.md $(DISTRIBUTED_ARGS)
