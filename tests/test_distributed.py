@@ -136,10 +136,12 @@ def test_tiles_assemble_into_the_single_machine_image_bit_for_bit(client, stage_
 def test_frames_are_the_same_on_one_and_two_workers(client, stage_path) -> None:
     want = [local(stage_path, f) for f in FRAMES]
     two = cluster_api.render_frames(client, stage_path, FRAMES, "/World/Cam", WIDTH, AOVS, SETTINGS)
-    with local_cluster(1) as one_client:
-        one = cluster_api.render_frames(
-            one_client, stage_path, FRAMES, "/World/Cam", WIDTH, AOVS, SETTINGS, tiles=2
-        )
+    first = sorted(client.scheduler_info()["workers"])[0]
+    one = cluster_api.render_frames(
+        client, stage_path, FRAMES, "/World/Cam", WIDTH, AOVS, SETTINGS, tiles=2, workers=[first]
+    )
+    assert {w for r in one for w in r.stats["distributed"]["workers"]} == {first}
+    assert len({w for r in two for w in r.stats["distributed"]["workers"]}) == 2
     for frame, w, a, b in zip(FRAMES, want, two, one, strict=True):
         assert_same_bits(a, w, f"frame {frame:g} on 2 workers")
         assert_same_bits(b, w, f"frame {frame:g} on 1 worker, 2 tiles")
@@ -186,13 +188,13 @@ def test_a_warm_worker_resyncs_only_what_varies_in_time(client, tmp_path) -> Non
     assert warm < cold, (warm, cold)
 
 
-def test_record_reports_a_failed_frame_and_writes_the_others(tmp_path, capsys) -> None:
+def test_record_reports_a_failed_frame_and_writes_the_others(client, tmp_path, capsys) -> None:
     path = write_stage(tmp_path / "bad.usda", bad_camera_at=3.0, nan_at=2.0)
     out = tmp_path / "out"
     status = record.main(
         [
-            "--local-cluster",
-            "2",
+            "--scheduler",
+            client.scheduler.address,
             "--frames",
             "1:4",
             "--camera",
@@ -306,3 +308,16 @@ def test_tile_windows_cover_the_frame_once() -> None:
         assert len(cluster_api.tile_windows(w, h, n)) == n
     with pytest.raises(mipray.RenderSettingsError, match="do not fit"):
         cluster_api.tile_windows(4, 4, 5)
+
+
+def test_record_refuses_cluster_flags_that_do_not_go_together(stage_path, tmp_path, capsys) -> None:
+    out = str(tmp_path / "x.exr")
+    for argv, message in (
+        (["--tiles", "2"], "--tiles needs a cluster"),
+        (["--local-cluster", "0"], "--local-cluster needs at least 1 worker"),
+        (["--local-cluster", "2", "--progressive"], "--progressive is not supported on a cluster"),
+    ):
+        assert record.main([*argv, stage_path, out]) == 1
+        err = capsys.readouterr().err
+        assert message in err and len(err.splitlines()) == 1, err
+    assert not os.path.exists(out)

@@ -389,6 +389,7 @@ def render_frames(
     purposes: Sequence[str] | None = None,
     *,
     tiles: int = 1,
+    workers: Sequence[str] | None = None,
     on_done: PieceCallback | None = None,
     on_frame: Callable[[RenderResult | FrameFailure], object] | None = None,
     check: bool = True,
@@ -408,6 +409,7 @@ def render_frames(
             machine's cores shared among the workers on it.
         purposes: as :func:`mipray.render`.
         tiles: crop windows per frame (:func:`tile_windows`), one task each.
+        workers: render on these workers only (addresses); default any.
         on_done: called as ``on_done(done, total, piece)`` as each piece lands.
         on_frame: called with each frame's result as soon as its last piece
             lands (or with its :class:`FrameFailure`), in completion order.
@@ -432,7 +434,9 @@ def render_frames(
     started = time_module.perf_counter()
     # The camera and the height once, on a worker (which warms its session too).
     try:
-        camera_path, height = client.submit(_resolve_view, job, frames[0], pure=False).result()
+        camera_path, height = client.submit(
+            _resolve_view, job, frames[0], pure=False, workers=workers
+        ).result()
     except MiprayError:
         raise
     except Exception as exc:  # a worker-side failure arrives as itself; keep it one line
@@ -442,7 +446,7 @@ def render_frames(
     futures = {}
     for index, frame in enumerate(frames):
         for window in windows:
-            future = client.submit(_render_piece, job, frame, window, pure=False)
+            future = client.submit(_render_piece, job, frame, window, pure=False, workers=workers)
             futures[future] = index
     state = [_Frame() for _ in frames]
     results: list[RenderResult | FrameFailure | None] = [None] * len(frames)
