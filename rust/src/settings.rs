@@ -179,7 +179,9 @@ impl SettingType {
             },
             SettingType::Window => {
                 let corners: Vec<f64> = match value {
-                    Value::String(s) => s.split(',').map(|c| c.trim().parse::<f64>().map_err(|_| "not four numbers")).collect::<Result<_, _>>()?,
+                    Value::String(s) => {
+                        s.split(',').map(|c| c.trim().parse::<f64>().map_err(|_| "not four numbers")).collect::<Result<_, _>>()?
+                    }
                     Value::Array(items) => items.iter().map(number).collect::<Result<_, _>>().map_err(|_| "not four numbers")?,
                     _ => return Err("not four numbers"),
                 };
