@@ -42,14 +42,17 @@ from .usd.scene_delegate import SyncError
 
 __all__ = [
     "PLUGIN_NAME",
+    "FrameFailure",
     "Job",
     "Piece",
     "cache_figures",
     "check_workers",
     "connect",
+    "crop_setting",
     "merge_stats",
     "render",
     "render_frames",
+    "stage_files",
     "tile_windows",
 ]
 
@@ -132,9 +135,8 @@ def _render_piece(job: Job, frame: float, window: tuple[int, int, int, int]) -> 
     width, height = job.width, job.height
     assert height is not None, "the client resolves the height before any piece"
     settings = dict(job.settings)
-    x0, y0, x1, y1 = window
-    if (x0, y0, x1, y1) != (0, 0, width, height):
-        settings["crop"] = f"{x0 / width},{1 - y1 / height},{x1 / width},{1 - y0 / height}"
+    if window != (0, 0, width, height):
+        settings["crop"] = crop_setting(window, width, height)
     result = session.render(
         job.camera,
         width,
@@ -177,6 +179,16 @@ def _worker_facts(paths: Sequence[str]) -> dict[str, Any]:
         "settings": sorted(TABLE),
         "missing": [p for p in paths if not os.path.exists(p)],
     }
+
+
+def crop_setting(window: tuple[int, int, int, int], width: int, height: int) -> str:
+    """The ``crop`` setting rendering pixels [x0, x1) × [y0, y1) (row 0 at the top) of a frame.
+
+    Its edges lie on pixel edges, half a pixel from every pixel centre, so the
+    renderer's rounding takes exactly those pixels.
+    """
+    x0, y0, x1, y1 = window
+    return f"{x0 / width},{1 - y1 / height},{x1 / width},{1 - y0 / height}"
 
 
 def tile_windows(width: int, height: int, tiles: int) -> list[tuple[int, int, int, int]]:

@@ -220,10 +220,11 @@ def measure(args: argparse.Namespace, log: Callable[[str], None]) -> dict[str, A
     for tiles in (1, 4, 16, 64):
         windows = distributed.tile_windows(args.tile_width, whole.height, tiles)
         stats = []
-        for x0, y0, x1, y1 in windows:
-            w, h = args.tile_width, whole.height
-            crop = f"{x0 / w},{1 - y1 / h},{x1 / w},{1 - y0 / h}"
-            tile = mipray.render(scene, None, w, settings={**settings, "crop": crop}, time=start)
+        for window in windows:
+            crop = distributed.crop_setting(window, args.tile_width, whole.height)
+            tile = mipray.render(
+                scene, None, args.tile_width, settings={**settings, "crop": crop}, time=start
+            )
             stats.append(tile.stats)
         cache = _cache_sum(stats)
         rows.append(
