@@ -35,7 +35,7 @@ import platform
 import statistics
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +108,21 @@ def _cache_sum(stats_list: Sequence[dict[str, Any]]) -> dict[str, float]:
     return total
 
 
+def _on_clusters(
+    render: Callable[[Any], Any], runs: int, log: Callable[[str], None], what: str
+) -> Iterator[tuple[int, tuple[float, Any]]]:
+    """``render(client)`` timed on a new LocalCluster of 1, then 2 workers."""
+    for workers in (1, 2):
+        log(f"{what}: {workers} worker(s)")
+        client = _local_cluster(workers)
+        try:
+            # Render threads: every core, shared among the workers (the default).
+            timed = _timed(functools.partial(render, client), runs)
+        finally:
+            _close(client)
+        yield workers, timed
+
+
 def _keep(pieces: list[Any], done: int, total: int, piece: Any) -> None:
     pieces.append(piece)
 
@@ -131,26 +146,14 @@ def measure(args: argparse.Namespace, log: Callable[[str], None]) -> dict[str, A
             return [session.render(None, args.width, settings=settings, time=f) for f in frames]
 
     out["frames_here_s"], truth = _timed(here_frames, args.runs)
-    for workers in (1, 2):
-        log(f"frames: {workers} worker(s)")
-        client = _local_cluster(workers)
-        try:
-            # Render threads: every core, shared among the workers (the default).
-            seconds, results = _timed(
-                functools.partial(
-                    distributed.render_frames,
-                    client,
-                    scene,
-                    frames,
-                    None,
-                    args.width,
-                    ("color",),
-                    settings,
-                ),
-                args.runs,
-            )
-        finally:
-            _close(client)
+    for workers, (seconds, results) in _on_clusters(
+        lambda client: distributed.render_frames(
+            client, scene, frames, None, args.width, ("color",), settings
+        ),
+        args.runs,
+        log,
+        "frames",
+    ):
         for f, got, want in zip(frames, results, truth, strict=True):
             if not isinstance(got, mipray.RenderResult):
                 raise BenchError(f"frame {f:g} failed on {workers} worker(s): {got.message}")
@@ -163,26 +166,14 @@ def measure(args: argparse.Namespace, log: Callable[[str], None]) -> dict[str, A
         lambda: mipray.render(scene, None, args.tile_width, settings=settings, time=start),
         args.runs,
     )
-    for workers in (1, 2):
-        log(f"tiles: {workers} worker(s)")
-        client = _local_cluster(workers)
-        try:
-            seconds, got = _timed(
-                functools.partial(
-                    distributed.render,
-                    client,
-                    scene,
-                    None,
-                    args.tile_width,
-                    ("color",),
-                    settings,
-                    start,
-                    tiles=4,
-                ),
-                args.runs,
-            )
-        finally:
-            _close(client)
+    for workers, (seconds, got) in _on_clusters(
+        lambda client: distributed.render(
+            client, scene, None, args.tile_width, ("color",), settings, start, tiles=4
+        ),
+        args.runs,
+        log,
+        "tiles",
+    ):
         _same(got, whole, f"4 tiles on {workers} worker(s)")
         out[f"tiles_{workers}w_s"] = seconds
 
