@@ -306,9 +306,10 @@ def report(m: dict[str, Any], command: str, started: str, args: argparse.Namespa
         )
     lines += [
         "",
-        "A warm worker re-syncs only the prims that vary in time (the animated torus) and "
-        "keeps the static meshes' tessellations, so its cold tessellations are those of the "
-        "moving mesh alone.",
+        "A warm worker re-syncs only the prims that vary in time (here the spinning torus, "
+        "by its transform alone: `set_transform`) and keeps every mesh's tessellations, "
+        "which are in object space; what it still tessellates cold are subpatches seen at a "
+        "rate no earlier frame on that worker asked for.",
         "",
         "## Tile size and the geometry cache",
         "",
