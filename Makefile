@@ -149,3 +149,7 @@ bench-cycles: ## mipray against Cycles (bpy) end to end on the plain throughput 
 	@[ -f $(OUT)/throughput/plain.usda ] || $(PY) -c 'from pathlib import Path; \
 		from mipray.tools.throughput import prepare_scene; prepare_scene("plain", Path("$(OUT)/throughput"))'
 	$(PY) -m mipray.tools.cycles_peer $(OUT)/throughput/plain.usda $(CYCLES_ARGS)
+
+.PHONY: bench-distributed
+bench-distributed: setup ## Frames and tiles on Dask LocalClusters of 1 and 2 workers, warm and cold caches, tile size: docs/distributed.md
+	$(PY) -m mipray.tools.distributed_bench --out docs/distributed.md $(DISTRIBUTED_ARGS)

@@ -79,6 +79,7 @@ def test_stub_declares_the_protocol() -> None:
         "RenderDelegate.render",
         "write_image",
         "output_plan",
+        "eight_bit_aovs",
         "srgb_encode",
         "read_image",
         "read_metadata",

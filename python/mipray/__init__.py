@@ -22,6 +22,8 @@ from __future__ import annotations
 import logging
 from importlib import metadata as _metadata
 
+# After .session, which it builds on: `mipray.distributed.render_frames` without another import.
+from . import distributed
 from .errors import (
     InternalError,
     MiprayError,
@@ -43,6 +45,7 @@ __all__ = [
     "RenderSettingsError",
     "StageError",
     "__version__",
+    "distributed",
     "open_stage",
     "render",
 ]

@@ -39,6 +39,10 @@ class PrimError(MiprayError):
         #: The problem, without the path.
         self.reason = message
 
+    def __reduce__(self) -> tuple[type[PrimError], tuple[str, str]]:
+        # Pickled whole (a Dask worker's error reaches the client so), not from the joined line.
+        return (type(self), (self.prim_path, self.reason))
+
 
 class RenderSettingsError(MiprayError):
     """A render setting (image size, AOV, sample count, ...) is invalid."""

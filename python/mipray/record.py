@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdLux, UsdRender
 
+from . import distributed
 from .errors import MiprayError, RenderSettingsError
 from .frames import (
     FrameSpecError,
@@ -368,6 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="print every renderer setting --setting takes, with its default, and exit",
     )
     ren.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    distributed.add_arguments(parser)
     return parser
 
 
@@ -724,6 +726,8 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
             plan.aovs,
             args.colorCorrectionMode,
         )
+    if distributed.wanted(args):
+        return distributed.record(args, times, settings, plan, extra, out, err, _write_stats)
     internal_errors = 0
     with RenderSession(stage, purposes=plan.purposes, time=times[0]) as session:
         for index, time in enumerate(times, start=1):

@@ -451,6 +451,8 @@ def render(
     *,
     progressive: bool | None = None,
     on_update: UpdateCallback | None = None,
+    client: Any = None,
+    tiles: int | None = None,
 ) -> RenderResult:
     """Render a USD file or a live ``Usd.Stage`` once.
 
@@ -475,6 +477,12 @@ def render(
             each pass: samples per pixel so far, whether it is the last pass,
             and AOV name → new H×W×C float32 array (linear); see
             :meth:`RenderSession.render`.
+        client: a ``distributed.Client``: render on that Dask cluster
+            (:func:`mipray.distributed.render`; the stage must be a saved file
+            every worker sees at the same path), bit-identical to rendering
+            here. Not with ``progressive`` or ``on_update``.
+        tiles: with ``client``, the image is cut into this many tiles, one
+            task each (default: one per worker).
 
     Returns:
         A :class:`RenderResult` with ``.aovs`` (name → H×W×C float32),
@@ -496,6 +504,14 @@ def render(
         mipray.render("shot.usda", settings={"samples": 16}, progressive=True, on_update=show)
 
     """
+    if client is not None:
+        if on_update is not None or progressive:
+            raise RenderSettingsError("progressive rendering is not supported on a cluster")
+        from .distributed import render as render_on_cluster
+
+        return render_on_cluster(
+            client, path_or_stage, camera, width, aovs, settings, time, purposes, tiles=tiles
+        )
     if isinstance(path_or_stage, Usd.Stage):
         stage = path_or_stage
     else:

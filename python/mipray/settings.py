@@ -23,7 +23,8 @@ class SettingRow(TypedDict):
     """One row of the settings table."""
 
     key: str
-    #: ``"int"``, ``"float"``, ``"bool"`` (0 or 1) or ``"choice"``.
+    #: ``"int"``, ``"float"``, ``"bool"`` (0 or 1), ``"choice"`` or ``"window"``
+    #: (``crop``: ``"xmin,ymin,xmax,ymax"`` in NDC).
     type: str
     #: Bounds of a number (None for a choice); ``min_open``/``max_open`` exclude them.
     min: float | None

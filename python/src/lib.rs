@@ -836,6 +836,7 @@ fn setting_to_py<'py>(py: Python<'py>, value: &SettingValue) -> PyResult<Bound<'
         SettingValue::Float(x) => x.into_pyobject(py)?.into_any(),
         SettingValue::Bool(b) => u8::from(*b).into_pyobject(py)?.into_any(),
         SettingValue::Choice(c) => c.into_pyobject(py)?.into_any(),
+        SettingValue::Window(_) => value.to_text().into_pyobject(py)?.into_any(),
         SettingValue::Unset => py.None().into_bound(py),
     })
 }
@@ -855,6 +856,7 @@ fn settings(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
             SettingType::Float { min, min_open, max, max_open } => ("float", Some(min), Some(max), min_open, max_open, &[]),
             SettingType::Bool => ("bool", Some(0.0), Some(1.0), false, false, &[]),
             SettingType::Choice(names) => ("choice", None, None, false, false, names),
+            SettingType::Window => ("window", Some(0.0), Some(1.0), false, false, &[]),
         };
         d.set_item("type", kind)?;
         d.set_item("min", min)?;

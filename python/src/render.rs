@@ -45,7 +45,11 @@ pub(crate) fn py_to_json(v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
     if let Ok(s) = v.extract::<String>() {
         return Ok(s.into());
     }
-    Err(PyValueError::new_err(format!("setting value {v} must be a bool, number or string")))
+    // A window (`crop`): a tuple or list of numbers.
+    if let Ok(items) = v.extract::<Vec<f64>>() {
+        return Ok(items.into());
+    }
+    Err(PyValueError::new_err(format!("setting value {v} must be a bool, number, string or list of numbers")))
 }
 
 /// How often the calling thread runs Python's signal handlers while a render runs: Ctrl-C

@@ -76,6 +76,29 @@ pub struct RenderOptions {
     /// off, the dome still lights the scene and shows in reflections, and the background is
     /// black with alpha 0, as usdrecord renders without `--enableDomeLightVisibility`.
     pub dome_light_camera_visibility: bool,
+    /// The window of the frame to render, in NDC: xmin, ymin, xmax, ymax, (0, 0) the
+    /// bottom-left corner, (1, 1) the top-right (USD's `dataWindowNDC`). A pixel is rendered
+    /// when its centre lies in the window ([`RenderOptions::data_window`]); the film holds those
+    /// pixels only, each exactly as the whole frame has it (rays, seeds and the irradiance
+    /// cache's records are the whole frame's), so tiles assemble into the frame bit for bit.
+    pub crop: [f64; 4],
+}
+
+/// The pixels a render fills: columns `x` and rows `y` (row 0 at the top) of the whole frame.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DataWindow {
+    pub x: std::ops::Range<usize>,
+    pub y: std::ops::Range<usize>,
+}
+
+impl DataWindow {
+    pub fn width(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn height(&self) -> usize {
+        self.y.len()
+    }
 }
 
 /// The `integrator` render setting.
@@ -131,6 +154,27 @@ impl RenderOptions {
         if self.width == 0 || self.height == 0 || self.width > 65_536 || self.height > 65_536 {
             return Err(RenderError::Settings(format!("resolution {}x{} must be within 1..=65536 on each side", self.width, self.height)));
         }
-        crate::settings::check(self).map_err(|e| RenderError::Settings(e.to_string()))
+        crate::settings::check(self).map_err(|e| RenderError::Settings(e.to_string()))?;
+        let window = self.data_window();
+        if window.x.is_empty() || window.y.is_empty() {
+            let [x0, y0, x1, y1] = self.crop;
+            return Err(RenderError::Settings(format!(
+                "render setting crop={x0},{y0},{x1},{y1}: holds no pixel centre of a {}x{} image",
+                self.width, self.height
+            )));
+        }
+        Ok(())
+    }
+
+    /// The pixels whose centres lie in the `crop` window: column x when `xmin·W ≤ x + ½ <
+    /// xmax·W`, row y (counted from the top, NDC y from the bottom) when `(1 − ymax)·H < y + ½ ≤
+    /// (1 − ymin)·H`. A window edge on a pixel edge (`k / W`) is half a pixel from every centre,
+    /// so tiles cut at pixel edges share no pixel and miss none, whatever the rounding of `k / W`.
+    pub fn data_window(&self) -> DataWindow {
+        let [x0, y0, x1, y1] = self.crop;
+        let (w, h) = (self.width as f64, self.height as f64);
+        let column = |ndc: f64| ((ndc * w - 0.5).ceil().max(0.0) as usize).min(self.width);
+        let row = |ndc: f64| (((1.0 - ndc) * h - 0.5).floor() + 1.0).clamp(0.0, h) as usize;
+        DataWindow { x: column(x0)..column(x1), y: row(y1)..row(y0) }
     }
 }

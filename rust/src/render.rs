@@ -115,13 +115,16 @@ pub fn render_with_cache(
         .build()
         .map_err(|e| RenderError::Settings(format!("cannot start {threads} render threads: {e}")))?;
     let (w, h) = (options.width, options.height);
+    // Only the crop window's pixels are rendered; each keeps its whole-frame coordinates (its
+    // rays and its samples' seeds), so a window's pixels are the whole frame's bit for bit.
+    let window = options.data_window();
     let mut tiles = Vec::new();
-    for y0 in (0..h).step_by(TILE) {
-        for x0 in (0..w).step_by(TILE) {
-            tiles.push((x0, y0, TILE.min(w - x0), TILE.min(h - y0)));
+    for y0 in window.y.clone().step_by(TILE) {
+        for x0 in window.x.clone().step_by(TILE) {
+            tiles.push((x0, y0, TILE.min(window.x.end - x0), TILE.min(window.y.end - y0)));
         }
     }
-    progress.start((w * h) as u64 * u64::from(options.samples));
+    progress.start((window.width() * window.height()) as u64 * u64::from(options.samples));
     let out = pool.install(|| {
         if progress.cancelled() {
             return Err(RenderError::Cancelled);
@@ -149,7 +152,7 @@ pub fn render_with_cache(
                 .iter()
                 .map(|&tile| TileState { tile, sums: Vec::new(), n_ok: Vec::new(), counters: TraceCounters::default(), dropped: 0 })
                 .collect();
-            let mut film = Film::new(w, h, &options.aovs);
+            let mut film = Film::new(window.width(), window.height(), &options.aovs);
             let mut reset = 0;
             for (pass, samples) in passes(options.samples, options.progressive).into_iter().enumerate() {
                 if progress.cancelled() {
@@ -162,7 +165,7 @@ pub fn render_with_cache(
                 reset = 0;
                 for r in &results {
                     reset += r.dropped;
-                    write_tile(&mut film, r);
+                    write_tile(&mut film, r, (window.x.start, window.y.start));
                 }
                 progress.pass_finished(samples.end, &film);
             }
@@ -201,6 +204,10 @@ pub fn render_with_cache(
             let left_out = tracer.dropped.list();
             obj.insert("dropped_prims".into(), Value::from(left_out.iter().map(ToString::to_string).collect::<Vec<_>>()));
             obj.insert("internal_errors".into(), Value::from(left_out.iter().filter(|d| d.internal).count()));
+            if let Some(Value::Object(render)) = obj.get_mut("render") {
+                // The pixels rendered, in whole-frame pixels: [x0, y0, x1, y1), row 0 at the top.
+                render.insert("data_window".into(), serde_json::json!([window.x.start, window.y.start, window.x.end, window.y.end]));
+            }
         }
         Ok(RenderOutput { film, stats })
     });
@@ -352,8 +359,10 @@ fn render_tile(
     Some(TileResult { tile: state.tile, values, dropped })
 }
 
-fn write_tile(film: &mut Film, r: &TileResult) {
+/// Copies a tile into the film, whose pixel (0, 0) is the frame's pixel `origin`.
+fn write_tile(film: &mut Film, r: &TileResult, origin: (usize, usize)) {
     let (x0, y0, tw, th) = r.tile;
+    let (x0, y0) = (x0 - origin.0, y0 - origin.1);
     let width = film.width;
     for buffer in &mut film.aovs {
         let aov = buffer.aov;

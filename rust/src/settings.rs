@@ -30,6 +30,10 @@ pub enum SettingType {
     Bool,
     /// One of these tokens.
     Choice(&'static [&'static str]),
+    /// A window of the image in NDC, USD's `dataWindowNDC`: `xmin,ymin,xmax,ymax`, (0, 0) the
+    /// bottom-left corner and (1, 1) the top-right one, each within [0, 1], min < max. Text
+    /// (`0,0.5,0.5,1`) or four JSON numbers.
+    Window,
 }
 
 /// Which part of the renderer reads a setting.
@@ -75,6 +79,8 @@ pub enum SettingValue {
     Float(f64),
     Bool(bool),
     Choice(&'static str),
+    /// A [`SettingType::Window`]: xmin, ymin, xmax, ymax in NDC.
+    Window([f64; 4]),
     /// An optional setting left unset (e.g. a per-tier cache budget).
     Unset,
 }
@@ -114,6 +120,7 @@ impl SettingType {
             }
             SettingType::Bool => "0 or 1".into(),
             SettingType::Choice(names) => format!("one of {}", names.join(", ")),
+            SettingType::Window => "xmin,ymin,xmax,ymax, NDC (y up), 0 ≤ min < max ≤ 1".into(),
         }
     }
 
@@ -170,6 +177,18 @@ impl SettingType {
                 Value::String(s) => names.iter().find(|n| **n == s.trim()).map(|n| SettingValue::Choice(n)).ok_or("not one of the choices"),
                 _ => Err("not one of the choices"),
             },
+            SettingType::Window => {
+                let corners: Vec<f64> = match value {
+                    Value::String(s) => {
+                        s.split(',').map(|c| c.trim().parse::<f64>().map_err(|_| "not four numbers")).collect::<Result<_, _>>()?
+                    }
+                    Value::Array(items) => items.iter().map(number).collect::<Result<_, _>>().map_err(|_| "not four numbers")?,
+                    _ => return Err("not four numbers"),
+                };
+                let window: [f64; 4] = corners.try_into().map_err(|_| "not four numbers")?;
+                self.check(&SettingValue::Window(window))?;
+                Ok(SettingValue::Window(window))
+            }
         }
     }
 
@@ -189,6 +208,13 @@ impl SettingType {
             }
             (SettingType::Bool, SettingValue::Bool(_)) => Ok(()),
             (SettingType::Choice(names), SettingValue::Choice(c)) => names.contains(c).then_some(()).ok_or("not one of the choices"),
+            (SettingType::Window, SettingValue::Window([x0, y0, x1, y1])) => {
+                if ![x0, y0, x1, y1].iter().all(|c| c.is_finite()) {
+                    return Err("not a finite number");
+                }
+                let inside = [x0, y0, x1, y1].iter().all(|c| (0.0..=1.0).contains(*c));
+                (inside && x0 < x1 && y0 < y1).then_some(()).ok_or("out of range")
+            }
             _ => Err("of the wrong type"),
         }
     }
@@ -269,6 +295,7 @@ impl SettingValue {
             SettingValue::Float(x) => x.to_string(),
             SettingValue::Bool(b) => u8::from(*b).to_string(),
             SettingValue::Choice(c) => (*c).to_string(),
+            SettingValue::Window(w) => w.map(|c| c.to_string()).join(","),
             SettingValue::Unset => String::new(),
         }
     }
@@ -324,6 +351,18 @@ impl SettingField for f32 {
     /// Through the shortest decimal that reads back as this f32, so `0.2_f32` shows as `0.2`.
     fn to_value(&self) -> SettingValue {
         SettingValue::Float(self.to_string().parse().unwrap_or(f64::from(*self)))
+    }
+}
+
+impl SettingField for [f64; 4] {
+    fn from_value(value: &SettingValue) -> Option<Self> {
+        match value {
+            SettingValue::Window(w) => Some(*w),
+            _ => None,
+        }
+    }
+    fn to_value(&self) -> SettingValue {
+        SettingValue::Window(*self)
     }
 }
 
@@ -517,6 +556,8 @@ settings_table! {
         "seam boxes closing cracks between tessellation rates (docs/cracks.md); 0 only to measure them: rays then slip through cracks";
     "domeLightCameraVisibility": dome_light_camera_visibility: bool = true, SettingType::Bool, Render => dome_light_camera_visibility,
         "camera rays see a dome light as the background (0: it lights the scene and shows in reflections only)";
+    "crop": crop: [f64; 4] = [0.0, 0.0, 1.0, 1.0], SettingType::Window, Render => crop,
+        "render only the pixels whose centres lie in this window of the frame (USD's dataWindowNDC), bit-identical to the same pixels of the whole frame";
 }
 
 /// The row of setting `key`.
