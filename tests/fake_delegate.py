@@ -396,6 +396,7 @@ def fake_module() -> types.ModuleType:
 
     module.read_metadata = read_metadata  # type: ignore[attr-defined]
     # The writer's rules are the compiled module's own.
+    module.eight_bit_aovs = native.eight_bit_aovs  # type: ignore[attr-defined]
     module.output_plan = native.output_plan  # type: ignore[attr-defined]
     module.srgb_encode = native.srgb_encode  # type: ignore[attr-defined]
     module.version = lambda: "0.0.0-fake"  # type: ignore[attr-defined]

@@ -188,6 +188,40 @@ def test_a_warm_worker_resyncs_only_what_varies_in_time(client, tmp_path) -> Non
     assert warm < cold, (warm, cold)
 
 
+def test_a_warm_worker_reads_each_texture_tile_once(client) -> None:
+    # The textured example: two textures (color and displacement height), a static stage.
+    # Its texture statistics are the worker session's, cumulative: a warm worker's later
+    # pieces look up texels again (lookups grow) without opening a file again or reading a
+    # tile it has (a cold session per piece would reopen both files and read the tiles anew,
+    # and its lookups would not add up).
+    path = str(Path(__file__).resolve().parent.parent / "examples" / "textured.usda")
+    pieces: list[cluster_api.Piece] = []
+    cluster_api.render_frames(
+        client,
+        path,
+        [1.0] * 6,
+        None,
+        24,
+        ("color",),
+        {"seed": 3},
+        on_done=lambda done, total, piece: pieces.append(piece),
+    )
+    by_worker: dict[str, list[dict]] = {}
+    for piece in pieces:
+        by_worker.setdefault(piece.worker, []).append(piece.stats["texture_cache"])
+    warm = 0
+    for worker, stats in by_worker.items():
+        stats.sort(key=lambda t: t["lookups"])
+        first = stats[0]
+        assert first["files"], worker
+        for later in stats[1:]:
+            warm += 1
+            assert later["lookups"] > first["lookups"], worker
+            assert later["tiles_read"] == first["tiles_read"], (worker, later, first)
+            assert [f["times_opened"] for f in later["files"]] == [1] * len(later["files"]), worker
+    assert warm >= 4, "fewer than four pieces rendered by a warm worker"
+
+
 def test_record_reports_a_failed_frame_and_writes_the_others(client, tmp_path, capsys) -> None:
     path = write_stage(tmp_path / "bad.usda", bad_camera_at=3.0, nan_at=2.0)
     out = tmp_path / "out"

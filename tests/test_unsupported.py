@@ -41,8 +41,8 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam")).CreateClippingPlanesAttr(
         [(0.0, 1.0, 0.0, 0.0)]
     )
-    UsdGeom.Sphere.Define(stage, "/World/Ball")
-    UsdGeom.Sphere.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.NurbsPatch.Define(stage, "/World/Ball")
+    UsdGeom.NurbsPatch.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
     UsdLux.CylinderLight.Define(stage, "/World/Tube")
 
     key = add_distant_light(stage, "/World/Key").GetPrim()
@@ -111,7 +111,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     return sorted(
         [
             Unsupported(cam, "camera clippingPlanes 1 plane(s)"),
-            Unsupported("/World/Ball", "prim type Sphere"),
+            Unsupported("/World/Ball", "prim type NurbsPatch"),
             Unsupported("/World/Tube", "prim type CylinderLight"),
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
@@ -166,8 +166,8 @@ def test_one_of_each_is_listed_exactly(fake, caplog) -> None:
 
 def test_invisible_and_excluded_prims_are_not_listed(fake) -> None:
     stage = new_stage()
-    UsdGeom.Sphere.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
-    UsdGeom.Sphere.Define(stage, "/Guide").CreatePurposeAttr("guide")
+    UsdGeom.NurbsPatch.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.NurbsPatch.Define(stage, "/Guide").CreatePurposeAttr("guide")
     add_cube(stage, "/Cube")
     scene = UsdSceneDelegate(stage, fake)
     scene.sync()

@@ -95,6 +95,12 @@ def settings_properties(
         elif kind == "bool":
             kwargs["default"] = bool(default)
             specs.append(PropertySpec(key, "BoolProperty", kwargs))
+        elif kind == "window":
+            # A window of the frame (xmin, ymin, xmax, ymax in NDC): four floats in [0, 1].
+            kwargs.update(size=4, min=0.0, max=1.0)
+            if default is not None:
+                kwargs["default"] = tuple(float(x) for x in str(default).split(","))
+            specs.append(PropertySpec(key, "FloatVectorProperty", kwargs))
         else:
             integer = kind == "int"
             kwargs.update(_number_kwargs(row, integer))
@@ -147,5 +153,7 @@ def render_settings(values: Any) -> dict[str, object]:
             value = int(bool(value))
         elif row["type"] == "float" and value >= 3.0e38:
             value = "inf"
+        elif row["type"] == "window":
+            value = ",".join(f"{float(x):.9g}" for x in value)
         chosen[key] = value
     return chosen
