@@ -28,6 +28,7 @@ import argparse
 import json
 import logging
 import os
+import signal
 import sys
 import time as time_module
 from collections.abc import Callable, Sequence
@@ -840,6 +841,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version
         return int(exc.code or 0) if not isinstance(exc.code, str) else 1
     handler, old_level = _install_logging(args.verbose, err)
+    old_sigterm = _stop_on_sigterm()
     try:
         return _run(args, frames, out, err)
     except MiprayError as exc:
@@ -848,9 +850,39 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         err.write(f"{PROG}: interrupted\n")
         return 130
+    except _Terminated:
+        err.write(f"{PROG}: terminated\n")
+        return 128 + signal.SIGTERM
     finally:
+        if old_sigterm is not None:
+            signal.signal(signal.SIGTERM, old_sigterm)
         _log.removeHandler(handler)
         _log.setLevel(old_level)
+
+
+class _Terminated(BaseException):
+    """SIGTERM arrived (a render farm's stop, ``kill``): stop as Ctrl-C does.
+
+    A BaseException, as KeyboardInterrupt is, so that no ``except Exception`` on the way
+    swallows it; raised by the handler on the main thread, where the render's watcher runs
+    Python's signal handlers while the render threads work, so the render stops at its next
+    check and no output is left half written.
+    """
+
+
+def _stop_on_sigterm() -> Any:
+    """Make SIGTERM raise :class:`_Terminated`; return the handler it replaced.
+
+    None (nothing installed) off the main thread, where Python cannot set handlers.
+    """
+
+    def stop(signum: int, frame: object) -> None:
+        raise _Terminated
+
+    try:
+        return signal.signal(signal.SIGTERM, stop)
+    except ValueError:
+        return None
 
 
 if __name__ == "__main__":
