@@ -73,8 +73,7 @@ impl<'a> ColorBleeding<'a> {
     /// settings called for (shadow rays only toward lights that cast shadows; hemisphere rays
     /// when `indirect_diffuse` is enabled; the `ao` AOV when `ao` is).
     pub fn new(tracer: &'a Tracer<'a>, scene: &'a Scene, effects: &[Effect], options: &RenderOptions) -> Self {
-        let direct = DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
-            .with_camera_sees_dome(options.dome_light_camera_visibility);
+        let direct = DirectLight::for_render(scene, effects, options);
         let mut bounce_direct = direct.clone();
         bounce_direct.shadow_samples = 1;
         let indirect_samples = if enabled(effects, "indirect_diffuse") { options.indirect_samples } else { 0 };

@@ -120,8 +120,7 @@ impl<'a> DirectLighting<'a> {
             reflection: enabled(effects, "reflection"),
             refraction: enabled(effects, "refraction"),
             glossy: enabled(effects, "glossy"),
-            direct: DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
-                .with_camera_sees_dome(options.dome_light_camera_visibility),
+            direct: DirectLight::for_render(scene, effects, options),
             ao: Hemisphere::new(if enabled(effects, "ao") { options.ao_samples } else { 0 }, options),
             ao_intensity: options.ao_intensity,
             max_depth: options.max_depth,

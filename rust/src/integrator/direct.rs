@@ -41,8 +41,10 @@ use glam::Vec3A;
 
 use crate::bsdf::Scattering;
 use crate::differential::RayDifferential;
+use crate::effects::{enabled, Effect};
 use crate::light::{Light, LightShape};
 use crate::light_sampler::LightSampler;
+use crate::options::RenderOptions;
 use crate::ray::{offset_origin, Ray, RayKind};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -107,9 +109,13 @@ impl DirectLight {
         }
     }
 
-    /// The same, with camera rays seeing domes or not ([`DirectLight::camera_sees_dome`]).
-    pub fn with_camera_sees_dome(self, camera_sees_dome: bool) -> Self {
-        DirectLight { camera_sees_dome, ..self }
+    /// What a render's integrators use: shadows when the scene calls for them (the `shadows`
+    /// effect), `shadowSamples`, and camera rays seeing domes as `domeLightCameraVisibility` says.
+    pub fn for_render(scene: &Scene, effects: &[Effect], options: &RenderOptions) -> Self {
+        DirectLight {
+            camera_sees_dome: options.dome_light_camera_visibility,
+            ..DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
+        }
     }
 
     /// The light sampler (for probabilities of choosing a light at a point).

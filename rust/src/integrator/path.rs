@@ -105,8 +105,7 @@ impl<'a> PathTracer<'a> {
             tracer,
             scene,
             depth_of_field: enabled(effects, "depth_of_field"),
-            direct: DirectLight::new(scene, enabled(effects, "shadows"), options.shadow_samples)
-                .with_camera_sees_dome(options.dome_light_camera_visibility),
+            direct: DirectLight::for_render(scene, effects, options),
             max_depth: options.max_depth,
             russian_roulette_depth: options.russian_roulette_depth,
             samples: options.samples,
