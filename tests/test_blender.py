@@ -25,6 +25,7 @@ if sys.version_info[:2] != (3, 11) and not os.environ.get("CI"):
     pytest.skip("bpy needs CPython 3.11", allow_module_level=True)
 
 import bpy  # noqa: E402
+from pxr import Usd, UsdGeom  # noqa: E402
 
 import mipray  # noqa: E402
 from mipray import _mipray  # noqa: E402
@@ -388,6 +389,59 @@ def test_object_the_export_drops_is_named_and_the_rest_renders(scene, tmp_path, 
         "Warning: mipray: object 'Smoke' (volume): no mesh in the USD export; rendered without it"
     ], out
     assert pixels[..., 3].max() > 0.99
+
+
+def _instance_on_points(grid: object, prototype: object, as_instance: bool) -> None:
+    """Geometry nodes on ``grid``: ``prototype`` instanced on each of its points."""
+    tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group_in = tree.nodes.new("NodeGroupInput")
+    group_out = tree.nodes.new("NodeGroupOutput")
+    scatter = tree.nodes.new("GeometryNodeInstanceOnPoints")
+    info = tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = prototype
+    info.inputs["As Instance"].default_value = as_instance
+    tree.links.new(group_in.outputs[0], scatter.inputs["Points"])
+    tree.links.new(info.outputs["Geometry"], scatter.inputs["Instance"])
+    tree.links.new(scatter.outputs[0], group_out.inputs[0])
+    grid.modifiers.new("Scatter", "NODES").node_group = tree
+
+
+@pytest.mark.parametrize("as_instance", [True, False])
+def test_geometry_node_instances_render_or_are_named(scene, tmp_path, capfd, as_instance):
+    # A 2×2 grid of points below the cube, each carrying a small ico sphere.
+    bpy.ops.mesh.primitive_grid_add(
+        x_subdivisions=1, y_subdivisions=1, size=3, location=(0, 0, -1.3)
+    )
+    grid = bpy.context.active_object
+    grid.name = "Scatter"
+    bpy.ops.mesh.primitive_ico_sphere_add(radius=0.3, location=(50, 0, 0))
+    prototype = bpy.context.active_object
+    prototype.hide_render = True
+    _instance_on_points(grid, prototype, as_instance)
+    stage = Usd.Stage.Open(export.export_usd(bpy.context.evaluated_depsgraph_get(), str(tmp_path)))
+    placed = [
+        prim
+        for prim in stage.Traverse()
+        if prim.IsA(UsdGeom.Mesh)
+        and len(UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get()) > 0
+        and "Scatter" in str(prim.GetPath())
+    ]
+    _render(scene, tmp_path / "scatter.exr")
+    out = capfd.readouterr()
+    lines = [line for line in (out.out + out.err).splitlines() if "Scatter" in line]
+    if as_instance:
+        # The four spheres arrive as meshes, and nothing is reported.
+        assert len(placed) >= 4 and lines == [], (placed, lines)
+    else:
+        # The exporter wrote them empty: the report says so, by object and count.
+        assert placed == []
+        assert lines == [
+            "Warning: mipray: object 'Scatter': 4 geometry-node instances came out of the USD "
+            "export empty (an Object Info node without 'As Instance', or geometry the exporter "
+            "cannot write); rendered without it"
+        ], out
 
 
 def test_addon_zip_installs_and_renders(tmp_path):

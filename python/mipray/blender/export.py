@@ -122,6 +122,17 @@ def _exported_objects(stage: Usd.Stage) -> Iterator[tuple[str, Usd.Prim]]:
             yield str(attr.Get()), prim
 
 
+def _named_ancestors(prim: Usd.Prim) -> list[Usd.Prim]:
+    """``prim``'s ancestors (and itself) that carry a Blender object name, nearest first."""
+    named = []
+    while prim and not prim.IsPseudoRoot():
+        attr = prim.GetAttribute(OBJECT_NAME)
+        if attr and attr.HasAuthoredValue():
+            named.append(prim)
+        prim = prim.GetParent()
+    return named
+
+
 def camera_prim(stage: Usd.Stage, camera_object: Any) -> str | None:
     """Path of the UsdGeom.Camera the exporter made of Blender's ``camera_object``."""
     if camera_object is None:
@@ -136,21 +147,40 @@ def camera_prim(stage: Usd.Stage, camera_object: Any) -> str | None:
 
 
 def unexported_objects(depsgraph: Any, stage: Usd.Stage) -> list[str]:
-    """One line per geometry object of ``depsgraph`` that left no mesh on ``stage``.
+    """One line per geometry object of ``depsgraph`` that the render will lack.
 
     mipray renders meshes (subdivision surfaces among them); a volume, a grease pencil, or an
     object the exporter dropped is named with its type, so the report can say what is missing.
+    Instances made by geometry nodes are checked too: Blender 5.0's exporter writes an instance
+    whose Object Info node lacks *As Instance* (or whose geometry it cannot express) as an empty
+    Mesh, which would render as nothing without a word; such meshes are counted per object.
     """
-    with_mesh = {
-        name
-        for name, prim in _exported_objects(stage)
-        if any(p.IsA(UsdGeom.Mesh) for p in Usd.PrimRange(prim))
-    }
-    lines = []
+    with_mesh = set()
+    empty: dict[str, int] = {}
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        owners = [str(a.GetAttribute(OBJECT_NAME).Get()) for a in _named_ancestors(prim)]
+        if not owners:
+            continue
+        counts = UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get()
+        if len(owners) > 1 and counts is not None and len(counts) == 0:
+            # An instance (an object's Xform under another's) that came out empty; counted on
+            # the object that instances it.
+            empty[owners[-1]] = empty.get(owners[-1], 0) + 1
+        else:
+            with_mesh.add(owners[0])
+    lines = set()
     for instance in depsgraph.object_instances:
         if instance.is_instance:
             continue
         obj = instance.object
-        if obj.type in _GEOMETRY_TYPES and obj.name not in with_mesh:
-            lines.append(f"object '{obj.name}' ({obj.type.lower()}): no mesh in the USD export")
-    return sorted(set(lines))
+        if obj.type in _GEOMETRY_TYPES and obj.name not in with_mesh | set(empty):
+            lines.add(f"object '{obj.name}' ({obj.type.lower()}): no mesh in the USD export")
+    for name, count in empty.items():
+        what = "instance" if count == 1 else "instances"
+        lines.add(
+            f"object '{name}': {count} geometry-node {what} came out of the USD export empty "
+            "(an Object Info node without 'As Instance', or geometry the exporter cannot write)"
+        )
+    return sorted(lines)
