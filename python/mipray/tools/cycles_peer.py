@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"run {i + 1}: mipray {mipray_runs[-1]}, cycles {cycles_runs[-1]}", file=sys.stderr)
 
     def med(runs: list[Run], f: str) -> float:
-        return statistics.median(getattr(r, f) for r in runs)
+        return float(statistics.median(getattr(r, f) for r in runs))
 
     rows = [
         (f, med(mipray_runs, f), med(cycles_runs, f)) for f in ("render_s", "process_s", "cpu_s")
@@ -260,10 +260,10 @@ def main(argv: list[str] | None = None) -> int:
         "Each run's figures:",
         "",
     ]
-    for i, (m, c) in enumerate(zip(mipray_runs, cycles_runs, strict=True)):
+    for i, (mr, cr) in enumerate(zip(mipray_runs, cycles_runs, strict=True)):
         lines.append(
-            f"- run {i + 1}: mipray {m.render_s:.2f} / {m.process_s:.2f} / {m.cpu_s:.2f} s; "
-            f"Cycles {c.render_s:.2f} / {c.process_s:.2f} / {c.cpu_s:.2f} s "
+            f"- run {i + 1}: mipray {mr.render_s:.2f} / {mr.process_s:.2f} / {mr.cpu_s:.2f} s; "
+            f"Cycles {cr.render_s:.2f} / {cr.process_s:.2f} / {cr.cpu_s:.2f} s "
             "(render / process / CPU)"
         )
     # The last run's images, halved, beside the doc.

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 __all__ = [
@@ -179,7 +180,7 @@ def _transform2d(shader: UsdShade.Shader, time: Usd.TimeCode) -> Transform2d:
     return (scale[0], scale[1]), float(rotation or 0.0), (translation[0], translation[1])
 
 
-def apply_transform2d(st: np.ndarray, transform: Transform2d) -> np.ndarray:
+def apply_transform2d(st: NDArray[np.float32], transform: Transform2d) -> NDArray[np.float32]:
     """``st`` through a UsdTransform2d: scaled, rotated counter-clockwise, then translated.
 
     This is UsdPreviewSurface's definition of the node.
