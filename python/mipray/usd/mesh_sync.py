@@ -10,6 +10,7 @@ Both the scene delegate (meshes rendered in place) and the instancing code
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,13 +18,24 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
+from ..errors import PrimError
 from .face_albedo import compute_surface_albedo
 from .gprim import gprim_arguments, point_colors
 from .material import compute_albedo
 from .mesh import mesh_arguments
+from .primvars import primvar_argument, read_normals
 from .shading import material_might_vary, shading_arguments
 
 __all__ = ["MeshRead", "read_mesh"]
+
+_log = logging.getLogger(__name__)
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        _log.warning("mipray: %s", message)
 
 
 @dataclass(frozen=True)
@@ -62,15 +74,44 @@ def read_mesh(
     args = mesh_arguments(mesh, time, transform, (0.18, 0.18, 0.18))
     if args is None:
         return MeshRead(None, (), data_varies)
-    surface = compute_surface_albedo(
-        mesh, time, args["face_vertex_counts"], args["face_vertex_indices"], len(args["points"])
-    )
+    counts, n_points = args["face_vertex_counts"], len(args["points"])
+    surface = compute_surface_albedo(mesh, time, counts, args["face_vertex_indices"], n_points)
+    primvars: dict[str, Any] = surface.arguments().pop("primvars", {})
     args.update(surface.arguments())
-    args.update(shading_arguments(prim, time))
+    args.pop("primvars", None)
+    shading = shading_arguments(prim, time)
+    primvars.update(shading.pop("primvars", {}))
+    args.update(shading)
+    normals, normals_vary = _normals(mesh, time, args["scheme"], counts, n_points)
+    if normals is not None:
+        primvars["normals"] = normals
+    if primvars:
+        args["primvars"] = primvars
     if prototype:
         args["prototype"] = True
-    varies = data_varies or surface.might_vary or material_might_vary(prim)
+    varies = data_varies or surface.might_vary or normals_vary or material_might_vary(prim)
     return MeshRead(args, surface.material_paths, varies)
+
+
+def _normals(
+    mesh: UsdGeom.Mesh, time: Usd.TimeCode, scheme: str, counts: NDArray[np.int32], n_points: int
+) -> tuple[dict[str, Any] | None, bool]:
+    """A polygonal mesh's authored normals as a ``primvars`` entry, and whether they may vary.
+
+    Subdivision surfaces ignore authored normals, as UsdGeom.Mesh says (they have their own);
+    bad normals are warned about once, naming the prim and attribute, and the mesh shades with
+    its own faceted normals.
+    """
+    if scheme != "none":
+        return None, False
+    try:
+        normals = read_normals(mesh, time, counts, n_points)
+    except PrimError as exc:
+        _warn_once(f"{exc}; shading the mesh with its faces' own normals")
+        return None, False
+    if normals is None:
+        return None, False
+    return primvar_argument(normals), normals.might_vary
 
 
 def _read_gprim(
