@@ -25,6 +25,7 @@ from .material import compute_albedo
 from .mesh import mesh_arguments
 from .primvars import primvar_argument, read_normals
 from .shading import material_might_vary, shading_arguments
+from .skel import Posed, SkelPoser, is_skinned
 
 __all__ = ["MeshRead", "read_mesh"]
 
@@ -49,14 +50,24 @@ class MeshRead:
     material_paths: tuple[str, ...]
     #: Whether the mesh's data (not its transform) might change over time.
     might_vary: bool
+    #: A skinned mesh's posed world bounds (min and max corners), which its rest extent
+    #: does not give; None for other meshes.
+    posed_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
 
 def read_mesh(
-    prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64], *, prototype: bool = False
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    transform: NDArray[np.float64],
+    *,
+    prototype: bool = False,
+    poser: SkelPoser | None = None,
 ) -> MeshRead:
     """Read the mesh ``prim`` at ``time``.
 
-    ``transform`` is object-to-world, or for a prototype object-to-prototype-root.
+    ``transform`` is object-to-world, or for a prototype object-to-prototype-root. A skinned
+    mesh is posed at ``time`` by ``poser`` (:mod:`mipray.usd.skel`; one is made if None):
+    its points posed, its transform the skeleton's.
 
     Raises:
         PrimError: the mesh's data is inconsistent (the message names the
@@ -74,6 +85,9 @@ def read_mesh(
     args = mesh_arguments(mesh, time, transform, (0.18, 0.18, 0.18))
     if args is None:
         return MeshRead(None, (), data_varies)
+    posed = _pose(prim, time, args["points"], prototype, poser)
+    if posed is not None:
+        args["points"], args["transform"] = posed.points, posed.transform
     counts, n_points = args["face_vertex_counts"], len(args["points"])
     surface = compute_surface_albedo(mesh, time, counts, args["face_vertex_indices"], n_points)
     primvars: dict[str, Any] = surface.arguments().pop("primvars", {})
@@ -90,7 +104,31 @@ def read_mesh(
     if prototype:
         args["prototype"] = True
     varies = data_varies or surface.might_vary or normals_vary or material_might_vary(prim)
-    return MeshRead(args, surface.material_paths, varies)
+    if posed is None:
+        return MeshRead(args, surface.material_paths, varies)
+    world = posed.points.astype(np.float64) @ posed.transform[:3, :3] + posed.transform[3, :3]
+    bounds = (world.min(axis=0), world.max(axis=0)) if len(world) else None
+    return MeshRead(args, surface.material_paths, varies or posed.might_vary, bounds)
+
+
+def _pose(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    points: NDArray[np.float32],
+    prototype: bool,
+    poser: SkelPoser | None,
+) -> Posed | None:
+    """A skinned mesh posed at ``time``, or None (not skinned, or at rest with a warning)."""
+    if not is_skinned(prim):
+        return None
+    if prototype:
+        # A prototype's transform is relative to its root; the skeleton's is a world one.
+        _warn_once(
+            f"{prim.GetPath()}: a skinned mesh inside an instancing prototype is not posed; "
+            "rendering its rest pose"
+        )
+        return None
+    return (poser or SkelPoser()).pose(prim, time, points)
 
 
 def _normals(

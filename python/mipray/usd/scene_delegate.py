@@ -56,6 +56,7 @@ from .light import (
 )
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
+from .skel import SkelPoser
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
 from .unsupported import HEADLIGHT, Unsupported, audit_stage, is_rendered_type, warn_unsupported
 
@@ -103,6 +104,8 @@ class _Record:
     material_paths: tuple[str, ...] = ()
     args: dict[str, Any] = field(default_factory=dict)  # kept for cameras only
     instancer: InstancerState | None = None  # a PointInstancer's prototypes
+    # A skinned mesh's posed world bounds (min, max); skinned meshes are re-read, not moved.
+    posed_bounds: tuple[Any, Any] | None = None
 
 
 _NO_RECORD = _Record("none", -1, in_delegate=False)
@@ -217,6 +220,7 @@ class UsdSceneDelegate:
         self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
         self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
+        self._poser = SkelPoser()
 
     # ------------------------------------------------------------------ state
 
@@ -395,6 +399,8 @@ class UsdSceneDelegate:
                 self._instancing.resend_native_prototype(self.stage, prototype)
         self._prototype_edits.clear()
 
+        if full or self._resync:
+            self._poser.clear()  # skeletons and bindings may have changed
         if full:
             self._order = 0
             roots = ["/"]
@@ -456,6 +462,8 @@ class UsdSceneDelegate:
             dirty.update(owners)
             self._instancer_full.update(owners)
         if elsewhere:
+            # A changed skeleton or animation re-poses the skinned meshes.
+            dirty.update(p for p, r in self._records.items() if r.posed_bounds is not None)
             # A changed material (or a shader under it) re-syncs the meshes bound to it.
             for p, r in self._records.items():
                 if any(_under(m, q) or _under(q, m) for m in r.material_paths for q in elsewhere):
@@ -473,7 +481,12 @@ class UsdSceneDelegate:
 
     def _is_mesh_record(self, path: str) -> bool:
         record = self._records.get(path)
-        return record is not None and record.kind == "mesh" and record.in_delegate
+        return (
+            record is not None
+            and record.kind == "mesh"
+            and record.in_delegate
+            and record.posed_bounds is None  # a skinned mesh is placed by its skeleton
+        )
 
     def _sync_transform(self, path: str, xform_cache: UsdGeom.XformCache) -> None:
         """Move a synced mesh: only its world transform is sent (``set_transform``)."""
@@ -629,13 +642,14 @@ class UsdSceneDelegate:
                 self._instancing.add_instance(path, prim.GetPrototype(), transform)
                 record = _Record("instance", order, in_delegate=False, xform_varies=xform_varies)
             elif is_renderable_gprim(prim):
-                read = read_mesh(prim, time, transform)
+                read = read_mesh(prim, time, transform, poser=self._poser)
                 record = _Record(
                     "mesh",
                     order,
                     might_vary=read.might_vary,
                     xform_varies=xform_varies,
                     material_paths=read.material_paths,
+                    posed_bounds=read.posed_bounds,
                 )
                 if read.args is None:  # no faces: valid USD that renders nothing
                     self._forget(path)
@@ -805,7 +819,8 @@ class UsdSceneDelegate:
         return DEFAULT_CAMERA_PATH
 
     def _sync_default_camera(self) -> None:
-        args = framing_camera_arguments(self.stage, self.time, self.purposes)
+        posed = {p: r.posed_bounds for p, r in self._records.items() if r.posed_bounds is not None}
+        args = framing_camera_arguments(self.stage, self.time, self.purposes, posed)
         self._default_camera = args
         self.delegate.set_camera(DEFAULT_CAMERA_PATH, **args)
         self.sync_counts[DEFAULT_CAMERA_PATH] = self.sync_counts.get(DEFAULT_CAMERA_PATH, 0) + 1
