@@ -209,9 +209,10 @@ def test_a_faceted_sphere_with_authored_normals_shades_as_the_smooth_sphere(
     err_smooth = _normal_error_degrees(smooth)
     err_faceted = _normal_error_degrees(faceted)
     assert len(err_smooth) > 300
-    # 15° facets: their own normals are up to ~7° off; interpolated ones well under 1°.
+    # 15° facets: their own normals are up to ~9° off; interpolated ones (measured 0.04°)
+    # follow the sphere.
     assert err_faceted.max() > 4.0, err_faceted.max()
-    assert err_smooth.max() < 1.0, err_smooth.max()
+    assert err_smooth.max() < 0.25, err_smooth.max()
     # The colour at a pixel: as the exact sphere's (an implicit Sphere under the same light).
     exact = new_stage()
     UsdGeom.Sphere.Define(exact, "/World/Ball").CreateRadiusAttr(1.0)
@@ -284,7 +285,7 @@ def test_a_display_color_gradient_matches_its_analytic_value_at_each_pixel(
     clear = np.abs(pos[:, 0]) > 0.06
     assert clear.sum() > 300
     np.testing.assert_allclose(
-        r["albedo"][hit][clear], _expected(pos, interpolation)[clear], atol=3e-3
+        r["albedo"][hit][clear], _expected(pos, interpolation)[clear], atol=1e-4
     )
 
 
