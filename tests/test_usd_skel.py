@@ -214,3 +214,31 @@ def test_a_render_shows_the_arm_where_the_pose_puts_it(native) -> None:
     straight, up = pixel(1.8, 0.0), pixel(1.0, 0.8)
     assert alpha[1][straight] == 1.0 and alpha[1][up] == 0.0
     assert alpha[2][straight] == 0.0 and alpha[2][up] == 1.0
+
+
+def test_a_rigidly_skinned_mesh_blurs_by_its_pose_over_the_shutter(fake) -> None:
+    # The whole mesh bound to the elbow (constant joint influences: UsdSkel's rigid
+    # deformation), the shutter open from frame 1 to 2: the elbow turns 0° to 90°.
+    stage = new_stage()
+    mesh = arm(stage)
+    binding = UsdSkel.BindingAPI(mesh.GetPrim())
+    binding.CreateJointIndicesPrimvar(True, 1).Set([1])
+    binding.CreateJointWeightsPrimvar(True, 1).Set([1.0])
+    cam = add_camera(stage, "/World/Camera")
+    cam.CreateShutterOpenAttr(-0.5)
+    cam.CreateShutterCloseAttr(0.5)
+    scene = UsdSceneDelegate(stage, fake, time=1.5)
+    scene.sync()
+    assert scene.unsupported == []  # a rigid pose blurs: nothing left out
+    assert scene.update_motion("/World/Camera") == ["/World/Arm/Mesh"]
+    call = fake.calls_for("/World/Arm/Mesh")[-1]
+    assert call.method == "set_motion"
+    times, mats = call.kwargs["times"], call.kwargs["transforms"]
+    tip = np.array([2.0, 0.1, 0.1, 1.0])
+    for f, m in zip(times, mats, strict=True):
+        angle = np.radians(90.0 * f)  # UsdSkel slerps the joint's rotation
+        c, s = np.cos(angle), np.sin(angle)
+        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # row-vector form
+        want = (tip[:3] - ELBOW) @ rot + ELBOW
+        np.testing.assert_allclose((tip @ m)[:3], want, atol=1e-5)
+    assert times[0] == 0.0 and times[-1] == 1.0 and len(times) > 2

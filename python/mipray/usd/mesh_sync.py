@@ -53,6 +53,8 @@ class MeshRead:
     #: A skinned mesh's posed world bounds (min and max corners), which its rest extent
     #: does not give; None for other meshes.
     posed_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    #: A rigidly deformed skinned mesh: its pose is its transform (see :mod:`mipray.usd.skel`).
+    rigid: bool = False
 
 
 def read_mesh(
@@ -108,7 +110,7 @@ def read_mesh(
         return MeshRead(args, surface.material_paths, varies)
     world = posed.points.astype(np.float64) @ posed.transform[:3, :3] + posed.transform[3, :3]
     bounds = (world.min(axis=0), world.max(axis=0)) if len(world) else None
-    return MeshRead(args, surface.material_paths, varies or posed.might_vary, bounds)
+    return MeshRead(args, surface.material_paths, varies or posed.might_vary, bounds, posed.rigid)
 
 
 def _pose(

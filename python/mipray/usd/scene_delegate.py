@@ -106,6 +106,7 @@ class _Record:
     instancer: InstancerState | None = None  # a PointInstancer's prototypes
     # A skinned mesh's posed world bounds (min, max); skinned meshes are re-read, not moved.
     posed_bounds: tuple[Any, Any] | None = None
+    rigid: bool = False  # a rigidly deformed skinned mesh: its pose is a transform
 
 
 _NO_RECORD = _Record("none", -1, in_delegate=False)
@@ -650,6 +651,7 @@ class UsdSceneDelegate:
                     xform_varies=xform_varies,
                     material_paths=read.material_paths,
                     posed_bounds=read.posed_bounds,
+                    rigid=read.rigid,
                 )
                 if read.args is None:  # no faces: valid USD that renders nothing
                     self._forget(path)
@@ -736,8 +738,9 @@ class UsdSceneDelegate:
         Transform motion blur: only meshes whose transform (or an ancestor's) is
         time-varying are sampled, and only when the camera's shutter is open for
         a while; a mesh that no longer moves gets its motion cleared. Returns the
-        paths of the moving meshes. PointInstancer and native instance motion is
-        not read (their transforms at the frame's time are used).
+        paths of the moving meshes. A rigidly deformed skinned mesh moves by its posed
+        transform (:meth:`mipray.usd.skel.SkelPoser.rigid_motion`). PointInstancer and native
+        instance motion is not read (their transforms at the frame's time are used).
         """
         shutter = camera_shutter(self.stage, camera_path, self.time)
         moving: list[str] = []
@@ -745,7 +748,13 @@ class UsdSceneDelegate:
             if record.kind != "mesh" or not record.in_delegate:
                 continue
             samples = None
-            if record.xform_varies and shutter[1] > shutter[0]:
+            if record.rigid and shutter[1] > shutter[0]:
+                prim = self.stage.GetPrimAtPath(path)
+                if prim:
+                    rest = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(self.time) or [])
+                    points = rest.astype(np.float32).reshape(-1, 3)
+                    samples = self._poser.rigid_motion(prim, self.time, shutter, points)
+            elif record.xform_varies and shutter[1] > shutter[0]:
                 prim = self.stage.GetPrimAtPath(path)
                 if prim:
                     samples = motion_samples(prim, self.time, shutter)

@@ -10,8 +10,10 @@ not its own (UsdSkel's rule: the skinned prim's transform is ignored).
 A skeleton whose joints cannot be posed (its joints do not resolve, the influences name joints
 it does not have, the mesh binds no skeleton) gets one warning naming the mesh, and the mesh
 renders in its rest pose (its authored points and transform). The core blurs transforms, not
-deformations: a skinned mesh is posed at the frame's time, and its animation is listed as
-unsupported motion blur (:mod:`mipray.usd.unsupported`).
+deformations: a rigidly deformed mesh (one joint moves it whole) blurs by its posed transform
+over the shutter (:meth:`SkelPoser.rigid_motion`); other skinned meshes are posed at the
+frame's time, and their animation is listed as unsupported motion blur
+(:mod:`mipray.usd.unsupported`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Usd, UsdGeom, UsdSkel, Vt
 
-from .transform import matrix_to_numpy
+from .transform import MOTION_SUBSAMPLES, matrix_to_numpy
 
 __all__ = ["Posed", "SkelPoser", "is_skinned"]
 
@@ -45,6 +47,9 @@ class Posed:
     transform: NDArray[np.float64]
     #: Whether the pose may change with the time (an animated skeleton or blend shapes).
     might_vary: bool
+    #: Rigidly deformed (one joint moves the whole mesh): ``points`` are the rest points and
+    #: ``transform`` carries the pose, so the pose over a shutter is a transform motion.
+    rigid: bool = False
 
 
 class SkelPoser:
@@ -91,6 +96,7 @@ class SkelPoser:
             anim.JointTransformsMightBeTimeVarying() or anim.BlendShapeWeightsMightBeTimeVarying()
         )
         posed = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, dtype=np.float32))
+        is_rigid = False
         if query.HasBlendShapes() and anim:
             problem = _blend(prim, query, anim, time, posed)
             if problem:
@@ -105,6 +111,7 @@ class SkelPoser:
                 if rigid is None:
                     return self._rest(path, f"its joints are not in {skeleton.GetPath()}")
                 skel_to_world = rigid * skel_to_world
+                is_rigid = not query.HasBlendShapes()
             elif not query.ComputeSkinnedPoints(xforms, posed, time):
                 return self._rest(
                     path, f"its jointIndices name joints {skeleton.GetPath()} does not have"
@@ -112,7 +119,38 @@ class SkelPoser:
         out = np.asarray(posed, dtype=np.float32).reshape(-1, 3)
         if not np.isfinite(out).all():
             return self._rest(path, "skinning gave points that are not finite")
-        return Posed(np.ascontiguousarray(out), matrix_to_numpy(skel_to_world), bool(varies))
+        return Posed(
+            np.ascontiguousarray(out), matrix_to_numpy(skel_to_world), bool(varies), is_rigid
+        )
+
+    def rigid_motion(
+        self,
+        prim: Usd.Prim,
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        points: NDArray[np.float32],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """A rigidly deformed mesh's posed transform over the shutter.
+
+        As :func:`mipray.usd.transform.motion_samples` gives a moving prim's: (times as
+        fractions of the shutter, (N, 4, 4) matrices) at the shutter's ends and evenly spaced
+        times between; None when it does not move in it, or is not rigidly posed.
+        """
+        if time.IsDefault() or shutter[1] <= shutter[0]:
+            return None
+        t0, t1 = time.GetValue() + shutter[0], time.GetValue() + shutter[1]
+        steps = MOTION_SUBSAMPLES + 1
+        times = [t0 + (t1 - t0) * k / steps for k in range(steps + 1)]
+        mats = []
+        for t in times:
+            posed = self.pose(prim, Usd.TimeCode(t), points)
+            if posed is None or not posed.rigid:
+                return None
+            mats.append(posed.transform)
+        stack = np.stack(mats)
+        if np.all(stack == stack[0]):
+            return None
+        return np.array([(t - t0) / (t1 - t0) for t in times], dtype=np.float32), stack
 
     def _rest(self, path: str, problem: str) -> Posed | None:
         """Warn once that ``path`` renders at rest because of ``problem``; None (no pose)."""

@@ -226,8 +226,16 @@ def _missing_material(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
 
 
 def _skinned_motion(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
-    """A skinned mesh whose skeleton is animated: posed at the frame's time, not blurred."""
+    """A skinned mesh whose skeleton is animated: posed at the frame's time, not blurred.
+
+    A rigidly deformed one blurs by its posed transform and is not listed.
+    """
     if not is_skinned(prim):
+        return []
+    binding = UsdSkel.BindingAPI(prim)
+    indices = binding.GetJointIndicesPrimvar()
+    rigid = indices.IsDefined() and indices.GetInterpolation() == UsdGeom.Tokens.constant
+    if rigid and not binding.GetBlendShapesAttr().HasAuthoredValue():
         return []
     skeleton = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
     if not skeleton:
