@@ -94,8 +94,11 @@ class FakeRenderDelegate:
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
+        primvars: dict[str, dict[str, object]] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
+        for role, pv in (primvars or {}).items():
+            _check_array(path, f"primvars['{role}']", pv["values"], np.float32, 2)
         textures = material.get("textures", {}) if material is not None else {}
         for tex in textures.values():  # type: ignore[attr-defined]
             if "file" not in tex:

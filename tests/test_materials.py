@@ -271,10 +271,17 @@ def test_a_primvar_reader_reads_the_mesh(fake, caplog) -> None:
         reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set(varname)
         shader.CreateInput(name, kind).ConnectToSource(reader.CreateOutput("result", kind))
     with caplog.at_level(logging.WARNING):
-        material = read(stage, fake)["material"]
+        args = read(stage, fake)
+    material = args["material"]
     assert material["roughness"] == pytest.approx(0.3)
-    assert material["emissiveColor"] == pytest.approx((0.5, 0.5, 0.0))  # the mean, with a warning
-    assert len(warnings_naming(caplog, "/World/Looks/M", "primvars:tint", "mean")) == 1
+    # The mean stands where the primvar cannot be evaluated; the primvar itself crosses to be
+    # interpolated as authored (issue 18: it used to be the mean everywhere, with a warning).
+    assert material["emissiveColor"] == pytest.approx((0.5, 0.5, 0.0))
+    tint = args["primvars"]["emissiveColor"]
+    assert tint["interpolation"] == "vertex"
+    np.testing.assert_array_equal(tint["values"], [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)])
+    assert "roughness" not in args["primvars"]  # a constant primvar is its value
+    assert warnings_naming(caplog, "/World/Looks/M", "primvars:tint") == []
 
 
 def test_textures_reading_different_primvars_use_the_first_with_one_warning(fake, caplog) -> None:

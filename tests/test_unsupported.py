@@ -13,6 +13,7 @@ import logging
 from pathlib import Path
 
 from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
+from test_usd_skel import arm
 
 from mipray.record import main
 from mipray.usd.scene_delegate import UsdSceneDelegate
@@ -103,6 +104,8 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     ).ConnectToSource(reader.ConnectableAPI(), "rgb")
     bind(subset.GetPrim(), tex)
 
+    arm(stage)  # a skinned mesh with an animated skeleton
+
     lost = add_cube(stage, "/World/Lost").GetPrim()
     UsdShade.MaterialBindingAPI.Apply(lost).GetDirectBindingRel().SetTargets(["/Looks/Nope"])
 
@@ -125,6 +128,11 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
             ),
             Unsupported("/World/Inst", "material binding on a native instance material:binding"),
             Unsupported("/World/Lost", "material binding to no Material </Looks/Nope>"),
+            Unsupported(
+                "/World/Arm/Mesh",
+                "UsdSkel deformation motion blur (a skinned mesh is posed at the frame's time) "
+                "animated by /World/Arm/Skel/Anim",
+            ),
             Unsupported(
                 "/Looks/Mtlx",
                 "material output (only the universal outputs:surface is read) outputs:mtlx:surface",

@@ -14,6 +14,7 @@ use mipray_bridge::OsdSurface;
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::material::{FaceAlbedo, SurfaceInputs, TextureInput};
+use mipray::material::{Input, PrimvarInput};
 use mipray::texture::Primvar2;
 
 /// What the scene delegate knows about a mesh. Object space; `transform` is object-to-world
@@ -45,6 +46,16 @@ pub struct MeshData {
     pub face_albedo: Option<FaceAlbedo>,
     /// The `st` primvar the textures read (face-varying through OpenSubdiv).
     pub st: Option<Primvar2>,
+    /// Authored normals of a polygonal mesh (`normals`, `primvars:normals`), as the two
+    /// 2-float channels of [`Primvar2::split`]; used for shading.
+    pub normals: Vec<Primvar2>,
+    /// UsdPreviewSurface inputs fed by a primvar interpolated as authored (`displayColor` on a
+    /// mesh without a material, a `UsdPrimvarReader_*`): each primvar as the channels of
+    /// [`Primvar2::split`] (one for a float, two for a colour).
+    pub primvar_inputs: Vec<(Input, Vec<Primvar2>)>,
+    /// The faces the primvar-fed inputs shade where [`MeshData::face_albedo`] gives others
+    /// a colour of their own (a GeomSubset's material); empty: every face.
+    pub primvar_faces: Vec<i32>,
     /// `diffuseColor` from a texture (replaces `albedo`) for a mesh without a `material`.
     pub diffuse_texture: Option<TextureInput>,
     /// `displacement` from a texture (replaces the procedural displacement).
@@ -54,7 +65,52 @@ pub struct MeshData {
     pub gprim: Option<Gprim>,
 }
 
+/// Where each primvar sits among a surface's 2-float channels ([`MeshData::channels`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Channels {
+    /// The channel textures read `st` from; `usize::MAX` (no channel) without `st`.
+    pub st: usize,
+    pub normals: Option<[usize; 2]>,
+    pub inputs: Vec<(Input, PrimvarInput)>,
+}
+
 impl MeshData {
+    /// The surface's primvar channels in order: `st` first (channel 0), then the normals, then
+    /// the primvar-fed inputs' ([`MeshData::channels`] says where each is).
+    pub fn primvar_list(&self) -> Vec<Primvar2> {
+        let mut list: Vec<Primvar2> = self.st.iter().cloned().collect();
+        if self.normals.len() == 2 {
+            list.extend(self.normals.iter().cloned());
+        }
+        for (_, parts) in &self.primvar_inputs {
+            list.extend(parts.iter().take(2).cloned());
+        }
+        list
+    }
+
+    /// Where each primvar is among [`MeshData::primvar_list`]'s channels.
+    pub fn channels(&self) -> Channels {
+        let mut next = 0;
+        let mut channels = Channels { st: usize::MAX, ..Channels::default() };
+        if self.st.is_some() {
+            channels.st = 0;
+            next = 1;
+        }
+        if self.normals.len() == 2 {
+            channels.normals = Some([next, next + 1]);
+            next += 2;
+        }
+        for (input, parts) in &self.primvar_inputs {
+            let n = parts.len().min(2);
+            if n == 0 {
+                continue;
+            }
+            channels.inputs.push((*input, PrimvarInput { channels: [next, next + n - 1] }));
+            next += n;
+        }
+        channels
+    }
+
     /// The faces [`MeshData::face_albedo`] indexes: the topology's, or for Points one per
     /// point (each point's sphere is a patch of its own base face).
     pub fn face_count(&self) -> usize {
@@ -91,6 +147,9 @@ impl Default for MeshData {
             prototype: false,
             face_albedo: None,
             st: None,
+            normals: Vec::new(),
+            primvar_inputs: Vec::new(),
+            primvar_faces: Vec::new(),
             diffuse_texture: None,
             displacement_texture: None,
             gprim: None,
@@ -155,7 +214,12 @@ impl MeshPrim {
     /// What differs between the current data and `new`.
     pub fn diff(&self, new: &MeshData) -> DirtyBits {
         let mut d = DirtyBits::CLEAN;
-        if self.data.topology != new.topology || self.data.st != new.st || self.data.gprim != new.gprim {
+        if self.data.topology != new.topology
+            || self.data.st != new.st
+            || self.data.normals != new.normals
+            || self.data.primvar_inputs != new.primvar_inputs
+            || self.data.gprim != new.gprim
+        {
             d = d | DirtyBits::TOPOLOGY;
         }
         if self.data.points != new.points {
@@ -168,6 +232,7 @@ impl MeshPrim {
             || self.data.mirror != new.mirror
             || self.data.double_sided != new.double_sided
             || self.data.face_albedo != new.face_albedo
+            || self.data.primvar_faces != new.primvar_faces
             || self.data.diffuse_texture != new.diffuse_texture
             || self.data.material != new.material
         {
@@ -250,15 +315,14 @@ impl MeshPrim {
             None => {}
         }
         let t = &self.data.topology;
-        let points_only = !dirty.contains(DirtyBits::TOPOLOGY) && self.data.st.is_none();
+        let primvars = self.data.primvar_list();
+        let points_only = !dirty.contains(DirtyBits::TOPOLOGY) && primvars.is_empty();
         if let (true, Some(Surface::Osd(s))) = (points_only, self.surface.as_mut()) {
             if let Some(osd) = Arc::get_mut(s) {
                 osd.update_points(&self.data.points)?;
                 return Ok(Surface::Osd(s.clone()));
             }
         }
-        // Textures read `st` as the surface's primvar channel 0.
-        let primvars: Vec<Primvar2> = self.data.st.iter().cloned().collect();
         Ok(match t.scheme {
             Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?.with_primvars(
                 t,

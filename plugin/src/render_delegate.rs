@@ -424,6 +424,12 @@ impl RenderDelegate {
                 material
             }
         };
+        let channels = m.data.channels();
+        let mut material = material;
+        for (_, t) in &mut material.textures {
+            t.st_channel = channels.st;
+        }
+        material.primvars = channels.inputs.clone();
         let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
         mesh.material = mat;
@@ -433,9 +439,21 @@ impl RenderDelegate {
                 // Face materials are lambertian: a subset's material does not inherit the mesh's mirror.
                 scene.add_material(mesh_material(&format!("{}[{k}]", m.path), *albedo, [0.0; 3]));
             }
-            let table: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
+            let mut table: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
+            if !channels.inputs.is_empty() {
+                // Faces a primvar shades take the mesh's material, which reads it.
+                if m.data.primvar_faces.is_empty() {
+                    table.iter_mut().for_each(|t| *t = mat as u32);
+                }
+                for &f in &m.data.primvar_faces {
+                    if let Some(t) = table.get_mut(f as usize) {
+                        *t = mat as u32;
+                    }
+                }
+            }
             mesh.face_materials = Some(table.into());
         }
+        mesh.normals = channels.normals;
         mesh.generation = m.generation;
         mesh.cache_id = Some(m.cache_id);
         mesh.left_handed = m.data.topology.left_handed;

@@ -69,6 +69,7 @@ class RenderDelegate:
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
+        primvars: dict[str, dict[str, object]] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -142,6 +143,16 @@ class RenderDelegate:
                 at ``points`` of diameters ``widths`` (one, one per point, or
                 none for USD's default 1). ``st`` is the surface's (u, v)
                 (see ``mipray::implicit``).
+            primvars: primvars interpolated over the surface as authored, by
+                role: ``"normals"`` (authored normals, (N, 3), used for
+                shading; meant for polygonal meshes) or a UsdPreviewSurface
+                input name they feed (``"diffuseColor"`` (N, 3), a float input
+                (N, 1)), each ``{"values": float32 array, "indices": int32 or
+                None, "interpolation": USD token, "faces": int32 face indices
+                an input's primvar shades where ``face_albedos`` colours others,
+                or None for all}``. Face-varying and vertex
+                primvars go through OpenSubdiv on subdivision surfaces; every
+                interpolation is linear over each face on polygonal ones.
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.

@@ -22,6 +22,7 @@ use mipray::camera::{Camera, Projection};
 use mipray::displacement::Displacement;
 use mipray::image_io::{ChannelFormat, ImageIo, MetaValue};
 use mipray::image_output::{self, write_layers, ColorCorrection, Layer, WriteOptions};
+use mipray::material::Input;
 use mipray::settings::{SettingType, SettingValue, SETTINGS};
 use mipray::texture::{Interpolation, Primvar2, SourceColorSpace, Wrap};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
@@ -133,6 +134,82 @@ fn face_albedo(
     Ok(Some(table))
 }
 
+/// The normals and primvar-fed inputs of `set_mesh`'s `primvars`: `{"normals" or a
+/// UsdPreviewSurface input name: {"values": (N, C) float32, C ≤ 3, "indices": int32 or None,
+/// "interpolation": USD token, "faces": int32 or None}}`, each checked against the topology so a
+/// bad one names the prim and the primvar at once. `faces`: the faces the inputs' primvars shade
+/// when a face table colours others (empty: all).
+#[allow(clippy::type_complexity)]
+fn read_primvars(
+    path: &str,
+    d: &Bound<'_, PyDict>,
+    topology: &MeshTopology,
+    points: usize,
+) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>, Vec<i32>)> {
+    let mut normals = Vec::new();
+    let mut inputs = Vec::new();
+    let mut faces = Vec::new();
+    for (key, value) in d.iter() {
+        let role: String = key.extract()?;
+        let entry = value.cast::<PyDict>().map_err(|_| value_error(path, format!("primvars['{role}'] must be a dict")))?;
+        let item = |k: &str| entry.get_item(k);
+        let values: PyReadonlyArray2<'_, f32> = item("values")?
+            .ok_or_else(|| value_error(path, format!("primvars['{role}'] has no values")))?
+            .extract()
+            .map_err(|_| value_error(path, format!("primvars['{role}'] values must be an (N, C) float32 array")))?;
+        let indices: Option<PyReadonlyArray1<'_, i32>> = match item("indices")? {
+            Some(v) if !v.is_none() => {
+                Some(v.extract().map_err(|_| value_error(path, format!("primvars['{role}'] indices must be int32")))?)
+            }
+            _ => None,
+        };
+        let token: String = match item("interpolation")? {
+            Some(v) => v.extract()?,
+            None => "vertex".into(),
+        };
+        let interpolation = Interpolation::from_usd(&token)
+            .ok_or_else(|| value_error(path, format!("primvars:{role} interpolation '{token}' is not a USD interpolation")))?;
+        let a = values.as_array();
+        let components = a.ncols();
+        let wanted = match role.as_str() {
+            "normals" => 3,
+            name => match input_from_usd(name) {
+                Some(Input::DiffuseColor | Input::SpecularColor | Input::EmissiveColor) => 3,
+                Some(Input::Normal) | None => {
+                    return Err(value_error(path, format!("primvars: '{role}' is not an input a primvar can feed")))
+                }
+                Some(_) => 1,
+            },
+        };
+        if components != wanted {
+            return Err(value_error(path, format!("primvars:{role} has {components} components, expected {wanted}")));
+        }
+        let rows: Vec<[f32; 3]> =
+            a.rows().into_iter().map(|r| [r[0], r.get(1).copied().unwrap_or(0.0), r.get(2).copied().unwrap_or(0.0)]).collect();
+        let channels = Primvar2::split(&role, interpolation, &rows, components, &vec_i32(indices));
+        for c in &channels {
+            c.face_varying_indices(topology, points).map_err(|e| value_error(path, e))?;
+        }
+        if let Some(f) = item("faces")?.filter(|f| !f.is_none()) {
+            let f: PyReadonlyArray1<'_, i32> =
+                f.extract().map_err(|_| value_error(path, format!("primvars['{role}'] faces must be int32")))?;
+            let f = f.as_array().to_vec();
+            if let Some(bad) = f.iter().find(|&&i| i < 0 || i as usize >= topology.face_vertex_counts.len()) {
+                return Err(value_error(
+                    path,
+                    format!("primvars['{role}'] faces holds {bad}, out of range for {} faces", topology.face_vertex_counts.len()),
+                ));
+            }
+            faces.extend(f);
+        }
+        match role.as_str() {
+            "normals" => normals = channels,
+            name => inputs.push((input_from_usd(name).expect("checked above"), channels)),
+        }
+    }
+    Ok((normals, inputs, faces))
+}
+
 fn vec_i32(a: Option<PyReadonlyArray1<'_, i32>>) -> Vec<i32> {
     a.map(|a| a.as_array().to_vec()).unwrap_or_default()
 }
@@ -156,7 +233,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None, primvars=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -191,6 +268,7 @@ impl RenderDelegate {
         displacement_texture: Option<&Bound<'_, PyDict>>,
         material: Option<&Bound<'_, PyDict>>,
         gprim: Option<&Bound<'_, PyDict>>,
+        primvars: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<()> {
         let gprim = gprim.map(|g| read_gprim(path, g)).transpose()?;
         let pts = points.as_array();
@@ -238,6 +316,10 @@ impl RenderDelegate {
                 Some(pv)
             }
         };
+        let (normals, primvar_inputs, primvar_faces) = match primvars {
+            None => (Vec::new(), Vec::new(), Vec::new()),
+            Some(d) => read_primvars(path, d, &topology, points.len())?,
+        };
         let diffuse_texture = diffuse_texture.map(|d| texture_input(path, "diffuseColor", d)).transpose()?;
         let displacement_texture = displacement_texture.map(|d| texture_input(path, "displacement", d)).transpose()?;
         let material = material.map(|d| surface_inputs(path, d)).transpose()?;
@@ -276,6 +358,9 @@ impl RenderDelegate {
                 prototype,
                 face_albedo,
                 st,
+                normals,
+                primvar_inputs,
+                primvar_faces,
                 diffuse_texture,
                 displacement_texture,
                 gprim,

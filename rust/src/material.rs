@@ -277,6 +277,32 @@ pub struct Material {
     /// Textured inputs, replacing the constant where a lookup succeeds. Float inputs read the
     /// texture's first channel (`lookup.first_channel`).
     pub textures: Vec<(Input, TexturedColor)>,
+    /// Inputs fed by a primvar of the surface interpolated as authored (`displayColor`, a
+    /// `UsdPrimvarReader_*`); an input is fed by one node, a texture or a primvar. Channel
+    /// numbers are the surface's, so a material with these belongs to one mesh.
+    pub primvars: Vec<(Input, PrimvarInput)>,
+}
+
+/// A UsdPreviewSurface input read from the surface's 2-float primvar channels
+/// ([`LimitSurface::face_varying`]): a colour is (channel 0's two values, channel 1's first),
+/// a float channel 0's first. Face-varying and vertex interpolation is linear in each
+/// component, so three components split over two channels interpolate exactly as one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PrimvarInput {
+    pub channels: [usize; 2],
+}
+
+impl PrimvarInput {
+    /// The primvar's value at the hit as three lanes (a float's splatted), or `None` when the
+    /// surface has no such channel.
+    pub fn eval(&self, surface: &dyn LimitSurface, hit: &Hit, components: usize) -> Option<Vec3A> {
+        let (a, _, _) = surface.face_varying(self.channels[0], hit.patch as usize, hit.u, hit.v)?;
+        if components == 1 {
+            return Some(Vec3A::splat(a[0]));
+        }
+        let (b, _, _) = surface.face_varying(self.channels[1], hit.patch as usize, hit.u, hit.v)?;
+        Some(Vec3A::new(a[0], a[1], b[0]))
+    }
 }
 
 impl Default for Material {
@@ -296,7 +322,7 @@ impl Material {
         let clamped = c != diffuse_color;
         let surface =
             PreviewSurface { diffuse_color: c, use_specular_workflow: true, specular_color: Vec3A::ZERO, ..PreviewSurface::default() };
-        (Material { name: name.into(), surface, textures: Vec::new() }, clamped)
+        (Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new() }, clamped)
     }
 
     /// A smooth specular-workflow surface: diffuse `diffuse_color` under a delta mirror of
@@ -309,14 +335,14 @@ impl Material {
             roughness: 0.0,
             ..PreviewSurface::default()
         };
-        Material { name: name.into(), surface, textures: Vec::new() }
+        Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new() }
     }
 
     /// A UsdPreviewSurface material, its inputs clamped into range; the names of the inputs that
     /// were out of range (warn once, naming the material).
     pub fn preview_surface(name: impl Into<String>, surface: PreviewSurface) -> (Self, Vec<&'static str>) {
         let (surface, changed) = surface.clamped();
-        (Material { name: name.into(), surface, textures: Vec::new() }, changed)
+        (Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new() }, changed)
     }
 
     /// The texture feeding `input`, if any.
@@ -324,10 +350,15 @@ impl Material {
         self.textures.iter().find(|(i, _)| *i == input).map(|(_, t)| t)
     }
 
+    /// Whether a texture or a primvar feeds `input`: its value varies over the surface.
+    pub fn varies(&self, input: Input) -> bool {
+        self.texture(input).is_some() || self.primvars.iter().any(|(i, _)| *i == input)
+    }
+
     /// The rays this material may call for anywhere on a surface (textured inputs may take any
     /// value): [`PreviewSurface::calls`].
     pub fn calls(&self) -> SurfaceCalls {
-        self.surface.calls(&|i| self.texture(i).is_some())
+        self.surface.calls(&|i| self.varies(i))
     }
 
     /// `opacityThreshold` may cut this material out somewhere: a threshold above 0 and either a
@@ -335,7 +366,7 @@ impl Material {
     /// surface, and visibility rays need not look closer.
     pub fn may_cut_out(&self) -> bool {
         let s = &self.surface;
-        s.opacity_threshold > 0.0 && (s.opacity < s.opacity_threshold || self.texture(Input::Opacity).is_some())
+        s.opacity_threshold > 0.0 && (s.opacity < s.opacity_threshold || self.varies(Input::Opacity))
     }
 
     /// Whether the material is cut out at a hit: [`ResolvedSurface::cut_out`] of
@@ -351,6 +382,9 @@ impl Material {
             let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
             let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
             opacity = unit_input(site.lookup(tex, 1).x);
+        }
+        if let Some(v) = self.primvars.iter().rev().find(|(i, _)| *i == Input::Opacity).and_then(|(_, p)| p.eval(surface, hit, 1)) {
+            opacity = unit_input(v.x);
         }
         opacity < self.surface.opacity_threshold
     }
@@ -438,6 +472,12 @@ impl Material {
     pub fn resolve(&self, surface: &dyn LimitSurface, hit: &Hit, sp: &ShadingPoint, footprint: &RayDifferential) -> ResolvedSurface {
         let mut inputs = self.surface;
         let mut ns = sp.ns;
+        for (input, pv) in &self.primvars {
+            let components = if matches!(input, Input::DiffuseColor | Input::SpecularColor | Input::EmissiveColor) { 3 } else { 1 };
+            if let Some(v) = pv.eval(surface, hit, components) {
+                set_varying_input(&mut inputs, *input, v, self.surface.ior);
+            }
+        }
         if self.textures.is_empty() {
             return ResolvedSurface { inputs, ns };
         }
@@ -502,6 +542,24 @@ fn normal_mapped(sp: &ShadingPoint, t: Vec3A, dst: Option<([f32; 2], [f32; 2])>)
         n
     } else {
         (n + sp.ng * (MIN_COS - c)).try_normalize().unwrap_or(sp.ng)
+    }
+}
+
+/// Sets `input` to a primvar's value `v` (three lanes; floats read `x`), clamped into the
+/// input's range as a texture's value is; `ior` ≤ 0 keeps the constant `ior`.
+fn set_varying_input(inputs: &mut PreviewSurface, input: Input, v: Vec3A, ior: f32) {
+    match input {
+        Input::DiffuseColor => inputs.diffuse_color = clamp_color(v),
+        Input::SpecularColor => inputs.specular_color = clamp_color(v),
+        Input::EmissiveColor => inputs.emissive_color = Vec3A::select(v.is_nan_mask(), Vec3A::ZERO, v).max(Vec3A::ZERO),
+        Input::Metallic => inputs.metallic = unit_input(v.x),
+        Input::Roughness => inputs.roughness = unit_input(v.x),
+        Input::Clearcoat => inputs.clearcoat = unit_input(v.x),
+        Input::ClearcoatRoughness => inputs.clearcoat_roughness = unit_input(v.x),
+        Input::Opacity => inputs.opacity = unit_input(v.x),
+        Input::Ior => inputs.ior = if v.x.is_finite() && v.x > 0.0 { v.x } else { ior },
+        // A primvar is not a tangent-space normal map.
+        Input::Normal => {}
     }
 }
 

@@ -38,6 +38,11 @@ pub struct Mesh {
     /// (USD GeomSubsets with their own material bindings, uniform `displayColor`). `None`, a
     /// face past the end, or an index out of range: the mesh's material.
     pub face_materials: Option<Arc<[u32]>>,
+    /// Authored normals (USD `normals` / `primvars:normals` on a polygonal mesh): the surface's
+    /// 2-float primvar channels holding (x, y) and (z, ·), object space, interpolated over each
+    /// face and normalized for shading (smooth shading of a faceted mesh). `None`: the limit
+    /// surface's own normal.
+    pub normals: Option<[usize; 2]>,
 }
 
 impl std::fmt::Debug for Mesh {
@@ -62,6 +67,7 @@ impl Mesh {
             displacement: None,
             cache_id: None,
             face_materials: None,
+            normals: None,
         }
     }
 }

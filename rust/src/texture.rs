@@ -585,6 +585,24 @@ pub struct Primvar2 {
 }
 
 impl Primvar2 {
+    /// A primvar of 1 to 3 components (a float, a colour, a normal) as 2-float channels:
+    /// (c0, c1), then (c2, 0) for a third component; a float's second lane is 0. Every
+    /// interpolation is linear in each component, so the channels together interpolate as the
+    /// primvar would.
+    pub fn split(name: &str, interpolation: Interpolation, values: &[[f32; 3]], components: usize, indices: &[i32]) -> Vec<Primvar2> {
+        let channel = |lanes: [usize; 2], used: usize| Primvar2 {
+            name: name.to_string(),
+            interpolation,
+            values: values.iter().map(|v| [v[lanes[0]], if used > 1 { v[lanes[1]] } else { 0.0 }]).collect(),
+            indices: indices.to_vec(),
+        };
+        match components {
+            0 | 1 => vec![channel([0, 0], 1)],
+            2 => vec![channel([0, 1], 2)],
+            _ => vec![channel([0, 1], 2), channel([2, 2], 1)],
+        }
+    }
+
     /// Resolves the primvar to one index into `values` per face-vertex (in `faceVertexIndices`
     /// order): the face-varying channel that represents it exactly. `points` is the mesh's point
     /// count.

@@ -10,11 +10,12 @@ clipping range in scene units, the camera looking down its local -Z axis.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Gf, Usd, UsdGeom
+from pxr import Gf, Usd, UsdGeom, UsdSkel
 
 from ..errors import PrimError
 from .transform import matrix_to_numpy
@@ -120,17 +121,47 @@ def find_camera_prim(stage: Usd.Stage, requested: str) -> Usd.Prim:
     raise PrimError(requested, "no camera prim of that name on the stage")
 
 
+def _bounds_without(
+    cache: UsdGeom.BBoxCache, root: Usd.Prim, skip: Mapping[str, Any]
+) -> Gf.Range3d:
+    """The world bounds of everything under ``root`` but the prims in ``skip``.
+
+    Each boundable (or instance) outside them, as ``cache`` bounds it; skeletons, which
+    render nothing, are left out.
+    """
+    box = Gf.Range3d()
+    prims = iter(Usd.PrimRange(root))
+    for prim in prims:
+        if str(prim.GetPath()) in skip or prim.IsA(UsdSkel.Skeleton):
+            prims.PruneChildren()
+        elif prim.IsInstance() or (prim.IsA(UsdGeom.Boundable) and not prim.IsA(UsdSkel.Root)):
+            box.UnionWith(cache.ComputeWorldBound(prim).ComputeAlignedRange())
+            prims.PruneChildren()
+    return box
+
+
 def framing_camera_arguments(
-    stage: Usd.Stage, time: Usd.TimeCode, purposes: tuple[str, ...]
+    stage: Usd.Stage,
+    time: Usd.TimeCode,
+    purposes: tuple[str, ...],
+    posed: Mapping[str, tuple[Any, Any]] | None = None,
 ) -> dict[str, Any]:
     """A perspective camera that frames the stage's world bounds from the front.
 
     "Front" looks down -Z when the stage's up axis is Y and down +Y when it
     is Z. The bounds are computed with ``UsdGeom.BBoxCache`` for the included
-    purposes; an empty stage frames the unit cube at the origin.
+    purposes, except for the prims in ``posed`` (skinned meshes: path → posed
+    world (min, max) corners), whose rest extents are replaced by their posed
+    bounds; an empty stage frames the unit cube at the origin.
     """
     cache = UsdGeom.BBoxCache(time, list(purposes), useExtentsHint=True)
-    box = cache.ComputeWorldBound(stage.GetPseudoRoot()).ComputeAlignedRange()
+    root = stage.GetPseudoRoot()
+    if posed:
+        box = _bounds_without(cache, root, posed)
+        for lo, hi in posed.values():
+            box.UnionWith(Gf.Range3d(Gf.Vec3d(*map(float, lo)), Gf.Vec3d(*map(float, hi))))
+    else:
+        box = cache.ComputeWorldBound(root).ComputeAlignedRange()
     if box.IsEmpty():
         box = Gf.Range3d(Gf.Vec3d(-1, -1, -1), Gf.Vec3d(1, 1, 1))
     center = box.GetMidpoint()

@@ -6,8 +6,14 @@ Each control face gets, in order:
    (``familyName = "materialBind"``) that holds the face, resolved as USD
    resolves bindings (the subset's own binding, else its ancestors');
 2. else that of the mesh's bound material (see :mod:`mipray.usd.material`);
-3. else ``primvars:displayColor`` — uniform per face, vertex, varying and
-   faceVarying averaged over the face's corners, constant everywhere;
+3. else ``primvars:displayColor`` — uniform per face, constant everywhere;
+   vertex, varying and faceVarying (indexed or not) interpolated over the
+   surface as authored: the face's entry is its corners' mean (its colour at
+   the centre for bilinear interpolation) and the primvar crosses as
+   ``set_mesh``'s ``primvars["diffuseColor"]``, which the renderer
+   interpolates over those faces (OpenSubdiv's face-varying and vertex
+   evaluation on subdivision surfaces, linear over each face on polygonal
+   ones; ``"faces"`` lists them when a subset's material colours others);
 4. else 0.18 grey.
 
 A material whose diffuse colour is not a constant (a texture) falls through to
@@ -19,7 +25,7 @@ turns them into per-face materials of the core.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -28,7 +34,7 @@ from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
 from .material import DEFAULT_ALBEDO, compute_albedo
-from .primvars import per_face, read_display_primvar
+from .primvars import per_face, primvar_argument, read_display_primvar
 
 __all__ = ["SurfaceAlbedo", "compute_surface_albedo"]
 
@@ -49,13 +55,18 @@ class SurfaceAlbedo:
     material_paths: tuple[str, ...]
     #: Whether anything read might change over time.
     might_vary: bool
+    #: ``set_mesh``'s ``primvars`` entries: ``diffuseColor`` from an interpolated
+    #: ``displayColor``, or empty.
+    primvars: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def arguments(self) -> dict[str, Any]:
-        """The ``set_mesh`` keyword arguments: ``albedo``, and the face table if any."""
+        """The ``set_mesh`` keyword arguments: ``albedo``, the face table and primvars if any."""
         args: dict[str, Any] = {"albedo": self.albedo}
         if self.face_albedos is not None:
             args["face_albedos"] = self.face_albedos
             args["face_albedo_indices"] = self.face_albedo_indices
+        if self.primvars:
+            args["primvars"] = dict(self.primvars)
         return args
 
 
@@ -105,6 +116,14 @@ def compute_surface_albedo(
     display: NDArray[np.float64] | None = None
     if color is not None:
         display = np.clip(per_face(color, counts, face_vertex_indices).astype(np.float64), 0, 1)
+    # A colour per point or face-vertex is interpolated over the faces by the renderer.
+    interpolated = (
+        color is not None
+        and own.source != "material"
+        and color.interpolation in ("vertex", "varying", "faceVarying")
+    )
+    # Faces a subset's constant-colour material colours; the primvar colours the rest.
+    constant = np.zeros(n_faces, dtype=bool)
 
     if own.source == "material":
         faces = np.tile(np.asarray(own.rgb, np.float64), (n_faces, 1))
@@ -124,16 +143,24 @@ def compute_surface_albedo(
         )
         if bound.source == "material":
             faces[indices] = bound.rgb
+            constant[indices] = True
         else:  # a textured (or no) material: the display colour, as for the mesh
             faces[indices] = fallback[indices] if fallback.ndim == 2 else fallback
 
+    primvars: dict[str, dict[str, Any]] = {}
+    if interpolated and not constant.all():
+        assert color is not None
+        entry = primvar_argument(color)
+        if constant.any():
+            entry["faces"] = np.flatnonzero(~constant).astype(np.int32)
+        primvars["diffuseColor"] = entry
     if n_faces == 0 or (faces == faces[0]).all():
         rgb = (
             own.rgb
             if n_faces == 0
             else (float(faces[0, 0]), float(faces[0, 1]), float(faces[0, 2]))
         )
-        return SurfaceAlbedo(rgb, None, None, tuple(paths), might_vary)
+        return SurfaceAlbedo(rgb, None, None, tuple(paths), might_vary, primvars)
     unique, inverse = np.unique(faces, axis=0, return_inverse=True)
     return SurfaceAlbedo(
         own.rgb,
@@ -141,4 +168,5 @@ def compute_surface_albedo(
         np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
         tuple(paths),
         might_vary,
+        primvars,
     )

@@ -10,6 +10,7 @@ Both the scene delegate (meshes rendered in place) and the instancing code
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,13 +18,25 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
+from ..errors import PrimError
 from .face_albedo import compute_surface_albedo
 from .gprim import gprim_arguments, point_colors
 from .material import compute_albedo
 from .mesh import mesh_arguments
+from .primvars import primvar_argument, read_normals
 from .shading import material_might_vary, shading_arguments
+from .skel import Posed, SkelPoser, is_skinned
 
 __all__ = ["MeshRead", "read_mesh"]
+
+_log = logging.getLogger(__name__)
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        _log.warning("mipray: %s", message)
 
 
 @dataclass(frozen=True)
@@ -37,14 +50,26 @@ class MeshRead:
     material_paths: tuple[str, ...]
     #: Whether the mesh's data (not its transform) might change over time.
     might_vary: bool
+    #: A skinned mesh's posed world bounds (min and max corners), which its rest extent
+    #: does not give; None for other meshes.
+    posed_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    #: A rigidly deformed skinned mesh: its pose is its transform (see :mod:`mipray.usd.skel`).
+    rigid: bool = False
 
 
 def read_mesh(
-    prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64], *, prototype: bool = False
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    transform: NDArray[np.float64],
+    *,
+    prototype: bool = False,
+    poser: SkelPoser | None = None,
 ) -> MeshRead:
     """Read the mesh ``prim`` at ``time``.
 
-    ``transform`` is object-to-world, or for a prototype object-to-prototype-root.
+    ``transform`` is object-to-world, or for a prototype object-to-prototype-root. A skinned
+    mesh is posed at ``time`` by ``poser`` (:mod:`mipray.usd.skel`; one is made if None):
+    its points posed, its transform the skeleton's.
 
     Raises:
         PrimError: the mesh's data is inconsistent (the message names the
@@ -62,15 +87,71 @@ def read_mesh(
     args = mesh_arguments(mesh, time, transform, (0.18, 0.18, 0.18))
     if args is None:
         return MeshRead(None, (), data_varies)
-    surface = compute_surface_albedo(
-        mesh, time, args["face_vertex_counts"], args["face_vertex_indices"], len(args["points"])
-    )
+    posed = _pose(prim, time, args["points"], prototype, poser)
+    if posed is not None:
+        args["points"], args["transform"] = posed.points, posed.transform
+    counts, n_points = args["face_vertex_counts"], len(args["points"])
+    surface = compute_surface_albedo(mesh, time, counts, args["face_vertex_indices"], n_points)
+    primvars: dict[str, Any] = surface.arguments().pop("primvars", {})
     args.update(surface.arguments())
-    args.update(shading_arguments(prim, time))
+    args.pop("primvars", None)
+    shading = shading_arguments(prim, time)
+    primvars.update(shading.pop("primvars", {}))
+    args.update(shading)
+    normals, normals_vary = _normals(mesh, time, args["scheme"], counts, n_points)
+    if normals is not None:
+        primvars["normals"] = normals
+    if primvars:
+        args["primvars"] = primvars
     if prototype:
         args["prototype"] = True
-    varies = data_varies or surface.might_vary or material_might_vary(prim)
-    return MeshRead(args, surface.material_paths, varies)
+    varies = data_varies or surface.might_vary or normals_vary or material_might_vary(prim)
+    if posed is None:
+        return MeshRead(args, surface.material_paths, varies)
+    world = posed.points.astype(np.float64) @ posed.transform[:3, :3] + posed.transform[3, :3]
+    bounds = (world.min(axis=0), world.max(axis=0)) if len(world) else None
+    return MeshRead(args, surface.material_paths, varies or posed.might_vary, bounds, posed.rigid)
+
+
+def _pose(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    points: NDArray[np.float32],
+    prototype: bool,
+    poser: SkelPoser | None,
+) -> Posed | None:
+    """A skinned mesh posed at ``time``, or None (not skinned, or at rest with a warning)."""
+    if not is_skinned(prim):
+        return None
+    if prototype:
+        # A prototype's transform is relative to its root; the skeleton's is a world one.
+        _warn_once(
+            f"{prim.GetPath()}: a skinned mesh inside an instancing prototype is not posed; "
+            "rendering its rest pose"
+        )
+        return None
+    return (poser or SkelPoser()).pose(prim, time, points)
+
+
+def _normals(
+    mesh: UsdGeom.Mesh, time: Usd.TimeCode, scheme: str, counts: NDArray[np.int32], n_points: int
+) -> tuple[dict[str, Any] | None, bool]:
+    """A polygonal mesh's authored normals as a ``primvars`` entry, and whether they may vary.
+
+    Subdivision surfaces ignore authored normals, as UsdGeom.Mesh says (they have their own);
+    bad normals are warned about once, naming the prim and attribute, and the mesh shades with
+    its own faceted normals.
+    """
+    if scheme != "none":
+        return None, False
+    try:
+        normals = read_normals(mesh, time, counts, n_points)
+    except PrimError as exc:
+        _warn_once(f"{exc}; shading the mesh with its faces' own normals")
+        return None, False
+    if normals is None:
+        return None, False
+    return primvar_argument(normals), normals.might_vary
 
 
 def _read_gprim(

@@ -7,11 +7,12 @@ their indices first. A size that does not match, an index out of range or a
 value that is not finite is an error naming the prim (the mesh is skipped,
 the rest of the stage renders).
 
-The renderer shades one diffuse colour per control face, so per-point and
-per-face-vertex colours are averaged over each face's corners: the colour the
-face shows at its centre for bilinear interpolation. ``displayOpacity`` is
-read and checked the same way; the core has no transparency yet, so it does
-not change the picture.
+Vertex, varying and faceVarying colours cross to the renderer as they are
+(:func:`primvar_argument`) and are interpolated over the surface; where one
+colour per face is wanted (a GeomSubset's fallback) they are averaged over
+each face's corners (:func:`per_face`). ``displayOpacity`` is read and checked
+the same way; it does not change the picture yet. Authored normals of polygonal meshes
+(``primvars:normals``, else ``normals``) are read by :func:`read_normals`.
 """
 
 from __future__ import annotations
@@ -30,7 +31,9 @@ __all__ = [
     "DisplayPrimvar",
     "per_face",
     "per_face_vertex",
+    "primvar_argument",
     "read_display_primvar",
+    "read_normals",
 ]
 
 #: The interpolation tokens UsdGeom defines for primvars.
@@ -69,6 +72,7 @@ def read_display_primvar(
     time: Usd.TimeCode,
     counts: NDArray[np.int32],
     n_points: int,
+    width: int | None = None,
 ) -> DisplayPrimvar | None:
     """Read ``primvars:<name>`` (``displayColor`` or ``displayOpacity``) of ``mesh``.
 
@@ -78,6 +82,7 @@ def read_display_primvar(
         time: the time code.
         counts: the mesh's faceVertexCounts (already checked).
         n_points: the number of points.
+        width: the component count wanted; None: 3 for ``displayColor``, else 1.
 
     Returns:
         The values, or None when the primvar is unauthored or empty.
@@ -92,16 +97,35 @@ def read_display_primvar(
     primvar = UsdGeom.PrimvarsAPI(mesh.GetPrim()).GetPrimvar(name)
     if not primvar or not primvar.HasValue():
         return None
+    return _checked(path, primvar, f"primvars:{name}", name, time, counts, n_points, width)
+
+
+def _checked(
+    path: str,
+    primvar: UsdGeom.Primvar,
+    attr: str,
+    name: str,
+    time: Usd.TimeCode,
+    counts: NDArray[np.int32],
+    n_points: int,
+    width: int | None,
+    interpolation: str | None = None,
+) -> DisplayPrimvar | None:
+    """A primvar's flattened values checked against the mesh.
+
+    As :func:`read_display_primvar`; ``interpolation`` overrides the primvar's own.
+    """
     raw = primvar.Get(time)
     if raw is None or len(raw) == 0:
         return None
-    width = 3 if name == "displayColor" else 1
+    if width is None:
+        width = 3 if name == "displayColor" else 1
     values = np.asarray(raw, dtype=np.float32).reshape(len(raw), -1)
     if values.shape[1] != width:
-        raise PrimError(path, f"primvars:{name} has {values.shape[1]} components, expected {width}")
-    interpolation = str(primvar.GetInterpolation())
+        raise PrimError(path, f"{attr} has {values.shape[1]} components, expected {width}")
+    interpolation = interpolation or str(primvar.GetInterpolation())
     if interpolation not in INTERPOLATIONS:
-        raise PrimError(path, f"primvars:{name} has unknown interpolation '{interpolation}'")
+        raise PrimError(path, f"{attr} has unknown interpolation '{interpolation}'")
     if primvar.IsIndexed():
         indices = np.asarray(primvar.GetIndices(time), dtype=np.int64)
         bad = (indices < 0) | (indices >= len(values))
@@ -109,8 +133,7 @@ def read_display_primvar(
             i = int(np.flatnonzero(bad)[0])
             raise PrimError(
                 path,
-                f"primvars:{name}:indices[{i}] = {int(indices[i])} is out of range "
-                f"for {len(values)} values",
+                f"{attr}:indices[{i}] = {int(indices[i])} is out of range for {len(values)} values",
             )
         values = values[indices]
     expected = _expected_size(interpolation, counts, n_points, int(counts.sum(dtype=np.int64)))
@@ -118,12 +141,12 @@ def read_display_primvar(
         what = {"uniform": "faces", "faceVarying": "face-vertices"}.get(interpolation, "points")
         raise PrimError(
             path,
-            f"primvars:{name} ({interpolation}) has {len(values)} values for {expected} {what}",
+            f"{attr} ({interpolation}) has {len(values)} values for {expected} {what}",
         )
     finite = np.isfinite(values).all(axis=1)
     if not finite.all():
         i = int(np.flatnonzero(~finite)[0])
-        raise PrimError(path, f"primvars:{name}[{i}] = {tuple(values[i].tolist())} is not finite")
+        raise PrimError(path, f"{attr}[{i}] = {tuple(values[i].tolist())} is not finite")
     might_vary = bool(primvar.ValueMightBeTimeVarying()) or bool(
         primvar.IsIndexed() and primvar.GetIndicesAttr().ValueMightBeTimeVarying()
     )
@@ -175,3 +198,46 @@ def per_face(
     starts = np.concatenate(([0], np.cumsum(counts[:-1], dtype=np.int64)))
     sums = np.add.reduceat(corners.astype(np.float64), starts, axis=0)
     return np.asarray(sums / counts[:, None], dtype=np.float32)
+
+
+def read_normals(
+    mesh: UsdGeom.Mesh, time: Usd.TimeCode, counts: NDArray[np.int32], n_points: int
+) -> DisplayPrimvar | None:
+    """A polygonal mesh's authored normals, flattened and checked.
+
+    ``primvars:normals`` if authored (it wins, as UsdGeom says), else ``normals`` with its
+    ``interpolation`` metadata.
+
+    Returns:
+        The normals (name ``"normals"``), or None when neither is authored.
+
+    Raises:
+        PrimError: as :func:`read_display_primvar`, naming the attribute read.
+
+    """
+    path = str(mesh.GetPath())
+    primvar = UsdGeom.PrimvarsAPI(mesh.GetPrim()).GetPrimvar("normals")
+    if primvar and primvar.HasValue():
+        return _checked(path, primvar, "primvars:normals", "normals", time, counts, n_points, 3)
+    attr = mesh.GetNormalsAttr()
+    if not attr or not attr.HasValue():
+        return None
+    # A plain attribute read as a primvar: its values and indices (none), with the
+    # interpolation UsdGeomPointBased gives it (vertex unless authored).
+    interpolation = str(mesh.GetNormalsInterpolation())
+    return _checked(
+        path, UsdGeom.Primvar(attr), "normals", "normals", time, counts, n_points, 3, interpolation
+    )
+
+
+def primvar_argument(primvar: DisplayPrimvar) -> dict[str, Any]:
+    """A checked primvar as ``set_mesh``'s ``primvars`` entry.
+
+    Its flattened values (a constant's first only), no indices, its interpolation.
+    """
+    values = primvar.values[:1] if primvar.interpolation == "constant" else primvar.values
+    return {
+        "values": np.ascontiguousarray(values, dtype=np.float32),
+        "indices": None,
+        "interpolation": primvar.interpolation,
+    }

@@ -56,6 +56,7 @@ from .light import (
 )
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
+from .skel import SkelPoser
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
 from .unsupported import HEADLIGHT, Unsupported, audit_stage, is_rendered_type, warn_unsupported
 
@@ -103,6 +104,9 @@ class _Record:
     material_paths: tuple[str, ...] = ()
     args: dict[str, Any] = field(default_factory=dict)  # kept for cameras only
     instancer: InstancerState | None = None  # a PointInstancer's prototypes
+    # A skinned mesh's posed world bounds (min, max); skinned meshes are re-read, not moved.
+    posed_bounds: tuple[Any, Any] | None = None
+    rigid: bool = False  # a rigidly deformed skinned mesh: its pose is a transform
 
 
 _NO_RECORD = _Record("none", -1, in_delegate=False)
@@ -217,6 +221,7 @@ class UsdSceneDelegate:
         self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
         self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
+        self._poser = SkelPoser()
 
     # ------------------------------------------------------------------ state
 
@@ -395,6 +400,8 @@ class UsdSceneDelegate:
                 self._instancing.resend_native_prototype(self.stage, prototype)
         self._prototype_edits.clear()
 
+        if full or self._resync:
+            self._poser.clear()  # skeletons and bindings may have changed
         if full:
             self._order = 0
             roots = ["/"]
@@ -456,6 +463,8 @@ class UsdSceneDelegate:
             dirty.update(owners)
             self._instancer_full.update(owners)
         if elsewhere:
+            # A changed skeleton or animation re-poses the skinned meshes.
+            dirty.update(p for p, r in self._records.items() if r.posed_bounds is not None)
             # A changed material (or a shader under it) re-syncs the meshes bound to it.
             for p, r in self._records.items():
                 if any(_under(m, q) or _under(q, m) for m in r.material_paths for q in elsewhere):
@@ -473,7 +482,12 @@ class UsdSceneDelegate:
 
     def _is_mesh_record(self, path: str) -> bool:
         record = self._records.get(path)
-        return record is not None and record.kind == "mesh" and record.in_delegate
+        return (
+            record is not None
+            and record.kind == "mesh"
+            and record.in_delegate
+            and record.posed_bounds is None  # a skinned mesh is placed by its skeleton
+        )
 
     def _sync_transform(self, path: str, xform_cache: UsdGeom.XformCache) -> None:
         """Move a synced mesh: only its world transform is sent (``set_transform``)."""
@@ -629,13 +643,15 @@ class UsdSceneDelegate:
                 self._instancing.add_instance(path, prim.GetPrototype(), transform)
                 record = _Record("instance", order, in_delegate=False, xform_varies=xform_varies)
             elif is_renderable_gprim(prim):
-                read = read_mesh(prim, time, transform)
+                read = read_mesh(prim, time, transform, poser=self._poser)
                 record = _Record(
                     "mesh",
                     order,
                     might_vary=read.might_vary,
                     xform_varies=xform_varies,
                     material_paths=read.material_paths,
+                    posed_bounds=read.posed_bounds,
+                    rigid=read.rigid,
                 )
                 if read.args is None:  # no faces: valid USD that renders nothing
                     self._forget(path)
@@ -722,8 +738,9 @@ class UsdSceneDelegate:
         Transform motion blur: only meshes whose transform (or an ancestor's) is
         time-varying are sampled, and only when the camera's shutter is open for
         a while; a mesh that no longer moves gets its motion cleared. Returns the
-        paths of the moving meshes. PointInstancer and native instance motion is
-        not read (their transforms at the frame's time are used).
+        paths of the moving meshes. A rigidly deformed skinned mesh moves by its posed
+        transform (:meth:`mipray.usd.skel.SkelPoser.rigid_motion`). PointInstancer and native
+        instance motion is not read (their transforms at the frame's time are used).
         """
         shutter = camera_shutter(self.stage, camera_path, self.time)
         moving: list[str] = []
@@ -731,7 +748,13 @@ class UsdSceneDelegate:
             if record.kind != "mesh" or not record.in_delegate:
                 continue
             samples = None
-            if record.xform_varies and shutter[1] > shutter[0]:
+            if record.rigid and shutter[1] > shutter[0]:
+                prim = self.stage.GetPrimAtPath(path)
+                if prim:
+                    rest = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(self.time) or [])
+                    points = rest.astype(np.float32).reshape(-1, 3)
+                    samples = self._poser.rigid_motion(prim, self.time, shutter, points)
+            elif record.xform_varies and shutter[1] > shutter[0]:
                 prim = self.stage.GetPrimAtPath(path)
                 if prim:
                     samples = motion_samples(prim, self.time, shutter)
@@ -805,7 +828,8 @@ class UsdSceneDelegate:
         return DEFAULT_CAMERA_PATH
 
     def _sync_default_camera(self) -> None:
-        args = framing_camera_arguments(self.stage, self.time, self.purposes)
+        posed = {p: r.posed_bounds for p, r in self._records.items() if r.posed_bounds is not None}
+        args = framing_camera_arguments(self.stage, self.time, self.purposes, posed)
         self._default_camera = args
         self.delegate.set_camera(DEFAULT_CAMERA_PATH, **args)
         self.sync_counts[DEFAULT_CAMERA_PATH] = self.sync_counts.get(DEFAULT_CAMERA_PATH, 0) + 1

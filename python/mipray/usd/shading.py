@@ -18,13 +18,16 @@ Read from the ``UsdPreviewSurface`` of the bound material (``full`` purpose, as
   output's channel), its
   ``st`` read by a ``UsdPrimvarReader_float2`` (``varname``, default ``st``),
   optionally through a ``UsdTransform2d``; or a ``UsdPrimvarReader_*`` reading
-  a primvar of the mesh (its value if constant, else its mean, with one
+  a primvar of the mesh (its value if constant; one that varies over a mesh is
+  interpolated as authored: ``primvars``; on other gprims its mean, with one
   warning). Any other node falls back to the input's fallback value, with one
   warning naming the material and the node.
 - ``st_values`` / ``st_indices`` / ``st_interpolation``: the one ``st`` primvar
   a mesh's textures read (a ``UsdTransform2d`` applied to its values). Textures
   reading different primvars (or transforming them differently) get the first
   one's, with one warning.
+- ``primvars``: ``{input name: {"values", "indices", "interpolation"}}`` for
+  inputs fed by a ``UsdPrimvarReader_*`` whose primvar varies over the mesh.
 - ``displacement_texture``: a ``UsdUVTexture`` feeding ``displacement``;
   ``displacement``: the built-in procedural displacement, from the mesh's
   ``mipray:displacement:amplitude``, ``frequency``, ``octaves`` and ``gain``;
@@ -45,6 +48,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdGeom, UsdShade
+
+from ..errors import PrimError
+from .primvars import primvar_argument, read_display_primvar
 
 __all__ = [
     "COLOR_INPUTS",
@@ -268,12 +274,20 @@ def _texture(
 
 
 def _primvar_value(
-    material: str, prim: Usd.Prim, reader: UsdShade.Shader, name: str, time: Usd.TimeCode
+    material: str,
+    prim: Usd.Prim,
+    reader: UsdShade.Shader,
+    name: str,
+    time: Usd.TimeCode,
+    varying: dict[str, dict[str, Any]],
 ) -> Any:
     """The value a UsdPrimvarReader feeding ``name`` reads on ``prim``.
 
-    A constant primvar is its value; a varying one its mean over its values (one
-    warning: a shading input here is one value per mesh); a missing one the
+    A constant primvar is its value; one that varies over a mesh is its mean (the
+    constant where the renderer cannot evaluate it) and, checked against the mesh,
+    goes into ``varying[name]`` as a ``set_mesh`` ``primvars`` entry, interpolated
+    as authored (a bad one: one warning naming the prim and primvar, the mean). On
+    other gprims a varying primvar is its mean (one warning); a missing one the
     reader's ``fallback``, else the input's.
     """
     varname = _const(reader, "varname", time)
@@ -286,7 +300,18 @@ def _primvar_value(
     if values.size == 0 or values.size % width:
         return FALLBACKS[name]
     values = values.reshape(-1, width)
-    if len(values) > 1 and not (values == values[0]).all():
+    if len(values) > 1 and not (values == values[0]).all() and prim.IsA(UsdGeom.Mesh):
+        mesh = UsdGeom.Mesh(prim)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], dtype=np.int32)
+        n_points = len(mesh.GetPointsAttr().Get(time) or [])
+        try:
+            read = read_display_primvar(mesh, str(varname), time, counts, n_points, width)
+        except PrimError as exc:
+            _warn_once(f"{exc}; {material}'s {name} uses its mean")
+        else:
+            if read is not None:
+                varying[name] = primvar_argument(read)
+    elif len(values) > 1 and not (values == values[0]).all():
         _warn_once(
             f"{material}: {name} reads primvars:{varname} of {prim.GetPath()}, which varies over "
             "the mesh; mipray uses its mean"
@@ -302,6 +327,8 @@ class _Material:
     args: dict[str, Any]
     #: (input, texture) in :data:`TEXTURED_INPUTS` order.
     textures: list[tuple[str, _Texture]]
+    #: Inputs fed by a primvar varying over the mesh: ``set_mesh``'s ``primvars`` entries.
+    primvars: dict[str, dict[str, Any]]
 
 
 def _preview_surface(
@@ -310,6 +337,7 @@ def _preview_surface(
     """Every input of ``surface`` as the ``material`` argument (see the module doc)."""
     args: dict[str, Any] = {"name": material_path}
     textures: list[tuple[str, _Texture]] = []
+    varying: dict[str, dict[str, Any]] = {}
     for name in (*COLOR_INPUTS, "useSpecularWorkflow", *FLOAT_INPUTS, "normal"):
         src = _source(surface, name)
         if src is None:
@@ -337,7 +365,7 @@ def _preview_surface(
                     tuple(fallback[:3]) if name in COLOR_INPUTS else fallback[min(channel, 3)]
                 )
         elif node_id.startswith("UsdPrimvarReader_") and name != "normal":
-            args[name] = _primvar_value(material_path, prim, node, name, time)
+            args[name] = _primvar_value(material_path, prim, node, name, time, varying)
         else:
             what = f"{node_id} node" if node_id else "node without an id"
             if node_id == "UsdUVTexture":
@@ -352,7 +380,7 @@ def _preview_surface(
     textures.sort(key=lambda t: order[t[0]])
     if textures:
         args["textures"] = {name: tex.desc for name, tex in textures}
-    return _Material(args, textures)
+    return _Material(args, textures, varying)
 
 
 def _st_arguments(prim: Usd.Prim, varname: str, time: Usd.TimeCode) -> dict[str, Any]:
@@ -452,6 +480,8 @@ def shading_arguments(
     if surface and surface.GetShaderId() == "UsdPreviewSurface":
         read = _preview_surface(prim, material_path, surface, time)
         args["material"] = read.args
+        if read.primvars and not surface_st:
+            args["primvars"] = read.primvars
         st_users += [(name, t.varname, t.transform) for name, t in read.textures]
     elif surface:
         _warn_once(

@@ -24,11 +24,12 @@ import logging
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
-from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade
+from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade, UsdSkel
 
 from .gprim import GPRIM_TYPES
 from .light import AREA_LIGHT_TYPES
 from .shading import COLOR_INPUTS, FLOAT_INPUTS
+from .skel import is_skinned
 
 __all__ = [
     "HEADLIGHT",
@@ -224,6 +225,27 @@ def _missing_material(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     return found
 
 
+def _skinned_motion(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
+    """A skinned mesh whose skeleton is animated: posed at the frame's time, not blurred.
+
+    A rigidly deformed one blurs by its posed transform and is not listed.
+    """
+    if not is_skinned(prim):
+        return []
+    binding = UsdSkel.BindingAPI(prim)
+    indices = binding.GetJointIndicesPrimvar()
+    rigid = indices.IsDefined() and indices.GetInterpolation() == UsdGeom.Tokens.constant
+    if rigid and not binding.GetBlendShapesAttr().HasAuthoredValue():
+        return []
+    skeleton = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    if not skeleton:
+        return []
+    anim = UsdSkel.BindingAPI(skeleton.GetPrim()).GetInheritedAnimationSource()
+    if anim and any(a.ValueMightBeTimeVarying() for a in anim.GetPrim().GetAuthoredAttributes()):
+        return [f"animated by {anim.GetPath()}"]
+    return []
+
+
 def _instance_binding(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     if not prim.IsInstance():
         return []
@@ -355,6 +377,11 @@ TABLE: tuple[Row, ...] = (
     Row("shadow linking", "prim", _linking("shadowLink")),
     Row("light input", "prim", _light_inputs),
     Row("camera clippingPlanes", "prim", _clipping_planes),
+    Row(
+        "UsdSkel deformation motion blur (a skinned mesh is posed at the frame's time)",
+        "prim",
+        _skinned_motion,
+    ),
     Row(
         "material output (only the universal outputs:surface is read)",
         "material",

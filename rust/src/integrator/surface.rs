@@ -73,7 +73,34 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     if ns.dot(ng) < 0.0 {
         ns = -ns;
     }
+    if let Some(n) = authored_normal(mesh, hit).map(|n| (nm * n).normalize_or_zero()).filter(|n| *n != Vec3A::ZERO && n.is_finite()) {
+        // Authored normals say which way is out only up to their author's care: take the side
+        // of the surface's own outward normal, then the viewer's, as for `ns` above.
+        let n = if n.dot(ng_out) < 0.0 { -n } else { n };
+        ns = tilt_above(if front { n } else { -n }, ng);
+    }
     ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front }
+}
+
+/// The mesh's authored normal at the hit (object space, not normalized), if it has one.
+fn authored_normal(mesh: &crate::scene::Mesh, hit: &Hit) -> Option<Vec3A> {
+    let [c0, c1] = mesh.normals?;
+    let (patch, u, v) = (hit.patch as usize, hit.u, hit.v);
+    let (xy, _, _) = mesh.surface.face_varying(c0, patch, u, v)?;
+    let (z, _, _) = mesh.surface.face_varying(c1, patch, u, v)?;
+    Some(Vec3A::new(xy[0], xy[1], z[0]))
+}
+
+/// `n` kept in `ng`'s hemisphere, tilted back to just above its horizon at worst: an
+/// interpolated normal near a silhouette may lean past the facet it shades.
+fn tilt_above(n: Vec3A, ng: Vec3A) -> Vec3A {
+    const MIN_COS: f32 = 0.01;
+    let c = n.dot(ng);
+    if c >= MIN_COS {
+        n
+    } else {
+        (n + ng * (MIN_COS - c)).try_normalize().unwrap_or(ng)
+    }
 }
 
 /// How far the tessellation hit is from the exact limit surface along the ray (world units):

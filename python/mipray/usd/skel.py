@@ -1,0 +1,197 @@
+"""Skinned meshes posed at the render's time code, by usd-core's UsdSkel.
+
+A mesh bound to a ``Skeleton`` under a ``SkelRoot`` (``UsdSkel.BindingAPI``) renders posed:
+blend shapes first (``UsdSkel.BlendShapeQuery`` with the animation's weights), then linear
+blend skinning (``UsdSkel.SkinningQuery.ComputeSkinnedPoints`` with the skeleton's skinning
+transforms) or, for a rigidly deformed mesh, its skinned transform. UsdSkel's skinned points
+are in the skeleton's space, so the posed mesh is placed by the skeleton's world transform,
+not its own (UsdSkel's rule: the skinned prim's transform is ignored).
+
+A skeleton whose joints cannot be posed (its joints do not resolve, the influences name joints
+it does not have, the mesh binds no skeleton) gets one warning naming the mesh, and the mesh
+renders in its rest pose (its authored points and transform). The core blurs transforms, not
+deformations: a rigidly deformed mesh (one joint moves it whole) blurs by its posed transform
+over the shutter (:meth:`SkelPoser.rigid_motion`); other skinned meshes are posed at the
+frame's time, and their animation is listed as unsupported motion blur
+(:mod:`mipray.usd.unsupported`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd, UsdGeom, UsdSkel, Vt
+
+from .transform import MOTION_SUBSAMPLES, matrix_to_numpy
+
+__all__ = ["Posed", "SkelPoser", "is_skinned"]
+
+_log = logging.getLogger(__name__)
+
+
+def is_skinned(prim: Usd.Prim) -> bool:
+    """Whether ``prim`` is a mesh that UsdSkel may pose: bound with ``UsdSkel.BindingAPI``."""
+    return bool(prim.IsA(UsdGeom.Mesh) and prim.HasAPI(UsdSkel.BindingAPI))
+
+
+@dataclass(frozen=True)
+class Posed:
+    """A skinned mesh at one time code."""
+
+    #: (N, 3) float32 posed points, in the space ``transform`` places.
+    points: NDArray[np.float32]
+    #: Object-to-world for ``points``: the skeleton's world transform.
+    transform: NDArray[np.float64]
+    #: Whether the pose may change with the time (an animated skeleton or blend shapes).
+    might_vary: bool
+    #: Rigidly deformed (one joint moves the whole mesh): ``points`` are the rest points and
+    #: ``transform`` carries the pose, so the pose over a shutter is a transform motion.
+    rigid: bool = False
+
+
+class SkelPoser:
+    """Poses skinned meshes of one stage; keeps a ``UsdSkel.Cache`` across calls."""
+
+    def __init__(self) -> None:
+        self._cache = UsdSkel.Cache()
+        self._populated: set[str] = set()
+        self._warned: set[str] = set()
+
+    def clear(self) -> None:
+        """Forget what the cache read (the stage's skeletons or bindings changed)."""
+        self._cache.Clear()
+        self._populated.clear()
+
+    def pose(self, prim: Usd.Prim, time: Usd.TimeCode, points: NDArray[np.float32]) -> Posed | None:
+        """``prim`` (a mesh whose rest ``points`` are given) posed at ``time``.
+
+        Returns:
+            The posed points and the transform placing them; None when the mesh is not
+            skinned (no SkelRoot above it, no joint influences nor blend shapes), or when it
+            cannot be posed — then with one warning naming the mesh: it renders at rest.
+
+        """
+        root = UsdSkel.Root.Find(prim)
+        if not root:
+            return None
+        key = str(root.GetPath())
+        if key not in self._populated:
+            self._cache.Populate(root, Usd.PrimDefaultPredicate)
+            self._populated.add(key)
+        query = self._cache.GetSkinningQuery(prim)
+        if not query or not (query.HasJointInfluences() or query.HasBlendShapes()):
+            return None
+        path = str(prim.GetPath())
+        skeleton = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+        if not skeleton:
+            return self._rest(path, "its skel:skeleton does not resolve to a Skeleton")
+        skel_query = self._cache.GetSkelQuery(skeleton)
+        if not skel_query:
+            return self._rest(path, f"the joints of {skeleton.GetPath()} do not resolve")
+        anim = skel_query.GetAnimQuery()
+        varies = bool(anim) and (
+            anim.JointTransformsMightBeTimeVarying() or anim.BlendShapeWeightsMightBeTimeVarying()
+        )
+        posed = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, dtype=np.float32))
+        is_rigid = False
+        if query.HasBlendShapes() and anim:
+            problem = _blend(prim, query, anim, time, posed)
+            if problem:
+                return self._rest(path, problem)
+        skel_to_world = UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time)
+        if query.HasJointInfluences():
+            xforms = skel_query.ComputeSkinningTransforms(time)
+            if xforms is None or len(xforms) != len(skel_query.GetJointOrder()):
+                return self._rest(path, f"the joints of {skeleton.GetPath()} cannot be posed")
+            if query.IsRigidlyDeformed():
+                rigid = query.ComputeSkinnedTransform(xforms, time)
+                if rigid is None:
+                    return self._rest(path, f"its joints are not in {skeleton.GetPath()}")
+                skel_to_world = rigid * skel_to_world
+                is_rigid = not query.HasBlendShapes()
+            elif not query.ComputeSkinnedPoints(xforms, posed, time):
+                return self._rest(
+                    path, f"its jointIndices name joints {skeleton.GetPath()} does not have"
+                )
+        out = np.asarray(posed, dtype=np.float32).reshape(-1, 3)
+        if not np.isfinite(out).all():
+            return self._rest(path, "skinning gave points that are not finite")
+        return Posed(
+            np.ascontiguousarray(out), matrix_to_numpy(skel_to_world), bool(varies), is_rigid
+        )
+
+    def rigid_motion(
+        self,
+        prim: Usd.Prim,
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        points: NDArray[np.float32],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """A rigidly deformed mesh's posed transform over the shutter.
+
+        As :func:`mipray.usd.transform.motion_samples` gives a moving prim's: (times as
+        fractions of the shutter, (N, 4, 4) matrices) at the shutter's ends and evenly spaced
+        times between; None when it does not move in it, or is not rigidly posed.
+        """
+        if time.IsDefault() or shutter[1] <= shutter[0]:
+            return None
+        t0, t1 = time.GetValue() + shutter[0], time.GetValue() + shutter[1]
+        steps = MOTION_SUBSAMPLES + 1
+        times = [t0 + (t1 - t0) * k / steps for k in range(steps + 1)]
+        mats = []
+        for t in times:
+            posed = self.pose(prim, Usd.TimeCode(t), points)
+            if posed is None or not posed.rigid:
+                return None
+            mats.append(posed.transform)
+        stack = np.stack(mats)
+        if np.all(stack == stack[0]):
+            return None
+        return np.array([(t - t0) / (t1 - t0) for t in times], dtype=np.float32), stack
+
+    def _rest(self, path: str, problem: str) -> Posed | None:
+        """Warn once that ``path`` renders at rest because of ``problem``; None (no pose)."""
+        if path not in self._warned:
+            self._warned.add(path)
+            _log.warning(
+                "mipray: %s: cannot pose the skinned mesh: %s; rendering its rest pose",
+                path,
+                problem,
+            )
+        return None
+
+
+def _blend(
+    prim: Usd.Prim,
+    query: UsdSkel.SkinningQuery,
+    anim: UsdSkel.AnimQuery,
+    time: Usd.TimeCode,
+    points: Vt.Vec3fArray,
+) -> str | None:
+    """Apply the mesh's blend shapes at the animation's weights to ``points`` in place.
+
+    Returns the problem, or None.
+    """
+    weights = anim.ComputeBlendShapeWeights(time)
+    if weights is None:
+        return "its blend shape weights cannot be read"
+    mapper = query.GetBlendShapeMapper()
+    if mapper is not None and not mapper.IsNull():
+        weights = mapper.Remap(weights)
+        if weights is None:
+            return "its blendShapes do not match the animation's"
+    shapes = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(prim))
+    sub_weights, shape_indices, sub_indices = shapes.ComputeSubShapeWeights(weights)
+    if not shapes.ComputeDeformedPoints(
+        sub_weights,
+        shape_indices,
+        sub_indices,
+        shapes.ComputeBlendShapePointIndices(),
+        shapes.ComputeSubShapePointOffsets(),
+        points,
+    ):
+        return "its blend shapes do not fit its points"
+    return None
