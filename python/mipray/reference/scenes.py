@@ -1,9 +1,13 @@
 """The scenes mipray is compared with Mitsuba 3 on, built in memory with usd-core.
 
-Every scene is polygonal (``subdivisionScheme = "none"``, planar faces) so both
-renderers intersect the same surface. Both show lights to camera rays (a dome is
-the background); the area lights are out of the camera's view all the same, so
-that the images compare surfaces, not the edges of bright lights.
+Every mesh is polygonal (``subdivisionScheme = "none"``, planar faces) so both
+renderers intersect the same surface; the implicit gprims (Sphere, Cylinder, a
+Cylinder flat enough to be a disk, Points) are the analytic shapes Mitsuba has,
+one primitive per ``implicit_*`` / ``points`` scene (:data:`RADIUS_SCALED`
+builds each with its radius off, to show the comparison sees it). Both show
+lights to camera rays (a dome is the background); the area lights are out of the
+camera's view all the same, so that the images compare surfaces, not the edges
+of bright lights.
 Each :class:`Scene` names the mipray render settings and the Mitsuba integrator
 that compute the same integral:
 
@@ -27,7 +31,7 @@ from typing import Any
 
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
-__all__ = ["SCENES", "Scene", "by_name"]
+__all__ = ["RADIUS_SCALED", "SCENES", "Scene", "by_name"]
 
 Vec3 = tuple[float, float, float]
 
@@ -556,6 +560,77 @@ def _implicit_glass() -> Usd.Stage:
     return stage
 
 
+def _on_ground(stage: Usd.Stage, prim: UsdGeom.Gprim, color: Vec3) -> None:
+    """Binds a lambertian ``color`` to ``prim``; a grey mesh ground, the still life's camera."""
+    ground(stage, lambert(stage, "Ground", (0.6, 0.6, 0.6)))
+    UsdShade.MaterialBindingAPI.Apply(prim.GetPrim()).Bind(lambert(stage, "Paint", color))
+    _camera(stage, (0.5, 4.5, 6.5), (0.2, 0.3, -0.3))
+    _sun(stage, (3.0, 5.0, 2.0))
+
+
+def _one_sphere(radius_scale: float = 1.0) -> Usd.Stage:
+    stage = _stage()
+    sphere = UsdGeom.Sphere.Define(stage, "/World/Ball")
+    sphere.CreateRadiusAttr(1.1 * radius_scale)
+    sphere.AddTranslateOp().Set(Gf.Vec3d(0.3, 1.1, 0.0))
+    _on_ground(stage, sphere, (0.15, 0.3, 0.7))
+    return stage
+
+
+def _one_cylinder(radius_scale: float = 1.0) -> Usd.Stage:
+    stage = _stage()
+    cylinder = UsdGeom.Cylinder.Define(stage, "/World/Post")
+    cylinder.CreateRadiusAttr(0.7 * radius_scale)
+    cylinder.CreateHeightAttr(1.8)
+    cylinder.CreateAxisAttr("Y")
+    cylinder.AddTranslateOp().Set(Gf.Vec3d(0.2, 0.9, -0.2))
+    _on_ground(stage, cylinder, (0.7, 0.15, 0.1))
+    return stage
+
+
+def _one_disk(radius_scale: float = 1.0) -> Usd.Stage:
+    # UsdGeom has no disk: a Cylinder 2 % as high as it is wide is a coin whose caps are the
+    # disks (Mitsuba's ``disk`` shapes, as the cap of every exported Cylinder), tilted toward
+    # the camera so the top cap fills most of its silhouette.
+    stage = _stage()
+    coin = UsdGeom.Cylinder.Define(stage, "/World/Coin")
+    coin.CreateRadiusAttr(1.2 * radius_scale)
+    coin.CreateHeightAttr(0.05)
+    coin.CreateAxisAttr("Y")
+    coin.AddTranslateOp().Set(Gf.Vec3d(0.2, 0.9, 0.0))
+    coin.AddRotateXOp().Set(35.0)
+    _on_ground(stage, coin, (0.8, 0.6, 0.1))
+    return stage
+
+
+def _points(radius_scale: float = 1.0) -> Usd.Stage:
+    stage = _stage()
+    points = UsdGeom.Points.Define(stage, "/World/Beads")
+    centres = [
+        (-1.5, 0.4, 0.5),
+        (-0.6, 0.6, -0.4),
+        (0.4, 0.5, 0.8),
+        (1.3, 0.8, -0.2),
+        (0.0, 1.6, -1.2),
+    ]
+    widths = [0.8, 1.2, 1.0, 1.6, 1.4]
+    points.CreatePointsAttr([Gf.Vec3f(*c) for c in centres])
+    points.CreateWidthsAttr([w * radius_scale for w in widths])
+    points.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+    _on_ground(stage, points, (0.2, 0.6, 0.3))
+    return stage
+
+
+#: Per implicit-prim scene: its builder with the primitive's radius (or widths) scaled, for
+#: checking that the comparison sees a geometric error as small as 5 %.
+RADIUS_SCALED: dict[str, Callable[[float], Usd.Stage]] = {
+    "implicit_sphere": _one_sphere,
+    "implicit_cylinder": _one_cylinder,
+    "implicit_disk": _one_disk,
+    "points": _points,
+}
+
+
 def _direct(samples: int) -> dict[str, Any]:
     """Mitsuba's direct-light integrator with ``samples`` light samples.
 
@@ -586,6 +661,30 @@ SCENES: tuple[Scene, ...] = (
         "and disk shapes",
         _implicit,
         settings={},
+    ),
+    Scene(
+        "implicit_sphere",
+        "an implicit Sphere alone on the ground under a distant light: mipray's exact sphere "
+        "against Mitsuba's analytic sphere",
+        _one_sphere,
+    ),
+    Scene(
+        "implicit_cylinder",
+        "an implicit capped Cylinder standing on the ground (axis Y): Mitsuba's cylinder and "
+        "two disks",
+        _one_cylinder,
+    ),
+    Scene(
+        "implicit_disk",
+        "a coin: an implicit Cylinder 0.05 high and 1.2 in radius, tilted 35° so its top cap "
+        "faces the camera: the caps are Mitsuba's disk shapes",
+        _one_disk,
+    ),
+    Scene(
+        "points",
+        "UsdGeom.Points of five widths (vertex interpolation) as exact spheres, against a "
+        "Mitsuba sphere per point",
+        _points,
     ),
     Scene(
         "implicit_glass",
