@@ -454,3 +454,23 @@ def test_a_native_instance_with_a_non_finite_transform_is_left_out_by_name(nativ
     assert [str(e) for e in result.errors] == ["/World/Bad: its transform is not finite"]
     row, col = pixel_of(stage, "/World/Good", result.width, result.height, Usd.TimeCode.Default())
     assert result.aovs["color"][row, col].sum() > 0.0, "the good instance is missing"
+
+
+def test_an_image_librarys_own_messages_never_reach_stderr_unprefixed(native, tmp_path) -> None:
+    # A PNG cut short: libpng printed "libpng error: IHDR: ..." on stderr by itself, beside
+    # mipray's own warning.
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x04\x00\x00\x00\x04")
+    usd = _texture_stage(tmp_path, str(cut))
+    done = subprocess.run(
+        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert lines and all(line.startswith("mipray-record: ") for line in lines), done.stderr
+    assert any(str(cut) in line for line in lines), done.stderr

@@ -203,6 +203,29 @@ impl OiioTextureSystem {
         Err(err(problem))
     }
 
+    /// [`TextureSampler::handle_encoded`]'s work once the request is new.
+    fn open_encoded(&self, path: &str, space: SourceColorSpace, encoded: &mut Encoded) -> Result<TextureHandle, TextureError> {
+        let request = (path.to_string(), space);
+        texture_cache::check_source(Path::new(path), texture_cache::OPEN_TIMEOUT)
+            .map_err(|message| TextureError { path: path.to_string(), message })?;
+        let srgb = match space {
+            SourceColorSpace::Raw => false,
+            SourceColorSpace::Srgb => true,
+            SourceColorSpace::Auto => {
+                ffi::oiio_auto_is_srgb(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?
+            }
+        };
+        let h = if srgb {
+            let h = self.handle(&self.linear_copy(path)?)?;
+            encoded.decoded_from.insert(h.index(), path.to_string());
+            h
+        } else {
+            self.handle(path)?
+        };
+        encoded.requests.insert(request, h);
+        Ok(h)
+    }
+
     /// The options it was made with.
     pub fn options(&self) -> &OiioTextureOptions {
         &self.options
@@ -299,26 +322,10 @@ impl TextureSampler for OiioTextureSystem {
         if let Some(&h) = encoded.requests.get(&request) {
             return Ok(h);
         }
-        texture_cache::check_source(Path::new(path), texture_cache::OPEN_TIMEOUT)
-            .map_err(|message| TextureError { path: path.to_string(), message })?;
-        let srgb = match space {
-            SourceColorSpace::Raw => false,
-            SourceColorSpace::Srgb => true,
-            SourceColorSpace::Auto => {
-                ffi::oiio_auto_is_srgb(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?
-            }
-        };
-        let h = if srgb {
-            let h = self.handle(&self.linear_copy(path)?)?;
-            encoded.decoded_from.insert(h.index(), path.to_string());
-            h
-        } else {
-            self.handle(path)?
-        };
-        encoded.requests.insert(request, h);
-        Ok(h)
+        let (opened, caught) = texture_cache::catching_stderr(|| self.open_encoded(path, space, &mut encoded));
+        texture_cache::pass_on(path, &caught);
+        opened
     }
-
     fn decoded_from_srgb(&self, handle: TextureHandle) -> bool {
         lock(&self.encoded).decoded_from.contains_key(&handle.index())
     }

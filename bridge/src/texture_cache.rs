@@ -243,6 +243,55 @@ pub fn evict(dir: &Path, limit: u64, keep: &Path) -> u64 {
     removed
 }
 
+/// Runs `f` with the process's standard error caught, and returns what was written there with
+/// `f`'s result. libpng and other image libraries print their own lines (`libpng error: IHDR:
+/// ...`) beside the error OpenImageIO returns; caught, they reach the log as part of one line
+/// naming the file. Another thread's output in that window is caught too and handed back.
+pub fn catching_stderr<T>(f: impl FnOnce() -> T) -> (T, String) {
+    use std::io::{Seek, SeekFrom};
+    use std::os::fd::AsRawFd;
+    let Ok(mut sink) = tempfile_in_tmp() else { return (f(), String::new()) };
+    // SAFETY: dup and dup2 on valid descriptors; 2 is restored before returning.
+    let saved = unsafe { libc::dup(2) };
+    if saved < 0 || unsafe { libc::dup2(sink.as_raw_fd(), 2) } < 0 {
+        if saved >= 0 {
+            // SAFETY: `saved` is ours.
+            unsafe { libc::close(saved) };
+        }
+        return (f(), String::new());
+    }
+    let out = f();
+    // SAFETY: as above.
+    unsafe {
+        libc::dup2(saved, 2);
+        libc::close(saved);
+    }
+    let mut text = String::new();
+    let _ = sink.seek(SeekFrom::Start(0)).and_then(|_| sink.read_to_string(&mut text));
+    (out, text)
+}
+
+/// An unnamed temporary file (`O_TMPFILE`): nothing to clean up, nothing another user can open.
+fn tempfile_in_tmp() -> std::io::Result<File> {
+    OpenOptions::new().read(true).write(true).mode(0o600).custom_flags(libc::O_TMPFILE).open(std::env::temp_dir())
+}
+
+/// The lines of `caught` worth passing on: other mipray lines as they were (another thread's),
+/// the libraries' own as one line.
+pub fn pass_on(path: &str, caught: &str) {
+    let mut foreign = Vec::new();
+    for line in caught.lines().map(str::trim).filter(|l| !l.is_empty()) {
+        if line.starts_with("mipray") {
+            eprintln!("{line}");
+        } else {
+            foreign.push(line);
+        }
+    }
+    if !foreign.is_empty() {
+        log::info!("texture {path}: the image library said: {}", foreign.join("; "));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -253,6 +302,18 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         dir
+    }
+
+    #[test]
+    fn what_a_library_prints_is_caught_not_left_on_the_terminal() {
+        let (value, caught) = catching_stderr(|| {
+            // SAFETY: a plain write of a static buffer to descriptor 2.
+            unsafe { libc::write(2, b"libpng error: IHDR\n".as_ptr().cast(), 19) };
+            7
+        });
+        assert_eq!((value, caught.as_str()), (7, "libpng error: IHDR\n"));
+        let (_, after) = catching_stderr(|| ());
+        assert_eq!(after, "", "descriptor 2 is restored and the next catch starts empty");
     }
 
     #[test]
