@@ -355,3 +355,34 @@ def test_record_refuses_cluster_flags_that_do_not_go_together(stage_path, tmp_pa
         err = capsys.readouterr().err
         assert message in err and len(err.splitlines()) == 1, err
     assert not os.path.exists(out)
+
+
+def test_a_cluster_frame_is_written_as_a_local_one(client, tmp_path) -> None:
+    # Frames written on a cluster lacked what the local path adds: the render settings'
+    # unsupported things in the stats, and usdrecord's opaque alpha over a visible dome.
+    import json
+
+    from test_unsupported import _settings
+
+    path = tmp_path / "dome.usda"
+    write_stage(path)
+    stage = Usd.Stage.Open(str(path))
+    UsdLux.DomeLight.Define(stage, "/World/Sky").CreateIntensityAttr(0.5)
+    _settings(stage, "C<RD>.*L")
+    stage.GetRootLayer().Save()
+    common = ["--camera", "/World/Cam", "-w", "16", "-rs", "/Render/Settings"]
+    common += ["--enableDomeLightVisibility", str(path)]
+    written = {}
+    for where, flags in (("local", []), ("cluster", ["--scheduler", client.scheduler.address])):
+        image, stats = tmp_path / f"{where}.png", tmp_path / f"{where}.json"
+        status = record.main([*flags, "--stats", str(stats), *common, str(image)])
+        assert status == 0, where
+        pixels, names = mipray._mipray.read_image(str(image))
+        written[where] = (pixels, names, json.loads(stats.read_text())["unsupported"])
+    local, cluster = written["local"], written["cluster"]
+    assert any("light-path expression" in u["what"] for u in local[2]), local[2]
+    assert cluster[2] == local[2]
+    assert local[1] == cluster[1] and "A" in local[1]
+    alpha = cluster[0][..., cluster[1].index("A")]
+    assert (alpha == 1.0).all(), "the dome fills every pixel: the PNG is opaque"
+    assert np.array_equal(cluster[0], local[0])

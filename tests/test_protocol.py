@@ -15,9 +15,9 @@ from fake_delegate import FakeRenderDelegate, fake_module
 STUB = Path(mipray.__file__).with_name("_mipray.pyi")
 
 
-def stub_signatures() -> dict[str, list[tuple[str, str, bool]]]:
+def stub_signatures(source: Path = STUB) -> dict[str, list[tuple[str, str, bool]]]:
     """``name`` or ``Class.method`` → [(parameter, kind, has default)] from the .pyi."""
-    tree = ast.parse(STUB.read_text())
+    tree = ast.parse(source.read_text())
     result: dict[str, list[tuple[str, str, bool]]] = {}
 
     def params(fn: ast.FunctionDef) -> list[tuple[str, str, bool]]:
@@ -183,3 +183,16 @@ def test_compiled_module_accepts_the_stub_protocol(native) -> None:
         mismatches += [f"{name}: {p}" for p in compatibility_problems(expected, actual)]
     assert not mismatches, "\n".join(mismatches)
     assert isinstance(native.version(), str) and native.version()
+
+
+def test_the_scene_delegates_protocol_is_the_stubs() -> None:
+    # usd/protocol.py types the scene delegate without the compiled module; it had drifted
+    # (21 of set_mesh's 30 keyword arguments).
+    protocol = stub_signatures(Path(mipray.__file__).parent / "usd" / "protocol.py")
+    stub = stub_signatures()
+    methods = {
+        k.split(".", 1)[1]: v for k, v in protocol.items() if k.startswith("RenderDelegateLike.")
+    }
+    assert methods, "no RenderDelegateLike methods found"
+    for name, params in methods.items():
+        assert params == stub[f"RenderDelegate.{name}"], name

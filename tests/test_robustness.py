@@ -9,6 +9,7 @@ render, and the stats list what was dropped.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import subprocess
 from pathlib import Path
@@ -329,3 +330,147 @@ def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_pa
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("mipray-record: ") and "2" in last, last
     assert done.stdout == "", "a frame was rendered and written first"
+
+
+def _texture_stage(tmp_path: Path, file: str) -> Path:
+    stage, shader = scene()
+    texture(stage, "/World/Looks/M", shader, "diffuseColor", file)
+    add_distant_light(stage, "/World/Sun")
+    usd = tmp_path / "textured.usda"
+    stage.GetRootLayer().Export(str(usd))
+    return usd
+
+
+@pytest.mark.parametrize("kind", ["device", "FIFO", "directory"])
+def test_a_texture_that_is_not_a_regular_file_is_refused_in_one_line(native, tmp_path, kind):
+    # /dev/zero and a FIFO hung the render for ever, past SIGTERM (OpenImageIO's format
+    # probes read them); now the file is named and its input takes its fallback.
+    file = {"device": "/dev/zero", "FIFO": str(tmp_path / "pipe.png"), "directory": str(tmp_path)}
+    if kind == "FIFO":
+        os.mkfifo(file[kind])
+    usd = _texture_stage(tmp_path, file[kind])
+    done = subprocess.run(
+        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 0, done.stderr
+    said = [line for line in done.stderr.splitlines() if file[kind] in line]
+    assert said and all(line.startswith("mipray-record: ") for line in said), done.stderr
+    if kind != "directory":
+        assert f"not a regular file (a {kind})" in said[0], said
+
+
+def test_a_usd_layer_that_is_a_fifo_is_refused_in_one_line(native, tmp_path) -> None:
+    # USD read it for ever.
+    fifo = tmp_path / "shot.usda"
+    os.mkfifo(fifo)
+    done = subprocess.run(
+        [*record_command(), str(fifo), str(tmp_path / "out.exr")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        f"mipray-record: {fifo}: not a regular file (a FIFO); a USD layer must be a file"
+    ]
+
+
+def _available_gb() -> float:
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024 / 1e9
+    except OSError:
+        pass
+    return math.inf
+
+
+@pytest.mark.skipif(_available_gb() > 200, reason="this machine could hold a 65536-wide film")
+def test_an_image_too_large_for_the_memory_is_refused_before_the_sync(native, tmp_path) -> None:
+    # -w 65536 aborted the process on a 37 GB allocation, after the sync.
+    stage = _stage_with(lambda stage: None)
+    with pytest.raises(mipray.RenderSettingsError, match=r"memory available") as caught:
+        _render(stage, width=65536)
+    assert "65536x" in str(caught.value) and "\n" not in str(caught.value)
+    usd = tmp_path / "big.usda"
+    stage.GetRootLayer().Export(str(usd))
+    done = subprocess.run(
+        [*record_command(), str(usd), str(tmp_path / "big.exr"), "--imageWidth", "65536"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 1
+    last = done.stderr.strip().splitlines()
+    assert len(last) == 1 and "memory available" in last[0], done.stderr
+    assert not (tmp_path / "big.exr").exists()
+
+
+def test_prims_skipped_for_bad_data_are_listed_in_the_stats(native) -> None:
+    # Only prims the renderer dropped were listed; those the scene delegate could not send
+    # (caught in Python) were in result.errors but not in the stats.
+    def build(stage: Usd.Stage) -> None:
+        bad = UsdGeom.Mesh.Define(stage, "/World/Bad")
+        bad.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (1, 1, 0)])
+        bad.CreateFaceVertexCountsAttr([3])
+        bad.CreateFaceVertexIndicesAttr([0, 1, 7])
+        _scaled_parent((0.0, 0.0, 0.0))(stage)
+
+    stage = _stage_with(build)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    listed = result.stats["prim_errors"]
+    assert [e for e in listed if e.startswith("/World/Bad:")] == [str(result.errors[0])]
+    assert any(e.startswith("/World/Parent/Bad:") for e in listed), listed
+    assert len(listed) == 2, listed
+
+
+def test_a_native_instance_with_a_non_finite_transform_is_left_out_by_name(native) -> None:
+    # Found by test_fuzz.py: a NaN rotation of one instance raised a ValueError out of
+    # mipray.render (the whole frame lost) instead of dropping that instance.
+    def build(stage: Usd.Stage) -> None:
+        add_cube(stage, "/Proto/Cube")
+        for name, x in (("Good", 1.4), ("Bad", 0.0)):
+            prim = stage.DefinePrim(f"/World/{name}", "Xform")
+            prim.GetReferences().AddInternalReference("/Proto")
+            prim.SetInstanceable(True)
+            UsdGeom.Xformable(prim).AddTranslateOp().Set(Gf.Vec3d(x, 0.9, 0.0))
+        UsdGeom.Xformable(stage.GetPrimAtPath("/World/Bad")).AddRotateYOp().Set(float("nan"))
+
+    stage = _stage_with(build)
+    stage.GetPrimAtPath("/Proto").SetSpecifier(Sdf.SpecifierClass)
+    result = _render(stage)
+    _ok_is_drawn(stage, result)
+    assert [str(e) for e in result.errors] == ["/World/Bad: its transform is not finite"]
+    row, col = pixel_of(stage, "/World/Good", result.width, result.height, Usd.TimeCode.Default())
+    assert result.aovs["color"][row, col].sum() > 0.0, "the good instance is missing"
+
+
+def test_an_image_librarys_own_messages_never_reach_stderr_unprefixed(native, tmp_path) -> None:
+    # A PNG cut short: libpng printed "libpng error: IHDR: ..." on stderr by itself, beside
+    # mipray's own warning.
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x04\x00\x00\x00\x04")
+    usd = _texture_stage(tmp_path, str(cut))
+    done = subprocess.run(
+        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert lines and all(line.startswith("mipray-record: ") for line in lines), done.stderr
+    assert any(str(cut) in line for line in lines), done.stderr

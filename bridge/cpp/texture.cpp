@@ -407,9 +407,11 @@ void oiio_make_linear_texture(rust::Str src_in, rust::Str dst_in) {
     config.tile_width = 64;
     config.tile_height = 64;
     config.tile_depth = 1;
-    // Half keeps the 8-bit source's dark steps (linear 8-bit would band them).
+    // Half keeps the 8-bit source's dark steps (linear 8-bit would band them) at half the
+    // bytes of float. OpenEXR, because OpenImageIO's TIFF writer has no half and silently
+    // writes float (a 1.6 MB JPEG became a 131 MB copy).
     config.set_format(OIIO::TypeDesc::HALF);
-    config.attribute("maketx:fileformatname", "tiff");
+    config.attribute("maketx:fileformatname", "openexr");
     config.attribute("maketx:filtername", "box");
     std::ostringstream log;
     if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, linear, dst, config,

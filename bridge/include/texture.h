@@ -62,7 +62,7 @@ std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& options);
 // when the header cannot be read.
 bool oiio_auto_is_srgb(rust::Str path);
 // Writes `dst`: `src` decoded from sRGB (colour channels; alpha as stored) into a linear,
-// half-float, tiled MIP map, as `maketx --colorconvert sRGB linear -d half` would. Throws with
+// half-float, tiled OpenEXR MIP map, as `maketx --colorconvert sRGB linear -d half` would. Throws with
 // OpenImageIO's reason. The caller writes to a temporary name and renames.
 void oiio_make_linear_texture(rust::Str src, rust::Str dst);
 

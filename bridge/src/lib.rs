@@ -38,6 +38,7 @@ mod ffi;
 pub mod oiio;
 pub mod osd;
 pub mod texture;
+pub mod texture_cache;
 
 pub use oiio::{oiio_version, OiioImageIo};
 pub use osd::{limit_stencil_fvar_reference, limit_stencil_reference, LimitSample, OsdOptions, OsdSurface, UniformMesh};

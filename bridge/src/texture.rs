@@ -22,6 +22,7 @@ use mipray::texture::{
 };
 
 use crate::ffi::bridge as ffi;
+use crate::texture_cache;
 
 /// Settings of an [`OiioTextureSystem`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -138,61 +139,91 @@ impl OiioTextureSystem {
         self
     }
 
-    /// Where sRGB-encoded textures are converted to (once per file version): `$MIPRAY_TEXTURE_CACHE`
-    /// if set, else `$XDG_CACHE_HOME/mipray/textures`, else `~/.cache/mipray/textures`, else the
-    /// system temporary directory's `mipray-textures`. Each copy is a half-float tiled MIP map
-    /// named after the source and a hash of its absolute path, size and modification time, so an
-    /// edited source gets a new copy and two renders share one.
+    /// Where sRGB-encoded textures are converted to (once per file content):
+    /// `$MIPRAY_TEXTURE_CACHE` if set, else `$XDG_CACHE_HOME/mipray/textures`, else
+    /// `~/.cache/mipray/textures`; a private directory (0700, this user's). Each copy is a
+    /// half-float tiled OpenEXR MIP map named after the source, a hash of the source's bytes and
+    /// a hash of its own bytes (checked on use: a damaged copy is made again); the directory is
+    /// kept under `$MIPRAY_TEXTURE_CACHE_MB` (default 4096) by removing the least recently used
+    /// copies. See [`crate::texture_cache`].
     pub fn linear_cache_dir(&self) -> &Path {
         &self.linear_cache
     }
 
     /// The linear copy of the sRGB-encoded `path` in the cache, made if it is not there yet.
-    /// A cache directory that cannot be written is warned about once and the system temporary
-    /// directory used instead, so an unwritable `$HOME` never costs a render its textures.
+    /// A cache directory that cannot be used is warned about and a per-user directory under the
+    /// system temporary directory used instead, so an unwritable `$HOME` never costs a render
+    /// its textures (and no other user's directory is ever trusted).
     fn linear_copy(&self, path: &str) -> Result<String, TextureError> {
         let err = |message: String| TextureError { path: path.to_string(), message };
         let source = Path::new(path);
-        let meta = std::fs::metadata(source).map_err(|e| err(format!("cannot read: {e}")))?;
-        let absolute = std::fs::canonicalize(source).unwrap_or_else(|_| source.to_path_buf());
-        let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
-        let key = format!("linear-v1\0{}\0{}\0{modified}", absolute.display(), meta.len());
-        let stem = source.file_stem().and_then(|s| s.to_str()).unwrap_or("texture");
-        let name = format!("{stem}-{:016x}.linear.tx", fnv1a(key.as_bytes()));
-        let fallback = std::env::temp_dir().join("mipray-textures");
-        let mut dirs = vec![self.linear_cache.clone()];
+        let source_hash = texture_cache::hash_file(source).map_err(|e| err(format!("cannot read: {e}")))?;
+        let prefix = texture_cache::entry_prefix(source, source_hash, "linear-v2 sRGB->linear half exr");
+        let fallback = texture_cache::fallback_dir();
+        let mut dirs = vec![(self.linear_cache.clone(), false)];
         if fallback != self.linear_cache {
-            dirs.push(fallback);
+            dirs.push((fallback, true));
         }
         let mut problem = String::new();
-        for dir in &dirs {
-            let copy = dir.join(&name);
-            if copy.is_file() {
-                return Ok(copy.to_string_lossy().into_owned());
-            }
-            // Another render may be converting the same file: each writes its own temporary
-            // file and the rename is atomic, so a reader sees a whole copy or none.
-            let partial = copy.with_extension(format!("{}.partial.tx", std::process::id()));
-            let written = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&partial, b""));
-            if let Err(e) = written {
-                problem = format!("cannot write the linear texture cache {}: {e}", dir.display());
+        for (dir, strict) in &dirs {
+            if let Err(e) = texture_cache::private_dir(dir, *strict) {
+                problem = format!("cannot use the linear texture cache: {e}");
                 log::warn!("{problem}; trying the next place");
                 continue;
             }
-            log::info!("texture {path}: sRGB-encoded; writing its linear MIP map {}", copy.display());
+            if let Some(copy) = texture_cache::find(dir, &prefix) {
+                return Ok(copy.to_string_lossy().into_owned());
+            }
+            // Another render may be converting the same file: each writes its own hidden file
+            // and the rename is atomic, so a reader sees a whole copy or none.
+            let partial = match texture_cache::new_partial(dir, &prefix) {
+                Ok(p) => p,
+                Err(e) => {
+                    problem = format!("cannot write the linear texture cache: {e}");
+                    log::warn!("{problem}; trying the next place");
+                    continue;
+                }
+            };
+            log::info!("texture {path}: sRGB-encoded; writing its linear MIP map in {}", dir.display());
             if let Err(e) = ffi::oiio_make_linear_texture(&source.to_string_lossy(), &partial.to_string_lossy()) {
                 let _ = std::fs::remove_file(&partial);
                 return Err(err(format!("cannot convert from sRGB: {}", e.what())));
             }
-            match std::fs::rename(&partial, &copy) {
-                Ok(()) => return Ok(copy.to_string_lossy().into_owned()),
+            match texture_cache::commit(dir, &prefix, &partial) {
+                Ok(copy) => {
+                    texture_cache::evict(dir, texture_cache::limit_bytes(), &copy);
+                    return Ok(copy.to_string_lossy().into_owned());
+                }
                 Err(e) => {
                     let _ = std::fs::remove_file(&partial);
-                    problem = format!("cannot write {}: {e}", copy.display());
+                    problem = e;
                 }
             }
         }
         Err(err(problem))
+    }
+
+    /// [`TextureSampler::handle_encoded`]'s work once the request is new.
+    fn open_encoded(&self, path: &str, space: SourceColorSpace, encoded: &mut Encoded) -> Result<TextureHandle, TextureError> {
+        let request = (path.to_string(), space);
+        texture_cache::check_source(Path::new(path), texture_cache::OPEN_TIMEOUT)
+            .map_err(|message| TextureError { path: path.to_string(), message })?;
+        let srgb = match space {
+            SourceColorSpace::Raw => false,
+            SourceColorSpace::Srgb => true,
+            SourceColorSpace::Auto => {
+                ffi::oiio_auto_is_srgb(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?
+            }
+        };
+        let h = if srgb {
+            let h = self.handle(&self.linear_copy(path)?)?;
+            encoded.decoded_from.insert(h.index(), path.to_string());
+            h
+        } else {
+            self.handle(path)?
+        };
+        encoded.requests.insert(request, h);
+        Ok(h)
     }
 
     /// The options it was made with.
@@ -264,6 +295,8 @@ impl TextureSampler for OiioTextureSystem {
         if let Some(&h) = guard.0.get(path) {
             return Ok(h);
         }
+        texture_cache::check_source(Path::new(path), texture_cache::OPEN_TIMEOUT)
+            .map_err(|message| TextureError { path: path.to_string(), message })?;
         let index = self.sys.open(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?;
         let h = TextureHandle::new(index);
         if let Some(c) = self.file_channels.get(index as usize) {
@@ -289,24 +322,10 @@ impl TextureSampler for OiioTextureSystem {
         if let Some(&h) = encoded.requests.get(&request) {
             return Ok(h);
         }
-        let srgb = match space {
-            SourceColorSpace::Raw => false,
-            SourceColorSpace::Srgb => true,
-            SourceColorSpace::Auto => {
-                ffi::oiio_auto_is_srgb(path).map_err(|e| TextureError { path: path.to_string(), message: e.what().to_string() })?
-            }
-        };
-        let h = if srgb {
-            let h = self.handle(&self.linear_copy(path)?)?;
-            encoded.decoded_from.insert(h.index(), path.to_string());
-            h
-        } else {
-            self.handle(path)?
-        };
-        encoded.requests.insert(request, h);
-        Ok(h)
+        let (opened, caught) = texture_cache::catching_stderr(|| self.open_encoded(path, space, &mut encoded));
+        texture_cache::pass_on(path, &caught);
+        opened
     }
-
     fn decoded_from_srgb(&self, handle: TextureHandle) -> bool {
         lock(&self.encoded).decoded_from.contains_key(&handle.index())
     }
@@ -458,11 +477,5 @@ fn default_linear_cache_dir() -> PathBuf {
     if let Some(dir) = var("XDG_CACHE_HOME").or_else(|| var("HOME").map(|h| h.join(".cache"))) {
         return dir.join("mipray").join("textures");
     }
-    std::env::temp_dir().join("mipray-textures")
-}
-
-/// 64-bit FNV-1a: a cache file name stable across builds and Rust versions (std's hasher is not
-/// promised to be).
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3))
+    texture_cache::fallback_dir()
 }

@@ -230,3 +230,73 @@ fn a_file_asked_for_again_is_not_read_again() {
     assert_eq!(first[0], first[1], "auto on 8-bit RGB is the sRGB copy");
     assert!(ts.decoded_from_srgb(first[0]) && !ts.decoded_from_srgb(first[2]));
 }
+
+#[test]
+fn a_same_size_replacement_with_its_time_restored_gets_a_new_copy() {
+    // The cache was keyed by path, size and modification time: this replacement was served the
+    // old copy (issue 16).
+    let dir = scratch_dir("replaced");
+    let cache = dir.join("cache");
+    let png = dir.join("swap.png");
+    write_u8(&png, 16, 3, |_, _, _| 40);
+    let stamp = std::fs::metadata(&png).unwrap().modified().unwrap();
+    let p = png.to_str().unwrap();
+    let first = system(&cache);
+    let h = first.handle_encoded(p, SourceColorSpace::Srgb).unwrap();
+    assert!((at(&first, h, [0.5, 0.5], 0, 1)[0] - srgb_to_linear(40.0 / 255.0)).abs() < 1e-3);
+    let size = std::fs::metadata(&png).unwrap().len();
+    write_u8(&png, 16, 3, |_, _, _| 220);
+    assert_eq!(std::fs::metadata(&png).unwrap().len(), size, "the test needs a same-size file");
+    std::fs::File::options().write(true).open(&png).unwrap().set_modified(stamp).unwrap();
+    let second = system(&cache);
+    let h = second.handle_encoded(p, SourceColorSpace::Srgb).unwrap();
+    let v = at(&second, h, [0.5, 0.5], 0, 1)[0];
+    assert!((v - srgb_to_linear(220.0 / 255.0)).abs() < 2e-3, "stale copy served: {v}");
+}
+
+#[test]
+fn a_damaged_copy_is_made_again() {
+    let dir = scratch_dir("damaged");
+    let cache = dir.join("cache");
+    let png = dir.join("dmg.png");
+    write_u8(&png, 32, 3, |x, _, _| (x * 8) as u8);
+    let p = png.to_str().unwrap();
+    system(&cache).handle_encoded(p, SourceColorSpace::Srgb).unwrap();
+    let made = copies(&cache);
+    assert_eq!(made.len(), 1, "{made:?}");
+    for damage in ["truncated", "edited"] {
+        let mut bytes = std::fs::read(&made[0]).unwrap();
+        if damage == "truncated" {
+            bytes.truncate(bytes.len() / 2);
+        } else {
+            let n = bytes.len();
+            bytes[n - 10] ^= 0x55;
+        }
+        std::fs::write(&made[0], &bytes).unwrap();
+        let ts = system(&cache);
+        let h = ts.handle_encoded(p, SourceColorSpace::Srgb).unwrap();
+        let v = at(&ts, h, [0.3, 0.5], 0, 1)[0];
+        let x = (0.3f32 * 32.0) as u32;
+        assert!((v - srgb_to_linear((x * 8) as f32 / 255.0)).abs() < 2e-2, "{damage}: {v}");
+        assert_eq!(copies(&cache).len(), 1, "{damage}: {:?}", copies(&cache));
+        let rebuilt = std::fs::read(&copies(&cache)[0]).unwrap();
+        assert_ne!(rebuilt, bytes, "{damage}: the damaged copy was served");
+    }
+}
+
+#[test]
+fn the_copy_is_half_float_and_the_cache_private() {
+    use std::os::unix::fs::PermissionsExt;
+    // Noise does not compress, so the file's size tells half (2 bytes) from float (4).
+    let dir = scratch_dir("half");
+    let cache = dir.join("cache");
+    let png = dir.join("noise.png");
+    let res = 128;
+    write_u8(&png, res, 3, |x, row, c| ((x * 7919 + row * 104_729 + c * 31) % 251) as u8);
+    system(&cache).handle_encoded(png.to_str().unwrap(), SourceColorSpace::Srgb).unwrap();
+    let made = copies(&cache);
+    let bytes = std::fs::metadata(&made[0]).unwrap().len() as f64;
+    let float_bytes = (res * res * 3 * 4) as f64 * 4.0 / 3.0;
+    assert!(bytes < 0.7 * float_bytes, "{bytes} bytes: not half float ({float_bytes} as float)");
+    assert_eq!(std::fs::metadata(&cache).unwrap().permissions().mode() & 0o777, 0o700);
+}

@@ -59,10 +59,13 @@ impl RenderPass {
     }
 
     fn render(&self, delegate: &mut RenderDelegate, progress: &dyn Progress) -> Result<PassResult, DelegateError> {
+        let options = self.settings.to_options(self.width, self.height, &self.aovs);
+        // Before the sync, which may take long: an image that cannot fit is refused first.
+        options.validate()?;
+        mipray::film::check_film_memory(options.width, options.height, &options.aovs)?;
         let prim_errors = delegate.sync_or_cancel(progress)?;
         delegate.prepare_textures(crate::config::texture_options(&self.settings))?;
         let scene = delegate.build_scene(&self.camera, self.settings.displacement_bound)?;
-        let options = self.settings.to_options(self.width, self.height, &self.aovs);
         let cache = delegate.geometry_cache(options.cache);
         let out = render_with_cache(&scene, &options, Some(cache), progress)?;
         let mut stats = out.stats;

@@ -108,6 +108,8 @@ class Piece:
     #: Whether this piece opened the stage on its worker (a cold session).
     opened: bool
     busy_s: float
+    #: The scene has a dome light (see :attr:`RenderResult.dome_background`).
+    dome_background: bool = False
 
 
 def _resolve_view(job: Job, frame: float) -> tuple[str, int]:
@@ -159,6 +161,7 @@ def _render_piece(job: Job, frame: float, window: tuple[int, int, int, int]) -> 
         synced=synced,
         opened=opened,
         busy_s=time_module.perf_counter() - started,
+        dome_background=result.dome_background,
     )
 
 
@@ -560,6 +563,7 @@ def _assemble(job: Job, pieces: list[Piece], wall_s: float) -> RenderResult:
         time=pieces[0].frame,
         errors=errors,
         _camera_args=pieces[0].camera_args,
+        dome_background=pieces[0].dome_background,
     )
 
 
@@ -730,7 +734,7 @@ def record(
     written. Returns the exit status: 0, 2 (a prim dropped after an internal
     error) or 1 (a frame failed).
     """
-    from .frames import format_frame_path
+    from .frames import format_frame_path, write_frame
 
     prog = "mipray-record"
     frames = [math.nan if t.IsDefault() else float(t.GetValue()) for t in times]
@@ -758,11 +762,14 @@ def record(
         for problem in result.errors:
             err.write(f"{prog}: warning: frame {value:g}: {problem}\n")
         path = format_frame_path(args.outputImagePath, value)
-        result.write(
+        write_frame(
+            result,
             path,
             plan.aovs,
             color_correction=args.colorCorrectionMode,
             metadata=extra,
+            unsupported=plan.unsupported,
+            dome_opaque=args.enableDomeLightVisibility,
             atomic=True,
         )
         out.write(path + "\n")

@@ -12,6 +12,12 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .session import RenderResult
+    from .usd.unsupported import Unsupported
 
 __all__ = [
     "FrameSpecError",
@@ -19,6 +25,7 @@ __all__ = [
     "frame_placeholder",
     "frames_precision",
     "parse_frame_spec",
+    "write_frame",
 ]
 
 _PLACEHOLDER = re.compile(r"#+(?:\.#+)?")
@@ -104,3 +111,34 @@ def format_frame_path(path: str, frame: float) -> str:
     decimals = len(placeholder.split(".")[1]) if "." in placeholder else 0
     text = f"{frame:0{len(placeholder)}.{decimals}f}"
     return path.replace(placeholder, text, 1)
+
+
+def write_frame(
+    result: RenderResult,
+    path: str,
+    aovs: Sequence[str],
+    *,
+    color_correction: str,
+    metadata: Mapping[str, Any] | None,
+    unsupported: Sequence[Unsupported],
+    dome_opaque: bool,
+    atomic: bool,
+) -> None:
+    """Write one frame of ``mipray-record``, rendered here or on a cluster, the same way.
+
+    What the render settings author that mipray ignores (``unsupported``) joins the stats'
+    ``unsupported`` list, and with ``dome_opaque`` (``--enableDomeLightVisibility``) an 8-bit
+    image of a scene with a dome light is opaque everywhere, as usdrecord writes it: the
+    dome fills every pixel (the alpha AOV itself stays the surfaces' coverage).
+    """
+    import numpy as np
+
+    from .image import is_eight_bit
+    from .usd.unsupported import Unsupported
+
+    if unsupported:
+        listed = [Unsupported(**u) for u in result.stats.get("unsupported", [])]
+        result.stats["unsupported"] = [u.as_dict() for u in sorted({*listed, *unsupported})]
+    if dome_opaque and is_eight_bit(path) and result.dome_background and "alpha" in result.aovs:
+        result.aovs["alpha"] = np.ones_like(result.aovs["alpha"])
+    result.write(path, aovs, color_correction=color_correction, metadata=metadata, atomic=atomic)

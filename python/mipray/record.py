@@ -37,7 +37,7 @@ from typing import Any, NoReturn, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Sdf, Usd, UsdLux, UsdRender
+from pxr import Sdf, Usd, UsdRender
 
 from . import distributed
 from .errors import MiprayError, RenderSettingsError
@@ -47,6 +47,7 @@ from .frames import (
     frame_placeholder,
     frames_precision,
     parse_frame_spec,
+    write_frame,
 )
 from .image import COLOR_CORRECTION_MODES, check_output, eight_bit_aovs, is_eight_bit
 from .session import DEFAULT_WIDTH, RenderSession, open_stage
@@ -759,14 +760,14 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
                     on_update=_pass_counter(progress) if progressive else None,
                     pass_output=pass_output,
                 )
-                _add_unsupported(result.stats, plan.unsupported)
-                if args.enableDomeLightVisibility and is_eight_bit(path):
-                    _opaque_over_dome(result.aovs, session.scene)
-                result.write(
+                write_frame(
+                    result,
                     path,
                     plan.aovs,
                     color_correction=args.colorCorrectionMode,
                     metadata=extra,
+                    unsupported=plan.unsupported,
+                    dome_opaque=args.enableDomeLightVisibility,
                     atomic=progressive,
                 )
             finally:
@@ -784,24 +785,6 @@ def _run(args: argparse.Namespace, frames: list[Any], out: TextIO, err: TextIO) 
         )
         return 2
     return 0
-
-
-def _opaque_over_dome(aovs: dict[str, NDArray[np.float32]], scene: Any) -> None:
-    """With a dome seen as the background, an 8-bit image's alpha is 1 everywhere.
-
-    The dome fills every pixel; usdrecord writes such images opaque. The alpha AOV itself
-    stays the surfaces' coverage.
-    """
-    domes = [p for p in scene.light_paths if scene.stage.GetPrimAtPath(p).IsA(UsdLux.DomeLight)]
-    if domes and "alpha" in aovs:
-        aovs["alpha"] = np.ones_like(aovs["alpha"])
-
-
-def _add_unsupported(stats: dict[str, Any], items: list[Unsupported]) -> None:
-    """Merge what the render settings author that mipray ignores into the stats' list."""
-    if items:
-        listed = [Unsupported(**u) for u in stats.get("unsupported", [])]
-        stats["unsupported"] = [u.as_dict() for u in sorted({*listed, *items})]
 
 
 def _samples(settings: dict[str, object]) -> int:

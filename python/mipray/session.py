@@ -14,6 +14,7 @@ import logging
 import math
 import os
 import re
+import stat
 import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -100,6 +101,12 @@ def _open_layer(path: str, what: str) -> Sdf.Layer:
     """Open one layer; a failure is a one-line error naming it (``what``: its role)."""
     if not os.path.exists(path):
         raise StageError(f"{path}: no such {what.strip() or 'file'}", path=path)
+    if not os.path.isfile(path):
+        # A FIFO or a device would have USD read it for ever, a directory fail obscurely.
+        kind, role = _kind_of(path), what or "layer "
+        raise StageError(
+            f"{path}: not a regular file ({kind}); a USD {role}must be a file", path=path
+        )
     try:
         layer = Sdf.Layer.FindOrOpen(path)
     except Tf.ErrorException as exc:
@@ -109,6 +116,18 @@ def _open_layer(path: str, what: str) -> Sdf.Layer:
     if not layer:
         raise StageError(f"{path}: cannot open {what}as a USD layer", path=path)
     return layer
+
+
+def _kind_of(path: str) -> str:
+    """What a path that is not a regular file is, for a message."""
+    mode = os.stat(path).st_mode
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a socket" if stat.S_ISSOCK(mode) else "not a plain file"
 
 
 #: The prefix of a warning USD prints itself: where in its source it was issued.
@@ -177,6 +196,8 @@ class RenderResult:
     #: Prims skipped because their data was bad, each naming its path.
     errors: list[SyncError] = field(default_factory=list)
     _camera_args: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: The scene has a dome light: seen from the camera, it is the background of every pixel.
+    dome_background: bool = False
 
     @property
     def width(self) -> int:
@@ -429,6 +450,10 @@ class RenderSession:
             stats = {}
         # Everything authored that the image lacks (mipray.usd.unsupported), listed in the stats.
         stats["unsupported"] = [u.as_dict() for u in self.scene.unsupported]
+        # Every prim left out, one line each: those the scene delegate could not send (bad
+        # data caught in Python) and those the renderer dropped.
+        skipped = [str(e) for e in self.scene.delegate_errors]
+        stats["prim_errors"] = list(dict.fromkeys([*skipped, *stats.get("prim_errors", [])]))
         scene_time = self.scene.time
         return RenderResult(
             aovs=dict(pixels),
@@ -437,7 +462,15 @@ class RenderSession:
             time=math.nan if scene_time.IsDefault() else float(scene_time.GetValue()),
             errors=self.scene.delegate_errors,
             _camera_args=camera_args,
+            dome_background=_has_dome_light(self.scene),
         )
+
+
+def _has_dome_light(scene: Any) -> bool:
+    """Whether a synced stage light of ``scene`` is a dome."""
+    from pxr import UsdLux
+
+    return any(scene.stage.GetPrimAtPath(p).IsA(UsdLux.DomeLight) for p in scene.light_paths)
 
 
 def render(

@@ -267,6 +267,9 @@ pub(crate) fn render<'py>(
         }
         Err(e @ hd_mipray::DelegateError::Prim { .. }) => return Err(PyValueError::new_err(e.to_string())),
         Err(e @ hd_mipray::DelegateError::Setting(_)) => return Err(PyValueError::new_err(e.to_string())),
+        // Settings the render refused (a resolution whose image cannot fit, …): the caller's
+        // to fix, not an internal error.
+        Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Settings(e))) => return Err(PyValueError::new_err(e)),
         Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
     };
     Ok((buffers_dict(py, result.buffers)?, result.stats.to_string()))

@@ -2,6 +2,7 @@
 //! [`crate::image_io::ImageIo`] or to Python as arrays. Non-finite samples never reach it: they
 //! are counted and dropped.
 
+use crate::error::RenderError;
 use crate::image_io::ChannelFormat;
 
 use crate::aov::{Aov, AOV_NAMES as AOV_NAME_ARRAY};
@@ -64,6 +65,45 @@ pub struct AovBuffer {
     pub aov: Aov,
     pub channels: usize,
     pub data: Vec<f32>,
+}
+
+/// Bytes a film of `aovs` at `width`×`height` holds (f32 channels).
+pub fn film_bytes(width: usize, height: usize, aovs: &[Aov]) -> u128 {
+    let channels: u128 = aovs.iter().map(|a| a.channels() as u128).sum();
+    width as u128 * height as u128 * channels * 4
+}
+
+/// Copies of the film a render may hold at once: the film, and the caller's converted copy
+/// while the image is written.
+pub const FILM_COPIES: u128 = 2;
+
+/// Refuses, before anything is allocated, a film and its AOVs that would not fit in the memory
+/// available (`MemAvailable` of `/proc/meminfo`; no check where that cannot be read), rather
+/// than let the allocation abort the process.
+///
+/// # Errors
+/// [`RenderError::Settings`] naming the resolution, the AOVs and both sizes.
+pub fn check_film_memory(width: usize, height: usize, aovs: &[Aov]) -> Result<(), RenderError> {
+    let need = film_bytes(width, height, aovs) * FILM_COPIES;
+    let Some(available) = available_memory() else { return Ok(()) };
+    if need > u128::from(available) {
+        let names: Vec<&str> = aovs.iter().map(|a| a.name()).collect();
+        return Err(RenderError::Settings(format!(
+            "resolution {width}x{height} with AOVs {}: the image needs {:.1} GB, more than the {:.1} GB of memory available; render it smaller or in tiles (the crop setting)",
+            names.join(", "),
+            need as f64 / 1e9,
+            available as f64 / 1e9
+        )));
+    }
+    Ok(())
+}
+
+/// The memory the system can give without swapping, bytes (`MemAvailable`), if known.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb.saturating_mul(1024))
 }
 
 /// A set of AOV buffers of one resolution.

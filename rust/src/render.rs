@@ -106,6 +106,7 @@ pub fn render_with_cache(
 ) -> Result<RenderOutput, RenderError> {
     options.validate()?;
     scene.camera.validate().map_err(RenderError::Camera)?;
+    crate::film::check_film_memory(options.width, options.height, &options.aovs)?;
     let start = Instant::now();
     let threads = if options.threads == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { options.threads };
     let pool = rayon::ThreadPoolBuilder::new()

@@ -440,15 +440,27 @@ class Instancing:
             instances = self._groups.get(proto, {})
             members = self._native_members.get(proto, [])
             owned = self._native_owned.setdefault(proto, set())
-            if instances and members:
-                k, n = len(members), len(instances)
-                transforms = np.stack(list(instances.values()))
-                self.delegate.set_instancer(
-                    proto,
-                    prototypes=members,
-                    proto_indices=np.tile(np.arange(k, dtype=np.int32), n),
-                    transforms=np.repeat(transforms, k, axis=0),
-                )
+            # An instance whose transform is not finite is left out by name; the others stay.
+            placed = {}
+            for instance, transform in instances.items():
+                if np.isfinite(transform).all():
+                    self.errors.pop(instance, None)
+                    placed[instance] = transform
+                else:
+                    self._fail(instance, ValueError("its transform is not finite"))
+            if placed and members:
+                k, n = len(members), len(placed)
+                transforms = np.stack(list(placed.values()))
+                try:
+                    self.delegate.set_instancer(
+                        proto,
+                        prototypes=members,
+                        proto_indices=np.tile(np.arange(k, dtype=np.int32), n),
+                        transforms=np.repeat(transforms, k, axis=0),
+                    )
+                except (PrimError, ValueError, TypeError, OverflowError) as exc:
+                    self._fail(proto, exc)
+                    continue
                 self._hold(proto, proto, owned)
                 self._count(proto)
             elif proto in owned:

@@ -43,6 +43,16 @@ class RenderDelegateLike(Protocol):
         prototype: bool = ...,
         face_albedos: NDArray[np.float32] | None = ...,
         face_albedo_indices: NDArray[np.int32] | None = ...,
+        mirror: tuple[float, float, float] = ...,
+        displacement_bound: float | None = ...,
+        displacement: tuple[float, float, int, float] | None = ...,
+        st_values: NDArray[np.float32] | None = ...,
+        st_indices: NDArray[np.int32] | None = ...,
+        st_interpolation: str = ...,
+        diffuse_texture: dict[str, object] | None = ...,
+        displacement_texture: dict[str, object] | None = ...,
+        material: dict[str, object] | None = ...,
+        gprim: dict[str, object] | None = ...,
     ) -> None:
         """Add or replace a mesh."""
 
