@@ -53,6 +53,7 @@ class RenderDelegateLike(Protocol):
         displacement_texture: dict[str, object] | None = ...,
         material: dict[str, object] | None = ...,
         gprim: dict[str, object] | None = ...,
+        primvars: dict[str, dict[str, object]] | None = ...,
     ) -> None:
         """Add or replace a mesh."""
 
