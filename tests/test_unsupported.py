@@ -65,7 +65,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     inst_mesh = UsdGeom.Mesh.Define(stage, "/World/InstMesh").GetPrim()
     inst_mesh.GetReferences().AddInternalReference("/Protos/Box")
     inst_mesh.SetInstanceable(True)
-    # A native instance with its own material binding.
+    # A native instance with its own material binding (rendered: not listed).
     group = UsdGeom.Xform.Define(stage, "/Protos/Group").GetPrim()
     add_cube(stage, "/Protos/Group/Part")
     inst = UsdGeom.Xform.Define(stage, "/World/Inst").GetPrim()
@@ -75,7 +75,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     bind(inst, red)
 
     # Materials: MaterialX-only, a non-PreviewSurface surface, ignored inputs, constant
-    # displacement, and a GeomSubset bound to a textured material.
+    # displacement, and a GeomSubset bound to a textured material (rendered: not listed).
     mtlx = UsdShade.Material.Define(stage, "/Looks/Mtlx")
     std = _shader(stage, "/Looks/Mtlx/Std", "ND_standard_surface_surfaceshader")
     mtlx.CreateSurfaceOutput("mtlx").ConnectToSource(std.ConnectableAPI(), "out")
@@ -123,7 +123,6 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
                 "/World/InstMesh",
                 "instanceable gprim (its own geometry is not instanced) Mesh",
             ),
-            Unsupported("/World/Inst", "material binding on a native instance material:binding"),
             Unsupported("/World/Lost", "material binding to no Material </Looks/Nope>"),
             Unsupported(
                 "/Looks/Mtlx",
@@ -134,11 +133,6 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
             Unsupported(
                 "/Looks/Plain",
                 "UsdPreviewSurface constant displacement displacement = 0.1",
-            ),
-            Unsupported(
-                "/Looks/Tex",
-                "GeomSubset material input (a subset renders its constant diffuseColor) "
-                "inputs:diffuseColor (textured)",
             ),
         ]
     )

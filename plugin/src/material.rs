@@ -49,6 +49,34 @@ impl FaceAlbedo {
     }
 }
 
+/// Whole UsdPreviewSurface networks on some faces of a mesh: GeomSubsets bound to their own
+/// materials, textures included. A face listed here takes its material over the mesh's own
+/// and over [`FaceAlbedo`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FaceMaterials {
+    /// The distinct materials.
+    pub materials: Vec<SurfaceInputs>,
+    /// Per control face (USD face order, holes included): an index into `materials`, or −1
+    /// for the face's colour from [`FaceAlbedo`] or the mesh's material.
+    pub indices: Vec<i32>,
+}
+
+impl FaceMaterials {
+    /// Checks the table against a mesh of `face_count` faces.
+    ///
+    /// # Errors
+    /// A one-line reason: the wrong number of indices, or an index out of range.
+    pub fn validate(&self, face_count: usize) -> Result<(), String> {
+        if self.indices.len() != face_count {
+            return Err(format!("face_material_indices has {} entries for {face_count} faces", self.indices.len()));
+        }
+        if let Some((i, v)) = self.indices.iter().enumerate().find(|(_, v)| **v < -1 || **v as i64 >= self.materials.len() as i64) {
+            return Err(format!("face_material_indices[{i}] = {v} is out of range for {} face materials", self.materials.len()));
+        }
+        Ok(())
+    }
+}
+
 /// A UsdUVTexture feeding a UsdPreviewSurface input, as the scene delegate resolved it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TextureInput {

@@ -13,7 +13,7 @@ use mipray_bridge::OsdSurface;
 
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
-use crate::material::{FaceAlbedo, SurfaceInputs, TextureInput};
+use crate::material::{FaceAlbedo, FaceMaterials, SurfaceInputs, TextureInput};
 use mipray::texture::Primvar2;
 
 /// What the scene delegate knows about a mesh. Object space; `transform` is object-to-world
@@ -43,6 +43,9 @@ pub struct MeshData {
     /// Per-face diffuse colours overriding `albedo` on some faces (GeomSubsets bound to their
     /// own materials, uniform `displayColor`).
     pub face_albedo: Option<FaceAlbedo>,
+    /// Whole materials on some faces (GeomSubsets bound to UsdPreviewSurfaces, textures
+    /// included), over `face_albedo` and `material`.
+    pub face_materials: Option<FaceMaterials>,
     /// The `st` primvar the textures read (face-varying through OpenSubdiv).
     pub st: Option<Primvar2>,
     /// `diffuseColor` from a texture (replaces `albedo`) for a mesh without a `material`.
@@ -90,6 +93,7 @@ impl Default for MeshData {
             displacement: None,
             prototype: false,
             face_albedo: None,
+            face_materials: None,
             st: None,
             diffuse_texture: None,
             displacement_texture: None,
@@ -168,6 +172,7 @@ impl MeshPrim {
             || self.data.mirror != new.mirror
             || self.data.double_sided != new.double_sided
             || self.data.face_albedo != new.face_albedo
+            || self.data.face_materials != new.face_materials
             || self.data.diffuse_texture != new.diffuse_texture
             || self.data.material != new.material
         {
@@ -199,7 +204,14 @@ impl MeshPrim {
         self.dirty = DirtyBits::CLEAN;
         if dirty.contains(DirtyBits::MATERIAL) || dirty.contains(DirtyBits::TOPOLOGY) {
             let faces = self.data.face_count();
-            if let Some(Err(problem)) = self.data.face_albedo.as_ref().map(|f| f.validate(faces)) {
+            let problem = match (
+                self.data.face_albedo.as_ref().map(|f| f.validate(faces)),
+                self.data.face_materials.as_ref().map(|f| f.validate(faces)),
+            ) {
+                (Some(Err(p)), _) | (_, Some(Err(p))) => Some(p),
+                _ => None,
+            };
+            if let Some(problem) = problem {
                 // Left out until fixed; the fix rebuilds the surface (a rare case, kept simple).
                 self.surface = None;
                 let e = DelegateError::prim(&self.path, problem);

@@ -156,6 +156,7 @@ impl RenderDelegate {
             m.data.diffuse_texture.is_some()
                 || m.data.displacement_texture.is_some()
                 || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
+                || m.data.face_materials.as_ref().is_some_and(|f| f.materials.iter().any(|s| !s.textures.is_empty()))
         }) || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
         if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
             return Ok(());
@@ -427,15 +428,27 @@ impl RenderDelegate {
         let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
         mesh.material = mat;
+        let mut table: Option<Vec<u32>> = None;
         if let Some(fa) = &m.data.face_albedo {
             let first = scene.materials.len();
             for (k, albedo) in fa.albedos.iter().enumerate() {
                 // Face materials are lambertian: a subset's material does not inherit the mesh's mirror.
                 scene.add_material(mesh_material(&format!("{}[{k}]", m.path), *albedo, [0.0; 3]));
             }
-            let table: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
-            mesh.face_materials = Some(table.into());
+            table = Some(fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect());
         }
+        if let Some(fm) = &m.data.face_materials {
+            // A subset's whole network: its own textures and lobes, not only its diffuse colour.
+            let ids: Vec<u32> =
+                fm.materials.iter().map(|inputs| scene.add_material(self.preview_material(&m.path, inputs)) as u32).collect();
+            let faces = table.get_or_insert_with(|| vec![mat as u32; fm.indices.len()]);
+            for (slot, &i) in faces.iter_mut().zip(&fm.indices) {
+                if i >= 0 {
+                    *slot = ids[i as usize];
+                }
+            }
+        }
+        mesh.face_materials = table.map(Into::into);
         mesh.generation = m.generation;
         mesh.cache_id = Some(m.cache_id);
         mesh.left_handed = m.data.topology.left_handed;

@@ -69,6 +69,8 @@ class RenderDelegate:
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
+        face_materials: list[dict[str, object]] | None = None,
+        face_material_indices: NDArray[np.int32] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -142,6 +144,13 @@ class RenderDelegate:
                 at ``points`` of diameters ``widths`` (one, one per point, or
                 none for USD's default 1). ``st`` is the surface's (u, v)
                 (see ``mipray::implicit``).
+            face_materials: whole UsdPreviewSurface networks of GeomSubsets
+                bound to their own materials, each a dict as ``material``
+                (textures included; they read the mesh's ``st``).
+            face_material_indices: (F,) int32, one per face in USD face order:
+                an index into ``face_materials``, or -1 for the face's colour
+                from ``face_albedos`` or the mesh's ``material``. Given
+                together with ``face_materials``.
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.

@@ -14,7 +14,7 @@ use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
-use hd_mipray::material::{input_from_usd, SurfaceInputs, TextureInput};
+use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
@@ -156,7 +156,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None, face_materials=None, face_material_indices=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -191,6 +191,8 @@ impl RenderDelegate {
         displacement_texture: Option<&Bound<'_, PyDict>>,
         material: Option<&Bound<'_, PyDict>>,
         gprim: Option<&Bound<'_, PyDict>>,
+        face_materials: Option<Vec<Bound<'_, PyDict>>>,
+        face_material_indices: Option<PyReadonlyArray1<'_, i32>>,
     ) -> PyResult<()> {
         let gprim = gprim.map(|g| read_gprim(path, g)).transpose()?;
         let pts = points.as_array();
@@ -217,6 +219,18 @@ impl RenderDelegate {
         // Points colour each point as a face of its own.
         let faces = if matches!(gprim, Some(Gprim::Points { .. })) { points.len() } else { topology.face_vertex_counts.len() };
         let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, faces)?;
+        let face_materials = match (face_materials, face_material_indices) {
+            (None, None) => None,
+            (Some(m), Some(i)) => {
+                let table = FaceMaterials {
+                    materials: m.iter().map(|d| surface_inputs(path, d)).collect::<PyResult<_>>()?,
+                    indices: i.as_array().to_vec(),
+                };
+                table.validate(faces).map_err(|e| value_error(path, e))?;
+                Some(table)
+            }
+            _ => return Err(value_error(path, "face_materials and face_material_indices go together")),
+        };
         let st = match st_values {
             None => None,
             Some(v) => {
@@ -275,6 +289,7 @@ impl RenderDelegate {
                 displacement,
                 prototype,
                 face_albedo,
+                face_materials,
                 st,
                 diffuse_texture,
                 displacement_texture,

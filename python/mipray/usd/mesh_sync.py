@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
-from .face_albedo import compute_surface_albedo
+from .face_albedo import compute_surface_albedo, material_subsets
 from .gprim import gprim_arguments, point_colors
 from .material import compute_albedo
 from .mesh import mesh_arguments
@@ -66,10 +66,12 @@ def read_mesh(
         mesh, time, args["face_vertex_counts"], args["face_vertex_indices"], len(args["points"])
     )
     args.update(surface.arguments())
-    args.update(shading_arguments(prim, time))
+    n_faces = len(args["face_vertex_counts"])
+    subsets = material_subsets(mesh, time, n_faces)
+    args.update(shading_arguments(prim, time, subsets=subsets, face_count=n_faces))
     if prototype:
         args["prototype"] = True
-    varies = data_varies or surface.might_vary or material_might_vary(prim)
+    varies = data_varies or surface.might_vary or material_might_vary(prim, subsets)
     return MeshRead(args, surface.material_paths, varies)
 
 

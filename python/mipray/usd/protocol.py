@@ -8,7 +8,7 @@ without it, for tests and for tools that only read USD).
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +43,8 @@ class RenderDelegateLike(Protocol):
         prototype: bool = ...,
         face_albedos: NDArray[np.float32] | None = ...,
         face_albedo_indices: NDArray[np.int32] | None = ...,
+        face_materials: list[dict[str, Any]] | None = ...,
+        face_material_indices: NDArray[np.int32] | None = ...,
     ) -> None:
         """Add or replace a mesh."""
 

@@ -626,8 +626,14 @@ class UsdSceneDelegate:
                 self._forget(path)  # its type changed: drop what the old kind sent
                 previous = None
             if prim.IsInstance():
-                self._instancing.add_instance(path, prim.GetPrototype(), transform)
-                record = _Record("instance", order, in_delegate=False, xform_varies=xform_varies)
+                bound = self._instancing.add_instance(path, prim.GetPrototype(), transform)
+                record = _Record(
+                    "instance",
+                    order,
+                    in_delegate=False,
+                    xform_varies=xform_varies,
+                    material_paths=bound,
+                )
             elif is_renderable_gprim(prim):
                 read = read_mesh(prim, time, transform)
                 record = _Record(

@@ -28,7 +28,7 @@ from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from .gprim import GPRIM_TYPES
 from .light import AREA_LIGHT_TYPES
-from .shading import COLOR_INPUTS, FLOAT_INPUTS
+from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 
 __all__ = [
     "HEADLIGHT",
@@ -224,13 +224,6 @@ def _missing_material(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     return found
 
 
-def _instance_binding(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
-    if not prim.IsInstance():
-        return []
-    rels = [r for r in prim.GetRelationships() if r.GetName().startswith("material:binding")]
-    return [r.GetName() for r in rels if r.HasAuthoredTargets()]
-
-
 # A material's checks take the Material prim (bound to something rendered).
 
 
@@ -287,19 +280,6 @@ def _constant_displacement(material: Usd.Prim, time: Usd.TimeCode) -> list[str]:
     return [f"displacement = {value:g}"] if value else []
 
 
-def _subset_material(material: Usd.Prim, _: Usd.TimeCode) -> list[str]:
-    """A GeomSubset's material renders its constant diffuseColor only (mipray.usd.face_albedo)."""
-    shader = _preview_surface(material)
-    if shader is None:
-        return []
-    return [
-        f"inputs:{i.GetBaseName()}" + (" (textured)" if i.HasConnectedSource() else "")
-        for i in shader.GetInputs()
-        if (i.GetBaseName() != "diffuseColor" and i.GetAttr().HasAuthoredValue())
-        or i.HasConnectedSource()
-    ]
-
-
 #: RenderVar light-path expressions that are the whole beauty image (what mipray renders).
 BEAUTY_LPES = frozenset({"C.*", "C.*[LO]", "C.*L", "C[DS]*[LO]"})
 
@@ -333,8 +313,8 @@ class Row:
     #: How the warning and the stats name it.
     what: str
     #: What it is checked on: ``prim`` (every rendered prim), ``material`` (every material
-    #: bound to a rendered mesh), ``subset material`` (bound to a GeomSubset), ``render var``
-    #: and ``render settings`` (those of the render).
+    #: bound to a rendered mesh or its GeomSubsets), ``render var`` and ``render settings``
+    #: (those of the render).
     scope: str
     #: ``check(prim, time)``: the details authored (empty: none).
     check: Callable[[Usd.Prim, Usd.TimeCode], list[str]]
@@ -346,7 +326,6 @@ class Row:
 TABLE: tuple[Row, ...] = (
     Row("prim type", "prim", _prim_type, warned_by="mipray.usd.scene_delegate"),
     Row("instanceable gprim (its own geometry is not instanced)", "prim", _instanceable_gprim),
-    Row("material binding on a native instance", "prim", _instance_binding),
     Row("material binding to no Material", "prim", _missing_material),
     Row("ShapingAPI", "prim", _applied("ShapingAPI")),
     Row("ShadowAPI", "prim", _applied("ShadowAPI", frozenset({"shadow:enable"}))),
@@ -363,11 +342,6 @@ TABLE: tuple[Row, ...] = (
     Row("surface shader", "material", _surface_shader, warned_by="mipray.usd.shading"),
     Row("UsdPreviewSurface input", "material", _preview_inputs),
     Row("UsdPreviewSurface constant displacement", "material", _constant_displacement),
-    Row(
-        "GeomSubset material input (a subset renders its constant diffuseColor)",
-        "subset material",
-        _subset_material,
-    ),
     Row("render var light-path expression", "render var", _render_var_lpe),
     Row(
         "render settings window",
@@ -427,19 +401,15 @@ def _rendered_prims(
         stack.extend((c, info, shown_root) for c in reversed(children))
 
 
-def _bound_materials(prim: Usd.Prim) -> tuple[list[Usd.Prim], list[Usd.Prim]]:
-    """(materials bound to ``prim``, to its GeomSubsets), for ``full`` rendering."""
-    own, subsets = [], []
-    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
-    if material:
-        own.append(material.GetPrim())
-    for subset in UsdGeom.Subset.GetAllGeomSubsets(UsdGeom.Imageable(prim)):
-        bound, _ = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial(
-            UsdShade.Tokens.full
-        )
-        if bound and bound.GetPrim() not in own:
-            subsets.append(bound.GetPrim())
-    return own, subsets
+def _bound_materials(prim: Usd.Prim) -> list[Usd.Prim]:
+    """The materials bound to ``prim`` and to its materialBind GeomSubsets, for rendering."""
+    found = []
+    subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
+    for owner in (prim, *(s.GetPrim() for s in subsets)):
+        material = bound_material(owner)
+        if material is not None and material.GetPrim() not in found:
+            found.append(material.GetPrim())
+    return found
 
 
 def audit_stage(
@@ -447,23 +417,18 @@ def audit_stage(
 ) -> list[Unsupported]:
     """Everything rendered prims author that mipray does not consume, sorted, each once.
 
-    The ``prim``, ``material`` and ``subset material`` rows of :data:`TABLE`.
+    The ``prim`` and ``material`` rows of :data:`TABLE`.
     """
     found: set[Unsupported] = set()
-    materials: dict[str, tuple[Usd.Prim, str]] = {}
+    materials: dict[str, Usd.Prim] = {}
     for prim, shown in _rendered_prims(stage, time, purposes):
         found.update(_apply("prim", prim, time, shown))
         if prim.IsA(UsdGeom.Gprim):
-            own, subsets = _bound_materials(prim)
-            for material in own:
-                materials.setdefault(str(material.GetPath()), (material, "material"))
-            for material in subsets:
-                materials.setdefault(str(material.GetPath()), (material, "subset material"))
+            for material in _bound_materials(prim):
+                materials.setdefault(str(material.GetPath()), material)
     found.update(composition_errors(stage))
-    for path, (material, scope) in materials.items():
+    for path, material in materials.items():
         found.update(_apply("material", material, time, path))
-        if scope == "subset material":
-            found.update(_apply(scope, material, time, path))
     return sorted(found)
 
 
