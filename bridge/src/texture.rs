@@ -156,7 +156,8 @@ impl OiioTextureSystem {
         let meta = std::fs::metadata(source).map_err(|e| err(format!("cannot read: {e}")))?;
         let absolute = std::fs::canonicalize(source).unwrap_or_else(|_| source.to_path_buf());
         let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
-        let key = format!("linear-v1\0{}\0{}\0{modified}", absolute.display(), meta.len());
+        // v2: alpha kept unassociated (v1 copies of files with alpha were premultiplied).
+        let key = format!("linear-v2\0{}\0{}\0{modified}", absolute.display(), meta.len());
         let stem = source.file_stem().and_then(|s| s.to_str()).unwrap_or("texture");
         let name = format!("{stem}-{:016x}.linear.tx", fnv1a(key.as_bytes()));
         let fallback = std::env::temp_dir().join("mipray-textures");

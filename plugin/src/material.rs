@@ -92,12 +92,19 @@ pub struct TextureInput {
     pub channel: u32,
     /// UsdUVTexture `sourceColorSpace`: how the file encodes its values (lookups are linear).
     pub color_space: mipray::texture::SourceColorSpace,
+    /// A `<UDIM>` file: its tiles present (tile number, file), each looked up where `st` falls
+    /// in it ([`mipray::texture::UdimSampler`]); empty for a single file.
+    pub udim_tiles: Vec<(u32, String)>,
 }
 
 impl TextureInput {
     /// The texture lookup options.
     pub fn lookup(&self) -> mipray::texture::Lookup {
-        mipray::texture::Lookup { first_channel: self.channel, wrap_s: self.wrap_s, wrap_t: self.wrap_t, fill: 0.0 }
+        use mipray::texture::Wrap;
+        // A UDIM tile's neighbour is another tile, not its own opposite edge: clamp unless the
+        // author said otherwise.
+        let wrap = |w: Wrap| if !self.udim_tiles.is_empty() && w == Wrap::FromFile { Wrap::Clamp } else { w };
+        mipray::texture::Lookup { first_channel: self.channel, wrap_s: wrap(self.wrap_s), wrap_t: wrap(self.wrap_t), fill: 0.0 }
     }
 
     /// `(scale, bias, fallback)` as the texture feeds `input`: a colour input takes the rgb

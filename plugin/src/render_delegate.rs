@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use mipray::displacement::{DisplacementShader, TextureDisplacement};
 use mipray::material::{Input, Material, TexturedColor};
-use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler};
+use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler, UdimSampler};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
 use glam::Mat4;
@@ -314,6 +314,9 @@ impl RenderDelegate {
     /// naming prim, input and file) when the texture cannot be read. Float inputs read the
     /// connected output's channel: scale, bias and fallback are that channel's.
     fn textured_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+        if !tex.udim_tiles.is_empty() {
+            return self.udim_color(path, input, tex);
+        }
         let problem = match self.sampler() {
             // prepare_textures makes a texture system whenever a mesh has a texture input.
             None => "no texture system".to_string(),
@@ -342,6 +345,45 @@ impl RenderDelegate {
             format!("{path}: cannot read {} texture {}: {problem}; using its fallback", input.usd_name(), tex.file),
         );
         None
+    }
+
+    /// [`Delegate::textured_color`] for a `<UDIM>` set: every tile opened (one that cannot be is
+    /// warned about, naming it, and its st reads the fallback), looked up through a
+    /// [`UdimSampler`]; `None` when no tile can be read.
+    fn udim_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+        let sampler = self.sampler()?;
+        let mut tiles = Vec::new();
+        for (number, file) in &tex.udim_tiles {
+            match sampler.handle_encoded(file, tex.color_space) {
+                Ok(handle) => tiles.push((*number, handle)),
+                Err(e) => self.warn_once(
+                    format!("{path} {file}"),
+                    format!("{path}: cannot read {} texture tile {file}: {}; using its fallback there", input.usd_name(), e.message),
+                ),
+            }
+        }
+        if tiles.is_empty() {
+            self.warn_once(
+                format!("{path} {}", tex.file),
+                format!("{path}: no tile of {} texture {} can be read; using its fallback", input.usd_name(), tex.file),
+            );
+            return None;
+        }
+        let udim = Arc::new(UdimSampler::new(sampler, tiles));
+        if !is_color(input) {
+            self.warn_data_decoded(path, input.usd_name(), tex, udim.as_ref(), TextureHandle::new(0));
+        }
+        let (scale, bias, fallback) = tex.affine(input);
+        Some(TexturedColor {
+            sampler: udim,
+            texture: TextureHandle::new(0),
+            path: tex.file.clone(),
+            lookup: tex.lookup(),
+            scale,
+            bias,
+            fallback,
+            st_channel: 0,
+        })
     }
 
     /// The core material of a mesh bound to a UsdPreviewSurface: its inputs clamped into range

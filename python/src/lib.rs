@@ -579,7 +579,8 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 }
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats
-/// each, optional), "wrapS", "wrapT", "sourceColorSpace" (USD tokens), "channel" (0–3)}`.
+/// each, optional), "wrapS", "wrapT", "sourceColorSpace" (USD tokens), "channel" (0–3),
+/// "udim_tiles" ((tile, file) pairs of a `<UDIM>` file)}`.
 /// `set_mesh`'s `gprim` dict: `type` (Sphere, Cube, Cylinder, Capsule, Plane, Points) and the
 /// shape's sizes (`radius`, `size`, `radius_bottom`, `radius_top`, `height`, `width`,
 /// `length`, `axis`; `widths` for Points). Sizes are checked here, so a bad one names the prim.
@@ -681,6 +682,10 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
         wrap_t: wrap("wrapT")?,
         channel,
         color_space,
+        udim_tiles: match d.get_item("udim_tiles")? {
+            None => Vec::new(),
+            Some(v) => v.extract().map_err(|_| value_error(path, format!("{input} texture udim_tiles must be (tile, file) pairs")))?,
+        },
     })
 }
 

@@ -55,6 +55,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
+from .assets import UDIM_TOKEN, local_file, udim_tiles
+
 __all__ = [
     "COLOR_INPUTS",
     "FALLBACKS",
@@ -145,16 +147,29 @@ def _source(shader: UsdShade.Shader, name: str) -> tuple[UsdShade.Shader, str] |
 
 
 def _resolve(attr: Usd.Attribute, value: Sdf.AssetPath) -> str:
+    """A texture file OpenImageIO can open for ``value``, authored on ``attr``.
+
+    Resolved by usd-core's asset resolver; a file inside a package (``.usdz``) is extracted
+    (:func:`mipray.usd.assets.local_file`). A path the resolver leaves unresolved (a
+    ``<UDIM>`` set, a missing file) is anchored to the layer that authored it, as usd-core
+    anchors asset paths (inside a package too).
+    """
     if value.resolvedPath:
-        return str(value.resolvedPath)
-    path = str(value.path)
-    if not path or os.path.isabs(path):
-        return path
-    for spec in attr.GetPropertyStack(Usd.TimeCode.Default()):
-        layer = spec.layer
-        if layer and layer.realPath:
-            return os.path.normpath(os.path.join(os.path.dirname(str(layer.realPath)), path))
-    return path
+        resolved = str(value.resolvedPath)
+    else:
+        resolved = str(value.path)
+        if resolved and not os.path.isabs(resolved):
+            for spec in attr.GetPropertyStack(Usd.TimeCode.Default()):
+                if spec.layer and not spec.layer.anonymous:
+                    resolved = str(spec.layer.ComputeAbsolutePath(resolved))
+                    break
+    if UDIM_TOKEN in resolved:
+        return resolved
+    try:
+        return local_file(resolved)
+    except OSError as exc:
+        _warn_once(f"{attr.GetPath()}: {exc}")
+        return resolved
 
 
 def _floats(value: Any, n: int, default: list[float]) -> list[float]:
@@ -234,6 +249,9 @@ def _texture(
         "file": _resolve(attrs[0], value),
         "channel": _CHANNELS.get(output, 0),
     }
+    if UDIM_TOKEN in desc["file"]:
+        # No tile found: the renderer cannot open the pattern itself, and says so.
+        desc["udim_tiles"] = udim_tiles(desc["file"])
     for key, default in (
         ("scale", [1.0] * 4),
         ("bias", [0.0] * 4),
