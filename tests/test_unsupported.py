@@ -74,15 +74,22 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     red = add_preview_material(stage, "/Looks/Red", (1.0, 0.0, 0.0))
     bind(inst, red)
 
-    # Materials: MaterialX-only, a non-PreviewSurface surface, ignored inputs, constant
+    # Materials: MaterialX with a node mipray does not evaluate, a non-PreviewSurface surface
+    # (with a render-context output), ignored inputs, constant
     # displacement, and a GeomSubset bound to a textured material (rendered: not listed).
     mtlx = UsdShade.Material.Define(stage, "/Looks/Mtlx")
     std = _shader(stage, "/Looks/Mtlx/Std", "ND_standard_surface_surfaceshader")
     mtlx.CreateSurfaceOutput("mtlx").ConnectToSource(std.ConnectableAPI(), "out")
+    noise = _shader(stage, "/Looks/Mtlx/Noise", "ND_noise3d_color3")
+    noise.CreateOutput("out", Sdf.ValueTypeNames.Color3f)
+    std.CreateInput("base_color", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+        noise.ConnectableAPI(), "out"
+    )
     bind(add_cube(stage, "/World/MtlxCube").GetPrim(), mtlx)
     other = UsdShade.Material.Define(stage, "/Looks/Other")
     osl = _shader(stage, "/Looks/Other/Osl", "PxrSurface")
     other.CreateSurfaceOutput().ConnectToSource(osl.ConnectableAPI(), "out")
+    other.CreateSurfaceOutput("ri").ConnectToSource(osl.ConnectableAPI(), "out")
     bind(add_cube(stage, "/World/OtherCube").GetPrim(), other)
     plain = add_preview_material(stage, "/Looks/Plain", (0.5, 0.5, 0.5))
     surface = UsdShade.Shader(stage.GetPrimAtPath("/Looks/Plain/PreviewSurface"))
@@ -124,9 +131,10 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
                 "instanceable gprim (its own geometry is not instanced) Mesh",
             ),
             Unsupported("/World/Lost", "material binding to no Material </Looks/Nope>"),
+            Unsupported("/Looks/Mtlx", "MaterialX node ND_noise3d_color3 at /Looks/Mtlx/Noise"),
             Unsupported(
-                "/Looks/Mtlx",
-                "material output (only the universal outputs:surface is read) outputs:mtlx:surface",
+                "/Looks/Other",
+                "material output (only the universal outputs:surface is read) outputs:ri:surface",
             ),
             Unsupported("/Looks/Other", "surface shader PxrSurface at /Looks/Other/Osl"),
             Unsupported("/Looks/Plain", "UsdPreviewSurface input inputs:occlusion"),

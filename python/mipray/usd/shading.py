@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 from .assets import UDIM_TOKEN, local_file, udim_tiles
+from .materialx import mtlx_surface, read_mtlx_surface
 
 __all__ = [
     "COLOR_INPUTS",
@@ -427,7 +428,11 @@ def material_might_vary(prim: Usd.Prim, subsets: list[Subset] | None = None) -> 
         s
         for material in bound
         if material is not None
-        for s in (material.ComputeSurfaceSource()[0], material.ComputeDisplacementSource()[0])
+        for s in (
+            material.ComputeSurfaceSource()[0],
+            material.ComputeSurfaceSource("mtlx")[0],
+            material.ComputeDisplacementSource()[0],
+        )
         if s
     ]
     while todo:
@@ -468,6 +473,11 @@ def _surface_material(
     surface, _, _ = material.ComputeSurfaceSource()
     if surface and surface.GetShaderId() == "UsdPreviewSurface":
         return _preview_surface(prim, material_path, surface, time)
+    mtlx = mtlx_surface(material)
+    if mtlx is not None:
+        read = read_mtlx_surface(material_path, mtlx, time)
+        textures = [(name, _Texture(desc, varname, None)) for name, desc, varname in read.textures]
+        return _Material(read.args, textures)
     if surface:
         _warn_once(
             f"{material_path}: surface shader {surface.GetPath()} ({surface.GetShaderId()}) is "

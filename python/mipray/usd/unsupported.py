@@ -28,6 +28,7 @@ from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from .gprim import GPRIM_TYPES
 from .light import AREA_LIGHT_TYPES
+from .materialx import mtlx_surface, unsupported_nodes
 from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 
 __all__ = [
@@ -239,10 +240,18 @@ def _context_only_outputs(material: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     """
     if _preview_surface(material) is not None:
         return []
+    read = {"mtlx:surface"} if mtlx_surface(UsdShade.Material(material)) else set()
     outputs = UsdShade.Material(material).GetSurfaceOutputs()
     return [
-        o.GetFullName() for o in outputs if o.GetBaseName() != "surface" and o.HasConnectedSource()
+        o.GetFullName()
+        for o in outputs
+        if o.GetBaseName() != "surface" and o.HasConnectedSource() and o.GetBaseName() not in read
     ]
+
+
+def _mtlx_nodes(material: Usd.Prim, time: Usd.TimeCode) -> list[str]:
+    """MaterialX nodes (and surface inputs) of the material's mtlx surface mipray cannot map."""
+    return unsupported_nodes(UsdShade.Material(material), time)
 
 
 def _preview_surface(material: Usd.Prim) -> UsdShade.Shader | None:
@@ -340,6 +349,7 @@ TABLE: tuple[Row, ...] = (
         _context_only_outputs,
     ),
     Row("surface shader", "material", _surface_shader, warned_by="mipray.usd.shading"),
+    Row("MaterialX node", "material", _mtlx_nodes),
     Row("UsdPreviewSurface input", "material", _preview_inputs),
     Row("UsdPreviewSurface constant displacement", "material", _constant_displacement),
     Row("render var light-path expression", "render var", _render_var_lpe),
