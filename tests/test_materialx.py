@@ -196,3 +196,81 @@ def test_an_unsupported_node_is_named_once_and_its_input_takes_the_default(fake,
     named = [r.getMessage() for r in caplog.records if "ND_fractal3d_color3" in r.getMessage()]
     assert len(named) == 1 and "/Looks/M" in named[0] and "/Looks/M/Noise" in named[0]
     assert any(u.what.startswith("MaterialX node") for u in scene.unsupported)
+
+
+# ------------------------------------------------------------ .mtlx files referenced
+
+
+def _mtlx_file(path, *, with_graph: bool) -> None:
+    mx = pytest.importorskip("MaterialX")
+    doc = mx.createDocument()
+    surface = doc.addNode("standard_surface", "Surf", "surfaceshader")
+    surface.setInputValue("base", 1.0)
+    surface.setInputValue("metalness", 0.3)
+    surface.setInputValue("specular_roughness", 0.4)
+    if with_graph:
+        graph = doc.addNodeGraph("Graph")
+        const = graph.addNode("constant", "Paint", "color3")
+        const.setInputValue("value", mx.Color3(0.2, 0.5, 0.7))
+        out = graph.addOutput("out", "color3")
+        out.setConnectedNode(const)
+        base = surface.addInput("base_color", "color3")
+        base.setNodeGraphString("Graph")
+        base.setOutputString("out")
+    else:
+        surface.setInputValue("base_color", mx.Color3(0.2, 0.5, 0.7))
+    material = doc.addMaterialNode("Paint")
+    material.setConnectedNode("surfaceshader", surface)
+    mx.writeToXmlFile(doc, str(path))
+
+
+@pytest.mark.parametrize("with_graph", [False, True])
+def test_a_referenced_mtlx_file_renders_as_the_same_network_inline(
+    native, tmp_path, with_graph
+) -> None:
+    _mtlx_file(tmp_path / "looks.mtlx", with_graph=with_graph)
+    layer = tmp_path / "scene.usda"
+    stage = Usd.Stage.CreateNew(str(layer))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    material = UsdShade.Material.Define(stage, "/Looks/Paint")
+    material.GetPrim().GetReferences().AddReference("./looks.mtlx", "/MaterialX/Materials/Paint")
+    bind(quad(stage).GetPrim(), material)
+    stage.Save()
+    scene = UsdSceneDelegate(stage, _FakeHolder.make())
+    scene.sync()
+    assert not [u for u in scene.unsupported if "mtlx" in u.what], scene.unsupported
+    got = _render(stage)
+    inline = new_stage()
+    mtlx_material(
+        inline, "/Looks/Paint", "ND_standard_surface_surfaceshader",
+        base=1.0, metalness=0.3, specular_roughness=0.4, base_color=(0.2, 0.5, 0.7),
+    )  # fmt: skip
+    bind(quad(inline).GetPrim(), UsdShade.Material.Get(inline, "/Looks/Paint"))
+    want = _render(inline)
+    assert want.max() > 0.05
+    np.testing.assert_array_equal(got, want)
+
+
+def test_an_unreadable_mtlx_file_is_named_and_the_frame_renders(native, tmp_path, caplog) -> None:
+    pytest.importorskip("MaterialX")
+    (tmp_path / "broken.mtlx").write_text("<materialx><not closed")
+    layer = tmp_path / "scene.usda"
+    stage = Usd.Stage.CreateNew(str(layer))
+    material = UsdShade.Material.Define(stage, "/Looks/Paint")
+    material.GetPrim().GetReferences().AddReference("./broken.mtlx", "/MaterialX/Materials/Paint")
+    bind(quad(stage).GetPrim(), material)
+    stage.Save()
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        image = _render(stage)
+    assert np.isfinite(image).all() and image.max() > 0
+    assert any(
+        "/Looks/Paint" in r.getMessage() and "broken.mtlx" in r.getMessage() for r in caplog.records
+    )
+
+
+class _FakeHolder:
+    @staticmethod
+    def make():
+        from fake_delegate import FakeRenderDelegate
+
+        return FakeRenderDelegate()

@@ -55,6 +55,7 @@ from .light import (
     distant_light_arguments,
 )
 from .mesh_sync import read_mesh
+from .mtlx_files import load_mtlx_references
 from .protocol import RenderDelegateLike
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
 from .unsupported import HEADLIGHT, Unsupported, audit_stage, is_rendered_type, warn_unsupported
@@ -217,6 +218,8 @@ class UsdSceneDelegate:
         self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
         self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
+        # Before anything is read: .mtlx references usd-core cannot compose.
+        load_mtlx_references(stage)
 
     # ------------------------------------------------------------------ state
 

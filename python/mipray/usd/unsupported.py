@@ -21,6 +21,7 @@ does not warn a second time.
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 from .gprim import GPRIM_TYPES
 from .light import AREA_LIGHT_TYPES
 from .materialx import mtlx_surface, unsupported_nodes
+from .mtlx_files import LOADED
 from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 
 __all__ = [
@@ -450,6 +452,8 @@ def composition_errors(stage: Usd.Stage) -> list[Unsupported]:
     found = []
     for error in stage.GetCompositionErrors():
         text = " ".join(str(error).split())
+        if any(os.path.basename(f) in text for f in LOADED):
+            continue  # a .mtlx reference mipray composed itself (mipray.usd.mtlx_files)
         site = getattr(error, "rootSite", None)
         prim = str(site.path) if site is not None and hasattr(site, "path") else "/"
         found.append(Unsupported(prim, f"composition error: {text}"))
