@@ -251,6 +251,27 @@ def test_a_referenced_mtlx_file_renders_as_the_same_network_inline(
     np.testing.assert_array_equal(got, want)
 
 
+def test_a_whole_mtlx_document_composes_under_materials_as_usd_mtlx_lays_it_out(
+    fake, tmp_path
+) -> None:
+    """``references = @looks.mtlx@</MaterialX>``: its materials at <prim>/Materials/<name>."""
+    _mtlx_file(tmp_path / "looks.mtlx", with_graph=True)
+    stage = Usd.Stage.CreateNew(str(tmp_path / "scene.usda"))
+    scope = stage.DefinePrim("/MaterialX", "Scope")
+    scope.GetReferences().AddReference("./looks.mtlx", "/MaterialX")
+    UsdShade.MaterialBindingAPI.Apply(quad(stage).GetPrim()).GetDirectBindingRel().SetTargets(
+        ["/MaterialX/Materials/Paint"]
+    )
+    stage.Save()
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    m = fake.meshes()["/World/Quad"]["material"]
+    assert m["name"] == "/MaterialX/Materials/Paint"
+    assert m["diffuseColor"] == pytest.approx((0.2, 0.5, 0.7))
+    assert m["metallic"] == pytest.approx(0.3)
+    assert scene.unsupported == []
+
+
 def test_an_unreadable_mtlx_file_is_named_and_the_frame_renders(native, tmp_path, caplog) -> None:
     pytest.importorskip("MaterialX")
     (tmp_path / "broken.mtlx").write_text("<materialx><not closed")

@@ -47,7 +47,10 @@ def _mtlx_references(prim: Usd.Prim) -> list[tuple[str, str, str]]:
             path = str(ref.assetPath)
             if path.lower().endswith(".mtlx"):
                 anchor = spec.layer.ComputeAbsolutePath(path) if spec.layer else path
-                name = ref.primPath.name if not ref.primPath.isEmpty else prim.GetName()
+                # </MaterialX/Materials/Wood> names one material; </MaterialX> (or no path)
+                # the whole document, composed under <prim>/Materials as usdMtlx lays it out.
+                target = ref.primPath
+                name = target.name if target.pathElementCount >= 3 else ""
                 found.append((anchor, name, os.path.dirname(anchor)))
     return found
 
@@ -66,13 +69,17 @@ def _value(mx: Any, value: Any, kind: str, folder: str) -> Any:
     return value
 
 
-def _translate(mx: Any, doc: Any, name: str, folder: str, layer: Sdf.Layer, at: Sdf.Path) -> None:
+def _translate(
+    mx: Any, doc: Any, name: str, folder: str, layer: Sdf.Layer, at: Sdf.Path, *, define: bool
+) -> None:
     """Author material ``name`` of ``doc`` at ``at`` in ``layer`` (see the module doc)."""
     material = doc.getChild(name)
     if material is None or material.getCategory() != "surfacematerial":
         raise ValueError(f"it has no surfacematerial named {name}")
     root = Sdf.CreatePrimInLayer(layer, at)
-    root.specifier = Sdf.SpecifierOver
+    root.specifier = Sdf.SpecifierDef if define else Sdf.SpecifierOver
+    if define:
+        root.typeName = "Material"
     done: dict[str, Sdf.Path] = {}
 
     def shader(node: Any, prefix: str) -> Sdf.Path:
@@ -109,7 +116,7 @@ def _translate(mx: Any, doc: Any, name: str, folder: str, layer: Sdf.Layer, at: 
                 source = shader(upstream, prefix)
                 a.connectionPathList.Append(source.AppendProperty("outputs:out"))
                 continue
-            value = inp.getValue()
+            value = inp.getResolvedValueString() if kind == "filename" else inp.getValue()
             if value is not None:
                 a.default = _value(mx, value, kind, folder)
             if inp.getColorSpace():
@@ -136,12 +143,7 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
     )
     if not mentioned:  # the common case: no prim walk at all
         return []
-    targets = [
-        (prim, refs)
-        for prim in stage.TraverseAll()
-        if prim.GetTypeName() in ("Material", "")
-        if (refs := _mtlx_references(prim))
-    ]
+    targets = [(prim, refs) for prim in stage.TraverseAll() if (refs := _mtlx_references(prim))]
     if not targets:
         return []
     problems: list[tuple[str, str]] = []
@@ -169,7 +171,15 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
                     )
                     doc.importLibrary(stdlib)
                     docs[file] = doc
-                _translate(mx, docs[file], name, folder, layer, prim.GetPath())
+                doc = docs[file]
+                if name:
+                    _translate(mx, doc, name, folder, layer, prim.GetPath(), define=False)
+                else:
+                    scope = Sdf.CreatePrimInLayer(layer, prim.GetPath().AppendChild("Materials"))
+                    scope.specifier, scope.typeName = Sdf.SpecifierDef, "Scope"
+                    for node in doc.getMaterialNodes():
+                        at = scope.path.AppendChild(node.getName())
+                        _translate(mx, doc, node.getName(), folder, layer, at, define=True)
                 LOADED.add(file)
             except Exception as exc:
                 text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
