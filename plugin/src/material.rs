@@ -183,3 +183,36 @@ pub fn input_from_usd(name: &str) -> Option<Input> {
     .into_iter()
     .find(|i| i.usd_name() == name)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn face_materials_are_checked_against_the_face_count() {
+        let table = FaceMaterials { materials: vec![SurfaceInputs::new("/Looks/A")], indices: vec![-1, 0, 0] };
+        assert_eq!(table.validate(3), Ok(()));
+        assert_eq!(table.validate(4).unwrap_err(), "face_material_indices has 3 entries for 4 faces");
+        let bad = FaceMaterials { materials: vec![SurfaceInputs::new("/Looks/A")], indices: vec![0, 1, -2] };
+        assert_eq!(bad.validate(3).unwrap_err(), "face_material_indices[1] = 1 is out of range for 1 face materials");
+    }
+
+    #[test]
+    fn a_udim_texture_clamps_unless_told_otherwise() {
+        use mipray::texture::{SourceColorSpace, Wrap};
+        let mut tex = TextureInput {
+            file: "paint.<UDIM>.png".into(),
+            scale: [1.0; 4],
+            bias: [0.0; 4],
+            fallback: [0.0, 0.0, 0.0, 1.0],
+            wrap_s: Wrap::FromFile,
+            wrap_t: Wrap::Mirror,
+            channel: 0,
+            color_space: SourceColorSpace::Auto,
+            udim_tiles: Vec::new(),
+        };
+        assert_eq!(tex.lookup().wrap_s, Wrap::FromFile);
+        tex.udim_tiles.push((1001, "paint.1001.png".into()));
+        assert_eq!((tex.lookup().wrap_s, tex.lookup().wrap_t), (Wrap::Clamp, Wrap::Mirror));
+    }
+}

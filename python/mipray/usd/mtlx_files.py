@@ -47,6 +47,8 @@ def _mtlx_references(prim: Usd.Prim) -> list[tuple[str, str, str]]:
             path = str(ref.assetPath)
             if path.lower().endswith(".mtlx"):
                 anchor = spec.layer.ComputeAbsolutePath(path) if spec.layer else path
+                if not os.path.isfile(anchor):
+                    continue  # usd-core's composition error already names the missing file
                 # </MaterialX/Materials/Wood> names one material; </MaterialX> (or no path)
                 # the whole document, composed under <prim>/Materials as usdMtlx lays it out.
                 target = ref.primPath
