@@ -257,6 +257,7 @@ class Instancing:
         self._variant_owned: dict[str, set[str]] = {}  # prototype → variant paths held
         self._referenced: set[str] = set()
         self._stage: Usd.Stage | None = None
+        self._binding_memo: dict[str, bool] = {}  # prim path → binds (see _binds_above)
         self._context: tuple[Usd.TimeCode, UsdGeom.XformCache, Counter[str]] | None = None
 
     # ------------------------------------------------------------ bookkeeping
@@ -465,6 +466,7 @@ class Instancing:
         have changed, so native prototypes are collected anew.
         """
         self._context = (time, xform_cache, unsupported)
+        self._binding_memo.clear()
         if full:
             self._native_members.clear()
             self._referenced = set()
@@ -532,6 +534,8 @@ class Instancing:
         bindings are resolved there (usd-core's ComputeBoundMaterial) and compared with the
         prototype's own. Empty: the instance renders the shared prototype.
         """
+        if not self._binds_above(instance):
+            return ()  # nothing outside the prototype binds: its own bindings hold
         root = str(instance.GetPath())
         stage = instance.GetStage()
         found = []
@@ -540,6 +544,23 @@ class Instancing:
             if proxy and (seen := _bindings(proxy)) != own:
                 found.append((rel, seen))
         return tuple(found)
+
+    def _binds_above(self, prim: Usd.Prim) -> bool:
+        """Whether ``prim`` or an ancestor has MaterialBindingAPI (memoized for the sync).
+
+        A binding reaching an instance proxy, direct or through a collection, is authored
+        on the proxy's ancestors; those outside the prototype are the instance and above.
+        usd-core ignores bindings on prims without the API applied.
+        """
+        path = str(prim.GetPath())
+        known = self._binding_memo.get(path)
+        if known is None:
+            parent = prim.GetParent()
+            known = prim.HasAPI(UsdShade.MaterialBindingAPI) or bool(
+                parent and not parent.IsPseudoRoot() and self._binds_above(parent)
+            )
+            self._binding_memo[path] = known
+        return known
 
     def add_instance(
         self, instance_path: str, prototype: Usd.Prim, world: NDArray[np.float64]
