@@ -95,6 +95,8 @@ class FakeRenderDelegate:
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
         primvars: dict[str, dict[str, object]] | None = None,
+        face_materials: list[dict[str, object]] | None = None,
+        face_material_indices: NDArray[np.int32] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
         for role, pv in (primvars or {}).items():
@@ -117,6 +119,18 @@ class FakeRenderDelegate:
             _check_array(path, "face_albedo_indices", face_albedo_indices, np.int32, 1)
             if len(face_albedo_indices) != len(face_vertex_counts):
                 raise ValueError(f"{path}: face_albedo_indices has the wrong length")
+        if (face_materials is None) != (face_material_indices is None):
+            raise ValueError(f"{path}: face_materials and face_material_indices go together")
+        if face_materials is not None:
+            _check_array(path, "face_material_indices", face_material_indices, np.int32, 1)
+            if len(face_material_indices) != len(face_vertex_counts):
+                raise ValueError(f"{path}: face_material_indices has the wrong length")
+            if int(face_material_indices.max(initial=-1)) >= len(face_materials):
+                raise ValueError(f"{path}: face_material_indices out of range")
+            for m in face_materials:
+                for tex in m.get("textures", {}).values():  # type: ignore[attr-defined]
+                    if "file" not in tex:
+                        raise ValueError(f"{path}: a texture needs a file")
         _check_array(path, "points", points, np.float32, 2)
         _check_array(path, "face_vertex_counts", face_vertex_counts, np.int32, 1)
         _check_array(path, "face_vertex_indices", face_vertex_indices, np.int32, 1)

@@ -66,7 +66,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     inst_mesh = UsdGeom.Mesh.Define(stage, "/World/InstMesh").GetPrim()
     inst_mesh.GetReferences().AddInternalReference("/Protos/Box")
     inst_mesh.SetInstanceable(True)
-    # A native instance with its own material binding.
+    # A native instance with its own material binding (rendered: not listed).
     group = UsdGeom.Xform.Define(stage, "/Protos/Group").GetPrim()
     add_cube(stage, "/Protos/Group/Part")
     inst = UsdGeom.Xform.Define(stage, "/World/Inst").GetPrim()
@@ -75,15 +75,22 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     red = add_preview_material(stage, "/Looks/Red", (1.0, 0.0, 0.0))
     bind(inst, red)
 
-    # Materials: MaterialX-only, a non-PreviewSurface surface, ignored inputs, constant
-    # displacement, and a GeomSubset bound to a textured material.
+    # Materials: MaterialX with a node mipray does not evaluate, a non-PreviewSurface surface
+    # (with a render-context output), ignored inputs, constant
+    # displacement, and a GeomSubset bound to a textured material (rendered: not listed).
     mtlx = UsdShade.Material.Define(stage, "/Looks/Mtlx")
     std = _shader(stage, "/Looks/Mtlx/Std", "ND_standard_surface_surfaceshader")
     mtlx.CreateSurfaceOutput("mtlx").ConnectToSource(std.ConnectableAPI(), "out")
+    noise = _shader(stage, "/Looks/Mtlx/Noise", "ND_noise3d_color3")
+    noise.CreateOutput("out", Sdf.ValueTypeNames.Color3f)
+    std.CreateInput("base_color", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+        noise.ConnectableAPI(), "out"
+    )
     bind(add_cube(stage, "/World/MtlxCube").GetPrim(), mtlx)
     other = UsdShade.Material.Define(stage, "/Looks/Other")
     osl = _shader(stage, "/Looks/Other/Osl", "PxrSurface")
     other.CreateSurfaceOutput().ConnectToSource(osl.ConnectableAPI(), "out")
+    other.CreateSurfaceOutput("ri").ConnectToSource(osl.ConnectableAPI(), "out")
     bind(add_cube(stage, "/World/OtherCube").GetPrim(), other)
     plain = add_preview_material(stage, "/Looks/Plain", (0.5, 0.5, 0.5))
     surface = UsdShade.Shader(stage.GetPrimAtPath("/Looks/Plain/PreviewSurface"))
@@ -126,27 +133,22 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
                 "/World/InstMesh",
                 "instanceable gprim (its own geometry is not instanced) Mesh",
             ),
-            Unsupported("/World/Inst", "material binding on a native instance material:binding"),
             Unsupported("/World/Lost", "material binding to no Material </Looks/Nope>"),
+            Unsupported("/Looks/Mtlx", "MaterialX node ND_noise3d_color3 at /Looks/Mtlx/Noise"),
             Unsupported(
                 "/World/Arm/Mesh",
                 "UsdSkel deformation motion blur (a skinned mesh is posed at the frame's time) "
                 "animated by /World/Arm/Skel/Anim",
             ),
             Unsupported(
-                "/Looks/Mtlx",
-                "material output (only the universal outputs:surface is read) outputs:mtlx:surface",
+                "/Looks/Other",
+                "material output (only the universal outputs:surface is read) outputs:ri:surface",
             ),
             Unsupported("/Looks/Other", "surface shader PxrSurface at /Looks/Other/Osl"),
             Unsupported("/Looks/Plain", "UsdPreviewSurface input inputs:occlusion"),
             Unsupported(
                 "/Looks/Plain",
                 "UsdPreviewSurface constant displacement displacement = 0.1",
-            ),
-            Unsupported(
-                "/Looks/Tex",
-                "GeomSubset material input (a subset renders its constant diffuseColor) "
-                "inputs:diffuseColor (textured)",
             ),
         ]
     )

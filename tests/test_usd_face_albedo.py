@@ -112,7 +112,12 @@ def test_subset_colour_shows_on_exactly_its_faces_in_the_render(native) -> None:
     stage = new_stage()
     mesh = strip(stage)
     bind(mesh.GetPrim(), add_preview_material(stage, "/Looks/Grey", (0.5, 0.5, 0.5)))
-    subset(mesh, "Red", [1], add_preview_material(stage, "/Looks/Red", (1.0, 0.0, 0.0)))
+    red = add_preview_material(stage, "/Looks/Red", (1.0, 0.0, 0.0))
+    # A subset renders its material's whole network: no specular lobe, so the face is pure red.
+    surface = UsdShade.Shader(stage.GetPrimAtPath("/Looks/Red/PreviewSurface"))
+    surface.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(1)
+    surface.CreateInput("specularColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0, 0, 0))
+    subset(mesh, "Red", [1], red)
     camera = add_camera(stage, "/World/Cam", eye=(0, 0, 4))
     camera.CreateHorizontalApertureAttr(30.0)
     camera.CreateVerticalApertureAttr(10.0)

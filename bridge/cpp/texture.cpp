@@ -178,6 +178,10 @@ std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& o) {
     // `maketx` output.
     m.cache->attribute("autotile", std::max(o.autotile, 0));
     m.cache->attribute("automip", o.automip ? 1 : 0);
+    // Colour and alpha as the file stores them, never premultiplied on read (OpenImageIO's
+    // default for PNG and others): UsdUVTexture's rgb and a are independent outputs, as Hydra's
+    // image reader (hioOiio, oiio:UnassociatedAlpha) gives them.
+    m.cache->attribute("unassociatedalpha", 1);
     m.ts = TextureSystem::create(false, m.cache);
     if (!m.ts) throw std::runtime_error("OpenImageIO could not create a TextureSystem");
     m.capacity = o.max_textures;
@@ -383,7 +387,9 @@ void oiio_make_linear_texture(rust::Str src_in, rust::Str dst_in) {
     const std::string dst(dst_in.data(), dst_in.size());
     // Read with an ImageInput, not ImageBuf(filename): that would go through OpenImageIO's
     // shared ImageCache, which keeps the file's old header and tiles when the file is edited.
-    auto in = OIIO::ImageInput::open(src);
+    OIIO::ImageSpec unassociated;
+    unassociated.attribute("oiio:UnassociatedAlpha", 1);
+    auto in = OIIO::ImageInput::open(src, &unassociated);
     if (!in) {
       std::string err = one_line(OIIO::geterror());
       throw std::runtime_error(err.empty() ? "cannot read the image" : err);
@@ -399,7 +405,8 @@ void oiio_make_linear_texture(rust::Str src_in, rust::Str dst_in) {
     // Decoded here rather than by make_texture's maketx:incolorspace, which in OpenImageIO 2.4
     // insists on an OCIO config file; colorconvert falls back to the built-in sRGB curve.
     OIIO::ImageBuf linear;
-    if (!OIIO::ImageBufAlgo::colorconvert(linear, encoded, "sRGB", "linear")) {
+    // Alpha is unassociated (see oiio_texsys_new): the curve applies to colour as it is.
+    if (!OIIO::ImageBufAlgo::colorconvert(linear, encoded, "sRGB", "linear", false)) {
       std::string err = one_line(linear.geterror());
       throw std::runtime_error(err.empty() ? "cannot decode from sRGB" : err);
     }
@@ -413,6 +420,7 @@ void oiio_make_linear_texture(rust::Str src_in, rust::Str dst_in) {
     config.set_format(OIIO::TypeDesc::HALF);
     config.attribute("maketx:fileformatname", "openexr");
     config.attribute("maketx:filtername", "box");
+    config.attribute("oiio:UnassociatedAlpha", 1);
     std::ostringstream log;
     if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, linear, dst, config,
                                           &log)) {

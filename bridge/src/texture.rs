@@ -158,7 +158,7 @@ impl OiioTextureSystem {
         let err = |message: String| TextureError { path: path.to_string(), message };
         let source = Path::new(path);
         let source_hash = texture_cache::hash_file(source).map_err(|e| err(format!("cannot read: {e}")))?;
-        let prefix = texture_cache::entry_prefix(source, source_hash, "linear-v2 sRGB->linear half exr");
+        let prefix = texture_cache::entry_prefix(source, source_hash, "linear-v3 unassociated alpha, sRGB->linear half exr");
         let fallback = texture_cache::fallback_dir();
         let mut dirs = vec![(self.linear_cache.clone(), false)];
         if fallback != self.linear_cache {

@@ -49,6 +49,34 @@ impl FaceAlbedo {
     }
 }
 
+/// Whole UsdPreviewSurface networks on some faces of a mesh: GeomSubsets bound to their own
+/// materials, textures included. A face listed here takes its material over the mesh's own
+/// and over [`FaceAlbedo`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FaceMaterials {
+    /// The distinct materials.
+    pub materials: Vec<SurfaceInputs>,
+    /// Per control face (USD face order, holes included): an index into `materials`, or −1
+    /// for the face's colour from [`FaceAlbedo`] or the mesh's material.
+    pub indices: Vec<i32>,
+}
+
+impl FaceMaterials {
+    /// Checks the table against a mesh of `face_count` faces.
+    ///
+    /// # Errors
+    /// A one-line reason: the wrong number of indices, or an index out of range.
+    pub fn validate(&self, face_count: usize) -> Result<(), String> {
+        if self.indices.len() != face_count {
+            return Err(format!("face_material_indices has {} entries for {face_count} faces", self.indices.len()));
+        }
+        if let Some((i, v)) = self.indices.iter().enumerate().find(|(_, v)| **v < -1 || **v as i64 >= self.materials.len() as i64) {
+            return Err(format!("face_material_indices[{i}] = {v} is out of range for {} face materials", self.materials.len()));
+        }
+        Ok(())
+    }
+}
+
 /// A UsdUVTexture feeding a UsdPreviewSurface input, as the scene delegate resolved it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TextureInput {
@@ -64,12 +92,19 @@ pub struct TextureInput {
     pub channel: u32,
     /// UsdUVTexture `sourceColorSpace`: how the file encodes its values (lookups are linear).
     pub color_space: mipray::texture::SourceColorSpace,
+    /// A `<UDIM>` file: its tiles present (tile number, file), each looked up where `st` falls
+    /// in it ([`mipray::texture::UdimSampler`]); empty for a single file.
+    pub udim_tiles: Vec<(u32, String)>,
 }
 
 impl TextureInput {
     /// The texture lookup options.
     pub fn lookup(&self) -> mipray::texture::Lookup {
-        mipray::texture::Lookup { first_channel: self.channel, wrap_s: self.wrap_s, wrap_t: self.wrap_t, fill: 0.0 }
+        use mipray::texture::Wrap;
+        // A UDIM tile's neighbour is another tile, not its own opposite edge: clamp unless the
+        // author said otherwise.
+        let wrap = |w: Wrap| if !self.udim_tiles.is_empty() && w == Wrap::FromFile { Wrap::Clamp } else { w };
+        mipray::texture::Lookup { first_channel: self.channel, wrap_s: wrap(self.wrap_s), wrap_t: wrap(self.wrap_t), fill: 0.0 }
     }
 
     /// `(scale, bias, fallback)` as the texture feeds `input`: a colour input takes the rgb
@@ -147,4 +182,37 @@ pub fn input_from_usd(name: &str) -> Option<Input> {
     ]
     .into_iter()
     .find(|i| i.usd_name() == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn face_materials_are_checked_against_the_face_count() {
+        let table = FaceMaterials { materials: vec![SurfaceInputs::new("/Looks/A")], indices: vec![-1, 0, 0] };
+        assert_eq!(table.validate(3), Ok(()));
+        assert_eq!(table.validate(4).unwrap_err(), "face_material_indices has 3 entries for 4 faces");
+        let bad = FaceMaterials { materials: vec![SurfaceInputs::new("/Looks/A")], indices: vec![0, 1, -2] };
+        assert_eq!(bad.validate(3).unwrap_err(), "face_material_indices[1] = 1 is out of range for 1 face materials");
+    }
+
+    #[test]
+    fn a_udim_texture_clamps_unless_told_otherwise() {
+        use mipray::texture::{SourceColorSpace, Wrap};
+        let mut tex = TextureInput {
+            file: "paint.<UDIM>.png".into(),
+            scale: [1.0; 4],
+            bias: [0.0; 4],
+            fallback: [0.0, 0.0, 0.0, 1.0],
+            wrap_s: Wrap::FromFile,
+            wrap_t: Wrap::Mirror,
+            channel: 0,
+            color_space: SourceColorSpace::Auto,
+            udim_tiles: Vec::new(),
+        };
+        assert_eq!(tex.lookup().wrap_s, Wrap::FromFile);
+        tex.udim_tiles.push((1001, "paint.1001.png".into()));
+        assert_eq!((tex.lookup().wrap_s, tex.lookup().wrap_t), (Wrap::Clamp, Wrap::Mirror));
+    }
 }

@@ -13,7 +13,7 @@ use mipray_bridge::OsdSurface;
 
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
-use crate::material::{FaceAlbedo, SurfaceInputs, TextureInput};
+use crate::material::{FaceAlbedo, FaceMaterials, SurfaceInputs, TextureInput};
 use mipray::material::{Input, PrimvarInput};
 use mipray::texture::Primvar2;
 
@@ -44,6 +44,9 @@ pub struct MeshData {
     /// Per-face diffuse colours overriding `albedo` on some faces (GeomSubsets bound to their
     /// own materials, uniform `displayColor`).
     pub face_albedo: Option<FaceAlbedo>,
+    /// Whole materials on some faces (GeomSubsets bound to UsdPreviewSurfaces, textures
+    /// included), over `face_albedo` and `material`.
+    pub face_materials: Option<FaceMaterials>,
     /// The `st` primvar the textures read (face-varying through OpenSubdiv).
     pub st: Option<Primvar2>,
     /// Authored normals of a polygonal mesh (`normals`, `primvars:normals`), as the two
@@ -146,6 +149,7 @@ impl Default for MeshData {
             displacement: None,
             prototype: false,
             face_albedo: None,
+            face_materials: None,
             st: None,
             normals: Vec::new(),
             primvar_inputs: Vec::new(),
@@ -233,6 +237,7 @@ impl MeshPrim {
             || self.data.double_sided != new.double_sided
             || self.data.face_albedo != new.face_albedo
             || self.data.primvar_faces != new.primvar_faces
+            || self.data.face_materials != new.face_materials
             || self.data.diffuse_texture != new.diffuse_texture
             || self.data.material != new.material
         {
@@ -264,7 +269,14 @@ impl MeshPrim {
         self.dirty = DirtyBits::CLEAN;
         if dirty.contains(DirtyBits::MATERIAL) || dirty.contains(DirtyBits::TOPOLOGY) {
             let faces = self.data.face_count();
-            if let Some(Err(problem)) = self.data.face_albedo.as_ref().map(|f| f.validate(faces)) {
+            let problem = match (
+                self.data.face_albedo.as_ref().map(|f| f.validate(faces)),
+                self.data.face_materials.as_ref().map(|f| f.validate(faces)),
+            ) {
+                (Some(Err(p)), _) | (_, Some(Err(p))) => Some(p),
+                _ => None,
+            };
+            if let Some(problem) = problem {
                 // Left out until fixed; the fix rebuilds the surface (a rare case, kept simple).
                 self.surface = None;
                 let e = DelegateError::prim(&self.path, problem);

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use mipray::displacement::{DisplacementShader, TextureDisplacement};
 use mipray::material::{Input, Material, TexturedColor};
-use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler};
+use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler, UdimSampler};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
 use glam::Mat4;
@@ -156,6 +156,7 @@ impl RenderDelegate {
             m.data.diffuse_texture.is_some()
                 || m.data.displacement_texture.is_some()
                 || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
+                || m.data.face_materials.as_ref().is_some_and(|f| f.materials.iter().any(|s| !s.textures.is_empty()))
         }) || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
         if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
             return Ok(());
@@ -313,6 +314,9 @@ impl RenderDelegate {
     /// naming prim, input and file) when the texture cannot be read. Float inputs read the
     /// connected output's channel: scale, bias and fallback are that channel's.
     fn textured_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+        if !tex.udim_tiles.is_empty() {
+            return self.udim_color(path, input, tex);
+        }
         let problem = match self.sampler() {
             // prepare_textures makes a texture system whenever a mesh has a texture input.
             None => "no texture system".to_string(),
@@ -341,6 +345,45 @@ impl RenderDelegate {
             format!("{path}: cannot read {} texture {}: {problem}; using its fallback", input.usd_name(), tex.file),
         );
         None
+    }
+
+    /// [`Delegate::textured_color`] for a `<UDIM>` set: every tile opened (one that cannot be is
+    /// warned about, naming it, and its st reads the fallback), looked up through a
+    /// [`UdimSampler`]; `None` when no tile can be read.
+    fn udim_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+        let sampler = self.sampler()?;
+        let mut tiles = Vec::new();
+        for (number, file) in &tex.udim_tiles {
+            match sampler.handle_encoded(file, tex.color_space) {
+                Ok(handle) => tiles.push((*number, handle)),
+                Err(e) => self.warn_once(
+                    format!("{path} {file}"),
+                    format!("{path}: cannot read {} texture tile {file}: {}; using its fallback there", input.usd_name(), e.message),
+                ),
+            }
+        }
+        if tiles.is_empty() {
+            self.warn_once(
+                format!("{path} {}", tex.file),
+                format!("{path}: no tile of {} texture {} can be read; using its fallback", input.usd_name(), tex.file),
+            );
+            return None;
+        }
+        let udim = Arc::new(UdimSampler::new(sampler, tiles));
+        if !is_color(input) {
+            self.warn_data_decoded(path, input.usd_name(), tex, udim.as_ref(), TextureHandle::new(0));
+        }
+        let (scale, bias, fallback) = tex.affine(input);
+        Some(TexturedColor {
+            sampler: udim,
+            texture: TextureHandle::new(0),
+            path: tex.file.clone(),
+            lookup: tex.lookup(),
+            scale,
+            bias,
+            fallback,
+            st_channel: 0,
+        })
     }
 
     /// The core material of a mesh bound to a UsdPreviewSurface: its inputs clamped into range
@@ -433,26 +476,48 @@ impl RenderDelegate {
         let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
         mesh.material = mat;
+        let mut table: Option<Vec<u32>> = None;
         if let Some(fa) = &m.data.face_albedo {
             let first = scene.materials.len();
             for (k, albedo) in fa.albedos.iter().enumerate() {
                 // Face materials are lambertian: a subset's material does not inherit the mesh's mirror.
                 scene.add_material(mesh_material(&format!("{}[{k}]", m.path), *albedo, [0.0; 3]));
             }
-            let mut table: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
+            let mut faces: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
             if !channels.inputs.is_empty() {
                 // Faces a primvar shades take the mesh's material, which reads it.
                 if m.data.primvar_faces.is_empty() {
-                    table.iter_mut().for_each(|t| *t = mat as u32);
+                    faces.iter_mut().for_each(|t| *t = mat as u32);
                 }
                 for &f in &m.data.primvar_faces {
-                    if let Some(t) = table.get_mut(f as usize) {
+                    if let Some(t) = faces.get_mut(f as usize) {
                         *t = mat as u32;
                     }
                 }
             }
-            mesh.face_materials = Some(table.into());
+            table = Some(faces);
         }
+        if let Some(fm) = &m.data.face_materials {
+            // A subset's whole network: its own textures and lobes, not only its diffuse colour.
+            let ids: Vec<u32> = fm
+                .materials
+                .iter()
+                .map(|inputs| {
+                    let mut material = self.preview_material(&m.path, inputs);
+                    for (_, t) in &mut material.textures {
+                        t.st_channel = channels.st;
+                    }
+                    scene.add_material(material) as u32
+                })
+                .collect();
+            let faces = table.get_or_insert_with(|| vec![mat as u32; fm.indices.len()]);
+            for (slot, &i) in faces.iter_mut().zip(&fm.indices) {
+                if i >= 0 {
+                    *slot = ids[i as usize];
+                }
+            }
+        }
+        mesh.face_materials = table.map(Into::into);
         mesh.normals = channels.normals;
         mesh.generation = m.generation;
         mesh.cache_id = Some(m.cache_id);

@@ -51,6 +51,7 @@ fn texture(file: &str, channel: u32) -> TextureInput {
         wrap_t: Wrap::Clamp,
         channel,
         color_space: mipray::texture::SourceColorSpace::Auto,
+        udim_tiles: Vec::new(),
     }
 }
 

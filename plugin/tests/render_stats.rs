@@ -45,6 +45,7 @@ fn delegate(texture_file: &str) -> RenderDelegate {
         wrap_t: Wrap::Clamp,
         channel: 0,
         color_space: mipray::texture::SourceColorSpace::Auto,
+        udim_tiles: Vec::new(),
     };
     d.set_mesh(
         "/quad",

@@ -70,6 +70,8 @@ class RenderDelegate:
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
         primvars: dict[str, dict[str, object]] | None = None,
+        face_materials: list[dict[str, object]] | None = None,
+        face_material_indices: NDArray[np.int32] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -153,6 +155,13 @@ class RenderDelegate:
                 or None for all}``. Face-varying and vertex
                 primvars go through OpenSubdiv on subdivision surfaces; every
                 interpolation is linear over each face on polygonal ones.
+            face_materials: whole UsdPreviewSurface networks of GeomSubsets
+                bound to their own materials, each a dict as ``material``
+                (textures included; they read the mesh's ``st``).
+            face_material_indices: (F,) int32, one per face in USD face order:
+                an index into ``face_materials``, or -1 for the face's colour
+                from ``face_albedos`` or the mesh's ``material``. Given
+                together with ``face_materials``.
 
         Raises:
             ValueError: the data is inconsistent; the message names ``path``.

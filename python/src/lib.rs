@@ -14,7 +14,7 @@ use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData};
 use hd_mipray::material::FaceAlbedo;
-use hd_mipray::material::{input_from_usd, SurfaceInputs, TextureInput};
+use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
@@ -233,7 +233,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None, primvars=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None, primvars=None, face_materials=None, face_material_indices=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -269,6 +269,8 @@ impl RenderDelegate {
         material: Option<&Bound<'_, PyDict>>,
         gprim: Option<&Bound<'_, PyDict>>,
         primvars: Option<&Bound<'_, PyDict>>,
+        face_materials: Option<Vec<Bound<'_, PyDict>>>,
+        face_material_indices: Option<PyReadonlyArray1<'_, i32>>,
     ) -> PyResult<()> {
         let gprim = gprim.map(|g| read_gprim(path, g)).transpose()?;
         let pts = points.as_array();
@@ -295,6 +297,18 @@ impl RenderDelegate {
         // Points colour each point as a face of its own.
         let faces = if matches!(gprim, Some(Gprim::Points { .. })) { points.len() } else { topology.face_vertex_counts.len() };
         let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, faces)?;
+        let face_materials = match (face_materials, face_material_indices) {
+            (None, None) => None,
+            (Some(m), Some(i)) => {
+                let table = FaceMaterials {
+                    materials: m.iter().map(|d| surface_inputs(path, d)).collect::<PyResult<_>>()?,
+                    indices: i.as_array().to_vec(),
+                };
+                table.validate(faces).map_err(|e| value_error(path, e))?;
+                Some(table)
+            }
+            _ => return Err(value_error(path, "face_materials and face_material_indices go together")),
+        };
         let st = match st_values {
             None => None,
             Some(v) => {
@@ -357,6 +371,7 @@ impl RenderDelegate {
                 displacement,
                 prototype,
                 face_albedo,
+                face_materials,
                 st,
                 normals,
                 primvar_inputs,
@@ -649,7 +664,8 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 }
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats
-/// each, optional), "wrapS", "wrapT", "sourceColorSpace" (USD tokens), "channel" (0–3)}`.
+/// each, optional), "wrapS", "wrapT", "sourceColorSpace" (USD tokens), "channel" (0–3),
+/// "udim_tiles" ((tile, file) pairs of a `<UDIM>` file)}`.
 /// `set_mesh`'s `gprim` dict: `type` (Sphere, Cube, Cylinder, Capsule, Plane, Points) and the
 /// shape's sizes (`radius`, `size`, `radius_bottom`, `radius_top`, `height`, `width`,
 /// `length`, `axis`; `widths` for Points). Sizes are checked here, so a bad one names the prim.
@@ -751,6 +767,10 @@ fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Tex
         wrap_t: wrap("wrapT")?,
         channel,
         color_space,
+        udim_tiles: match d.get_item("udim_tiles")? {
+            None => Vec::new(),
+            Some(v) => v.extract().map_err(|_| value_error(path, format!("{input} texture udim_tiles must be (tile, file) pairs")))?,
+        },
     })
 }
 

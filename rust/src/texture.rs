@@ -740,6 +740,65 @@ impl BaseFacePrimvar {
     }
 }
 
+/// The UDIM tile holding `st` (`1001 + ⌊s⌋ + 10 ⌊t⌋`, the convention of Mari and USD's
+/// `<UDIM>` paths: tile 1001 is st ∈ [0, 1)², 1002 one to the right, 1011 one up) and `st`
+/// within it; `None` outside the ten columns (s ∉ [0, 10)), below t = 0, or not finite.
+pub fn udim_tile(st: [f32; 2]) -> Option<(u32, [f32; 2])> {
+    let (u, v) = (st[0].floor(), st[1].floor());
+    if !(u.is_finite() && v.is_finite()) || !(0.0..10.0).contains(&u) || !(0.0..100.0).contains(&v) {
+        return None;
+    }
+    Some((1001 + u as u32 + 10 * v as u32, [st[0] - u, st[1] - v]))
+}
+
+/// A UDIM tile set as one texture: each lookup reads the tile its `st` falls in (see
+/// [`udim_tile`]), at `st` within the tile, through the sampler that opened the tiles. A lookup
+/// in a tile the set lacks fails, so the input takes its fallback there (as a missing file
+/// does). Filter footprints stay in their tile: tiles are separate images.
+pub struct UdimSampler {
+    inner: std::sync::Arc<dyn TextureSampler>,
+    /// (tile number, the inner sampler's handle), sorted by tile.
+    tiles: Vec<(u32, TextureHandle)>,
+}
+
+impl UdimSampler {
+    /// The set of `tiles` (tile number, handle of `inner`); the handle a [`UdimSampler`] is
+    /// looked up with is ignored.
+    pub fn new(inner: std::sync::Arc<dyn TextureSampler>, mut tiles: Vec<(u32, TextureHandle)>) -> Self {
+        tiles.sort_by_key(|t| t.0);
+        tiles.dedup_by_key(|t| t.0);
+        UdimSampler { inner, tiles }
+    }
+
+    fn tile(&self, number: u32) -> Option<TextureHandle> {
+        self.tiles.binary_search_by_key(&number, |t| t.0).ok().map(|i| self.tiles[i].1)
+    }
+}
+
+impl TextureSampler for UdimSampler {
+    fn handle(&self, path: &str) -> Result<TextureHandle, TextureError> {
+        Err(TextureError { path: path.to_string(), message: "a UDIM set opens its tiles through its inner sampler".into() })
+    }
+
+    fn decoded_from_srgb(&self, _handle: TextureHandle) -> bool {
+        self.tiles.iter().any(|t| self.inner.decoded_from_srgb(t.1))
+    }
+
+    fn sample(&self, _handle: TextureHandle, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2], lookup: &Lookup, out: &mut [f32]) -> bool {
+        let Some((number, local)) = udim_tile(st) else { return false };
+        let Some(handle) = self.tile(number) else { return false };
+        self.inner.sample(handle, local, dst_dx, dst_dy, lookup, out)
+    }
+
+    fn filter_mode(&self) -> FilterMode {
+        self.inner.filter_mode()
+    }
+
+    fn stats(&self) -> Value {
+        self.inner.stats()
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -761,6 +820,31 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn udim_tiles_follow_the_convention_and_lookups_read_their_own_tile() {
+        assert_eq!(udim_tile([0.25, 0.5]), Some((1001, [0.25, 0.5])));
+        assert_eq!(udim_tile([1.5, 0.25]), Some((1002, [0.5, 0.25])));
+        assert_eq!(udim_tile([0.5, 1.75]), Some((1011, [0.5, 0.75])));
+        assert_eq!(udim_tile([9.5, 2.5]), Some((1030, [0.5, 0.5])));
+        assert_eq!(udim_tile([10.5, 0.5]), None);
+        assert_eq!(udim_tile([-0.5, 0.5]), None);
+        assert_eq!(udim_tile([f32::NAN, 0.5]), None);
+        // A checker as tile 1012: a lookup there at st + (1, 1) reads it exactly as a lookup of
+        // it alone at st.
+        let inner: std::sync::Arc<dyn TextureSampler> = std::sync::Arc::new(CheckerSampler::new("c", 1024, 8, FilterMode::Differentials));
+        let b = inner.handle("c").unwrap();
+        let udim = UdimSampler::new(inner.clone(), vec![(1012, b)]);
+        let lookup = Lookup::DEFAULT;
+        for st in [[0.06f32, 0.06], [0.19, 0.06], [0.31, 0.81]] {
+            let (mut want, mut got) = ([0.0f32; 1], [0.0f32; 1]);
+            assert!(inner.sample(b, st, [1e-3, 0.0], [0.0, 1e-3], &lookup, &mut want));
+            assert!(udim.sample(TextureHandle::new(99), [st[0] + 1.0, st[1] + 1.0], [1e-3, 0.0], [0.0, 1e-3], &lookup, &mut got));
+            assert_eq!(got, want, "{st:?}");
+        }
+        // Tile 1002 is not in the set: the lookup fails (the input's fallback).
+        assert!(!udim.sample(TextureHandle::new(0), [1.5, 0.5], [1e-3, 0.0], [0.0, 1e-3], &lookup, &mut [0.0]));
+    }
 
     #[test]
     fn checker_box_average_is_exact() {

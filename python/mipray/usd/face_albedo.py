@@ -17,7 +17,10 @@ Each control face gets, in order:
 4. else 0.18 grey.
 
 A material whose diffuse colour is not a constant (a texture) falls through to
-step 3 for its faces. When every face ends up with the same colour the mesh
+step 3 for its faces here; a subset bound to a UsdPreviewSurface also sends its
+whole network (textures and every lobe) for its faces
+(:func:`mipray.usd.shading.shading_arguments`, ``face_materials``), which the
+renderer uses over this colour. When every face ends up with the same colour the mesh
 gets one ``albedo``; otherwise the distinct colours and a per-face index
 table (``face_albedos``, ``face_albedo_indices``) go to the delegate, which
 turns them into per-face materials of the core.
@@ -36,7 +39,7 @@ from ..errors import PrimError
 from .material import DEFAULT_ALBEDO, compute_albedo
 from .primvars import per_face, primvar_argument, read_display_primvar
 
-__all__ = ["SurfaceAlbedo", "compute_surface_albedo"]
+__all__ = ["SurfaceAlbedo", "compute_surface_albedo", "material_subsets"]
 
 
 @dataclass(frozen=True)
@@ -84,6 +87,22 @@ def _face_indices(subset: UsdGeom.Subset, time: Usd.TimeCode, n_faces: int) -> N
             path, f"indices[{i}] = {int(indices[i])} is out of range for {n_faces} faces"
         )
     return indices
+
+
+def material_subsets(
+    mesh: UsdGeom.Mesh, time: Usd.TimeCode, n_faces: int
+) -> list[tuple[Usd.Prim, NDArray[np.int64]]]:
+    """The mesh's materialBind GeomSubsets and their checked face indices, in USD's order.
+
+    Raises:
+        PrimError: a subset of the wrong element type or with face indices out of range
+            (the message names the subset).
+
+    """
+    return [
+        (subset.GetPrim(), _face_indices(subset, time, n_faces))
+        for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets()
+    ]
 
 
 def compute_surface_albedo(

@@ -35,12 +35,13 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Usd, UsdGeom
+from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
 from .gprim import is_renderable_gprim
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
+from .shading import bound_material
 from .transform import matrix_to_numpy
 
 __all__ = [
@@ -165,8 +166,29 @@ class _Walk:
     material_paths: set[str] = field(default_factory=set)
     might_vary: bool = False
     member_prims: set[str] = field(default_factory=set)
+    #: (delegate path, USD path) of each gprim member sent.
+    gprims: list[tuple[str, str]] = field(default_factory=list)
     #: The PointInstancers being expanded, outermost first: one met again is a cycle.
     expanding: set[str] = field(default_factory=set)
+
+
+#: The materials bound to a gprim and to each of its materialBind GeomSubsets.
+_Bindings = tuple[str, ...]
+#: (path below the prototype, bindings) of the gprims an instance sees bound differently.
+_Variant = tuple[tuple[str, _Bindings], ...]
+
+
+def _bindings(prim: Usd.Prim) -> _Bindings:
+    """The paths of the materials bound to ``prim`` and its materialBind subsets ("" for none)."""
+    owners = [
+        prim,
+        *(s.GetPrim() for s in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()),
+    ]
+    out = []
+    for owner in owners:
+        material = bound_material(owner)
+        out.append(str(material.GetPath()) if material is not None else "")
+    return tuple(out)
 
 
 def _expand(
@@ -228,7 +250,14 @@ class Instancing:
         self._groups: dict[str, dict[str, NDArray[np.float64]]] = {}  # prototype → instances
         self._instance_of: dict[str, str] = {}  # instance prim path → prototype path
         self._dirty_groups: set[str] = set()
+        # Per native prototype: (path below the prototype, bindings there) per gprim member.
+        self._native_bindings: dict[str, list[tuple[str, _Bindings]]] = {}
+        # Per instance prim: the members whose bindings differ through it (its variant).
+        self._variant_of: dict[str, _Variant] = {}
+        self._variant_owned: dict[str, set[str]] = {}  # prototype → variant paths held
         self._referenced: set[str] = set()
+        self._stage: Usd.Stage | None = None
+        self._binding_memo: dict[str, bool] = {}  # prim path → binds (see _binds_above)
         self._context: tuple[Usd.TimeCode, UsdGeom.XformCache, Counter[str]] | None = None
 
     # ------------------------------------------------------------ bookkeeping
@@ -322,6 +351,7 @@ class Instancing:
         self.errors.pop(path, None)
         walk.material_paths.update(read.material_paths)
         walk.might_vary = walk.might_vary or read.might_vary
+        walk.gprims.append((dpath, path))
         self._hold(walk.owner, dpath, walk.owned)
         self._count(dpath)
         return True
@@ -386,6 +416,7 @@ class Instancing:
     def _native(self, prototype: Usd.Prim) -> list[str]:
         """The members of native prototype ``prototype``, sent on first use."""
         path = str(prototype.GetPath())
+        self._stage = prototype.GetStage()
         self._referenced.add(path)
         if path not in self._native_members:
             self._resend_native(prototype)
@@ -404,6 +435,15 @@ class Instancing:
         self._release(path, old - walk.owned)
         self._native_members[path] = members
         self._native_owned[path] = walk.owned
+        self._native_bindings[path] = [
+            (usd_path[len(path) :], _bindings(prototype.GetStage().GetPrimAtPath(usd_path)))
+            for _, usd_path in walk.gprims
+        ]
+        stage = prototype.GetStage()
+        for instance_path in self._groups.get(path, {}):
+            instance = stage.GetPrimAtPath(instance_path)
+            if instance:
+                self._variant_of[instance_path] = self._variant(instance, path)
         if walk.might_vary:
             self._native_vary.add(path)
         else:
@@ -426,6 +466,7 @@ class Instancing:
         have changed, so native prototypes are collected anew.
         """
         self._context = (time, xform_cache, unsupported)
+        self._binding_memo.clear()
         if full:
             self._native_members.clear()
             self._referenced = set()
@@ -437,7 +478,9 @@ class Instancing:
         After a full walk, drop the prototypes nothing uses any more.
         """
         for proto in sorted(self._dirty_groups):
-            instances = self._groups.get(proto, {})
+            every = self._groups.get(proto, {})
+            plain = self._send_variants(proto, every)
+            instances = {p: every[p] for p in plain}
             members = self._native_members.get(proto, [])
             owned = self._native_owned.setdefault(proto, set())
             # An instance whose transform is not finite is left out by name; the others stay.
@@ -470,6 +513,8 @@ class Instancing:
         if full:
             for proto in [p for p in self._native_owned if p not in self._referenced]:
                 self._release(proto, self._native_owned.pop(proto))
+                self._release(proto + ".variants", self._variant_owned.pop(proto, set()))
+                self._native_bindings.pop(proto, None)
                 self._groups.pop(proto, None)
                 self._native_vary.discard(proto)
         self._context = None
@@ -493,26 +538,118 @@ class Instancing:
             self._resend_native(prototype)
         return True
 
+    def _variant(self, instance: Usd.Prim, proto: str) -> _Variant:
+        """The prototype's gprims whose materials differ seen through ``instance``.
+
+        A binding on the instance prim (or an ancestor, or a collection naming instance
+        proxies) reaches the prototype's prims only through the instance proxies, so the
+        bindings are resolved there (usd-core's ComputeBoundMaterial) and compared with the
+        prototype's own. Empty: the instance renders the shared prototype.
+        """
+        if not self._binds_above(instance):
+            return ()  # nothing outside the prototype binds: its own bindings hold
+        root = str(instance.GetPath())
+        stage = instance.GetStage()
+        found = []
+        for rel, own in self._native_bindings.get(proto, []):
+            proxy = stage.GetPrimAtPath(root + rel)
+            if proxy and (seen := _bindings(proxy)) != own:
+                found.append((rel, seen))
+        return tuple(found)
+
+    def _binds_above(self, prim: Usd.Prim) -> bool:
+        """Whether ``prim`` or an ancestor has MaterialBindingAPI (memoized for the sync).
+
+        A binding reaching an instance proxy, direct or through a collection, is authored
+        on the proxy's ancestors; those outside the prototype are the instance and above.
+        usd-core ignores bindings on prims without the API applied.
+        """
+        path = str(prim.GetPath())
+        known = self._binding_memo.get(path)
+        if known is None:
+            parent = prim.GetParent()
+            known = prim.HasAPI(UsdShade.MaterialBindingAPI) or bool(
+                parent and not parent.IsPseudoRoot() and self._binds_above(parent)
+            )
+            self._binding_memo[path] = known
+        return known
+
     def add_instance(
         self, instance_path: str, prototype: Usd.Prim, world: NDArray[np.float64]
-    ) -> bool:
+    ) -> tuple[str, ...]:
         """Place native prototype ``prototype`` at ``world`` for instance prim ``instance_path``.
 
-        Returns whether the prototype has anything to render.
+        Returns the materials bound through the instance to its prototype's prims where they
+        differ from the prototype's own (the scene delegate re-syncs the instance when one of
+        them changes).
         """
         proto = str(prototype.GetPath())
-        members = self._native(prototype)
+        self._native(prototype)
         old = self._instance_of.get(instance_path)
         if old is not None and old != proto:
             self.remove_instance(instance_path)
         self._groups.setdefault(proto, {})[instance_path] = world
         self._instance_of[instance_path] = proto
+        instance = prototype.GetStage().GetPrimAtPath(instance_path)
+        variant = self._variant(instance, proto) if instance else ()
+        self._variant_of[instance_path] = variant
         self._dirty_groups.add(proto)
-        return bool(members)
+        return tuple(sorted({m for _, b in variant for m in b if m}))
+
+    def _send_variants(self, proto: str, instances: dict[str, NDArray[np.float64]]) -> list[str]:
+        """Send one instancer per distinct variant of ``proto``'s instances; hold its meshes.
+
+        A variant's meshes are read through its first instance's proxies (so each gets the
+        materials bound there) under ``<prototype>.variant<k>``. Returns the instances
+        rendering the shared prototype.
+        """
+        assert self._context is not None, "begin_sync() first"
+        time, xform_cache, unsupported = self._context
+        owner = proto + ".variants"
+        groups: dict[_Variant, list[str]] = {}
+        plain: list[str] = []
+        for instance_path in instances:
+            variant = self._variant_of.get(instance_path, ())
+            (groups.setdefault(variant, []) if variant else plain).append(instance_path)
+        owned: set[str] = set()
+        members = self._native_members.get(proto, [])
+        for k, (variant, paths) in enumerate(sorted(groups.items())):
+            first = self._stage_prim(paths[0])
+            if first is None:
+                continue
+            root = f"{proto}.variant{k}"
+            walk = _Walk(owner, time, xform_cache, unsupported)
+            replaced: dict[str, str] = {}
+            for rel, _ in variant:
+                proxy = self._stage_prim(paths[0] + rel)
+                if proxy is not None and self._prototype_mesh(proxy, first, root + rel, walk):
+                    replaced[proto + rel] = root + rel
+            placed = [replaced.get(m, m) for m in members]
+            if not placed:
+                continue
+            transforms = np.stack([instances[p] for p in paths])
+            n = len(placed)
+            self.delegate.set_instancer(
+                root,
+                prototypes=placed,
+                proto_indices=np.tile(np.arange(n, dtype=np.int32), len(paths)),
+                transforms=np.repeat(transforms, n, axis=0),
+            )
+            self._hold(owner, root, walk.owned)
+            self._count(root)
+            owned |= walk.owned
+        self._release(owner, self._variant_owned.get(proto, set()) - owned)
+        self._variant_owned[proto] = owned
+        return plain
+
+    def _stage_prim(self, path: str) -> Usd.Prim | None:
+        prim = self._stage.GetPrimAtPath(path) if self._stage is not None else None
+        return prim if prim else None
 
     def remove_instance(self, instance_path: str) -> None:
         """Take instance prim ``instance_path`` out of its prototype's instancer."""
         proto = self._instance_of.pop(instance_path, None)
+        self._variant_of.pop(instance_path, None)
         if proto is not None:
             self._groups.get(proto, {}).pop(instance_path, None)
             self._dirty_groups.add(proto)

@@ -3,8 +3,8 @@
 A mesh bound to a UsdPreviewSurface sends all of that surface's inputs to the
 renderer (:mod:`mipray.usd.shading`); the albedo resolved here is what faces
 without such a material render with — meshes with only a display color, and
-GeomSubsets bound to their own materials, which render lambertian in their
-``diffuseColor`` (:mod:`mipray.usd.face_albedo`). It comes from, in order:
+faces of GeomSubsets bound to materials that are not UsdPreviewSurfaces
+(:mod:`mipray.usd.face_albedo`). It comes from, in order:
 
 1. the ``diffuseColor`` of the ``UsdPreviewSurface`` that the prim's bound
    material (purpose ``full``, falling back to all-purpose, as Hydra resolves
@@ -15,7 +15,8 @@ GeomSubsets bound to their own materials, which render lambertian in their
 3. else 0.18 grey.
 
 A ``diffuseColor`` connected to a texture is not a constant: such a subset
-falls through to its display color.
+falls through to its display color here, and renders its texture through
+``face_materials`` (:mod:`mipray.usd.shading`).
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ import math
 from dataclasses import dataclass
 
 from pxr import Usd, UsdGeom, UsdShade
+
+from .shading import bound_material
 
 __all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo"]
 
@@ -103,7 +106,7 @@ def _display_color(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float, fl
 
 def compute_albedo(prim: Usd.Prim, time: Usd.TimeCode) -> Albedo:
     """Resolve the albedo of ``prim`` at ``time`` (see the module doc for the order)."""
-    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
+    material = bound_material(prim)
     material_path = str(material.GetPath()) if material else None
     if material:
         rgb, might_vary = _preview_surface_diffuse(material, time)

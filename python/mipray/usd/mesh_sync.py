@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
-from .face_albedo import compute_surface_albedo
+from .face_albedo import compute_surface_albedo, material_subsets
 from .gprim import gprim_arguments, point_colors
 from .material import compute_albedo
 from .mesh import mesh_arguments
@@ -95,7 +95,9 @@ def read_mesh(
     primvars: dict[str, Any] = surface.arguments().pop("primvars", {})
     args.update(surface.arguments())
     args.pop("primvars", None)
-    shading = shading_arguments(prim, time)
+    n_faces = len(counts)
+    subsets = material_subsets(mesh, time, n_faces)
+    shading = shading_arguments(prim, time, subsets=subsets, face_count=n_faces)
     primvars.update(shading.pop("primvars", {}))
     args.update(shading)
     normals, normals_vary = _normals(mesh, time, args["scheme"], counts, n_points)
@@ -105,7 +107,7 @@ def read_mesh(
         args["primvars"] = primvars
     if prototype:
         args["prototype"] = True
-    varies = data_varies or surface.might_vary or normals_vary or material_might_vary(prim)
+    varies = data_varies or surface.might_vary or normals_vary or material_might_vary(prim, subsets)
     if posed is None:
         return MeshRead(args, surface.material_paths, varies)
     world = posed.points.astype(np.float64) @ posed.transform[:3, :3] + posed.transform[3, :3]

@@ -54,6 +54,8 @@ class RenderDelegateLike(Protocol):
         material: dict[str, object] | None = ...,
         gprim: dict[str, object] | None = ...,
         primvars: dict[str, dict[str, object]] | None = ...,
+        face_materials: list[dict[str, object]] | None = ...,
+        face_material_indices: NDArray[np.int32] | None = ...,
     ) -> None:
         """Add or replace a mesh."""
 

@@ -55,6 +55,7 @@ from .light import (
     distant_light_arguments,
 )
 from .mesh_sync import read_mesh
+from .mtlx_files import load_mtlx_references
 from .protocol import RenderDelegateLike
 from .skel import SkelPoser
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
@@ -222,6 +223,8 @@ class UsdSceneDelegate:
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
         self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
         self._poser = SkelPoser()
+        # Before anything is read: .mtlx references usd-core cannot compose.
+        load_mtlx_references(stage)
 
     # ------------------------------------------------------------------ state
 
@@ -640,8 +643,14 @@ class UsdSceneDelegate:
                 self._forget(path)  # its type changed: drop what the old kind sent
                 previous = None
             if prim.IsInstance():
-                self._instancing.add_instance(path, prim.GetPrototype(), transform)
-                record = _Record("instance", order, in_delegate=False, xform_varies=xform_varies)
+                bound = self._instancing.add_instance(path, prim.GetPrototype(), transform)
+                record = _Record(
+                    "instance",
+                    order,
+                    in_delegate=False,
+                    xform_varies=xform_varies,
+                    material_paths=bound,
+                )
             elif is_renderable_gprim(prim):
                 read = read_mesh(prim, time, transform, poser=self._poser)
                 record = _Record(

@@ -33,6 +33,15 @@ Read from the ``UsdPreviewSurface`` of the bound material (``full`` purpose, as
   ``mipray:displacement:amplitude``, ``frequency``, ``octaves`` and ``gain``;
   ``displacement_bound``: ``primvars:displacementBound`` on the mesh.
 
+- ``face_materials`` / ``face_material_indices``: the whole networks of the
+  mesh's materialBind GeomSubsets bound to UsdPreviewSurfaces (each a dict as
+  ``material``; their textures read the mesh's one ``st``), and per face the
+  one it renders (the mesh's own ``material`` on the other faces).
+
+Bindings are resolved by usd-core (:func:`bound_material`): direct and
+collection bindings, ``bindMaterialAs`` strength, and the ``full`` purpose
+before the all-purpose binding, as Hydra does for a final-frame renderer.
+
 A material whose surface is not a UsdPreviewSurface sends no ``material``: the
 mesh renders its display color (one warning naming the material).
 """
@@ -50,6 +59,8 @@ from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
+from .assets import UDIM_TOKEN, local_file, udim_tiles
+from .materialx import mtlx_surface, read_mtlx_surface
 from .primvars import primvar_argument, read_display_primvar
 
 __all__ = [
@@ -142,16 +153,29 @@ def _source(shader: UsdShade.Shader, name: str) -> tuple[UsdShade.Shader, str] |
 
 
 def _resolve(attr: Usd.Attribute, value: Sdf.AssetPath) -> str:
+    """A texture file OpenImageIO can open for ``value``, authored on ``attr``.
+
+    Resolved by usd-core's asset resolver; a file inside a package (``.usdz``) is extracted
+    (:func:`mipray.usd.assets.local_file`). A path the resolver leaves unresolved (a
+    ``<UDIM>`` set, a missing file) is anchored to the layer that authored it, as usd-core
+    anchors asset paths (inside a package too).
+    """
     if value.resolvedPath:
-        return str(value.resolvedPath)
-    path = str(value.path)
-    if not path or os.path.isabs(path):
-        return path
-    for spec in attr.GetPropertyStack(Usd.TimeCode.Default()):
-        layer = spec.layer
-        if layer and layer.realPath:
-            return os.path.normpath(os.path.join(os.path.dirname(str(layer.realPath)), path))
-    return path
+        resolved = str(value.resolvedPath)
+    else:
+        resolved = str(value.path)
+        if resolved and not os.path.isabs(resolved):
+            for spec in attr.GetPropertyStack(Usd.TimeCode.Default()):
+                if spec.layer and not spec.layer.anonymous:
+                    resolved = str(spec.layer.ComputeAbsolutePath(resolved))
+                    break
+    if UDIM_TOKEN in resolved:
+        return resolved
+    try:
+        return local_file(resolved)
+    except OSError as exc:
+        _warn_once(f"{attr.GetPath()}: {exc}")
+        return resolved
 
 
 def _floats(value: Any, n: int, default: list[float]) -> list[float]:
@@ -231,6 +255,9 @@ def _texture(
         "file": _resolve(attrs[0], value),
         "channel": _CHANNELS.get(output, 0),
     }
+    if UDIM_TOKEN in desc["file"]:
+        # No tile found: the renderer cannot open the pattern itself, and says so.
+        desc["udim_tiles"] = udim_tiles(desc["file"])
     for key, default in (
         ("scale", [1.0] * 4),
         ("bias", [0.0] * 4),
@@ -416,19 +443,23 @@ def _procedural(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float, int, 
     )
 
 
-def material_might_vary(prim: Usd.Prim) -> bool:
+def material_might_vary(prim: Usd.Prim, subsets: list[Subset] | None = None) -> bool:
     """Whether the shading :func:`shading_arguments` reads for ``prim`` may change over time.
 
-    True when an input of the bound material's surface or displacement shader, or of a node
-    feeding one (textures, readers, transforms, interface inputs), is time-sampled.
+    True when an input of the bound material's (or a subset's) surface or displacement shader,
+    or of a node feeding one (textures, readers, transforms, interface inputs), is time-sampled.
     """
-    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
-    if not material:
-        return False
+    bound = [bound_material(p) for p in (prim, *(s for s, _ in subsets or ()))]
     seen: set[str] = set()
     todo = [
         s
-        for s in (material.ComputeSurfaceSource()[0], material.ComputeDisplacementSource()[0])
+        for material in bound
+        if material is not None
+        for s in (
+            material.ComputeSurfaceSource()[0],
+            material.ComputeSurfaceSource("mtlx")[0],
+            material.ComputeDisplacementSource()[0],
+        )
         if s
     ]
     while todo:
@@ -450,13 +481,102 @@ def _describe_st(varname: str, transform: Transform2d | None) -> str:
     return f"primvars:{varname}" + ("" if transform is None else f" through {transform}")
 
 
+def bound_material(prim: Usd.Prim) -> UsdShade.Material | None:
+    """The material bound to ``prim`` (a gprim, a GeomSubset, an instance proxy) for rendering.
+
+    usd-core resolves it as Hydra does for a renderer of ``full`` purpose: direct and
+    collection bindings, ``bindMaterialAs`` strength, the nearest ancestor's binding, a
+    ``full`` binding before an all-purpose one (a ``preview``-only binding is not used).
+    """
+    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
+    return material if material else None
+
+
+def _surface_material(
+    prim: Usd.Prim, material: UsdShade.Material, time: Usd.TimeCode
+) -> _Material | None:
+    """The ``material`` argument of ``material``'s UsdPreviewSurface on ``prim``, or None."""
+    material_path = str(material.GetPath())
+    surface, _, _ = material.ComputeSurfaceSource()
+    if surface and surface.GetShaderId() == "UsdPreviewSurface":
+        return _preview_surface(prim, material_path, surface, time)
+    mtlx = mtlx_surface(material)
+    if mtlx is not None:
+        read = read_mtlx_surface(material_path, mtlx, time)
+        textures = [(name, _Texture(desc, varname, None)) for name, desc, varname in read.textures]
+        return _Material(read.args, textures, {})
+    if surface:
+        _warn_once(
+            f"{material_path}: surface shader {surface.GetPath()} ({surface.GetShaderId()}) is "
+            "not a UsdPreviewSurface; rendering the mesh's display color"
+        )
+    return None
+
+
+#: A materialBind GeomSubset and its (checked) face indices.
+Subset = tuple[Usd.Prim, NDArray[np.int64]]
+
+
+def _face_materials(
+    prim: Usd.Prim,
+    own: UsdShade.Material | None,
+    own_read: _Material | None,
+    subsets: list[Subset],
+    face_count: int,
+    time: Usd.TimeCode,
+    args: dict[str, Any],
+) -> list[tuple[str, str, Transform2d | None]]:
+    """``face_materials`` / ``face_material_indices`` for subsets bound to UsdPreviewSurfaces.
+
+    Each such subset's faces get its material's whole network (textures included); the other
+    faces keep the mesh's own material (when it is a UsdPreviewSurface), else their colour
+    from the face albedo table (-1). Nothing is added when every subset renders the mesh's
+    own material. Returns the subsets' texture readers, for the shared ``st``.
+    """
+    own_key = str(own.GetPath()) if own is not None and own_read is not None else None
+    slot: dict[str, int] = {}
+    materials: list[dict[str, Any]] = []
+    st_users: list[tuple[str, str, Transform2d | None]] = []
+    per_face: list[tuple[NDArray[np.int64], int]] = []
+    if own_key is not None and own_read is not None:
+        slot[own_key] = 0
+        materials.append(own_read.args)
+    for subset, faces in subsets:
+        material = bound_material(subset)
+        if material is None:
+            continue
+        key = str(material.GetPath())
+        if key not in slot:
+            read = _surface_material(prim, material, time)
+            if read is None:
+                continue  # not a UsdPreviewSurface: the subset's faces keep their colour
+            slot[key] = len(materials)
+            materials.append(read.args)
+            st_users += [(name, t.varname, t.transform) for name, t in read.textures]
+        per_face.append((faces, slot[key]))
+    if all(k == slot.get(own_key or "") for _, k in per_face):
+        return []
+    indices = np.full(face_count, 0 if own_key is not None else -1, np.int32)
+    for faces, k in per_face:
+        indices[faces] = k
+    args["face_materials"] = materials
+    args["face_material_indices"] = indices
+    return st_users
+
+
 def shading_arguments(
-    prim: Usd.Prim, time: Usd.TimeCode, *, surface_st: bool = False
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    *,
+    surface_st: bool = False,
+    subsets: list[Subset] | None = None,
+    face_count: int = 0,
 ) -> dict[str, Any]:
     """The ``set_mesh`` keyword arguments for ``prim``'s shading (see the module doc).
 
     ``surface_st``: the prim's textures read its surface's own (u, v) (implicit
-    gprims and points), not an ``st`` primvar.
+    gprims and points), not an ``st`` primvar. ``subsets``: the mesh's materialBind
+    GeomSubsets with their faces, of ``face_count`` faces in all.
     """
     args: dict[str, Any] = {}
     path = str(prim.GetPath())
@@ -470,24 +590,20 @@ def shading_arguments(
             args["displacement_bound"] = float(v if not hasattr(v, "__len__") else v[0])
         except (TypeError, ValueError, IndexError):
             _warn_once(f"{path}: primvars:displacementBound {v!r} is not a number; ignored")
-    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
-    if not material:
-        return args
-    material_path = str(material.GetPath())
+    material = bound_material(prim)
     # Every texture of the mesh reads one st: (who reads it, varname, transform) of the first.
     st_users: list[tuple[str, str, Transform2d | None]] = []
-    surface, _, _ = material.ComputeSurfaceSource()
-    if surface and surface.GetShaderId() == "UsdPreviewSurface":
-        read = _preview_surface(prim, material_path, surface, time)
+    read = _surface_material(prim, material, time) if material else None
+    if read is not None:
         args["material"] = read.args
         if read.primvars and not surface_st:
             args["primvars"] = read.primvars
         st_users += [(name, t.varname, t.transform) for name, t in read.textures]
-    elif surface:
-        _warn_once(
-            f"{material_path}: surface shader {surface.GetPath()} ({surface.GetShaderId()}) is "
-            "not a UsdPreviewSurface; rendering the mesh's display color"
-        )
+    if subsets:
+        st_users += _face_materials(prim, material, read, subsets, face_count, time, args)
+    if not material:
+        return _with_st(prim, time, args, st_users, surface_st=surface_st)
+    material_path = str(material.GetPath())
     disp_shader, _, _ = material.ComputeDisplacementSource()
     if disp_shader and disp_shader.GetShaderId() == "UsdPreviewSurface":
         src = _source(disp_shader, "displacement")
@@ -502,6 +618,19 @@ def shading_arguments(
                 if tex is not None:
                     args["displacement_texture"] = tex.desc
                     st_users.append(("displacement", tex.varname, tex.transform))
+    return _with_st(prim, time, args, st_users, surface_st=surface_st)
+
+
+def _with_st(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    args: dict[str, Any],
+    st_users: list[tuple[str, str, Transform2d | None]],
+    *,
+    surface_st: bool,
+) -> dict[str, Any]:
+    """``args`` with the one ``st`` the mesh's textures read (the first reader's)."""
+    path = str(prim.GetPath())
     if st_users:
         first, st_name, st_transform = st_users[0]
         for name, varname, transform in st_users[1:]:

@@ -21,6 +21,7 @@ does not warn a second time.
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
@@ -28,7 +29,9 @@ from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade, UsdSkel
 
 from .gprim import GPRIM_TYPES
 from .light import AREA_LIGHT_TYPES
-from .shading import COLOR_INPUTS, FLOAT_INPUTS
+from .materialx import mtlx_surface, unsupported_nodes
+from .mtlx_files import LOADED
+from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 from .skel import is_skinned
 
 __all__ = [
@@ -246,13 +249,6 @@ def _skinned_motion(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     return []
 
 
-def _instance_binding(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
-    if not prim.IsInstance():
-        return []
-    rels = [r for r in prim.GetRelationships() if r.GetName().startswith("material:binding")]
-    return [r.GetName() for r in rels if r.HasAuthoredTargets()]
-
-
 # A material's checks take the Material prim (bound to something rendered).
 
 
@@ -268,10 +264,18 @@ def _context_only_outputs(material: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     """
     if _preview_surface(material) is not None:
         return []
+    read = {"mtlx:surface"} if mtlx_surface(UsdShade.Material(material)) else set()
     outputs = UsdShade.Material(material).GetSurfaceOutputs()
     return [
-        o.GetFullName() for o in outputs if o.GetBaseName() != "surface" and o.HasConnectedSource()
+        o.GetFullName()
+        for o in outputs
+        if o.GetBaseName() != "surface" and o.HasConnectedSource() and o.GetBaseName() not in read
     ]
+
+
+def _mtlx_nodes(material: Usd.Prim, time: Usd.TimeCode) -> list[str]:
+    """MaterialX nodes (and surface inputs) of the material's mtlx surface mipray cannot map."""
+    return unsupported_nodes(UsdShade.Material(material), time)
 
 
 def _preview_surface(material: Usd.Prim) -> UsdShade.Shader | None:
@@ -309,19 +313,6 @@ def _constant_displacement(material: Usd.Prim, time: Usd.TimeCode) -> list[str]:
     return [f"displacement = {value:g}"] if value else []
 
 
-def _subset_material(material: Usd.Prim, _: Usd.TimeCode) -> list[str]:
-    """A GeomSubset's material renders its constant diffuseColor only (mipray.usd.face_albedo)."""
-    shader = _preview_surface(material)
-    if shader is None:
-        return []
-    return [
-        f"inputs:{i.GetBaseName()}" + (" (textured)" if i.HasConnectedSource() else "")
-        for i in shader.GetInputs()
-        if (i.GetBaseName() != "diffuseColor" and i.GetAttr().HasAuthoredValue())
-        or i.HasConnectedSource()
-    ]
-
-
 #: RenderVar light-path expressions that are the whole beauty image (what mipray renders).
 BEAUTY_LPES = frozenset({"C.*", "C.*[LO]", "C.*L", "C[DS]*[LO]"})
 
@@ -355,8 +346,8 @@ class Row:
     #: How the warning and the stats name it.
     what: str
     #: What it is checked on: ``prim`` (every rendered prim), ``material`` (every material
-    #: bound to a rendered mesh), ``subset material`` (bound to a GeomSubset), ``render var``
-    #: and ``render settings`` (those of the render).
+    #: bound to a rendered mesh or its GeomSubsets), ``render var`` and ``render settings``
+    #: (those of the render).
     scope: str
     #: ``check(prim, time)``: the details authored (empty: none).
     check: Callable[[Usd.Prim, Usd.TimeCode], list[str]]
@@ -368,7 +359,6 @@ class Row:
 TABLE: tuple[Row, ...] = (
     Row("prim type", "prim", _prim_type, warned_by="mipray.usd.scene_delegate"),
     Row("instanceable gprim (its own geometry is not instanced)", "prim", _instanceable_gprim),
-    Row("material binding on a native instance", "prim", _instance_binding),
     Row("material binding to no Material", "prim", _missing_material),
     Row("ShapingAPI", "prim", _applied("ShapingAPI")),
     Row("ShadowAPI", "prim", _applied("ShadowAPI", frozenset({"shadow:enable"}))),
@@ -388,13 +378,9 @@ TABLE: tuple[Row, ...] = (
         _context_only_outputs,
     ),
     Row("surface shader", "material", _surface_shader, warned_by="mipray.usd.shading"),
+    Row("MaterialX node", "material", _mtlx_nodes),
     Row("UsdPreviewSurface input", "material", _preview_inputs),
     Row("UsdPreviewSurface constant displacement", "material", _constant_displacement),
-    Row(
-        "GeomSubset material input (a subset renders its constant diffuseColor)",
-        "subset material",
-        _subset_material,
-    ),
     Row("render var light-path expression", "render var", _render_var_lpe),
     Row(
         "render settings window",
@@ -454,19 +440,15 @@ def _rendered_prims(
         stack.extend((c, info, shown_root) for c in reversed(children))
 
 
-def _bound_materials(prim: Usd.Prim) -> tuple[list[Usd.Prim], list[Usd.Prim]]:
-    """(materials bound to ``prim``, to its GeomSubsets), for ``full`` rendering."""
-    own, subsets = [], []
-    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
-    if material:
-        own.append(material.GetPrim())
-    for subset in UsdGeom.Subset.GetAllGeomSubsets(UsdGeom.Imageable(prim)):
-        bound, _ = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial(
-            UsdShade.Tokens.full
-        )
-        if bound and bound.GetPrim() not in own:
-            subsets.append(bound.GetPrim())
-    return own, subsets
+def _bound_materials(prim: Usd.Prim) -> list[Usd.Prim]:
+    """The materials bound to ``prim`` and to its materialBind GeomSubsets, for rendering."""
+    found = []
+    subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
+    for owner in (prim, *(s.GetPrim() for s in subsets)):
+        material = bound_material(owner)
+        if material is not None and material.GetPrim() not in found:
+            found.append(material.GetPrim())
+    return found
 
 
 def audit_stage(
@@ -474,23 +456,18 @@ def audit_stage(
 ) -> list[Unsupported]:
     """Everything rendered prims author that mipray does not consume, sorted, each once.
 
-    The ``prim``, ``material`` and ``subset material`` rows of :data:`TABLE`.
+    The ``prim`` and ``material`` rows of :data:`TABLE`.
     """
     found: set[Unsupported] = set()
-    materials: dict[str, tuple[Usd.Prim, str]] = {}
+    materials: dict[str, Usd.Prim] = {}
     for prim, shown in _rendered_prims(stage, time, purposes):
         found.update(_apply("prim", prim, time, shown))
         if prim.IsA(UsdGeom.Gprim):
-            own, subsets = _bound_materials(prim)
-            for material in own:
-                materials.setdefault(str(material.GetPath()), (material, "material"))
-            for material in subsets:
-                materials.setdefault(str(material.GetPath()), (material, "subset material"))
+            for material in _bound_materials(prim):
+                materials.setdefault(str(material.GetPath()), material)
     found.update(composition_errors(stage))
-    for path, (material, scope) in materials.items():
+    for path, material in materials.items():
         found.update(_apply("material", material, time, path))
-        if scope == "subset material":
-            found.update(_apply(scope, material, time, path))
     return sorted(found)
 
 
@@ -502,6 +479,8 @@ def composition_errors(stage: Usd.Stage) -> list[Unsupported]:
     found = []
     for error in stage.GetCompositionErrors():
         text = " ".join(str(error).split())
+        if any(os.path.basename(f) in text for f in LOADED):
+            continue  # a .mtlx reference mipray composed itself (mipray.usd.mtlx_files)
         site = getattr(error, "rootSite", None)
         prim = str(site.path) if site is not None and hasattr(site, "path") else "/"
         found.append(Unsupported(prim, f"composition error: {text}"))

@@ -1,0 +1,200 @@
+"""``.mtlx`` documents referenced from USD, read with the MaterialX package.
+
+usd-core ships no ``usdMtlx`` file-format plugin, so a reference such as
+``references = @./looks.mtlx@</MaterialX/Materials/Wood>`` fails to compose (a composition
+error) and the material comes out empty. :func:`load_mtlx_references` reads each such
+document with MaterialX (the ``MaterialX`` PyPI package) and writes what ``usdMtlx`` would
+have composed there — a Shader prim per node (``info:id`` its nodedef), their inputs and
+connections, ``outputs:mtlx:surface`` — into an anonymous layer under the stage's session
+layer, so the rest of the front end reads it as any inline MaterialX network
+(:mod:`mipray.usd.materialx`). A document that cannot be read is warned about once, naming the
+prim and the file; the material then renders as if unbound.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any
+
+from pxr import Gf, Sdf, Usd
+
+__all__ = ["LOADED", "load_mtlx_references"]
+
+_log = logging.getLogger(__name__)
+
+#: MaterialX types → USD value types (what usdMtlx uses).
+_TYPES = {
+    "float": Sdf.ValueTypeNames.Float,
+    "integer": Sdf.ValueTypeNames.Int,
+    "boolean": Sdf.ValueTypeNames.Bool,
+    "color3": Sdf.ValueTypeNames.Color3f,
+    "color4": Sdf.ValueTypeNames.Color4f,
+    "vector2": Sdf.ValueTypeNames.Float2,
+    "vector3": Sdf.ValueTypeNames.Float3,
+    "vector4": Sdf.ValueTypeNames.Float4,
+    "string": Sdf.ValueTypeNames.String,
+    "filename": Sdf.ValueTypeNames.Asset,
+}
+
+
+def _mtlx_references(prim: Usd.Prim) -> list[tuple[str, str, str]]:
+    """(document path, material name, the layer's directory) of ``prim``'s .mtlx references."""
+    found = []
+    for spec in prim.GetPrimStack():
+        items = spec.referenceList.GetAddedOrExplicitItems()
+        for ref in items:
+            path = str(ref.assetPath)
+            if path.lower().endswith(".mtlx"):
+                anchor = spec.layer.ComputeAbsolutePath(path) if spec.layer else path
+                if not os.path.isfile(anchor):
+                    continue  # usd-core's composition error already names the missing file
+                # </MaterialX/Materials/Wood> names one material; </MaterialX> (or no path)
+                # the whole document, composed under <prim>/Materials as usdMtlx lays it out.
+                target = ref.primPath
+                name = target.name if target.pathElementCount >= 3 else ""
+                found.append((anchor, name, os.path.dirname(anchor)))
+    return found
+
+
+def _value(mx: Any, value: Any, kind: str, folder: str) -> Any:
+    if kind in ("color3", "vector3"):
+        return Gf.Vec3f(*value.asTuple())
+    if kind in ("color4", "vector4"):
+        return Gf.Vec4f(*value.asTuple())
+    if kind == "vector2":
+        return Gf.Vec2f(*value.asTuple())
+    if kind == "filename":
+        text = str(value)
+        return Sdf.AssetPath(text if os.path.isabs(text) else os.path.join(folder, text))
+    del mx
+    return value
+
+
+def _translate(
+    mx: Any, doc: Any, name: str, folder: str, layer: Sdf.Layer, at: Sdf.Path, *, define: bool
+) -> None:
+    """Author material ``name`` of ``doc`` at ``at`` in ``layer`` (see the module doc)."""
+    material = doc.getChild(name)
+    if material is None or material.getCategory() != "surfacematerial":
+        raise ValueError(f"it has no surfacematerial named {name}")
+    root = Sdf.CreatePrimInLayer(layer, at)
+    root.specifier = Sdf.SpecifierDef if define else Sdf.SpecifierOver
+    if define:
+        root.typeName = "Material"
+    done: dict[str, Sdf.Path] = {}
+
+    def shader(node: Any, prefix: str) -> Sdf.Path:
+        key = prefix + node.getName()
+        if key in done:
+            return done[key]
+        path = at.AppendChild(key)
+        done[key] = path
+        spec = Sdf.CreatePrimInLayer(layer, path)
+        spec.specifier = Sdf.SpecifierDef
+        spec.typeName = "Shader"
+        nodedef = node.getNodeDef()
+        node_id = nodedef.getName() if nodedef is not None else f"ND_{node.getCategory()}"
+        attr = Sdf.AttributeSpec(spec, "info:id", Sdf.ValueTypeNames.Token, Sdf.VariabilityUniform)
+        attr.default = node_id
+        out_type = _TYPES.get(node.getType(), Sdf.ValueTypeNames.Token)
+        Sdf.AttributeSpec(spec, "outputs:out", out_type)
+        for inp in node.getInputs():
+            kind = inp.getType()
+            a = Sdf.AttributeSpec(
+                spec, f"inputs:{inp.getName()}", _TYPES.get(kind, Sdf.ValueTypeNames.Token)
+            )
+            upstream = inp.getConnectedNode()
+            graph_name = inp.getNodeGraphString()
+            if upstream is None and graph_name:
+                graph = doc.getNodeGraph(graph_name)
+                out = graph.getOutput(inp.getOutputString() or "out") if graph else None
+                upstream = out.getConnectedNode() if out is not None else None
+                if upstream is not None:
+                    source = shader(upstream, graph_name + "_")
+                    a.connectionPathList.Append(source.AppendProperty("outputs:out"))
+                    continue
+            if upstream is not None:
+                source = shader(upstream, prefix)
+                a.connectionPathList.Append(source.AppendProperty("outputs:out"))
+                continue
+            value = inp.getResolvedValueString() if kind == "filename" else inp.getValue()
+            if value is not None:
+                a.default = _value(mx, value, kind, folder)
+            if inp.getColorSpace():
+                a.SetInfo("colorSpace", inp.getColorSpace())
+        return path
+
+    surface_input = material.getInput("surfaceshader")
+    surface = surface_input.getConnectedNode() if surface_input is not None else None
+    if surface is None:
+        raise ValueError(f"material {name} has no surfaceshader")
+    out = Sdf.AttributeSpec(root, "outputs:mtlx:surface", Sdf.ValueTypeNames.Token)
+    out.connectionPathList.Append(shader(surface, "").AppendProperty("outputs:out"))
+
+
+def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
+    """Compose the stage's ``.mtlx`` references (see the module doc).
+
+    Returns the (prim, problem) of each that could not be read (also warned about once).
+    """
+    mentioned = any(
+        str(path).lower().endswith(".mtlx")
+        for layer in stage.GetUsedLayers()
+        for path in layer.GetExternalReferences()
+    )
+    if not mentioned:  # the common case: no prim walk at all
+        return []
+    targets = [(prim, refs) for prim in stage.TraverseAll() if (refs := _mtlx_references(prim))]
+    if not targets:
+        return []
+    problems: list[tuple[str, str]] = []
+    try:
+        import MaterialX as mx
+    except ImportError:
+        for prim, refs in targets:
+            problems.append(
+                (str(prim.GetPath()), f"{refs[0][0]}: the MaterialX package is not installed")
+            )
+        for prim_path, problem in problems:
+            _log.warning("mipray: %s: cannot read %s", prim_path, problem)
+        return problems
+    layer = Sdf.Layer.CreateAnonymous("mipray-mtlx.usda")
+    docs: dict[str, Any] = {}
+    for prim, refs in targets:
+        for file, name, folder in refs:
+            try:
+                if file not in docs:
+                    doc = mx.createDocument()
+                    mx.readFromXmlFile(doc, file)
+                    stdlib = mx.createDocument()
+                    mx.loadLibraries(
+                        mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), stdlib
+                    )
+                    doc.importLibrary(stdlib)
+                    docs[file] = doc
+                doc = docs[file]
+                if name:
+                    _translate(mx, doc, name, folder, layer, prim.GetPath(), define=False)
+                else:
+                    scope = Sdf.CreatePrimInLayer(layer, prim.GetPath().AppendChild("Materials"))
+                    scope.specifier, scope.typeName = Sdf.SpecifierDef, "Scope"
+                    for node in doc.getMaterialNodes():
+                        at = scope.path.AppendChild(node.getName())
+                        _translate(mx, doc, node.getName(), folder, layer, at, define=True)
+                LOADED.add(file)
+            except Exception as exc:
+                text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                problems.append((str(prim.GetPath()), f"{file}: {text}"))
+    if len(layer.rootPrims):
+        stage.GetSessionLayer().subLayerPaths.append(layer.identifier)
+        # The session layer holds it only by identifier: keep the layer alive with the stage.
+        _keep_alive.setdefault(id(stage), []).append(layer)
+    for prim_path, problem in problems:
+        _log.warning("mipray: %s: cannot read MaterialX document %s", prim_path, problem)
+    return problems
+
+
+_keep_alive: dict[int, list[Sdf.Layer]] = {}
+#: The .mtlx documents composed here: usd-core's composition errors about them are not news.
+LOADED: set[str] = set()
