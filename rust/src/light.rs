@@ -59,6 +59,121 @@ pub struct Light {
     /// light of angle 0, where it is the irradiance on a surface facing the light.
     pub radiance_scale: Vec3A,
     pub casts_shadows: bool,
+    /// UsdLux `ShapingAPI` (sphere, rect and disk lights): the emission's cone and focus.
+    pub shaping: Option<Shaping>,
+    /// UsdLux light linking: the meshes this light illuminates.
+    pub illuminates: MeshFilter,
+    /// UsdLux shadow linking: the meshes that block this light's shadow rays.
+    pub shadowed_by: MeshFilter,
+}
+
+/// A set of the scene's meshes (indices into [`Scene::meshes`]) given by those it leaves out:
+/// the default holds every mesh. What a light or shadow linking collection resolves to.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct MeshFilter {
+    /// Sorted, without duplicates.
+    excluded: std::sync::Arc<[u32]>,
+}
+
+impl MeshFilter {
+    /// Every mesh but `excluded`.
+    pub fn excluding(mut excluded: Vec<u32>) -> Self {
+        excluded.sort_unstable();
+        excluded.dedup();
+        MeshFilter { excluded: excluded.into() }
+    }
+
+    /// Whether mesh `mesh` is in the set.
+    pub fn contains(&self, mesh: u32) -> bool {
+        self.excluded.binary_search(&mesh).is_err()
+    }
+
+    /// True for the set of every mesh (no linking).
+    pub fn is_all(&self) -> bool {
+        self.excluded.is_empty()
+    }
+
+    /// The meshes left out.
+    pub fn excluded(&self) -> &[u32] {
+        &self.excluded
+    }
+}
+
+/// UsdLux's `ShapingAPI` on an area light, as Hydra's reference path tracer (hdEmbree) applies
+/// it: emitted radiance along a direction ω (from the light toward the lit point) at angle
+/// θ = ∠(axis, ω) off the light's axis (its local −Z) is multiplied by
+///
+/// - focus: `lerp(|cos θ|^focus, focusTint, 1)` when `focus` > 0 (the tint colours what the
+///   focus takes away; black by default);
+/// - cone: `1 − smoothstep(θ; θsoft, θcone)` with θcone = `cone:angle` and
+///   θsoft = θcone · (1 − `cone:softness`): full inside θsoft, zero beyond θcone (softness 0:
+///   a hard edge at θcone).
+///
+/// The factor depends only on ω, so a spot of cone angle α pointing down from height h lights a
+/// floor inside radius h·tan α and nothing outside (for a small light).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shaping {
+    /// Unit, render space: where the light points (its local −Z).
+    pub axis: Vec3A,
+    /// `cone:angle`, radians, in [0, π].
+    pub cone: f32,
+    /// `cone:softness`, in [0, 1].
+    pub softness: f32,
+    /// `focus`, ≥ 0.
+    pub focus: f32,
+    /// `focusTint`, linear RGB.
+    pub focus_tint: Vec3A,
+}
+
+impl Shaping {
+    /// From UsdLux's inputs (`cone_deg` in degrees); values out of range are clamped (NaN: the
+    /// input's fallback). `None` when the inputs shape nothing (a cone of 180° or more, no focus).
+    pub fn new(axis: Vec3A, cone_deg: f32, softness: f32, focus: f32, focus_tint: Vec3A) -> Option<Shaping> {
+        let finite = |x: f32, fallback: f32| if x.is_finite() { x } else { fallback };
+        let cone = finite(cone_deg, 180.0).clamp(0.0, 180.0).to_radians();
+        let focus = finite(focus, 0.0).max(0.0);
+        let s = Shaping {
+            axis: axis.normalize_or(Vec3A::NEG_Z),
+            cone,
+            softness: finite(softness, 0.0).clamp(0.0, 1.0),
+            focus,
+            focus_tint: focus_tint.is_finite().then_some(focus_tint.max(Vec3A::ZERO)).unwrap_or(Vec3A::ZERO),
+        };
+        (cone < PI || focus > 0.0).then_some(s)
+    }
+
+    /// What radiance emitted along unit `w` (away from the light) is multiplied by (RGB).
+    pub fn factor(&self, w: Vec3A) -> Vec3A {
+        let cos_off = self.axis.dot(w).clamp(-1.0, 1.0);
+        let mut f = Vec3A::ONE;
+        if self.focus > 0.0 {
+            let ff = cos_off.abs().powf(self.focus);
+            f = self.focus_tint + (Vec3A::ONE - self.focus_tint) * ff;
+        }
+        if self.cone < PI {
+            let theta = cos_off.acos();
+            let soft = self.cone * (1.0 - self.softness);
+            let step = if theta <= soft {
+                0.0
+            } else if theta >= self.cone {
+                1.0
+            } else {
+                let t = (theta - soft) / (self.cone - soft);
+                t * t * (3.0 - 2.0 * t)
+            };
+            f *= 1.0 - step;
+        }
+        f
+    }
+
+    /// Cosine of the widest angle off the axis the light emits at (−1: every direction).
+    pub fn cos_max(&self) -> f32 {
+        if self.cone < PI {
+            self.cone.cos()
+        } else {
+            -1.0
+        }
+    }
 }
 
 /// One sample of a light as seen from a point.
@@ -127,6 +242,9 @@ impl Light {
             shape: LightShape::Distant { direction: direction.normalize_or(Vec3A::NEG_Z), angle_deg: 0.0 },
             radiance_scale: irradiance,
             casts_shadows: true,
+            shaping: None,
+            illuminates: MeshFilter::default(),
+            shadowed_by: MeshFilter::default(),
         }
     }
 
@@ -162,7 +280,15 @@ impl Light {
                 radiance /= area;
             }
         }
-        Light { name: name.into(), shape, radiance_scale: radiance, casts_shadows: true }
+        Light {
+            name: name.into(),
+            shape,
+            radiance_scale: radiance,
+            casts_shadows: true,
+            shaping: None,
+            illuminates: MeshFilter::default(),
+            shadowed_by: MeshFilter::default(),
+        }
     }
 
     /// True when one sample represents the light exactly (a point at infinity).
@@ -270,6 +396,14 @@ impl Light {
                 LightSample { wi, distance: dist, radiance: self.radiance_scale, pdf: dist2 / (cos_l * area), delta: false }
             }
         };
+        let mut sample = sample;
+        if let Some(shaping) = &self.shaping {
+            sample.radiance *= shaping.factor(-sample.wi);
+            if sample.radiance.max_element() <= 0.0 {
+                // Outside the cone: no shadow ray for nothing.
+                return None;
+            }
+        }
         // A non-finite radiance (a broken light) is passed on: the render loop drops and counts
         // such samples.
         (sample.pdf.is_finite() && sample.pdf > 0.0 && sample.wi.is_finite()).then_some(sample)
@@ -317,6 +451,14 @@ impl Light {
     /// `t_max` (sphere, rect, disk; `None` for distant and dome lights, which rays meet only by
     /// escaping: [`Light::environment`]).
     pub fn intersect(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        let mut hit = self.intersect_shape(o, d, t_max)?;
+        if let Some(shaping) = &self.shaping {
+            hit.radiance *= shaping.factor(-d);
+        }
+        Some(hit)
+    }
+
+    fn intersect_shape(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
         match &self.shape {
             LightShape::Sphere { center, radius } => {
                 let to_c = *center - o;

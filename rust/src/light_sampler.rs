@@ -135,6 +135,17 @@ impl LightBounds {
             }
             _ => return None,
         };
+        // A shaped light emits only within its cone about its axis (focus only dims it: the
+        // bound stays an upper one), from any point of it.
+        let b = match &light.shaping {
+            Some(shaping) if shaping.cos_max() > -1.0 => match light.shape {
+                LightShape::Sphere { .. } => {
+                    LightBounds { normals: Cone { w: shaping.axis, cos_theta: 1.0 }, cos_theta_e: shaping.cos_max(), ..b }
+                }
+                _ => LightBounds { cos_theta_e: b.cos_theta_e.max(shaping.cos_max()), ..b },
+            },
+            _ => b,
+        };
         // A light of non-finite radiance stays in, with a nominal power: its samples carry the
         // non-finite value to the render loop, which drops them and counts them (no NaN reaches
         // the film, and the stats say a light is broken). Only lights that emit nothing leave.
