@@ -116,8 +116,6 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
             Unsupported(key_path, "light input inputs:diffuse"),
-            Unsupported(key_path, "light linking collection:lightLink:includes"),
-            Unsupported(key_path, "shadow linking collection:shadowLink:includeRoot"),
             Unsupported("/World/Emitter", "MeshLightAPI"),
             Unsupported(
                 "/World/InstMesh",

@@ -36,6 +36,23 @@ pub enum AreaKind {
     },
 }
 
+/// UsdLux `ShapingAPI` inputs (sphere, rect and disk lights; see [`mipray::light::Shaping`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShapingData {
+    pub cone_angle_deg: f32,
+    pub cone_softness: f32,
+    pub focus: f32,
+    pub focus_tint: [f32; 3],
+}
+
+/// Light and shadow linking, resolved by the scene delegate: the mesh prims (paths) a light's
+/// `collection:lightLink` leaves out, and those its `collection:shadowLink` leaves out.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LinkData {
+    pub unlit: Vec<String>,
+    pub no_shadow: Vec<String>,
+}
+
 /// A light prim.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightPrim {
@@ -43,6 +60,8 @@ pub struct LightPrim {
     pub data: DistantLightData,
     /// `None`: a distant light.
     pub area: Option<AreaKind>,
+    pub shaping: Option<ShapingData>,
+    pub links: LinkData,
 }
 
 impl LightPrim {
@@ -108,6 +127,25 @@ impl LightPrim {
             }
         };
         l.casts_shadows = d.shadow_enable;
+        if let (Some(sh), Some(AreaKind::Sphere { .. } | AreaKind::Rect { .. } | AreaKind::Disk { .. })) = (&self.shaping, &self.area) {
+            let axis = m.transform_vector3a(Vec3A::NEG_Z);
+            l.shaping = mipray::light::Shaping::new(axis, sh.cone_angle_deg, sh.cone_softness, sh.focus, Vec3A::from(sh.focus_tint.map(f)));
+        }
+        l
+    }
+
+    /// As [`LightPrim::to_light_with`], with the links resolved to core meshes: `mesh_index`
+    /// gives a mesh prim's index in the scene (`None`: not in it).
+    pub fn to_scene_light(
+        &self,
+        textures: Option<&std::sync::Arc<dyn mipray::texture::TextureSampler>>,
+        mesh_index: &dyn Fn(&str) -> Option<usize>,
+    ) -> Light {
+        let mut l = self.to_light_with(textures);
+        let resolve =
+            |paths: &[String]| mipray::light::MeshFilter::excluding(paths.iter().filter_map(|p| mesh_index(p)).map(|i| i as u32).collect());
+        l.illuminates = resolve(&self.links.unlit);
+        l.shadowed_by = resolve(&self.links.no_shadow);
         l
     }
 }

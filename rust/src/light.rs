@@ -1,4 +1,6 @@
-//! Lights (UsdLux): distant, sphere, rect, disk and dome.
+//! Lights (UsdLux): distant, sphere, rect, disk and dome; `ShapingAPI` on sphere, rect and disk
+//! lights ([`Shaping`]); light and shadow linking ([`Light::illuminates`],
+//! [`Light::shadowed_by`]: what the direct-lighting estimator and shadow rays honour).
 //!
 //! **Units** (UsdLux's `LightAPI`): a light's scalar emission is `intensity · 2^exposure`, times
 //! `color` (and the blackbody colour of `colorTemperature`, which the USD front end folds into

@@ -15,25 +15,42 @@ multiplies ``color`` before it reaches the core. What the core does with them
 warning naming the light; a value nothing sensible can be made of (non-finite,
 negative intensity or colour, zero size) is a ``PrimError`` naming the light,
 which skips that light only.
+
+``ShapingAPI`` on sphere, rect and disk lights (``shaping:cone:angle``,
+``cone:softness``, ``focus``, ``focusTint``, with the schema's fallbacks once the
+API is applied) goes to the core, which applies it as Hydra's hdEmbree does
+(``mipray::light::Shaping``); IES profiles and shaping on distant and dome lights
+are listed as unsupported. Light and shadow linking (``collection:lightLink``,
+``collection:shadowLink``) are resolved here with usd-core's
+``ComputeMembershipQuery`` into the mesh prims each collection leaves out
+(``unlit``, ``no_shadow``); the scene delegate re-resolves them whenever the
+stage changes. Meshes inside native-instance prototypes are matched by their
+prototype path (``/__Prototype_1/...``), which only ``includeRoot`` reaches.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Usd, UsdLux
+from pxr import Sdf, Usd, UsdLux
 
 from ..errors import PrimError
 
 __all__ = [
     "AREA_LIGHT_TYPES",
     "CAMERA_LIGHT_PATH",
+    "LINK_COLLECTIONS",
+    "SHAPED_KINDS",
+    "SHAPING_INPUTS",
     "area_light_arguments",
     "camera_light_arguments",
     "distant_light_arguments",
+    "link_arguments",
+    "linking_authored",
 ]
 
 #: The non-distant UsdLux light types mipray renders, and their ``set_light`` kind.
@@ -44,6 +61,16 @@ AREA_LIGHT_TYPES: tuple[tuple[type, str], ...] = (
     (UsdLux.DomeLight, "dome"),
 )
 _warned: set[str] = set()
+
+#: The light kinds ``ShapingAPI`` shapes (as Hydra's hdEmbree: area lights with a position).
+SHAPED_KINDS = frozenset({"sphere", "rect", "disk"})
+#: The ``ShapingAPI`` inputs mipray reads on those (IES profiles are not read).
+SHAPING_INPUTS = frozenset(
+    {"shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint"}
+)
+#: UsdLux's linking collections and the ``set_light`` argument each resolves to: the mesh prims
+#: the light does not illuminate, and those that do not block its shadow rays.
+LINK_COLLECTIONS = (("lightLink", "unlit"), ("shadowLink", "no_shadow"))
 
 #: Path of the light mipray adds at the camera when a stage has no light.
 CAMERA_LIGHT_PATH = "/__mipray_camera_light"
@@ -195,6 +222,22 @@ def area_light_arguments(
         "normalize": bool(get("normalize", False)),
         "shadow_enable": bool(get("shadow:enable", True)),
     }
+    if kind in SHAPED_KINDS and prim.HasAPI(UsdLux.ShapingAPI):
+        # The schema's fallbacks (a 90° cone) apply once the API is applied.
+        shaping = UsdLux.ShapingAPI(prim)
+        args["cone_angle"] = float(shaping.GetShapingConeAngleAttr().Get(time))
+        args["cone_softness"] = float(shaping.GetShapingConeSoftnessAttr().Get(time))
+        args["focus"] = float(shaping.GetShapingFocusAttr().Get(time))
+        tint = tuple(float(c) for c in shaping.GetShapingFocusTintAttr().Get(time))
+        args["focus_tint"] = (tint[0], tint[1], tint[2])
+        for key in ("cone_angle", "cone_softness", "focus", "focus_tint"):
+            if not np.isfinite(args[key]).all():
+                raise PrimError(path, f"inputs:shaping {key} {args[key]} is not finite")
+        if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
+            _warn_once(
+                f"{path}: inputs:shaping:cone:softness {args['cone_softness']:g} is clipped to "
+                f"[0, 1] and inputs:shaping:focus {args['focus']:g} to >= 0"
+            )
     if kind in ("sphere", "disk"):
         args["radius"] = float(get("radius", 0.5))
     if kind == "rect":
@@ -205,8 +248,6 @@ def area_light_arguments(
                 f"{path}: rect light textures are not supported yet; lighting with its colour"
             )
     if kind == "dome":
-        from pxr import Sdf
-
         from .shading import _resolve
 
         attr = prim.GetAttribute("inputs:texture:file")
@@ -241,3 +282,44 @@ def _warn_once(message: str) -> None:
     if message not in _warned:
         _warned.add(message)
         logging.getLogger(__name__).warning("mipray: %s", message)
+
+
+def linking_authored(prim: Usd.Prim, collection: str, time: Usd.TimeCode) -> list[str]:
+    """What a light's ``collection:<collection>`` authors that limits it (empty: it holds all).
+
+    UsdLux's linking collections default to ``includeRoot`` true: a light reaches everything.
+    """
+    names = [f"collection:{collection}:{n}" for n in ("includes", "excludes")]
+    names.append(f"collection:{collection}:membershipExpression")
+    found = []
+    for name in names:
+        prop = prim.GetProperty(name)
+        if isinstance(prop, Usd.Relationship) and prop.HasAuthoredTargets():
+            found.append(name)
+        elif isinstance(prop, Usd.Attribute) and prop.HasAuthoredValue():
+            found.append(name)
+    root = prim.GetAttribute(f"collection:{collection}:includeRoot")
+    if root and root.HasAuthoredValue() and not root.Get(time):
+        found.append(root.GetName())
+    return found
+
+
+def link_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode, mesh_paths: Callable[[], Iterable[str]]
+) -> dict[str, list[str]]:
+    """``set_light``'s ``unlit`` and ``no_shadow``: the mesh prims a light's linking leaves out.
+
+    Membership is usd-core's (``Usd.CollectionAPI.ComputeMembershipQuery``: includes,
+    excludes, ``includeRoot``, expansion rules and membership expressions), asked of every
+    path ``mesh_paths()`` gives (called only when the light links anything).
+    """
+    args: dict[str, list[str]] = {}
+    paths: list[str] | None = None
+    for collection, key in LINK_COLLECTIONS:
+        if not linking_authored(prim, collection, time):
+            continue
+        if paths is None:
+            paths = list(mesh_paths())
+        query = Usd.CollectionAPI(prim, collection).ComputeMembershipQuery()
+        args[key] = [p for p in paths if not query.IsPathIncluded(Sdf.Path(p))]
+    return args

@@ -93,6 +93,8 @@ class RenderDelegateLike(Protocol):
         angle: float = ...,
         normalize: bool = ...,
         shadow_enable: bool = ...,
+        unlit: list[str] = ...,
+        no_shadow: list[str] = ...,
     ) -> None:
         """Add or replace a distant light."""
 
@@ -112,6 +114,12 @@ class RenderDelegateLike(Protocol):
         width: float = ...,
         height: float = ...,
         texture: str | None = ...,
+        cone_angle: float = ...,
+        cone_softness: float = ...,
+        focus: float = ...,
+        focus_tint: tuple[float, float, float] = ...,
+        unlit: list[str] = ...,
+        no_shadow: list[str] = ...,
     ) -> None:
         """Add or replace a sphere, rect, disk or dome light (``kind``)."""
 

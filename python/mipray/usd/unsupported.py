@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from .gprim import GPRIM_TYPES
-from .light import AREA_LIGHT_TYPES
+from .light import AREA_LIGHT_TYPES, SHAPED_KINDS, SHAPING_INPUTS
 from .shading import COLOR_INPUTS, FLOAT_INPUTS
 
 __all__ = [
@@ -153,21 +153,10 @@ def _applied(
     return check
 
 
-def _linking(collection: str) -> Callable[..., list[str]]:
-    """A light's light- or shadow-linking collection that limits what it reaches."""
-
-    def check(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
-        if not _is_light(prim):
-            return []
-        names = [f"collection:{collection}:{n}" for n in ("includes", "excludes")]
-        names.append(f"collection:{collection}:membershipExpression")
-        found = _authored(prim, names)
-        root = prim.GetAttribute(f"collection:{collection}:includeRoot")
-        if root and root.HasAuthoredValue() and not root.Get(time):
-            found.append(root.GetName())
-        return found
-
-    return check
+def _shaping(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
+    """ShapingAPI inputs not read: IES profiles, and any shaping on lights it does not shape."""
+    shaped = any(prim.IsA(t) for t, k in AREA_LIGHT_TYPES if k in SHAPED_KINDS)
+    return _applied("ShapingAPI", SHAPING_INPUTS if shaped else frozenset())(prim, time)
 
 
 def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
@@ -348,11 +337,9 @@ TABLE: tuple[Row, ...] = (
     Row("instanceable gprim (its own geometry is not instanced)", "prim", _instanceable_gprim),
     Row("material binding on a native instance", "prim", _instance_binding),
     Row("material binding to no Material", "prim", _missing_material),
-    Row("ShapingAPI", "prim", _applied("ShapingAPI")),
+    Row("ShapingAPI", "prim", _shaping),
     Row("ShadowAPI", "prim", _applied("ShadowAPI", frozenset({"shadow:enable"}))),
     Row("MeshLightAPI", "prim", _applied("MeshLightAPI", presence=True)),
-    Row("light linking", "prim", _linking("lightLink")),
-    Row("shadow linking", "prim", _linking("shadowLink")),
     Row("light input", "prim", _light_inputs),
     Row("camera clippingPlanes", "prim", _clipping_planes),
     Row(
