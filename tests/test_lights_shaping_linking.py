@@ -149,3 +149,42 @@ def test_an_occluder_left_out_of_shadow_linking_casts_no_shadow(native) -> None:
     assert math.isclose(float(unshadowed[row, column, 0]), lit, rel_tol=0.01)
     # The light still lights the occluder itself (linking is not shadow linking).
     assert float(unshadowed.max()) > 0.0
+
+
+def test_the_stats_name_each_light_and_what_it_did(native) -> None:
+    stage = two_spheres()
+    link = UsdLux.LightAPI(stage.GetPrimAtPath("/World/Sun")).GetLightLinkCollectionAPI()
+    link.CreateExcludesRel().AddTarget("/World/B")
+    shadow = UsdLux.LightAPI(stage.GetPrimAtPath("/World/Sun")).GetShadowLinkCollectionAPI()
+    shadow.CreateIncludeRootAttr(False)
+    bulb = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+    UsdLux.ShapingAPI.Apply(bulb.GetPrim()).CreateShapingConeSoftnessAttr(0.25)
+    with mipray.RenderSession(stage) as session:
+        result = session.render("/World/Cam", width=8, camera_light=False)
+    lights = {light["name"]: light for light in result.stats["scene"]["lights"]}
+    sun, spot = lights["/World/Sun"], lights["/World/Bulb"]
+    assert sun["kind"] == "distant" and sun["not_illuminating"] == ["/World/B"]
+    assert sorted(sun["not_shadowed_by"]) == ["/World/A", "/World/B"]
+    assert "shaping" not in sun and "not_illuminating" not in spot
+    assert spot["kind"] == "sphere" and spot["casts_shadows"]
+    assert math.isclose(spot["shaping"]["cone_angle_deg"], 90.0, rel_tol=1e-6)
+    assert spot["shaping"]["cone_softness"] == 0.25
+
+
+def test_ies_profiles_and_shaping_on_a_distant_light_stay_listed_as_unsupported() -> None:
+    from mipray.usd.unsupported import audit_stage
+
+    stage = stage_with_camera()
+    UsdGeom.Xform.Define(stage, "/World")
+    bulb = UsdLux.SphereLight.Define(stage, "/World/Bulb").GetPrim()
+    shaping = UsdLux.ShapingAPI.Apply(bulb)
+    shaping.CreateShapingConeAngleAttr(40.0)
+    shaping.CreateShapingIesFileAttr("profile.ies")
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun").GetPrim()
+    UsdLux.ShapingAPI.Apply(sun).CreateShapingFocusAttr(2.0)
+    UsdLux.LightAPI(sun).GetLightLinkCollectionAPI().CreateExcludesRel().AddTarget("/World/G")
+    found = {(u.prim, u.what) for u in audit_stage(stage, Usd.TimeCode.Default(), ("default",))}
+    assert found == {
+        ("/World/Bulb", "ShapingAPI inputs:shaping:ies:file"),
+        ("/World/Sun", "ShapingAPI inputs:shaping:focus"),
+    }

@@ -536,6 +536,37 @@ impl Light {
 }
 
 impl Light {
+    /// What the stats say of this light (`scene.lights`): its name, kind, whether it casts
+    /// shadows, its shaping, and the meshes its light and shadow linking leave out (by name).
+    pub fn describe(&self, scene: &Scene) -> serde_json::Value {
+        let kind = match &self.shape {
+            LightShape::Distant { .. } => "distant",
+            LightShape::Sphere { .. } => "sphere",
+            LightShape::Rect { .. } => "rect",
+            LightShape::Disk { .. } => "disk",
+            LightShape::Dome(_) => "dome",
+        };
+        let names = |f: &MeshFilter| -> Vec<&str> {
+            f.excluded().iter().filter_map(|&m| scene.meshes.get(m as usize)).map(|m| m.name.as_str()).collect()
+        };
+        let mut out = serde_json::json!({ "name": self.name, "kind": kind, "casts_shadows": self.casts_shadows });
+        if let Some(s) = &self.shaping {
+            out["shaping"] = serde_json::json!({
+                "cone_angle_deg": s.cone.to_degrees(),
+                "cone_softness": s.softness,
+                "focus": s.focus,
+                "focus_tint": [s.focus_tint.x, s.focus_tint.y, s.focus_tint.z],
+            });
+        }
+        if !self.illuminates.is_all() {
+            out["not_illuminating"] = serde_json::json!(names(&self.illuminates));
+        }
+        if !self.shadowed_by.is_all() {
+            out["not_shadowed_by"] = serde_json::json!(names(&self.shadowed_by));
+        }
+        out
+    }
+
     /// What a camera or mirror ray escaping along unit `wi` sees of this light, its
     /// directional spread (from its differential) `spread_rad`: a dome's texture filtered over
     /// that angle rather than over the importance table's texel ([`Light::environment`]), a
