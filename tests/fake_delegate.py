@@ -178,6 +178,7 @@ class FakeRenderDelegate:
         width: float = 1.0,
         height: float = 1.0,
         texture: str | None = None,
+        length: float = 1.0,
         cone_angle: float = 180.0,
         cone_softness: float = 0.0,
         focus: float = 0.0,

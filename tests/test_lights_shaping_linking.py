@@ -188,3 +188,34 @@ def test_ies_profiles_and_shaping_on_a_distant_light_stay_listed_as_unsupported(
         ("/World/Bulb", "ShapingAPI inputs:shaping:ies:file"),
         ("/World/Sun", "ShapingAPI inputs:shaping:focus"),
     }
+
+
+def test_a_cylinder_light_lights_the_floor_as_the_quadrature_of_its_wall(native) -> None:
+    # A tube along X (its local axis) of radius 0.2 and length 1.5, 2 units above the floor.
+    stage = stage_with_camera()
+    radius, length, h, intensity = 0.2, 1.5, 2.0, 5.0
+    tube = UsdLux.CylinderLight.Define(stage, "/World/Tube")
+    tube.AddTranslateOp().Set(Gf.Vec3d(0, 0, h))
+    tube.CreateRadiusAttr(radius)
+    tube.CreateLengthAttr(length)
+    tube.CreateIntensityAttr(intensity)
+    # E below its centre = ∫ L cos θ_light cos θ_floor / d² dA over the wall facing the point.
+    x, phi = np.meshgrid(
+        (np.arange(1500) + 0.5) / 1500 * length - length / 2,
+        (np.arange(1500) + 0.5) / 1500 * 2 * math.pi,
+    )
+    normal = np.stack([np.zeros_like(x), np.cos(phi), np.sin(phi)], -1)
+    point = np.stack([x, radius * np.cos(phi), h + radius * np.sin(phi)], -1)
+    d2 = (point**2).sum(-1)
+    w = point / np.sqrt(d2)[..., None]
+    cos_light = np.clip(-(normal * w).sum(-1), 0.0, None)
+    area = 2 * math.pi * radius * length / x.size
+    irradiance = float((intensity * cos_light * w[..., 2] / d2).sum() * area)
+    image = render(stage, 33, samples=16)
+    centre = image[16, 16, 0]
+    assert math.isclose(float(centre), ALBEDO * irradiance / math.pi, rel_tol=0.03)
+    # Normalized, the same light's radiance is divided by its wall's area.
+    tube.CreateNormalizeAttr(True)
+    normalized = render(stage, 33, samples=16)[16, 16, 0]
+    wall = 2 * math.pi * radius * length
+    assert math.isclose(float(normalized), float(centre) / wall, rel_tol=0.03)

@@ -1,4 +1,4 @@
-//! Light Sprims (UsdLux): distant, sphere, rect, disk and dome lights.
+//! Light Sprims (UsdLux): distant, sphere, rect, disk, cylinder and dome lights.
 
 use glam::{Mat4, Vec3A};
 use mipray::light::{Light, LightShape};
@@ -29,6 +29,11 @@ pub enum AreaKind {
     },
     Disk {
         radius: f32,
+    },
+    /// A tube along the light's X axis, without end caps.
+    Cylinder {
+        radius: f32,
+        length: f32,
     },
     /// An environment: constant radiance, or a latlong texture (resolved file path).
     Dome {
@@ -104,6 +109,13 @@ impl LightPrim {
                         v: m.transform_vector3a(Vec3A::Y * f(radius)),
                         normal,
                     },
+                    AreaKind::Cylinder { radius, length } => {
+                        // The tube stays round under the mean of the light's Y and Z scales.
+                        let axis = m.transform_vector3a(Vec3A::X * (f(length) * 0.5));
+                        let s = (m.transform_vector3a(Vec3A::Y).length() + m.transform_vector3a(Vec3A::Z).length()) / 2.0;
+                        let (e1, e2) = axis.normalize_or(Vec3A::X).any_orthonormal_pair();
+                        LightShape::Cylinder { center, axis, radius: f(radius) * s, e1, e2 }
+                    }
                     AreaKind::Dome { texture } => {
                         let env = texture.as_ref().zip(textures).and_then(|(file, sampler)| {
                             match sampler.handle_encoded(file, mipray::texture::SourceColorSpace::Auto) {
@@ -127,7 +139,9 @@ impl LightPrim {
             }
         };
         l.casts_shadows = d.shadow_enable;
-        if let (Some(sh), Some(AreaKind::Sphere { .. } | AreaKind::Rect { .. } | AreaKind::Disk { .. })) = (&self.shaping, &self.area) {
+        if let (Some(sh), Some(AreaKind::Sphere { .. } | AreaKind::Rect { .. } | AreaKind::Disk { .. } | AreaKind::Cylinder { .. })) =
+            (&self.shaping, &self.area)
+        {
             let axis = m.transform_vector3a(Vec3A::NEG_Z);
             l.shaping = mipray::light::Shaping::new(axis, sh.cone_angle_deg, sh.cone_softness, sh.focus, Vec3A::from(sh.focus_tint.map(f)));
         }

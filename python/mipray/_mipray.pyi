@@ -258,6 +258,7 @@ class RenderDelegate:
         width: float = 1.0,
         height: float = 1.0,
         texture: str | None = None,
+        length: float = 1.0,
         cone_angle: float = 180.0,
         cone_softness: float = 0.0,
         focus: float = 0.0,
@@ -269,7 +270,8 @@ class RenderDelegate:
 
         ``kind`` is ``distant`` (as :meth:`set_distant_light`), ``sphere``
         (``radius``), ``rect`` (``width`` × ``height``, emitting along local
-        -Z), ``disk`` (``radius``, along -Z) or ``dome`` (radiance from every
+        -Z), ``disk`` (``radius``, along -Z), ``cylinder`` (``radius``,
+        ``length``, along local X, no end caps) or ``dome`` (radiance from every
         direction: constant, or the latlong ``texture`` file, +Y up). Area
         lights emit radiance ``color * intensity
         * 2**exposure``, divided by their area with ``normalize``; they cast

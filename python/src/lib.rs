@@ -402,11 +402,12 @@ impl RenderDelegate {
     }
 
     /// Inserts or replaces a UsdLux light of any kind: ``distant`` (as `set_distant_light`),
-    /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius) or ``dome``.
+    /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius), ``cylinder`` (radius,
+    /// length, along local X) or ``dome``.
     /// ``cone_angle`` (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are UsdLux's
     /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
     /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new()))]
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new()))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -423,6 +424,7 @@ impl RenderDelegate {
         width: f32,
         height: f32,
         texture: Option<String>,
+        length: f32,
         cone_angle: f32,
         cone_softness: f32,
         focus: f32,
@@ -440,6 +442,7 @@ impl RenderDelegate {
             radius,
             width,
             height,
+            length,
             cone_angle,
             cone_softness,
             focus,
@@ -470,8 +473,9 @@ impl RenderDelegate {
             "sphere" => AreaKind::Sphere { radius: size("radius", radius)? },
             "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)? },
             "disk" => AreaKind::Disk { radius: size("radius", radius)? },
+            "cylinder" => AreaKind::Cylinder { radius: size("radius", radius)?, length: size("length", length)? },
             "dome" => AreaKind::Dome { texture },
-            _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk or dome"))),
+            _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk, cylinder or dome"))),
         };
         let shaping =
             Some(ShapingData { cone_angle_deg: cone_angle, cone_softness, focus, focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2] });

@@ -1,4 +1,4 @@
-//! Lights (UsdLux): distant, sphere, rect, disk and dome; `ShapingAPI` on sphere, rect and disk
+//! Lights (UsdLux): distant, sphere, rect, disk, cylinder and dome; `ShapingAPI` on sphere, rect and disk
 //! lights ([`Shaping`]); light and shadow linking ([`Light::illuminates`],
 //! [`Light::shadowed_by`]: what the direct-lighting estimator and shadow rays honour).
 //!
@@ -48,6 +48,10 @@ pub enum LightShape {
     Rect { center: Vec3A, u: Vec3A, v: Vec3A, normal: Vec3A },
     /// An ellipse `center + a·u + b·v`, a² + b² ≤ 1, emitting along `normal`.
     Disk { center: Vec3A, u: Vec3A, v: Vec3A, normal: Vec3A },
+    /// A tube without end caps (UsdLux.CylinderLight): `center + t·axis + radius·(cos φ e1 +
+    /// sin φ e2)`, t ∈ [−1, 1], where e1, e2 are unit and orthogonal to each other and to
+    /// `axis` (the half-length vector: the light's local X). It emits outward only.
+    Cylinder { center: Vec3A, axis: Vec3A, radius: f32, e1: Vec3A, e2: Vec3A },
     /// Radiance from every direction: uniform, or a latlong environment texture.
     Dome(Option<EnvTexture>),
 }
@@ -334,6 +338,14 @@ impl Light {
                 }
                 (shape_area(shape) * normal.dot(d).abs() / (d2 * d2.sqrt())).min(2.0 * PI)
             }
+            LightShape::Cylinder { center, axis, radius, .. } => {
+                // Its largest projected area over the distance²: an estimate, as for rects.
+                let d2 = (*center - p).length_squared();
+                if !(d2 > 0.0) {
+                    return 4.0 * PI;
+                }
+                (4.0 * radius * axis.length() / d2).min(4.0 * PI)
+            }
         }
     }
 
@@ -381,7 +393,7 @@ impl Light {
                 let distance = (b - disc.sqrt()).max(0.0);
                 LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
-            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. }) => {
+            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. }) => {
                 let (y, ny, area) = sample_planar(shape, u1, u2)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
@@ -446,6 +458,7 @@ impl Light {
                 }
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
+            LightShape::Cylinder { .. } => self.intersect_cylinder(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
         }
     }
 
@@ -480,8 +493,45 @@ impl Light {
                 (t > 0.0 && t < t_max).then(|| LightHit { t, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max) })
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(o, d, t_max),
+            LightShape::Cylinder { .. } => self.intersect_cylinder(o, d, t_max),
             _ => None,
         }
+    }
+
+    /// The tube's outer wall where the ray from `o` along unit `d` first meets it, from outside:
+    /// a ray entering through an open end sees only the inner side, which emits nothing. As the
+    /// solid cylinder is convex, these are exactly the wall points [`Light::sample`] keeps.
+    fn intersect_cylinder(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        let LightShape::Cylinder { center, axis, radius, .. } = &self.shape else { return None };
+        let half = axis.length();
+        let a_hat = *axis / half;
+        let oc = o - *center;
+        let op = oc - a_hat * oc.dot(a_hat);
+        let dp = d - a_hat * d.dot(a_hat);
+        let a = dp.length_squared();
+        let c = op.length_squared() - radius * radius;
+        if !(a > 0.0 && c > 0.0 && half > 0.0) {
+            return None;
+        }
+        let b = op.dot(dp);
+        let disc = b * b - a * c;
+        if !(disc >= 0.0) {
+            return None;
+        }
+        // The near root, without cancellation.
+        let t = c / (-b + disc.sqrt());
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        if (oc + d * t).dot(a_hat).abs() > half {
+            return None;
+        }
+        let n = (op + dp * t) / *radius;
+        let cos_l = -n.dot(d);
+        if !(cos_l > 0.0) {
+            return None;
+        }
+        Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * shape_area(&self.shape)) })
     }
 
     fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
@@ -544,6 +594,7 @@ impl Light {
             LightShape::Sphere { .. } => "sphere",
             LightShape::Rect { .. } => "rect",
             LightShape::Disk { .. } => "disk",
+            LightShape::Cylinder { .. } => "cylinder",
             LightShape::Dome(_) => "dome",
         };
         let names = |f: &MeshFilter| -> Vec<&str> {
@@ -618,11 +669,13 @@ pub fn shape_area(shape: &LightShape) -> f32 {
         LightShape::Sphere { radius, .. } => 4.0 * PI * radius * radius,
         LightShape::Rect { u, v, .. } => 4.0 * u.cross(*v).length(),
         LightShape::Disk { u, v, .. } => PI * u.cross(*v).length(),
+        LightShape::Cylinder { axis, radius, .. } => 2.0 * PI * radius * 2.0 * axis.length(),
         _ => 0.0,
     }
 }
 
-/// A uniformly distributed point on a rect or disk light: (point, emitting normal, area).
+/// A uniformly distributed point on a rect, disk or cylinder light: (point, emitting normal,
+/// area).
 fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, f32)> {
     let area = shape_area(shape);
     if !(area > 0.0) {
@@ -630,6 +683,11 @@ fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, 
     }
     match shape {
         LightShape::Rect { center, u, v, normal } => Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area)),
+        LightShape::Cylinder { center, axis, radius, e1, e2 } => {
+            let phi = 2.0 * PI * u2;
+            let n = *e1 * phi.cos() + *e2 * phi.sin();
+            Some((*center + *axis * (2.0 * u1 - 1.0) + n * *radius, n, area))
+        }
         LightShape::Disk { center, u, v, normal } => {
             let r = u1.sqrt();
             let phi = 2.0 * PI * u2;

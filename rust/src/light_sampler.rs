@@ -133,13 +133,21 @@ impl LightBounds {
                     cos_theta_e: 0.0,
                 }
             }
+            LightShape::Cylinder { center, axis, radius, .. } => LightBounds {
+                lo: *center - axis.abs() - Vec3A::splat(*radius),
+                hi: *center + axis.abs() + Vec3A::splat(*radius),
+                // Seen side-on it shows 2r × length; end-on, no more than its wall's πr².
+                phi: lum * (4.0 * radius * axis.length() + PI * radius * radius),
+                normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
+                cos_theta_e: 0.0,
+            },
             _ => return None,
         };
         // A shaped light emits only within its cone about its axis (focus only dims it: the
         // bound stays an upper one), from any point of it.
         let b = match &light.shaping {
             Some(shaping) if shaping.cos_max() > -1.0 => match light.shape {
-                LightShape::Sphere { .. } => {
+                LightShape::Sphere { .. } | LightShape::Cylinder { .. } => {
                     LightBounds { normals: Cone { w: shaping.axis, cos_theta: 1.0 }, cos_theta_e: shaping.cos_max(), ..b }
                 }
                 _ => LightBounds { cos_theta_e: b.cos_theta_e.max(shaping.cos_max()), ..b },

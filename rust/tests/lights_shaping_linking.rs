@@ -165,3 +165,62 @@ fn a_light_linked_away_leaves_a_surface_dark_and_an_unlinked_occluder_casts_no_s
     scene.lights = vec![blocked];
     assert_eq!(lit(&scene, Vec3A::ZERO, Mode::Mis), 0.0, "the occluder is in the set");
 }
+
+/// A tube of radius 0.3 and length 1.6 above the origin, its axis tilted out of the floor's
+/// plane, radiance 2.
+fn tube() -> Light {
+    let axis = Vec3A::new(0.8, 0.1, 0.3).normalize() * 0.8;
+    let (e1, e2) = axis.normalize().any_orthonormal_pair();
+    let shape = LightShape::Cylinder { center: Vec3A::new(0.4, 0.2, 1.5), axis, radius: 0.3, e1, e2 };
+    Light::usd_area("/tube", shape, 2.0, 0.0, Vec3A::ONE, false)
+}
+
+#[test]
+fn a_cylinder_light_delivers_the_quadrature_of_its_wall_and_its_density_is_its_area_s() {
+    let light = tube();
+    let LightShape::Cylinder { center, axis, radius, e1, e2 } = light.shape else { unreachable!() };
+    // E at the origin (normal +z) = ∫ L cos θ_light cos θ_surface / d² dA over the wall facing it.
+    let (nt, np) = (1000, 2000);
+    let (mut e, mut facing) = (0.0f64, 0.0f64);
+    let da = f64::from(2.0 * axis.length() * 2.0 * PI * radius) / f64::from(nt * np);
+    for i in 0..nt {
+        let t = -1.0 + 2.0 * (i as f32 + 0.5) / nt as f32;
+        for j in 0..np {
+            let phi = 2.0 * PI * (j as f32 + 0.5) / np as f32;
+            let n = e1 * phi.cos() + e2 * phi.sin();
+            let y = center + axis * t + n * radius;
+            let d2 = y.length_squared();
+            let w = y / d2.sqrt();
+            let (cos_l, cos_s) = (-n.dot(w), w.z);
+            if cos_l > 0.0 {
+                facing += 1.0 / f64::from(nt * np);
+            }
+            if cos_l > 0.0 && cos_s > 0.0 {
+                e += f64::from(2.0 * cos_l * cos_s / d2) * da;
+            }
+        }
+    }
+    let truth = (e / f64::from(PI)) as f32;
+    let scene = with(vec![light.clone()]);
+    for mode in [Mode::Mis, Mode::PathTracer] {
+        let got = estimate_at(&scene, Vec3A::ZERO, 4, 2000, mode, white);
+        assert!((got.mean.x - truth).abs() < 4.0 * got.std_error + 1e-3 * truth, "{mode:?}: {} ± {} vs {truth}", got.mean.x, got.std_error);
+    }
+    // Area sampling keeps the points whose outer side faces the origin: ∫ pdf dω over the
+    // directions that meet them is the fraction of the wall they make up.
+    let (nt, np) = (800, 1600);
+    let dw = 4.0 * std::f64::consts::PI / f64::from(nt * np);
+    let mut integral = 0.0f64;
+    for i in 0..nt {
+        let z = 1.0 - 2.0 * (i as f32 + 0.5) / nt as f32;
+        for j in 0..np {
+            let phi = 2.0 * PI * (j as f32 + 0.5) / np as f32;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            integral += f64::from(light.pdf(Vec3A::ZERO, Vec3A::Z, Vec3A::new(r * phi.cos(), r * phi.sin(), z))) * dw;
+        }
+    }
+    assert!((integral - facing).abs() < 0.01 * facing, "∫ pdf = {integral} vs {facing}");
+    // From inside the tube, or through an open end, the outward wall shows nothing.
+    assert!(light.intersect(center, Vec3A::Z, f32::INFINITY).is_none());
+    assert!(light.intersect(center + axis * 3.0, -axis.normalize(), f32::INFINITY).is_none());
+}

@@ -1,4 +1,4 @@
-"""Lights: ``UsdLux`` distant, sphere, rect, disk and dome lights, and the camera light.
+"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder and dome lights, and the camera light.
 
 ``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
 others into ``RenderDelegate.set_light`` with their shape; a stage with no
@@ -58,12 +58,13 @@ AREA_LIGHT_TYPES: tuple[tuple[type, str], ...] = (
     (UsdLux.SphereLight, "sphere"),
     (UsdLux.RectLight, "rect"),
     (UsdLux.DiskLight, "disk"),
+    (UsdLux.CylinderLight, "cylinder"),
     (UsdLux.DomeLight, "dome"),
 )
 _warned: set[str] = set()
 
 #: The light kinds ``ShapingAPI`` shapes (as Hydra's hdEmbree: area lights with a position).
-SHAPED_KINDS = frozenset({"sphere", "rect", "disk"})
+SHAPED_KINDS = frozenset({"sphere", "rect", "disk", "cylinder"})
 #: The ``ShapingAPI`` inputs mipray reads on those (IES profiles are not read).
 SHAPING_INPUTS = frozenset(
     {"shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint"}
@@ -189,10 +190,11 @@ def camera_light_arguments(camera_transform: NDArray[np.float64]) -> dict[str, A
 def area_light_arguments(
     prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
 ) -> dict[str, Any] | None:
-    """``RenderDelegate.set_light`` keyword arguments for a sphere, rect, disk or dome light.
+    """``RenderDelegate.set_light`` keyword arguments for a sphere, rect, disk, cylinder or dome light.
 
     Returns None when ``prim`` is none of those. Sizes are UsdLux's (``radius``,
-    ``width``, ``height``, in the light's units). A dome light's texture is
+    ``width``, ``height``, ``length``, in the light's units; a cylinder lies along
+    its local X and has no end caps). A dome light's texture is
     read through OpenImageIO as a latlong environment (``texture`` argument;
     a ``texture:format`` other than ``automatic`` or ``latlong`` is read as a
     latlong, with one warning). A sphere's ``treatAsPoint`` is a hint that
@@ -238,8 +240,10 @@ def area_light_arguments(
                 f"{path}: inputs:shaping:cone:softness {args['cone_softness']:g} is clipped to "
                 f"[0, 1] and inputs:shaping:focus {args['focus']:g} to >= 0"
             )
-    if kind in ("sphere", "disk"):
+    if kind in ("sphere", "disk", "cylinder"):
         args["radius"] = float(get("radius", 0.5))
+    if kind == "cylinder":
+        args["length"] = float(get("length", 1.0))
     if kind == "rect":
         args["width"] = float(get("width", 1.0))
         args["height"] = float(get("height", 1.0))
@@ -263,10 +267,10 @@ def area_light_arguments(
                     f"{path}: dome texture:format '{layout}' is not supported; "
                     "reading the texture as a latlong map"
                 )
-    for key in ("intensity", "exposure", "radius", "width", "height"):
+    for key in ("intensity", "exposure", "radius", "width", "height", "length"):
         if key in args and not math.isfinite(args[key]):
             raise PrimError(path, f"inputs:{key} is not finite")
-    for key in ("radius", "width", "height"):
+    for key in ("radius", "width", "height", "length"):
         if key in args and args[key] <= 0.0:
             raise PrimError(path, f"inputs:{key} is {args[key]}; it must be > 0")
     if args["intensity"] < 0.0:

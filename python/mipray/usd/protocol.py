@@ -114,6 +114,7 @@ class RenderDelegateLike(Protocol):
         width: float = ...,
         height: float = ...,
         texture: str | None = ...,
+        length: float = ...,
         cone_angle: float = ...,
         cone_softness: float = ...,
         focus: float = ...,

@@ -75,6 +75,7 @@ LIGHT_INPUTS = frozenset(
         "radius",
         "width",
         "height",
+        "length",
         "texture:file",
         "texture:format",
     }
