@@ -190,7 +190,7 @@ def camera_light_arguments(camera_transform: NDArray[np.float64]) -> dict[str, A
 def area_light_arguments(
     prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
 ) -> dict[str, Any] | None:
-    """``RenderDelegate.set_light`` keyword arguments for a sphere, rect, disk, cylinder or dome light.
+    """``RenderDelegate.set_light`` keyword arguments for an area or dome light.
 
     Returns None when ``prim`` is none of those. Sizes are UsdLux's (``radius``,
     ``width``, ``height``, ``length``, in the light's units; a cylinder lies along
