@@ -23,9 +23,11 @@ pub enum AreaKind {
     Sphere {
         radius: f32,
     },
+    /// With the resolved path of its `texture:file`, if any.
     Rect {
         width: f32,
         height: f32,
+        texture: Option<String>,
     },
     Disk {
         radius: f32,
@@ -97,7 +99,7 @@ impl LightPrim {
                             / 3.0;
                         LightShape::Sphere { center, radius: f(radius) * s }
                     }
-                    AreaKind::Rect { width, height } => LightShape::Rect {
+                    AreaKind::Rect { width, height, .. } => LightShape::Rect {
                         center,
                         u: m.transform_vector3a(Vec3A::X * (f(width) * 0.5)),
                         v: m.transform_vector3a(Vec3A::Y * (f(height) * 0.5)),
@@ -139,6 +141,12 @@ impl LightPrim {
             }
         };
         l.casts_shadows = d.shadow_enable;
+        if let (Some(AreaKind::Rect { texture: Some(file), .. }), Some(sampler)) = (&self.area, textures) {
+            match sampler.handle_encoded(file, mipray::texture::SourceColorSpace::Auto) {
+                Ok(texture) => l.texture = Some(mipray::light::RectTexture { sampler: sampler.clone(), texture }),
+                Err(e) => log::warn!("{}: cannot read rect light texture {file}: {}; lighting with its colour", self.path, e.message),
+            }
+        }
         if let (Some(sh), Some(AreaKind::Sphere { .. } | AreaKind::Rect { .. } | AreaKind::Disk { .. } | AreaKind::Cylinder { .. })) =
             (&self.shaping, &self.area)
         {

@@ -161,7 +161,10 @@ impl RenderDelegate {
             m.data.diffuse_texture.is_some()
                 || m.data.displacement_texture.is_some()
                 || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
-        }) || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
+        }) || self
+            .lights
+            .values()
+            .any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) } | AreaKind::Rect { texture: Some(_), .. })));
         if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
             return Ok(());
         }

@@ -471,7 +471,7 @@ impl RenderDelegate {
                 return Ok(());
             }
             "sphere" => AreaKind::Sphere { radius: size("radius", radius)? },
-            "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)? },
+            "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)?, texture },
             "disk" => AreaKind::Disk { radius: size("radius", radius)? },
             "cylinder" => AreaKind::Cylinder { radius: size("radius", radius)?, length: size("length", length)? },
             "dome" => AreaKind::Dome { texture },

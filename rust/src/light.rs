@@ -69,6 +69,8 @@ pub struct Light {
     pub shaping: Option<Shaping>,
     /// UsdLux light linking: the meshes this light illuminates.
     pub illuminates: MeshFilter,
+    /// A rect light's `texture:file`, multiplying its radiance over the rect.
+    pub texture: Option<RectTexture>,
     /// UsdLux shadow linking: the meshes that block this light's shadow rays.
     pub shadowed_by: MeshFilter,
 }
@@ -102,6 +104,50 @@ impl MeshFilter {
     /// The meshes left out.
     pub fn excluded(&self) -> &[u32] {
         &self.excluded
+    }
+}
+
+/// A rect light's texture (`texture:file`), laid over the rect as Hydra's hdEmbree lays it: `s`
+/// along the light's +X from its −X edge, `t` along +Y from its −Y edge (USD's `st`, `t` up the
+/// image).
+#[derive(Clone)]
+pub struct RectTexture {
+    pub sampler: std::sync::Arc<dyn crate::texture::TextureSampler>,
+    pub texture: crate::texture::TextureHandle,
+}
+
+impl std::fmt::Debug for RectTexture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RectTexture").field("texture", &self.texture).finish_non_exhaustive()
+    }
+}
+
+impl PartialEq for RectTexture {
+    fn eq(&self, o: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.sampler, &o.sampler) && self.texture == o.texture
+    }
+}
+
+impl RectTexture {
+    /// The texture's colour at `st` (a texel's worth of filtering); white where it cannot be
+    /// read, black for non-finite or negative texels.
+    pub fn radiance(&self, st: [f32; 2]) -> Vec3A {
+        // One texel of the finer axis both ways: a coarser MIP level would bleed colour across
+        // the rect.
+        let [w, h] = self.sampler.resolution(self.texture).unwrap_or([1024, 1024]);
+        let texel = 1.0 / w.max(h).max(1) as f32;
+        let lookup =
+            crate::texture::Lookup { wrap_s: crate::texture::Wrap::Clamp, wrap_t: crate::texture::Wrap::Clamp, ..Default::default() };
+        let mut rgb = [0.0f32; 3];
+        if !self.sampler.sample(self.texture, st, [texel, 0.0], [0.0, texel], &lookup, &mut rgb) {
+            return Vec3A::ONE;
+        }
+        let c = Vec3A::from(rgb);
+        if c.is_finite() {
+            c.max(Vec3A::ZERO)
+        } else {
+            Vec3A::ZERO
+        }
     }
 }
 
@@ -251,6 +297,7 @@ impl Light {
             shaping: None,
             illuminates: MeshFilter::default(),
             shadowed_by: MeshFilter::default(),
+            texture: None,
         }
     }
 
@@ -294,6 +341,7 @@ impl Light {
             shaping: None,
             illuminates: MeshFilter::default(),
             shadowed_by: MeshFilter::default(),
+            texture: None,
         }
     }
 
@@ -406,8 +454,12 @@ impl Light {
                 if cos_l <= 0.0 {
                     return None;
                 }
+                let mut radiance = self.radiance_scale;
+                if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, shape) {
+                    radiance *= tex.radiance([u1, u2]);
+                }
                 // Area sampling: density in solid angle = dist² / (cos_l · area).
-                LightSample { wi, distance: dist, radiance: self.radiance_scale, pdf: dist2 / (cos_l * area), delta: false }
+                LightSample { wi, distance: dist, radiance, pdf: dist2 / (cos_l * area), delta: false }
             }
         };
         let mut sample = sample;
@@ -565,7 +617,11 @@ impl Light {
             return None;
         }
         let area = shape_area(&self.shape);
-        Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * area) })
+        let mut radiance = self.radiance_scale;
+        if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, &self.shape) {
+            radiance *= tex.radiance([0.5 * (a + 1.0), 0.5 * (b + 1.0)]);
+        }
+        Some(LightHit { t, radiance, pdf: t * t / (cos_l * area) })
     }
 
     /// Radiance arriving along unit `wi` from this light when a ray escapes the scene: a dome's,

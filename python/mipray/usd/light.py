@@ -197,7 +197,8 @@ def area_light_arguments(
     its local X and has no end caps). A dome light's texture is
     read through OpenImageIO as a latlong environment (``texture`` argument;
     a ``texture:format`` other than ``automatic`` or ``latlong`` is read as a
-    latlong, with one warning). A sphere's ``treatAsPoint`` is a hint that
+    latlong, with one warning). A rect light's texture multiplies its colour
+    over the rect (``s`` along its +X, ``t`` along its +Y). A sphere's ``treatAsPoint`` is a hint that
     renderers of area lights may disregard (UsdLux): it stays a sphere.
 
     Raises:
@@ -247,11 +248,7 @@ def area_light_arguments(
     if kind == "rect":
         args["width"] = float(get("width", 1.0))
         args["height"] = float(get("height", 1.0))
-        if get("texture:file", None):
-            _warn_once(
-                f"{path}: rect light textures are not supported yet; lighting with its colour"
-            )
-    if kind == "dome":
+    if kind in ("rect", "dome"):
         from .shading import _resolve
 
         attr = prim.GetAttribute("inputs:texture:file")
@@ -260,7 +257,7 @@ def area_light_arguments(
             args["texture"] = _resolve(attr, value)
         elif isinstance(value, str) and value:
             args["texture"] = value
-        if "texture" in args:
+        if "texture" in args and kind == "dome":
             layout = str(get("texture:format", "automatic"))
             if layout not in ("automatic", "latlong"):
                 _warn_once(

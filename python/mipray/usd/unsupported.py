@@ -172,8 +172,6 @@ def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
         and not p.GetName().startswith(schema_owned)
         and p.GetName().removeprefix("inputs:") not in LIGHT_INPUTS
     ]
-    if prim.IsA(UsdLux.RectLight):
-        unread += _authored(prim, ["inputs:texture:file"])
     fmt = prim.GetAttribute("inputs:texture:format")
     if prim.IsA(UsdLux.DomeLight) and fmt and fmt.HasAuthoredValue():
         if str(fmt.Get(time)) not in ("automatic", "latlong"):
