@@ -189,7 +189,7 @@ impl Shaping {
             cone,
             softness: finite(softness, 0.0).clamp(0.0, 1.0),
             focus,
-            focus_tint: focus_tint.is_finite().then_some(focus_tint.max(Vec3A::ZERO)).unwrap_or(Vec3A::ZERO),
+            focus_tint: if focus_tint.is_finite() { focus_tint.max(Vec3A::ZERO) } else { Vec3A::ZERO },
         };
         (cone < PI || focus > 0.0).then_some(s)
     }

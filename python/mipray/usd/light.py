@@ -198,8 +198,9 @@ def area_light_arguments(
     read through OpenImageIO as a latlong environment (``texture`` argument;
     a ``texture:format`` other than ``automatic`` or ``latlong`` is read as a
     latlong, with one warning). A rect light's texture multiplies its colour
-    over the rect (``s`` along its +X, ``t`` along its +Y). A sphere's ``treatAsPoint`` is a hint that
-    renderers of area lights may disregard (UsdLux): it stays a sphere.
+    over the rect (``s`` along its +X, ``t`` along its +Y). A sphere's
+    ``treatAsPoint`` is a hint that renderers of area lights may disregard
+    (UsdLux): it stays a sphere.
 
     Raises:
         PrimError: a non-finite, negative or zero value, or a non-finite transform.
