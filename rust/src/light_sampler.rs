@@ -5,15 +5,19 @@
 //! P_j(p, n) proportional to an upper-bound-flavoured estimate of the irradiance it can deliver,
 //! without occlusion:
 //!
-//! - area lights (sphere, rect, disk): `Φ · cos θ'_light · cos θ'_surface / d²`, where Φ is the
-//!   light's luminance × area facing the point at best (a rect's or disk's area, a sphere's πr²:
-//!   an intensity), d the distance from p to its bounds' centre (at least half their diagonal),
-//!   θ'_light the smallest angle between the light's emission cone and the direction to p that
-//!   the bounds allow (zero importance when p is behind a one-sided light) and θ'_surface the
-//!   smallest angle between n and a direction into the bounds (zero below the horizon);
+//! - area lights (sphere, rect, disk, cylinder): `Φ · cos θ'_light · cos θ'_surface / d²`, where
+//!   Φ is the light's luminance × area facing the point at best (a rect's or disk's area, a
+//!   sphere's πr², a tube's 2rℓ + πr²: an intensity), d the distance from p to its bounds'
+//!   centre (at least half their diagonal), θ'_light the smallest angle between the light's
+//!   emission cone and the direction to p that the bounds allow (zero importance when p is
+//!   behind a one-sided light) and θ'_surface the smallest angle between n and a direction into
+//!   the bounds (zero below the horizon);
 //! - distant lights: the irradiance facing the light × the cosine of the smallest angle between
 //!   n and the light's cone (delta lights included: angle 0);
 //! - dome lights: π × the dome's mean luminance (its irradiance on any surface, roughly).
+//!
+//! A light shaped by UsdLux's `ShapingAPI` emits only within its cone: its bounds say so
+//! (emission spread θe = the cone angle), so points outside every cone get probability 0.
 //!
 //! Every quantity is an irradiance, so the three kinds compete on one scale. A light gets
 //! probability 0 only where these bounds prove it cannot light p, so the estimator
