@@ -174,6 +174,8 @@ class FakeRenderDelegate:
         angle: float = 0.53,
         normalize: bool = False,
         shadow_enable: bool = True,
+        unlit: list[str] | None = None,
+        no_shadow: list[str] | None = None,
     ) -> None:
         self._set("set_distant_light", path, dict(locals_without_self(locals())))
 
@@ -193,6 +195,13 @@ class FakeRenderDelegate:
         width: float = 1.0,
         height: float = 1.0,
         texture: str | None = None,
+        length: float = 1.0,
+        cone_angle: float = 180.0,
+        cone_softness: float = 0.0,
+        focus: float = 0.0,
+        focus_tint: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        unlit: list[str] | None = None,
+        no_shadow: list[str] | None = None,
     ) -> None:
         self._set("set_light", path, dict(locals_without_self(locals())))
 

@@ -21,7 +21,7 @@ use crate::camera::{Camera, CameraPrim};
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
-use crate::light::{AreaKind, DistantLightData, LightPrim};
+use crate::light::{AreaKind, DistantLightData, LightPrim, LinkData};
 use crate::material::{is_color, mesh_material, set_input, SurfaceInputs, TextureInput};
 use crate::mesh::{MeshData, MeshPrim};
 
@@ -128,12 +128,17 @@ impl RenderDelegate {
 
     /// Inserts or replaces a distant light.
     pub fn set_distant_light(&mut self, path: &str, data: DistantLightData) {
-        self.lights.insert(path.to_string(), LightPrim { path: path.to_string(), data, area: None });
+        self.set_light(LightPrim { path: path.to_string(), data, area: None, shaping: None, links: LinkData::default() });
+    }
+
+    /// Inserts or replaces a light of any kind, with its shaping and links.
+    pub fn set_light(&mut self, light: LightPrim) {
+        self.lights.insert(light.path.clone(), light);
     }
 
     /// Inserts or replaces a sphere, rect, disk or dome light: the shared inputs and its shape.
     pub fn set_area_light(&mut self, path: &str, data: DistantLightData, area: AreaKind) {
-        self.lights.insert(path.to_string(), LightPrim { path: path.to_string(), data, area: Some(area) });
+        self.set_light(LightPrim { path: path.to_string(), data, area: Some(area), shaping: None, links: LinkData::default() });
     }
 
     /// Removes a prim of any type; returns whether it existed.
@@ -157,7 +162,10 @@ impl RenderDelegate {
                 || m.data.displacement_texture.is_some()
                 || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
                 || m.data.face_materials.as_ref().is_some_and(|f| f.materials.iter().any(|s| !s.textures.is_empty()))
-        }) || self.lights.values().any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) })));
+        }) || self
+            .lights
+            .values()
+            .any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) } | AreaKind::Rect { texture: Some(_), .. })));
         if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
             return Ok(());
         }
@@ -305,7 +313,8 @@ impl RenderDelegate {
             expand(&self.instancers, inst, Mat4::IDENTITY, &is_mesh, &mut |p, t| place(&mut scene, p, t));
         }
         let sampler = self.sampler();
-        scene.lights = self.lights.values().map(|l| l.to_light_with(sampler.as_ref())).collect();
+        let mesh_index = |p: &str| index.get(p).copied().flatten();
+        scene.lights = self.lights.values().map(|l| l.to_scene_light(sampler.as_ref(), &mesh_index)).collect();
         scene.textures = sampler;
         Ok(scene)
     }

@@ -278,16 +278,28 @@ class RenderDelegate:
         width: float = 1.0,
         height: float = 1.0,
         texture: str | None = None,
+        length: float = 1.0,
+        cone_angle: float = 180.0,
+        cone_softness: float = 0.0,
+        focus: float = 0.0,
+        focus_tint: tuple[float, float, float] = ...,  # (0.0, 0.0, 0.0)
+        unlit: list[str] = ...,  # []
+        no_shadow: list[str] = ...,  # []
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
 
         ``kind`` is ``distant`` (as :meth:`set_distant_light`), ``sphere``
         (``radius``), ``rect`` (``width`` × ``height``, emitting along local
-        -Z), ``disk`` (``radius``, along -Z) or ``dome`` (radiance from every
+        -Z), ``disk`` (``radius``, along -Z), ``cylinder`` (``radius``,
+        ``length``, along local X, no end caps) or ``dome`` (radiance from every
         direction: constant, or the latlong ``texture`` file, +Y up). Area
         lights emit radiance ``color * intensity
         * 2**exposure``, divided by their area with ``normalize``; they cast
-        soft shadows with ``shadowSamples`` rays each.
+        soft shadows with ``shadowSamples`` rays each. ``cone_angle``
+        (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are
+        UsdLux's ShapingAPI on sphere, rect and disk lights (the defaults
+        shape nothing); ``unlit`` and ``no_shadow`` name the mesh prims the
+        light's light- and shadow-linking collections leave out.
 
         Raises:
             ValueError: a non-finite value or a non-positive size; the message
@@ -305,6 +317,8 @@ class RenderDelegate:
         angle: float = 0.53,
         normalize: bool = False,
         shadow_enable: bool = True,
+        unlit: list[str] = ...,  # []
+        no_shadow: list[str] = ...,  # []
     ) -> None:
         """Add or replace a ``UsdLuxDistantLight`` (an Sprim).
 

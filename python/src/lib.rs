@@ -12,7 +12,7 @@ use std::path::Path;
 
 use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
-use hd_mipray::light::{AreaKind, DistantLightData};
+use hd_mipray::light::{AreaKind, DistantLightData, LightPrim, LinkData, ShapingData};
 use hd_mipray::material::FaceAlbedo;
 use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
@@ -468,7 +468,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or replaces a UsdLux.DistantLight.
-    #[pyo3(signature = (path, *, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), angle=0.53, normalize=false, shadow_enable=true))]
+    #[pyo3(signature = (path, *, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), angle=0.53, normalize=false, shadow_enable=true, unlit=Vec::new(), no_shadow=Vec::new()))]
     #[allow(clippy::too_many_arguments)]
     fn set_distant_light(
         &mut self,
@@ -480,30 +480,34 @@ impl RenderDelegate {
         angle: f32,
         normalize: bool,
         shadow_enable: bool,
+        unlit: Vec<String>,
+        no_shadow: Vec<String>,
     ) -> PyResult<()> {
         let vals = [intensity, exposure, color.0, color.1, color.2, angle];
         if vals.iter().any(|v| !v.is_finite()) {
             return Err(value_error(path, "light inputs must be finite"));
         }
         let transform = matrix(path, &transform)?;
-        self.inner.set_distant_light(
-            path,
-            DistantLightData {
-                transform,
-                intensity,
-                exposure,
-                color: [color.0, color.1, color.2],
-                angle_deg: angle,
-                normalize,
-                shadow_enable,
-            },
-        );
+        let data = DistantLightData {
+            transform,
+            intensity,
+            exposure,
+            color: [color.0, color.1, color.2],
+            angle_deg: angle,
+            normalize,
+            shadow_enable,
+        };
+        self.inner.set_light(LightPrim { path: path.to_string(), data, area: None, shaping: None, links: LinkData { unlit, no_shadow } });
         Ok(())
     }
 
     /// Inserts or replaces a UsdLux light of any kind: ``distant`` (as `set_distant_light`),
-    /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius) or ``dome``.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None))]
+    /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius), ``cylinder`` (radius,
+    /// length, along local X) or ``dome``.
+    /// ``cone_angle`` (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are UsdLux's
+    /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
+    /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new()))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -520,8 +524,32 @@ impl RenderDelegate {
         width: f32,
         height: f32,
         texture: Option<String>,
+        length: f32,
+        cone_angle: f32,
+        cone_softness: f32,
+        focus: f32,
+        focus_tint: (f32, f32, f32),
+        unlit: Vec<String>,
+        no_shadow: Vec<String>,
     ) -> PyResult<()> {
-        let vals = [intensity, exposure, color.0, color.1, color.2, angle, radius, width, height];
+        let vals = [
+            intensity,
+            exposure,
+            color.0,
+            color.1,
+            color.2,
+            angle,
+            radius,
+            width,
+            height,
+            length,
+            cone_angle,
+            cone_softness,
+            focus,
+            focus_tint.0,
+            focus_tint.1,
+            focus_tint.2,
+        ];
         if vals.iter().any(|v| !v.is_finite()) {
             return Err(value_error(path, "light inputs must be finite"));
         }
@@ -536,18 +564,22 @@ impl RenderDelegate {
         };
         let size =
             |name: &str, v: f32| if v > 0.0 { Ok(v) } else { Err(value_error(path, format!("inputs:{name} = {v} must be positive"))) };
+        let links = LinkData { unlit, no_shadow };
         let area = match kind {
             "distant" => {
-                self.inner.set_distant_light(path, data);
+                self.inner.set_light(LightPrim { path: path.to_string(), data, area: None, shaping: None, links });
                 return Ok(());
             }
             "sphere" => AreaKind::Sphere { radius: size("radius", radius)? },
-            "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)? },
+            "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)?, texture },
             "disk" => AreaKind::Disk { radius: size("radius", radius)? },
+            "cylinder" => AreaKind::Cylinder { radius: size("radius", radius)?, length: size("length", length)? },
             "dome" => AreaKind::Dome { texture },
-            _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk or dome"))),
+            _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk, cylinder or dome"))),
         };
-        self.inner.set_area_light(path, data, area);
+        let shaping =
+            Some(ShapingData { cone_angle_deg: cone_angle, cone_softness, focus, focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2] });
+        self.inner.set_light(LightPrim { path: path.to_string(), data, area: Some(area), shaping, links });
         Ok(())
     }
 

@@ -1,4 +1,6 @@
-//! Lights (UsdLux): distant, sphere, rect, disk and dome.
+//! Lights (UsdLux): distant, sphere, rect, disk, cylinder and dome; `ShapingAPI` on sphere, rect and disk
+//! lights ([`Shaping`]); light and shadow linking ([`Light::illuminates`],
+//! [`Light::shadowed_by`]: what the direct-lighting estimator and shadow rays honour).
 //!
 //! **Units** (UsdLux's `LightAPI`): a light's scalar emission is `intensity · 2^exposure`, times
 //! `color` (and the blackbody colour of `colorTemperature`, which the USD front end folds into
@@ -46,6 +48,10 @@ pub enum LightShape {
     Rect { center: Vec3A, u: Vec3A, v: Vec3A, normal: Vec3A },
     /// An ellipse `center + a·u + b·v`, a² + b² ≤ 1, emitting along `normal`.
     Disk { center: Vec3A, u: Vec3A, v: Vec3A, normal: Vec3A },
+    /// A tube without end caps (UsdLux.CylinderLight): `center + t·axis + radius·(cos φ e1 +
+    /// sin φ e2)`, t ∈ [−1, 1], where e1, e2 are unit and orthogonal to each other and to
+    /// `axis` (the half-length vector: the light's local X). It emits outward only.
+    Cylinder { center: Vec3A, axis: Vec3A, radius: f32, e1: Vec3A, e2: Vec3A },
     /// Radiance from every direction: uniform, or a latlong environment texture.
     Dome(Option<EnvTexture>),
 }
@@ -59,6 +65,167 @@ pub struct Light {
     /// light of angle 0, where it is the irradiance on a surface facing the light.
     pub radiance_scale: Vec3A,
     pub casts_shadows: bool,
+    /// UsdLux `ShapingAPI` (sphere, rect and disk lights): the emission's cone and focus.
+    pub shaping: Option<Shaping>,
+    /// UsdLux light linking: the meshes this light illuminates.
+    pub illuminates: MeshFilter,
+    /// A rect light's `texture:file`, multiplying its radiance over the rect.
+    pub texture: Option<RectTexture>,
+    /// UsdLux shadow linking: the meshes that block this light's shadow rays.
+    pub shadowed_by: MeshFilter,
+}
+
+/// A set of the scene's meshes (indices into [`Scene::meshes`]) given by those it leaves out:
+/// the default holds every mesh. What a light or shadow linking collection resolves to.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct MeshFilter {
+    /// Sorted, without duplicates.
+    excluded: std::sync::Arc<[u32]>,
+}
+
+impl MeshFilter {
+    /// Every mesh but `excluded`.
+    pub fn excluding(mut excluded: Vec<u32>) -> Self {
+        excluded.sort_unstable();
+        excluded.dedup();
+        MeshFilter { excluded: excluded.into() }
+    }
+
+    /// Whether mesh `mesh` is in the set.
+    pub fn contains(&self, mesh: u32) -> bool {
+        self.excluded.binary_search(&mesh).is_err()
+    }
+
+    /// True for the set of every mesh (no linking).
+    pub fn is_all(&self) -> bool {
+        self.excluded.is_empty()
+    }
+
+    /// The meshes left out.
+    pub fn excluded(&self) -> &[u32] {
+        &self.excluded
+    }
+}
+
+/// A rect light's texture (`texture:file`), laid over the rect as Hydra's hdEmbree lays it: `s`
+/// along the light's +X from its −X edge, `t` along +Y from its −Y edge (USD's `st`, `t` up the
+/// image).
+#[derive(Clone)]
+pub struct RectTexture {
+    pub sampler: std::sync::Arc<dyn crate::texture::TextureSampler>,
+    pub texture: crate::texture::TextureHandle,
+}
+
+impl std::fmt::Debug for RectTexture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RectTexture").field("texture", &self.texture).finish_non_exhaustive()
+    }
+}
+
+impl PartialEq for RectTexture {
+    fn eq(&self, o: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.sampler, &o.sampler) && self.texture == o.texture
+    }
+}
+
+impl RectTexture {
+    /// The texture's colour at `st` (a texel's worth of filtering); white where it cannot be
+    /// read, black for non-finite or negative texels.
+    pub fn radiance(&self, st: [f32; 2]) -> Vec3A {
+        // One texel of the finer axis both ways: a coarser MIP level would bleed colour across
+        // the rect.
+        let [w, h] = self.sampler.resolution(self.texture).unwrap_or([1024, 1024]);
+        let texel = 1.0 / w.max(h).max(1) as f32;
+        let lookup =
+            crate::texture::Lookup { wrap_s: crate::texture::Wrap::Clamp, wrap_t: crate::texture::Wrap::Clamp, ..Default::default() };
+        let mut rgb = [0.0f32; 3];
+        if !self.sampler.sample(self.texture, st, [texel, 0.0], [0.0, texel], &lookup, &mut rgb) {
+            return Vec3A::ONE;
+        }
+        let c = Vec3A::from(rgb);
+        if c.is_finite() {
+            c.max(Vec3A::ZERO)
+        } else {
+            Vec3A::ZERO
+        }
+    }
+}
+
+/// UsdLux's `ShapingAPI` on an area light, as Hydra's reference path tracer (hdEmbree) applies
+/// it: emitted radiance along a direction ω (from the light toward the lit point) at angle
+/// θ = ∠(axis, ω) off the light's axis (its local −Z) is multiplied by
+///
+/// - focus: `lerp(|cos θ|^focus, focusTint, 1)` when `focus` > 0 (the tint colours what the
+///   focus takes away; black by default);
+/// - cone: `1 − smoothstep(θ; θsoft, θcone)` with θcone = `cone:angle` and
+///   θsoft = θcone · (1 − `cone:softness`): full inside θsoft, zero beyond θcone (softness 0:
+///   a hard edge at θcone).
+///
+/// The factor depends only on ω, so a spot of cone angle α pointing down from height h lights a
+/// floor inside radius h·tan α and nothing outside (for a small light).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shaping {
+    /// Unit, render space: where the light points (its local −Z).
+    pub axis: Vec3A,
+    /// `cone:angle`, radians, in [0, π].
+    pub cone: f32,
+    /// `cone:softness`, in [0, 1].
+    pub softness: f32,
+    /// `focus`, ≥ 0.
+    pub focus: f32,
+    /// `focusTint`, linear RGB.
+    pub focus_tint: Vec3A,
+}
+
+impl Shaping {
+    /// From UsdLux's inputs (`cone_deg` in degrees); values out of range are clamped (NaN: the
+    /// input's fallback). `None` when the inputs shape nothing (a cone of 180° or more, no focus).
+    pub fn new(axis: Vec3A, cone_deg: f32, softness: f32, focus: f32, focus_tint: Vec3A) -> Option<Shaping> {
+        let finite = |x: f32, fallback: f32| if x.is_finite() { x } else { fallback };
+        let cone = finite(cone_deg, 180.0).clamp(0.0, 180.0).to_radians();
+        let focus = finite(focus, 0.0).max(0.0);
+        let s = Shaping {
+            axis: axis.normalize_or(Vec3A::NEG_Z),
+            cone,
+            softness: finite(softness, 0.0).clamp(0.0, 1.0),
+            focus,
+            focus_tint: if focus_tint.is_finite() { focus_tint.max(Vec3A::ZERO) } else { Vec3A::ZERO },
+        };
+        (cone < PI || focus > 0.0).then_some(s)
+    }
+
+    /// What radiance emitted along unit `w` (away from the light) is multiplied by (RGB).
+    pub fn factor(&self, w: Vec3A) -> Vec3A {
+        let cos_off = self.axis.dot(w).clamp(-1.0, 1.0);
+        let mut f = Vec3A::ONE;
+        if self.focus > 0.0 {
+            let ff = cos_off.abs().powf(self.focus);
+            f = self.focus_tint + (Vec3A::ONE - self.focus_tint) * ff;
+        }
+        if self.cone < PI {
+            let theta = cos_off.acos();
+            let soft = self.cone * (1.0 - self.softness);
+            let step = if theta <= soft {
+                0.0
+            } else if theta >= self.cone {
+                1.0
+            } else {
+                let t = (theta - soft) / (self.cone - soft);
+                t * t * (3.0 - 2.0 * t)
+            };
+            f *= 1.0 - step;
+        }
+        f
+    }
+
+    /// Cosine of the widest angle off the axis the light emits at (−1: every direction).
+    pub fn cos_max(&self) -> f32 {
+        if self.cone < PI {
+            self.cone.cos()
+        } else {
+            -1.0
+        }
+    }
 }
 
 /// One sample of a light as seen from a point.
@@ -127,6 +294,10 @@ impl Light {
             shape: LightShape::Distant { direction: direction.normalize_or(Vec3A::NEG_Z), angle_deg: 0.0 },
             radiance_scale: irradiance,
             casts_shadows: true,
+            shaping: None,
+            illuminates: MeshFilter::default(),
+            shadowed_by: MeshFilter::default(),
+            texture: None,
         }
     }
 
@@ -162,7 +333,16 @@ impl Light {
                 radiance /= area;
             }
         }
-        Light { name: name.into(), shape, radiance_scale: radiance, casts_shadows: true }
+        Light {
+            name: name.into(),
+            shape,
+            radiance_scale: radiance,
+            casts_shadows: true,
+            shaping: None,
+            illuminates: MeshFilter::default(),
+            shadowed_by: MeshFilter::default(),
+            texture: None,
+        }
     }
 
     /// True when one sample represents the light exactly (a point at infinity).
@@ -205,6 +385,14 @@ impl Light {
                     return 2.0 * PI;
                 }
                 (shape_area(shape) * normal.dot(d).abs() / (d2 * d2.sqrt())).min(2.0 * PI)
+            }
+            LightShape::Cylinder { center, axis, radius, .. } => {
+                // Its largest projected area over the distance²: an estimate, as for rects.
+                let d2 = (*center - p).length_squared();
+                if !(d2 > 0.0) {
+                    return 4.0 * PI;
+                }
+                (4.0 * radius * axis.length() / d2).min(4.0 * PI)
             }
         }
     }
@@ -253,7 +441,7 @@ impl Light {
                 let distance = (b - disc.sqrt()).max(0.0);
                 LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
-            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. }) => {
+            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. }) => {
                 let (y, ny, area) = sample_planar(shape, u1, u2)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
@@ -266,10 +454,22 @@ impl Light {
                 if cos_l <= 0.0 {
                     return None;
                 }
+                let mut radiance = self.radiance_scale;
+                if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, shape) {
+                    radiance *= tex.radiance([u1, u2]);
+                }
                 // Area sampling: density in solid angle = dist² / (cos_l · area).
-                LightSample { wi, distance: dist, radiance: self.radiance_scale, pdf: dist2 / (cos_l * area), delta: false }
+                LightSample { wi, distance: dist, radiance, pdf: dist2 / (cos_l * area), delta: false }
             }
         };
+        let mut sample = sample;
+        if let Some(shaping) = &self.shaping {
+            sample.radiance *= shaping.factor(-sample.wi);
+            if sample.radiance.max_element() <= 0.0 {
+                // Outside the cone: no shadow ray for nothing.
+                return None;
+            }
+        }
         // A non-finite radiance (a broken light) is passed on: the render loop drops and counts
         // such samples.
         (sample.pdf.is_finite() && sample.pdf > 0.0 && sample.wi.is_finite()).then_some(sample)
@@ -310,6 +510,7 @@ impl Light {
                 }
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
+            LightShape::Cylinder { .. } => self.intersect_cylinder(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
         }
     }
 
@@ -317,6 +518,14 @@ impl Light {
     /// `t_max` (sphere, rect, disk; `None` for distant and dome lights, which rays meet only by
     /// escaping: [`Light::environment`]).
     pub fn intersect(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        let mut hit = self.intersect_shape(o, d, t_max)?;
+        if let Some(shaping) = &self.shaping {
+            hit.radiance *= shaping.factor(-d);
+        }
+        Some(hit)
+    }
+
+    fn intersect_shape(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
         match &self.shape {
             LightShape::Sphere { center, radius } => {
                 let to_c = *center - o;
@@ -336,8 +545,45 @@ impl Light {
                 (t > 0.0 && t < t_max).then(|| LightHit { t, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max) })
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(o, d, t_max),
+            LightShape::Cylinder { .. } => self.intersect_cylinder(o, d, t_max),
             _ => None,
         }
+    }
+
+    /// The tube's outer wall where the ray from `o` along unit `d` first meets it, from outside:
+    /// a ray entering through an open end sees only the inner side, which emits nothing. As the
+    /// solid cylinder is convex, these are exactly the wall points [`Light::sample`] keeps.
+    fn intersect_cylinder(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        let LightShape::Cylinder { center, axis, radius, .. } = &self.shape else { return None };
+        let half = axis.length();
+        let a_hat = *axis / half;
+        let oc = o - *center;
+        let op = oc - a_hat * oc.dot(a_hat);
+        let dp = d - a_hat * d.dot(a_hat);
+        let a = dp.length_squared();
+        let c = op.length_squared() - radius * radius;
+        if !(a > 0.0 && c > 0.0 && half > 0.0) {
+            return None;
+        }
+        let b = op.dot(dp);
+        let disc = b * b - a * c;
+        if !(disc >= 0.0) {
+            return None;
+        }
+        // The near root, without cancellation.
+        let t = c / (-b + disc.sqrt());
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        if (oc + d * t).dot(a_hat).abs() > half {
+            return None;
+        }
+        let n = (op + dp * t) / *radius;
+        let cos_l = -n.dot(d);
+        if !(cos_l > 0.0) {
+            return None;
+        }
+        Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * shape_area(&self.shape)) })
     }
 
     fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
@@ -371,7 +617,11 @@ impl Light {
             return None;
         }
         let area = shape_area(&self.shape);
-        Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * area) })
+        let mut radiance = self.radiance_scale;
+        if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, &self.shape) {
+            radiance *= tex.radiance([0.5 * (a + 1.0), 0.5 * (b + 1.0)]);
+        }
+        Some(LightHit { t, radiance, pdf: t * t / (cos_l * area) })
     }
 
     /// Radiance arriving along unit `wi` from this light when a ray escapes the scene: a dome's,
@@ -392,6 +642,38 @@ impl Light {
 }
 
 impl Light {
+    /// What the stats say of this light (`scene.lights`): its name, kind, whether it casts
+    /// shadows, its shaping, and the meshes its light and shadow linking leave out (by name).
+    pub fn describe(&self, scene: &Scene) -> serde_json::Value {
+        let kind = match &self.shape {
+            LightShape::Distant { .. } => "distant",
+            LightShape::Sphere { .. } => "sphere",
+            LightShape::Rect { .. } => "rect",
+            LightShape::Disk { .. } => "disk",
+            LightShape::Cylinder { .. } => "cylinder",
+            LightShape::Dome(_) => "dome",
+        };
+        let names = |f: &MeshFilter| -> Vec<&str> {
+            f.excluded().iter().filter_map(|&m| scene.meshes.get(m as usize)).map(|m| m.name.as_str()).collect()
+        };
+        let mut out = serde_json::json!({ "name": self.name, "kind": kind, "casts_shadows": self.casts_shadows });
+        if let Some(s) = &self.shaping {
+            out["shaping"] = serde_json::json!({
+                "cone_angle_deg": s.cone.to_degrees(),
+                "cone_softness": s.softness,
+                "focus": s.focus,
+                "focus_tint": [s.focus_tint.x, s.focus_tint.y, s.focus_tint.z],
+            });
+        }
+        if !self.illuminates.is_all() {
+            out["not_illuminating"] = serde_json::json!(names(&self.illuminates));
+        }
+        if !self.shadowed_by.is_all() {
+            out["not_shadowed_by"] = serde_json::json!(names(&self.shadowed_by));
+        }
+        out
+    }
+
     /// What a camera or mirror ray escaping along unit `wi` sees of this light, its
     /// directional spread (from its differential) `spread_rad`: a dome's texture filtered over
     /// that angle rather than over the importance table's texel ([`Light::environment`]), a
@@ -443,11 +725,13 @@ pub fn shape_area(shape: &LightShape) -> f32 {
         LightShape::Sphere { radius, .. } => 4.0 * PI * radius * radius,
         LightShape::Rect { u, v, .. } => 4.0 * u.cross(*v).length(),
         LightShape::Disk { u, v, .. } => PI * u.cross(*v).length(),
+        LightShape::Cylinder { axis, radius, .. } => 2.0 * PI * radius * 2.0 * axis.length(),
         _ => 0.0,
     }
 }
 
-/// A uniformly distributed point on a rect or disk light: (point, emitting normal, area).
+/// A uniformly distributed point on a rect, disk or cylinder light: (point, emitting normal,
+/// area).
 fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, f32)> {
     let area = shape_area(shape);
     if !(area > 0.0) {
@@ -455,6 +739,11 @@ fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, 
     }
     match shape {
         LightShape::Rect { center, u, v, normal } => Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area)),
+        LightShape::Cylinder { center, axis, radius, e1, e2 } => {
+            let phi = 2.0 * PI * u2;
+            let n = *e1 * phi.cos() + *e2 * phi.sin();
+            Some((*center + *axis * (2.0 * u1 - 1.0) + n * *radius, n, area))
+        }
         LightShape::Disk { center, u, v, normal } => {
             let r = u1.sqrt();
             let phi = 2.0 * PI * u2;

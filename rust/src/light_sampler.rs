@@ -5,15 +5,19 @@
 //! P_j(p, n) proportional to an upper-bound-flavoured estimate of the irradiance it can deliver,
 //! without occlusion:
 //!
-//! - area lights (sphere, rect, disk): `Φ · cos θ'_light · cos θ'_surface / d²`, where Φ is the
-//!   light's luminance × area facing the point at best (a rect's or disk's area, a sphere's πr²:
-//!   an intensity), d the distance from p to its bounds' centre (at least half their diagonal),
-//!   θ'_light the smallest angle between the light's emission cone and the direction to p that
-//!   the bounds allow (zero importance when p is behind a one-sided light) and θ'_surface the
-//!   smallest angle between n and a direction into the bounds (zero below the horizon);
+//! - area lights (sphere, rect, disk, cylinder): `Φ · cos θ'_light · cos θ'_surface / d²`, where
+//!   Φ is the light's luminance × area facing the point at best (a rect's or disk's area, a
+//!   sphere's πr², a tube's 2rℓ + πr²: an intensity), d the distance from p to its bounds'
+//!   centre (at least half their diagonal), θ'_light the smallest angle between the light's
+//!   emission cone and the direction to p that the bounds allow (zero importance when p is
+//!   behind a one-sided light) and θ'_surface the smallest angle between n and a direction into
+//!   the bounds (zero below the horizon);
 //! - distant lights: the irradiance facing the light × the cosine of the smallest angle between
 //!   n and the light's cone (delta lights included: angle 0);
 //! - dome lights: π × the dome's mean luminance (its irradiance on any surface, roughly).
+//!
+//! A light shaped by UsdLux's `ShapingAPI` emits only within its cone: its bounds say so
+//! (emission spread θe = the cone angle), so points outside every cone get probability 0.
 //!
 //! Every quantity is an irradiance, so the three kinds compete on one scale. A light gets
 //! probability 0 only where these bounds prove it cannot light p, so the estimator
@@ -133,7 +137,26 @@ impl LightBounds {
                     cos_theta_e: 0.0,
                 }
             }
+            LightShape::Cylinder { center, axis, radius, .. } => LightBounds {
+                lo: *center - axis.abs() - Vec3A::splat(*radius),
+                hi: *center + axis.abs() + Vec3A::splat(*radius),
+                // Seen side-on it shows 2r × length; end-on, no more than its wall's πr².
+                phi: lum * (4.0 * radius * axis.length() + PI * radius * radius),
+                normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
+                cos_theta_e: 0.0,
+            },
             _ => return None,
+        };
+        // A shaped light emits only within its cone about its axis (focus only dims it: the
+        // bound stays an upper one), from any point of it.
+        let b = match &light.shaping {
+            Some(shaping) if shaping.cos_max() > -1.0 => match light.shape {
+                LightShape::Sphere { .. } | LightShape::Cylinder { .. } => {
+                    LightBounds { normals: Cone { w: shaping.axis, cos_theta: 1.0 }, cos_theta_e: shaping.cos_max(), ..b }
+                }
+                _ => LightBounds { cos_theta_e: b.cos_theta_e.max(shaping.cos_max()), ..b },
+            },
+            _ => b,
         };
         // A light of non-finite radiance stays in, with a nominal power: its samples carry the
         // non-finite value to the render loop, which drops them and counts them (no NaN reaches

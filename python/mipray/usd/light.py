@@ -1,4 +1,4 @@
-"""Lights: ``UsdLux`` distant, sphere, rect, disk and dome lights, and the camera light.
+"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder and dome lights, and the camera light.
 
 ``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
 others into ``RenderDelegate.set_light`` with their shape; a stage with no
@@ -15,25 +15,42 @@ multiplies ``color`` before it reaches the core. What the core does with them
 warning naming the light; a value nothing sensible can be made of (non-finite,
 negative intensity or colour, zero size) is a ``PrimError`` naming the light,
 which skips that light only.
+
+``ShapingAPI`` on sphere, rect and disk lights (``shaping:cone:angle``,
+``cone:softness``, ``focus``, ``focusTint``, with the schema's fallbacks once the
+API is applied) goes to the core, which applies it as Hydra's hdEmbree does
+(``mipray::light::Shaping``); IES profiles and shaping on distant and dome lights
+are listed as unsupported. Light and shadow linking (``collection:lightLink``,
+``collection:shadowLink``) are resolved here with usd-core's
+``ComputeMembershipQuery`` into the mesh prims each collection leaves out
+(``unlit``, ``no_shadow``); the scene delegate re-resolves them whenever the
+stage changes. Meshes inside native-instance prototypes are matched by their
+prototype path (``/__Prototype_1/...``), which only ``includeRoot`` reaches.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Usd, UsdLux
+from pxr import Sdf, Usd, UsdLux
 
 from ..errors import PrimError
 
 __all__ = [
     "AREA_LIGHT_TYPES",
     "CAMERA_LIGHT_PATH",
+    "LINK_COLLECTIONS",
+    "SHAPED_KINDS",
+    "SHAPING_INPUTS",
     "area_light_arguments",
     "camera_light_arguments",
     "distant_light_arguments",
+    "link_arguments",
+    "linking_authored",
 ]
 
 #: The non-distant UsdLux light types mipray renders, and their ``set_light`` kind.
@@ -41,9 +58,20 @@ AREA_LIGHT_TYPES: tuple[tuple[type, str], ...] = (
     (UsdLux.SphereLight, "sphere"),
     (UsdLux.RectLight, "rect"),
     (UsdLux.DiskLight, "disk"),
+    (UsdLux.CylinderLight, "cylinder"),
     (UsdLux.DomeLight, "dome"),
 )
 _warned: set[str] = set()
+
+#: The light kinds ``ShapingAPI`` shapes (as Hydra's hdEmbree: area lights with a position).
+SHAPED_KINDS = frozenset({"sphere", "rect", "disk", "cylinder"})
+#: The ``ShapingAPI`` inputs mipray reads on those (IES profiles are not read).
+SHAPING_INPUTS = frozenset(
+    {"shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint"}
+)
+#: UsdLux's linking collections and the ``set_light`` argument each resolves to: the mesh prims
+#: the light does not illuminate, and those that do not block its shadow rays.
+LINK_COLLECTIONS = (("lightLink", "unlit"), ("shadowLink", "no_shadow"))
 
 #: Path of the light mipray adds at the camera when a stage has no light.
 CAMERA_LIGHT_PATH = "/__mipray_camera_light"
@@ -162,14 +190,17 @@ def camera_light_arguments(camera_transform: NDArray[np.float64]) -> dict[str, A
 def area_light_arguments(
     prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
 ) -> dict[str, Any] | None:
-    """``RenderDelegate.set_light`` keyword arguments for a sphere, rect, disk or dome light.
+    """``RenderDelegate.set_light`` keyword arguments for an area or dome light.
 
     Returns None when ``prim`` is none of those. Sizes are UsdLux's (``radius``,
-    ``width``, ``height``, in the light's units). A dome light's texture is
+    ``width``, ``height``, ``length``, in the light's units; a cylinder lies along
+    its local X and has no end caps). A dome light's texture is
     read through OpenImageIO as a latlong environment (``texture`` argument;
     a ``texture:format`` other than ``automatic`` or ``latlong`` is read as a
-    latlong, with one warning). A sphere's ``treatAsPoint`` is a hint that
-    renderers of area lights may disregard (UsdLux): it stays a sphere.
+    latlong, with one warning). A rect light's texture multiplies its colour
+    over the rect (``s`` along its +X, ``t`` along its +Y). A sphere's
+    ``treatAsPoint`` is a hint that renderers of area lights may disregard
+    (UsdLux): it stays a sphere.
 
     Raises:
         PrimError: a non-finite, negative or zero value, or a non-finite transform.
@@ -195,18 +226,30 @@ def area_light_arguments(
         "normalize": bool(get("normalize", False)),
         "shadow_enable": bool(get("shadow:enable", True)),
     }
-    if kind in ("sphere", "disk"):
+    if kind in SHAPED_KINDS and prim.HasAPI(UsdLux.ShapingAPI):
+        # The schema's fallbacks (a 90° cone) apply once the API is applied.
+        shaping = UsdLux.ShapingAPI(prim)
+        args["cone_angle"] = float(shaping.GetShapingConeAngleAttr().Get(time))
+        args["cone_softness"] = float(shaping.GetShapingConeSoftnessAttr().Get(time))
+        args["focus"] = float(shaping.GetShapingFocusAttr().Get(time))
+        tint = tuple(float(c) for c in shaping.GetShapingFocusTintAttr().Get(time))
+        args["focus_tint"] = (tint[0], tint[1], tint[2])
+        for key in ("cone_angle", "cone_softness", "focus", "focus_tint"):
+            if not np.isfinite(args[key]).all():
+                raise PrimError(path, f"inputs:shaping {key} {args[key]} is not finite")
+        if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
+            _warn_once(
+                f"{path}: inputs:shaping:cone:softness {args['cone_softness']:g} is clipped to "
+                f"[0, 1] and inputs:shaping:focus {args['focus']:g} to >= 0"
+            )
+    if kind in ("sphere", "disk", "cylinder"):
         args["radius"] = float(get("radius", 0.5))
+    if kind == "cylinder":
+        args["length"] = float(get("length", 1.0))
     if kind == "rect":
         args["width"] = float(get("width", 1.0))
         args["height"] = float(get("height", 1.0))
-        if get("texture:file", None):
-            _warn_once(
-                f"{path}: rect light textures are not supported yet; lighting with its colour"
-            )
-    if kind == "dome":
-        from pxr import Sdf
-
+    if kind in ("rect", "dome"):
         from .shading import _resolve
 
         attr = prim.GetAttribute("inputs:texture:file")
@@ -215,17 +258,17 @@ def area_light_arguments(
             args["texture"] = _resolve(attr, value)
         elif isinstance(value, str) and value:
             args["texture"] = value
-        if "texture" in args:
+        if "texture" in args and kind == "dome":
             layout = str(get("texture:format", "automatic"))
             if layout not in ("automatic", "latlong"):
                 _warn_once(
                     f"{path}: dome texture:format '{layout}' is not supported; "
                     "reading the texture as a latlong map"
                 )
-    for key in ("intensity", "exposure", "radius", "width", "height"):
+    for key in ("intensity", "exposure", "radius", "width", "height", "length"):
         if key in args and not math.isfinite(args[key]):
             raise PrimError(path, f"inputs:{key} is not finite")
-    for key in ("radius", "width", "height"):
+    for key in ("radius", "width", "height", "length"):
         if key in args and args[key] <= 0.0:
             raise PrimError(path, f"inputs:{key} is {args[key]}; it must be > 0")
     if args["intensity"] < 0.0:
@@ -241,3 +284,44 @@ def _warn_once(message: str) -> None:
     if message not in _warned:
         _warned.add(message)
         logging.getLogger(__name__).warning("mipray: %s", message)
+
+
+def linking_authored(prim: Usd.Prim, collection: str, time: Usd.TimeCode) -> list[str]:
+    """What a light's ``collection:<collection>`` authors that limits it (empty: it holds all).
+
+    UsdLux's linking collections default to ``includeRoot`` true: a light reaches everything.
+    """
+    names = [f"collection:{collection}:{n}" for n in ("includes", "excludes")]
+    names.append(f"collection:{collection}:membershipExpression")
+    found = []
+    for name in names:
+        prop = prim.GetProperty(name)
+        if isinstance(prop, Usd.Relationship) and prop.HasAuthoredTargets():
+            found.append(name)
+        elif isinstance(prop, Usd.Attribute) and prop.HasAuthoredValue():
+            found.append(name)
+    root = prim.GetAttribute(f"collection:{collection}:includeRoot")
+    if root and root.HasAuthoredValue() and not root.Get(time):
+        found.append(root.GetName())
+    return found
+
+
+def link_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode, mesh_paths: Callable[[], Iterable[str]]
+) -> dict[str, list[str]]:
+    """``set_light``'s ``unlit`` and ``no_shadow``: the mesh prims a light's linking leaves out.
+
+    Membership is usd-core's (``Usd.CollectionAPI.ComputeMembershipQuery``: includes,
+    excludes, ``includeRoot``, expansion rules and membership expressions), asked of every
+    path ``mesh_paths()`` gives (called only when the light links anything).
+    """
+    args: dict[str, list[str]] = {}
+    paths: list[str] | None = None
+    for collection, key in LINK_COLLECTIONS:
+        if not linking_authored(prim, collection, time):
+            continue
+        if paths is None:
+            paths = list(mesh_paths())
+        query = Usd.CollectionAPI(prim, collection).ComputeMembershipQuery()
+        args[key] = [p for p in paths if not query.IsPathIncluded(Sdf.Path(p))]
+    return args

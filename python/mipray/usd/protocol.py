@@ -106,6 +106,8 @@ class RenderDelegateLike(Protocol):
         angle: float = ...,
         normalize: bool = ...,
         shadow_enable: bool = ...,
+        unlit: list[str] = ...,
+        no_shadow: list[str] = ...,
     ) -> None:
         """Add or replace a distant light."""
 
@@ -125,6 +127,13 @@ class RenderDelegateLike(Protocol):
         width: float = ...,
         height: float = ...,
         texture: str | None = ...,
+        length: float = ...,
+        cone_angle: float = ...,
+        cone_softness: float = ...,
+        focus: float = ...,
+        focus_tint: tuple[float, float, float] = ...,
+        unlit: list[str] = ...,
+        no_shadow: list[str] = ...,
     ) -> None:
         """Add or replace a sphere, rect, disk or dome light (``kind``)."""
 

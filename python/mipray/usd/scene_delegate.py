@@ -53,6 +53,7 @@ from .light import (
     area_light_arguments,
     camera_light_arguments,
     distant_light_arguments,
+    link_arguments,
 )
 from .mesh_sync import read_mesh
 from .mtlx_files import load_mtlx_references
@@ -225,6 +226,8 @@ class UsdSceneDelegate:
         self._poser = SkelPoser()
         # Before anything is read: .mtlx references usd-core cannot compose.
         load_mtlx_references(stage)
+        self._linked: set[str] = set()  # lights whose linking leaves some meshes out
+        self._gprims: list[str] | None = None  # the stage's gprim paths, this sync
 
     # ------------------------------------------------------------------ state
 
@@ -394,6 +397,7 @@ class UsdSceneDelegate:
         unsupported: Counter[str] = Counter()
         synced_now: set[str] = set()
         changed = self.is_dirty
+        self._gprims = None
         if any(not self.stage.GetPrimAtPath(p) for p in self._prototype_edits):
             self._full = True
         full = self._full
@@ -432,6 +436,12 @@ class UsdSceneDelegate:
             self._sync_transform(path, xform_cache)
         self._instancer_full.clear()
         self._instancing.end_sync(full=full)
+        if changed:
+            # Linking is resolved against the stage's meshes: those may have changed.
+            for path in sorted(self._linked):
+                prim, record = self.stage.GetPrimAtPath(path), self._records.get(path)
+                if prim and record is not None:
+                    self._sync_prim(prim, xform_cache, memo, record.order, unsupported)
 
         self._warn_unsupported(unsupported)
         if changed:
@@ -689,12 +699,16 @@ class UsdSceneDelegate:
                 self.delegate.set_camera(path, **args)
             elif prim.IsA(UsdLux.DistantLight):
                 args = distant_light_arguments(UsdLux.DistantLight(prim), time, transform)
+                links = link_arguments(prim, time, self._gprim_paths)
                 record = _Record("light", order, might_vary=might_vary)
-                self.delegate.set_distant_light(path, **args)
+                self.delegate.set_distant_light(path, **{**args, **links})
+                self._track_links(path, links)
             elif any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES):
                 args = area_light_arguments(prim, time, transform) or {}
+                links = link_arguments(prim, time, self._gprim_paths)
                 record = _Record("light", order, might_vary=might_vary)
-                self.delegate.set_light(path, **args)
+                self.delegate.set_light(path, **{**args, **links})
+                self._track_links(path, links)
             else:
                 # Its type changed to one we do not render.
                 self._is_supported(prim, unsupported)
@@ -713,6 +727,22 @@ class UsdSceneDelegate:
         self.sync_counts[path] = self.sync_counts.get(path, 0) + 1
         _log.debug("mipray: synced %s %s", record.kind, path)
 
+    def _gprim_paths(self) -> list[str]:
+        """Every gprim on the stage (PointInstancer prototypes' included), once per sync."""
+        if self._gprims is None:
+            self._gprims = [
+                str(p.GetPath())
+                for p in Usd.PrimRange(self.stage.GetPseudoRoot())
+                if p.IsA(UsdGeom.Gprim)
+            ]
+        return self._gprims
+
+    def _track_links(self, path: str, links: dict[str, list[str]]) -> None:
+        if links:
+            self._linked.add(path)
+        else:
+            self._linked.discard(path)
+
     def _fail(self, path: str, message: str) -> None:
         error = SyncError(path, message)
         _log.error("mipray: skipping %s", error)
@@ -723,6 +753,7 @@ class UsdSceneDelegate:
         """Remove a prim from the delegate and from the books."""
         record = self._records.pop(path, None)
         self._moving.discard(path)
+        self._linked.discard(path)
         if record is not None and record.kind == "instance":
             self._instancing.remove_instance(path)
         elif record is not None and record.instancer is not None:

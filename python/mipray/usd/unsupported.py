@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade, UsdSkel
 
 from .gprim import GPRIM_TYPES
-from .light import AREA_LIGHT_TYPES
+from .light import AREA_LIGHT_TYPES, SHAPED_KINDS, SHAPING_INPUTS
 from .materialx import mtlx_surface, unsupported_nodes
 from .mtlx_files import LOADED
 from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
@@ -79,6 +79,7 @@ LIGHT_INPUTS = frozenset(
         "radius",
         "width",
         "height",
+        "length",
         "texture:file",
         "texture:format",
     }
@@ -157,21 +158,10 @@ def _applied(
     return check
 
 
-def _linking(collection: str) -> Callable[..., list[str]]:
-    """A light's light- or shadow-linking collection that limits what it reaches."""
-
-    def check(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
-        if not _is_light(prim):
-            return []
-        names = [f"collection:{collection}:{n}" for n in ("includes", "excludes")]
-        names.append(f"collection:{collection}:membershipExpression")
-        found = _authored(prim, names)
-        root = prim.GetAttribute(f"collection:{collection}:includeRoot")
-        if root and root.HasAuthoredValue() and not root.Get(time):
-            found.append(root.GetName())
-        return found
-
-    return check
+def _shaping(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
+    """ShapingAPI inputs not read: IES profiles, and any shaping on lights it does not shape."""
+    shaped = any(prim.IsA(t) for t, k in AREA_LIGHT_TYPES if k in SHAPED_KINDS)
+    return _applied("ShapingAPI", SHAPING_INPUTS if shaped else frozenset())(prim, time)
 
 
 def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
@@ -186,8 +176,6 @@ def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
         and not p.GetName().startswith(schema_owned)
         and p.GetName().removeprefix("inputs:") not in LIGHT_INPUTS
     ]
-    if prim.IsA(UsdLux.RectLight):
-        unread += _authored(prim, ["inputs:texture:file"])
     fmt = prim.GetAttribute("inputs:texture:format")
     if prim.IsA(UsdLux.DomeLight) and fmt and fmt.HasAuthoredValue():
         if str(fmt.Get(time)) not in ("automatic", "latlong"):
@@ -360,11 +348,9 @@ TABLE: tuple[Row, ...] = (
     Row("prim type", "prim", _prim_type, warned_by="mipray.usd.scene_delegate"),
     Row("instanceable gprim (its own geometry is not instanced)", "prim", _instanceable_gprim),
     Row("material binding to no Material", "prim", _missing_material),
-    Row("ShapingAPI", "prim", _applied("ShapingAPI")),
+    Row("ShapingAPI", "prim", _shaping),
     Row("ShadowAPI", "prim", _applied("ShadowAPI", frozenset({"shadow:enable"}))),
     Row("MeshLightAPI", "prim", _applied("MeshLightAPI", presence=True)),
-    Row("light linking", "prim", _linking("lightLink")),
-    Row("shadow linking", "prim", _linking("shadowLink")),
     Row("light input", "prim", _light_inputs),
     Row("camera clippingPlanes", "prim", _clipping_planes),
     Row(

@@ -192,6 +192,13 @@ impl DirectLight {
             if !domes && matches!(light.shape, LightShape::Dome(_)) {
                 continue;
             }
+            if from.mesh.is_some_and(|m| !light.illuminates.contains(m)) {
+                continue;
+            }
+            if mis.is_some() && !light.shadowed_by.is_all() {
+                // Found by light sampling alone (see `gather`).
+                continue;
+            }
             let through = mis.is_some() && !(self.shadows && light.casts_shadows);
             // An escaping ray (t_hit infinite) sees the lights at infinity too.
             if !(t < t_hit || t_hit == f32::INFINITY || through) {
@@ -267,13 +274,19 @@ impl DirectLight {
             let (u1, u2) = (sampler.next_f32(), sampler.next_f32());
             let Some((j, prob)) = at.sample(u_choice) else { continue };
             let light = &scene.lights[j];
+            if !light.illuminates.contains(hit.mesh) {
+                continue;
+            }
             let Some(ls) = light.sample(sp.p, sp.ns, u1, u2) else { continue };
             let f = bsdf.eval(wo, ls.wi);
             if f.total().max_element() <= 0.0 {
                 continue;
             }
             let p_light = prob * ls.pdf;
-            let w = if ls.delta { 1.0 } else { power_heuristic(nf * p_light, nbf * f.pdf) };
+            // A shadow-linked light is found by light sampling alone: which surfaces block it
+            // depends on the light, so the BSDF samples' shared occlusion ray cannot answer.
+            let light_only = ls.delta || !light.shadowed_by.is_all();
+            let w = if light_only { 1.0 } else { power_heuristic(nf * p_light, nbf * f.pdf) };
             let scale = w / (nf * p_light);
             if !(scale > 0.0 && scale.is_finite()) {
                 continue;
@@ -309,7 +322,11 @@ impl DirectLight {
             if !(f.pdf > 0.0) || f.total().max_element() <= 0.0 {
                 continue;
             }
-            let crossed = self.crossed(scene, sp, s.wi);
+            let mut crossed = self.crossed(scene, sp, s.wi);
+            crossed.retain(|c| {
+                let light = &scene.lights[c.0];
+                light.illuminates.contains(hit.mesh) && light.shadowed_by.is_all()
+            });
             if crossed.is_empty() {
                 continue;
             }
@@ -342,7 +359,7 @@ impl DirectLight {
         sp: &ShadingPoint,
         hit: &Hit,
         footprint: &RayDifferential,
-        _light: &Light,
+        light: &Light,
         wi: Vec3A,
         distance: f32,
         spread: Option<(f32, u32)>,
@@ -359,7 +376,12 @@ impl DirectLight {
             }
         };
         // Through opacity cut-outs: a leaf card shadows only where its mask leaves a leaf.
-        visibility::occluded_from(tracer, &self.shadow_ray(sp, hit, wi, distance, diff), hit, counters)
+        let ray = self.shadow_ray(sp, hit, wi, distance, diff);
+        if light.shadowed_by.is_all() {
+            visibility::occluded_from(tracer, &ray, hit, counters)
+        } else {
+            visibility::occluded_by(tracer, &ray, hit, &light.shadowed_by, counters)
+        }
     }
 
     /// A shadow ray toward a light at `distance`, stopping just short of it (a light is not

@@ -22,6 +22,9 @@ pub struct ShadingPoint {
     /// negated for a left-handed mesh). Refraction enters the material from the front and
     /// leaves it from the back.
     pub front: bool,
+    /// The mesh shaded (index into the scene's meshes; `None` at the camera): which lights
+    /// reach it (light linking).
+    pub mesh: Option<u32>,
 }
 
 /// Evaluates the exact limit surface at the hit's (u, v) for shading (the paper: intersect the
@@ -79,7 +82,7 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
         let n = if n.dot(ng_out) < 0.0 { -n } else { n };
         ns = tilt_above(if front { n } else { -n }, ng);
     }
-    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front }
+    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front, mesh: Some(hit.mesh) }
 }
 
 /// The mesh's authored normal at the hit (object space, not normalized), if it has one.

@@ -32,6 +32,7 @@
 //! With a threshold above 0, opacity at or above it is fully opaque (the BSDF takes opacity as
 //! 1), and below it there is nothing at all.
 
+use crate::light::MeshFilter;
 use crate::ray::{offset_origin, Ray};
 use crate::trace::{Hit, TraceCounters, Tracer};
 
@@ -102,6 +103,37 @@ pub fn first_opaque_from(tracer: &Tracer<'_>, ray: &Ray, from: &Hit, counters: &
         passed += 1;
         counters.cutout_passes += 1;
         distance += hit.t;
+        (ray, from) = (next, hit);
+    }
+}
+
+/// As [`occluded_from`] for a shadow-linked light: only the meshes in `casters` block `ray`;
+/// others are passed through like cut-outs (counted among `render.cutout_passes`, and bounded by
+/// [`MAX_CUTOUTS`] with them).
+pub fn occluded_by(tracer: &Tracer<'_>, ray: &Ray, from: &Hit, casters: &MeshFilter, counters: &mut TraceCounters) -> bool {
+    let (mut ray, mut from) = (*ray, *from);
+    let mut passed = 0u32;
+    loop {
+        let Some(hit) = tracer.intersect_from(&ray, &from, counters) else { return false };
+        let next = if casters.contains(hit.mesh) {
+            match pass_cutout(tracer, &ray, &hit, counters) {
+                Some(next) => next,
+                None => return true,
+            }
+        } else {
+            let scene = tracer.scene();
+            let sp = shading_point(tracer, scene, &ray, &hit);
+            let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
+            counters.differential_clamps += u64::from(clamped);
+            let o = offset_origin(sp.p, hit.p_error, sp.ng, ray.d);
+            Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..ray }
+        };
+        if passed == MAX_CUTOUTS {
+            counters.cutout_limit += 1;
+            return true;
+        }
+        passed += 1;
+        counters.cutout_passes += 1;
         (ray, from) = (next, hit);
     }
 }

@@ -28,6 +28,7 @@ pub fn area(shape: LightShape, l: f32) -> Light {
         LightShape::Disk { .. } => "/disk",
         LightShape::Dome(_) => "/dome",
         LightShape::Distant { .. } => "/distant",
+        LightShape::Cylinder { .. } => "/cylinder",
     };
     Light::usd_area(name, shape, l, 0.0, Vec3A::ONE, false)
 }
