@@ -253,6 +253,21 @@ impl SeamNormal {
 /// limit surface at [`SEAM_PROBES`] points inside a boundary chord (at stride 1) and that chord,
 /// plus [`seam_margin`]. Object units. Non-finite distances (a degenerate patch) are left out.
 pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize) -> (f32, SeamNormal) {
+    seam_extent_with(surface, patch, rect, verts, n, true)
+}
+
+/// [`seam_extent`]; with `normals` false only the radius is measured, and the extents along
+/// the normals are [`SeamNormal::ISOTROPIC`]: what a displaced grid uses (its chords are not
+/// the ones measured), which saves measuring what it would throw away. The radius is
+/// the same bits either way.
+pub fn seam_extent_with(
+    surface: &dyn LimitSurface,
+    patch: usize,
+    rect: UvRect,
+    verts: &[[f32; 3]],
+    n: usize,
+    normals: bool,
+) -> (f32, SeamNormal) {
     if n < 2 || verts.len() < n * n {
         return (0.0, SeamNormal::ISOTROPIC);
     }
@@ -275,7 +290,7 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let mut probes = Vec::with_capacity(uv.len());
     surface.evaluate_points(patch, &uv, &mut probes);
     for ((e, k), curve) in chords().zip(probes.chunks_exact(SEAM_PROBES)) {
-        let frame = chord_frame(at, e, k, n, 1);
+        let frame = if normals { chord_frame(at, e, k, n, 1) } else { None };
         let (ia, ja) = edge_vertex(e, k, n);
         let (ib, jb) = edge_vertex(e, k + 1, n);
         // The edge curve's deviation from the chord, D(τ) = c(τ) − (a + (b − a)τ) over the
@@ -293,6 +308,13 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
             *gp = d / (tau * (1.0 - tau));
         }
         if !ok {
+            continue;
+        }
+        if !normals {
+            for &[l0, l1, l2, bump] in &FIT_TABLE {
+                let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
+                dev_sq = dev_sq.max(d.length_squared());
+            }
             continue;
         }
         for &[l0, l1, l2, bump] in &FIT_TABLE {
@@ -313,6 +335,9 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let dev = dev_sq.sqrt();
     let margin = seam_margin(max_abs);
     let r = SEAM_SAFETY * dev + margin;
+    if !normals {
+        return (r, SeamNormal::ISOTROPIC);
+    }
     // The probes can miss a shallow dip to the side the curve barely crosses to (near a chord's
     // end, beyond the outer probes); each side gets at least a fraction of the other's.
     let floor = SEAM_NORMAL_FLOOR * below.max(above);
