@@ -206,8 +206,9 @@ fn hit_quads(
         return;
     }
     // Row buffers sized to the rows tested: most calls test a 1-quad coarse grid or a 4×4
-    // sub-box, and filling two 17-vertex buffers for them cost more than the quads' tests
-    // (measured with callgrind). The widths a tier's grid or sub-box makes: 2, 3, 5, 9, 17.
+    // sub-box, and filling two 17-vertex buffers for them was over a third of the call's
+    // instructions (callgrind: docs/throughput-callgrind.md). The widths a tier's grid or
+    // sub-box makes: 2, 3, 5, 9, 17.
     match i1 - i0 + 1 {
         0..=2 => hit_quads_rows::<2>(ray, tess, stride, range, t_min, best, t_max),
         3 => hit_quads_rows::<3>(ray, tess, stride, range, t_min, best, t_max),
