@@ -201,31 +201,56 @@ fn hit_quads(
     best: &mut Option<GridHit>,
     t_max: &mut f32,
 ) {
-    let q = (tess.n - 1) / stride;
-    let inv_q = 1.0 / q as f32;
     let (i0, i1, j0, j1) = range;
     if i1 <= i0 || j1 <= j0 {
         return;
     }
+    // Row buffers sized to the rows tested: most calls test a 1-quad coarse grid or a 4×4
+    // sub-box, and filling two 17-vertex buffers for them was over a third of the call's
+    // instructions (callgrind: docs/throughput-callgrind.md). The widths a tier's grid or
+    // sub-box makes: 2, 3, 5, 9, 17.
+    match i1 - i0 + 1 {
+        0..=2 => hit_quads_rows::<2>(ray, tess, stride, range, t_min, best, t_max),
+        3 => hit_quads_rows::<3>(ray, tess, stride, range, t_min, best, t_max),
+        4..=5 => hit_quads_rows::<5>(ray, tess, stride, range, t_min, best, t_max),
+        6..=9 => hit_quads_rows::<9>(ray, tess, stride, range, t_min, best, t_max),
+        10..=MAX_ROW => hit_quads_rows::<MAX_ROW>(ray, tess, stride, range, t_min, best, t_max),
+        _ => {
+            // Wider than any tier's grid: test it in column strips.
+            let mid = i0 + (MAX_ROW - 1);
+            hit_quads(ray, tess, stride, (i0, mid, j0, j1), t_min, best, t_max);
+            hit_quads(ray, tess, stride, (mid, i1, j0, j1), t_min, best, t_max);
+        }
+    }
+}
+
+/// [`hit_quads`] for rows of at most `W` vertices (`i1 − i0 + 1 ≤ W`, checked by the caller).
+#[inline(always)]
+fn hit_quads_rows<const W: usize>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    range: (usize, usize, usize, usize),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+) {
+    let q = (tess.n - 1) / stride;
+    let inv_q = 1.0 / q as f32;
+    let (i0, i1, j0, j1) = range;
     let verts: &[[f32; 3]] = &tess.verts;
     let n = tess.n;
     let triangle = tess.domain == GridDomain::LowerTriangle;
     let width = i1 - i0 + 1;
-    if width > MAX_ROW {
-        // Wider than any tier's grid: test it in column strips.
-        let mid = i0 + (MAX_ROW - 1);
-        hit_quads(ray, tess, stride, (i0, mid, j0, j1), t_min, best, t_max);
-        hit_quads(ray, tess, stride, (mid, i1, j0, j1), t_min, best, t_max);
-        return;
-    }
-    let shear_row = |j: usize, row: &mut [Sheared; MAX_ROW]| {
+    debug_assert!(width <= W);
+    let shear_row = |j: usize, row: &mut [Sheared; W]| {
         let base = j * stride * n;
         for (k, s) in row.iter_mut().take(width).enumerate() {
             *s = ray.shear(&verts[base + (i0 + k) * stride]);
         }
     };
-    let mut lo = [Sheared::default(); MAX_ROW];
-    let mut hi = [Sheared::default(); MAX_ROW];
+    let mut lo = [Sheared::default(); W];
+    let mut hi = [Sheared::default(); W];
     shear_row(j0, &mut lo);
     for j in j0..j1 {
         shear_row(j + 1, &mut hi);

@@ -253,6 +253,21 @@ impl SeamNormal {
 /// limit surface at [`SEAM_PROBES`] points inside a boundary chord (at stride 1) and that chord,
 /// plus [`seam_margin`]. Object units. Non-finite distances (a degenerate patch) are left out.
 pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize) -> (f32, SeamNormal) {
+    seam_extent_with(surface, patch, rect, verts, n, true)
+}
+
+/// [`seam_extent`]; with `normals` false only the radius is measured, and the extents along
+/// the normals are [`SeamNormal::ISOTROPIC`]: what a displaced grid uses (its chords are not
+/// the ones measured), which saves measuring what it would throw away. The radius is
+/// the same bits either way.
+pub fn seam_extent_with(
+    surface: &dyn LimitSurface,
+    patch: usize,
+    rect: UvRect,
+    verts: &[[f32; 3]],
+    n: usize,
+    normals: bool,
+) -> (f32, SeamNormal) {
     if n < 2 || verts.len() < n * n {
         return (0.0, SeamNormal::ISOTROPIC);
     }
@@ -275,7 +290,7 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let mut probes = Vec::with_capacity(uv.len());
     surface.evaluate_points(patch, &uv, &mut probes);
     for ((e, k), curve) in chords().zip(probes.chunks_exact(SEAM_PROBES)) {
-        let frame = chord_frame(at, e, k, n, 1);
+        let frame = if normals { chord_frame(at, e, k, n, 1) } else { None };
         let (ia, ja) = edge_vertex(e, k, n);
         let (ib, jb) = edge_vertex(e, k + 1, n);
         // The edge curve's deviation from the chord, D(τ) = c(τ) − (a + (b − a)τ) over the
@@ -293,6 +308,13 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
             *gp = d / (tau * (1.0 - tau));
         }
         if !ok {
+            continue;
+        }
+        if !normals {
+            for &[l0, l1, l2, bump] in &FIT_TABLE {
+                let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
+                dev_sq = dev_sq.max(d.length_squared());
+            }
             continue;
         }
         for &[l0, l1, l2, bump] in &FIT_TABLE {
@@ -313,6 +335,9 @@ pub fn seam_extent(surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts
     let dev = dev_sq.sqrt();
     let margin = seam_margin(max_abs);
     let r = SEAM_SAFETY * dev + margin;
+    if !normals {
+        return (r, SeamNormal::ISOTROPIC);
+    }
     // The probes can miss a shallow dip to the side the curve barely crosses to (near a chord's
     // end, beyond the outer probes); each side gets at least a fraction of the other's.
     let floor = SEAM_NORMAL_FLOOR * below.max(above);
@@ -558,6 +583,61 @@ pub fn intersect_seams(
     best
 }
 
+/// Whether `ray` may hit, in (`t_min`, `t_max`), the grid `tess` read at `stride` or a seam box
+/// of its `edges`: false only when it misses one box holding all of them, the grid's vertices'
+/// (a fine grid's: its sub-boxes') grown by the seam boxes' largest reach and a few ulps.
+/// Most rays that reach a subpatch pass beside its grid: its box is the patch's hull (grown by
+/// the displacement bound on displaced meshes), looser than the grid. One box test then
+/// replaces a fine grid's sixteen sub-box tests, a coarse or medium grid's triangle tests and
+/// every seam's edge and chord culls. Conservative: it holds every chord box the seams' own
+/// culls test (so a seam box passing them passes this) and every sub-box.
+fn may_hit_grid_or_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, edges: SeamEdges, t_min: f32, t_max: f32) -> bool {
+    let n = tess.n;
+    if n < 2 || stride == 0 || (n - 1) % stride != 0 || tess.domain == GridDomain::Empty {
+        // Left to the tests themselves (which find nothing or refuse the same way).
+        return true;
+    }
+    let verts: &[[f32; 3]] = &tess.verts;
+    let mut bb = crate::bounds::Bounds3::EMPTY;
+    if tess.sub_boxes.len() == 16 {
+        for b in tess.sub_boxes.iter() {
+            bb = bb.union(b);
+        }
+    } else {
+        for j in (0..n).step_by(stride) {
+            for v in verts[j * n..(j + 1) * n].iter().step_by(stride) {
+                bb.grow(Vec3A::from(*v));
+            }
+        }
+    }
+    // The seams' largest reach from their chords, as `intersect_seams` bounds it.
+    let base = tess.seam_radius;
+    let mut reach: f32 = 0.0;
+    let edges = edges.within(tess.domain);
+    if edges != SeamEdges::NONE && base >= 0.0 && base.is_finite() {
+        reach = base;
+        if stride > 1 {
+            let q = (n - 1) / stride;
+            for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
+                let vert = |k: usize| {
+                    let (i, j) = edge_vertex(e, k, n);
+                    Vec3A::from(verts[j * n + i])
+                };
+                for k in 0..q {
+                    let mid = (vert(k * stride) + vert((k + 1) * stride)) * 0.5;
+                    for m in 1..stride {
+                        reach = reach.max(base + (vert(k * stride + m) - mid).abs().element_sum());
+                    }
+                }
+            }
+        }
+    }
+    // A triangle's hit is computed in the ray's sheared frame: a few ulps of slack so that
+    // rounding never puts a grazing hit outside the box.
+    let pad = 1.8 * reach + crate::ray::gamma(8) * bb.max_abs();
+    ray.hit_box(&bb.expanded(pad), t_min, t_max).is_some()
+}
+
 /// The closest hit of `ray` with the grid `tess` read at `stride` and with the seam boxes of
 /// its `edges` ([`SeamEdges::NONE`]: the grid alone, as without seams), in (`t_min`, `t_max`).
 pub fn intersect_with_seams(
@@ -568,6 +648,9 @@ pub fn intersect_with_seams(
     t_min: f32,
     t_max: f32,
 ) -> Option<GridHit> {
+    if !may_hit_grid_or_seams(ray, tess, stride, edges, t_min, t_max) {
+        return None;
+    }
     let grid = intersect_tessellation(ray, tess, stride, t_min, t_max);
     let limit = grid.map_or(t_max, |h| h.t);
     intersect_seams(ray, tess, stride, edges, t_min, limit).or(grid)

@@ -428,10 +428,8 @@ pub fn tessellate_reusing(
     // Measured on the undisplaced grid: seams follow the limit surface's edges. Displaced, the
     // grid's chords and their normals are not the ones measured: the box is the radius on every
     // side.
-    let (seam_radius, mut seam_normal) = crate::seam::seam_extent(surface, sub.patch as usize, sub.rect, &scratch.p, n);
-    if displace.is_some() {
-        seam_normal = SeamNormal::ISOTROPIC;
-    }
+    let (seam_radius, seam_normal) =
+        crate::seam::seam_extent_with(surface, sub.patch as usize, sub.rect, &scratch.p, n, displace.is_none());
     let mut outside = 0;
     if let Some(d) = displace {
         let mut offsets = Vec::with_capacity(n * n);

@@ -718,7 +718,14 @@ def report(r: Results) -> str:
         if notes:
             lines += ["", "Checks (before): " + "; ".join(notes)]
         lines.append("")
-    lines += ["## Profile", ""]
+    lines += [
+        "## Profile",
+        "",
+        "Instruction counts (callgrind) per configuration, before and after each optimisation "
+        "step, are in [throughput-callgrind.md](throughput-callgrind.md): repeatable on a loaded "
+        "machine, where these wall times are not.",
+        "",
+    ]
     for name, p in r.profiles.items():
         lines += [f"### {name}, `ao` configuration", ""]
         if "skipped" in p:
