@@ -140,8 +140,8 @@ pub(crate) mod bridge {
         /// Patch table, stencils and refined control points of one mesh.
         type OsdMesh;
 
-        /// Builds the refiner, adaptive patch table with Gregory-basis end caps, the stencils of
-        /// the refined and local points, and applies them to `points` (3 floats per point).
+        /// Builds the refiner and the adaptive patch table with Gregory-basis end caps, and refines
+        /// `points` (3 floats per point) into the control points; keeps the table and the points.
         fn osd_mesh_new(desc: &OsdMeshDesc, points: &[f32]) -> Result<UniquePtr<OsdMesh>>;
         /// Warnings OpenSubdiv reported while building (one per line; empty when none).
         fn warnings(self: &OsdMesh) -> String;
@@ -152,8 +152,9 @@ pub(crate) mod bridge {
         /// Copies the mesh's own points (the first control points) into `out`; false if `out` is
         /// not 3 × the point count long.
         fn base_points(self: &OsdMesh, out: &mut [f32]) -> bool;
-        /// Recomputes the refined and local control points from new mesh points.
-        fn update_points(self: Pin<&mut OsdMesh>, points: &[f32]) -> Result<()>;
+        /// Recomputes the refined and local control points from new mesh points, refining
+        /// `desc` (the descriptor the mesh was built from) again.
+        fn update_points(self: Pin<&mut OsdMesh>, desc: &OsdMeshDesc, points: &[f32]) -> Result<()>;
         /// Position, d/du, d/dv, d²/du², d²/dudv, d²/dv² (18 floats) at the patch's local (u, v).
         /// Returns false (and leaves `out` alone) for a bad patch index or a short `out`.
         fn evaluate(self: &OsdMesh, patch: usize, u: f32, v: f32, out: &mut [f32]) -> bool;

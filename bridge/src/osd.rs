@@ -4,10 +4,12 @@
 //!
 //! Construction validates the mesh on the Rust side, builds a `Far::TopologyRefiner` (scheme,
 //! boundary and face-varying rules, creases, corners, holes), refines adaptively, builds the patch
-//! table and a stencil table that makes every refined and end-cap ("local") point from the mesh's
-//! points. The resulting control points are kept, so evaluation is a basis evaluation and a
-//! weighted sum; [`OsdSurface::update_points`] re-applies the stencils for animated points without
-//! touching topology.
+//! table, and makes every refined and end-cap ("local") point from the mesh's points level by
+//! level (`Far::PrimvarRefiner`, then the patch table's local-point stencils): linear in the mesh,
+//! where OpenSubdiv's factorized stencil tables cost the cube of a vertex's valence. The control
+//! points and the patch table are kept, the refiner is not, so evaluation is a basis evaluation
+//! and a weighted sum; [`OsdSurface::update_points`] refines the same topology again for animated
+//! points.
 //!
 //! Coordinates: positions and derivatives are in the mesh's object space. A patch's own (u, v) is
 //! in [0, 1]² (the triangle u + v ≤ 1 for Loop patches), and [`LimitSurface::evaluate`]'s
@@ -20,7 +22,7 @@
 //! `Far::PrimvarRefiner`, end caps by the patch table's face-varying local-point stencils,
 //! evaluated on its face-varying patches (`EvaluateBasisFaceVarying` / `GetPatchFVarValues`), so
 //! the mesh's `faceVaryingLinearInterpolation` decides how they smooth and where seams stay
-//! sharp. Vertex ones go through the points' own stencils and patches; constant, uniform and
+//! sharp. Vertex ones are refined as the points are and evaluated on their patches; constant, uniform and
 //! varying ones are interpolated over the base faces in the core
 //! ([`mipray::texture::BaseFacePrimvar`]). All are read through [`LimitSurface::face_varying`].
 //!
@@ -227,8 +229,9 @@ impl OsdSurface {
         self.mesh.ptex_face_count()
     }
 
-    /// New positions for the same topology (animation): re-applies the stored stencils and
-    /// recomputes the patch bounds. Topology is not rebuilt.
+    /// New positions for the same topology (animation): refines them as at construction (the
+    /// refiner is built again: it is not kept) and recomputes the patch bounds. The patch table
+    /// is not rebuilt.
     ///
     /// # Errors
     /// [`MeshError::Invalid`] if the point count differs, [`MeshError::NonFinite`] naming the
@@ -243,7 +246,7 @@ impl OsdSurface {
             )));
         }
         check_finite(&self.name, points)?;
-        self.mesh.pin_mut().update_points(points.as_flattened()).map_err(|e| subdivision_error(&self.name, &e))?;
+        self.mesh.pin_mut().update_points(&self.desc, points.as_flattened()).map_err(|e| subdivision_error(&self.name, &e))?;
         self.refresh_bounds()
     }
 

@@ -11,7 +11,7 @@ use std::io::Write;
 use std::process::Command;
 use std::time::Instant;
 
-use hd_mipray::bench_scene::{build, BenchSceneSpec};
+use hd_mipray::bench_scene::{build, BenchKind, BenchSceneSpec};
 use mipray::aov::Aov;
 use mipray::geometry_cache::CacheConfig;
 use mipray::options::RenderOptions;
@@ -36,10 +36,14 @@ struct Args {
     tess_factor: f32,
     /// Only these configurations, e.g. `unbounded,multires:30` (default: all eleven).
     configs: Option<Vec<(String, f64)>>,
+    /// The objects: cube-sphere blobs under AO (the paper's §6.3.2) or lat-long blobs.
+    kind: BenchKind,
+    /// Samples per pixel.
+    spp: u32,
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)\n       mipray-bench-cache report PREFIX   (PREFIX.md again from PREFIX.json)");
+    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...] [--scene cubes|latlong] [--spp N]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)\n       mipray-bench-cache report PREFIX   (PREFIX.md again from PREFIX.json)");
     std::process::exit(2)
 }
 
@@ -55,7 +59,18 @@ fn parse(args: &[String]) -> Args {
         face_res: 13,
         tess_factor: 1.0,
         configs: None,
+        kind: BenchKind::Cubes,
+        spp: 1,
     };
+    // `--scene latlong` first sets that scene's defaults; options after it override them.
+    if let Some(pos) = args.iter().position(|k| k == "--scene") {
+        a.kind = args.get(pos + 1).and_then(|n| BenchKind::from_name(n)).unwrap_or_else(|| usage());
+        if a.kind == BenchKind::LatLong {
+            let spec = BenchSceneSpec::latlong();
+            (a.grid, a.face_res, a.width, a.height, a.ao, a.spp) = (spec.grid, spec.face_res, 240, 160, 0, 4);
+            a.out = "docs/cache-benchmark-latlong".into();
+        }
+    }
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
@@ -68,6 +83,8 @@ fn parse(args: &[String]) -> Args {
             "--single-runs" => a.single_runs = v().parse().unwrap_or_else(|_| usage()),
             "--face-res" => a.face_res = v().parse().unwrap_or_else(|_| usage()),
             "--tess-factor" => a.tess_factor = v().parse().unwrap_or_else(|_| usage()),
+            "--scene" => drop(v()),
+            "--spp" => a.spp = v().parse().unwrap_or_else(|_| usage()),
             "--configs" => {
                 let list = v()
                     .split(',')
@@ -101,7 +118,7 @@ fn vm_kb(field: &str) -> u64 {
 /// One configuration, in this process: prints one JSON object.
 fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
     let t0 = Instant::now();
-    let scene = match build(&BenchSceneSpec { grid: a.grid, face_res: a.face_res, seed: 1 }) {
+    let scene = match build(&BenchSceneSpec { grid: a.grid, face_res: a.face_res, seed: 1, kind: a.kind }) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("mipray-bench-cache: scene: {e}");
@@ -124,6 +141,7 @@ fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
     let opts = RenderOptions {
         width: a.width,
         height: a.height,
+        samples: a.spp,
         ao_samples: a.ao,
         ao_distance: 6.0,
         tess_factor: a.tess_factor,
@@ -245,6 +263,10 @@ fn main() {
                 &format!("{},{}", a.grid.0, a.grid.1),
                 "--tess-factor",
                 &a.tess_factor.to_string(),
+                "--scene",
+                a.kind.name(),
+                "--spp",
+                &a.spp.to_string(),
             ]);
             let out = match cmd.output() {
                 Ok(o) if o.status.success() => o,
