@@ -297,6 +297,29 @@ std::vector<float> refine_values(const Far::TopologyRefiner& refiner, const Far:
   return out;
 }
 
+// Frees the end-cap (local point) stencils a patch table holds once its local points are
+// computed: they are most of a mesh's memory outside the cache (docs/memory.md) and only make
+// local points from refined ones, which update_points does with a patch table of its own.
+// Far::PatchTable hands them out const and StencilTable::Clear keeps the capacity, so the
+// vectors are swapped out through pointers to the protected members, named from a subclass.
+struct StencilRelease : Far::StencilTable {
+  static void release(const Far::StencilTable* table) {
+    if (!table) return;
+    auto& t = const_cast<Far::StencilTable&>(*table);
+    std::vector<int>().swap(t.*(&StencilRelease::_sizes));
+    std::vector<Far::Index>().swap(t.*(&StencilRelease::_offsets));
+    std::vector<Far::Index>().swap(t.*(&StencilRelease::_indices));
+    std::vector<float>().swap(t.*(&StencilRelease::_weights));
+  }
+};
+
+void release_local_stencils(const Far::PatchTable& table) {
+  StencilRelease::release(table.GetLocalPointStencilTable());
+  StencilRelease::release(table.GetLocalPointVaryingStencilTable());
+  for (int c = 0; c < table.GetNumFVarChannels(); ++c)
+    StencilRelease::release(table.GetLocalPointFaceVaryingStencilTable(c));
+}
+
 // A 2-float value as Far::PrimvarRefiner and StencilTable::UpdateValues want it.
 struct Value2 {
   float v[2];
@@ -348,11 +371,12 @@ struct OsdMesh::Impl {
   // Vertex primvars: one value per control point (the index space of GetPatchVertices).
   std::vector<std::vector<float>> vertex_primvars;
 
-  // The control points from the mesh's points, through `refiner` (the one the patch table was
-  // built from, or one refined again from the same descriptor: the same vertices in the same
-  // order). Nothing of the refinement is kept between calls.
-  void set_points(const Far::TopologyRefiner& refiner, const float* points) {
-    std::vector<float> all = refine_values<3>(refiner, patch_table.get(), points);
+  // The control points from the mesh's points, through `refiner` and `table` (the ones the kept
+  // patch table came from, or made again from the same descriptor: the same vertices and local
+  // points in the same order). Nothing of the refinement is kept between calls.
+  void set_points(const Far::TopologyRefiner& refiner, const Far::PatchTable& table,
+                  const float* points) {
+    std::vector<float> all = refine_values<3>(refiner, &table, points);
     if (all.size() != control_points.size())
       throw std::runtime_error("refined point count changed (" + std::to_string(all.size() / 3) +
                                ", was " + std::to_string(control_points.size() / 3) + ")");
@@ -673,29 +697,47 @@ rust::Vec<OsdPatchInfo> OsdMesh::patch_infos() const {
   return out;
 }
 
-rust::Vec<float> OsdMesh::patch_bounds() const {
-  rust::Vec<float> out;
-  out.reserve(impl->handles.size() * 6);
-  for (const auto& h : impl->handles) {
-    float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
-                   std::numeric_limits<float>::infinity()};
-    float hi[3] = {-lo[0], -lo[1], -lo[2]};
-    const std::size_t patch = std::size_t(h.patchIndex);
-    if (impl->is_regular(patch)) {
-      impl->regular_bezier_bounds(patch, lo, hi);
-    } else {
-      Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(h);
-      for (int k = 0; k < cvs.size(); ++k) {
-        const float* c = impl->control_points.data() + 3 * std::size_t(cvs[k]);
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = std::min(lo[a], c[a]);
-          hi[a] = std::max(hi[a], c[a]);
-        }
+bool OsdMesh::patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept {
+  if (patch >= impl->handles.size() || out.size() < 6) return false;
+  float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                 std::numeric_limits<float>::infinity()};
+  float hi[3] = {-lo[0], -lo[1], -lo[2]};
+  if (impl->is_regular(patch)) {
+    impl->regular_bezier_bounds(patch, lo, hi);
+  } else {
+    Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(impl->handles[patch]);
+    for (int k = 0; k < cvs.size(); ++k) {
+      const float* c = impl->control_points.data() + 3 * std::size_t(cvs[k]);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], c[a]);
+        hi[a] = std::max(hi[a], c[a]);
       }
     }
-    for (float x : lo) out.push_back(x);
-    for (float x : hi) out.push_back(x);
   }
+  for (int a = 0; a < 3; ++a) {
+    out[std::size_t(a)] = lo[a];
+    out[std::size_t(a) + 3] = hi[a];
+  }
+  return true;
+}
+
+rust::Vec<uint64_t> OsdMesh::memory_parts() const {
+  auto bytes = [](const auto& v) { return uint64_t(v.capacity() * sizeof(v[0])); };
+  const Far::PatchTable& t = *impl->patch_table;
+  uint64_t stencils = 0;
+  if (const Far::StencilTable* st = t.GetLocalPointStencilTable())
+    stencils = bytes(st->GetSizes()) + bytes(st->GetOffsets()) + bytes(st->GetControlIndices()) +
+               bytes(st->GetWeights());
+  uint64_t primvars = 0;
+  for (const auto& v : impl->fvar_values) primvars += bytes(v);
+  for (const auto& v : impl->vertex_primvars) primvars += bytes(v);
+  rust::Vec<uint64_t> out;
+  out.push_back(bytes(impl->control_points));
+  out.push_back(bytes(t.GetPatchControlVerticesTable()));
+  out.push_back(bytes(t.GetPatchParamTable()));
+  out.push_back(stencils);
+  out.push_back(bytes(impl->handles) + bytes(impl->types) + bytes(impl->ptex_to_base));
+  out.push_back(primvars);
   return out;
 }
 
@@ -715,7 +757,11 @@ void OsdMesh::update_points(const OsdMeshDesc& desc, rust::Slice<const float> po
   FarCapture capture;
   RefinerPtr refiner = create_refiner(desc, capture);
   refine_adaptive(*refiner, desc, capture);
-  impl->set_points(*refiner, points.data());
+  // A patch table of its own for the end caps' stencils (the kept one's are released).
+  std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, patch_options_of(desc)));
+  if (!table) capture.fail("OpenSubdiv could not build the patch table");
+  capture.check("OpenSubdiv patch table");
+  impl->set_points(*refiner, *table, points.data());
 }
 
 bool OsdMesh::evaluate(std::size_t patch, float u, float v, rust::Slice<float> out) const noexcept {
@@ -856,7 +902,7 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
     const std::size_t total = std::size_t(refiner->GetNumVerticesTotal()) +
                               std::size_t(std::max(m.patch_table->GetNumLocalPoints(), 0));
     m.control_points.assign(3 * total, 0.0f);
-    m.set_points(*refiner, points.data());
+    m.set_points(*refiner, *m.patch_table, points.data());
     capture.check("OpenSubdiv refined points");
 
     // Vertex primvars go through the same refinement as the points.
@@ -895,6 +941,8 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
       }
     }
     m.patch_map = std::make_unique<Far::PatchMap>(*m.patch_table);
+    // Every local point and value is computed: their stencils are not needed again.
+    release_local_stencils(*m.patch_table);
 
     // Ptex face -> base face: a base face owns its ptex ids from GetFaceId(f) up to the next's.
     Far::PtexIndices ptex(*refiner);

@@ -32,7 +32,8 @@ class OsdMesh {
   rust::String warnings() const;
   std::size_t ptex_face_count() const;
   rust::Vec<OsdPatchInfo> patch_infos() const;
-  rust::Vec<float> patch_bounds() const;
+  bool patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept;
+  rust::Vec<uint64_t> memory_parts() const;
   bool base_points(rust::Slice<float> out) const noexcept;
   void update_points(const OsdMeshDesc& desc, rust::Slice<const float> points);
   bool evaluate(std::size_t patch, float u, float v, rust::Slice<float> out) const noexcept;

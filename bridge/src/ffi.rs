@@ -147,8 +147,13 @@ pub(crate) mod bridge {
         fn warnings(self: &OsdMesh) -> String;
         fn ptex_face_count(self: &OsdMesh) -> usize;
         fn patch_infos(self: &OsdMesh) -> Result<Vec<OsdPatchInfo>>;
-        /// Hull bounds of every patch's control points: 6 floats (min xyz, max xyz) each.
-        fn patch_bounds(self: &OsdMesh) -> Result<Vec<f32>>;
+        /// A patch's bounds into `out[0..6]` (min xyz, max xyz): a regular patch's Bézier hull,
+        /// any other patch's control hull. False for a bad index or a short `out`.
+        fn patch_bound(self: &OsdMesh, patch: usize, out: &mut [f32]) -> bool;
+        /// Bytes held, by part: control points, patch vertex indices, patch params, end-cap
+        /// (local point) stencils, per-patch handles and types with the ptex-to-face map,
+        /// primvar values. Not counted: the patch map's quadtree and OpenSubdiv's small members.
+        fn memory_parts(self: &OsdMesh) -> Result<Vec<u64>>;
         /// Copies the mesh's own points (the first control points) into `out`; false if `out` is
         /// not 3 × the point count long.
         fn base_points(self: &OsdMesh, out: &mut [f32]) -> bool;

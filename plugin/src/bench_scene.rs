@@ -77,6 +77,11 @@ fn hash(mut x: u64) -> u64 {
     x ^ (x >> 33)
 }
 
+/// The seed of object `k` of a scene built with `seed`.
+pub fn object_seed(seed: u64, k: u64) -> u64 {
+    hash(seed ^ k)
+}
+
 fn rand01(seed: u64, k: u64) -> f32 {
     (hash(seed.wrapping_mul(0x9E37_79B9).wrapping_add(k)) >> 40) as f32 / (1u64 << 24) as f32
 }
@@ -194,7 +199,7 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
     for j in 0..gy {
         for i in 0..gx {
             let k = (j * gx + i) as u64;
-            let seed = hash(spec.seed ^ k);
+            let seed = object_seed(spec.seed, k);
             let latlong = spec.kind == BenchKind::LatLong;
             let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
             let name = format!("/objects/blob_{i}_{j}");
