@@ -925,6 +925,9 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
       capture.check("OpenSubdiv face-varying refinement");
     }
 
+    // Sized once: grown by push_back they would hold up to twice their patches.
+    m.handles.reserve(std::size_t(m.patch_table->GetNumPatchesTotal()));
+    m.types.reserve(std::size_t(m.patch_table->GetNumPatchesTotal()));
     for (int a = 0, current = 0; a < m.patch_table->GetNumPatchArrays(); ++a) {
       const Far::PatchDescriptor pd = m.patch_table->GetPatchArrayDescriptor(a);
       const int n = m.patch_table->GetNumPatches(a);
