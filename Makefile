@@ -96,10 +96,12 @@ clean: ## Remove build outputs and renders (keeps .venv)
 figures: ## Re-make the pictures of docs/ray-differentials.md
 	cargo run --release -p hd-mipray --bin mipray-figures -- docs/images
 
-bench-cache: setup ## The paper's §6.3.2 cache tables: docs/cache-benchmark.{md,json,png}
+bench-cache: setup ## The paper's §6.3.2 cache tables: docs/cache-benchmark{,-latlong}.{md,json,png}
 	cargo run --release -p hd-mipray --bin mipray-bench-cache -- --out docs/cache-benchmark
+	cargo run --release -p hd-mipray --bin mipray-bench-cache -- --scene latlong --out docs/cache-benchmark-latlong
 	$(VENV)/bin/python -m pip install -q 'matplotlib>=3.7'
 	$(VENV)/bin/python scripts/plot_cache_bench.py docs/cache-benchmark.json docs/cache-benchmark.png
+	$(VENV)/bin/python scripts/plot_cache_bench.py docs/cache-benchmark-latlong.json docs/cache-benchmark-latlong.png
 
 .PHONY: blender-addon
 blender-addon: setup ## The Blender add-on zip: $(OUT)/mipray_blender.zip (Install from Disk in Blender)

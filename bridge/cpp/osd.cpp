@@ -1,5 +1,5 @@
 // OpenSubdiv (Far) for mipray: topology refinement, the adaptive patch table with Gregory-basis
-// end caps, control points by stencils, and limit evaluation. See include/osd.h.
+// end caps, control points refined level by level, and limit evaluation. See include/osd.h.
 //
 // Error handling: OpenSubdiv reports problems through Far::Error / Far::Warning. Without a
 // callback a FAR_FATAL_ERROR calls exit(), which would kill a Python host, so callbacks are
@@ -249,44 +249,75 @@ void refine_adaptive(Far::TopologyRefiner& refiner, const OsdMeshDesc& d,
   capture.check("OpenSubdiv adaptive refinement");
 }
 
-// Applies a stencil table (weights over the base points) to `base` (3 floats per point) and
-// writes the results to `dst` (3 floats per stencil). Accumulates in double: stencils around
-// high-valence vertices have many small weights.
-void apply_stencils(const Far::StencilTable& st, const float* base, float* dst) {
-  const std::vector<int>& sizes = st.GetSizes();
-  const std::vector<Far::Index>& idx = st.GetControlIndices();
-  const std::vector<float>& w = st.GetWeights();
-  std::size_t ofs = 0;
-  for (std::size_t s = 0; s < sizes.size(); ++s) {
-    double acc[3] = {0, 0, 0};
-    for (int k = 0; k < sizes[s]; ++k, ++ofs) {
-      const float* p = base + 3 * std::size_t(idx[ofs]);
-      acc[0] += double(w[ofs]) * p[0];
-      acc[1] += double(w[ofs]) * p[1];
-      acc[2] += double(w[ofs]) * p[2];
-    }
-    dst[3 * s + 0] = float(acc[0]);
-    dst[3 * s + 1] = float(acc[1]);
-    dst[3 * s + 2] = float(acc[2]);
+// N floats of a primvar with double accumulators, as Far::PrimvarRefiner and
+// PatchTable::ComputeLocalPointValues want them: masks around high-valence vertices have many
+// small weights.
+template <int N>
+struct ValueD {
+  double v[N];
+  void Clear(void* = nullptr) {
+    for (double& x : v) x = 0.0;
   }
+  void AddWithWeight(const ValueD& src, float weight) {
+    for (int i = 0; i < N; ++i) v[i] += double(weight) * src.v[i];
+  }
+};
+
+// The values of every vertex of `refiner` (the mesh's own, then each refined level's) and then,
+// when `table` is given, its end caps' local points: the index space of the patch table's
+// control vertex indices. `base` holds N floats per mesh vertex; the result N floats per point.
+//
+// Level by level with Far::PrimvarRefiner, each new vertex from its parents' masks, then the
+// local points from their stencils over those vertices. OpenSubdiv's StencilTableFactory would
+// factorize every refined and local point down to the mesh's points instead; it merges weights
+// by linear search, so a point near a vertex of valence n costs O(n²) and the mesh O(n³) (a
+// minute at valence 360). This costs the masks' sizes: linear in the mesh.
+template <int N>
+std::vector<float> refine_values(const Far::TopologyRefiner& refiner, const Far::PatchTable* table,
+                                 const float* base) {
+  const std::size_t total = std::size_t(refiner.GetNumVerticesTotal());
+  const std::size_t local = table ? std::size_t(std::max(table->GetNumLocalPoints(), 0)) : 0;
+  const std::size_t nbase = std::size_t(refiner.GetLevel(0).GetNumVertices());
+  std::vector<ValueD<N>> buf(total + local);
+  for (std::size_t i = 0; i < nbase; ++i)
+    for (int c = 0; c < N; ++c) buf[i].v[c] = base[N * i + std::size_t(c)];
+  Far::PrimvarRefiner primvar(refiner);
+  ValueD<N>* src = buf.data();
+  for (int level = 1; level <= refiner.GetMaxLevel(); ++level) {
+    ValueD<N>* dst = src + refiner.GetLevel(level - 1).GetNumVertices();
+    primvar.Interpolate(level, src, dst);
+    src = dst;
+  }
+  if (local > 0) table->ComputeLocalPointValues(buf.data(), buf.data() + total);
+  std::vector<float> out(N * buf.size());
+  for (std::size_t i = 0; i < buf.size(); ++i)
+    for (int c = 0; c < N; ++c) out[N * i + std::size_t(c)] = float(buf[i].v[c]);
+  // The mesh's own values exactly as given (the double round trip keeps them, but say so).
+  std::copy(base, base + N * nbase, out.begin());
+  return out;
 }
 
-// The same for 2-float values (vertex primvars).
-void apply_stencils2(const Far::StencilTable& st, const float* base, float* dst) {
-  const std::vector<int>& sizes = st.GetSizes();
-  const std::vector<Far::Index>& idx = st.GetControlIndices();
-  const std::vector<float>& w = st.GetWeights();
-  std::size_t ofs = 0;
-  for (std::size_t s = 0; s < sizes.size(); ++s) {
-    double acc[2] = {0, 0};
-    for (int k = 0; k < sizes[s]; ++k, ++ofs) {
-      const float* p = base + 2 * std::size_t(idx[ofs]);
-      acc[0] += double(w[ofs]) * p[0];
-      acc[1] += double(w[ofs]) * p[1];
-    }
-    dst[2 * s + 0] = float(acc[0]);
-    dst[2 * s + 1] = float(acc[1]);
+// Frees the end-cap (local point) stencils a patch table holds once its local points are
+// computed: they are most of a mesh's memory outside the cache (docs/memory.md) and only make
+// local points from refined ones, which update_points does with a patch table of its own.
+// Far::PatchTable hands them out const and StencilTable::Clear keeps the capacity, so the
+// vectors are swapped out through pointers to the protected members, named from a subclass.
+struct StencilRelease : Far::StencilTable {
+  static void release(const Far::StencilTable* table) {
+    if (!table) return;
+    auto& t = const_cast<Far::StencilTable&>(*table);
+    std::vector<int>().swap(t.*(&StencilRelease::_sizes));
+    std::vector<Far::Index>().swap(t.*(&StencilRelease::_offsets));
+    std::vector<Far::Index>().swap(t.*(&StencilRelease::_indices));
+    std::vector<float>().swap(t.*(&StencilRelease::_weights));
   }
+};
+
+void release_local_stencils(const Far::PatchTable& table) {
+  StencilRelease::release(table.GetLocalPointStencilTable());
+  StencilRelease::release(table.GetLocalPointVaryingStencilTable());
+  for (int c = 0; c < table.GetNumFVarChannels(); ++c)
+    StencilRelease::release(table.GetLocalPointFaceVaryingStencilTable(c));
 }
 
 // A 2-float value as Far::PrimvarRefiner and StencilTable::UpdateValues want it.
@@ -325,9 +356,6 @@ constexpr int kMaxPatchPoints = 20;  // Gregory basis; every other type has fewe
 struct OsdMesh::Impl {
   std::unique_ptr<Far::PatchTable> patch_table;
   std::unique_ptr<Far::PatchMap> patch_map;
-  // Refined and local points as weights over the mesh's points (mesh points themselves are not in
-  // it: they are copied).
-  std::unique_ptr<const Far::StencilTable> stencils;
   int num_base_points = 0;
   // Mesh points, then refined points of every level, then local (end-cap) points: the index
   // space of the patch table's control vertex indices. 3 floats each.
@@ -343,10 +371,16 @@ struct OsdMesh::Impl {
   // Vertex primvars: one value per control point (the index space of GetPatchVertices).
   std::vector<std::vector<float>> vertex_primvars;
 
-  void set_points(const float* points) {
-    std::copy(points, points + 3 * std::size_t(num_base_points), control_points.begin());
-    if (stencils && stencils->GetNumStencils() > 0)
-      apply_stencils(*stencils, points, control_points.data() + 3 * std::size_t(num_base_points));
+  // The control points from the mesh's points, through `refiner` and `table` (the ones the kept
+  // patch table came from, or made again from the same descriptor: the same vertices and local
+  // points in the same order). Nothing of the refinement is kept between calls.
+  void set_points(const Far::TopologyRefiner& refiner, const Far::PatchTable& table,
+                  const float* points) {
+    std::vector<float> all = refine_values<3>(refiner, &table, points);
+    if (all.size() != control_points.size())
+      throw std::runtime_error("refined point count changed (" + std::to_string(all.size() / 3) +
+                               ", was " + std::to_string(control_points.size() / 3) + ")");
+    control_points = std::move(all);
   }
 
   // A regular B-spline patch's limit surface factors into uniform cubic B-spline weights along
@@ -663,29 +697,47 @@ rust::Vec<OsdPatchInfo> OsdMesh::patch_infos() const {
   return out;
 }
 
-rust::Vec<float> OsdMesh::patch_bounds() const {
-  rust::Vec<float> out;
-  out.reserve(impl->handles.size() * 6);
-  for (const auto& h : impl->handles) {
-    float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
-                   std::numeric_limits<float>::infinity()};
-    float hi[3] = {-lo[0], -lo[1], -lo[2]};
-    const std::size_t patch = std::size_t(h.patchIndex);
-    if (impl->is_regular(patch)) {
-      impl->regular_bezier_bounds(patch, lo, hi);
-    } else {
-      Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(h);
-      for (int k = 0; k < cvs.size(); ++k) {
-        const float* c = impl->control_points.data() + 3 * std::size_t(cvs[k]);
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = std::min(lo[a], c[a]);
-          hi[a] = std::max(hi[a], c[a]);
-        }
+bool OsdMesh::patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept {
+  if (patch >= impl->handles.size() || out.size() < 6) return false;
+  float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                 std::numeric_limits<float>::infinity()};
+  float hi[3] = {-lo[0], -lo[1], -lo[2]};
+  if (impl->is_regular(patch)) {
+    impl->regular_bezier_bounds(patch, lo, hi);
+  } else {
+    Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(impl->handles[patch]);
+    for (int k = 0; k < cvs.size(); ++k) {
+      const float* c = impl->control_points.data() + 3 * std::size_t(cvs[k]);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], c[a]);
+        hi[a] = std::max(hi[a], c[a]);
       }
     }
-    for (float x : lo) out.push_back(x);
-    for (float x : hi) out.push_back(x);
   }
+  for (int a = 0; a < 3; ++a) {
+    out[std::size_t(a)] = lo[a];
+    out[std::size_t(a) + 3] = hi[a];
+  }
+  return true;
+}
+
+rust::Vec<uint64_t> OsdMesh::memory_parts() const {
+  auto bytes = [](const auto& v) { return uint64_t(v.capacity() * sizeof(v[0])); };
+  const Far::PatchTable& t = *impl->patch_table;
+  uint64_t stencils = 0;
+  if (const Far::StencilTable* st = t.GetLocalPointStencilTable())
+    stencils = bytes(st->GetSizes()) + bytes(st->GetOffsets()) + bytes(st->GetControlIndices()) +
+               bytes(st->GetWeights());
+  uint64_t primvars = 0;
+  for (const auto& v : impl->fvar_values) primvars += bytes(v);
+  for (const auto& v : impl->vertex_primvars) primvars += bytes(v);
+  rust::Vec<uint64_t> out;
+  out.push_back(bytes(impl->control_points));
+  out.push_back(bytes(t.GetPatchControlVerticesTable()));
+  out.push_back(bytes(t.GetPatchParamTable()));
+  out.push_back(stencils);
+  out.push_back(bytes(impl->handles) + bytes(impl->types) + bytes(impl->ptex_to_base));
+  out.push_back(primvars);
   return out;
 }
 
@@ -696,10 +748,20 @@ bool OsdMesh::base_points(rust::Slice<float> out) const noexcept {
   return true;
 }
 
-void OsdMesh::update_points(rust::Slice<const float> points) {
+void OsdMesh::update_points(const OsdMeshDesc& desc, rust::Slice<const float> points) {
   if (points.size() != 3 * std::size_t(impl->num_base_points))
     throw std::runtime_error("update_points: the point count differs from the mesh's");
-  impl->set_points(points.data());
+  check_desc(desc, points.size());
+  // The refinement is not kept (it is most of a mesh's memory): refined again, it numbers the
+  // vertices as the first time.
+  FarCapture capture;
+  RefinerPtr refiner = create_refiner(desc, capture);
+  refine_adaptive(*refiner, desc, capture);
+  // A patch table of its own for the end caps' stencils (the kept one's are released).
+  std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, patch_options_of(desc)));
+  if (!table) capture.fail("OpenSubdiv could not build the patch table");
+  capture.check("OpenSubdiv patch table");
+  impl->set_points(*refiner, *table, points.data());
 }
 
 bool OsdMesh::evaluate(std::size_t patch, float u, float v, rust::Slice<float> out) const noexcept {
@@ -834,45 +896,20 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
     if (!m.patch_table) capture.fail("OpenSubdiv could not build the patch table");
     capture.check("OpenSubdiv patch table");
 
-    // Stencils for every refined vertex (all levels: adaptive patches index into all of them),
-    // then the end caps' local points, all factorized down to the mesh's own points.
-    Far::StencilTableFactory::Options so;
-    so.generateOffsets = true;
-    so.generateIntermediateLevels = true;
-    so.generateControlVerts = false;
-    m.stencils.reset(Far::StencilTableFactory::Create(*refiner, so));
-    if (const Far::StencilTable* local = m.patch_table->GetLocalPointStencilTable()) {
-      if (local->GetNumStencils() > 0) {
-        const Far::StencilTable* combined =
-            Far::StencilTableFactory::AppendLocalPointStencilTable(*refiner, m.stencils.get(),
-                                                                  local);
-        if (!combined) capture.fail("OpenSubdiv could not append the end-cap stencils");
-        m.stencils.reset(combined);
-      }
-    }
-    capture.check("OpenSubdiv stencils");
-
+    // Every refined vertex (all levels: adaptive patches index into all of them), then the end
+    // caps' local points.
     m.num_base_points = desc.num_vertices;
     const std::size_t total = std::size_t(refiner->GetNumVerticesTotal()) +
-                              std::size_t(m.patch_table->GetNumLocalPoints());
-    const std::size_t stenciled = m.stencils ? std::size_t(m.stencils->GetNumStencils()) : 0;
-    if (stenciled + std::size_t(desc.num_vertices) != total)
-      throw std::runtime_error("stencil count (" + std::to_string(stenciled) +
-                               ") does not cover the refined and local points (" +
-                               std::to_string(total - std::size_t(desc.num_vertices)) + ")");
+                              std::size_t(std::max(m.patch_table->GetNumLocalPoints(), 0));
     m.control_points.assign(3 * total, 0.0f);
-    m.set_points(points.data());
+    m.set_points(*refiner, *m.patch_table, points.data());
+    capture.check("OpenSubdiv refined points");
 
-    // Vertex primvars go through the same stencils as the points.
+    // Vertex primvars go through the same refinement as the points.
     const std::size_t nv = std::size_t(desc.num_vertices);
-    for (std::size_t ofs = 0; nv > 0 && ofs < desc.vertex_primvars.size(); ofs += 2 * nv) {
-      std::vector<float> values(2 * total, 0.0f);
-      std::copy(desc.vertex_primvars.begin() + std::ptrdiff_t(ofs),
-                desc.vertex_primvars.begin() + std::ptrdiff_t(ofs + 2 * nv), values.begin());
-      if (m.stencils && m.stencils->GetNumStencils() > 0)
-        apply_stencils2(*m.stencils, values.data(), values.data() + 2 * nv);
-      m.vertex_primvars.push_back(std::move(values));
-    }
+    for (std::size_t ofs = 0; nv > 0 && ofs < desc.vertex_primvars.size(); ofs += 2 * nv)
+      m.vertex_primvars.push_back(
+          refine_values<2>(*refiner, m.patch_table.get(), desc.vertex_primvars.data() + ofs));
     if (!desc.fvar_value_counts.empty()) {
       if (m.patch_table->GetNumFVarChannels() != int(desc.fvar_value_counts.size()))
         throw std::runtime_error("OpenSubdiv built " +
@@ -888,6 +925,9 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
       capture.check("OpenSubdiv face-varying refinement");
     }
 
+    // Sized once: grown by push_back they would hold up to twice their patches.
+    m.handles.reserve(std::size_t(m.patch_table->GetNumPatchesTotal()));
+    m.types.reserve(std::size_t(m.patch_table->GetNumPatchesTotal()));
     for (int a = 0, current = 0; a < m.patch_table->GetNumPatchArrays(); ++a) {
       const Far::PatchDescriptor pd = m.patch_table->GetPatchArrayDescriptor(a);
       const int n = m.patch_table->GetNumPatches(a);
@@ -904,6 +944,8 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
       }
     }
     m.patch_map = std::make_unique<Far::PatchMap>(*m.patch_table);
+    // Every local point and value is computed: their stencils are not needed again.
+    release_local_stencils(*m.patch_table);
 
     // Ptex face -> base face: a base face owns its ptex ids from GetFaceId(f) up to the next's.
     Far::PtexIndices ptex(*refiner);
@@ -1084,24 +1126,14 @@ OsdUniform osd_uniform_refine(const OsdMeshDesc& desc, rust::Slice<const float> 
     refiner->RefineUniform(uo);
     capture.check("OpenSubdiv uniform refinement");
 
-    // Stencils of the last level only, in terms of the mesh's points.
+    // The last level's points, refined level by level (see refine_values).
     OsdUniform out;
     const Far::TopologyLevel& last = refiner->GetLevel(level);
     const std::size_t nv = std::size_t(last.GetNumVertices());
+    std::vector<float> all = refine_values<3>(*refiner, nullptr, points.data());
+    if (all.size() < 3 * nv) capture.fail("OpenSubdiv could not refine the points uniformly");
     out.points.reserve(3 * nv);
-    if (level == 0) {
-      for (float x : points) out.points.push_back(x);
-    } else {
-      Far::StencilTableFactory::Options so;
-      so.generateIntermediateLevels = false;
-      so.generateOffsets = true;
-      std::unique_ptr<const Far::StencilTable> st(Far::StencilTableFactory::Create(*refiner, so));
-      if (!st || std::size_t(st->GetNumStencils()) != nv)
-        capture.fail("OpenSubdiv could not build the uniform stencils");
-      std::vector<float> refined(3 * nv);
-      apply_stencils(*st, points.data(), refined.data());
-      for (float x : refined) out.points.push_back(x);
-    }
+    for (std::size_t i = all.size() - 3 * nv; i < all.size(); ++i) out.points.push_back(all[i]);
     for (int f = 0; f < last.GetNumFaces(); ++f) {
       // Holes stay holes in the refined mesh: leave their children out.
       if (last.IsFaceHole(f)) continue;

@@ -1,5 +1,5 @@
 // OpenSubdiv (Far) side of mipray's bridge: one mesh's adaptive patch table with Gregory-basis end
-// caps, the stencils that make its control points from the mesh's points, and evaluation.
+// caps, its control points refined from the mesh's points, and evaluation.
 //
 // Nothing here lets an exception or an OpenSubdiv error escape: functions that can fail throw
 // std::runtime_error, which the cxx shim turns into a Rust `Err`; the rest never throw.
@@ -32,9 +32,10 @@ class OsdMesh {
   rust::String warnings() const;
   std::size_t ptex_face_count() const;
   rust::Vec<OsdPatchInfo> patch_infos() const;
-  rust::Vec<float> patch_bounds() const;
+  bool patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept;
+  rust::Vec<uint64_t> memory_parts() const;
   bool base_points(rust::Slice<float> out) const noexcept;
-  void update_points(rust::Slice<const float> points);
+  void update_points(const OsdMeshDesc& desc, rust::Slice<const float> points);
   bool evaluate(std::size_t patch, float u, float v, rust::Slice<float> out) const noexcept;
   bool evaluate_grid(std::size_t patch, float u0, float v0, float u1, float v1, std::size_t n,
                      rust::Slice<float> p, rust::Slice<float> du,

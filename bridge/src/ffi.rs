@@ -140,20 +140,26 @@ pub(crate) mod bridge {
         /// Patch table, stencils and refined control points of one mesh.
         type OsdMesh;
 
-        /// Builds the refiner, adaptive patch table with Gregory-basis end caps, the stencils of
-        /// the refined and local points, and applies them to `points` (3 floats per point).
+        /// Builds the refiner and the adaptive patch table with Gregory-basis end caps, and refines
+        /// `points` (3 floats per point) into the control points; keeps the table and the points.
         fn osd_mesh_new(desc: &OsdMeshDesc, points: &[f32]) -> Result<UniquePtr<OsdMesh>>;
         /// Warnings OpenSubdiv reported while building (one per line; empty when none).
         fn warnings(self: &OsdMesh) -> String;
         fn ptex_face_count(self: &OsdMesh) -> usize;
         fn patch_infos(self: &OsdMesh) -> Result<Vec<OsdPatchInfo>>;
-        /// Hull bounds of every patch's control points: 6 floats (min xyz, max xyz) each.
-        fn patch_bounds(self: &OsdMesh) -> Result<Vec<f32>>;
+        /// A patch's bounds into `out[0..6]` (min xyz, max xyz): a regular patch's Bézier hull,
+        /// any other patch's control hull. False for a bad index or a short `out`.
+        fn patch_bound(self: &OsdMesh, patch: usize, out: &mut [f32]) -> bool;
+        /// Bytes held, by part: control points, patch vertex indices, patch params, end-cap
+        /// (local point) stencils, per-patch handles and types with the ptex-to-face map,
+        /// primvar values. Not counted: the patch map's quadtree and OpenSubdiv's small members.
+        fn memory_parts(self: &OsdMesh) -> Result<Vec<u64>>;
         /// Copies the mesh's own points (the first control points) into `out`; false if `out` is
         /// not 3 × the point count long.
         fn base_points(self: &OsdMesh, out: &mut [f32]) -> bool;
-        /// Recomputes the refined and local control points from new mesh points.
-        fn update_points(self: Pin<&mut OsdMesh>, points: &[f32]) -> Result<()>;
+        /// Recomputes the refined and local control points from new mesh points, refining
+        /// `desc` (the descriptor the mesh was built from) again.
+        fn update_points(self: Pin<&mut OsdMesh>, desc: &OsdMeshDesc, points: &[f32]) -> Result<()>;
         /// Position, d/du, d/dv, d²/du², d²/dudv, d²/dv² (18 floats) at the patch's local (u, v).
         /// Returns false (and leaves `out` alone) for a bad patch index or a short `out`.
         fn evaluate(self: &OsdMesh, patch: usize, u: f32, v: f32, out: &mut [f32]) -> bool;

@@ -4,10 +4,12 @@
 //!
 //! Construction validates the mesh on the Rust side, builds a `Far::TopologyRefiner` (scheme,
 //! boundary and face-varying rules, creases, corners, holes), refines adaptively, builds the patch
-//! table and a stencil table that makes every refined and end-cap ("local") point from the mesh's
-//! points. The resulting control points are kept, so evaluation is a basis evaluation and a
-//! weighted sum; [`OsdSurface::update_points`] re-applies the stencils for animated points without
-//! touching topology.
+//! table, and makes every refined and end-cap ("local") point from the mesh's points level by
+//! level (`Far::PrimvarRefiner`, then the patch table's local-point stencils): linear in the mesh,
+//! where OpenSubdiv's factorized stencil tables cost the cube of a vertex's valence. The control
+//! points and the patch table are kept, the refiner is not, so evaluation is a basis evaluation
+//! and a weighted sum; [`OsdSurface::update_points`] refines the same topology again for animated
+//! points.
 //!
 //! Coordinates: positions and derivatives are in the mesh's object space. A patch's own (u, v) is
 //! in [0, 1]² (the triangle u + v ≤ 1 for Loop patches), and [`LimitSurface::evaluate`]'s
@@ -20,7 +22,7 @@
 //! `Far::PrimvarRefiner`, end caps by the patch table's face-varying local-point stencils,
 //! evaluated on its face-varying patches (`EvaluateBasisFaceVarying` / `GetPatchFVarValues`), so
 //! the mesh's `faceVaryingLinearInterpolation` decides how they smooth and where seams stay
-//! sharp. Vertex ones go through the points' own stencils and patches; constant, uniform and
+//! sharp. Vertex ones are refined as the points are and evaluated on their patches; constant, uniform and
 //! varying ones are interpolated over the base faces in the core
 //! ([`mipray::texture::BaseFacePrimvar`]). All are read through [`LimitSurface::face_varying`].
 //!
@@ -93,7 +95,6 @@ pub struct OsdSurface {
     /// The topology as OpenSubdiv saw it, for uniform refinement on demand.
     desc: ffi::OsdMeshDesc,
     params: Vec<PatchParam>,
-    bounds: Vec<Bounds3>,
     control_faces: usize,
     warnings: String,
     /// Primvar channels, in the order given to [`OsdSurface::with_primvars`].
@@ -191,25 +192,44 @@ impl OsdSurface {
             log::warn!("{name}: OpenSubdiv: {w}");
         }
         let params = mesh.patch_infos().map_err(|e| subdivision_error(name, &e))?.iter().map(patch_param_of).collect();
-        let mut surface = OsdSurface {
-            name: name.to_string(),
-            mesh,
-            desc,
-            params,
-            bounds: Vec::new(),
-            control_faces: topology.face_count(),
-            warnings,
-            primvars: sources,
-        };
-        surface.refresh_bounds()?;
-        Ok(surface)
+        Ok(OsdSurface { name: name.to_string(), mesh, desc, params, control_faces: topology.face_count(), warnings, primvars: sources })
     }
 
-    fn refresh_bounds(&mut self) -> Result<(), MeshError> {
-        let flat = self.mesh.patch_bounds().map_err(|e| subdivision_error(&self.name, &e))?;
-        self.bounds =
-            flat.chunks_exact(6).map(|b| Bounds3 { min: Vec3A::new(b[0], b[1], b[2]), max: Vec3A::new(b[3], b[4], b[5]) }).collect();
-        Ok(())
+    /// Bytes this surface holds, by part (docs/memory.md): OpenSubdiv's tables and points (C++),
+    /// then its own records. Capacities, not lengths; without the patch map's quadtree and the
+    /// allocator's headers, which only a malloc count sees.
+    ///
+    /// # Errors
+    /// The C++ side failing to allocate the report.
+    pub fn memory(&self) -> Result<Vec<(&'static str, usize)>, MeshError> {
+        let parts = self.mesh.memory_parts().map_err(|e| subdivision_error(&self.name, &e))?;
+        let names = [
+            "control points (refined and end-cap)",
+            "patch control-vertex indices",
+            "patch params (OpenSubdiv)",
+            "end-cap stencils",
+            "patch handles, types, ptex map",
+            "primvar values",
+        ];
+        let mut out: Vec<(&'static str, usize)> = names.iter().zip(parts).map(|(n, b)| (*n, b as usize)).collect();
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let d = &self.desc;
+        let desc = bytes(&d.face_vertex_counts)
+            + bytes(&d.face_vertex_indices)
+            + bytes(&d.crease_pairs)
+            + bytes(&d.crease_weights)
+            + bytes(&d.corner_indices)
+            + bytes(&d.corner_weights)
+            + bytes(&d.hole_indices)
+            + bytes(&d.fvar_value_counts)
+            + bytes(&d.fvar_values)
+            + bytes(&d.fvar_indices)
+            + bytes(&d.vertex_primvars);
+        out.push(("topology descriptor (kept to refine again)", desc));
+        out.push(("patch params (mipray)", bytes(&self.params)));
+        Ok(out)
     }
 
     /// The mesh's name, as given at construction.
@@ -227,8 +247,9 @@ impl OsdSurface {
         self.mesh.ptex_face_count()
     }
 
-    /// New positions for the same topology (animation): re-applies the stored stencils and
-    /// recomputes the patch bounds. Topology is not rebuilt.
+    /// New positions for the same topology (animation): refines them as at construction (the
+    /// refiner is built again: it is not kept) and recomputes the patch bounds. The patch table
+    /// is not rebuilt.
     ///
     /// # Errors
     /// [`MeshError::Invalid`] if the point count differs, [`MeshError::NonFinite`] naming the
@@ -243,8 +264,7 @@ impl OsdSurface {
             )));
         }
         check_finite(&self.name, points)?;
-        self.mesh.pin_mut().update_points(points.as_flattened()).map_err(|e| subdivision_error(&self.name, &e))?;
-        self.refresh_bounds()
+        self.mesh.pin_mut().update_points(&self.desc, points.as_flattened()).map_err(|e| subdivision_error(&self.name, &e))
     }
 
     /// The patch holding (u, v) of a ptex face (`Far::PatchMap`) and the patch's own (u, v)
@@ -392,8 +412,14 @@ impl LimitSurface for OsdSurface {
 
     /// # Panics
     /// If `patch >= patch_count()`.
+    /// Computed on each call (a Bézier conversion of 16 points, or a hull of 20) rather than kept:
+    /// the tracer asks once per patch and render, and keeps them in its root subpatches.
     fn patch_bounds(&self, patch: usize) -> Bounds3 {
-        self.bounds[patch]
+        let mut b = [0.0f32; 6];
+        if !self.mesh.patch_bound(patch, &mut b) {
+            return Bounds3::EMPTY;
+        }
+        Bounds3 { min: Vec3A::new(b[0], b[1], b[2]), max: Vec3A::new(b[3], b[4], b[5]) }
     }
 
     /// # Panics

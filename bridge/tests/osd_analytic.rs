@@ -293,3 +293,49 @@ fn topology_opensubdiv_dislikes_does_not_abort() {
         }
     }
 }
+
+/// A disk of `n` quads around one vertex of valence `n`, slightly domed.
+fn quad_pole(n: usize) -> (MeshTopology, Vec<[f32; 3]>) {
+    let mut pts = vec![[0.0, 0.0, 0.3]];
+    for i in 0..n {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        pts.push([a.cos(), a.sin(), 0.1]);
+        let b = std::f32::consts::TAU * (i as f32 + 0.5) / n as f32;
+        pts.push([1.4 * b.cos(), 1.4 * b.sin(), 0.0]);
+    }
+    let r = |i: usize| (1 + 2 * (i % n)) as i32;
+    let q = |i: usize| (2 + 2 * (i % n)) as i32;
+    let idx: Vec<i32> = (0..n).flat_map(|i| [0, r(i), q(i), r(i + 1)]).collect();
+    (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; n], face_vertex_indices: idx, ..Default::default() }, pts)
+}
+
+/// Issue 15: a vertex of high valence costs memory in proportion to its patches. OpenSubdiv's
+/// factorized stencils (kept to update points) and its end-cap stencils grow with the square of
+/// the valence; the surface keeps neither, so its bytes per patch at valence 512 stay within
+/// twice those at valence 8. New points are refined again through the end caps: a surface
+/// updated to scaled points evaluates, on the Gregory patches around the pole too, as one built
+/// from them.
+#[test]
+fn a_high_valence_pole_holds_memory_in_proportion_to_its_patches_and_updates_as_rebuilt() {
+    let per_patch = |n: usize| {
+        let (t, p) = quad_pole(n);
+        let s = OsdSurface::new("/pole", &t, &p).unwrap();
+        let bytes: usize = s.memory().unwrap().iter().map(|(_, b)| b).sum();
+        bytes as f64 / s.patch_count() as f64
+    };
+    let (low, high) = (per_patch(8), per_patch(512));
+    assert!(high <= 2.0 * low, "bytes per patch: {low:.0} at valence 8, {high:.0} at valence 512");
+
+    let (t, p) = quad_pole(64);
+    let mut s = OsdSurface::new("/pole", &t, &p).unwrap();
+    let scaled: Vec<[f32; 3]> = p.iter().map(|q| [2.0 * q[0], 2.0 * q[1], 2.0 * q[2]]).collect();
+    s.update_points(&scaled).unwrap();
+    let rebuilt = OsdSurface::new("/pole", &t, &scaled).unwrap();
+    let gregory = (0..s.patch_count()).filter(|&i| s.patch_param(i).kind == PatchKind::GregoryBasis).count();
+    assert!(gregory >= 64, "{gregory} Gregory patches");
+    for i in 0..s.patch_count() {
+        let (a, b) = (s.evaluate(i, 0.3, 0.7), rebuilt.evaluate(i, 0.3, 0.7));
+        assert!((a.p - b.p).length() < 1e-5 && (a.dpdu - b.dpdu).length() < 1e-4, "patch {i}: {a:?} vs {b:?}");
+        assert_eq!(s.patch_bounds(i), rebuilt.patch_bounds(i), "patch {i}");
+    }
+}

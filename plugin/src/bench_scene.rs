@@ -14,21 +14,58 @@ use mipray::scene::{Mesh, Scene};
 use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::OsdSurface;
 
+/// Which objects the scene is made of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchKind {
+    /// Cube-sphere blobs ([`blob_mesh`]): every vertex regular but the eight cube corners, a
+    /// third displaced, half chrome and half matte under ambient occlusion (the paper's §6.3.2).
+    Cubes,
+    /// Latitude-longitude blobs ([`latlong_blob_mesh`]): `2·face_res` segments and `face_res`
+    /// rings, so two poles of valence `2·face_res` each, ringed by triangles; half mirrors, no
+    /// ambient occlusion, a sun. Control faces about a pixel on screen, and at the poles many
+    /// small irregular patches: the scene of issue 15.
+    LatLong,
+}
+
+impl BenchKind {
+    pub const fn name(self) -> &'static str {
+        match self {
+            BenchKind::Cubes => "cubes",
+            BenchKind::LatLong => "latlong",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        [BenchKind::Cubes, BenchKind::LatLong].into_iter().find(|k| k.name() == name)
+    }
+}
+
 /// Size of the generated scene.
 #[derive(Clone, Copy, Debug)]
 pub struct BenchSceneSpec {
     /// Objects along x and along y on the ground.
     pub grid: (usize, usize),
-    /// Quads per cube-face side of each object's control mesh (6·n² faces).
+    /// Quads per cube-face side of each object's control mesh (6·n² faces), or rings of a
+    /// lat-long blob (2·n² faces).
     pub face_res: usize,
     pub seed: u64,
+    pub kind: BenchKind,
 }
 
 impl Default for BenchSceneSpec {
     /// 24 × 20 objects of 6·13² = 1014 control faces: about 1.8 GB of vertices if every
     /// subpatch were tessellated at 17×17.
     fn default() -> Self {
-        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1 }
+        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1, kind: BenchKind::Cubes }
+    }
+}
+
+impl BenchSceneSpec {
+    /// The lat-long blob scene at the size `make bench-cache` renders it: 12 × 8 blobs of
+    /// 80 segments × 40 rings (3,200 control faces, two valence-80 poles each), 307k control
+    /// faces in all.
+    pub fn latlong() -> Self {
+        BenchSceneSpec { grid: (12, 8), face_res: 40, seed: 1, kind: BenchKind::LatLong }
     }
 }
 
@@ -38,6 +75,11 @@ fn hash(mut x: u64) -> u64 {
     x ^= x >> 33;
     x = x.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
     x ^ (x >> 33)
+}
+
+/// The seed of object `k` of a scene built with `seed`.
+pub fn object_seed(seed: u64, k: u64) -> u64 {
+    hash(seed ^ k)
 }
 
 fn rand01(seed: u64, k: u64) -> f32 {
@@ -58,20 +100,13 @@ pub fn blob_mesh(n: usize, seed: u64) -> (MeshTopology, Vec<[f32; 3]>) {
         (Vec3::Z, Vec3::X, Vec3::Y),
         (-Vec3::Z, Vec3::Y, Vec3::X),
     ];
-    let lumps: Vec<(Vec3, f32)> = (0..5)
-        .map(|k| {
-            let d =
-                Vec3::new(rand01(seed, 3 * k) - 0.5, rand01(seed, 3 * k + 1) - 0.5, rand01(seed, 3 * k + 2) - 0.5).normalize_or(Vec3::Z);
-            (d, 0.35 * (rand01(seed, 100 + k) - 0.4))
-        })
-        .collect();
+    let lumps = lumps(seed);
     let mut vid = |p: Vec3| -> i32 {
         // Shared cube edges produce the same point from two faces: key by rounded position.
         let key = ((p.x * 4096.0).round() as i64, (p.y * 4096.0).round() as i64, (p.z * 4096.0).round() as i64);
         *index.entry(key).or_insert_with(|| {
             let s = p.normalize();
-            let r = 1.0 + lumps.iter().map(|(d, a)| a * (-(1.0 - s.dot(*d)) * 4.0).exp()).sum::<f32>();
-            pts.push((s * r).to_array());
+            pts.push((s * lumped_radius(&lumps, s)).to_array());
             (pts.len() - 1) as i32
         })
     };
@@ -93,6 +128,62 @@ pub fn blob_mesh(n: usize, seed: u64) -> (MeshTopology, Vec<[f32; 3]>) {
     (topo, pts)
 }
 
+/// A lumpy latitude-longitude sphere: `2·rings` segments around, `rings` bands from pole to
+/// pole, triangles at the two poles (so each pole is a vertex of valence `2·rings`), quads
+/// elsewhere, dented by the same random smooth lumps as [`blob_mesh`].
+pub fn latlong_blob_mesh(rings: usize, seed: u64) -> (MeshTopology, Vec<[f32; 3]>) {
+    let rings = rings.max(2);
+    let segments = 2 * rings;
+    let lumps = lumps(seed);
+    let place = |s: Vec3| -> [f32; 3] { (s * lumped_radius(&lumps, s)).to_array() };
+    // South pole, rings − 1 circles of latitude, north pole.
+    let mut pts = vec![place(-Vec3::Z)];
+    for r in 1..rings {
+        let lat = std::f32::consts::PI * (r as f32 / rings as f32 - 0.5);
+        for i in 0..segments {
+            let lon = std::f32::consts::TAU * i as f32 / segments as f32;
+            pts.push(place(Vec3::new(lat.cos() * lon.cos(), lat.cos() * lon.sin(), lat.sin())));
+        }
+    }
+    pts.push(place(Vec3::Z));
+    let north = (pts.len() - 1) as i32;
+    let at = |r: usize, i: usize| (1 + (r - 1) * segments + i % segments) as i32;
+    let (mut counts, mut idx) = (Vec::new(), Vec::new());
+    // Counter-clockwise seen from outside: along the longitude, then up.
+    for i in 0..segments {
+        counts.push(3);
+        idx.extend([0, at(1, i + 1), at(1, i)]);
+    }
+    for r in 1..rings - 1 {
+        for i in 0..segments {
+            counts.push(4);
+            idx.extend([at(r, i), at(r, i + 1), at(r + 1, i + 1), at(r + 1, i)]);
+        }
+    }
+    for i in 0..segments {
+        counts.push(3);
+        idx.extend([at(rings - 1, i), at(rings - 1, i + 1), north]);
+    }
+    let topo = MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: counts, face_vertex_indices: idx, ..Default::default() };
+    (topo, pts)
+}
+
+/// Five random smooth lumps (direction, height) of a blob.
+fn lumps(seed: u64) -> Vec<(Vec3, f32)> {
+    (0..5)
+        .map(|k| {
+            let d =
+                Vec3::new(rand01(seed, 3 * k) - 0.5, rand01(seed, 3 * k + 1) - 0.5, rand01(seed, 3 * k + 2) - 0.5).normalize_or(Vec3::Z);
+            (d, 0.35 * (rand01(seed, 100 + k) - 0.4))
+        })
+        .collect()
+}
+
+/// The radius of a blob with `lumps` in unit direction `s`.
+fn lumped_radius(lumps: &[(Vec3, f32)], s: Vec3) -> f32 {
+    1.0 + lumps.iter().map(|(d, a)| a * (-(1.0 - s.dot(*d)) * 4.0).exp()).sum::<f32>()
+}
+
 /// Builds the scene (OpenSubdiv patch tables for every object). Returns the scene and the
 /// number of control faces.
 ///
@@ -108,13 +199,14 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
     for j in 0..gy {
         for i in 0..gx {
             let k = (j * gx + i) as u64;
-            let seed = hash(spec.seed ^ k);
-            let (topo, pts) = blob_mesh(spec.face_res, seed);
+            let seed = object_seed(spec.seed, k);
+            let latlong = spec.kind == BenchKind::LatLong;
+            let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
             let name = format!("/objects/blob_{i}_{j}");
             let surface = OsdSurface::new(&name, &topo, &pts)?;
             let mut mesh = Mesh::new(&name, Arc::new(surface));
             mesh.material = if (i + j) % 2 == 0 { chrome } else { matte };
-            if k % 3 == 0 {
+            if k % 3 == 0 && !latlong {
                 mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 }.into());
                 mesh.displacement_bound = 0.06;
             }
@@ -124,6 +216,8 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
             let s = 0.8 + 0.4 * rand01(seed, 7);
             let xf = Mat4::from_translation(Vec3::new(x, y, s))
                 * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU)
+                // Lat-long blobs lean their poles every way, toward the camera too.
+                * Mat4::from_rotation_x(if latlong { rand01(seed, 9) * std::f32::consts::PI } else { 0.0 })
                 * Mat4::from_scale(Vec3::splat(s));
             scene.add_instance(m, xf);
         }

@@ -229,40 +229,54 @@ impl RenderDelegate {
         self.sync_or_cancel(&mipray::progress::NoProgress).unwrap_or_default()
     }
 
-    /// As [`RenderDelegate::sync`], stopping between two meshes when `progress` is cancelled
-    /// (Ctrl-C during a long sync); the meshes not synced stay dirty for the next render.
+    /// As [`RenderDelegate::sync`], starting no more meshes once `progress` is cancelled (Ctrl-C
+    /// during a long sync); the meshes not synced stay dirty for the next render. Meshes sync
+    /// in parallel on rayon's pool.
     ///
     /// # Errors
     /// [`RenderError::Cancelled`](mipray::error::RenderError::Cancelled).
     pub fn sync_or_cancel(&mut self, progress: &dyn mipray::progress::Progress) -> Result<Vec<DelegateError>, mipray::error::RenderError> {
+        use rayon::prelude::*;
         let mut errors = Vec::new();
-        for m in self.meshes.values_mut() {
-            if m.dirty.is_clean() {
-                continue;
-            }
-            if progress.cancelled() {
-                return Err(mipray::error::RenderError::Cancelled);
-            }
-            // A panic in one prim's sync (its patch tables, its primvars) drops that prim only.
-            let synced = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| m.sync())).unwrap_or_else(|payload| {
-                m.surface = None;
-                let e = DelegateError::internal(&m.path, mipray::dropped::panic_message(payload.as_ref()));
-                m.error = Some(e.to_string());
-                Err(e)
-            });
+        // Meshes sync in parallel (each builds its own OpenSubdiv tables); results are taken in
+        // path order, so errors and cache invalidations come out as a serial sync's would.
+        let mut dirty: Vec<&mut MeshPrim> = self.meshes.values_mut().filter(|m| !m.dirty.is_clean()).collect();
+        let results: Vec<Option<Result<bool, DelegateError>>> = dirty
+            .par_iter_mut()
+            .with_max_len(1)
+            .map(|m| {
+                if progress.cancelled() {
+                    return None;
+                }
+                // A panic in one prim's sync (its patch tables, its primvars) drops that prim only.
+                Some(std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| m.sync())).unwrap_or_else(|payload| {
+                    m.surface = None;
+                    let e = DelegateError::internal(&m.path, mipray::dropped::panic_message(payload.as_ref()));
+                    m.error = Some(e.to_string());
+                    Err(e)
+                }))
+            })
+            .collect();
+        let mut cancelled = false;
+        for (m, synced) in dirty.iter().zip(results) {
             match synced {
-                Ok(true) => {
+                // Not started: the mesh stays dirty for the next render.
+                None => cancelled = true,
+                Some(Ok(true)) => {
                     // New points or topology: this mesh's tessellations are stale, nobody else's.
                     if let Some((_, cache)) = &self.cache {
                         cache.invalidate_mesh(m.cache_id);
                     }
                 }
-                Ok(false) => {}
-                Err(e) => {
+                Some(Ok(false)) => {}
+                Some(Err(e)) => {
                     log::error!("{e}");
                     errors.push(e);
                 }
             }
+        }
+        if cancelled {
+            return Err(mipray::error::RenderError::Cancelled);
         }
         let meshes = &self.meshes;
         for e in check_references(&self.instancers, &|p| meshes.contains_key(p)) {

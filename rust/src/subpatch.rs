@@ -28,6 +28,38 @@ pub struct Subpatch {
     pub affine: bool,
 }
 
+/// A root subpatch as a mesh keeps it: one whole patch (its domain the unit square) and its
+/// bounds, in 32 bytes. A [`Subpatch`] takes 64 (its domain, and bounds of 16-byte-aligned
+/// vectors); a scene of a million control faces keeps three million roots.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RootSubpatch {
+    min: [f32; 3],
+    /// Patch index in the mesh's [`crate::patch::LimitSurface`].
+    pub patch: u32,
+    max: [f32; 3],
+    /// See [`Subpatch::affine`].
+    pub affine: bool,
+}
+
+impl RootSubpatch {
+    /// The root of `patch`, bounded by `bounds`.
+    pub fn new(patch: u32, bounds: Bounds3, affine: bool) -> Self {
+        RootSubpatch { min: bounds.min.into(), patch, max: bounds.max.into(), affine }
+    }
+
+    /// Object space, grown by the mesh's displacement bound.
+    #[inline]
+    pub fn bounds(&self) -> Bounds3 {
+        Bounds3 { min: self.min.into(), max: self.max.into() }
+    }
+
+    /// The part `rect` of this root (a split child, or `UvRect::UNIT` for the root itself), with
+    /// the root's bounds.
+    pub fn subpatch(&self, rect: UvRect) -> Subpatch {
+        Subpatch { patch: self.patch, rect, bounds: self.bounds(), affine: self.affine }
+    }
+}
+
 /// Where a split child lies: its root subpatch, split depth, and cell (i along u, j along v) of
 /// the root's 2^depth × 2^depth grid of children.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -110,7 +142,8 @@ impl ChildIds {
 /// A mesh prepared for tracing: its root subpatches and a BVH over them (object space).
 /// Shared by all instances of the mesh.
 pub struct MeshGeometry {
-    pub subpatches: Vec<Subpatch>,
+    /// One per patch with bounds (a patch whose bounds are empty has no surface to hit).
+    pub subpatches: Vec<RootSubpatch>,
     /// `None` when the mesh has no patches (all holes, or empty).
     pub bvh: Option<CwBvh>,
     pub bounds: Bounds3,
@@ -128,26 +161,22 @@ impl MeshGeometry {
     pub fn build(mesh: &Mesh, split_ids: impl FnOnce(u32) -> Arc<SplitIds>) -> Result<Self, String> {
         let s = &mesh.surface;
         let grow = mesh.displacement_bound.max(0.0);
-        let mut subpatches: Vec<Subpatch> = (0..s.patch_count())
-            .map(|i| Subpatch {
-                patch: i as u32,
-                rect: UvRect::UNIT,
-                bounds: s.patch_bounds(i).expanded(grow),
-                affine: mesh.displacement.is_none() && s.patch_is_affine(i),
-            })
-            .filter(|sp| !sp.bounds.is_empty())
+        let mut subpatches: Vec<RootSubpatch> = (0..s.patch_count())
+            .map(|i| (i, s.patch_bounds(i).expanded(grow)))
+            .filter(|(_, b)| !b.is_empty())
+            .map(|(i, b)| RootSubpatch::new(i as u32, b, mesh.displacement.is_none() && s.patch_is_affine(i)))
             .collect();
-        if let Some(sp) = subpatches.iter().find(|sp| !sp.bounds.is_traceable()) {
+        if let Some(sp) = subpatches.iter().find(|sp| !sp.bounds().is_traceable()) {
             return Err(format!(
                 "patch {} reaches {:e} (displacement bound {grow:e}), beyond the traceable ±{MAX_COORDINATE:e}",
                 sp.patch,
-                sp.bounds.max_abs()
+                sp.bounds().max_abs()
             ));
         }
         // Collected through a filter, the vector may hold twice its length: give it back.
         subpatches.shrink_to_fit();
-        let bounds = subpatches.iter().fold(Bounds3::EMPTY, |b, sp| b.union(&sp.bounds));
-        let boxes: Vec<Bounds3> = subpatches.iter().map(|s| s.bounds).collect();
+        let boxes: Vec<Bounds3> = subpatches.iter().map(RootSubpatch::bounds).collect();
+        let bounds = boxes.iter().fold(Bounds3::EMPTY, |b, sb| b.union(sb));
         let bvh = build_bvh(&boxes);
         let child_ids = ChildIds::new(split_ids(subpatches.len() as u32));
         Ok(MeshGeometry { subpatches, bvh, bounds, child_ids })
@@ -196,6 +225,17 @@ mod tests {
         // Invalidating the mesh forgets its ids with its entries.
         cache.invalidate_mesh(7);
         assert_eq!(ChildIds::new(cache.split_ids(7, 0, 10)).id(kids[1]), 10);
+    }
+
+    /// The record a mesh keeps per patch (issue 15: a million control faces make three million).
+    #[test]
+    fn roots_are_32_bytes_and_give_back_their_bounds() {
+        assert_eq!(std::mem::size_of::<RootSubpatch>(), 32);
+        let b = Bounds3 { min: glam::Vec3A::new(-1.0, 2.0, -3.5), max: glam::Vec3A::new(4.0, 5.25, 6.0) };
+        let r = RootSubpatch::new(7, b, true);
+        assert_eq!(r.bounds(), b);
+        let c = ChildCell { root: 0, depth: 1, i: 1, j: 0 }.rect(&UvRect::UNIT);
+        assert_eq!(r.subpatch(c), Subpatch { patch: 7, rect: c, bounds: b, affine: true });
     }
 
     #[test]

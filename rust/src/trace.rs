@@ -18,7 +18,7 @@ use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
 use crate::seam::{intersect_with_seams, SeamEdges};
-use crate::subpatch::{ChildCell, MeshGeometry, Subpatch};
+use crate::subpatch::{ChildCell, MeshGeometry, RootSubpatch};
 use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceParams, Rate, Tessellation};
 
 /// Replaces −0.0 components by +0.0. obvhs 0.4's CWBVH traversal picks the child order from the
@@ -356,7 +356,7 @@ impl<'s> Tracer<'s> {
 
     /// Bytes of the root subpatches (their bounds are the bottom-level BVHs' primitives).
     pub fn subpatch_bytes(&self) -> usize {
-        self.meshes.iter().map(|m| m.subpatches.len() * std::mem::size_of::<crate::subpatch::Subpatch>()).sum()
+        self.meshes.iter().map(|m| m.subpatches.len() * std::mem::size_of::<RootSubpatch>()).sum()
     }
 
     /// Bytes of every BVH (both levels), for the stats.
@@ -493,14 +493,15 @@ impl<'s> Tracer<'s> {
             }
             let si = blas.primitive_indices[id] as usize;
             let sp = &geom.subpatches[si];
-            let Some((t_enter, _)) = wray.hit_box(&sp.bounds, ray.t_min, t_best) else {
+            let sp_bounds = sp.bounds();
+            let Some((t_enter, _)) = wray.hit_box(&sp_bounds, ray.t_min, t_best) else {
                 return f32::INFINITY;
             };
             counters.ray_subpatch_tests += 1;
             // The rate is sized by the patch itself: its box less the displacement bound it was
             // grown by (displacement finer than the grid is filtered to its spacing, so the
             // bound is no reason to tessellate finer).
-            let size = (sp.bounds.diagonal().max_element() - displacement_pad).max(0.0) * inst.scale;
+            let size = (sp_bounds.diagonal().max_element() - displacement_pad).max(0.0) * inst.scale;
             let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
             let own = origin.filter(|org| org.instance == ii as u32);
             let depth = if sp.affine { 0 } else { split_depth(needed) };
@@ -564,7 +565,7 @@ impl<'s> Tracer<'s> {
                     intersect_with_seams(&wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
                         t: h.t,
                         uv: (h.u, h.v),
-                        rect: sp.rect,
+                        rect: UvRect::UNIT,
                         ng: h.ng,
                         quads: rate.quads() as u32,
                         chord_error,
@@ -687,7 +688,7 @@ impl<'s> Tracer<'s> {
         let key =
             CacheKey { mesh: Self::cache_mesh(mesh, mesh_index), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
         self.cache.get_or_build_reusing(key, |spare| {
-            let sub = Subpatch { patch: root.patch, rect: cell.rect(&root.rect), bounds: root.bounds, affine: root.affine };
+            let sub = root.subpatch(cell.rect(&UvRect::UNIT));
             let mut scratch = GridSamples::default();
             let displace = mesh.displacement.clone().map(|displacement| DisplaceParams {
                 displacement,
@@ -723,7 +724,7 @@ impl<'s> Tracer<'s> {
         t_best: &mut f32,
         best: &mut Option<LocalHit>,
     ) {
-        let root_rect = geom.subpatches[cell.root as usize].rect;
+        let root_rect = UvRect::UNIT;
         if u32::from(cell.depth) >= target_depth {
             if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best) {
                 *t_best = h.t;

@@ -3,7 +3,11 @@
 //!
 //! ```text
 //! cargo run --release -p hd-mipray --bin mipray-bench-cache -- --out docs/cache-benchmark
+//! cargo run --release -p hd-mipray --bin mipray-bench-cache -- --scene latlong --out docs/cache-benchmark-latlong
 //! ```
+//! `--scene latlong` is issue 15's scene: lat-long blobs with valence-80 poles, faces about a
+//! pixel on screen, half mirrors and a sun, 4 samples per pixel (its own defaults for the grid,
+//! size and samples; later options override them).
 //! Every configuration renders in its own process, so each peak RSS is its own. Writes
 //! `<out>.json` and `<out>.md`; `scripts/plot_cache_bench.py` draws `<out>.png` from the JSON.
 
@@ -11,7 +15,7 @@ use std::io::Write;
 use std::process::Command;
 use std::time::Instant;
 
-use hd_mipray::bench_scene::{build, BenchSceneSpec};
+use hd_mipray::bench_scene::{build, BenchKind, BenchSceneSpec};
 use mipray::aov::Aov;
 use mipray::geometry_cache::CacheConfig;
 use mipray::options::RenderOptions;
@@ -36,10 +40,14 @@ struct Args {
     tess_factor: f32,
     /// Only these configurations, e.g. `unbounded,multires:30` (default: all eleven).
     configs: Option<Vec<(String, f64)>>,
+    /// The objects: cube-sphere blobs under AO (the paper's §6.3.2) or lat-long blobs.
+    kind: BenchKind,
+    /// Samples per pixel.
+    spp: u32,
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)\n       mipray-bench-cache report PREFIX   (PREFIX.md again from PREFIX.json)");
+    eprintln!("usage: mipray-bench-cache [--out PREFIX] [--width W] [--height H] [--ao N] [--runs N] [--single-runs N] [--grid X,Y] [--face-res N] [--tess-factor F] [--configs MODE:MB,...] [--scene cubes|latlong] [--spp N]\n       mipray-bench-cache run MODE MB RAWFILE [same options]   (one configuration; prints stats JSON)\n       mipray-bench-cache report PREFIX   (PREFIX.md again from PREFIX.json)");
     std::process::exit(2)
 }
 
@@ -55,7 +63,18 @@ fn parse(args: &[String]) -> Args {
         face_res: 13,
         tess_factor: 1.0,
         configs: None,
+        kind: BenchKind::Cubes,
+        spp: 1,
     };
+    // `--scene latlong` first sets that scene's defaults; options after it override them.
+    if let Some(pos) = args.iter().position(|k| k == "--scene") {
+        a.kind = args.get(pos + 1).and_then(|n| BenchKind::from_name(n)).unwrap_or_else(|| usage());
+        if a.kind == BenchKind::LatLong {
+            let spec = BenchSceneSpec::latlong();
+            (a.grid, a.face_res, a.width, a.height, a.ao, a.spp) = (spec.grid, spec.face_res, 240, 160, 0, 4);
+            a.out = "docs/cache-benchmark-latlong".into();
+        }
+    }
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
@@ -68,6 +87,8 @@ fn parse(args: &[String]) -> Args {
             "--single-runs" => a.single_runs = v().parse().unwrap_or_else(|_| usage()),
             "--face-res" => a.face_res = v().parse().unwrap_or_else(|_| usage()),
             "--tess-factor" => a.tess_factor = v().parse().unwrap_or_else(|_| usage()),
+            "--scene" => drop(v()),
+            "--spp" => a.spp = v().parse().unwrap_or_else(|_| usage()),
             "--configs" => {
                 let list = v()
                     .split(',')
@@ -101,7 +122,7 @@ fn vm_kb(field: &str) -> u64 {
 /// One configuration, in this process: prints one JSON object.
 fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
     let t0 = Instant::now();
-    let scene = match build(&BenchSceneSpec { grid: a.grid, face_res: a.face_res, seed: 1 }) {
+    let scene = match build(&BenchSceneSpec { grid: a.grid, face_res: a.face_res, seed: 1, kind: a.kind }) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("mipray-bench-cache: scene: {e}");
@@ -124,6 +145,7 @@ fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
     let opts = RenderOptions {
         width: a.width,
         height: a.height,
+        samples: a.spp,
         ao_samples: a.ao,
         ao_distance: 6.0,
         tess_factor: a.tess_factor,
@@ -245,6 +267,10 @@ fn main() {
                 &format!("{},{}", a.grid.0, a.grid.1),
                 "--tess-factor",
                 &a.tess_factor.to_string(),
+                "--scene",
+                a.kind.name(),
+                "--spp",
+                &a.spp.to_string(),
             ]);
             let out = match cmd.output() {
                 Ok(o) if o.status.success() => o,
@@ -278,7 +304,7 @@ fn main() {
         r["bit_identical_to_unbounded"] = json!(img == reference);
     }
     let _ = std::fs::remove_dir_all(&tmp);
-    let doc = json!({"width": a.width, "height": a.height, "ao_samples": a.ao, "runs": a.runs, "single_runs": a.single_runs, "elapsed_s": t_all.elapsed().as_secs_f64(), "grid": [a.grid.0, a.grid.1], "face_res": a.face_res, "tess_factor": a.tess_factor, "rows": rows});
+    let doc = json!({"width": a.width, "height": a.height, "ao_samples": a.ao, "runs": a.runs, "single_runs": a.single_runs, "elapsed_s": t_all.elapsed().as_secs_f64(), "grid": [a.grid.0, a.grid.1], "face_res": a.face_res, "tess_factor": a.tess_factor, "scene": a.kind.name(), "spp": a.spp, "rows": rows});
     let json_path = format!("{}.json", a.out);
     if let Err(e) = std::fs::write(&json_path, serde_json::to_string_pretty(&doc).unwrap_or_default()) {
         eprintln!("mipray-bench-cache: {json_path}: {e}");
@@ -309,20 +335,47 @@ fn markdown(doc: &Value) -> String {
     let mut s = String::new();
     let first = &rows[0]["stats"];
     s += "# Geometry cache benchmark\n\n";
-    s += "Generated by `make bench-cache` (`cargo run --release -p hd-mipray --bin mipray-bench-cache`); do not edit by hand.\n\n";
+    let latlong = doc["scene"] == BenchKind::LatLong.name();
     s += &format!(
-        "Scene: {} individually modelled Catmull-Clark objects ({} control faces, {} subpatches; full tessellation at 17×17: {} vertices, {:.2} GB), half chrome, half matte with ambient occlusion ({} AO rays per hit, 6 units), a third displaced. {}×{} pixels, 1 sample per pixel; {} run(s) per configuration, median wall time ({} of each single-resolution one, whose recomputed vertices are the same every run); the whole table took {:.1} minutes.\n\n",
-        first["scene"]["instances"].as_u64().unwrap_or(0) - 1,
+        "Generated by `make bench-cache` (`cargo run --release -p hd-mipray --bin mipray-bench-cache{}`); do not edit by hand.\n\n",
+        if latlong { " -- --scene latlong --out docs/cache-benchmark-latlong" } else { "" }
+    );
+    let objects = first["scene"]["instances"].as_u64().unwrap_or(0) - 1;
+    let what = if latlong {
+        format!(
+            "{objects} lumpy latitude-longitude Catmull-Clark blobs of {} segments and {} rings (two poles of valence {} each, ringed by triangles), half mirrors, half matte, lit by a sun, no ambient occlusion",
+            2 * doc["face_res"].as_u64().unwrap_or(0),
+            doc["face_res"],
+            2 * doc["face_res"].as_u64().unwrap_or(0)
+        )
+    } else {
+        format!(
+            "{objects} individually modelled Catmull-Clark objects, half chrome, half matte with ambient occlusion ({} AO rays per hit, 6 units), a third displaced",
+            doc["ao_samples"]
+        )
+    };
+    s += &format!(
+        "Scene: {what}: {} control faces, {} subpatches; full tessellation at 17×17: {} vertices, {:.2} GB. {}×{} pixels, {} sample(s) per pixel; {} run(s) per configuration, median wall time ({} of each single-resolution one, whose recomputed vertices are the same every run); the whole table took {:.1} minutes.\n\n",
         first["scene"]["control_faces"],
         first["scene"]["subpatches"],
         fmt_count(first["scene"]["full_tessellation_vertices"].as_f64().unwrap_or(0.0)),
         first["scene"]["full_tessellation_bytes"].as_f64().unwrap_or(0.0) / 1e9,
-        doc["ao_samples"],
         doc["width"],
         doc["height"],
+        doc["spp"].as_u64().unwrap_or(1),
         doc["runs"],
         doc["single_runs"],
         doc["elapsed_s"].as_f64().unwrap_or(0.0) / 60.0,
+    );
+    // Sync: OpenSubdiv's tables for every object, in one thread (the render's own subpatches
+    // and BVHs come after), and what the process holds then.
+    let faces = first["scene"]["control_faces"].as_f64().unwrap_or(0.0).max(1.0);
+    s += &format!(
+        "Scene build (OpenSubdiv tables of every object, one thread): {:.2} s, {:.2} s per 100k control faces; resident after it: {:.0} MB, {:.0} MB per 100k control faces (docs/memory.md breaks it down).\n\n",
+        rows[0]["scene_build_s"].as_f64().unwrap_or(0.0),
+        rows[0]["scene_build_s"].as_f64().unwrap_or(0.0) * 1e5 / faces,
+        rows[0]["base_rss_bytes"].as_f64().unwrap_or(0.0) / 1e6,
+        rows[0]["base_rss_bytes"].as_f64().unwrap_or(0.0) / faces * 1e5 / 1e6,
     );
     let tess_factor = doc["tess_factor"].as_f64().unwrap_or(1.0);
     s += &format!(
@@ -337,6 +390,18 @@ fn markdown(doc: &Value) -> String {
         rays["ao"],
         fmt_count(first["render"]["ray_subpatch_tests"].as_f64().unwrap_or(0.0))
     );
+    // Where the rates fall (the paper's §5.2: quads about as wide as the beam), per ray kind.
+    s += "Subpatch tests by rate (quads per side; split: finer than 16, served by split subpatches), unbounded run:\n\n| rays | 1 | 2 | 4 | 8 | 16 | split | at 16 or split |\n|---|---|---|---|---|---|---|---|\n";
+    for kind in ["camera", "shadow", "reflection", "ao"] {
+        let t = &first["render"]["rate_tests_by_ray"][kind];
+        let n: Vec<f64> = ["1", "2", "4", "8", "16", "split"].iter().map(|r| t[*r].as_f64().unwrap_or(0.0)).collect();
+        let total: f64 = n.iter().sum();
+        if total > 0.0 {
+            let cells: Vec<String> = n.iter().map(|x| fmt_count(*x)).collect();
+            s += &format!("| {kind} | {} | {:.1}% |\n", cells.join(" | "), 100.0 * (n[4] + n[5]) / total);
+        }
+    }
+    s += "\n";
     s += "| mode | budget | capacity (entries, c/m/f) | cold tessellations (c/m/f) | misses (c/m/f) | hit rate (c/m/f) | recomputed vertices | wall s | peak RSS MB | image vs unbounded |\n|---|---|---|---|---|---|---|---|---|---|\n";
     for r in &rows {
         let gc = &r["stats"]["geometry_cache"];
@@ -380,13 +445,15 @@ fn markdown(doc: &Value) -> String {
         );
     }
     s += "\n";
-    s += &targets(&rows);
+    // Issue 15 asks the lat-long scene for the paper's ratios (≥ 50×); the cube scene's target
+    // is the earlier 20×.
+    s += &targets(&rows, if latlong { 50.0 } else { 20.0 });
     s
 }
 
 /// The issue's targets, checked on the 30 MB rows (without a single-resolution row, e.g. with
 /// `--configs unbounded,multires:30`, the first target reads "not run").
-fn targets(rows: &[Value]) -> String {
+fn targets(rows: &[Value], min_ratio: f64) -> String {
     let find = |mode: &str, mb: f64| rows.iter().find(|r| r["mode"] == mode && (r["budget_mb"].as_f64().unwrap_or(-1.0) - mb).abs() < 1e-9);
     let (Some(multi), Some(unb)) = (find("multires", 30.0), find("unbounded", 0.0)) else {
         return String::new();
@@ -399,7 +466,7 @@ fn targets(rows: &[Value]) -> String {
                 (format!("single recomputes {}, multires none", fmt_count(rv(single))), "met")
             } else {
                 let ratio = rv(single) / rv(multi);
-                (format!("single/multires = {ratio:.0}×"), if ratio >= 20.0 { "met" } else { "NOT met" })
+                (format!("single/multires = {ratio:.0}×"), if ratio >= min_ratio { "met" } else { "NOT met" })
             }
         }
         None => ("single not run".to_string(), "—"),
@@ -420,7 +487,7 @@ fn targets(rows: &[Value]) -> String {
     let ok = |b: bool| if b { "met" } else { "NOT met" };
     let rest = peak - base - bvh - 30e6;
     format!(
-        "## Targets at 30 MB\n\n| target | measured | |\n|---|---|---|\n| multires recomputes ≤ 1/20 of single's vertices | {ratio_text} | {ratio_ok} |\n| hit rate ≥ 99.5% in every tier | lowest {:.3}% | {} |\n| wall time ≤ 1.3 × unbounded | {tratio:.2}× | {} |\n| peak RSS ≤ 1.1 × (base {:.0} MB + budget 30 MB + BVH and subpatch bounds {:.0} MB) = {:.0} MB | {:.0} MB | {} |\n| multires image bit-identical to unbounded | {} | {} |\n\nThe multires peak at 30 MB is base {:.0} MB + BVH and subpatch bounds {:.0} MB + the cache's 30 MB as the budget counts it (the paper's 12 bytes a vertex, plus the two error floats and a fine grid's sub-boxes) + {:.0} MB more: the cache's bookkeeping (LRU nodes, hash index, shared vertex blocks' headers; see the `geometry_cache` module docs), the allocator's slack and the render's own working memory.\n",
+        "## Targets at 30 MB\n\n| target | measured | |\n|---|---|---|\n| multires recomputes ≤ 1/{min_ratio} of single's vertices | {ratio_text} | {ratio_ok} |\n| hit rate ≥ 99.5% in every tier | lowest {:.3}% | {} |\n| wall time ≤ 1.3 × unbounded | {tratio:.2}× | {} |\n| peak RSS ≤ 1.1 × (base {:.0} MB + budget 30 MB + BVH and subpatch bounds {:.0} MB) = {:.0} MB | {:.0} MB | {} |\n| multires image bit-identical to unbounded | {} | {} |\n\nThe multires peak at 30 MB is base {:.0} MB + BVH and subpatch bounds {:.0} MB + the cache's 30 MB as the budget counts it (the paper's 12 bytes a vertex, plus the two error floats and a fine grid's sub-boxes) + {:.0} MB more: the cache's bookkeeping (LRU nodes, hash index, shared vertex blocks' headers; see the `geometry_cache` module docs), the allocator's slack and the render's own working memory.\n",
         min_hit * 100.0,
         ok(min_hit >= 0.995),
         ok(tratio <= 1.3),
