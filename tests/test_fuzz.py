@@ -5,9 +5,10 @@ things at random — a value (NaN, infinities, 0, negatives, 1e30), a count or a
 a mesh, a transform (zero, huge, non-finite, projective), a texture file (random bytes,
 cut short, missing, a directory) — then renders it at a few pixels. The render must end in
 an image with no NaN or a :class:`mipray.MiprayError`: never another exception, a crash or
-a hang. Rounds run for ``$MIPRAY_FUZZ_SECONDS`` (default 20) from a seed printed on failure
-(``$MIPRAY_FUZZ_SEED`` replays one), so CI spends a bounded time and a failure can be
-reproduced.
+a hang. Rounds run for ``$MIPRAY_FUZZ_SECONDS`` (default 20) from the seed
+``$MIPRAY_FUZZ_SEED`` (default :data:`DEFAULT_SEED`, so CI runs the same rounds every time;
+``random`` takes a new one), printed on failure, so CI spends a bounded time and a failure can
+be reproduced.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import mipray
 
 ROOT = Path(__file__).resolve().parent.parent
 STAGES = ["subdiv_showcase", "forest", "implicit_prims", "render_settings", "textured"]
+#: The rounds `make test` runs (see the module doc).
+DEFAULT_SEED = 1
 BAD_FLOATS = [math.nan, math.inf, -math.inf, 0.0, -1.0, 1e30, -1e30, 3e38, 1e-30]
 
 
@@ -162,7 +165,10 @@ def mutate(rng: random.Random, stage: Usd.Stage, scratch: Path) -> list[str]:
 
 def test_mutated_example_stages_render_or_fail_in_one_line(native, tmp_path, caplog) -> None:
     budget = float(os.environ.get("MIPRAY_FUZZ_SECONDS", "20"))
-    seed = int(os.environ.get("MIPRAY_FUZZ_SEED", str(time.time_ns() % 1_000_000)))
+    # A fixed seed by default, so `make test` runs the same rounds every time (a slower
+    # machine runs fewer of them); MIPRAY_FUZZ_SEED=random explores new ones.
+    chosen = os.environ.get("MIPRAY_FUZZ_SEED", str(DEFAULT_SEED))
+    seed = time.time_ns() % 1_000_000 if chosen == "random" else int(chosen)
     rng = random.Random(seed)
     stages = {name: _flat(name) for name in STAGES}
     started, rounds, refused = time.monotonic(), 0, 0

@@ -302,6 +302,30 @@ def test_an_unusable_stage_camera_is_reported_not_replaced(native, tmp_path) -> 
     assert not (tmp_path / "out.exr").exists()
 
 
+def test_an_aperture_giving_no_possible_image_height_is_one_line(native, tmp_path) -> None:
+    # Found by tests/test_fuzz.py (seed 354351): a verticalAperture of 3e38 made the height
+    # overflow the renderer's integer, an OverflowError instead of a MiprayError.
+    stage = new_stage()
+    add_cube(stage, "/World/Cube")
+    add_camera(stage, "/World/Cam").CreateVerticalApertureAttr(3e38)
+    with pytest.raises(mipray.RenderSettingsError, match=r"^/World/Cam: an image 24 pixels wide"):
+        _render(stage)
+    usd = tmp_path / "tall.usda"
+    stage.GetRootLayer().Export(str(usd))
+    done = subprocess.run(
+        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=subprocess_env(),
+    )
+    assert done.returncode == 1, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("mipray-record: /World/Cam: an image 16 pixels wide"), done.stderr
+    assert not (tmp_path / "out.exr").exists()
+
+
 @pytest.mark.parametrize("problem", ["directory", "device", "file as folder"])
 def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_path, problem):
     # Frame 2's output cannot be written: nothing renders (frame 1's image was written, and

@@ -409,7 +409,7 @@ class RenderSession:
         camera_args = self.scene.cameras[camera_path]
         self.scene.update_camera_light(camera_path, camera_light)
         self.scene.update_motion(camera_path)
-        h = int(height) if height is not None else image_height(width, camera_args)
+        h = int(height) if height is not None else image_height(width, camera_args, camera_path)
         chosen = dict(settings or {})
         if progressive is not None:
             chosen["progressive"] = int(bool(progressive))

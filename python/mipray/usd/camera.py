@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Gf, Usd, UsdGeom, UsdSkel
 
-from ..errors import PrimError
+from ..errors import PrimError, RenderSettingsError
 from .transform import matrix_to_numpy
 
 __all__ = [
@@ -194,16 +194,29 @@ def framing_camera_arguments(
     }
 
 
-def image_height(width: int, camera_args: dict[str, Any]) -> int:
+def image_height(width: int, camera_args: dict[str, Any], camera: str = "the camera") -> int:
     """Image height for ``width`` pixels from the camera's aperture aspect ratio.
 
     Truncated to whole pixels in single precision, at least 1, as usdrecord's frame
     recorder computes it (so its command lines give its image sizes).
+
+    Raises:
+        RenderSettingsError: the aperture's aspect gives no height an image can have
+            (``camera`` names the camera in the message).
     """
-    aspect = np.float32(camera_args["horizontal_aperture"]) / np.float32(
-        camera_args["vertical_aperture"]
-    )
-    return max(1, int(np.float32(width) / aspect))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        aspect = np.float32(camera_args["horizontal_aperture"]) / np.float32(
+            camera_args["vertical_aperture"]
+        )
+        height = np.float32(width) / aspect
+    if not np.isfinite(height) or height >= 2.0**32:
+        # Past what any image side can be; the renderer's own check states the bound.
+        raise RenderSettingsError(
+            f"{camera}: an image {width} pixels wide through its aperture of "
+            f"{camera_args['horizontal_aperture']:g} x {camera_args['vertical_aperture']:g} "
+            "would be too tall to render; give the camera a sane aperture or the image a height"
+        )
+    return max(1, int(height))
 
 
 def camera_matrices(
