@@ -203,6 +203,7 @@ def image_height(width: int, camera_args: dict[str, Any], camera: str = "the cam
     Raises:
         RenderSettingsError: the aperture's aspect gives no height an image can have
             (``camera`` names the camera in the message).
+
     """
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         aspect = np.float32(camera_args["horizontal_aperture"]) / np.float32(
