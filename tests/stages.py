@@ -84,6 +84,48 @@ def add_preview_material(
     return material
 
 
+def add_textured_material(
+    stage: Usd.Stage,
+    path: str,
+    file: str,
+    *,
+    output: str = "rgb",
+    space: str | None = None,
+    wrap: str = "clamp",
+) -> UsdShade.Material:
+    """A UsdPreviewSurface whose diffuseColor (or opacity, for ``output`` ``a``) reads ``file``
+    at the mesh's ``st``, wrapping by ``wrap``; ``sourceColorSpace`` is ``space`` (None:
+    unauthored)."""
+    material = add_preview_material(stage, path, None)
+    surface = UsdShade.Shader(stage.GetPrimAtPath(f"{path}/PreviewSurface"))
+    reader = UsdShade.Shader.Define(stage, f"{path}/St")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    tex = UsdShade.Shader.Define(stage, f"{path}/Image")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+    if space is not None:
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
+    for name in ("wrapS", "wrapT"):
+        tex.CreateInput(name, Sdf.ValueTypeNames.Token).Set(wrap)
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        reader.ConnectableAPI(), "result"
+    )
+    if output == "a":
+        tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
+        surface.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
+            tex.ConnectableAPI(), "a"
+        )
+        surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
+    else:
+        tex.CreateOutput(output, Sdf.ValueTypeNames.Float3)
+        surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+            tex.ConnectableAPI(), output
+        )
+    return material
+
+
 def bind(prim: Usd.Prim, material: UsdShade.Material) -> None:
     """Bind ``material`` to ``prim`` (applying MaterialBindingAPI, as USD requires)."""
     UsdShade.MaterialBindingAPI.Apply(prim).Bind(material)

@@ -14,7 +14,15 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
 import mipray
 from mipray.usd import UsdSceneDelegate
 
-from stages import add_camera, add_cube, add_distant_light, add_preview_material, bind, new_stage
+from stages import (
+    add_camera,
+    add_cube,
+    add_distant_light,
+    add_preview_material,
+    add_textured_material,
+    bind,
+    new_stage,
+)
 
 # A 3 × 1 strip of unit quads in z = 0 facing +Z: faces 0, 1, 2 from left to right, with an
 # st primvar per point (s along x over the whole strip).
@@ -43,26 +51,9 @@ def subset(mesh: UsdGeom.Mesh, name: str, faces: list[int], material) -> UsdGeom
 
 
 def textured_material(stage: Usd.Stage, path: str, file: str) -> UsdShade.Material:
-    """A UsdPreviewSurface whose diffuseColor reads ``file`` at the mesh's ``st``."""
-    material = add_preview_material(stage, path, None)
-    surface = UsdShade.Shader(stage.GetPrimAtPath(f"{path}/PreviewSurface"))
-    reader = UsdShade.Shader.Define(stage, f"{path}/St")
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
-    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-    tex = UsdShade.Shader.Define(stage, f"{path}/Image")
-    tex.CreateIdAttr("UsdUVTexture")
-    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
-    for wrap in ("wrapS", "wrapT"):  # no black border blended in at the strip's edges
-        tex.CreateInput(wrap, Sdf.ValueTypeNames.Token).Set("repeat")
-    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-        reader.ConnectableAPI(), "result"
-    )
-    tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
-    surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
-        tex.ConnectableAPI(), "rgb"
-    )
-    return material
+    """diffuseColor from ``file`` at the mesh's ``st``, repeating: no black border blended in
+    at the strip's edges."""
+    return add_textured_material(stage, path, file, wrap="repeat")
 
 
 def make_texture(path: Path, color: tuple[float, ...], fmt: str = "uint8", size: int = 8) -> Path:

@@ -29,6 +29,18 @@ def _render(stage: Usd.Stage, width: int = 24, **settings: object) -> mipray.Ren
     return mipray.render(stage, width=width, settings={"samples": 1, "seed": 1, **settings})
 
 
+def _record(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """``mipray-record args`` in a new process; its exit status and text (never raises)."""
+    return subprocess.run(
+        [*record_command(), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+        env=subprocess_env(),
+    )
+
+
 def _stage_with(build) -> Usd.Stage:
     """A lit stage with a camera at z = 10, a cube /World/Ok down and left of the centre, and
     whatever ``build(stage)`` adds."""
@@ -240,14 +252,7 @@ def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, t
     usd = tmp_path / "bright.usda"
     stage.GetRootLayer().Export(str(usd))
     out = tmp_path / "bright.exr"
-    done = subprocess.run(
-        [*record_command(), str(usd), str(out), "--imageWidth", "16", "--camera", "/World/Camera"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), str(out), "--imageWidth", "16", "--camera", "/World/Camera")
     assert done.returncode == 0, done.stderr
     pixels, names = native.read_image(str(out))
     assert np.isfinite(pixels).all()
@@ -287,14 +292,7 @@ def test_an_unusable_stage_camera_is_reported_not_replaced(native, tmp_path) -> 
         _render(stage)
     usd = tmp_path / "bad_camera.usda"
     stage.GetRootLayer().Export(str(usd))
-    done = subprocess.run(
-        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16")
     assert done.returncode == 1
     assert (
         done.stderr.strip().splitlines()[-1].startswith("mipray-record: /World/Cam: cannot render")
@@ -312,14 +310,7 @@ def test_an_aperture_giving_no_possible_image_height_is_one_line(native, tmp_pat
         _render(stage)
     usd = tmp_path / "tall.usda"
     stage.GetRootLayer().Export(str(usd))
-    done = subprocess.run(
-        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16")
     assert done.returncode == 1, done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("mipray-record: /World/Cam: an image 16 pixels wide"), done.stderr
@@ -342,14 +333,7 @@ def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_pa
     else:
         pattern = str(tmp_path / "frame#" / "out.exr")
         (tmp_path / "frame2").write_text("a file where frame 2's folder would be made")
-    done = subprocess.run(
-        [*record_command(), str(usd), pattern, "--frames", "1:2", "--imageWidth", "8"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), pattern, "--frames", "1:2", "--imageWidth", "8")
     assert done.returncode == 1
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("mipray-record: ") and "2" in last, last
@@ -373,14 +357,7 @@ def test_a_texture_that_is_not_a_regular_file_is_refused_in_one_line(native, tmp
     if kind == "FIFO":
         os.mkfifo(file[kind])
     usd = _texture_stage(tmp_path, file[kind])
-    done = subprocess.run(
-        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=120)
     assert done.returncode == 0, done.stderr
     said = [line for line in done.stderr.splitlines() if file[kind] in line]
     assert said and all(line.startswith("mipray-record: ") for line in said), done.stderr
@@ -392,14 +369,7 @@ def test_a_usd_layer_that_is_a_fifo_is_refused_in_one_line(native, tmp_path) -> 
     # USD read it for ever.
     fifo = tmp_path / "shot.usda"
     os.mkfifo(fifo)
-    done = subprocess.run(
-        [*record_command(), str(fifo), str(tmp_path / "out.exr")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(fifo), str(tmp_path / "out.exr"), timeout=120)
     assert done.returncode == 1
     assert done.stderr.strip().splitlines() == [
         f"mipray-record: {fifo}: not a regular file (a FIFO); a USD layer must be a file"
@@ -426,14 +396,7 @@ def test_an_image_too_large_for_the_memory_is_refused_before_the_sync(native, tm
     assert "65536x" in str(caught.value) and "\n" not in str(caught.value)
     usd = tmp_path / "big.usda"
     stage.GetRootLayer().Export(str(usd))
-    done = subprocess.run(
-        [*record_command(), str(usd), str(tmp_path / "big.exr"), "--imageWidth", "65536"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), str(tmp_path / "big.exr"), "--imageWidth", "65536")
     assert done.returncode == 1
     last = done.stderr.strip().splitlines()
     assert len(last) == 1 and "memory available" in last[0], done.stderr
@@ -486,14 +449,7 @@ def test_an_image_librarys_own_messages_never_reach_stderr_unprefixed(native, tm
     cut = tmp_path / "cut.png"
     cut.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x04\x00\x00\x00\x04")
     usd = _texture_stage(tmp_path, str(cut))
-    done = subprocess.run(
-        [*record_command(), str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-        env=subprocess_env(),
-    )
+    done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=120)
     assert done.returncode == 0, done.stderr
     lines = [line for line in done.stderr.splitlines() if line.strip()]
     assert lines and all(line.startswith("mipray-record: ") for line in lines), done.stderr

@@ -18,7 +18,14 @@ import mipray
 from mipray.usd import UsdSceneDelegate
 from mipray.usd.assets import local_file, udim_tiles
 
-from stages import add_camera, add_cube, add_distant_light, add_preview_material, bind
+from stages import (
+    add_camera,
+    add_cube,
+    add_distant_light,
+    add_preview_material,
+    add_textured_material,
+    bind,
+)
 
 
 def oiiotool(*args: str) -> None:
@@ -54,34 +61,9 @@ def quads(stage: Usd.Stage, n: int = 1, path: str = "/World/Quads") -> UsdGeom.M
 def textured(
     stage: Usd.Stage, path: str, file: str, *, output: str = "rgb", space: str = "raw"
 ) -> UsdShade.Material:
-    """A UsdPreviewSurface whose diffuseColor (or opacity, for output ``a``) reads ``file``."""
-    material = add_preview_material(stage, path, None)
-    surface = UsdShade.Shader(stage.GetPrimAtPath(f"{path}/PreviewSurface"))
-    reader = UsdShade.Shader.Define(stage, f"{path}/St")
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
-    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-    tex = UsdShade.Shader.Define(stage, f"{path}/Image")
-    tex.CreateIdAttr("UsdUVTexture")
-    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
-    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
-    for wrap in ("wrapS", "wrapT"):  # the edge texel continues: no border blended in
-        tex.CreateInput(wrap, Sdf.ValueTypeNames.Token).Set("clamp")
-    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-        reader.ConnectableAPI(), "result"
-    )
-    if output == "a":
-        tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
-        surface.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
-            tex.ConnectableAPI(), "a"
-        )
-        surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
-    else:
-        tex.CreateOutput(output, Sdf.ValueTypeNames.Float3)
-        surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
-            tex.ConnectableAPI(), output
-        )
-    return material
+    """A textured material (see ``stages.add_textured_material``): the edge texel continues,
+    so no border is blended in; colour read as ``space`` (raw unless told)."""
+    return add_textured_material(stage, path, file, output=output, space=space, wrap="clamp")
 
 
 def lit(stage: Usd.Stage, n: int = 1) -> None:

@@ -47,6 +47,7 @@ __all__ = [
     "SHAPED_KINDS",
     "SHAPING_INPUTS",
     "area_light_arguments",
+    "authored_properties",
     "camera_light_arguments",
     "distant_light_arguments",
     "link_arguments",
@@ -286,6 +287,18 @@ def _warn_once(message: str) -> None:
         logging.getLogger(__name__).warning("mipray: %s", message)
 
 
+def authored_properties(prim: Usd.Prim, names: Iterable[str]) -> list[str]:
+    """The names among ``names`` whose attribute or relationship ``prim`` authors."""
+    found = []
+    for name in names:
+        prop = prim.GetProperty(name)
+        if isinstance(prop, Usd.Attribute) and prop.HasAuthoredValue():
+            found.append(name)
+        elif isinstance(prop, Usd.Relationship) and prop.HasAuthoredTargets():
+            found.append(name)
+    return found
+
+
 def linking_authored(prim: Usd.Prim, collection: str, time: Usd.TimeCode) -> list[str]:
     """What a light's ``collection:<collection>`` authors that limits it (empty: it holds all).
 
@@ -293,13 +306,7 @@ def linking_authored(prim: Usd.Prim, collection: str, time: Usd.TimeCode) -> lis
     """
     names = [f"collection:{collection}:{n}" for n in ("includes", "excludes")]
     names.append(f"collection:{collection}:membershipExpression")
-    found = []
-    for name in names:
-        prop = prim.GetProperty(name)
-        if isinstance(prop, Usd.Relationship) and prop.HasAuthoredTargets():
-            found.append(name)
-        elif isinstance(prop, Usd.Attribute) and prop.HasAuthoredValue():
-            found.append(name)
+    found = authored_properties(prim, names)
     root = prim.GetAttribute(f"collection:{collection}:includeRoot")
     if root and root.HasAuthoredValue() and not root.Get(time):
         found.append(root.GetName())

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade, UsdSkel
 
 from .gprim import GPRIM_TYPES
-from .light import AREA_LIGHT_TYPES, SHAPED_KINDS, SHAPING_INPUTS
+from .light import AREA_LIGHT_TYPES, SHAPED_KINDS, SHAPING_INPUTS, authored_properties
 from .materialx import mtlx_surface, unsupported_nodes
 from .mtlx_files import LOADED
 from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
@@ -122,18 +122,6 @@ def _prim_type(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     return []
 
 
-def _authored(prim: Usd.Prim, names: Iterable[str]) -> list[str]:
-    """The names among ``names`` whose attribute or relationship ``prim`` authors."""
-    found = []
-    for name in names:
-        prop = prim.GetProperty(name)
-        if isinstance(prop, Usd.Attribute) and prop.HasAuthoredValue():
-            found.append(name)
-        elif isinstance(prop, Usd.Relationship) and prop.HasAuthoredTargets():
-            found.append(name)
-    return found
-
-
 def _api_properties(api: str, unread: Callable[[str], bool] = lambda _: True) -> list[str]:
     definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition(api)
     return [n for n in (definition.GetPropertyNames() if definition else ()) if unread(n)]
@@ -152,7 +140,7 @@ def _applied(
         if api not in prim.GetAppliedSchemas():
             return []
         unread = _api_properties(api, lambda n: n.removeprefix("inputs:") not in read)
-        names = _authored(prim, unread)
+        names = authored_properties(prim, unread)
         return names or ([api] if presence else [])
 
     return check
@@ -180,7 +168,7 @@ def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
     if prim.IsA(UsdLux.DomeLight) and fmt and fmt.HasAuthoredValue():
         if str(fmt.Get(time)) not in ("automatic", "latlong"):
             unread.append(f"inputs:texture:format = {fmt.Get(time)}")
-    return unread + _authored(prim, ["light:filters", "portals"])
+    return unread + authored_properties(prim, ["light:filters", "portals"])
 
 
 def _clipping_planes(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
