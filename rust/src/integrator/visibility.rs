@@ -32,11 +32,12 @@
 //! With a threshold above 0, opacity at or above it is fully opaque (the BSDF takes opacity as
 //! 1), and below it there is nothing at all.
 
+use crate::differential::RayDifferential;
 use crate::light::MeshFilter;
 use crate::ray::{offset_origin, Ray};
 use crate::trace::{Hit, TraceCounters, Tracer};
 
-use super::shading_point;
+use super::{shading_point, ShadingPoint};
 
 /// Most cut-out surfaces one ray passes through before it is taken as blocked (a stack of leaf
 /// cards, say): a bound so a degenerate scene cannot loop, not physics.
@@ -62,14 +63,26 @@ pub fn pass_cutout(tracer: &Tracer<'_>, ray: &Ray, hit: &Hit, counters: &mut Tra
         return None;
     }
     let sp = shading_point(tracer, scene, ray, hit);
-    let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
-    counters.differential_clamps += u64::from(clamped);
+    let footprint = footprint_at(ray, hit, &sp, counters);
     let mesh = &scene.meshes[hit.mesh as usize];
     if !material.cut_out_at(mesh.surface.as_ref(), hit, &sp, &footprint) {
         return None;
     }
+    Some(ray_beyond(ray, hit, &sp, footprint))
+}
+
+/// `ray`'s differential carried to `hit` (at shading point `sp`); a clamp is counted.
+fn footprint_at(ray: &Ray, hit: &Hit, sp: &ShadingPoint, counters: &mut TraceCounters) -> RayDifferential {
+    let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
+    counters.differential_clamps += u64::from(clamped);
+    footprint
+}
+
+/// The rest of `ray` past `hit` (at shading point `sp`, with the differential `footprint` it has
+/// there): from just beyond the surface, for what is left of its length.
+fn ray_beyond(ray: &Ray, hit: &Hit, sp: &ShadingPoint, footprint: RayDifferential) -> Ray {
     let o = offset_origin(sp.p, hit.p_error, sp.ng, ray.d);
-    Some(Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..*ray })
+    Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..*ray }
 }
 
 /// True when a surface that is not cut out blocks `ray` (leaving the surface at `from`) within
@@ -121,12 +134,10 @@ pub fn occluded_by(tracer: &Tracer<'_>, ray: &Ray, from: &Hit, casters: &MeshFil
                 None => return true,
             }
         } else {
-            let scene = tracer.scene();
-            let sp = shading_point(tracer, scene, &ray, &hit);
-            let (footprint, clamped) = ray.diff.transfer_checked(ray.d, hit.t, sp.ng);
-            counters.differential_clamps += u64::from(clamped);
-            let o = offset_origin(sp.p, hit.p_error, sp.ng, ray.d);
-            Ray { o, t_min: 0.0, t_max: ray.t_max - hit.t, diff: footprint, ..ray }
+            // Not a caster of this light's shadows: passed as a cut-out is.
+            let sp = shading_point(tracer, tracer.scene(), &ray, &hit);
+            let footprint = footprint_at(&ray, &hit, &sp, counters);
+            ray_beyond(&ray, &hit, &sp, footprint)
         };
         if passed == MAX_CUTOUTS {
             counters.cutout_limit += 1;
