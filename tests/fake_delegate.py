@@ -80,17 +80,12 @@ class FakeRenderDelegate:
         hole_indices: NDArray[np.int32] | None = None,
         left_handed: bool = False,
         double_sided: bool = False,
-        albedo: tuple[float, float, float] = (0.18, 0.18, 0.18),
         prototype: bool = False,
-        face_albedos: NDArray[np.float32] | None = None,
-        face_albedo_indices: NDArray[np.int32] | None = None,
-        mirror: tuple[float, float, float] = (0.0, 0.0, 0.0),
         displacement_bound: float | None = None,
         displacement: tuple[float, float, int, float] | None = None,
         st_values: NDArray[np.float32] | None = None,
         st_indices: NDArray[np.int32] | None = None,
         st_interpolation: str = "faceVarying",
-        diffuse_texture: dict[str, object] | None = None,
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
@@ -107,23 +102,18 @@ class FakeRenderDelegate:
                 raise ValueError(f"{path}: a texture needs a file")
         if st_values is not None:
             _check_array(path, "st_values", st_values, np.float32, 2)
-        for tex in (diffuse_texture, displacement_texture):
-            if tex is not None and "file" not in tex:
-                raise ValueError(f"{path}: a texture needs a file")
+        if displacement_texture is not None and "file" not in displacement_texture:
+            raise ValueError(f"{path}: a texture needs a file")
         if path in self.reject:
             raise ValueError(f"{path}: rejected by the fake delegate")
-        if (face_albedos is None) != (face_albedo_indices is None):
-            raise ValueError(f"{path}: face_albedos and face_albedo_indices go together")
-        if face_albedos is not None:
-            _check_array(path, "face_albedos", face_albedos, np.float32, 2)
-            _check_array(path, "face_albedo_indices", face_albedo_indices, np.int32, 1)
-            if len(face_albedo_indices) != len(face_vertex_counts):
-                raise ValueError(f"{path}: face_albedo_indices has the wrong length")
         if (face_materials is None) != (face_material_indices is None):
             raise ValueError(f"{path}: face_materials and face_material_indices go together")
         if face_materials is not None:
             _check_array(path, "face_material_indices", face_material_indices, np.int32, 1)
-            if len(face_material_indices) != len(face_vertex_counts):
+            # Points: one entry per point (each point's sphere is a face of its own).
+            points_prim = gprim is not None and gprim.get("type") == "Points"
+            faces = len(points) if points_prim else len(face_vertex_counts)
+            if len(face_material_indices) != faces:
                 raise ValueError(f"{path}: face_material_indices has the wrong length")
             if int(face_material_indices.max(initial=-1)) >= len(face_materials):
                 raise ValueError(f"{path}: face_material_indices out of range")
@@ -356,6 +346,58 @@ class FakeRenderDelegate:
             if not kw["prototype"]:
                 expand(kw, np.eye(4), 0)
         return out
+
+
+def display_color(args: dict[str, Any], path: str) -> tuple[float, float, float] | None:
+    """The colour ``set_mesh`` got for the prim at ``path`` without a UsdPreviewSurface.
+
+    That is the lambertian ``material`` named after the prim
+    (:func:`mipray.usd.material.lambertian`); None when the material is another (a bound
+    network, named after its material prim) or absent.
+    """
+    from mipray.usd.material import lambertian
+
+    material = args.get("material")
+    if material is None or material.get("name") != path:
+        return None
+    assert material == lambertian(path, material["diffuseColor"]), material
+    return material["diffuseColor"]
+
+
+def face_colors(args: dict[str, Any]) -> NDArray[np.float32]:
+    """(F, 3) diffuse colour per face as the delegate will shade it.
+
+    A face of the mesh's own material with a ``diffuseColor`` primvar takes the mean of its
+    corners' values (its colour at the centre under bilinear interpolation).
+    """
+
+    def colour(material: dict[str, Any] | None) -> NDArray[np.float32]:
+        return np.asarray((material or {}).get("diffuseColor", (0.18,) * 3), np.float32)
+
+    counts = np.asarray(args["face_vertex_counts"])
+    n = len(counts)
+    own = np.tile(colour(args.get("material")), (n, 1))
+    primvar = (args.get("primvars") or {}).get("diffuseColor")
+    if primvar is not None:
+        values = np.asarray(primvar["values"], np.float32)
+        if primvar.get("indices") is not None:
+            values = values[primvar["indices"]]
+        interpolation = primvar["interpolation"]
+        if interpolation == "constant":
+            own = np.tile(values[0], (n, 1))
+        elif interpolation == "uniform":
+            own = values[:n]
+        else:
+            corners = (
+                values[args["face_vertex_indices"]] if interpolation != "faceVarying" else values
+            )
+            starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+            own = np.add.reduceat(corners, starts, axis=0) / counts[:, None]
+    if args.get("face_materials") is None:
+        return own
+    table = np.asarray([colour(m) for m in args["face_materials"]], np.float32).reshape(-1, 3)
+    indices = args["face_material_indices"]
+    return np.where(indices[:, None] < 0, own, table[np.maximum(indices, 0)])
 
 
 def locals_without_self(values: dict[str, Any]) -> dict[str, Any]:

@@ -9,6 +9,7 @@ from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 import mipray
 from mipray.usd import UsdSceneDelegate
 
+from fake_delegate import face_colors
 from stages import add_camera, add_cube, add_distant_light, add_preview_material, bind, new_stage
 
 # A 3 × 1 strip of unit quads in z = 0 facing +Z: faces 0, 1, 2 from left to right.
@@ -34,15 +35,6 @@ def subset(mesh: UsdGeom.Mesh, name: str, faces: list[int], material) -> UsdGeom
     if material is not None:
         UsdShade.MaterialBindingAPI.Apply(sub.GetPrim()).Bind(material)
     return sub
-
-
-def face_colors(args: dict) -> np.ndarray:
-    """(F, 3) colour per face as the delegate will shade it."""
-    n = len(args["face_vertex_counts"])
-    if args["face_albedos"] is None:
-        return np.tile(np.asarray(args["albedo"], np.float32), (n, 1))
-    table = args["face_albedos"][args["face_albedo_indices"]]
-    return np.where(args["face_albedo_indices"][:, None] < 0, args["albedo"], table)
 
 
 def synced(stage, fake) -> UsdSceneDelegate:
@@ -72,7 +64,9 @@ def test_subset_without_own_binding_uses_the_mesh_material(fake) -> None:
     subset(mesh, "Plain", [0, 2], None)
     synced(stage, fake)
     args = fake.meshes()["/World/Strip"]
-    assert args["face_albedos"] is None and args["albedo"] == pytest.approx((0, 0, 1))
+    assert args["face_materials"] is None and args["material"]["diffuseColor"] == pytest.approx(
+        (0, 0, 1)
+    )
 
 
 def test_subset_edit_resyncs_its_mesh(fake) -> None:
@@ -190,7 +184,7 @@ def test_material_wins_over_display_color(fake) -> None:
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.uniform).Set([(1, 0, 0), (0, 1, 0), (0, 0, 1)])
     bind(mesh.GetPrim(), add_preview_material(stage, "/Looks/Grey", (0.5, 0.5, 0.5)))
     synced(stage, fake)
-    assert fake.meshes()["/World/Strip"]["face_albedos"] is None
+    assert fake.meshes()["/World/Strip"]["face_materials"] is None
 
 
 @pytest.mark.parametrize(

@@ -75,7 +75,7 @@ def test_material_edit_resyncs_the_meshes_bound_to_it(fake) -> None:
     bind(cubes["A"].GetPrim(), material)
     bind(cubes["C"].GetPrim(), material)
     scene.sync()
-    assert fake.meshes()["/World/A"]["albedo"] == (1.0, 0.0, 0.0)
+    assert tuple(fake.meshes()["/World/A"]["material"]["diffuseColor"]) == (1.0, 0.0, 0.0)
     before = dict(scene.sync_counts)
     shader = stage.GetPrimAtPath("/Looks/Red/PreviewSurface")
     shader.GetAttribute("inputs:diffuseColor").Set(Gf.Vec3f(0.0, 0.5, 0.0))
@@ -84,7 +84,7 @@ def test_material_edit_resyncs_the_meshes_bound_to_it(fake) -> None:
         "/World/A",
         "/World/C",
     }
-    assert fake.meshes()["/World/C"]["albedo"] == (0.0, 0.5, 0.0)
+    assert tuple(fake.meshes()["/World/C"]["material"]["diffuseColor"]) == (0.0, 0.5, 0.0)
 
 
 def test_added_removed_and_hidden_prims(fake) -> None:

@@ -8,6 +8,7 @@ from pxr import Gf, Sdf, UsdGeom, UsdShade
 
 from mipray.usd import UsdSceneDelegate
 
+from fake_delegate import display_color, face_colors
 from stages import (
     CUBE_COUNTS,
     CUBE_INDICES,
@@ -84,7 +85,7 @@ def test_unauthored_tags_use_usd_fallbacks_and_none(fake) -> None:
         assert args[key] is None, key
     assert args["left_handed"] is False
     assert args["double_sided"] is False
-    assert args["albedo"] == (0.18, 0.18, 0.18)
+    assert display_color(args, "/Cube") == (0.18, 0.18, 0.18)
 
 
 @pytest.mark.parametrize("scheme", ["none", "bilinear", "loop"])
@@ -131,7 +132,7 @@ def test_albedo_from_bound_preview_surface(fake) -> None:
     cube.CreateDisplayColorAttr([(0.0, 0.0, 1.0)])
     bind(cube.GetPrim(), add_preview_material(stage, "/Looks/Red", (0.8, 0.1, 0.05)))
     sync(stage, fake)
-    assert fake.meshes()["/Cube"]["albedo"] == pytest.approx((0.8, 0.1, 0.05))
+    assert fake.meshes()["/Cube"]["material"]["diffuseColor"] == pytest.approx((0.8, 0.1, 0.05))
 
 
 def test_albedo_binding_is_inherited_from_an_ancestor(fake) -> None:
@@ -139,7 +140,9 @@ def test_albedo_binding_is_inherited_from_an_ancestor(fake) -> None:
     add_cube(stage, "/Group/Cube")
     bind(stage.GetPrimAtPath("/Group"), add_preview_material(stage, "/Looks/G", (0.2, 0.7, 0.2)))
     sync(stage, fake)
-    assert fake.meshes()["/Group/Cube"]["albedo"] == pytest.approx((0.2, 0.7, 0.2))
+    assert fake.meshes()["/Group/Cube"]["material"]["diffuseColor"] == pytest.approx(
+        (0.2, 0.7, 0.2)
+    )
 
 
 def test_unauthored_diffuse_is_the_preview_surface_default(fake) -> None:
@@ -148,7 +151,7 @@ def test_unauthored_diffuse_is_the_preview_surface_default(fake) -> None:
     cube.CreateDisplayColorAttr([(0.0, 0.0, 1.0)])
     bind(cube.GetPrim(), add_preview_material(stage, "/Looks/Plain", None))
     sync(stage, fake)
-    assert fake.meshes()["/Cube"]["albedo"] == pytest.approx((0.18, 0.18, 0.18))
+    assert tuple(face_colors(fake.meshes()["/Cube"])[0]) == pytest.approx((0.18, 0.18, 0.18))
 
 
 def test_textured_diffuse_falls_back_to_display_color(fake) -> None:
@@ -165,9 +168,9 @@ def test_textured_diffuse_falls_back_to_display_color(fake) -> None:
     bind(cube.GetPrim(), material)
     sync(stage, fake)
     mesh = fake.meshes()["/Cube"]
-    # The constant albedo falls back to displayColor; the texture travels separately (the
-    # renderer uses the texture's own fallback if the file cannot be read).
-    assert mesh["albedo"] == pytest.approx((0.1, 0.2, 0.3))
+    # The network shades it, not displayColor; the renderer uses the texture's own fallback
+    # if the file cannot be read.
+    assert display_color(mesh, "/Cube") is None
     assert mesh["material"]["textures"]["diffuseColor"]["file"].endswith("wood.png")
     assert mesh["material"]["textures"]["diffuseColor"]["channel"] == 0
 
@@ -182,7 +185,7 @@ def test_diffuse_through_a_material_interface_input_is_constant(fake) -> None:
     surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(knob)
     bind(cube.GetPrim(), material)
     sync(stage, fake)
-    assert fake.meshes()["/Cube"]["albedo"] == pytest.approx((0.3, 0.4, 0.5))
+    assert fake.meshes()["/Cube"]["material"]["diffuseColor"] == pytest.approx((0.3, 0.4, 0.5))
 
 
 def test_albedo_from_display_color_else_grey(fake) -> None:
@@ -193,11 +196,11 @@ def test_albedo_from_display_color_else_grey(fake) -> None:
     many.CreateDisplayColorPrimvar(UsdGeom.Tokens.uniform).Set([(1, 0, 0)] * 6)
     add_cube(stage, "/None")
     sync(stage, fake)
-    assert fake.meshes()["/One"]["albedo"] == pytest.approx((0.9, 0.5, 0.1))
+    assert display_color(fake.meshes()["/One"], "/One") == pytest.approx((0.9, 0.5, 0.1))
     # The same colour on every face is one albedo, no per-face table.
-    assert fake.meshes()["/Many"]["albedo"] == pytest.approx((1.0, 0.0, 0.0))
-    assert fake.meshes()["/Many"]["face_albedos"] is None
-    assert fake.meshes()["/None"]["albedo"] == pytest.approx((0.18, 0.18, 0.18))
+    assert display_color(fake.meshes()["/Many"], "/Many") == pytest.approx((1.0, 0.0, 0.0))
+    assert fake.meshes()["/Many"]["face_materials"] is None
+    assert display_color(fake.meshes()["/None"], "/None") == pytest.approx((0.18, 0.18, 0.18))
 
 
 def test_time_sampled_points_are_read_at_the_time_code(fake) -> None:

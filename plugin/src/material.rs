@@ -1,63 +1,21 @@
 //! Materials. A mesh bound to a UsdPreviewSurface carries its inputs ([`SurfaceInputs`]: the
 //! constants as authored and a [`TextureInput`] per textured input); the render delegate turns
-//! them into the core's [`Material`], clamped into range and with its textures opened. A mesh
-//! with only a resolved diffuse color (display color, no material) becomes a lambertian
-//! material.
+//! them into the core's [`mipray::material::Material`], clamped into range and with its textures opened. A mesh
+//! with only a display colour crosses as the same inputs ([`SurfaceInputs::lambertian`]), so
+//! there is one material model.
 
 use glam::Vec3A;
-use mipray::material::{Input, Material, PreviewSurface};
+use mipray::material::{Input, PreviewSurface};
 
-/// The material for a mesh's resolved albedo and mirror reflectance; warns once per mesh when
-/// values were clamped.
-pub fn mesh_material(path: &str, albedo: [f32; 3], mirror: [f32; 3]) -> Material {
-    let (d, m) = (Vec3A::from(albedo), Vec3A::from(mirror));
-    let mat = if m == Vec3A::ZERO { Material::lambertian(path, d).0 } else { Material::mirror(path, d, m) };
-    if mat.surface.diffuse_color != d || (m != Vec3A::ZERO && mat.surface.specular_color != m) {
-        log::warn!("{path}: diffuse color {albedo:?} and mirror {mirror:?} clamped to [0, 1]");
-    }
-    mat
-}
-
-/// Per-face diffuse colours of a mesh: faces of GeomSubsets bound to their own materials, or a
-/// `displayColor` with uniform (or per-vertex, averaged per face) interpolation.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct FaceAlbedo {
-    /// The distinct colours, linear RGB in [0, 1].
-    pub albedos: Vec<[f32; 3]>,
-    /// Per control face (USD face order, holes included): an index into `albedos`, or −1 for
-    /// the mesh's own albedo.
-    pub indices: Vec<i32>,
-}
-
-impl FaceAlbedo {
-    /// Checks the table against a mesh of `face_count` faces.
-    ///
-    /// # Errors
-    /// A one-line reason: the wrong number of indices, an index out of range, or a colour
-    /// that is not finite.
-    pub fn validate(&self, face_count: usize) -> Result<(), String> {
-        if self.indices.len() != face_count {
-            return Err(format!("face_albedo_indices has {} entries for {face_count} faces", self.indices.len()));
-        }
-        if let Some((i, v)) = self.indices.iter().enumerate().find(|(_, v)| **v < -1 || **v as i64 >= self.albedos.len() as i64) {
-            return Err(format!("face_albedo_indices[{i}] = {v} is out of range for {} face albedos", self.albedos.len()));
-        }
-        if let Some((i, c)) = self.albedos.iter().enumerate().find(|(_, c)| !c.iter().all(|x| x.is_finite())) {
-            return Err(format!("face_albedos[{i}] = {c:?} is not finite"));
-        }
-        Ok(())
-    }
-}
-
-/// Whole UsdPreviewSurface networks on some faces of a mesh: GeomSubsets bound to their own
-/// materials, textures included. A face listed here takes its material over the mesh's own
-/// and over [`FaceAlbedo`].
+/// Materials of their own on some faces of a mesh: GeomSubsets bound to their own
+/// UsdPreviewSurfaces (textures included), faces of a per-face display colour. A face listed
+/// here takes its material over the mesh's own.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FaceMaterials {
     /// The distinct materials.
     pub materials: Vec<SurfaceInputs>,
-    /// Per control face (USD face order, holes included): an index into `materials`, or −1
-    /// for the face's colour from [`FaceAlbedo`] or the mesh's material.
+    /// Per control face (USD face order, holes included; per point for Points): an index into
+    /// `materials`, or −1 for the mesh's material.
     pub indices: Vec<i32>,
 }
 
@@ -142,6 +100,26 @@ impl SurfaceInputs {
     pub fn new(name: impl Into<String>) -> Self {
         SurfaceInputs { name: name.into(), surface: PreviewSurface::default(), textures: Vec::new() }
     }
+
+    /// A lambertian surface of linear RGB `diffuse_color`: the specular workflow with no
+    /// specular, as [`mipray::material::Material::lambertian`] builds it (a display colour
+    /// without a material).
+    pub fn lambertian(name: impl Into<String>, diffuse_color: [f32; 3]) -> Self {
+        let mut out = SurfaceInputs::new(name);
+        out.surface.diffuse_color = Vec3A::from(diffuse_color);
+        out.surface.use_specular_workflow = true;
+        out.surface.specular_color = Vec3A::ZERO;
+        out
+    }
+
+    /// `diffuse_color` under a smooth delta mirror of normal-incidence reflectance `mirror`
+    /// (linear RGB), as [`mipray::material::Material::mirror`] builds it.
+    pub fn mirror(name: impl Into<String>, diffuse_color: [f32; 3], mirror: [f32; 3]) -> Self {
+        let mut out = SurfaceInputs::lambertian(name, diffuse_color);
+        out.surface.specular_color = Vec3A::from(mirror);
+        out.surface.roughness = 0.0;
+        out
+    }
 }
 
 /// Whether `input` is a colour (three channels) rather than a float (one channel) or the normal.
@@ -195,6 +173,19 @@ mod tests {
         assert_eq!(table.validate(4).unwrap_err(), "face_material_indices has 3 entries for 4 faces");
         let bad = FaceMaterials { materials: vec![SurfaceInputs::new("/Looks/A")], indices: vec![0, 1, -2] };
         assert_eq!(bad.validate(3).unwrap_err(), "face_material_indices[1] = 1 is out of range for 1 face materials");
+    }
+
+    #[test]
+    fn lambertian_and_mirror_inputs_build_the_core_materials_they_name() {
+        use mipray::material::Material;
+        for (d, m) in [([0.2, 0.4, 0.6], [0.0; 3]), ([0.05; 3], [0.9, 0.5, 0.1]), ([1.5, -0.2, f32::NAN], [2.0, 0.3, 0.3])] {
+            let (d3, m3) = (Vec3A::from(d), Vec3A::from(m));
+            let want = if m3 == Vec3A::ZERO { Material::lambertian("/q", d3).0 } else { Material::mirror("/q", d3, m3) };
+            let inputs = if m3 == Vec3A::ZERO { SurfaceInputs::lambertian("/q", d) } else { SurfaceInputs::mirror("/q", d, m) };
+            let (got, _) = Material::preview_surface(inputs.name, inputs.surface);
+            // Bitwise, NaN included: the examples must render bit-identical through either.
+            assert_eq!(format!("{:?}", got.surface), format!("{:?}", want.surface));
+        }
     }
 
     #[test]

@@ -13,7 +13,7 @@ use mipray_bridge::OsdSurface;
 
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
-use crate::material::{FaceAlbedo, FaceMaterials, SurfaceInputs, TextureInput};
+use crate::material::{FaceMaterials, SurfaceInputs, TextureInput};
 use mipray::material::{Input, PrimvarInput};
 use mipray::texture::Primvar2;
 
@@ -25,13 +25,9 @@ pub struct MeshData {
     pub points: Vec<[f32; 3]>,
     pub transform: Mat4,
     pub double_sided: bool,
-    /// Linear RGB diffuse reflectance (the resolved material's diffuseColor or displayColor);
-    /// used when there is no [`MeshData::material`].
-    pub albedo: [f32; 3],
-    /// Normal-incidence reflectance of a perfect mirror layer over `albedo` (callers without a
-    /// material); used when there is no [`MeshData::material`].
-    pub mirror: [f32; 3],
-    /// The bound UsdPreviewSurface's inputs; replaces `albedo`, `mirror` and `diffuse_texture`.
+    /// The mesh's UsdPreviewSurface: the bound material's inputs, or for a mesh without one
+    /// its display colour as a lambertian surface ([`SurfaceInputs::lambertian`]); `None`
+    /// renders UsdPreviewSurface's 0.18 grey, lambertian.
     pub material: Option<SurfaceInputs>,
     /// Object units; `None` uses the procedural displacement's own bound, else the render
     /// setting.
@@ -41,11 +37,8 @@ pub struct MeshData {
     /// A prototype of instancers: rendered only where an instancer places it, and `transform`
     /// is then relative to the prototype's root (see [`crate::instancer`]).
     pub prototype: bool,
-    /// Per-face diffuse colours overriding `albedo` on some faces (GeomSubsets bound to their
-    /// own materials, uniform `displayColor`).
-    pub face_albedo: Option<FaceAlbedo>,
-    /// Whole materials on some faces (GeomSubsets bound to UsdPreviewSurfaces, textures
-    /// included), over `face_albedo` and `material`.
+    /// Materials of their own on some faces (GeomSubsets bound to UsdPreviewSurfaces, textures
+    /// included; per-face display colours as lambertian surfaces), over `material`.
     pub face_materials: Option<FaceMaterials>,
     /// The `st` primvar the textures read (face-varying through OpenSubdiv).
     pub st: Option<Primvar2>,
@@ -56,11 +49,6 @@ pub struct MeshData {
     /// mesh without a material, a `UsdPrimvarReader_*`): each primvar as the channels of
     /// [`Primvar2::split`] (one for a float, two for a colour).
     pub primvar_inputs: Vec<(Input, Vec<Primvar2>)>,
-    /// The faces the primvar-fed inputs shade where [`MeshData::face_albedo`] gives others
-    /// a colour of their own (a GeomSubset's material); empty: every face.
-    pub primvar_faces: Vec<i32>,
-    /// `diffuseColor` from a texture (replaces `albedo`) for a mesh without a `material`.
-    pub diffuse_texture: Option<TextureInput>,
     /// `displacement` from a texture (replaces the procedural displacement).
     pub displacement_texture: Option<TextureInput>,
     /// Set for gprims other than meshes, which are intersected exactly: their shape replaces
@@ -114,7 +102,7 @@ impl MeshData {
         channels
     }
 
-    /// The faces [`MeshData::face_albedo`] indexes: the topology's, or for Points one per
+    /// The faces [`MeshData::face_materials`] indexes: the topology's, or for Points one per
     /// point (each point's sphere is a patch of its own base face).
     pub fn face_count(&self) -> usize {
         match self.gprim {
@@ -142,19 +130,14 @@ impl Default for MeshData {
             points: Vec::new(),
             transform: Mat4::IDENTITY,
             double_sided: false,
-            albedo: [0.18; 3],
-            mirror: [0.0; 3],
             material: None,
             displacement_bound: None,
             displacement: None,
             prototype: false,
-            face_albedo: None,
             face_materials: None,
             st: None,
             normals: Vec::new(),
             primvar_inputs: Vec::new(),
-            primvar_faces: Vec::new(),
-            diffuse_texture: None,
             displacement_texture: None,
             gprim: None,
         }
@@ -232,13 +215,8 @@ impl MeshPrim {
         if self.data.transform != new.transform {
             d = d | DirtyBits::TRANSFORM;
         }
-        if self.data.albedo != new.albedo
-            || self.data.mirror != new.mirror
-            || self.data.double_sided != new.double_sided
-            || self.data.face_albedo != new.face_albedo
-            || self.data.primvar_faces != new.primvar_faces
+        if self.data.double_sided != new.double_sided
             || self.data.face_materials != new.face_materials
-            || self.data.diffuse_texture != new.diffuse_texture
             || self.data.material != new.material
         {
             d = d | DirtyBits::MATERIAL;
@@ -269,14 +247,7 @@ impl MeshPrim {
         self.dirty = DirtyBits::CLEAN;
         if dirty.contains(DirtyBits::MATERIAL) || dirty.contains(DirtyBits::TOPOLOGY) {
             let faces = self.data.face_count();
-            let problem = match (
-                self.data.face_albedo.as_ref().map(|f| f.validate(faces)),
-                self.data.face_materials.as_ref().map(|f| f.validate(faces)),
-            ) {
-                (Some(Err(p)), _) | (_, Some(Err(p))) => Some(p),
-                _ => None,
-            };
-            if let Some(problem) = problem {
+            if let Some(Err(problem)) = self.data.face_materials.as_ref().map(|f| f.validate(faces)) {
                 // Left out until fixed; the fix rebuilds the surface (a rare case, kept simple).
                 self.surface = None;
                 let e = DelegateError::prim(&self.path, problem);

@@ -10,7 +10,7 @@ use mipray::material::{Input, Material, TexturedColor};
 use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler, UdimSampler};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
-use glam::Mat4;
+use glam::{Mat4, Vec3A};
 
 use mipray::geometry_cache::{CacheConfig, GeometryCache};
 use mipray::tessellate::Tessellation;
@@ -22,7 +22,7 @@ use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
 use crate::light::{AreaKind, DistantLightData, LightPrim, LinkData};
-use crate::material::{is_color, mesh_material, set_input, SurfaceInputs, TextureInput};
+use crate::material::{is_color, set_input, SurfaceInputs, TextureInput};
 use crate::mesh::{MeshData, MeshPrim};
 
 /// Rprim types the delegate renders.
@@ -158,8 +158,7 @@ impl RenderDelegate {
     /// OpenImageIO could not start a texture system.
     pub fn prepare_textures(&mut self, options: OiioTextureOptions) -> Result<(), DelegateError> {
         let needed = self.meshes.values().any(|m| {
-            m.data.diffuse_texture.is_some()
-                || m.data.displacement_texture.is_some()
+            m.data.displacement_texture.is_some()
                 || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
                 || m.data.face_materials.as_ref().is_some_and(|f| f.materials.iter().any(|s| !s.textures.is_empty()))
         }) || self
@@ -478,17 +477,8 @@ impl RenderDelegate {
         let surface = m.surface.as_ref()?;
         let material = match &m.data.material {
             Some(inputs) => self.preview_material(&m.path, inputs),
-            None => {
-                let mut material = mesh_material(&m.path, m.data.albedo, m.data.mirror);
-                if let Some(input) = &m.data.diffuse_texture {
-                    match self.textured_color(&m.path, Input::DiffuseColor, input) {
-                        Some(t) => material.textures.push((Input::DiffuseColor, t)),
-                        // Unreadable: the input's fallback value, as UsdUVTexture says.
-                        None => material.surface.diffuse_color = mipray::material::clamp_color(input.affine(Input::DiffuseColor).2),
-                    }
-                }
-                material
-            }
+            // UsdPreviewSurface's fallback colour, lambertian as a display colour is.
+            None => Material::lambertian(m.path.as_str(), Vec3A::splat(0.18)).0,
         };
         let channels = m.data.channels();
         let mut material = material;
@@ -499,27 +489,6 @@ impl RenderDelegate {
         let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
         mesh.material = mat;
-        let mut table: Option<Vec<u32>> = None;
-        if let Some(fa) = &m.data.face_albedo {
-            let first = scene.materials.len();
-            for (k, albedo) in fa.albedos.iter().enumerate() {
-                // Face materials are lambertian: a subset's material does not inherit the mesh's mirror.
-                scene.add_material(mesh_material(&format!("{}[{k}]", m.path), *albedo, [0.0; 3]));
-            }
-            let mut faces: Vec<u32> = fa.indices.iter().map(|&i| if i < 0 { mat as u32 } else { (first + i as usize) as u32 }).collect();
-            if !channels.inputs.is_empty() {
-                // Faces a primvar shades take the mesh's material, which reads it.
-                if m.data.primvar_faces.is_empty() {
-                    faces.iter_mut().for_each(|t| *t = mat as u32);
-                }
-                for &f in &m.data.primvar_faces {
-                    if let Some(t) = faces.get_mut(f as usize) {
-                        *t = mat as u32;
-                    }
-                }
-            }
-            table = Some(faces);
-        }
         if let Some(fm) = &m.data.face_materials {
             // A subset's whole network: its own textures and lobes, not only its diffuse colour.
             let ids: Vec<u32> = fm
@@ -533,14 +502,9 @@ impl RenderDelegate {
                     scene.add_material(material) as u32
                 })
                 .collect();
-            let faces = table.get_or_insert_with(|| vec![mat as u32; fm.indices.len()]);
-            for (slot, &i) in faces.iter_mut().zip(&fm.indices) {
-                if i >= 0 {
-                    *slot = ids[i as usize];
-                }
-            }
+            let table: Vec<u32> = fm.indices.iter().map(|&i| if i < 0 { mat as u32 } else { ids[i as usize] }).collect();
+            mesh.face_materials = Some(table.into());
         }
-        mesh.face_materials = table.map(Into::into);
         mesh.normals = channels.normals;
         mesh.generation = m.generation;
         mesh.cache_id = Some(m.cache_id);

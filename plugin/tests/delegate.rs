@@ -4,6 +4,7 @@
 mod common;
 
 use glam::{Mat4, Vec3};
+use hd_mipray::material::SurfaceInputs;
 use hd_mipray::mesh::MeshData;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
@@ -23,7 +24,7 @@ fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
 }
 
 fn data(topology: MeshTopology, points: Vec<[f32; 3]>, transform: Mat4) -> MeshData {
-    MeshData { topology, points, transform, albedo: [0.5; 3], ..Default::default() }
+    MeshData { topology, points, transform, material: Some(SurfaceInputs::lambertian("/grey", [0.5; 3])), ..Default::default() }
 }
 
 fn delegate_with_camera(eye: Vec3, target: Vec3) -> RenderDelegate {

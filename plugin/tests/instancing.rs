@@ -5,7 +5,7 @@ mod common;
 
 use glam::{Mat4, Vec3};
 use hd_mipray::instancer::InstancerData;
-use hd_mipray::material::FaceAlbedo;
+use hd_mipray::material::{FaceMaterials, SurfaceInputs};
 use hd_mipray::mesh::MeshData;
 use hd_mipray::render_pass::PassResult;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
@@ -13,10 +13,18 @@ use mipray::aov::Aov;
 use mipray::progress::NoProgress;
 use mipray::topology::{MeshTopology, Scheme};
 
+fn grey() -> SurfaceInputs {
+    SurfaceInputs::lambertian("/grey", [0.5; 3])
+}
+
+fn red_faces(indices: Vec<i32>) -> FaceMaterials {
+    FaceMaterials { materials: vec![SurfaceInputs::lambertian("/red", [1.0, 0.0, 0.0])], indices }
+}
+
 /// A subdivided cube of side 2 centred on the origin.
 fn cube(transform: Mat4) -> MeshData {
     let (topology, points) = common::cube();
-    MeshData { topology, points, transform, albedo: [0.5; 3], ..Default::default() }
+    MeshData { topology, points, transform, material: Some(grey()), ..Default::default() }
 }
 
 /// Two polygonal unit quads side by side in z = 0: face 0 on the left (x < 0), face 1 on the right.
@@ -28,7 +36,7 @@ fn two_quads() -> MeshData {
         face_vertex_indices: vec![0, 1, 4, 3, 1, 2, 5, 4],
         ..Default::default()
     };
-    MeshData { topology, points, albedo: [0.5; 3], ..Default::default() }
+    MeshData { topology, points, material: Some(grey()), ..Default::default() }
 }
 
 fn delegate(eye: Vec3) -> RenderDelegate {
@@ -113,10 +121,10 @@ fn set_transform_moves_a_mesh_without_rebuilding_it() {
 }
 
 #[test]
-fn face_albedo_colours_exactly_its_faces() {
+fn face_materials_colour_exactly_their_faces() {
     let mut d = delegate(Vec3::new(0.0, 0.0, 4.0));
     let mut quads = two_quads();
-    quads.face_albedo = Some(FaceAlbedo { albedos: vec![[1.0, 0.0, 0.0]], indices: vec![-1, 0] });
+    quads.face_materials = Some(red_faces(vec![-1, 0]));
     d.set_mesh("/q", quads.clone());
     let r = render(&mut d, &["color"]);
     let px = |x: usize| {
@@ -127,9 +135,9 @@ fn face_albedo_colours_exactly_its_faces() {
     assert!(left[0] > 0.0 && (left[0] - left[1]).abs() < 1e-6, "the left face keeps the mesh's grey: {left:?}");
     assert!(right[0] > 0.0 && right[1] == 0.0 && right[2] == 0.0, "the right face is red: {right:?}");
 
-    quads.face_albedo = Some(FaceAlbedo { albedos: vec![[1.0, 0.0, 0.0]], indices: vec![0, 1] });
+    quads.face_materials = Some(red_faces(vec![0, 1]));
     d.set_mesh("/q", quads);
     let bad = render(&mut d, &["color"]);
     assert_eq!(bad.prim_errors.len(), 1);
-    assert_eq!(bad.prim_errors[0].to_string(), "/q: face_albedo_indices[1] = 1 is out of range for 1 face albedos");
+    assert_eq!(bad.prim_errors[0].to_string(), "/q: face_material_indices[1] = 1 is out of range for 1 face materials");
 }

@@ -84,9 +84,9 @@ fn constant_inputs_reach_the_core_material_clamped() {
 }
 
 #[test]
-fn without_a_material_the_albedo_and_mirror_make_the_material() {
+fn a_mirror_over_a_diffuse_colour_makes_the_material() {
     let mut d = delegate();
-    d.set_mesh("/quad", MeshData { albedo: [0.2, 0.4, 0.6], mirror: [0.5; 3], ..quad(None) });
+    d.set_mesh("/quad", quad(Some(SurfaceInputs::mirror("/quad", [0.2, 0.4, 0.6], [0.5; 3]))));
     let m = built(d);
     assert_eq!(m.surface.diffuse_color, Vec3A::new(0.2, 0.4, 0.6));
     assert_eq!((m.surface.specular_color, m.surface.roughness), (Vec3A::splat(0.5), 0.0));

@@ -8,11 +8,12 @@
 mod common;
 
 use glam::{Mat4, Vec3};
-use hd_mipray::material::TextureInput;
+use hd_mipray::material::{SurfaceInputs, TextureInput};
 use hd_mipray::mesh::MeshData;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
 use mipray::image_io::{ChannelFormat, ImageBuf, ImageIo};
+use mipray::material::Input;
 use mipray::progress::NoProgress;
 use mipray::texture::{Interpolation, Primvar2, Wrap};
 use mipray_bridge::OiioImageIo;
@@ -27,7 +28,16 @@ const SAMPLES: u32 = 2;
 fn delegate(texture_file: &str) -> RenderDelegate {
     let mut d = common::delegate_with_camera(Vec3::new(1.0, -3.0, 4.0), Vec3::ZERO, true);
     let (topology, points) = common::cube();
-    d.set_mesh("/cube", MeshData { topology, points, transform: Mat4::IDENTITY, albedo: [0.6; 3], ..Default::default() });
+    d.set_mesh(
+        "/cube",
+        MeshData {
+            topology,
+            points,
+            transform: Mat4::IDENTITY,
+            material: Some(SurfaceInputs::lambertian("/cube", [0.6; 3])),
+            ..Default::default()
+        },
+    );
     let (mut topology, points) = mipray::bilinear::grid_mesh(1.0, 1, 0.0);
     topology.scheme = mipray::topology::Scheme::None;
     let st = Primvar2 {
@@ -54,7 +64,10 @@ fn delegate(texture_file: &str) -> RenderDelegate {
             points,
             transform: Mat4::from_translation(Vec3::new(2.0, 0.0, 0.0)),
             st: Some(st),
-            diffuse_texture: Some(diffuse),
+            material: Some(SurfaceInputs {
+                textures: vec![(Input::DiffuseColor, diffuse)],
+                ..SurfaceInputs::lambertian("/quad", [0.18; 3])
+            }),
             ..Default::default()
         },
     );

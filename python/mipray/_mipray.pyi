@@ -55,17 +55,12 @@ class RenderDelegate:
         hole_indices: NDArray[np.int32] | None = None,
         left_handed: bool = False,
         double_sided: bool = False,
-        albedo: tuple[float, float, float] = ...,  # (0.18, 0.18, 0.18)
         prototype: bool = False,
-        face_albedos: NDArray[np.float32] | None = None,
-        face_albedo_indices: NDArray[np.int32] | None = None,
-        mirror: tuple[float, float, float] = ...,  # (0.0, 0.0, 0.0)
         displacement_bound: float | None = None,
         displacement: tuple[float, float, int, float] | None = None,
         st_values: NDArray[np.float32] | None = None,
         st_indices: NDArray[np.int32] | None = None,
         st_interpolation: str = "faceVarying",
-        diffuse_texture: dict[str, object] | None = None,
         displacement_texture: dict[str, object] | None = None,
         material: dict[str, object] | None = None,
         gprim: dict[str, object] | None = None,
@@ -94,17 +89,9 @@ class RenderDelegate:
             hole_indices: int32 indices of faces that are holes.
             left_handed: True when USD ``orientation`` is ``leftHanded``.
             double_sided: USD ``doubleSided``.
-            albedo: linear diffuse reflectance, each in [0, 1].
             prototype: a prototype of instancers (:meth:`set_instancer`): it
                 renders only where an instancer places it, and ``transform``
                 is then relative to its prototype's root.
-            face_albedos: (M, 3) float32 per-face diffuse colours (GeomSubsets
-                bound to their own materials, per-face ``displayColor``).
-            face_albedo_indices: (F,) int32, one per face in USD face order
-                (holes included): an index into ``face_albedos``, or -1 for
-                ``albedo``. Given together with ``face_albedos``.
-            mirror: normal-incidence reflectance of a perfect mirror layer over
-                ``albedo``, linear RGB (for callers without a ``material``).
             displacement_bound: ``primvars:displacementBound``, object units;
                 None: the displacement's own bound, else the render setting.
             displacement: built-in fBm displacement ``(amplitude, frequency,
@@ -112,29 +99,33 @@ class RenderDelegate:
             st_values: (K, 2) float32 values of the ``st`` primvar textures read.
             st_indices: int32 USD indices of an indexed ``st``, or None.
             st_interpolation: the primvar's USD interpolation.
-            diffuse_texture: a UsdUVTexture feeding ``diffuseColor``: ``{"file",
-                "scale", "bias", "fallback" (4 floats each), "wrapS", "wrapT",
-                "sourceColorSpace" (``auto``, the default: 8-bit files of 3 or 4
-                channels are sRGB, as in Hydra; ``raw``; ``sRGB``), "channel"
-                (0-3)}``; sRGB files are decoded into a linear MIP map once
-                (``$MIPRAY_TEXTURE_CACHE``, else ``~/.cache/mipray/textures``)
-                and filtered by the ray differentials. For a mesh
-                without a ``material`` (with one, use its ``"textures"``).
-            displacement_texture: the same for ``displacement``, along the
-                limit normal at tessellation time, filtered at the grid's
-                spacing (coarse tiers read coarse MIP levels).
-            material: the bound UsdPreviewSurface, replacing ``albedo``,
-                ``mirror`` and ``diffuse_texture``: ``{"name": material path,
-                "diffuseColor", "emissiveColor", "specularColor": 3 floats,
+            displacement_texture: a UsdUVTexture feeding ``displacement`` (a
+                dict as in ``material``'s ``"textures"``), along the limit
+                normal at tessellation time, filtered at the grid's spacing
+                (coarse tiers read coarse MIP levels).
+            material: the mesh's UsdPreviewSurface, the one material model:
+                ``{"name": material path (default ``path``), "diffuseColor",
+                "emissiveColor", "specularColor": 3 floats,
                 "useSpecularWorkflow": bool, "metallic", "roughness",
                 "clearcoat", "clearcoatRoughness", "opacity",
-                "opacityThreshold", "ior": float, "textures": {input name: a
-                UsdUVTexture as in ``diffuse_texture``}}``; every key optional
-                (an input left out keeps UsdPreviewSurface's fallback). Float
-                inputs read the texture's ``channel``; ``"normal"`` is a
-                tangent-space normal map. Out-of-range values are clamped with
-                one warning naming the material; an unreadable texture renders
-                its ``fallback`` with one warning naming prim and file.
+                "opacityThreshold", "ior": float, "textures": {input name:
+                UsdUVTexture}}``; every key optional (an input left out keeps
+                UsdPreviewSurface's fallback). A display colour without a
+                material is ``{"diffuseColor": rgb, "useSpecularWorkflow":
+                True, "specularColor": (0, 0, 0)}`` (lambertian); a smooth
+                mirror over it adds ``"specularColor": reflectance,
+                "roughness": 0``. None: lambertian 0.18 grey. A UsdUVTexture
+                is ``{"file", "scale", "bias", "fallback" (4 floats each),
+                "wrapS", "wrapT", "sourceColorSpace" (``auto``, the default:
+                8-bit files of 3 or 4 channels are sRGB, as in Hydra; ``raw``;
+                ``sRGB``), "channel" (0-3), "udim_tiles"}``; sRGB files are
+                decoded into a linear MIP map once (``$MIPRAY_TEXTURE_CACHE``,
+                else ``~/.cache/mipray/textures``) and filtered by the ray
+                differentials. Float inputs read the texture's ``channel``;
+                ``"normal"`` is a tangent-space normal map. Out-of-range values
+                are clamped with one warning naming the material; an unreadable
+                texture renders its ``fallback`` with one warning naming prim
+                and file.
             gprim: a gprim other than a mesh, intersected exactly (the mesh
                 arguments' topology is then empty): ``{"type": "Sphere",
                 "radius"}``, ``{"type": "Cube", "size"}``, ``{"type":
@@ -150,17 +141,17 @@ class RenderDelegate:
                 shading; meant for polygonal meshes) or a UsdPreviewSurface
                 input name they feed (``"diffuseColor"`` (N, 3), a float input
                 (N, 1)), each ``{"values": float32 array, "indices": int32 or
-                None, "interpolation": USD token, "faces": int32 face indices
-                an input's primvar shades where ``face_albedos`` colours others,
-                or None for all}``. Face-varying and vertex
+                None, "interpolation": USD token}``; an input's primvar shades
+                the faces of the mesh's own ``material``. Face-varying and vertex
                 primvars go through OpenSubdiv on subdivision surfaces; every
                 interpolation is linear over each face on polygonal ones.
-            face_materials: whole UsdPreviewSurface networks of GeomSubsets
-                bound to their own materials, each a dict as ``material``
-                (textures included; they read the mesh's ``st``).
-            face_material_indices: (F,) int32, one per face in USD face order:
-                an index into ``face_materials``, or -1 for the face's colour
-                from ``face_albedos`` or the mesh's ``material``. Given
+            face_materials: materials of their own on some faces, each a dict
+                as ``material``: GeomSubsets' whole UsdPreviewSurface networks
+                (textures included; they read the mesh's ``st``), per-face
+                display colours (lambertian).
+            face_material_indices: (F,) int32, one per face in USD face order
+                (holes included; one per point for Points): an index into
+                ``face_materials``, or -1 for the mesh's ``material``. Given
                 together with ``face_materials``.
 
         Raises:

@@ -136,10 +136,10 @@ def _usd_mesh_kwargs(path: str, prim_path: str, time: str | None) -> dict[str, A
     if not prim.IsA(UsdGeom.Mesh):
         raise PrimError(prim_path, f"is a {prim.GetTypeName() or 'typeless prim'}, not a Mesh")
     code = Usd.TimeCode(float(time)) if time is not None else Usd.TimeCode.Default()
-    args = mesh_arguments(UsdGeom.Mesh(prim), code, np.eye(4), (0.18, 0.18, 0.18))
+    args = mesh_arguments(UsdGeom.Mesh(prim), code, np.eye(4))
     if args is None:
         raise PrimError(prim_path, "the mesh has no faces")
-    for key in ("transform", "double_sided", "albedo"):
+    for key in ("transform", "double_sided"):
         args.pop(key, None)
     return args
 

@@ -13,7 +13,7 @@ use std::path::Path;
 use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData, LightPrim, LinkData, ShapingData};
-use hd_mipray::material::FaceAlbedo;
+
 use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
@@ -113,42 +113,19 @@ fn matrices(path: &str, m: &PyReadonlyArray3<'_, f64>) -> PyResult<Vec<Mat4>> {
     Ok(out)
 }
 
-/// The per-face albedo table of `set_mesh`: both arrays or neither.
-fn face_albedo(
-    path: &str,
-    albedos: Option<PyReadonlyArray2<'_, f32>>,
-    indices: Option<PyReadonlyArray1<'_, i32>>,
-    face_count: usize,
-) -> PyResult<Option<FaceAlbedo>> {
-    let (albedos, indices) = match (albedos, indices) {
-        (None, None) => return Ok(None),
-        (Some(a), Some(i)) => (a, i),
-        _ => return Err(value_error(path, "face_albedos and face_albedo_indices go together")),
-    };
-    let a = albedos.as_array();
-    if a.ncols() != 3 {
-        return Err(value_error(path, format!("face_albedos must be M×3, got {:?}", a.shape())));
-    }
-    let table = FaceAlbedo { albedos: a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect(), indices: indices.as_array().to_vec() };
-    table.validate(face_count).map_err(|e| value_error(path, e))?;
-    Ok(Some(table))
-}
-
 /// The normals and primvar-fed inputs of `set_mesh`'s `primvars`: `{"normals" or a
 /// UsdPreviewSurface input name: {"values": (N, C) float32, C ≤ 3, "indices": int32 or None,
-/// "interpolation": USD token, "faces": int32 or None}}`, each checked against the topology so a
-/// bad one names the prim and the primvar at once. `faces`: the faces the inputs' primvars shade
-/// when a face table colours others (empty: all).
+/// "interpolation": USD token}}`, each checked against the topology so a bad one names the prim
+/// and the primvar at once. An input's primvar shades the faces of the mesh's own material.
 #[allow(clippy::type_complexity)]
 fn read_primvars(
     path: &str,
     d: &Bound<'_, PyDict>,
     topology: &MeshTopology,
     points: usize,
-) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>, Vec<i32>)> {
+) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>)> {
     let mut normals = Vec::new();
     let mut inputs = Vec::new();
-    let mut faces = Vec::new();
     for (key, value) in d.iter() {
         let role: String = key.extract()?;
         let entry = value.cast::<PyDict>().map_err(|_| value_error(path, format!("primvars['{role}'] must be a dict")))?;
@@ -190,24 +167,12 @@ fn read_primvars(
         for c in &channels {
             c.face_varying_indices(topology, points).map_err(|e| value_error(path, e))?;
         }
-        if let Some(f) = item("faces")?.filter(|f| !f.is_none()) {
-            let f: PyReadonlyArray1<'_, i32> =
-                f.extract().map_err(|_| value_error(path, format!("primvars['{role}'] faces must be int32")))?;
-            let f = f.as_array().to_vec();
-            if let Some(bad) = f.iter().find(|&&i| i < 0 || i as usize >= topology.face_vertex_counts.len()) {
-                return Err(value_error(
-                    path,
-                    format!("primvars['{role}'] faces holds {bad}, out of range for {} faces", topology.face_vertex_counts.len()),
-                ));
-            }
-            faces.extend(f);
-        }
         match role.as_str() {
             "normals" => normals = channels,
             name => inputs.push((input_from_usd(name).expect("checked above"), channels)),
         }
     }
-    Ok((normals, inputs, faces))
+    Ok((normals, inputs))
 }
 
 fn vec_i32(a: Option<PyReadonlyArray1<'_, i32>>) -> Vec<i32> {
@@ -233,7 +198,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, albedo=(0.18, 0.18, 0.18), mirror=(0.0, 0.0, 0.0), displacement_bound=None, displacement=None, prototype=false, face_albedos=None, face_albedo_indices=None, st_values=None, st_indices=None, st_interpolation="faceVarying", diffuse_texture=None, displacement_texture=None, material=None, gprim=None, primvars=None, face_materials=None, face_material_indices=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, displacement_bound=None, displacement=None, prototype=false, st_values=None, st_indices=None, st_interpolation="faceVarying", displacement_texture=None, material=None, gprim=None, primvars=None, face_materials=None, face_material_indices=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -254,17 +219,12 @@ impl RenderDelegate {
         hole_indices: Option<PyReadonlyArray1<'_, i32>>,
         left_handed: bool,
         double_sided: bool,
-        albedo: (f32, f32, f32),
-        mirror: (f32, f32, f32),
         displacement_bound: Option<f32>,
         displacement: Option<(f32, f32, u32, f32)>,
         prototype: bool,
-        face_albedos: Option<PyReadonlyArray2<'_, f32>>,
-        face_albedo_indices: Option<PyReadonlyArray1<'_, i32>>,
         st_values: Option<PyReadonlyArray2<'_, f32>>,
         st_indices: Option<PyReadonlyArray1<'_, i32>>,
         st_interpolation: &str,
-        diffuse_texture: Option<&Bound<'_, PyDict>>,
         displacement_texture: Option<&Bound<'_, PyDict>>,
         material: Option<&Bound<'_, PyDict>>,
         gprim: Option<&Bound<'_, PyDict>>,
@@ -296,7 +256,6 @@ impl RenderDelegate {
         topology.validate(points.len()).map_err(|e| value_error(path, e))?;
         // Points colour each point as a face of its own.
         let faces = if matches!(gprim, Some(Gprim::Points { .. })) { points.len() } else { topology.face_vertex_counts.len() };
-        let face_albedo = face_albedo(path, face_albedos, face_albedo_indices, faces)?;
         let face_materials = match (face_materials, face_material_indices) {
             (None, None) => None,
             (Some(m), Some(i)) => {
@@ -330,11 +289,10 @@ impl RenderDelegate {
                 Some(pv)
             }
         };
-        let (normals, primvar_inputs, primvar_faces) = match primvars {
-            None => (Vec::new(), Vec::new(), Vec::new()),
+        let (normals, primvar_inputs) = match primvars {
+            None => (Vec::new(), Vec::new()),
             Some(d) => read_primvars(path, d, &topology, points.len())?,
         };
-        let diffuse_texture = diffuse_texture.map(|d| texture_input(path, "diffuseColor", d)).transpose()?;
         let displacement_texture = displacement_texture.map(|d| texture_input(path, "displacement", d)).transpose()?;
         let material = material.map(|d| surface_inputs(path, d)).transpose()?;
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
@@ -364,19 +322,14 @@ impl RenderDelegate {
                 points,
                 transform,
                 double_sided,
-                albedo: [albedo.0, albedo.1, albedo.2],
-                mirror: [mirror.0, mirror.1, mirror.2],
                 material,
                 displacement_bound,
                 displacement,
                 prototype,
-                face_albedo,
                 face_materials,
                 st,
                 normals,
                 primvar_inputs,
-                primvar_faces,
-                diffuse_texture,
                 displacement_texture,
                 gprim,
             },

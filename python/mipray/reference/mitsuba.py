@@ -253,12 +253,12 @@ def _bitmap(path: str, tex: dict[str, Any], normal: bool = False) -> dict[str, A
     }
 
 
-def _surface(material: dict[str, Any] | None, albedo: Any) -> dict[str, Any]:
+def _surface(material: dict[str, Any] | None) -> dict[str, Any]:
     """UsdPreviewSurface's inputs with fallbacks, clamped as the core clamps them."""
     m = material or {}
     if material is None:
-        # mipray's display-color material: lambertian (specular workflow, no specular).
-        m = {"diffuseColor": albedo, "useSpecularWorkflow": True}
+        # set_mesh without a material: lambertian grey (specular workflow, no specular).
+        m = {"diffuseColor": (0.18,) * 3, "useSpecularWorkflow": True}
     s = {
         "diffuseColor": tuple(_clamp01(c) for c in _rgb(m.get("diffuseColor"), (0.18,) * 3)),
         "emissiveColor": tuple(
@@ -281,10 +281,8 @@ def _surface(material: dict[str, Any] | None, albedo: Any) -> dict[str, Any]:
     return s
 
 
-def material_mapping(
-    path: str, material: dict[str, Any] | None, albedo: Any = (0.18, 0.18, 0.18)
-) -> MaterialMapping:
-    """The Mitsuba BSDF for a mesh's ``material`` argument (or its ``albedo``).
+def material_mapping(path: str, material: dict[str, Any] | None) -> MaterialMapping:
+    """The Mitsuba BSDF for a mesh's ``material`` argument (None: lambertian 0.18 grey).
 
     Raises:
         PrimError: a textured input (Mitsuba would need the mesh's st).
@@ -299,7 +297,7 @@ def material_mapping(
             path,
             f"textured inputs ({inputs}) are not exported to Mitsuba (diffuseColor and normal are)",
         )
-    s = _surface(material, albedo)
+    s = _surface(material)
     emission = s["emissiveColor"] if max(s["emissiveColor"]) > 0.0 else None
     rough = s["roughness"]
     alpha = rough * rough
@@ -314,7 +312,7 @@ def material_mapping(
             glass.update({"distribution": "ggx", "alpha": alpha})
         if s["opacity"] <= 0.0:
             return MaterialMapping(glass, emission, "glass", True)
-        opaque = material_mapping(path, {**(material or {}), "opacity": 1.0}, albedo)
+        opaque = material_mapping(path, {**(material or {}), "opacity": 1.0})
         blend = {
             "type": "blendbsdf",
             "weight": 1.0 - s["opacity"],
@@ -767,7 +765,7 @@ def scene_dict(
         if args.get("prototype"):
             raise PrimError(path, "instance prototypes are not exported to Mitsuba")
         if args.get("gprim") is not None:
-            own = material_mapping(path, args.get("material"), args.get("albedo", (0.18,) * 3))
+            own = material_mapping(path, args.get("material"))
             cap.materials[path] = own
             if own.emission is not None or own.model in (TEXTURED_DIFFUSE, NORMAL_MAPPED):
                 raise PrimError(path, "an emissive or textured implicit prim is not exported")
@@ -778,17 +776,17 @@ def scene_dict(
         tris = _triangles(path, args, points)
         if len(tris) == 0:
             continue
-        own = material_mapping(path, args.get("material"), args.get("albedo", (0.18,) * 3))
+        own = material_mapping(path, args.get("material"))
         cap.materials[path] = own
-        # Per-face colours (GeomSubsets, uniform displayColor): lambertian, as mipray makes them.
-        table = args.get("face_albedo_indices")
+        # Per-face materials (GeomSubsets, per-face displayColor as lambertian ones).
+        table = args.get("face_material_indices")
         groups: dict[int, MaterialMapping] = {-1: own}
         face_group = np.full(len(tris), -1, dtype=np.int64)
         if table is not None:
             face_group = np.asarray(table, dtype=np.int64)[tris[:, 3]]
             for g in np.unique(face_group).tolist():
                 if g >= 0:
-                    groups[g] = material_mapping(path, None, args["face_albedos"][g])
+                    groups[g] = material_mapping(path, args["face_materials"][g])
         for g, mapping in groups.items():
             sel = tris[face_group == g]
             if len(sel) == 0 or mapping.bsdf is None:

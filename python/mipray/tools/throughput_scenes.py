@@ -485,7 +485,7 @@ def read_stage(usd_path: Path) -> ExportedScene:
         if not prim.IsA(UsdGeom.Mesh):
             continue
         transform = world_transform(xforms, prim)
-        args = mesh_arguments(UsdGeom.Mesh(prim), time, transform, (0.5, 0.5, 0.5))
+        args = mesh_arguments(UsdGeom.Mesh(prim), time, transform)
         if args is None:
             continue
         scheme = args["scheme"]

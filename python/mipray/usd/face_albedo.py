@@ -11,19 +11,20 @@ Each control face gets, in order:
    surface as authored: the face's entry is its corners' mean (its colour at
    the centre for bilinear interpolation) and the primvar crosses as
    ``set_mesh``'s ``primvars["diffuseColor"]``, which the renderer
-   interpolates over those faces (OpenSubdiv's face-varying and vertex
-   evaluation on subdivision surfaces, linear over each face on polygonal
-   ones; ``"faces"`` lists them when a subset's material colours others);
+   interpolates over the faces of the mesh's own material (OpenSubdiv's
+   face-varying and vertex evaluation on subdivision surfaces, linear over
+   each face on polygonal ones);
 4. else 0.18 grey.
 
 A material whose diffuse colour is not a constant (a texture) falls through to
 step 3 for its faces here; a subset bound to a UsdPreviewSurface also sends its
 whole network (textures and every lobe) for its faces
 (:func:`mipray.usd.shading.shading_arguments`, ``face_materials``), which the
-renderer uses over this colour. When every face ends up with the same colour the mesh
-gets one ``albedo``; otherwise the distinct colours and a per-face index
-table (``face_albedos``, ``face_albedo_indices``) go to the delegate, which
-turns them into per-face materials of the core.
+renderer uses over this colour. The colours cross in the one material model
+(:func:`mipray.usd.material.lambertian`): when every face ends up with the same
+colour the mesh's ``material`` is that colour; otherwise the distinct colours
+join the subsets' networks in ``face_materials`` / ``face_material_indices``
+(:meth:`SurfaceAlbedo.face_arguments`).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
-from .material import DEFAULT_ALBEDO, compute_albedo
+from .material import DEFAULT_ALBEDO, compute_albedo, lambertian
 from .primvars import per_face, primvar_argument, read_display_primvar
 
 __all__ = ["SurfaceAlbedo", "compute_surface_albedo", "material_subsets"]
@@ -61,16 +62,54 @@ class SurfaceAlbedo:
     #: ``set_mesh``'s ``primvars`` entries: ``diffuseColor`` from an interpolated
     #: ``displayColor``, or empty.
     primvars: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: The faces ``primvars`` shades when a subset's constant colour takes others; None: all.
+    primvar_faces: NDArray[np.int32] | None = None
 
-    def arguments(self) -> dict[str, Any]:
-        """The ``set_mesh`` keyword arguments: ``albedo``, the face table and primvars if any."""
-        args: dict[str, Any] = {"albedo": self.albedo}
-        if self.face_albedos is not None:
-            args["face_albedos"] = self.face_albedos
-            args["face_albedo_indices"] = self.face_albedo_indices
-        if self.primvars:
-            args["primvars"] = dict(self.primvars)
-        return args
+    def material(self, path: str) -> dict[str, Any]:
+        """``set_mesh``'s ``material`` for the mesh without a UsdPreviewSurface of its own."""
+        return lambertian(path, self.albedo)
+
+    def face_arguments(self, path: str, args: dict[str, Any], primvars: dict[str, Any]) -> None:
+        """Puts the face colours into ``args``'s face material table.
+
+        ``args`` holds the shading's ``face_materials`` (subsets' whole networks) if any;
+        ``primvars`` is every ``set_mesh`` primvar of the mesh. In order, a face takes: a
+        subset's network; else the mesh's own material where an input primvar shades it
+        (:attr:`primvar_faces`, all faces when None), since only that material reads the
+        primvar; else its colour; ``-1`` is the mesh's material. A colour no face keeps, or
+        the mesh's own (its material being that colour), is not sent: the table lists only
+        materials some face renders.
+        """
+        if self.face_albedos is None or self.face_albedo_indices is None:
+            return
+        table = self.face_albedo_indices.copy()
+        if args.get("material") == self.material(path):
+            own = np.asarray(self.albedo, np.float32)
+            table[(self.face_albedos[table] == own).all(axis=1)] = -1
+        if any(role != "normals" for role in primvars):
+            if self.primvar_faces is None or primvars.get("diffuseColor") is not self.primvars.get(
+                "diffuseColor"
+            ):
+                table[:] = -1
+            else:
+                table[self.primvar_faces] = -1
+        subsets = args.get("face_materials")
+        if subsets is not None:
+            subset_table = args["face_material_indices"]
+            table = np.where(subset_table >= 0, subset_table + len(self.face_albedos), table)
+        kept = np.unique(table[table >= 0])
+        if len(kept) == 0:
+            args.pop("face_materials", None)
+            args.pop("face_material_indices", None)
+            return
+        colours = [lambertian(f"{path}[{k}]", c) for k, c in enumerate(self.face_albedos)]
+        materials = colours + list(subsets or [])
+        remap = np.full(len(materials), -1, np.int32)
+        remap[kept] = np.arange(len(kept), dtype=np.int32)
+        args["face_materials"] = [materials[k] for k in kept]
+        args["face_material_indices"] = np.ascontiguousarray(
+            np.where(table >= 0, remap[np.maximum(table, 0)], -1), dtype=np.int32
+        )
 
 
 def _face_indices(subset: UsdGeom.Subset, time: Usd.TimeCode, n_faces: int) -> NDArray[np.int64]:
@@ -167,19 +206,19 @@ def compute_surface_albedo(
             faces[indices] = fallback[indices] if fallback.ndim == 2 else fallback
 
     primvars: dict[str, dict[str, Any]] = {}
+    primvar_faces: NDArray[np.int32] | None = None
     if interpolated and not constant.all():
         assert color is not None
-        entry = primvar_argument(color)
+        primvars["diffuseColor"] = primvar_argument(color)
         if constant.any():
-            entry["faces"] = np.flatnonzero(~constant).astype(np.int32)
-        primvars["diffuseColor"] = entry
+            primvar_faces = np.flatnonzero(~constant).astype(np.int32)
     if n_faces == 0 or (faces == faces[0]).all():
         rgb = (
             own.rgb
             if n_faces == 0
             else (float(faces[0, 0]), float(faces[0, 1]), float(faces[0, 2]))
         )
-        return SurfaceAlbedo(rgb, None, None, tuple(paths), might_vary, primvars)
+        return SurfaceAlbedo(rgb, None, None, tuple(paths), might_vary, primvars, primvar_faces)
     unique, inverse = np.unique(faces, axis=0, return_inverse=True)
     return SurfaceAlbedo(
         own.rgb,
@@ -188,4 +227,5 @@ def compute_surface_albedo(
         tuple(paths),
         might_vary,
         primvars,
+        primvar_faces,
     )

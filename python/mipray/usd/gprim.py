@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
+from .material import lambertian
 
 __all__ = ["GPRIM_TYPES", "gprim_arguments", "is_renderable_gprim", "point_colors"]
 
@@ -110,7 +111,7 @@ def _points(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], di
 def gprim_arguments(
     prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
 ) -> dict[str, Any] | None:
-    """``set_mesh`` keyword arguments (without path and albedo) of a non-mesh gprim.
+    """``set_mesh`` keyword arguments (without path and shading) of a non-mesh gprim.
 
     Returns None for a Points prim without points (valid USD that renders nothing).
 
@@ -141,7 +142,7 @@ def gprim_arguments(
 
 
 def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str, Any]:
-    """Per-point ``displayColor`` of a Points prim as ``set_mesh``'s face table.
+    """Per-point ``displayColor`` of a Points prim as ``set_mesh``'s face material table.
 
     Each point is a "face" of its own; ``{}`` when the prim has one colour
     (constant, or a single value).
@@ -166,7 +167,10 @@ def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str,
             f"for {n_points} points",
         )
     unique, inverse = np.unique(np.clip(values, 0.0, 1.0), axis=0, return_inverse=True)
+    path = str(prim.GetPath())
+    # Rounded to float32 as the colours were when they crossed as an array.
+    colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
-        "face_albedos": np.ascontiguousarray(unique, dtype=np.float32),
-        "face_albedo_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
+        "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],
+        "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
     }

@@ -24,17 +24,34 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from pxr import Usd, UsdGeom, UsdShade
 
 from .shading import bound_material
 
-__all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo"]
+__all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo", "lambertian"]
 
 _log = logging.getLogger(__name__)
 
 #: Albedo of a prim with neither a usable material nor a display color.
 DEFAULT_ALBEDO: tuple[float, float, float] = (0.18, 0.18, 0.18)
+
+
+def lambertian(name: str, rgb: Any) -> dict[str, Any]:
+    """``set_mesh``'s ``material`` for a diffuse colour alone (a display colour, a face's colour).
+
+    UsdPreviewSurface's specular workflow with no specular: a lambertian surface of linear
+    RGB ``rgb``, the one material model expressing what has no material of its own.
+    ``name`` names it in messages (the prim's path, ``path[k]`` for a face colour).
+    """
+    r, g, b = (float(c) for c in rgb)
+    return {
+        "name": name,
+        "diffuseColor": (r, g, b),
+        "useSpecularWorkflow": True,
+        "specularColor": (0.0, 0.0, 0.0),
+    }
 
 
 @dataclass(frozen=True)

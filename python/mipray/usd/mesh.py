@@ -176,9 +176,10 @@ def mesh_arguments(
     mesh: UsdGeom.Mesh,
     time: Usd.TimeCode,
     transform: NDArray[np.float64],
-    albedo: tuple[float, float, float],
 ) -> dict[str, Any] | None:
-    """The keyword arguments of ``RenderDelegate.set_mesh`` for ``mesh`` at ``time``.
+    """The geometry keyword arguments of ``RenderDelegate.set_mesh`` for ``mesh`` at ``time``.
+
+    Shading is not among them (:mod:`mipray.usd.face_albedo`, :mod:`mipray.usd.shading`).
 
     Optional subdivision tags that are unauthored or empty are passed as
     ``None``.
@@ -225,7 +226,6 @@ def mesh_arguments(
         "hole_indices": optional(mesh.GetHoleIndicesAttr(), np.int32),
         "left_handed": _token(mesh.GetOrientationAttr(), time, "rightHanded") == "leftHanded",
         "double_sided": bool(mesh.GetDoubleSidedAttr().Get(time) or False),
-        "albedo": albedo,
     }
     problem = check_mesh(args)
     if problem:

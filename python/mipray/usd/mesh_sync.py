@@ -21,7 +21,7 @@ from pxr import Usd, UsdGeom
 from ..errors import PrimError
 from .face_albedo import compute_surface_albedo, material_subsets
 from .gprim import gprim_arguments, point_colors
-from .material import compute_albedo
+from .material import compute_albedo, lambertian
 from .mesh import mesh_arguments
 from .primvars import primvar_argument, read_normals
 from .shading import material_might_vary, shading_arguments
@@ -84,7 +84,7 @@ def read_mesh(
     if not prim.IsA(UsdGeom.Mesh):
         return _read_gprim(prim, time, transform, data_varies, prototype=prototype)
     mesh = UsdGeom.Mesh(prim)
-    args = mesh_arguments(mesh, time, transform, (0.18, 0.18, 0.18))
+    args = mesh_arguments(mesh, time, transform)
     if args is None:
         return MeshRead(None, (), data_varies)
     posed = _pose(prim, time, args["points"], prototype, poser)
@@ -92,14 +92,15 @@ def read_mesh(
         args["points"], args["transform"] = posed.points, posed.transform
     counts, n_points = args["face_vertex_counts"], len(args["points"])
     surface = compute_surface_albedo(mesh, time, counts, args["face_vertex_indices"], n_points)
-    primvars: dict[str, Any] = surface.arguments().pop("primvars", {})
-    args.update(surface.arguments())
-    args.pop("primvars", None)
+    path = str(prim.GetPath())
+    args["material"] = surface.material(path)
+    primvars: dict[str, Any] = dict(surface.primvars)
     n_faces = len(counts)
     subsets = material_subsets(mesh, time, n_faces)
     shading = shading_arguments(prim, time, subsets=subsets, face_count=n_faces)
     primvars.update(shading.pop("primvars", {}))
     args.update(shading)
+    surface.face_arguments(path, args, primvars)
     normals, normals_vary = _normals(mesh, time, args["scheme"], counts, n_points)
     if normals is not None:
         primvars["normals"] = normals
@@ -169,7 +170,7 @@ def _read_gprim(
     if args is None:
         return MeshRead(None, (), data_varies)
     own = compute_albedo(prim, time)
-    args["albedo"] = own.rgb
+    args["material"] = lambertian(str(prim.GetPath()), own.rgb)
     if prim.IsA(UsdGeom.Points) and own.source != "material":
         args.update(point_colors(prim, time, len(args["points"])))
     args.update(shading_arguments(prim, time, surface_st=True))
