@@ -19,7 +19,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 import mipray
 from mipray import RenderSettingsError
-from mipray import sweep as sw
+from mipray.tools import sweep as sw
 
 WIDTH = 64
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from pxr import UsdGeom
 
-from mipray import subdiv_compare
+from mipray.tools import subdiv_compare
 
 from stages import add_cube, new_stage
 
@@ -134,7 +134,7 @@ def test_usd_input_split_keeps_colons_in_file_paths() -> None:
 
 def test_console_script_runs(native: types.ModuleType, cube_obj: Path) -> None:
     exe = Path(sys.executable).parent / "mipray-subdiv-compare"
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "mipray.subdiv_compare"]
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "mipray.tools.subdiv_compare"]
     done = subprocess.run(
         [*cmd, "--json", "--quick", str(cube_obj)],
         capture_output=True,

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mipray import sweep as sw
-from mipray.sweep_report import (
+from mipray.tools import sweep as sw
+from mipray.tools.sweep_report import (
     ROW_FIELDS,
     SCHEMA,
     image_errors,
@@ -98,7 +98,7 @@ def test_bad_knob_or_value_lists_the_valid_knobs(scene_file: Path, capsys, spec,
 
 
 def test_irradiance_cache_knobs_follow_the_renderer(monkeypatch) -> None:
-    from mipray import sweep_knobs
+    from mipray.tools import sweep_knobs
 
     monkeypatch.setattr(
         sweep_knobs, "_renderer_settings", lambda: ("irradianceCache", "irradianceCacheError")
@@ -118,7 +118,7 @@ def test_irradiance_cache_knobs_follow_the_renderer(monkeypatch) -> None:
 
 
 def test_optional_knobs_follow_the_renderer(monkeypatch) -> None:
-    from mipray import sweep_knobs
+    from mipray.tools import sweep_knobs
 
     monkeypatch.setattr(sweep_knobs, "_renderer_settings", lambda: ("textureFilter",))
     assert sw.parse_knob("textureFilter=finest,differentials") == (

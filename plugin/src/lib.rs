@@ -7,6 +7,7 @@
 //! rebuild only that mesh's patches.
 
 pub mod aov;
+#[cfg(feature = "tools")]
 pub mod bench_scene;
 pub mod camera;
 pub mod config;
@@ -19,6 +20,7 @@ pub mod mesh;
 pub mod render_buffer;
 pub mod render_delegate;
 pub mod render_pass;
+#[cfg(feature = "tools")]
 pub mod subdiv_compare;
 
 pub use config::RenderSettings;

@@ -1,5 +1,5 @@
 //! The project's subdivision results compared with OpenSubdiv's, for `mipray-subdiv-compare`
-//! (and `mipray.subdiv_compare` in Python).
+//! (and `mipray.tools.subdiv_compare` in Python).
 //!
 //! For one mesh it measures, relative to the control mesh's bounding-box diagonal:
 //! - **limit evaluation**: our patches ([`OsdSurface::evaluate`] at an s×s grid of each patch's

@@ -5,9 +5,7 @@ mod common;
 
 use std::sync::Mutex;
 
-use glam::{Mat4, Vec3};
-use hd_mipray::material::SurfaceInputs;
-use hd_mipray::mesh::MeshData;
+use glam::Vec3;
 use hd_mipray::render_pass::PassUpdate;
 use hd_mipray::{RenderPass, RenderSettings};
 use mipray::aov::Aov;
@@ -41,17 +39,7 @@ fn the_settings_parse_and_reach_the_core() {
 #[test]
 fn each_pass_reaches_the_caller_as_render_buffers() {
     let mut delegate = common::delegate_with_camera(Vec3::new(0.0, -3.0, 4.0), Vec3::ZERO, true);
-    let (topology, points) = common::cube();
-    delegate.set_mesh(
-        "/cube",
-        MeshData {
-            topology,
-            points,
-            transform: Mat4::IDENTITY,
-            material: Some(SurfaceInputs::lambertian("/cube", [0.6; 3])),
-            ..Default::default()
-        },
-    );
+    delegate.set_mesh("/cube", common::grey_mesh("/cube", common::cube(), 0.6));
     let pass = |progressive: bool| RenderPass {
         camera: "/cam".into(),
         width: 24,

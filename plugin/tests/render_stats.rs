@@ -27,17 +27,7 @@ const SAMPLES: u32 = 2;
 /// used and reports), under the shadow-casting sun of `delegate_with_camera`.
 fn delegate(texture_file: &str) -> RenderDelegate {
     let mut d = common::delegate_with_camera(Vec3::new(1.0, -3.0, 4.0), Vec3::ZERO, true);
-    let (topology, points) = common::cube();
-    d.set_mesh(
-        "/cube",
-        MeshData {
-            topology,
-            points,
-            transform: Mat4::IDENTITY,
-            material: Some(SurfaceInputs::lambertian("/cube", [0.6; 3])),
-            ..Default::default()
-        },
-    );
+    d.set_mesh("/cube", common::grey_mesh("/cube", common::cube(), 0.6));
     let (mut topology, points) = mipray::bilinear::grid_mesh(1.0, 1, 0.0);
     topology.scheme = mipray::topology::Scheme::None;
     let st = Primvar2 {

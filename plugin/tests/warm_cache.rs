@@ -5,10 +5,8 @@
 
 mod common;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use hd_mipray::camera::Camera;
-use hd_mipray::material::SurfaceInputs;
-use hd_mipray::mesh::MeshData;
 use hd_mipray::render_pass::PassResult;
 use hd_mipray::{RenderDelegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
@@ -32,17 +30,7 @@ fn magnified(dir: Vec3) -> Camera {
 
 fn delegate() -> RenderDelegate {
     let mut d = common::delegate_with_camera(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO, true);
-    let (topology, points) = common::cube_sphere(2, Scheme::CatmullClark);
-    d.set_mesh(
-        "/sphere",
-        MeshData {
-            topology,
-            points,
-            transform: Mat4::IDENTITY,
-            material: Some(SurfaceInputs::lambertian("/sphere", [0.7; 3])),
-            ..Default::default()
-        },
-    );
+    d.set_mesh("/sphere", common::grey_mesh("/sphere", common::cube_sphere(2, Scheme::CatmullClark), 0.7));
     d
 }
 

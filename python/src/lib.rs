@@ -1013,6 +1013,7 @@ fn version() -> &'static str {
 /// OpenSubdiv's regression-shape format (`obj_text`) or USD's mesh attributes (as `set_mesh`
 /// takes them). `heatmap` writes a picture of the tessellation error at `heatmap_rate` quads a
 /// side. The GIL is released while comparing.
+#[cfg(feature = "tools")]
 #[pyfunction]
 #[pyo3(signature = (name, *, obj_text=None, points=None, face_vertex_counts=None, face_vertex_indices=None, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, uniform_level=2, samples_per_side=5, tessellation_patches=512, split_depth=2, split_patches=64, quick=false, table=false, heatmap=None, heatmap_rate=4))]
 #[allow(clippy::too_many_arguments)]
@@ -1136,6 +1137,7 @@ fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(aov_names, m)?)?;
     m.add_function(wrap_pyfunction!(aovs, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    #[cfg(feature = "tools")]
     m.add_function(wrap_pyfunction!(subdiv_compare, m)?)?;
     Ok(())
 }

@@ -8,7 +8,7 @@
 //! A readable table goes to stdout (one JSON object with `--json`); one-line errors to stderr.
 //! Exit status: 0 when compared, 1 on failure (including shapes refused as not supported), 2 for
 //! a bad command line. USD meshes (`file.usda:/Prim/Path`) are read by the Python command of
-//! the same name (`python -m mipray.subdiv_compare`), which calls the same comparison.
+//! the same name (`python -m mipray.tools.subdiv_compare`), which calls the same comparison.
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -91,7 +91,7 @@ fn parse_args(argv: &[String]) -> Result<Option<Args>> {
 fn run(args: &Args) -> Result<()> {
     let path = Path::new(&args.input);
     if args.input.contains(".usd") && args.input.contains(':') && !path.exists() {
-        bail!("{}: USD meshes are read by the Python command: python -m mipray.subdiv_compare {}", args.input, args.input);
+        bail!("{}: USD meshes are read by the Python command: python -m mipray.tools.subdiv_compare {}", args.input, args.input);
     }
     let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", args.input))?;
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("shape");

@@ -182,3 +182,11 @@ pub fn cube() -> (MeshTopology, Vec<[f32; 3]>) {
     let idx = vec![0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7];
     (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 6], face_vertex_indices: idx, ..Default::default() }, pts)
 }
+
+/// A mesh of `shape` (topology, points) in place, shaded lambertian in grey `grey` (linear): a
+/// display colour without a material, as the USD front end sends it; named `name`.
+pub fn grey_mesh(name: &str, shape: (MeshTopology, Vec<[f32; 3]>), grey: f32) -> hd_mipray::mesh::MeshData {
+    let (topology, points) = shape;
+    let material = Some(hd_mipray::material::SurfaceInputs::lambertian(name, [grey; 3]));
+    hd_mipray::mesh::MeshData { topology, points, transform: glam::Mat4::IDENTITY, material, ..Default::default() }
+}

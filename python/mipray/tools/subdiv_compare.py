@@ -125,9 +125,9 @@ def _usd_mesh_kwargs(path: str, prim_path: str, time: str | None) -> dict[str, A
     import numpy as np
     from pxr import Usd, UsdGeom
 
-    from .errors import PrimError
-    from .session import open_stage
-    from .usd.mesh import mesh_arguments
+    from ..errors import PrimError
+    from ..session import open_stage
+    from ..usd.mesh import mesh_arguments
 
     stage = open_stage(path)
     prim = stage.GetPrimAtPath(prim_path)
@@ -167,7 +167,7 @@ def compare(
             hierarchical edits).
 
     """
-    from . import _mipray
+    from .. import _mipray
 
     options: dict[str, Any] = {
         "uniform_level": uniform_level,
@@ -196,7 +196,7 @@ def compare(
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit status."""
-    from .errors import MiprayError
+    from ..errors import MiprayError
 
     try:
         args = build_parser().parse_args(argv)

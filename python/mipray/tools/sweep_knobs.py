@@ -16,9 +16,9 @@ import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from .errors import MiprayError, RenderSettingsError
-from .settings import TABLE
-from .settings import parse as parse_setting
+from ..errors import MiprayError, RenderSettingsError
+from ..settings import TABLE
+from ..settings import parse as parse_setting
 
 __all__ = [
     "DEFAULT_REFERENCE_SAMPLES",
@@ -118,7 +118,7 @@ RESERVED_KNOBS: dict[str, str] = {}
 def _renderer_settings() -> tuple[str, ...]:
     """The settings the compiled renderer takes (empty without it)."""
     try:
-        from . import _mipray
+        from .. import _mipray
     except ImportError:
         return ()
     # Not in the hand-written stubs yet: asked for by name, so an older build still works.

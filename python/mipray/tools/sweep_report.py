@@ -1,4 +1,4 @@
-"""The figures and the tables of an accuracy-versus-time sweep (:mod:`mipray.sweep`).
+"""The figures and the tables of an accuracy-versus-time sweep (:mod:`mipray.tools.sweep`).
 
 Three things live here, apart from the rendering:
 

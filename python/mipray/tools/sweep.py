@@ -13,19 +13,19 @@ reuse; or give an EXR of the same size. It writes ``PREFIX.json`` and
 ``PREFIX.md`` (one row per setting: median wall and CPU time, peak memory,
 recomputed vertices, color RMSE, max and mean error against the reference,
 and the ``tessError`` AOV's geometric error in world units and in beam
-widths; see :data:`mipray.sweep_report.ROW_FIELDS`) after every row, so an
+widths; see :data:`mipray.tools.sweep_report.ROW_FIELDS`) after every row, so an
 interrupted sweep keeps the rows it finished, and ``PREFIX.png``, error
 against time with the Pareto front marked (needs matplotlib).
 
 ``--set KEY=VALUE`` fixes a setting for every row; ``--reference-set`` changes
 one of the ``auto`` reference's (``samples=4 seed=0`` gives it the rows' own
 noise, so the error left is the knobs' bias). Each setting renders in its own
-process (``python -m mipray.sweep --one REQUEST.json``), so its peak memory is
+process (``python -m mipray.tools.sweep --one REQUEST.json``), so its peak memory is
 its own, and every run of it with a new render delegate, so each starts cold;
 a row rendered by another build of the extension than the rows before it (a
 rebuild during the sweep) stops the sweep. From Python::
 
-    from mipray.sweep import sweep
+    from mipray.tools.sweep import sweep
     rows = sweep("scene.usda", {"tessFactor": [0.5, 1, 2]}, width=160, out="out/tess")
     rows[0]["wall_s"], rows[0]["color_rmse"]
 
@@ -51,7 +51,7 @@ from typing import Any, NoReturn, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import MiprayError
+from ..errors import MiprayError
 from .sweep_knobs import (
     DEFAULT_REFERENCE_SAMPLES,
     KNOBS,
@@ -240,7 +240,7 @@ def sweep(
 
     Returns:
         The rows, one dict per setting (fields in
-        :data:`mipray.sweep_report.ROW_FIELDS`).
+        :data:`mipray.tools.sweep_report.ROW_FIELDS`).
 
     Raises:
         SweepError: bad knobs, values, settings or reference; or a row that
@@ -316,7 +316,7 @@ def sweep(
             table["scene_stats"] = rendered.stats.get("scene", {})
             table["extension"] = rendered.extension
             if prefix is not None:
-                from .image import write_aovs
+                from ..image import write_aovs
 
                 ref_path = f"{prefix}.reference.exr"
                 write_aovs(ref_path, {"color": ref_image}, ["color"], formats={"color": "float"})

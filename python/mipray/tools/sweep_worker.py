@@ -1,7 +1,7 @@
 """Rendering one setting of a sweep, in this process or in a new one.
 
-:func:`render_in_subprocess` (the default runner of :func:`mipray.sweep.sweep`)
-starts ``python -m mipray.sweep --one REQUEST.json`` so each setting's peak
+:func:`render_in_subprocess` (the default runner of :func:`mipray.tools.sweep.sweep`)
+starts ``python -m mipray.tools.sweep --one REQUEST.json`` so each setting's peak
 memory is its own; that worker calls :func:`run_worker`, which renders with
 :func:`render_in_process`. :func:`image_size` and :func:`read_reference` let a
 sweep check a reference image before anything renders.
@@ -86,7 +86,7 @@ def extension_identity() -> str:
     would not be comparable.
     """
     try:
-        from . import _mipray
+        from .. import _mipray
     except ImportError:
         return ""
     path = getattr(_mipray, "__file__", None) or ""
@@ -106,7 +106,7 @@ def render_in_process(
     between renders carries cache statistics over (``recomputed_vertices``
     grows run after run), and a sweep wants every run to measure the same.
     """
-    from .session import RenderSession, open_stage
+    from ..session import RenderSession, open_stage
 
     stage = open_stage(request.scene)
     walls: list[float] = []
@@ -139,7 +139,7 @@ def render_in_process(
 def render_in_subprocess(
     request: RowRequest, progress: Callable[[int, int, int], None] | None = None
 ) -> Rendered:
-    """Render ``request`` in a new process (``python -m mipray.sweep --one``).
+    """Render ``request`` in a new process (``python -m mipray.tools.sweep --one``).
 
     Its ``memory.peak_rss_bytes`` is then this configuration's own. A
     ``KeyboardInterrupt`` here stops the worker and is raised again.
@@ -164,7 +164,7 @@ def render_in_subprocess(
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
         with subprocess.Popen(
-            [sys.executable, "-m", "mipray.sweep", "--one", req_path],
+            [sys.executable, "-m", "mipray.tools.sweep", "--one", req_path],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             stdin=subprocess.DEVNULL,
@@ -254,8 +254,8 @@ def image_size(scene: str, width: int, camera: str | None = None) -> tuple[str, 
         StageError, PrimError: the stage or the camera is unusable.
 
     """
-    from .session import RenderSession, open_stage
-    from .usd.camera import image_height
+    from ..session import RenderSession, open_stage
+    from ..usd.camera import image_height
 
     stage = open_stage(scene)
     with RenderSession(stage, delegate=_NullDelegate()) as session:
@@ -271,7 +271,7 @@ def read_reference(path: str) -> NDArray[np.float32]:
         SweepError: the file cannot be read or has no color channels.
 
     """
-    from . import _mipray
+    from .. import _mipray
 
     if not os.path.exists(path):
         raise SweepError(f"reference {path}: no such file")
