@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <mutex>
 #include <stdexcept>
@@ -447,6 +448,51 @@ struct OsdMesh::Impl {
     }
   }
 
+  // Positions of a regular patch at `count` points (u, v interleaved in `uv`): the patch's end
+  // conditions and control points read once, and the points taken in runs along an axis (the
+  // seam probes of a grid run along its edges): a run of one v contracts the control rows
+  // along t once and each point only along s, a run of one u the columns along s once and each
+  // point only along t; a point alone contracts rows (as a 1×1 grid would). Position only: no
+  // derivative weights or rows.
+  void eval_regular_points(std::size_t patch, const float* uv, std::size_t count, float* p) const {
+    bool ends[4];
+    regular_ends(patch, ends);
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handles[patch]);
+    auto cv = [&](int b, int a) { return control_points.data() + 3 * std::size_t(cvs[4 * b + a]); };
+    auto bits = [](float x) {
+      std::uint32_t b;
+      std::memcpy(&b, &x, sizeof b);
+      return b;
+    };
+    double w_fixed[4], w_run[4], dw[4], line[4][3];
+    for (std::size_t k = 0; k < count;) {
+      const float u = uv[2 * k], v = uv[2 * k + 1];
+      // The run: the points after k sharing its v (or, failing that, its u), bit for bit.
+      std::size_t end = k + 1;
+      while (end < count && bits(uv[2 * end + 1]) == bits(v)) ++end;
+      const bool along_s = end > k + 1 || k + 1 == count || bits(uv[2 * (k + 1)]) != bits(u);
+      if (!along_s)
+        while (end < count && bits(uv[2 * end]) == bits(u)) ++end;
+      // line[i] = Σ_j w_fixed[j] · cv(fixed axis j, i): rows along t for a run of one v,
+      // columns along s for a run of one u.
+      bspline(double(along_s ? v : u), ends[along_s ? 2 : 0], ends[along_s ? 3 : 1], w_fixed, dw);
+      for (int i = 0; i < 4; ++i)
+        for (int c = 0; c < 3; ++c) line[i][c] = 0.0;
+      for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+          const float* x = along_s ? cv(j, i) : cv(i, j);
+          for (int c = 0; c < 3; ++c) line[i][c] += w_fixed[j] * x[c];
+        }
+      for (; k < end; ++k) {
+        const float t = along_s ? uv[2 * k] : uv[2 * k + 1];
+        bspline(double(t), ends[along_s ? 0 : 2], ends[along_s ? 1 : 3], w_run, dw);
+        for (int c = 0; c < 3; ++c)
+          p[3 * k + c] = float(w_run[0] * line[0][c] + w_run[1] * line[1][c] +
+                               w_run[2] * line[2][c] + w_run[3] * line[3][c]);
+      }
+    }
+  }
+
   // A regular patch's grid (see is_regular); du, dv may be null.
   void eval_regular_grid(std::size_t patch, float u0, float v0, float u1, float v1, std::size_t n,
                          float* p, float* du, float* dv) const {
@@ -532,18 +578,6 @@ struct OsdMesh::Impl {
       lo[c] -= pad;
       hi[c] += pad;
     }
-  }
-
-  // A regular patch's position at one (u, v): the grid's arithmetic for a 1×1 grid there.
-  void eval_regular_point(std::size_t patch, float u, float v, float* p) const {
-    bool ends[4];
-    regular_ends(patch, ends);
-    double sw[4], dsw[4], tw[4], dtw[4], r[4][3], dr[4][3];
-    bspline(double(u), ends[0], ends[1], sw, dsw);
-    bspline(double(v), ends[2], ends[3], tw, dtw);
-    contract_rows(patch, tw, dtw, r, dr);
-    for (int c = 0; c < 3; ++c)
-      p[c] = float(sw[0] * r[0][c] + sw[1] * r[1][c] + sw[2] * r[2][c] + sw[3] * r[3][c]);
   }
 
   // Evaluates at the patch's local (s, t). Derivative outputs may be null (then not computed);
@@ -805,14 +839,13 @@ bool OsdMesh::evaluate_points(std::size_t patch, rust::Slice<const float> uv,
                               rust::Slice<float> p) const noexcept {
   if (patch >= impl->handles.size() || uv.size() % 2 != 0 || p.size() != uv.size() / 2 * 3)
     return false;
-  const bool regular = impl->is_regular(patch);
-  for (std::size_t k = 0; 2 * k < uv.size(); ++k) {
-    if (regular)
-      impl->eval_regular_point(patch, uv[2 * k], uv[2 * k + 1], p.data() + 3 * k);
-    else
-      impl->eval(patch, uv[2 * k], uv[2 * k + 1], p.data() + 3 * k, nullptr, nullptr, nullptr,
-                 nullptr, nullptr);
+  if (impl->is_regular(patch)) {
+    impl->eval_regular_points(patch, uv.data(), uv.size() / 2, p.data());
+    return true;
   }
+  for (std::size_t k = 0; 2 * k < uv.size(); ++k)
+    impl->eval(patch, uv[2 * k], uv[2 * k + 1], p.data() + 3 * k, nullptr, nullptr, nullptr,
+               nullptr, nullptr);
   return true;
 }
 

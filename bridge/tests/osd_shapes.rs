@@ -128,6 +128,11 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         let uv: Vec<[f32; 2]> = (0..side * side).map(|k| UvRect::UNIT.grid_uv(k % side, k / side, side)).map(|(u, v)| [u, v]).collect();
         let mut points = Vec::new();
         surface.evaluate_points(patch, &uv, &mut points);
+        // The same points v fastest: runs of one u, which a regular patch contracts along u
+        // first (and u fastest, above, along v first).
+        let uv_t: Vec<[f32; 2]> = uv.iter().enumerate().map(|(k, _)| uv[(k % side) * side + k / side]).collect();
+        let mut points_t = Vec::new();
+        surface.evaluate_points(patch, &uv_t, &mut points_t);
         for j in 0..side {
             for i in 0..side {
                 let (u, v) = UvRect::UNIT.grid_uv(i, j, side);
@@ -137,6 +142,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
                 let gd = Vec3A::from(grid.dpdu[k]);
                 stats.grid_err = stats.grid_err.max(max_abs(g - sp.p)).max(max_abs(gd - sp.dpdu));
                 stats.grid_err = stats.grid_err.max(max_abs(Vec3A::from(points[k]) - sp.p));
+                stats.grid_err = stats.grid_err.max(max_abs(Vec3A::from(points_t[i * side + j]) - sp.p));
                 if tri && u + v > 1.0 + 1e-6 {
                     // Outside the triangle's domain: the basis extrapolates there.
                     continue;

@@ -24,7 +24,7 @@
 //! (the tessellation's own chord error at that rate, below the ray's beam width) before the
 //! tessellated surface; flat patches have `R` at the rounding level only.
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 
 use crate::intersect::{intersect_tessellation, GridHit, WatertightRay};
 use crate::patch::{LimitSurface, UvRect};
@@ -310,26 +310,34 @@ pub fn seam_extent_with(
         if !ok {
             continue;
         }
-        if !normals {
-            for &[l0, l1, l2, bump] in &FIT_TABLE {
-                let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
-                dev_sq = dev_sq.max(d.length_squared());
-            }
-            continue;
-        }
-        for &[l0, l1, l2, bump] in &FIT_TABLE {
-            let d = (g[0] * l0 + g[1] * l1 + g[2] * l2) * bump;
-            dev_sq = dev_sq.max(d.length_squared());
+        // The fitted deviation at every sample, four samples a lane (x, y, z apart): a grid's
+        // seam extent was measured one sample at a time, and at 31 samples per chord that was
+        // most of what making a coarse grid cost.
+        let side = frame.filter(|_| normals).map(|f| f.e1);
+        let (mut chord_sq, mut low, mut high) = (Vec4::ZERO, Vec4::ZERO, Vec4::ZERO);
+        let [p0, p1, p2] = &FIT_WEIGHTS;
+        for ((w0, w1), w2) in p0.iter().zip(p1).zip(p2) {
+            let (w0, w1, w2) = (Vec4::from_array(*w0), Vec4::from_array(*w1), Vec4::from_array(*w2));
+            let dx = w0 * g[0].x + w1 * g[1].x + w2 * g[2].x;
+            let dy = w0 * g[0].y + w1 * g[1].y + w2 * g[2].y;
+            let dz = w0 * g[0].z + w1 * g[1].z + w2 * g[2].z;
+            chord_sq = chord_sq.max(dx * dx + dy * dy + dz * dz);
             // Along the normal, from the chord's line: a box spans the chord's length (and `r`
             // beyond its ends) whatever the curve's position along it.
-            match frame {
-                Some(f) => {
-                    let h = d.dot(f.e1);
-                    below = below.max(-h);
-                    above = above.max(h);
-                }
-                None => (below, above) = (below.max(d.length()), above.max(d.length())),
+            if let Some(e1) = side {
+                let h = dx * e1.x + dy * e1.y + dz * e1.z;
+                low = low.min(h);
+                high = high.max(h);
             }
+        }
+        let chord_sq = chord_sq.max_element();
+        dev_sq = dev_sq.max(chord_sq);
+        if !normals {
+            continue;
+        }
+        match side {
+            Some(_) => (below, above) = (below.max(-low.min_element()), above.max(high.max_element())),
+            None => (below, above) = (below.max(chord_sq.sqrt()), above.max(chord_sq.sqrt())),
         }
     }
     let dev = dev_sq.sqrt();
@@ -350,21 +358,25 @@ pub fn seam_extent_with(
 /// most 4 % of it: [`SEAM_SAFETY`] covers that.
 const FIT_STEPS: usize = 32;
 
-/// For each inner sample τ = step / [`FIT_STEPS`] (the ends, where the deviation is zero, left
-/// out): the Lagrange weights of the quadratic through τ = ¼, ½, ¾, and τ(1 − τ). The same for
-/// every chord of every grid, so made once, at compile time.
-const FIT_TABLE: [[f32; 4]; FIT_STEPS - 1] = {
+/// Lanes of four samples in [`FIT_WEIGHTS`].
+const FIT_LANES: usize = FIT_STEPS / 4;
+
+/// For each probe p and inner sample τ = step / [`FIT_STEPS`] (the ends, where the deviation is
+/// zero, left out): the Lagrange weight of probe p in the quadratic through τ = ¼, ½, ¾, times
+/// τ(1 − τ); the deviation at the sample is Σ_p g_p · weight. Four samples a lane, sample
+/// `step` at `[p][(step − 1) / 4][(step − 1) % 4]`; the last lane's fourth entry (τ = 1) is 0.
+/// The same for every chord of every grid, so made once, at compile time.
+const FIT_WEIGHTS: [[[f32; 4]; FIT_LANES]; SEAM_PROBES] = {
     let (x0, x1, x2) = (0.25f32, 0.5f32, 0.75f32);
-    let mut table = [[0.0f32; 4]; FIT_STEPS - 1];
+    let mut table = [[[0.0f32; 4]; FIT_LANES]; SEAM_PROBES];
     let mut step = 1;
     while step < FIT_STEPS {
         let tau = step as f32 / FIT_STEPS as f32;
-        table[step - 1] = [
-            (tau - x1) * (tau - x2) / ((x0 - x1) * (x0 - x2)),
-            (tau - x0) * (tau - x2) / ((x1 - x0) * (x1 - x2)),
-            (tau - x0) * (tau - x1) / ((x2 - x0) * (x2 - x1)),
-            tau * (1.0 - tau),
-        ];
+        let bump = tau * (1.0 - tau);
+        let (lane, k) = ((step - 1) / 4, (step - 1) % 4);
+        table[0][lane][k] = (tau - x1) * (tau - x2) / ((x0 - x1) * (x0 - x2)) * bump;
+        table[1][lane][k] = (tau - x0) * (tau - x2) / ((x1 - x0) * (x1 - x2)) * bump;
+        table[2][lane][k] = (tau - x0) * (tau - x1) / ((x2 - x0) * (x2 - x1)) * bump;
         step += 1;
     }
     table

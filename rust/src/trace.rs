@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use glam::{Mat3A, Mat4, Vec3A};
 use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray as BvhRay, RayHit};
+use obvhs::ray::Ray as BvhRay;
 
 use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
@@ -28,6 +28,32 @@ use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceP
 #[inline]
 pub fn positive_zeros(d: Vec3A) -> Vec3A {
     d + Vec3A::ZERO
+}
+
+/// Visits the primitives of `bvh` whose boxes `ray` enters, nearest boxes first. `test(id)`
+/// tests leaf primitive `id` (an index into `bvh.primitive_indices`) against the ray, clipped to
+/// the nearest hit so far, and returns its hit distance; later boxes beyond it are skipped.
+/// With `any_hit`, the first hit ends the traversal: obvhs's `ray_traverse` would go on popping
+/// its stack through every box nearer than the hit, which an occlusion query never needs.
+#[inline(always)]
+fn traverse_bvh(bvh: &CwBvh, ray: BvhRay, any_hit: bool, mut test: impl FnMut(usize) -> Option<f32>) {
+    // The `traverse!` macro names `UVec2` unqualified.
+    use glam::UVec2;
+    let mut clipped = ray;
+    let mut state = bvh.new_traversal(ray.direction);
+    let mut node;
+    'traversal: {
+        obvhs::traverse!(bvh, node, state, node.intersect_ray(&clipped, state.oct_inv4), {
+            if let Some(t) = test(state.primitive_id as usize) {
+                if any_hit {
+                    break 'traversal;
+                }
+                if t < clipped.tmax {
+                    clipped.tmax = t;
+                }
+            }
+        });
+    }
 }
 
 /// Per-thread counters, summed into the render stats at the end (no shared atomics on the hot
@@ -414,22 +440,12 @@ impl<'s> Tracer<'s> {
         let bray = BvhRay::new(ray.o, positive_zeros(ray.d), ray.t_min, ray.t_max);
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
-        let mut rh = RayHit::none();
-        let mut done = false;
-        tlas.ray_traverse(bray, &mut rh, |_r, id| {
-            if done {
-                return f32::INFINITY;
-            }
+        traverse_bvh(tlas, bray, any_hit, |id| {
             let ii = tlas.primitive_indices[id] as usize;
-            if let Some(h) = self.test_instance(ii, ray, t_best, counters, any_hit, origin) {
-                t_best = h.t;
-                best = Some(h);
-                if any_hit {
-                    done = true;
-                }
-                return h.t;
-            }
-            f32::INFINITY
+            let h = self.test_instance(ii, ray, t_best, counters, any_hit, origin)?;
+            t_best = h.t;
+            best = Some(h);
+            Some(h.t)
         });
         best
     }
@@ -485,18 +501,11 @@ impl<'s> Tracer<'s> {
         let wray = WatertightRay::new(o, d);
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
-        let mut rh = RayHit::none();
-        let mut done = false;
-        blas.ray_traverse(BvhRay::new(o, d, ray.t_min, t_max), &mut rh, |_r, id| {
-            if done {
-                return f32::INFINITY;
-            }
+        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
             let si = blas.primitive_indices[id] as usize;
             let sp = &geom.subpatches[si];
             let sp_bounds = sp.bounds();
-            let Some((t_enter, _)) = wray.hit_box(&sp_bounds, ray.t_min, t_best) else {
-                return f32::INFINITY;
-            };
+            let (t_enter, _) = wray.hit_box(&sp_bounds, ray.t_min, t_best)?;
             counters.ray_subpatch_tests += 1;
             // The rate is sized by the patch itself: its box less the displacement bound it was
             // grown by (displacement finer than the grid is filtered to its spacing, so the
@@ -573,17 +582,10 @@ impl<'s> Tracer<'s> {
                     })
                 })
             };
-            match found {
-                Some(h) => {
-                    t_best = h.t;
-                    best = Some((h, si as u32));
-                    if any_hit {
-                        done = true;
-                    }
-                    h.t
-                }
-                None => f32::INFINITY,
-            }
+            let h = found?;
+            t_best = h.t;
+            best = Some((h, si as u32));
+            Some(h.t)
         });
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
@@ -648,12 +650,7 @@ impl<'s> Tracer<'s> {
         let own = origin.filter(|org| org.instance == ii as u32);
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
-        let mut rh = RayHit::none();
-        let mut done = false;
-        blas.ray_traverse(BvhRay::new(o, d, ray.t_min, t_max), &mut rh, |_r, id| {
-            if done {
-                return f32::INFINITY;
-            }
+        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
             let si = blas.primitive_indices[id] as usize;
             let patch = geom.subpatches[si].patch as usize;
             counters.ray_subpatch_tests += 1;
@@ -666,12 +663,11 @@ impl<'s> Tracer<'s> {
                     _ => break Some(h),
                 }
             };
-            let Some(h) = found else { return f32::INFINITY };
+            let h = found?;
             t_best = h.t;
             let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error, seam: false };
             best = Some((local, si as u32));
-            done = any_hit;
-            h.t
+            Some(h.t)
         });
         best
     }

@@ -13,7 +13,6 @@
 //! C. Schlick, *An Inexpensive BRDF Model for Physically-based Rendering*, 1994.
 
 use std::f32::consts::PI;
-use std::sync::OnceLock;
 
 use glam::Vec3A;
 
@@ -153,18 +152,24 @@ pub fn refract(wo: Vec3A, h: Vec3A, eta: f32) -> Option<Vec3A> {
 }
 
 /// Grid size of the albedo tables, in each of `cos θo` and roughness.
-const N: usize = 32;
+pub(super) const ALBEDO_TABLE_SIZE: usize = 32;
+const N: usize = ALBEDO_TABLE_SIZE;
 
 /// The directional albedo of a GGX reflector with Schlick's Fresnel, tabulated: because
 /// Schlick's form is linear in `f0` and `f90`, the albedo is `f0·A(μ, r) + f90·B(μ, r)` for two
 /// scalar tables over `μ = cos θo` and roughness `r` (α = r²), and its cosine-weighted
 /// hemispherical average `E_avg = 2∫ E(μ) μ dμ` is `f0·A_avg(r) + f90·B_avg(r)`.
 ///
-/// Computed once (about a million GGX samples, a few milliseconds optimised) by importance
-/// sampling the visible normals with a 32 × 32 stratified pattern per entry: each sample's
-/// weight is `F · G2/G1`, so the estimates are within about 1e-3 of the integral. The averages
-/// integrate the piecewise-linear interpolant exactly, so they are consistent with the
-/// lookups: that is what makes [`super::preview`]'s diffuse scaling conserve energy.
+/// Computed by importance sampling the visible normals with a 32 × 32 stratified pattern per
+/// entry ([`AlbedoTable::compute`]): each sample's weight is `F · G2/G1`, so the estimates are
+/// within about 1e-3 of the integral. The averages integrate the piecewise-linear interpolant
+/// exactly, so they are consistent with the lookups: that is what makes [`super::preview`]'s
+/// diffuse scaling conserve energy.
+///
+/// The table a render uses is that computation's output, stored in `albedo_table_data.rs`: the
+/// million GGX samples cost about 190 M instructions (60 ms), which a render paid inside its
+/// first tile, blocking every thread that shaded a glossy surface, on every run. A test
+/// recomputes it and fails if the stored copy drifts.
 pub struct AlbedoTable {
     a: [[f32; N]; N],
     b: [[f32; N]; N],
@@ -174,12 +179,19 @@ pub struct AlbedoTable {
 
 impl AlbedoTable {
     /// The shared table.
+    #[inline]
     pub fn get() -> &'static AlbedoTable {
-        static TABLE: OnceLock<AlbedoTable> = OnceLock::new();
-        TABLE.get_or_init(AlbedoTable::compute)
+        static TABLE: AlbedoTable = AlbedoTable {
+            a: super::albedo_table_data::A,
+            b: super::albedo_table_data::B,
+            a_avg: super::albedo_table_data::A_AVG,
+            b_avg: super::albedo_table_data::B_AVG,
+        };
+        &TABLE
     }
 
-    fn compute() -> AlbedoTable {
+    /// The table computed afresh (what `albedo_table_data.rs` stores; see the type's doc).
+    pub fn compute() -> AlbedoTable {
         let mut t = AlbedoTable { a: [[0.0; N]; N], b: [[0.0; N]; N], a_avg: [0.0; N], b_avg: [0.0; N] };
         let strata = 32;
         for (j, (ra, rb)) in t.a.iter_mut().zip(t.b.iter_mut()).enumerate() {
@@ -220,6 +232,30 @@ impl AlbedoTable {
             t.b_avg[j] = cosine_average(&t.b[j]);
         }
         t
+    }
+
+    /// Rust source of `albedo_table_data.rs` holding this table (`{:?}` prints an `f32` that
+    /// reads back as the same value).
+    #[cfg(test)]
+    fn to_source(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::from(
+            "//! The GGX albedo tables of [`super::microfacet::AlbedoTable`], as `AlbedoTable::compute` makes\n\
+             //! them. Generated: `MIPRAY_WRITE_ALBEDO_TABLE=1 cargo test -p mipray --lib stored_albedo_table`.\n\n\
+             use super::microfacet::ALBEDO_TABLE_SIZE as N;\n",
+        );
+        let row = |r: &[f32; N]| r.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>().join(", ");
+        for (name, t) in [("A", &self.a), ("B", &self.b)] {
+            let _ = writeln!(s, "\n#[rustfmt::skip]\npub(super) const {name}: [[f32; N]; N] = [");
+            for r in t {
+                let _ = writeln!(s, "    [{}],", row(r));
+            }
+            s.push_str("];\n");
+        }
+        for (name, t) in [("A_AVG", &self.a_avg), ("B_AVG", &self.b_avg)] {
+            let _ = writeln!(s, "\n#[rustfmt::skip]\npub(super) const {name}: [f32; N] = [{}];", row(t));
+        }
+        s
     }
 
     /// `(A, B)` at `mu = cos θo` and `roughness`, bilinear.
@@ -378,6 +414,25 @@ mod tests {
         assert!((wt.z + (1.0 - (0.6f32.sin() / 1.5).powi(2)).sqrt()).abs() < 1e-5);
         assert!(((wt.x * wt.x + wt.y * wt.y).sqrt() * 1.5 - 0.6f32.sin()).abs() < 1e-5);
         assert!(refract(sph(crit + 0.01, 0.0), Vec3A::Z, 1.0 / 1.5).is_none());
+    }
+
+    /// The stored table is the computation's output (to rounding: the sampling runs through the
+    /// platform's `sin`, `cos` and `sqrt`). Regenerate it with
+    /// `MIPRAY_WRITE_ALBEDO_TABLE=1 cargo test -p mipray --lib stored_albedo_table`.
+    #[test]
+    fn stored_albedo_table_is_the_computed_one() {
+        let fresh = AlbedoTable::compute();
+        if std::env::var_os("MIPRAY_WRITE_ALBEDO_TABLE").is_some() {
+            let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/bsdf/albedo_table_data.rs");
+            std::fs::write(path, fresh.to_source()).expect("write albedo_table_data.rs");
+        }
+        let stored = AlbedoTable::get();
+        let rows = |t: &AlbedoTable| -> Vec<f32> {
+            t.a.iter().chain(t.b.iter()).flatten().chain(t.a_avg.iter()).chain(t.b_avg.iter()).copied().collect()
+        };
+        let (s, f) = (rows(stored), rows(&fresh));
+        let worst = s.iter().zip(&f).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst <= 1e-6, "albedo_table_data.rs is stale: an entry differs by {worst}; regenerate it (see this test's doc)");
     }
 
     /// The table against an independent estimate (uniform hemisphere sampling of the BRDF).

@@ -9,6 +9,7 @@ use glam::Vec3A;
 
 use crate::sampling::{cosine_hemisphere, frame};
 
+mod albedo_table_data;
 pub mod microfacet;
 pub mod preview;
 
