@@ -134,16 +134,21 @@ fn brightest(scene: &Scene, integrator: IntegratorKind, tess_factor: f32, incohe
 
 const INTEGRATORS: [IntegratorKind; 4] = [IntegratorKind::Direct, IntegratorKind::Ao, IntegratorKind::ColorBleeding, IntegratorKind::Path];
 
+/// The integrators whose images depend on the lights: ambient occlusion does not (it is the
+/// open sky's share, lit or not), so it can only show a leak from inside the shell looking at
+/// its inner side, where every occlusion ray must be blocked.
+const LIT_INTEGRATORS: [IntegratorKind; 3] = [IntegratorKind::Direct, IntegratorKind::ColorBleeding, IntegratorKind::Path];
+
 /// Every (shell, integrator, tess factor) whose render is not exactly 0 everywhere, for
-/// `lights` and the camera placements `views`.
-fn leaks(lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)]) -> Vec<String> {
+/// `lights`, the camera placements `views` and `integrators`.
+fn leaks(lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)], integrators: &[IntegratorKind]) -> Vec<String> {
     let mut leaks = Vec::new();
     for shell in [Shell::CatmullClark, Shell::Loop, Shell::Displaced] {
         let mut scene = shell_scene(shell);
         scene.lights = lights();
         for &(eye, target) in views {
             scene.camera = camera(eye, target);
-            for integrator in INTEGRATORS {
+            for &integrator in integrators {
                 for (tess, incoherent) in [(0.25, 1.0), (1.0, 1.0), (4.0, 1.0), (16.0, 1.0), (16.0, 32.0)] {
                     let (max, lit) = brightest(&scene, integrator, tess, incoherent);
                     println!("{shell:?} {integrator:?} tess {tess} incoherent {incoherent}: max {max:.3e} over {lit} pixels");
@@ -165,7 +170,7 @@ fn leaks(lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)]) -> Vec<String> {
 #[ignore = "issue 23: light still leaks through Loop and displaced shells"]
 fn no_light_from_outside_reaches_a_camera_inside_a_closed_shell() {
     let views = [(Vec3::ZERO, Vec3::new(1.0, 0.2, 0.3)), (Vec3::new(0.5, -0.5, 0.5), Vec3::new(-1.0, 0.3, -0.6))];
-    let leaks = leaks(lights_outside, &views);
+    let leaks = leaks(lights_outside, &views, &INTEGRATORS);
     assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
 }
 
@@ -173,6 +178,6 @@ fn no_light_from_outside_reaches_a_camera_inside_a_closed_shell() {
 #[ignore = "issue 23: light still leaks through Loop and displaced shells"]
 fn no_light_from_inside_a_closed_shell_gets_out() {
     let views = [(Vec3::new(0.0, 2.0, 9.0), Vec3::ZERO), (Vec3::new(-7.0, -3.0, 1.0), Vec3::ZERO)];
-    let leaks = leaks(lights_inside, &views);
+    let leaks = leaks(lights_inside, &views, &LIT_INTEGRATORS);
     assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
 }
