@@ -17,7 +17,7 @@ Conventions
   non-finite values).
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, final
 
 import numpy as np
@@ -344,7 +344,7 @@ class RenderDelegate:
         *,
         on_update: Callable[[int, bool, dict[str, NDArray[np.float32]]], object] | None = None,
         pass_output: dict[str, Any] | None = None,
-    ) -> tuple[dict[str, NDArray[np.float32]], str]:
+    ) -> tuple[Mapping[str, NDArray[np.float32]], str]:
         """Render the scene through ``camera`` and return its AOVs.
 
         Releases the GIL for the whole render; the render thread re-takes it
@@ -377,9 +377,11 @@ class RenderDelegate:
             on_update: called as ``on_update(samples, converged, aovs)`` after
                 each pass, in order, from a render thread: ``samples`` is the
                 samples per pixel so far, ``converged`` is True for the last
-                pass only, and ``aovs`` maps each AOV asked for to a new
-                H×W×C float32 array (linear, averaged over the samples so
-                far; the caller may keep it). Without ``"progressive"`` there
+                pass only, and ``aovs`` maps each AOV asked for to a
+                read-only H×W×C float32 array (linear, averaged over the
+                samples so far) viewing that pass's own buffers in place
+                (its ``base`` owns them): the caller may keep it, later
+                passes do not touch it. Without ``"progressive"`` there
                 is one pass, so one call. An exception raised in it cancels
                 the render (no further pass starts) and is raised by
                 ``render`` as it was raised; the delegate stays usable.
@@ -396,8 +398,16 @@ class RenderDelegate:
         and is raised here once the render threads have stopped.
 
         Returns:
-            ``(aovs, stats_json)``: each AOV an H×W×C float32 array, and the
-            render statistics as a JSON string (names in DESIGN.md).
+            ``(aovs, stats_json)``: the AOVs, and the render statistics as
+            a JSON string (names in DESIGN.md). ``aovs`` is a read-only
+            mapping, AOV name → H×W×C float32 array, that keeps the buffers
+            the renderer filled: each ``aovs[name]`` is a new array object
+            viewing the buffer in place (its ``base`` is ``aovs``, kept
+            alive by it), so no pixel is copied, and :func:`write_image`
+            reads such arrays where they are. The arrays are read-only
+            (numpy refuses to make them writeable; ``numpy.array(a)`` is a
+            copy to change). ``keys`` (a list), ``values``, ``items``,
+            ``get``, ``len``, ``in`` and iteration work as on a dict.
 
         Raises:
             ValueError: unknown camera or AOV, or an invalid setting.

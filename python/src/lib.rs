@@ -556,8 +556,8 @@ impl RenderDelegate {
         self.inner.instancer(path).map(|i| i.updates)
     }
 
-    /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL; calls
-    /// `on_update(samples, converged, {aov: array})` after each pass and writes every pass but
+    /// Syncs and renders. Returns (`RenderBuffers`: {aov: read-only H×W×C float32 view}, stats
+    /// JSON). Releases the GIL; calls `on_update(samples, converged, {aov: view})` after each pass and writes every pass but
     /// the last to `pass_output` (see `render.rs`); Ctrl-C cancels it.
     #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None, *, on_update=None, pass_output=None))]
     #[allow(clippy::too_many_arguments)]
@@ -572,7 +572,7 @@ impl RenderDelegate {
         progress: Option<Py<PyAny>>,
         on_update: Option<Py<PyAny>>,
         pass_output: Option<&Bound<'py, PyDict>>,
-    ) -> PyResult<(Bound<'py, PyDict>, String)> {
+    ) -> PyResult<(Bound<'py, render::RenderBuffers>, String)> {
         // Names become AOVs here, at the boundary: the render never sees an unknown one.
         let aovs = aovs.iter().map(|a| Aov::parse(a)).collect::<Result<Vec<_>, _>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
         let pass_output = pass_output.map(render::PassOutput::from_py).transpose()?;
