@@ -12,9 +12,11 @@ Conventions
   the translation in the last row.
 * Prim paths are USD path strings (``"/World/Geo/Cube"``); a ``set_*`` call with
   a path already present replaces that prim.
-* Methods that take array data raise ``ValueError`` naming the prim path when
-  the data is inconsistent (index out of range, counts that do not add up,
-  non-finite values).
+* Methods that take array data raise ``mipray.errors.PrimDataError`` (a
+  ``PrimError`` and a ``ValueError``) naming the prim path when the data is
+  inconsistent (index out of range, counts that do not add up, non-finite
+  values). ``set_mesh`` checks a mesh's data once, here: the scene delegate
+  does not check it first.
 """
 
 from collections.abc import Callable, Mapping
@@ -155,7 +157,10 @@ class RenderDelegate:
                 together with ``face_materials``.
 
         Raises:
-            ValueError: the data is inconsistent; the message names ``path``.
+            PrimDataError: the data is inconsistent (the one check of a mesh's
+                data: points, topology, subdivision tags, primvars, face table,
+                transform, displacement, widths); the message names ``path``,
+                and the mesh is not kept. A ``ValueError`` too.
         """
 
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
@@ -170,7 +175,7 @@ class RenderDelegate:
                 to its prototype's root), row-vector convention.
 
         Raises:
-            ValueError: no mesh at ``path``, or the transform is not finite.
+            PrimDataError: no mesh at ``path``, or the transform is not finite.
         """
 
     def set_motion(
@@ -189,7 +194,7 @@ class RenderDelegate:
             transforms: (N, 4, 4) float64 local-to-world, row-vector convention.
 
         Raises:
-            ValueError: no mesh at ``path``, lengths differ, or a key is not finite.
+            PrimDataError: no mesh at ``path``, lengths differ, or a key is not finite.
         """
 
     def set_instancer(
@@ -224,7 +229,7 @@ class RenderDelegate:
                 itself.
 
         Raises:
-            ValueError: sizes that disagree, an index out of range, or a
+            PrimDataError: sizes that disagree, an index out of range, or a
                 transform that is not finite; the message names ``path``.
         """
 
