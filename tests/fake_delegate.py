@@ -2,8 +2,8 @@
 
 ``FakeRenderDelegate`` has exactly the methods and signatures of
 ``mipray._mipray.RenderDelegate`` (``test_protocol.py`` checks it against the
-stubs); it validates the basics the real one does (array dtypes and shapes)
-and records every call. ``fake_module()`` builds a module object with the
+stubs); it validates the basics the real one does (array dtypes and shapes),
+has the real one check each mesh's geometry, and records every call. ``fake_module()`` builds a module object with the
 delegate, ``write_image``, ``read_image`` and ``version``, to stand in for
 ``mipray._mipray`` in tests of ``mipray.render`` and ``mipray-record``.
 """
@@ -37,6 +37,38 @@ def _check_array(path: str, name: str, value: Any, dtype: type, ndim: int) -> No
         raise TypeError(f"{path}: {name} must be {np.dtype(dtype).name}, got {value.dtype}")
     if value.ndim != ndim:
         raise ValueError(f"{path}: {name} must have {ndim} dimension(s), got {value.ndim}")
+
+
+# The compiled delegate's class, taken now: tests stand the fake module in for
+# ``mipray._mipray`` (the ``fake_native`` fixture), and the fake must not ask itself.
+try:
+    from mipray._mipray import RenderDelegate as _CompiledDelegate
+except ImportError:  # a build-less run: meshes go unchecked
+    _CompiledDelegate = None
+
+#: The compiled delegate that checks the fake's meshes (see :func:`_check_geometry`).
+_CHECKER: list[Any] = []
+
+#: The ``set_mesh`` arguments about shading, not geometry: tests give the fake what they like.
+_SHADING = frozenset(
+    (
+        "material face_materials face_material_indices displacement_texture gprim primvars "
+        "st_values st_indices st_interpolation double_sided prototype"
+    ).split()
+)
+
+
+def _check_geometry(path: str, kwargs: dict[str, Any]) -> None:
+    """Refuse a mesh as the real delegate does: mesh data is checked in one place, the
+    compiled delegate's ``set_mesh`` (``PrimDataError`` naming the prim), so the fake asks it
+    rather than keeping a copy of its rules."""
+    if _CompiledDelegate is None:
+        return
+    if not _CHECKER:
+        _CHECKER.append(_CompiledDelegate())
+    checker = _CHECKER[0]
+    checker.set_mesh(path, **{k: v for k, v in kwargs.items() if k not in _SHADING})
+    checker.remove(path)
 
 
 class FakeRenderDelegate:
@@ -134,6 +166,7 @@ class FakeRenderDelegate:
         ):
             if value is not None:
                 _check_array(path, name, value, dtype, 1)
+        _check_geometry(path, kwargs)
         self._set("set_mesh", path, kwargs)
 
     def set_camera(

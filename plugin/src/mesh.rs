@@ -102,6 +102,53 @@ impl MeshData {
         channels
     }
 
+    /// Every check of a mesh's data, once (the delegate's [`crate::RenderDelegate::set_mesh`]
+    /// makes it): finite points, the topology ([`MeshTopology::validate`]), the face table,
+    /// the primvars against the topology, a finite transform, the displacement and its bound,
+    /// a Points gprim's widths. A mesh that passes builds, or fails only where OpenSubdiv or a
+    /// gprim's own constructor refuses it.
+    ///
+    /// # Errors
+    /// The first problem, one line naming the USD attribute (without the prim's path).
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some(i) = self.points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+            let [x, y, z] = self.points[i].map(py_float);
+            return Err(format!("points[{i}] = ({x}, {y}, {z}) is not finite"));
+        }
+        let reason = |e: mipray::error::MeshError| match e {
+            mipray::error::MeshError::Invalid(m) => m,
+            e => e.to_string(),
+        };
+        self.topology.validate(self.points.len()).map_err(reason)?;
+        if self.topology.scheme == Scheme::Loop {
+            // OpenSubdiv's guard in the bridge refuses this too, but only when the surface is
+            // built: here the mesh is refused when it is set.
+            if let Some((f, n)) = self.topology.face_vertex_counts.iter().enumerate().find(|(_, &n)| n != 3) {
+                return Err(format!("subdivisionScheme loop needs triangles, but face {f} has {n} vertices"));
+            }
+        }
+        if let Some(table) = &self.face_materials {
+            table.validate(self.face_count())?;
+        }
+        let channels = self.st.iter().chain(&self.normals).chain(self.primvar_inputs.iter().flat_map(|(_, c)| c));
+        for c in channels {
+            c.face_varying_indices(&self.topology, self.points.len()).map_err(|e| e.to_string())?;
+        }
+        if !self.transform.is_finite() {
+            return Err("transform is not finite".into());
+        }
+        if let Some(d) = &self.displacement {
+            d.validate()?;
+        }
+        if let Some(b) = self.displacement_bound.filter(|b| !(b.is_finite() && *b >= 0.0)) {
+            return Err(format!("primvars:displacementBound = {b} must be a non-negative number"));
+        }
+        if let Some(Gprim::Points { widths }) = &self.gprim {
+            PointsSurface::check(&self.points, widths)?;
+        }
+        Ok(())
+    }
+
     /// The faces [`MeshData::face_materials`] indexes: the topology's, or for Points one per
     /// point (each point's sphere is a patch of its own base face).
     pub fn face_count(&self) -> usize {
@@ -176,6 +223,9 @@ pub struct MeshPrim {
     pub generation: u32,
     /// The last sync's error, if the prim could not be built.
     pub error: Option<String>,
+    /// Why the data last set is unusable ([`MeshData::validate`], made by `set_mesh`); such a
+    /// prim is not built, and each render reports it.
+    pub invalid: Option<String>,
     /// The mesh's key in the delegate's geometry cache, fixed for the prim's life.
     pub cache_id: u32,
     /// Its world transform over the camera's shutter, when it moves within it (set by
@@ -185,6 +235,7 @@ pub struct MeshPrim {
 
 impl MeshPrim {
     pub fn new(path: &str, data: MeshData, cache_id: u32) -> Self {
+        let invalid = data.validate().err();
         MeshPrim {
             path: path.to_string(),
             data,
@@ -193,6 +244,7 @@ impl MeshPrim {
             surface_syncs: 0,
             generation: 0,
             error: None,
+            invalid,
             cache_id,
             motion: None,
         }
@@ -245,24 +297,15 @@ impl MeshPrim {
     pub fn sync(&mut self) -> Result<bool, DelegateError> {
         let dirty = self.dirty;
         self.dirty = DirtyBits::CLEAN;
-        if dirty.contains(DirtyBits::MATERIAL) || dirty.contains(DirtyBits::TOPOLOGY) {
-            let faces = self.data.face_count();
-            if let Some(Err(problem)) = self.data.face_materials.as_ref().map(|f| f.validate(faces)) {
-                // Left out until fixed; the fix rebuilds the surface (a rare case, kept simple).
-                self.surface = None;
-                let e = DelegateError::prim(&self.path, problem);
-                self.error = Some(e.to_string());
-                return Err(e);
-            }
+        if let Some(problem) = &self.invalid {
+            // Left out until fixed; the fix rebuilds the surface (a rare case, kept simple).
+            self.surface = None;
+            let e = DelegateError::prim(&self.path, problem);
+            self.error = Some(e.to_string());
+            return Err(e);
         }
         if !(dirty.contains(DirtyBits::TOPOLOGY) || dirty.contains(DirtyBits::POINTS)) && self.surface.is_some() {
             return Ok(false);
-        }
-        if !self.data.transform.is_finite() {
-            self.surface = None;
-            let e = DelegateError::prim(&self.path, "transform is not finite");
-            self.error = Some(e.to_string());
-            return Err(e);
         }
         let result = self.build(dirty);
         self.generation = self.generation.wrapping_add(1);
@@ -283,9 +326,6 @@ impl MeshPrim {
     }
 
     fn build(&mut self, dirty: DirtyBits) -> Result<Surface, mipray::error::MeshError> {
-        if let Some(d) = &self.data.displacement {
-            d.validate().map_err(mipray::error::MeshError::Invalid)?;
-        }
         match &self.data.gprim {
             Some(Gprim::Implicit(shape)) => {
                 return Ok(Surface::Implicit(Arc::new(ImplicitSurface::new(*shape).map_err(mipray::error::MeshError::Invalid)?)))
@@ -321,5 +361,23 @@ impl MeshPrim {
                 &primvars,
             )?)),
         })
+    }
+}
+
+/// A float as Python's `repr` writes it (`nan`, `inf`, `1e+20`), so a point named in an error
+/// reads as the scene delegate's other messages do.
+fn py_float(v: f32) -> String {
+    let v = f64::from(v);
+    if v.is_nan() {
+        return "nan".into();
+    }
+    if v.is_infinite() {
+        return if v > 0.0 { "inf".into() } else { "-inf".into() };
+    }
+    let s = format!("{v:?}");
+    match s.split_once('e') {
+        Some((m, e)) if e.starts_with('-') => format!("{m}e-{:0>2}", &e[1..]),
+        Some((m, e)) => format!("{m}e+{e:0>2}"),
+        None => s,
     }
 }

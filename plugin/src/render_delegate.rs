@@ -57,12 +57,16 @@ impl RenderDelegate {
         Self::default()
     }
 
-    /// Inserts a mesh, or updates it and marks dirty exactly what changed.
+    /// Inserts a mesh, or updates it and marks dirty exactly what changed. The data is checked
+    /// here, once ([`MeshData::validate`]): unusable data is kept but not built, each render
+    /// reports it in its `prim_errors` (as Hydra's delegates report at sync), and
+    /// [`RenderDelegate::mesh_problem`] says why at once.
     pub fn set_mesh(&mut self, path: &str, data: MeshData) {
         match self.meshes.get_mut(path) {
             Some(m) => {
                 let d = m.diff(&data);
                 m.dirty = m.dirty | d;
+                m.invalid = data.validate().err();
                 m.data = data;
             }
             None => {
@@ -71,6 +75,11 @@ impl RenderDelegate {
                 self.meshes.insert(path.to_string(), MeshPrim::new(path, data, id));
             }
         }
+    }
+
+    /// Why the mesh at `path` was refused by its last [`RenderDelegate::set_mesh`], if it was.
+    pub fn mesh_problem(&self, path: &str) -> Option<DelegateError> {
+        self.meshes.get(path).and_then(|m| m.invalid.as_ref()).map(|p| DelegateError::prim(path, p))
     }
 
     /// Moves a mesh: a new object-to-world transform (for a prototype mesh: to its prototype's
@@ -86,6 +95,10 @@ impl RenderDelegate {
         if m.data.transform != transform {
             m.data.transform = transform;
             m.dirty = m.dirty | DirtyBits::TRANSFORM;
+            if m.invalid.is_some() {
+                // The refused data may have been refused for its transform alone.
+                m.invalid = m.data.validate().err();
+            }
         }
         Ok(())
     }

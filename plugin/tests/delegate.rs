@@ -167,3 +167,39 @@ fn a_cancel_during_sync_stops_between_meshes_and_the_rest_sync_next_time() {
     assert_eq!(synced(&d), 6, "the meshes left dirty sync on the next render");
     assert!(r.buffers[0].data.iter().any(|a| *a > 0.5));
 }
+
+#[test]
+fn set_mesh_checks_the_data_once_and_every_render_reports_what_it_refused() {
+    let mut d = delegate_with_camera(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO);
+    let (t, p) = grid(Scheme::None);
+    let mut bad_points = p.clone();
+    // Named as Python's repr names them (the scene delegate's other messages): the truth is
+    // `tuple(float(c) for c in np.float32([nan, 2**60, 2**-20]))`.
+    bad_points[1] = [f32::NAN, 2f32.powi(60), 2f32.powi(-20)];
+    let mut holes = t.clone();
+    holes.hole_indices = vec![i32::try_from(t.face_count()).unwrap()];
+    let cases = [
+        (
+            data(t.clone(), bad_points, Mat4::IDENTITY),
+            "points[1] = (nan, 1.152921504606847e+18, 9.5367431640625e-07) is not finite".to_string(),
+        ),
+        (data(t.clone(), p.clone(), Mat4::from_scale(Vec3::splat(f32::INFINITY))), "transform is not finite".to_string()),
+        (data(holes, p.clone(), Mat4::IDENTITY), format!("holeIndices[0] = {0} is out of range for {0} faces", t.face_count())),
+    ];
+    for (mesh, reason) in cases {
+        d.set_mesh("/bad", mesh);
+        let problem = d.mesh_problem("/bad").map(|e| e.to_string());
+        assert_eq!(problem.as_deref(), Some(format!("/bad: {reason}").as_str()));
+        let r = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+        assert_eq!(r.prim_errors.iter().map(ToString::to_string).collect::<Vec<_>>(), [format!("/bad: {reason}")]);
+        assert!(r.buffers[0].data.iter().all(|a| *a == 0.0), "nothing of the refused mesh is drawn");
+    }
+    // A transform-only fix clears a refusal that was for the transform alone.
+    d.set_mesh("/bad", data(t.clone(), p.clone(), Mat4::from_scale(Vec3::splat(f32::NAN))));
+    assert!(d.mesh_problem("/bad").is_some());
+    d.set_transform("/bad", Mat4::IDENTITY).unwrap();
+    assert!(d.mesh_problem("/bad").is_none());
+    let r = pass(&["alpha"]).execute(&mut d, &NoProgress).unwrap();
+    assert!(r.prim_errors.is_empty(), "{:?}", r.prim_errors);
+    assert!(r.buffers[0].data.iter().any(|a| *a > 0.5), "the mended mesh renders");
+}

@@ -12,12 +12,14 @@ Conventions
   the translation in the last row.
 * Prim paths are USD path strings (``"/World/Geo/Cube"``); a ``set_*`` call with
   a path already present replaces that prim.
-* Methods that take array data raise ``ValueError`` naming the prim path when
-  the data is inconsistent (index out of range, counts that do not add up,
-  non-finite values).
+* Methods that take array data raise ``mipray.errors.PrimDataError`` (a
+  ``PrimError`` and a ``ValueError``) naming the prim path when the data is
+  inconsistent (index out of range, counts that do not add up, non-finite
+  values). ``set_mesh`` checks a mesh's data once, here: the scene delegate
+  does not check it first.
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, final
 
 import numpy as np
@@ -155,7 +157,10 @@ class RenderDelegate:
                 together with ``face_materials``.
 
         Raises:
-            ValueError: the data is inconsistent; the message names ``path``.
+            PrimDataError: the data is inconsistent (the one check of a mesh's
+                data: points, topology, subdivision tags, primvars, face table,
+                transform, displacement, widths); the message names ``path``,
+                and the mesh is not kept. A ``ValueError`` too.
         """
 
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
@@ -170,7 +175,7 @@ class RenderDelegate:
                 to its prototype's root), row-vector convention.
 
         Raises:
-            ValueError: no mesh at ``path``, or the transform is not finite.
+            PrimDataError: no mesh at ``path``, or the transform is not finite.
         """
 
     def set_motion(
@@ -189,7 +194,7 @@ class RenderDelegate:
             transforms: (N, 4, 4) float64 local-to-world, row-vector convention.
 
         Raises:
-            ValueError: no mesh at ``path``, lengths differ, or a key is not finite.
+            PrimDataError: no mesh at ``path``, lengths differ, or a key is not finite.
         """
 
     def set_instancer(
@@ -224,7 +229,7 @@ class RenderDelegate:
                 itself.
 
         Raises:
-            ValueError: sizes that disagree, an index out of range, or a
+            PrimDataError: sizes that disagree, an index out of range, or a
                 transform that is not finite; the message names ``path``.
         """
 
@@ -344,7 +349,7 @@ class RenderDelegate:
         *,
         on_update: Callable[[int, bool, dict[str, NDArray[np.float32]]], object] | None = None,
         pass_output: dict[str, Any] | None = None,
-    ) -> tuple[dict[str, NDArray[np.float32]], str]:
+    ) -> tuple[Mapping[str, NDArray[np.float32]], str]:
         """Render the scene through ``camera`` and return its AOVs.
 
         Releases the GIL for the whole render; the render thread re-takes it
@@ -377,9 +382,11 @@ class RenderDelegate:
             on_update: called as ``on_update(samples, converged, aovs)`` after
                 each pass, in order, from a render thread: ``samples`` is the
                 samples per pixel so far, ``converged`` is True for the last
-                pass only, and ``aovs`` maps each AOV asked for to a new
-                H×W×C float32 array (linear, averaged over the samples so
-                far; the caller may keep it). Without ``"progressive"`` there
+                pass only, and ``aovs`` maps each AOV asked for to a
+                read-only H×W×C float32 array (linear, averaged over the
+                samples so far) viewing that pass's own buffers in place
+                (its ``base`` owns them): the caller may keep it, later
+                passes do not touch it. Without ``"progressive"`` there
                 is one pass, so one call. An exception raised in it cancels
                 the render (no further pass starts) and is raised by
                 ``render`` as it was raised; the delegate stays usable.
@@ -396,8 +403,16 @@ class RenderDelegate:
         and is raised here once the render threads have stopped.
 
         Returns:
-            ``(aovs, stats_json)``: each AOV an H×W×C float32 array, and the
-            render statistics as a JSON string (names in DESIGN.md).
+            ``(aovs, stats_json)``: the AOVs, and the render statistics as
+            a JSON string (names in DESIGN.md). ``aovs`` is a read-only
+            mapping, AOV name → H×W×C float32 array, that keeps the buffers
+            the renderer filled: each ``aovs[name]`` is a new array object
+            viewing the buffer in place (its ``base`` is ``aovs``, kept
+            alive by it), so no pixel is copied, and :func:`write_image`
+            reads such arrays where they are. The arrays are read-only
+            (numpy refuses to make them writeable; ``numpy.array(a)`` is a
+            copy to change). ``keys`` (a list), ``values``, ``items``,
+            ``get``, ``len``, ``in`` and iteration work as on a dict.
 
         Raises:
             ValueError: unknown camera or AOV, or an invalid setting.

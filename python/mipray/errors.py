@@ -10,6 +10,7 @@ __all__ = [
     "InternalError",
     "MiprayError",
     "OutputError",
+    "PrimDataError",
     "PrimError",
     "RenderSettingsError",
     "StageError",
@@ -42,6 +43,14 @@ class PrimError(MiprayError):
     def __reduce__(self) -> tuple[type[PrimError], tuple[str, str]]:
         # Pickled whole (a Dask worker's error reaches the client so), not from the joined line.
         return (type(self), (self.prim_path, self.reason))
+
+
+class PrimDataError(PrimError, ValueError):
+    """The render delegate refused a prim's data (``mipray._mipray``'s ``set_*``).
+
+    The delegate checks the data once, in Rust, and raises this naming the prim; it is a
+    ``ValueError`` too, as the delegate's refusals always were.
+    """
 
 
 class RenderSettingsError(MiprayError):

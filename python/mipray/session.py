@@ -185,7 +185,8 @@ def _tf_reason(exc: Exception) -> str:
 class RenderResult:
     """What one render produced."""
 
-    #: AOV name → H×W×C float32 array, linear.
+    #: AOV name → H×W×C float32 array, linear. A render's arrays are read-only views of the
+    #: renderer's own buffers (no pixel copied); ``numpy.array(a)`` is a copy to change.
     aovs: dict[str, NDArray[np.float32]]
     #: Render statistics (names as in DESIGN.md, "Statistics and stats JSON").
     stats: dict[str, Any]
@@ -367,8 +368,9 @@ class RenderSession:
                 each pass, in order: ``samples`` is the samples per pixel so
                 far (int), ``converged`` is True for the last pass only (its
                 arrays equal the result's), and ``aovs`` maps each AOV asked
-                for to a new H×W×C float32 array, linear, averaged over the
-                samples so far (yours to keep). A render without
+                for to a read-only H×W×C float32 array, linear, averaged over
+                the samples so far, viewing that pass's own buffers (yours to
+                keep: later passes do not touch them). A render without
                 ``progressive`` has one pass, so one call. It runs on a
                 render thread with the GIL held, while no pixel is being
                 rendered; the GIL is released in between. An exception it

@@ -34,7 +34,8 @@ use numpy::{
 };
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{PyDict, PyList, PyType};
 
 /// Collects the Rust side's `log` records while native code runs (render threads included, no
 /// GIL needed), so they can be replayed into Python's `logging` ("mipray" logger) once the call
@@ -78,8 +79,25 @@ pub(crate) fn forward_logs(py: Python<'_>) {
     }
 }
 
+/// `mipray.errors.PrimDataError(path, msg)`: prim data the delegate refuses is a MiprayError
+/// naming the prim (`prim_path`, `reason`), and a ValueError as it always was. Should the
+/// package's errors module fail to import, a ValueError with the same one line.
 fn value_error(path: &str, msg: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(format!("{path}: {msg}"))
+    static PRIM_DATA_ERROR: PyOnceLock<Py<PyType>> = PyOnceLock::new();
+    let reason = msg.to_string();
+    Python::attach(|py| match PRIM_DATA_ERROR.import(py, "mipray.errors", "PrimDataError").and_then(|t| t.call1((path, &reason))) {
+        Ok(exc) => PyErr::from_value(exc),
+        Err(_) => PyValueError::new_err(format!("{path}: {reason}")),
+    })
+}
+
+/// A delegate's refusal as Python sees it: a prim's bad data as [`value_error`], the rest as
+/// ValueError with the delegate's line.
+fn delegate_error(e: hd_mipray::DelegateError) -> PyErr {
+    match e {
+        hd_mipray::DelegateError::Prim { path, message } => value_error(&path, message),
+        e => PyValueError::new_err(e.to_string()),
+    }
 }
 
 fn matrix(path: &str, m: &PyReadonlyArray2<'_, f64>) -> PyResult<Mat4> {
@@ -115,15 +133,10 @@ fn matrices(path: &str, m: &PyReadonlyArray3<'_, f64>) -> PyResult<Vec<Mat4>> {
 
 /// The normals and primvar-fed inputs of `set_mesh`'s `primvars`: `{"normals" or a
 /// UsdPreviewSurface input name: {"values": (N, C) float32, C ≤ 3, "indices": int32 or None,
-/// "interpolation": USD token}}`, each checked against the topology so a bad one names the prim
-/// and the primvar at once. An input's primvar shades the faces of the mesh's own material.
+/// "interpolation": USD token}}` (checked against the topology by the delegate's `set_mesh`).
+/// An input's primvar shades the faces of the mesh's own material.
 #[allow(clippy::type_complexity)]
-fn read_primvars(
-    path: &str,
-    d: &Bound<'_, PyDict>,
-    topology: &MeshTopology,
-    points: usize,
-) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>)> {
+fn read_primvars(path: &str, d: &Bound<'_, PyDict>) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>)> {
     let mut normals = Vec::new();
     let mut inputs = Vec::new();
     for (key, value) in d.iter() {
@@ -164,9 +177,6 @@ fn read_primvars(
         let rows: Vec<[f32; 3]> =
             a.rows().into_iter().map(|r| [r[0], r.get(1).copied().unwrap_or(0.0), r.get(2).copied().unwrap_or(0.0)]).collect();
         let channels = Primvar2::split(&role, interpolation, &rows, components, &vec_i32(indices));
-        for c in &channels {
-            c.face_varying_indices(topology, points).map_err(|e| value_error(path, e))?;
-        }
         match role.as_str() {
             "normals" => normals = channels,
             name => inputs.push((input_from_usd(name).expect("checked above"), channels)),
@@ -203,7 +213,7 @@ impl RenderDelegate {
     fn set_mesh(
         &mut self,
         path: &str,
-        points: PyReadonlyArray2<'_, f32>,
+        points: PyReadonlyArrayDyn<'_, f32>,
         face_vertex_counts: PyReadonlyArray1<'_, i32>,
         face_vertex_indices: PyReadonlyArray1<'_, i32>,
         transform: PyReadonlyArray2<'_, f64>,
@@ -234,10 +244,14 @@ impl RenderDelegate {
     ) -> PyResult<()> {
         let gprim = gprim.map(|g| read_gprim(path, g)).transpose()?;
         let pts = points.as_array();
-        if pts.ncols() != 3 {
-            return Err(value_error(path, format!("points must be N×3, got {:?}", pts.shape())));
+        let shape = pts.shape();
+        if shape.len() != 2 || shape[1] != 3 {
+            // The shape as numpy writes it: (36,) or (4, 2).
+            let dims: Vec<String> = shape.iter().map(usize::to_string).collect();
+            let shape = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
+            return Err(value_error(path, format!("points has shape {shape}, expected (N, 3)")));
         }
-        let points: Vec<[f32; 3]> = pts.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let points: Vec<[f32; 3]> = pts.outer_iter().map(|r| [r[0], r[1], r[2]]).collect();
         let topology = MeshTopology {
             scheme: Scheme::from_usd(scheme).map_err(|e| value_error(path, e))?,
             face_vertex_counts: face_vertex_counts.as_array().to_vec(),
@@ -253,19 +267,12 @@ impl RenderDelegate {
             triangle_subdivision: TriangleSubdivision::from_usd(triangle_subdivision_rule).map_err(|e| value_error(path, e))?,
             left_handed,
         };
-        topology.validate(points.len()).map_err(|e| value_error(path, e))?;
-        // Points colour each point as a face of its own.
-        let faces = if matches!(gprim, Some(Gprim::Points { .. })) { points.len() } else { topology.face_vertex_counts.len() };
         let face_materials = match (face_materials, face_material_indices) {
             (None, None) => None,
-            (Some(m), Some(i)) => {
-                let table = FaceMaterials {
-                    materials: m.iter().map(|d| surface_inputs(path, d)).collect::<PyResult<_>>()?,
-                    indices: i.as_array().to_vec(),
-                };
-                table.validate(faces).map_err(|e| value_error(path, e))?;
-                Some(table)
-            }
+            (Some(m), Some(i)) => Some(FaceMaterials {
+                materials: m.iter().map(|d| surface_inputs(path, d)).collect::<PyResult<_>>()?,
+                indices: i.as_array().to_vec(),
+            }),
             _ => return Err(value_error(path, "face_materials and face_material_indices go together")),
         };
         let st = match st_values {
@@ -278,43 +285,22 @@ impl RenderDelegate {
                 let interpolation = Interpolation::from_usd(st_interpolation).ok_or_else(|| {
                     value_error(path, format!("primvars:st interpolation '{st_interpolation}' is not a USD interpolation"))
                 })?;
-                let pv = Primvar2 {
+                Some(Primvar2 {
                     name: "st".into(),
                     interpolation,
                     values: a.rows().into_iter().map(|r| [r[0], r[1]]).collect(),
                     indices: vec_i32(st_indices),
-                };
-                // Check now, so a bad primvar names the prim at once rather than at sync.
-                pv.face_varying_indices(&topology, points.len()).map_err(|e| value_error(path, e))?;
-                Some(pv)
+                })
             }
         };
         let (normals, primvar_inputs) = match primvars {
             None => (Vec::new(), Vec::new()),
-            Some(d) => read_primvars(path, d, &topology, points.len())?,
+            Some(d) => read_primvars(path, d)?,
         };
         let displacement_texture = displacement_texture.map(|d| texture_input(path, "displacement", d)).transpose()?;
         let material = material.map(|d| surface_inputs(path, d)).transpose()?;
-        if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(value_error(path, format!("points[{i}] = {:?} is not finite", points[i])));
-        }
-        if let Some(Gprim::Points { widths }) = &gprim {
-            // Checked now, so bad widths name the prim at once rather than at sync.
-            mipray::implicit::PointsSurface::new(points.clone(), widths).map_err(|e| value_error(path, e))?;
-        }
         let transform = matrix(path, &transform)?;
-        if !transform.is_finite() {
-            return Err(value_error(path, "transform is not finite"));
-        }
         let displacement = displacement.map(|(amplitude, frequency, octaves, gain)| Displacement { amplitude, frequency, octaves, gain });
-        if let Some(d) = &displacement {
-            d.validate().map_err(|e| value_error(path, e))?;
-        }
-        if let Some(b) = displacement_bound {
-            if !(b.is_finite() && b >= 0.0) {
-                return Err(value_error(path, format!("primvars:displacementBound = {b} must be a non-negative number")));
-            }
-        }
         self.inner.set_mesh(
             path,
             MeshData {
@@ -334,13 +320,19 @@ impl RenderDelegate {
                 gprim,
             },
         );
+        // The delegate checks the data, once; what it refuses is not kept, and is an error
+        // naming the prim now rather than a line in the next render's stats.
+        if let Some(problem) = self.inner.mesh_problem(path) {
+            self.inner.remove(path);
+            return Err(delegate_error(problem));
+        }
         Ok(())
     }
 
     /// Moves a mesh without resending its points (a transform-only edit). See the stubs.
     fn set_transform(&mut self, path: &str, transform: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
         let transform = matrix(path, &transform)?;
-        self.inner.set_transform(path, transform).map_err(|e| PyValueError::new_err(e.to_string()))
+        self.inner.set_transform(path, transform).map_err(delegate_error)
     }
 
     /// Sets a mesh's world transform over the camera's shutter (transform motion blur). See the
@@ -356,7 +348,7 @@ impl RenderDelegate {
             .zip(transforms)
             .map(|(time, render_from_object)| mipray::motion::MotionKey { time, render_from_object })
             .collect();
-        self.inner.set_motion(path, keys).map_err(|e| PyValueError::new_err(e.to_string()))
+        self.inner.set_motion(path, keys).map_err(delegate_error)
     }
 
     /// Inserts or replaces an instancer: `prototypes[proto_indices[i]]` placed at
@@ -376,7 +368,7 @@ impl RenderDelegate {
             Some(s) => InstancerData::new(path, prototypes, s, transforms, prototype),
             None => InstancerData::new(path, prototypes, &indices.to_vec(), transforms, prototype),
         };
-        self.inner.set_instancer(path, data.map_err(|e| PyValueError::new_err(e.to_string()))?);
+        self.inner.set_instancer(path, data.map_err(delegate_error)?);
         Ok(())
     }
 
@@ -556,8 +548,8 @@ impl RenderDelegate {
         self.inner.instancer(path).map(|i| i.updates)
     }
 
-    /// Syncs and renders. Returns ({aov: H×W×C float32}, stats JSON). Releases the GIL; calls
-    /// `on_update(samples, converged, {aov: array})` after each pass and writes every pass but
+    /// Syncs and renders. Returns (`RenderBuffers`: {aov: read-only H×W×C float32 view}, stats
+    /// JSON). Releases the GIL; calls `on_update(samples, converged, {aov: view})` after each pass and writes every pass but
     /// the last to `pass_output` (see `render.rs`); Ctrl-C cancels it.
     #[pyo3(signature = (camera, width, height, aovs, settings=None, progress=None, *, on_update=None, pass_output=None))]
     #[allow(clippy::too_many_arguments)]
@@ -572,7 +564,7 @@ impl RenderDelegate {
         progress: Option<Py<PyAny>>,
         on_update: Option<Py<PyAny>>,
         pass_output: Option<&Bound<'py, PyDict>>,
-    ) -> PyResult<(Bound<'py, PyDict>, String)> {
+    ) -> PyResult<(Bound<'py, render::RenderBuffers>, String)> {
         // Names become AOVs here, at the boundary: the render never sees an unknown one.
         let aovs = aovs.iter().map(|a| Aov::parse(a)).collect::<Result<Vec<_>, _>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
         let pass_output = pass_output.map(render::PassOutput::from_py).transpose()?;

@@ -23,11 +23,11 @@ use hd_mipray::{RenderDelegate as Delegate, RenderPass};
 use mipray::image_io::MetaValue;
 use mipray::image_output::WriteOptions;
 use mipray::progress::Progress;
-use numpy::ndarray::Array3;
-use numpy::IntoPyArray;
-use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
+use numpy::ndarray::ArrayView3;
+use numpy::{PyArray3, PyArrayMethods};
+use pyo3::exceptions::{PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyIterator, PyList};
 
 use crate::forward_logs;
 
@@ -110,13 +110,94 @@ impl Progress for PyProgress {
     }
 }
 
-/// Render buffers as `{aov: H×W×C float32 array}`, in the pass's order. The arrays own their
-/// pixels: a caller may keep one pass's arrays while later passes render.
+/// A render's (or one pass's) AOVs, kept in the buffers the render filled: a read-only mapping
+/// from AOV name to an H×W×C float32 numpy array that views the buffer in place. Each
+/// `buffers[name]` is a new array object over the same memory, which it keeps alive; nothing is
+/// copied, neither here nor when `write_image` writes the arrays. The arrays are read-only:
+/// `frozen` makes the buffers immutable for Rust (the writer reads them with the GIL released),
+/// and numpy refuses to make a borrowed array writeable again. Not a module attribute: only
+/// `render` makes these, and the stub calls it a `Mapping`.
+#[pyclass(module = "mipray._mipray", frozen)]
+pub(crate) struct RenderBuffers {
+    buffers: Vec<RenderBuffer>,
+}
+
+impl RenderBuffers {
+    fn find(&self, name: &str) -> PyResult<&RenderBuffer> {
+        self.buffers.iter().find(|b| b.aov == name).ok_or_else(|| PyKeyError::new_err(name.to_string()))
+    }
+
+    /// A read-only H×W×C view of `this`'s AOV `name`, whose base is `this`.
+    fn view<'py>(this: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyArray3<f32>>> {
+        let b = this.get().find(name)?;
+        let shaped =
+            ArrayView3::from_shape((b.height, b.width, b.channels), &b.data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        // SAFETY: the array's base is `this`, which owns `b.data`; the class is frozen and has no
+        // method that touches `buffers`, so the Vec is neither dropped nor reallocated while
+        // the array (or any array over it) lives.
+        let array = unsafe { PyArray3::borrow_from_array(&shaped, this.clone().into_any()) };
+        // A new array has no other borrow, so taking it writable cannot fail.
+        let readonly = array.try_readwrite().map_err(|e| PyRuntimeError::new_err(e.to_string()))?.make_nonwriteable();
+        Ok((*readonly).clone())
+    }
+}
+
+#[pymethods]
+impl RenderBuffers {
+    fn __len__(&self) -> usize {
+        self.buffers.len()
+    }
+
+    fn __contains__(&self, name: &str) -> bool {
+        self.buffers.iter().any(|b| b.aov == name)
+    }
+
+    fn __getitem__<'py>(this: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyArray3<f32>>> {
+        Self::view(this, name)
+    }
+
+    fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyIterator>> {
+        PyList::new(py, self.keys())?.as_any().try_iter()
+    }
+
+    /// The AOV names, in the render's order.
+    fn keys(&self) -> Vec<String> {
+        self.buffers.iter().map(|b| b.aov.clone()).collect()
+    }
+
+    /// A view of each AOV, in the render's order.
+    fn values<'py>(this: &Bound<'py, Self>) -> PyResult<Vec<Bound<'py, PyArray3<f32>>>> {
+        this.get().buffers.iter().map(|b| Self::view(this, &b.aov)).collect()
+    }
+
+    /// `(name, view)` for each AOV, in the render's order.
+    fn items<'py>(this: &Bound<'py, Self>) -> PyResult<Vec<(String, Bound<'py, PyArray3<f32>>)>> {
+        this.get().buffers.iter().map(|b| Ok((b.aov.clone(), Self::view(this, &b.aov)?))).collect()
+    }
+
+    /// A view of AOV `name`, or `default` when the render has none.
+    #[pyo3(signature = (name, default=None))]
+    fn get<'py>(this: &Bound<'py, Self>, name: &str, default: Option<Bound<'py, PyAny>>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        if this.get().__contains__(name) {
+            return Ok(Some(Self::view(this, name)?.into_any()));
+        }
+        Ok(default)
+    }
+
+    fn __repr__(&self) -> String {
+        let shapes: Vec<String> = self.buffers.iter().map(|b| format!("'{}': {}x{}x{}", b.aov, b.height, b.width, b.channels)).collect();
+        format!("RenderBuffers({{{}}})", shapes.join(", "))
+    }
+}
+
+/// `{aov: read-only H×W×C float32 view}` over `buffers`, moved into a [`RenderBuffers`] that the
+/// views keep alive: a caller may keep one pass's arrays while later passes render (each pass
+/// has buffers of its own).
 fn buffers_dict(py: Python<'_>, buffers: Vec<RenderBuffer>) -> PyResult<Bound<'_, PyDict>> {
+    let owner = Bound::new(py, RenderBuffers { buffers })?;
     let dict = PyDict::new(py);
-    for b in buffers {
-        let arr = Array3::from_shape_vec((b.height, b.width, b.channels), b.data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-        dict.set_item(b.aov, arr.into_pyarray(py))?;
+    for (name, view) in RenderBuffers::items(&owner)? {
+        dict.set_item(name, view)?;
     }
     Ok(dict)
 }
@@ -219,8 +300,8 @@ fn run_watched<T: Send>(
     })
 }
 
-/// Runs `pass` on `delegate` with the GIL released; returns `({aov: H×W×C float32}, stats
-/// JSON)`. With `on_update`, it is called after every pass (one for a render of fixed sample
+/// Runs `pass` on `delegate` with the GIL released; returns the AOVs (a [`RenderBuffers`]:
+/// `{aov: H×W×C float32}` viewed in place) and the stats JSON. With `on_update`, it is called after every pass (one for a render of fixed sample
 /// count; 1, 2, 4, … samples with the `progressive` setting), the last with `converged` true;
 /// with `pass_output`, every pass but the last is written to its file.
 ///
@@ -236,7 +317,7 @@ pub(crate) fn render<'py>(
     progress: Option<Py<PyAny>>,
     on_update: Option<Py<PyAny>>,
     pass_output: Option<PassOutput>,
-) -> PyResult<(Bound<'py, PyDict>, String)> {
+) -> PyResult<(Bound<'py, RenderBuffers>, String)> {
     let prog = PyProgress::new(progress);
     let failed: Mutex<Option<PyErr>> = Mutex::new(None);
     let interrupted: Mutex<Option<PyErr>> = Mutex::new(None);
@@ -272,5 +353,5 @@ pub(crate) fn render<'py>(
         Err(hd_mipray::DelegateError::Render(mipray::error::RenderError::Settings(e))) => return Err(PyValueError::new_err(e)),
         Err(e) => return Err(PyRuntimeError::new_err(e.to_string())),
     };
-    Ok((buffers_dict(py, result.buffers)?, result.stats.to_string()))
+    Ok((Bound::new(py, RenderBuffers { buffers: result.buffers })?, result.stats.to_string()))
 }

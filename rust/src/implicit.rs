@@ -568,19 +568,31 @@ impl PointsSurface {
     /// A point or width is not finite, a width is negative, or `widths` has neither 0, 1 nor
     /// `points.len()` entries: the message names the attribute and index.
     pub fn new(points: Vec<[f32; 3]>, widths: &[f32]) -> Result<Self, String> {
+        Self::check(&points, widths)?;
+        let radii = match widths.len() {
+            0 => vec![0.5; points.len()],
+            1 => vec![0.5 * widths[0]; points.len()],
+            _ => widths.iter().map(|w| 0.5 * w).collect(),
+        };
+        Ok(PointsSurface { centers: points, radii })
+    }
+
+    /// What [`PointsSurface::new`] refuses, without building anything.
+    ///
+    /// # Errors
+    /// As [`PointsSurface::new`].
+    pub fn check(points: &[[f32; 3]], widths: &[f32]) -> Result<(), String> {
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(format!("points[{i}] = {:?} is not finite", points[i]));
         }
         if let Some(i) = widths.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
             return Err(format!("widths[{i}] = {} must be a non-negative number", widths[i]));
         }
-        let radii = match widths.len() {
-            0 => vec![0.5; points.len()],
-            1 => vec![0.5 * widths[0]; points.len()],
-            n if n == points.len() => widths.iter().map(|w| 0.5 * w).collect(),
-            n => return Err(format!("widths has {n} values for {} points (want 1 or one per point)", points.len())),
-        };
-        Ok(PointsSurface { centers: points, radii })
+        match widths.len() {
+            0 | 1 => Ok(()),
+            n if n == points.len() => Ok(()),
+            n => Err(format!("widths has {n} values for {} points (want 1 or one per point)", points.len())),
+        }
     }
 
     fn sphere(&self, patch: usize) -> Option<(DVec3, f64)> {

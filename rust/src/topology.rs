@@ -141,61 +141,58 @@ impl MeshTopology {
     }
 
     /// Checks the counts and indices against `point_count`, and the crease, corner and hole
-    /// arrays against each other, so that nothing downstream (OpenSubdiv included) sees a
-    /// malformed mesh.
+    /// arrays against each other, so that nothing downstream
+    /// (OpenSubdiv included) sees a malformed mesh. The messages are the USD attributes' names
+    /// and indices, as a user fixes them.
     ///
     /// # Errors
-    /// The first problem found, as a [`MeshError`] whose message names the offending array.
+    /// The first problem found, as a [`MeshError::Invalid`] whose message names the offending
+    /// array.
     pub fn validate(&self, point_count: usize) -> Result<(), MeshError> {
-        let mut total: usize = 0;
-        for (f, &n) in self.face_vertex_counts.iter().enumerate() {
-            if n < 3 {
-                return Err(MeshError::Invalid(format!("faceVertexCounts[{f}] = {n}: a face needs at least 3 vertices")));
-            }
-            total += n as usize;
+        let invalid = |m: String| Err(MeshError::Invalid(m));
+        if let Some((f, n)) = self.face_vertex_counts.iter().enumerate().find(|(_, &n)| n < 3) {
+            return invalid(format!("faceVertexCounts[{f}] = {n}; a face needs at least 3 vertices"));
         }
-        if total != self.face_vertex_indices.len() {
-            return Err(MeshError::Invalid(format!(
-                "faceVertexCounts sum to {total} but faceVertexIndices has {} entries",
+        let total: i64 = self.face_vertex_counts.iter().map(|&n| i64::from(n)).sum();
+        if total != self.face_vertex_indices.len() as i64 {
+            return invalid(format!(
+                "faceVertexCounts add up to {total} but faceVertexIndices has {} entries",
                 self.face_vertex_indices.len()
-            )));
+            ));
         }
-        let check = |name: &str, idx: &[i32], bound: usize| -> Result<(), MeshError> {
-            if let Some((i, &v)) = idx.iter().enumerate().find(|(_, &v)| v < 0 || v as usize >= bound) {
-                return Err(MeshError::Invalid(format!("{name}[{i}] = {v} is out of range [0, {bound})")));
-            }
-            Ok(())
-        };
-        check("faceVertexIndices", &self.face_vertex_indices, point_count)?;
-        check("creaseIndices", &self.crease_indices, point_count)?;
-        check("cornerIndices", &self.corner_indices, point_count)?;
-        check("holeIndices", &self.hole_indices, self.face_count())?;
-        let chain_total: i64 = self.crease_lengths.iter().map(|&l| l as i64).sum();
-        if self.crease_lengths.iter().any(|&l| l < 2) || chain_total != self.crease_indices.len() as i64 {
-            return Err(MeshError::Invalid(format!(
-                "creaseLengths (sum {chain_total}) do not describe creaseIndices ({} entries) as chains of 2 or more",
-                self.crease_indices.len()
-            )));
+        in_range("faceVertexIndices", &self.face_vertex_indices, point_count, "points")?;
+        if let Some((c, l)) = self.crease_lengths.iter().enumerate().find(|(_, &l)| l < 2) {
+            return invalid(format!("creaseLengths[{c}] = {l}; a crease needs at least 2 vertices"));
         }
-        let edges: i64 = self.crease_lengths.iter().map(|&l| l as i64 - 1).sum();
+        let chain_total: i64 = self.crease_lengths.iter().map(|&l| i64::from(l)).sum();
+        if chain_total != self.crease_indices.len() as i64 {
+            return invalid(format!("creaseLengths add up to {chain_total} but creaseIndices has {} entries", self.crease_indices.len()));
+        }
+        // USD allows one sharpness per crease or one per crease edge.
+        let chains = self.crease_lengths.len() as i64;
+        let edges = chain_total - chains;
         let ns = self.crease_sharpnesses.len() as i64;
-        if ns != self.crease_lengths.len() as i64 && ns != edges {
-            return Err(MeshError::Invalid(format!(
-                "creaseSharpnesses has {ns} entries; expected one per chain ({}) or one per edge ({edges})",
-                self.crease_lengths.len()
-            )));
+        if ns != chains && ns != edges {
+            return invalid(format!(
+                "creaseSharpnesses has {ns} entries; expected {chains} (one per crease) or {edges} (one per crease edge)"
+            ));
         }
+        if let Some((i, s)) = self.crease_sharpnesses.iter().enumerate().find(|(_, s)| !s.is_finite()) {
+            return invalid(format!("creaseSharpnesses[{i}] = {s}: a sharpness must be finite"));
+        }
+        in_range("creaseIndices", &self.crease_indices, point_count, "points")?;
         if self.corner_sharpnesses.len() != self.corner_indices.len() {
-            return Err(MeshError::Invalid(format!(
-                "cornerSharpnesses has {} entries but cornerIndices has {}",
-                self.corner_sharpnesses.len(),
-                self.corner_indices.len()
-            )));
+            return invalid(format!(
+                "cornerIndices has {} entries but cornerSharpnesses has {}",
+                self.corner_indices.len(),
+                self.corner_sharpnesses.len()
+            ));
         }
-        if let Some(s) = self.crease_sharpnesses.iter().chain(&self.corner_sharpnesses).find(|s| !s.is_finite()) {
-            return Err(MeshError::Invalid(format!("sharpness {s} is not finite")));
+        in_range("cornerIndices", &self.corner_indices, point_count, "points")?;
+        if let Some((i, s)) = self.corner_sharpnesses.iter().enumerate().find(|(_, s)| !s.is_finite()) {
+            return invalid(format!("cornerSharpnesses[{i}] = {s}: a sharpness must be finite"));
         }
-        Ok(())
+        in_range("holeIndices", &self.hole_indices, self.face_count(), "faces")
     }
 
     /// Crease edges as (point a, point b, sharpness), expanding chains and per-chain sharpness.
@@ -215,6 +212,14 @@ impl MeshTopology {
             start += len;
         }
         out
+    }
+}
+
+/// `name[i]` out of `[0, limit)`, named as USD's attribute (`what`: points or faces).
+fn in_range(name: &str, indices: &[i32], limit: usize, what: &str) -> Result<(), MeshError> {
+    match indices.iter().enumerate().find(|(_, &v)| v < 0 || v as usize >= limit) {
+        Some((i, v)) => Err(MeshError::Invalid(format!("{name}[{i}] = {v} is out of range for {limit} {what}"))),
+        None => Ok(()),
     }
 }
 
