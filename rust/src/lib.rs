@@ -40,6 +40,7 @@ pub mod effects;
 pub mod error;
 pub mod film;
 pub mod geometry_cache;
+pub mod hit;
 pub mod image_io;
 pub mod image_output;
 pub mod implicit;

@@ -13,14 +13,14 @@
 //! is a point at infinity (a delta light) whose emission is that irradiance. So a white
 //! lambertian surface facing a normalized distant light of intensity 1 has radiance 1/π.
 //!
-//! **Sampling** (what [`crate::integrator::direct`] and the light sampler build on): every
+//! **Sampling** (what [`crate::integrator::direct_light`] and the light sampler build on): every
 //! light samples a direction toward it from a shading point with a solid-angle density
 //! ([`Light::sample`], [`Light::pdf`]): a sphere uniformly over the cone it subtends, a rect or
 //! disk uniformly over its area, a distant light uniformly over its cone, a textured dome by its
 //! importance table ([`EnvTexture`]) and a uniform dome cosine-weighted about the normal. Rays
 //! found by BSDF sampling meet area lights through [`Light::intersect`] (lights are not geometry
 //! in the BVH) and, when they escape, dome and distant lights through [`Light::environment`] /
-//! [`Scene::environment`], so the two strategies can be weighted by multiple importance
+//! [`crate::scene::Scene::environment`], so the two strategies can be weighted by multiple importance
 //! sampling. Shadow rays get the paper's differentials: narrow toward point-like lights (§4.3),
 //! spread over the light's solid angle divided among the rays toward wide ones (§4.5).
 
@@ -29,7 +29,6 @@ use std::f32::consts::PI;
 use glam::{Mat4, Vec3A};
 
 use crate::sampling::{cosine_hemisphere, frame};
-use crate::scene::Scene;
 
 mod env;
 
@@ -75,7 +74,7 @@ pub struct Light {
     pub shadowed_by: MeshFilter,
 }
 
-/// A set of the scene's meshes (indices into [`Scene::meshes`]) given by those it leaves out:
+/// A set of the scene's meshes (indices into [`crate::scene::Scene::meshes`]) given by those it leaves out:
 /// the default holds every mesh. What a light or shadow linking collection resolves to.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct MeshFilter {
@@ -643,8 +642,9 @@ impl Light {
 
 impl Light {
     /// What the stats say of this light (`scene.lights`): its name, kind, whether it casts
-    /// shadows, its shaping, and the meshes its light and shadow linking leave out (by name).
-    pub fn describe(&self, scene: &Scene) -> serde_json::Value {
+    /// shadows, its shaping, and the meshes its light and shadow linking leave out, by the names
+    /// `mesh_name` gives their indices (the scene's: [`crate::scene::Scene::meshes`]).
+    pub fn describe<'a>(&self, mesh_name: &dyn Fn(u32) -> Option<&'a str>) -> serde_json::Value {
         let kind = match &self.shape {
             LightShape::Distant { .. } => "distant",
             LightShape::Sphere { .. } => "sphere",
@@ -653,9 +653,7 @@ impl Light {
             LightShape::Cylinder { .. } => "cylinder",
             LightShape::Dome(_) => "dome",
         };
-        let names = |f: &MeshFilter| -> Vec<&str> {
-            f.excluded().iter().filter_map(|&m| scene.meshes.get(m as usize)).map(|m| m.name.as_str()).collect()
-        };
+        let names = |f: &MeshFilter| -> Vec<&str> { f.excluded().iter().filter_map(|&m| mesh_name(m)).collect() };
         let mut out = serde_json::json!({ "name": self.name, "kind": kind, "casts_shadows": self.casts_shadows });
         if let Some(s) = &self.shaping {
             out["shaping"] = serde_json::json!({
@@ -684,26 +682,6 @@ impl Light {
             LightShape::Dome(Some(env)) => self.radiance_scale * env.radiance_filtered(wi, spread_rad),
             _ => self.environment(wi),
         }
-    }
-}
-
-impl Scene {
-    /// Radiance (RGB) arriving along render-space unit `wi` from rays that escape the scene, as
-    /// lighting integrates it: the sum of every dome light and of every distant light with an
-    /// angle whose disk `wi` falls in ([`Light::environment`]). Zero without such lights. What
-    /// the direct-light estimator's BSDF samples and a path tracer's MIS-weighted escaped rays
-    /// add.
-    pub fn environment(&self, wi: Vec3A) -> Vec3A {
-        self.lights.iter().filter(|l| l.is_infinite()).map(|l| l.environment(wi)).sum()
-    }
-
-    /// The background a camera ray, or a mirror's reflection, sees along unit `wi` when it
-    /// escapes, filtered over the ray's directional spread `spread_rad` (radians, from its
-    /// differential: [`crate::differential::RayDifferential::directional_spread_rad`]), so a
-    /// dome seen directly is as sharp as the pixel ([`Light::seen`]). Zero without dome or
-    /// angular distant lights.
-    pub fn background(&self, wi: Vec3A, spread_rad: f32) -> Vec3A {
-        self.lights.iter().filter(|l| l.is_infinite()).map(|l| l.seen(wi, spread_rad)).sum()
     }
 }
 

@@ -8,10 +8,9 @@ use glam::Vec3A;
 
 use crate::bsdf::PreviewSurfaceBsdf;
 use crate::differential::{RayDifferential, UvDifferentials};
-use crate::integrator::ShadingPoint;
+use crate::hit::{Hit, ShadingPoint};
 use crate::patch::LimitSurface;
 use crate::texture::{Lookup, TextureHandle, TextureSampler};
-use crate::trace::Hit;
 
 /// A colour input fed by a texture (UsdUVTexture → UsdPreviewSurface `diffuseColor`):
 /// `texel.rgb · scale + bias`, looked up at the surface's `st` primvar channel with filter
@@ -82,95 +81,7 @@ impl TexturedColor {
     }
 }
 
-/// UsdPreviewSurface's constant inputs, with its specification's names, meanings and fallbacks
-/// (<https://openusd.org/release/spec_usdpreviewsurface.html>). Colours are linear RGB in
-/// [0, 1]; every value is kept inside its valid range by [`PreviewSurface::clamped`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PreviewSurface {
-    /// Base colour: the diffuse reflectance, and a metal's specular colour. Fallback 0.18.
-    pub diffuse_color: Vec3A,
-    /// Emitted radiance (linear RGB, unbounded above). Fallback 0.
-    pub emissive_color: Vec3A,
-    /// Specular colour from `specular_color` (true) or from `metallic` and `ior` (false, the
-    /// fallback).
-    pub use_specular_workflow: bool,
-    /// Normal-incidence specular reflectance in the specular workflow. Fallback 0.
-    pub specular_color: Vec3A,
-    /// 0 dielectric .. 1 metal (metallic workflow). Fallback 0.
-    pub metallic: f32,
-    /// Perceptual roughness in [0, 1] (GGX α = roughness²); 0 is the delta mirror or glass.
-    /// Fallback 0.5.
-    pub roughness: f32,
-    /// Weight of a white dielectric (ior 1.5) coat over everything. Fallback 0.
-    pub clearcoat: f32,
-    /// The coat's roughness. Fallback 0.01.
-    pub clearcoat_roughness: f32,
-    /// 1 opaque; below 1 the surface transmits (glass, with `ior`) or, under
-    /// `opacity_threshold`, is cut out. Fallback 1.
-    pub opacity: f32,
-    /// Above 0: opacity is a cutout mask (below the threshold: no surface). Fallback 0.
-    pub opacity_threshold: f32,
-    /// Index of refraction, > 0. Fallback 1.5.
-    pub ior: f32,
-}
-
-impl Default for PreviewSurface {
-    fn default() -> Self {
-        PreviewSurface {
-            diffuse_color: Vec3A::splat(0.18),
-            emissive_color: Vec3A::ZERO,
-            use_specular_workflow: false,
-            specular_color: Vec3A::ZERO,
-            metallic: 0.0,
-            roughness: 0.5,
-            clearcoat: 0.0,
-            clearcoat_roughness: 0.01,
-            opacity: 1.0,
-            opacity_threshold: 0.0,
-            ior: 1.5,
-        }
-    }
-}
-
-impl PreviewSurface {
-    /// Every input inside its valid range (NaN to the fallback's side: 0 for colours); the
-    /// names of the inputs that changed, so the caller can warn once naming the material.
-    pub fn clamped(&self) -> (PreviewSurface, Vec<&'static str>) {
-        let mut out = *self;
-        let mut changed = Vec::new();
-        let mut unit = |v: &mut f32, name: &'static str| {
-            let c = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
-            if c != *v {
-                changed.push(name);
-                *v = c;
-            }
-        };
-        unit(&mut out.metallic, "metallic");
-        unit(&mut out.roughness, "roughness");
-        unit(&mut out.clearcoat, "clearcoat");
-        unit(&mut out.clearcoat_roughness, "clearcoatRoughness");
-        unit(&mut out.opacity, "opacity");
-        unit(&mut out.opacity_threshold, "opacityThreshold");
-        for (c, name) in [(&mut out.diffuse_color, "diffuseColor"), (&mut out.specular_color, "specularColor")] {
-            let k = clamp_color(*c);
-            if k != *c {
-                changed.push(name);
-                *c = k;
-            }
-        }
-        let e = Vec3A::select(out.emissive_color.is_nan_mask(), Vec3A::ZERO, out.emissive_color).clamp(Vec3A::ZERO, Vec3A::splat(f32::MAX));
-        if e != out.emissive_color {
-            changed.push("emissiveColor");
-            out.emissive_color = e;
-        }
-        if !(out.ior.is_finite() && out.ior > 0.0) {
-            changed.push("ior");
-            // ior ≤ 0 or NaN has no meaning; 1 (no refraction) is the nearest harmless value.
-            out.ior = if out.ior.is_finite() && out.ior > 0.0 { out.ior } else { 1.0 };
-        }
-        (out, changed)
-    }
-}
+pub use crate::bsdf::preview::{clamp_color, PreviewSurface};
 
 /// Roughness under which a plain dielectric (metallic workflow, `metallic` 0) calls for glossy
 /// rays: its 4 % reflection is a recognisable image of its surroundings only while the lobe is
@@ -570,9 +481,4 @@ fn unit_input(v: f32) -> f32 {
     } else {
         v.clamp(0.0, 1.0)
     }
-}
-
-/// NaN to 0, then into [0, 1].
-pub fn clamp_color(c: Vec3A) -> Vec3A {
-    Vec3A::select(c.is_nan_mask(), Vec3A::ZERO, c).clamp(Vec3A::ZERO, Vec3A::ONE)
 }

@@ -40,7 +40,7 @@ pub struct RenderOptions {
     pub max_depth: u32,
     /// Light samples per shading point, shared among all the lights by importance (the light
     /// sampler), plus as many BSDF samples for multiple importance sampling: see
-    /// [`crate::integrator::direct`].
+    /// [`crate::integrator::direct_light`].
     pub shadow_samples: u32,
     /// Glossy rays (rough reflection and refraction, sampled from the BSDF's non-diffuse lobes)
     /// per shading point at the first non-mirror hit of a camera ray; 1 at hits further along a

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use glam::Mat4;
+use glam::{Mat4, Vec3A};
 
 use crate::camera::Camera;
 use crate::displacement::DisplacementShader;
@@ -147,5 +147,30 @@ impl Scene {
             self.materials.get(*table.get(face)? as usize)
         });
         face_material.unwrap_or_else(|| self.material_of(mesh))
+    }
+}
+
+impl Scene {
+    /// The name (prim path) of mesh `mesh` (an index into [`Scene::meshes`]), if there is one.
+    pub fn mesh_name(&self, mesh: u32) -> Option<&str> {
+        self.meshes.get(mesh as usize).map(|m| m.name.as_str())
+    }
+
+    /// Radiance (RGB) arriving along render-space unit `wi` from rays that escape the scene, as
+    /// lighting integrates it: the sum of every dome light and of every distant light with an
+    /// angle whose disk `wi` falls in ([`Light::environment`]). Zero without such lights. What
+    /// the direct-light estimator's BSDF samples and a path tracer's MIS-weighted escaped rays
+    /// add.
+    pub fn environment(&self, wi: Vec3A) -> Vec3A {
+        self.lights.iter().filter(|l| l.is_infinite()).map(|l| l.environment(wi)).sum()
+    }
+
+    /// The background a camera ray, or a mirror's reflection, sees along unit `wi` when it
+    /// escapes, filtered over the ray's directional spread `spread_rad` (radians, from its
+    /// differential: [`crate::differential::RayDifferential::directional_spread_rad`]), so a
+    /// dome seen directly is as sharp as the pixel ([`Light::seen`]). Zero without dome or
+    /// angular distant lights.
+    pub fn background(&self, wi: Vec3A, spread_rad: f32) -> Vec3A {
+        self.lights.iter().filter(|l| l.is_infinite()).map(|l| l.seen(wi, spread_rad)).sum()
     }
 }

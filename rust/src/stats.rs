@@ -84,7 +84,7 @@ pub fn collect(
             "subpatch_bytes": tracer.subpatch_bytes(),
             "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
             "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
-            "lights": tracer.scene().lights.iter().map(|l| l.describe(tracer.scene())).collect::<Vec<Value>>(),
+            "lights": tracer.scene().lights.iter().map(|l| l.describe(&|m| tracer.scene().mesh_name(m))).collect::<Vec<Value>>(),
         },
         "texture_cache": tracer.scene().textures.as_ref().map_or(Value::Null, |t| t.stats()),
         "memory": { "peak_rss_bytes": peak_rss_bytes() },

@@ -13,6 +13,7 @@ use crate::bounds::Bounds3;
 use crate::bvh::build_bvh;
 use crate::dropped::DroppedPrims;
 use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
+pub use crate::hit::Hit;
 use crate::intersect::WatertightRay;
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
@@ -101,39 +102,6 @@ impl TraceCounters {
             }
         }
     }
-}
-
-/// A ray's closest hit. Render space unless stated.
-#[derive(Clone, Copy, Debug)]
-pub struct Hit {
-    pub t: f32,
-    /// Index into the tracer's instances (for [`Tracer::render_from_object`]).
-    pub instance: u32,
-    /// The scene's instance id (the `instanceId` AOV).
-    pub instance_id: u32,
-    pub mesh: u32,
-    pub patch: u32,
-    /// The patch's own (u, v) at the hit: shading evaluates the exact limit surface there.
-    pub u: f32,
-    pub v: f32,
-    /// The hit point on the tessellation.
-    pub p: Vec3A,
-    /// Conservative per-axis floating-point error of `p`, for offsetting new rays.
-    pub p_error: Vec3A,
-    /// Unit geometric normal of the hit triangle, from its winding (front faces wind counter-
-    /// clockwise, as USD's rightHanded orientation).
-    pub ng: Vec3A,
-    /// The effective rate the hit was found at, in quads per side of the root subpatch: 1, 2, 4,
-    /// 8, 16, or 16·2^depth after splitting; 0 on a surface intersected exactly ([`crate::implicit`]).
-    pub quads: u32,
-    /// The root subpatch hit (index in its mesh's subpatches).
-    pub subpatch: u32,
-    /// How far the tessellation that was hit may stray from the surface (render units): new rays
-    /// from this hit ignore their own subpatch closer than this plus the error of whatever
-    /// tessellation of it they test (see [`Tracer::intersect_from`]).
-    pub chord_error: f32,
-    /// The ray's shutter time (see [`Ray::time`]): rays leaving this hit inherit it.
-    pub time: f32,
 }
 
 /// The surface a secondary ray starts on: a hit on the instance it starts from, closer than the

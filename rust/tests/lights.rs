@@ -328,7 +328,7 @@ fn environment_is_what_escaping_rays_see() {
     // A camera ray sees the background (the dome and the sun's disk) and the area lights it
     // crosses before its hit.
     scene.lights.push(area(LightShape::Sphere { center: Vec3A::new(0.0, 0.0, 5.0), radius: 1.0 }, 2.0));
-    let direct = mipray::integrator::direct::DirectLight::new(&scene, true, 4);
+    let direct = mipray::integrator::direct_light::DirectLight::new(&scene, true, 4);
     let ray = |d: Vec3A| mipray::ray::Ray {
         o: Vec3A::ZERO,
         d,

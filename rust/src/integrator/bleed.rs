@@ -42,7 +42,7 @@ use crate::sampling::{frame, Sampler};
 use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
 
-use super::direct::DirectLight;
+use super::direct_light::DirectLight;
 use super::hemisphere::{gather, prepass_build, visible, visible_at, Hemisphere, Visible, RECORD_STREAM};
 use super::{tessellation_error, Integrator, SampleValue, ShadingPoint};
 

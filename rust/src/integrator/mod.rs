@@ -3,10 +3,10 @@
 //! [`crate::effects::analyze`] enabled. Every new ray gets its differential from the paper's §4
 //! rules, so its tessellation rate follows its width.
 //!
-//! - [`classic`]: direct light with shadows, specular and glossy reflection and refraction to a
+//! - [`direct_lighting`]: direct light with shadows, specular and glossy reflection and refraction to a
 //!   maximum depth, ambient occlusion (the paper's classic plus distribution ray tracing);
 //! - [`surface`]: the shading point at a hit (exact limit surface), shared by all;
-//! - [`direct`]: light from the scene's lights at a shading point;
+//! - [`direct_light`]: light from the scene's lights at a shading point;
 //! - [`hemisphere`]: hemisphere integrals (ambient occlusion) at a shading point;
 //! - [`bleed`]: one-bounce color bleeding, with the irradiance cache when asked;
 //! - [`visibility`]: shadow, occlusion and hemisphere rays through opacity cut-outs.
@@ -21,8 +21,8 @@ use crate::trace::TraceCounters;
 
 pub mod ao;
 pub mod bleed;
-pub mod classic;
-pub mod direct;
+pub mod direct_light;
+pub mod direct_lighting;
 pub mod hemisphere;
 pub mod path;
 pub mod select;
@@ -31,7 +31,7 @@ pub mod visibility;
 
 pub use ao::AmbientOcclusion;
 pub use bleed::ColorBleeding;
-pub use classic::DirectLighting;
+pub use direct_lighting::DirectLighting;
 pub use path::PathTracer;
 pub use surface::{normal_differentials, shading_point, tessellation_error, ShadingPoint};
 

@@ -4,28 +4,12 @@
 use glam::Vec3A;
 
 use crate::differential::{dndu_dndv, RayDifferential, UvDifferentials};
+use crate::hit::Hit;
 use crate::ray::Ray;
 use crate::scene::Scene;
-use crate::trace::{Hit, Tracer};
+use crate::trace::Tracer;
 
-/// The surface at a hit, in render space, oriented toward the incoming ray.
-#[derive(Clone, Copy, Debug)]
-pub struct ShadingPoint {
-    pub p: Vec3A,
-    /// Unit geometric normal, facing the incoming ray.
-    pub ng: Vec3A,
-    /// Unit shading normal (the limit surface's), in `ng`'s hemisphere.
-    pub ns: Vec3A,
-    pub dpdu: Vec3A,
-    pub dpdv: Vec3A,
-    /// The ray arrived on the side the surface's normal points to (its outside: dP/du × dP/dv,
-    /// negated for a left-handed mesh). Refraction enters the material from the front and
-    /// leaves it from the back.
-    pub front: bool,
-    /// The mesh shaded (index into the scene's meshes; `None` at the camera): which lights
-    /// reach it (light linking).
-    pub mesh: Option<u32>,
-}
+pub use crate::hit::ShadingPoint;
 
 /// Evaluates the exact limit surface at the hit's (u, v) for shading (the paper: intersect the
 /// tessellation, shade the surface). The position stays the tessellation's hit point, so new

@@ -6,7 +6,7 @@
 //! Camera and secondary rays already pass through cut-outs when they look for the surface they
 //! shade ([`super::hemisphere::visible`]); these are the queries that only ask *whether* (or
 //! *where*) light is stopped: shadow rays toward every kind of light (delta, area and dome,
-//! light samples and BSDF samples alike, [`super::direct`]), ambient-occlusion rays
+//! light samples and BSDF samples alike, [`super::direct_light`]), ambient-occlusion rays
 //! ([`super::hemisphere::Hemisphere::occlusion`]) and the hemisphere rays of the irradiance and
 //! occlusion caches' records ([`super::hemisphere::gather`]).
 //!

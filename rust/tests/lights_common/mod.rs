@@ -10,7 +10,7 @@ use mipray::bilinear::BilinearSurface;
 use mipray::bsdf::Scattering;
 use mipray::differential::RayDifferential;
 use mipray::geometry_cache::CacheConfig;
-use mipray::integrator::direct::{DirectLight, LightEstimate};
+use mipray::integrator::direct_light::{DirectLight, LightEstimate};
 use mipray::integrator::{shading_point, ShadingPoint};
 use mipray::light::{latlong_direction, EnvTexture, Light, LightShape};
 use mipray::ray::{offset_origin, Ray, RayKind};

@@ -76,7 +76,7 @@ pub struct DirectLight {
     pub shadows: bool,
     /// Light samples (and BSDF samples) per shading point: `shadowSamples`.
     pub shadow_samples: u32,
-    /// Camera rays see dome lights ([`crate::RenderOptions::dome_light_camera_visibility`]).
+    /// Camera rays see dome lights ([`crate::options::RenderOptions::dome_light_camera_visibility`]).
     pub camera_sees_dome: bool,
     lights: Arc<LightSampler>,
 }

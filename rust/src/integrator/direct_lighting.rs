@@ -44,7 +44,7 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::trace::{Hit, TraceCounters, Tracer};
 
-use super::direct::DirectLight;
+use super::direct_light::DirectLight;
 use super::hemisphere::{self, Hemisphere, Visible};
 pub use super::visibility::MAX_CUTOUTS;
 use super::{normal_differentials, tessellation_error, Integrator, SampleValue, ShadingPoint};
