@@ -131,17 +131,13 @@ impl IntegratorKind {
         Self::NAMES[self as usize]
     }
 
+    /// Every variant, in the order of [`IntegratorKind::NAMES`].
+    pub const ALL: [IntegratorKind; 5] =
+        [IntegratorKind::Auto, IntegratorKind::Direct, IntegratorKind::Ao, IntegratorKind::ColorBleeding, IntegratorKind::Path];
+
     /// Parses [`IntegratorKind::name`].
     pub fn from_name(name: &str) -> Option<Self> {
-        use crate::settings::Named;
         Self::NAMES.iter().position(|n| *n == name).map(|i| Self::ALL[i])
-    }
-}
-
-/// The defaults of [`crate::settings::RenderSettings`], at 320×240 pixels, the colour AOV.
-impl Default for RenderOptions {
-    fn default() -> Self {
-        crate::settings::RenderSettings::default().to_options(320, 240, &[crate::aov::Aov::Color])
     }
 }
 

@@ -399,9 +399,16 @@ impl<T: Named + PartialEq> SettingField for T {
 }
 
 impl Named for IntegratorKind {
-    const ALL: &'static [Self] =
-        &[IntegratorKind::Auto, IntegratorKind::Direct, IntegratorKind::Ao, IntegratorKind::ColorBleeding, IntegratorKind::Path];
+    const ALL: &'static [Self] = &IntegratorKind::ALL;
     const NAMES: &'static [&'static str] = IntegratorKind::NAMES;
+}
+
+/// The defaults of [`RenderSettings`], at 320×240 pixels, the colour AOV. Here rather than in
+/// `options.rs`: the settings table makes options, not the other way round.
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderSettings::default().to_options(320, 240, &[crate::aov::Aov::Color])
+    }
 }
 
 impl Named for CacheMode {
