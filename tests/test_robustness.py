@@ -25,12 +25,8 @@ import mipray
 from stages import CUBE_INDICES, add_camera, add_cube, add_distant_light, new_stage
 
 
-def _render(
-    stage: Usd.Stage, width: int = 24, **settings: object
-) -> mipray.RenderResult:
-    return mipray.render(
-        stage, width=width, settings={"samples": 1, "seed": 1, **settings}
-    )
+def _render(stage: Usd.Stage, width: int = 24, **settings: object) -> mipray.RenderResult:
+    return mipray.render(stage, width=width, settings={"samples": 1, "seed": 1, **settings})
 
 
 def _record(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -59,9 +55,7 @@ def _stage_with(build) -> Usd.Stage:
 def _ok_is_drawn(stage: Usd.Stage, result: mipray.RenderResult) -> None:
     color = result.aovs["color"]
     assert np.isfinite(color).all()
-    row, col = pixel_of(
-        stage, "/World/Ok", result.width, result.height, Usd.TimeCode.Default()
-    )
+    row, col = pixel_of(stage, "/World/Ok", result.width, result.height, Usd.TimeCode.Default())
     assert color[row, col].sum() > 0.0, "the good prim is missing"
 
 
@@ -84,9 +78,7 @@ def test_degenerate_scales_drop_the_prim_by_name(native, caplog, scale) -> None:
         result = _render(stage)
     _ok_is_drawn(stage, result)
     dropped = result.stats["dropped_prims"]
-    assert len(dropped) == 1 and dropped[0].startswith(
-        "/World/Parent/Bad: transform "
-    ), dropped
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Parent/Bad: transform "), dropped
     assert any("/World/Parent/Bad: transform" in r.getMessage() for r in caplog.records)
     assert result.stats["internal_errors"] == 0
 
@@ -158,9 +150,7 @@ def test_a_huge_displacement_scale_drops_the_mesh_by_name(native) -> None:
     def build(stage: Usd.Stage) -> None:
         mesh = add_cube(stage, "/World/Bumpy")
         prim = mesh.GetPrim()
-        prim.CreateAttribute(
-            "mipray:displacement:amplitude", Sdf.ValueTypeNames.Float
-        ).Set(1e30)
+        prim.CreateAttribute("mipray:displacement:amplitude", Sdf.ValueTypeNames.Float).Set(1e30)
 
     stage = _stage_with(build)
     result = _render(stage)
@@ -198,16 +188,14 @@ def test_a_projective_transform_drops_the_prim_by_name(native) -> None:
     result = _render(stage)
     _ok_is_drawn(stage, result)
     dropped = result.stats["dropped_prims"]
-    assert len(dropped) == 1 and dropped[0].startswith(
-        "/World/Proj: transform is projective"
-    ), dropped
+    assert len(dropped) == 1 and dropped[0].startswith("/World/Proj: transform is projective"), (
+        dropped
+    )
 
 
 def _texture_file(native, path: Path, texel: tuple[float, ...]) -> str:
     """An 8×8 float EXR whose every texel is ``texel`` (as many channels as values)."""
-    values = np.ascontiguousarray(
-        np.broadcast_to(np.array(texel, np.float32), (8, 8, len(texel)))
-    )
+    values = np.ascontiguousarray(np.broadcast_to(np.array(texel, np.float32), (8, 8, len(texel))))
     native.write_image(str(path), {"map": values}, ["map"], {"map": "float"})
     return str(path)
 
@@ -220,9 +208,7 @@ def _texture_file(native, path: Path, texel: tuple[float, ...]) -> str:
         ((0.1, 0.2, 0.3), (0.1, 0.2, 0.3)),
     ],
 )
-def test_rgb_of_files_with_fewer_channels_follows_usd_uv_texture(
-    native, tmp_path, texel, expected
-):
+def test_rgb_of_files_with_fewer_channels_follows_usd_uv_texture(native, tmp_path, texel, expected):
     stage, shader = scene(diffuseColor=(0.0, 0.0, 0.0), useSpecularWorkflow=1)
     file = _texture_file(native, tmp_path / "map.exr", texel)
     texture(stage, "/World/Looks/M", shader, "emissiveColor", file)
@@ -269,9 +255,7 @@ def test_outputs_a_of_a_file_without_alpha_is_one(native, tmp_path, texel, alpha
     assert a[h // 2, w // 2, 0] == pytest.approx(alpha, abs=1e-4)
 
 
-def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(
-    native, tmp_path
-) -> None:
+def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, tmp_path) -> None:
     # An emissive 1e5: half float's largest value is 65504, so the EXR held Inf.
     stage, _ = scene(
         diffuseColor=(0.0, 0.0, 0.0),
@@ -281,9 +265,7 @@ def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(
     usd = tmp_path / "bright.usda"
     stage.GetRootLayer().Export(str(usd))
     out = tmp_path / "bright.exr"
-    done = _record(
-        str(usd), str(out), "--imageWidth", "16", "--camera", "/World/Camera"
-    )
+    done = _record(str(usd), str(out), "--imageWidth", "16", "--camera", "/World/Camera")
     assert done.returncode == 0, done.stderr
     pixels, names = native.read_image(str(out))
     assert np.isfinite(pixels).all()
@@ -328,40 +310,30 @@ def test_an_unusable_stage_camera_is_reported_not_replaced(native, tmp_path) -> 
     done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16")
     assert done.returncode == 1
     assert (
-        done.stderr.strip()
-        .splitlines()[-1]
-        .startswith("mipray-record: /World/Cam: cannot render")
+        done.stderr.strip().splitlines()[-1].startswith("mipray-record: /World/Cam: cannot render")
     )
     assert not (tmp_path / "out.exr").exists()
 
 
-def test_an_aperture_giving_no_possible_image_height_is_one_line(
-    native, tmp_path
-) -> None:
+def test_an_aperture_giving_no_possible_image_height_is_one_line(native, tmp_path) -> None:
     # Found by tests/test_fuzz.py (seed 354351): a verticalAperture of 3e38 made the height
     # overflow the renderer's integer, an OverflowError instead of a MiprayError.
     stage = new_stage()
     add_cube(stage, "/World/Cube")
     add_camera(stage, "/World/Cam").CreateVerticalApertureAttr(3e38)
-    with pytest.raises(
-        mipray.RenderSettingsError, match=r"^/World/Cam: an image 24 pixels wide"
-    ):
+    with pytest.raises(mipray.RenderSettingsError, match=r"^/World/Cam: an image 24 pixels wide"):
         _render(stage)
     usd = tmp_path / "tall.usda"
     stage.GetRootLayer().Export(str(usd))
     done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "16")
     assert done.returncode == 1, done.stderr
     last = done.stderr.strip().splitlines()[-1]
-    assert last.startswith("mipray-record: /World/Cam: an image 16 pixels wide"), (
-        done.stderr
-    )
+    assert last.startswith("mipray-record: /World/Cam: an image 16 pixels wide"), done.stderr
     assert not (tmp_path / "out.exr").exists()
 
 
 @pytest.mark.parametrize("problem", ["directory", "device", "file as folder"])
-def test_an_unwritable_output_is_refused_before_any_frame_renders(
-    native, tmp_path, problem
-):
+def test_an_unwritable_output_is_refused_before_any_frame_renders(native, tmp_path, problem):
     # Frame 2's output cannot be written: nothing renders (frame 1's image was written, and
     # only frame 2's write failed, after its render).
     stage = _stage_with(lambda stage: None)
@@ -393,9 +365,7 @@ def _texture_stage(tmp_path: Path, file: str) -> Path:
 
 
 @pytest.mark.parametrize("kind", ["device", "FIFO", "directory"])
-def test_a_texture_that_is_not_a_regular_file_is_refused_in_one_line(
-    native, tmp_path, kind
-):
+def test_a_texture_that_is_not_a_regular_file_is_refused_in_one_line(native, tmp_path, kind):
     # /dev/zero and a FIFO hung the render for ever, past SIGTERM (OpenImageIO's format
     # probes read them); now the file is named and its input takes its fallback.
     file = {
@@ -406,14 +376,10 @@ def test_a_texture_that_is_not_a_regular_file_is_refused_in_one_line(
     if kind == "FIFO":
         os.mkfifo(file[kind])
     usd = _texture_stage(tmp_path, file[kind])
-    done = _record(
-        str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=120
-    )
+    done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=120)
     assert done.returncode == 0, done.stderr
     said = [line for line in done.stderr.splitlines() if file[kind] in line]
-    assert said and all(line.startswith("mipray-record: ") for line in said), (
-        done.stderr
-    )
+    assert said and all(line.startswith("mipray-record: ") for line in said), done.stderr
     if kind != "directory":
         assert f"not a regular file (a {kind})" in said[0], said
 
@@ -440,12 +406,8 @@ def _available_gb() -> float:
     return math.inf
 
 
-@pytest.mark.skipif(
-    _available_gb() > 200, reason="this machine could hold a 65536-wide film"
-)
-def test_an_image_too_large_for_the_memory_is_refused_before_the_sync(
-    native, tmp_path
-) -> None:
+@pytest.mark.skipif(_available_gb() > 200, reason="this machine could hold a 65536-wide film")
+def test_an_image_too_large_for_the_memory_is_refused_before_the_sync(native, tmp_path) -> None:
     # -w 65536 aborted the process on a 37 GB allocation, after the sync.
     stage = _stage_with(lambda stage: None)
     with pytest.raises(mipray.RenderSettingsError, match=r"memory available") as caught:
@@ -491,48 +453,32 @@ def test_a_native_instance_with_a_non_finite_transform_is_left_out_by_name(
             prim.GetReferences().AddInternalReference("/Proto")
             prim.SetInstanceable(True)
             UsdGeom.Xformable(prim).AddTranslateOp().Set(Gf.Vec3d(x, 0.9, 0.0))
-        UsdGeom.Xformable(stage.GetPrimAtPath("/World/Bad")).AddRotateYOp().Set(
-            float("nan")
-        )
+        UsdGeom.Xformable(stage.GetPrimAtPath("/World/Bad")).AddRotateYOp().Set(float("nan"))
 
     stage = _stage_with(build)
     stage.GetPrimAtPath("/Proto").SetSpecifier(Sdf.SpecifierClass)
     result = _render(stage)
     _ok_is_drawn(stage, result)
-    assert [str(e) for e in result.errors] == [
-        "/World/Bad: its transform is not finite"
-    ]
-    row, col = pixel_of(
-        stage, "/World/Good", result.width, result.height, Usd.TimeCode.Default()
-    )
+    assert [str(e) for e in result.errors] == ["/World/Bad: its transform is not finite"]
+    row, col = pixel_of(stage, "/World/Good", result.width, result.height, Usd.TimeCode.Default())
     assert result.aovs["color"][row, col].sum() > 0.0, "the good instance is missing"
 
 
-def test_an_image_librarys_own_messages_never_reach_stderr_unprefixed(
-    native, tmp_path
-) -> None:
+def test_an_image_librarys_own_messages_never_reach_stderr_unprefixed(native, tmp_path) -> None:
     # A PNG cut short: libpng printed "libpng error: IHDR: ..." on stderr by itself, beside
     # mipray's own warning.
     cut = tmp_path / "cut.png"
     cut.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x04\x00\x00\x00\x04")
     usd = _texture_stage(tmp_path, str(cut))
-    done = _record(
-        str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=120
-    )
+    done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=120)
     assert done.returncode == 0, done.stderr
     lines = [line for line in done.stderr.splitlines() if line.strip()]
-    assert lines and all(line.startswith("mipray-record: ") for line in lines), (
-        done.stderr
-    )
+    assert lines and all(line.startswith("mipray-record: ") for line in lines), done.stderr
     assert any(str(cut) in line for line in lines), done.stderr
 
 
-@pytest.mark.parametrize(
-    "arc", ["sublayer", "reference", "payload", "variant reference"]
-)
-def test_a_layer_brought_in_that_is_a_fifo_is_refused_in_one_line(
-    native, tmp_path, arc
-) -> None:
+@pytest.mark.parametrize("arc", ["sublayer", "reference", "payload", "variant reference"])
+def test_a_layer_brought_in_that_is_a_fifo_is_refused_in_one_line(native, tmp_path, arc) -> None:
     # USD read it for ever while composing (only the root and session layers were checked).
     fifo = tmp_path / "part.usda"
     os.mkfifo(fifo)
@@ -554,9 +500,7 @@ def test_a_layer_brought_in_that_is_a_fifo_is_refused_in_one_line(
     usd = tmp_path / "shot.usda"
     root.Export(str(usd))
     try:
-        done = _record(
-            str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=60
-        )
+        done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=60)
     except subprocess.TimeoutExpired:
         pytest.fail(f"a {arc} that is a FIFO hung the render")
     assert done.returncode == 1

@@ -122,9 +122,11 @@ def _open_layer(path: str, what: str) -> Sdf.Layer:
 
 
 def _refuse_special_dependencies(top: Sdf.Layer) -> None:
-    """Refuse every layer ``top`` brings in (sublayers, references, payloads, in variants too,
-    and theirs in turn) that is a FIFO, a device or a directory, naming it and the layer that
-    asks for it: composing would have USD read a FIFO or a device for ever.
+    """Refuse every layer ``top`` brings in that is a FIFO, a device or a directory.
+
+    Sublayers, references and payloads (in variants too, and theirs in turn) are checked; the
+    error names the file and the layer that asks for it. Composing would have USD read a FIFO
+    or a device for ever.
 
     Layers that are not local files (inside a package, through a custom resolver) or that fail
     to open are left to USD, whose composition errors are reported as before.
