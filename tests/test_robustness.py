@@ -69,8 +69,7 @@ def _scaled_parent(scale: tuple[float, float, float]):
 
 
 @pytest.mark.parametrize(
-    "scale",
-    [(0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1e-30, 1e-30, 1e-30), (1e20, 1e20, 1e20)],
+    "scale", [(0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1e-30, 1e-30, 1e-30), (1e20, 1e20, 1e20)]
 )
 def test_degenerate_scales_drop_the_prim_by_name(native, caplog, scale) -> None:
     stage = _stage_with(_scaled_parent(scale))
@@ -120,12 +119,7 @@ def test_a_point_instancer_with_scale_zero_names_the_prototype(native) -> None:
 def test_points_beyond_the_traceable_range_drop_the_mesh_by_name(native, far) -> None:
     def build(stage: Usd.Stage) -> None:
         points = [(x, y, z) for x, y, z in [(-0.5, -0.5, 0.5), (far, -0.5, 0.5)]]
-        points += [
-            (-0.5, 0.5, 0.5),
-            (0.5, 0.5, 0.5),
-            (-0.5, 0.5, -0.5),
-            (0.5, 0.5, -0.5),
-        ]
+        points += [(-0.5, 0.5, 0.5), (0.5, 0.5, 0.5), (-0.5, 0.5, -0.5), (0.5, 0.5, -0.5)]
         points += [(-0.5, -0.5, -0.5), (0.5, -0.5, -0.5)]
         add_cube(stage, "/World/Far", points=points, scheme="none")
 
@@ -223,12 +217,7 @@ def test_rgb_of_files_with_fewer_channels_follows_usd_uv_texture(native, tmp_pat
 
 @pytest.mark.parametrize(
     ("texel", "alpha"),
-    [
-        ((0.25,), 1.0),
-        ((0.1, 0.2, 0.3), 1.0),
-        ((0.25, 0.5), 0.0),
-        ((0.1, 0.2, 0.3, 0.75), 1.0),
-    ],
+    [((0.25,), 1.0), ((0.1, 0.2, 0.3), 1.0), ((0.25, 0.5), 0.0), ((0.1, 0.2, 0.3, 0.75), 1.0)],
 )
 def test_outputs_a_of_a_file_without_alpha_is_one(native, tmp_path, texel, alpha):
     # OpenImageIO aborted the process (sample_bilinear: offset < tile_bytes) when asked for a
@@ -258,9 +247,7 @@ def test_outputs_a_of_a_file_without_alpha_is_one(native, tmp_path, texel, alpha
 def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, tmp_path) -> None:
     # An emissive 1e5: half float's largest value is 65504, so the EXR held Inf.
     stage, _ = scene(
-        diffuseColor=(0.0, 0.0, 0.0),
-        emissiveColor=(1e5, 1e5, 1e5),
-        useSpecularWorkflow=1,
+        diffuseColor=(0.0, 0.0, 0.0), emissiveColor=(1e5, 1e5, 1e5), useSpecularWorkflow=1
     )
     usd = tmp_path / "bright.usda"
     stage.GetRootLayer().Export(str(usd))
@@ -275,9 +262,7 @@ def test_colour_beyond_half_float_is_clamped_in_the_exr_with_a_warning(native, t
     assert len(warned) == 1 and str(out) in warned[0], done.stderr
 
 
-def test_a_point_instancer_whose_prototype_holds_it_is_reported_in_one_line(
-    native,
-) -> None:
+def test_a_point_instancer_whose_prototype_holds_it_is_reported_in_one_line(native) -> None:
     # Its prototype is its own parent: expanding it met itself again, without end (a 2,663-line
     # RecursionError).
     def build(stage: Usd.Stage) -> None:
@@ -368,11 +353,7 @@ def _texture_stage(tmp_path: Path, file: str) -> Path:
 def test_a_texture_that_is_not_a_regular_file_is_refused_in_one_line(native, tmp_path, kind):
     # /dev/zero and a FIFO hung the render for ever, past SIGTERM (OpenImageIO's format
     # probes read them); now the file is named and its input takes its fallback.
-    file = {
-        "device": "/dev/zero",
-        "FIFO": str(tmp_path / "pipe.png"),
-        "directory": str(tmp_path),
-    }
+    file = {"device": "/dev/zero", "FIFO": str(tmp_path / "pipe.png"), "directory": str(tmp_path)}
     if kind == "FIFO":
         os.mkfifo(file[kind])
     usd = _texture_stage(tmp_path, file[kind])
@@ -441,9 +422,7 @@ def test_prims_skipped_for_bad_data_are_listed_in_the_stats(native) -> None:
     assert len(listed) == 2, listed
 
 
-def test_a_native_instance_with_a_non_finite_transform_is_left_out_by_name(
-    native,
-) -> None:
+def test_a_native_instance_with_a_non_finite_transform_is_left_out_by_name(native) -> None:
     # Found by test_fuzz.py: a NaN rotation of one instance raised a ValueError out of
     # mipray.render (the whole frame lost) instead of dropping that instance.
     def build(stage: Usd.Stage) -> None:
