@@ -489,3 +489,25 @@ def test_a_layer_brought_in_that_is_a_fifo_is_refused_in_one_line(native, tmp_pa
     ]
     with pytest.raises(mipray.StageError, match="not a regular file"):
         mipray.open_stage(usd)
+
+
+def test_a_1024_gon_renders_with_bilinear_end_caps_named_in_the_stats(native) -> None:
+    # Its Gregory end caps cost the square of its side count (a 16384-gon took over 24 GB).
+    def build(stage: Usd.Stage) -> None:
+        n = 1024
+        mesh = UsdGeom.Mesh.Define(stage, "/World/NGon")
+        angles = [2.0 * math.pi * i / n for i in range(n)]
+        mesh.CreatePointsAttr([Gf.Vec3f(2 * math.cos(a), 2 * math.sin(a), 0.0) for a in angles])
+        mesh.CreateFaceVertexCountsAttr([n])
+        mesh.CreateFaceVertexIndicesAttr(list(range(n)))
+        mesh.CreateSubdivisionSchemeAttr("catmullClark")
+
+    result = _render(_stage_with(build))
+    simplified = result.stats["scene"]["simplified"]
+    assert len(simplified) == 1 and simplified[0].startswith(
+        "/World/NGon: a vertex of valence 1024"
+    )
+    assert result.stats["prim_errors"] == []
+    color = np.asarray(result.aovs["color"])
+    h, w = color.shape[:2]
+    assert np.isfinite(color).all() and color[h // 2, w // 2].sum() > 0.0, "the n-gon is missing"
