@@ -454,3 +454,60 @@ def test_an_image_librarys_own_messages_never_reach_stderr_unprefixed(native, tm
     lines = [line for line in done.stderr.splitlines() if line.strip()]
     assert lines and all(line.startswith("mipray-record: ") for line in lines), done.stderr
     assert any(str(cut) in line for line in lines), done.stderr
+
+
+@pytest.mark.parametrize("arc", ["sublayer", "reference", "payload", "variant reference"])
+def test_a_layer_brought_in_that_is_a_fifo_is_refused_in_one_line(native, tmp_path, arc) -> None:
+    # USD read it for ever while composing (only the root and session layers were checked).
+    fifo = tmp_path / "part.usda"
+    os.mkfifo(fifo)
+    stage = _stage_with(lambda stage: None)
+    root = stage.GetRootLayer()
+    prim = stage.DefinePrim("/World/Part")
+    if arc == "sublayer":
+        root.subLayerPaths.append("./part.usda")
+    elif arc == "reference":
+        prim.GetReferences().AddReference("./part.usda")
+    elif arc == "payload":
+        prim.GetPayloads().AddPayload("./part.usda")
+    else:
+        variants = prim.GetVariantSets().AddVariantSet("look")
+        variants.AddVariant("a")
+        variants.SetVariantSelection("a")
+        with variants.GetVariantEditContext():
+            prim.GetReferences().AddReference("./part.usda")
+    usd = tmp_path / "shot.usda"
+    root.Export(str(usd))
+    try:
+        done = _record(str(usd), str(tmp_path / "out.exr"), "--imageWidth", "8", timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"a {arc} that is a FIFO hung the render")
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        f"mipray-record: {fifo}: not a regular file (a FIFO); a USD layer must be a file"
+        f" (brought in by {usd})"
+    ]
+    with pytest.raises(mipray.StageError, match="not a regular file"):
+        mipray.open_stage(usd)
+
+
+def test_a_1024_gon_renders_with_bilinear_end_caps_named_in_the_stats(native) -> None:
+    # Its Gregory end caps cost the square of its side count (a 16384-gon took over 24 GB).
+    def build(stage: Usd.Stage) -> None:
+        n = 1024
+        mesh = UsdGeom.Mesh.Define(stage, "/World/NGon")
+        angles = [2.0 * math.pi * i / n for i in range(n)]
+        mesh.CreatePointsAttr([Gf.Vec3f(2 * math.cos(a), 2 * math.sin(a), 0.0) for a in angles])
+        mesh.CreateFaceVertexCountsAttr([n])
+        mesh.CreateFaceVertexIndicesAttr(list(range(n)))
+        mesh.CreateSubdivisionSchemeAttr("catmullClark")
+
+    result = _render(_stage_with(build))
+    simplified = result.stats["scene"]["simplified"]
+    assert len(simplified) == 1 and simplified[0].startswith(
+        "/World/NGon: a vertex of valence 1024"
+    )
+    assert result.stats["prim_errors"] == []
+    color = np.asarray(result.aovs["color"])
+    h, w = color.shape[:2]
+    assert np.isfinite(color).all() and color[h // 2, w // 2].sum() > 0.0, "the n-gon is missing"

@@ -224,9 +224,33 @@ RefinerPtr create_refiner(const OsdMeshDesc& d, const FarCapture& capture) {
   return refiner;
 }
 
-Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d) {
+// The highest valence the mesh's refinement meets: a vertex's edge count, or a Catmull-Clark
+// n-gon's side count (its first refinement puts a vertex of valence n at its centre).
+int max_valence(const Far::TopologyRefiner& refiner) {
+  const Far::TopologyLevel& l = refiner.GetLevel(0);
+  int most = 0;
+  for (int v = 0; v < l.GetNumVertices(); ++v) most = std::max(most, l.GetVertexEdges(v).size());
+  if (refiner.GetSchemeType() == Sdc::SCHEME_CATMARK)
+    for (int f = 0; f < l.GetNumFaces(); ++f) most = std::max(most, l.GetFaceVertices(f).size());
+  return most;
+}
+
+// Above this valence a mesh's end caps are bilinear, not Gregory. Each of the n Gregory patches
+// around a vertex of valence n has 20 local points whose stencils span its whole 1-ring, so the
+// stencils cost O(n²) (a 4096-gon took 2.3 GB, a 16384-gon over 24 GB). Held to this valence the
+// end caps cost at most ~20·kMaxGregoryValence weights per unit of total valence: linear in the
+// mesh. Bilinear end caps are the refined polygon at the isolation level: the regular patches
+// (everything but the few around extraordinary vertices) stay the exact limit.
+constexpr int kMaxGregoryValence = 256;
+
+bool bilinear_end_caps(const Far::TopologyRefiner& refiner) {
+  return max_valence(refiner) > kMaxGregoryValence;
+}
+
+Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d, bool bilinear_caps = false) {
   Far::PatchTableFactory::Options po(d.isolation_level);
-  po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+  po.SetEndCapType(bilinear_caps ? Far::PatchTableFactory::Options::ENDCAP_BILINEAR_BASIS
+                                 : Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
   po.useInfSharpPatch = true;
   // Vertex data and face-varying channels are evaluated; varying primvars are interpolated over
   // the base faces in the core, so no varying tables.
@@ -366,6 +390,8 @@ struct OsdMesh::Impl {
   std::vector<Far::PatchDescriptor::Type> types;
   std::vector<int32_t> ptex_to_base;
   std::string warnings;
+  // What was made cheaper than the exact limit surface to bound the work (empty: nothing).
+  std::string simplified;
   // Face-varying channels: the values of every refinement level, then the end caps' local
   // values — the index space of GetPatchFVarValues. 2 floats each.
   std::vector<std::vector<float>> fvar_values;
@@ -691,6 +717,7 @@ OsdMesh::OsdMesh() : impl(new Impl) {}
 OsdMesh::~OsdMesh() = default;
 
 rust::String OsdMesh::warnings() const { return rust::String(impl->warnings); }
+rust::String OsdMesh::simplified() const { return rust::String(impl->simplified); }
 
 std::size_t OsdMesh::ptex_face_count() const {
   return std::size_t(impl->patch_table->GetNumPtexFaces());
@@ -792,7 +819,8 @@ void OsdMesh::update_points(const OsdMeshDesc& desc, rust::Slice<const float> po
   RefinerPtr refiner = create_refiner(desc, capture);
   refine_adaptive(*refiner, desc, capture);
   // A patch table of its own for the end caps' stencils (the kept one's are released).
-  std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, patch_options_of(desc)));
+  std::unique_ptr<Far::PatchTable> table(
+      Far::PatchTableFactory::Create(*refiner, patch_options_of(desc, bilinear_end_caps(*refiner))));
   if (!table) capture.fail("OpenSubdiv could not build the patch table");
   capture.check("OpenSubdiv patch table");
   impl->set_points(*refiner, *table, points.data());
@@ -925,7 +953,16 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
 
     auto mesh = std::make_unique<OsdMesh>();
     OsdMesh::Impl& m = *mesh->impl;
-    m.patch_table.reset(Far::PatchTableFactory::Create(*refiner, patch_options_of(desc)));
+    const int valence = max_valence(*refiner);
+    const bool bilinear = valence > kMaxGregoryValence;
+    m.patch_table.reset(Far::PatchTableFactory::Create(*refiner, patch_options_of(desc, bilinear)));
+    if (bilinear)
+      m.simplified = "a vertex of valence " + std::to_string(valence) +
+                     " (an n-gon counts its sides) is above " +
+                     std::to_string(kMaxGregoryValence) +
+                     ": bilinear end caps for this mesh (near its extraordinary vertices the "
+                     "surface is the polygon refined to level " +
+                     std::to_string(int(desc.isolation_level)) + ", not the limit)";
     if (!m.patch_table) capture.fail("OpenSubdiv could not build the patch table");
     capture.check("OpenSubdiv patch table");
 

@@ -30,6 +30,7 @@ class OsdMesh {
   OsdMesh& operator=(const OsdMesh&) = delete;
 
   rust::String warnings() const;
+  rust::String simplified() const;
   std::size_t ptex_face_count() const;
   rust::Vec<OsdPatchInfo> patch_infos() const;
   bool patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept;

@@ -140,11 +140,15 @@ pub(crate) mod bridge {
         /// Patch table, stencils and refined control points of one mesh.
         type OsdMesh;
 
-        /// Builds the refiner and the adaptive patch table with Gregory-basis end caps, and refines
+        /// Builds the refiner and the adaptive patch table with Gregory-basis end caps (bilinear above
+        /// a valence of 256, see `simplified`), and refines
         /// `points` (3 floats per point) into the control points; keeps the table and the points.
         fn osd_mesh_new(desc: &OsdMeshDesc, points: &[f32]) -> Result<UniquePtr<OsdMesh>>;
         /// Warnings OpenSubdiv reported while building (one per line; empty when none).
         fn warnings(self: &OsdMesh) -> String;
+        /// What was made cheaper than the exact limit surface to bound the work, one line
+        /// (empty: nothing): bilinear end caps above a valence threshold.
+        fn simplified(self: &OsdMesh) -> String;
         fn ptex_face_count(self: &OsdMesh) -> usize;
         fn patch_infos(self: &OsdMesh) -> Result<Vec<OsdPatchInfo>>;
         /// A patch's bounds into `out[0..6]` (min xyz, max xyz): a regular patch's Bézier hull,

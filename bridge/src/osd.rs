@@ -97,6 +97,8 @@ pub struct OsdSurface {
     params: Vec<PatchParam>,
     control_faces: usize,
     warnings: String,
+    /// What was made cheaper than the exact limit to bound the work (empty: nothing).
+    simplified: String,
     /// Primvar channels, in the order given to [`OsdSurface::with_primvars`].
     primvars: Vec<PrimvarSource>,
 }
@@ -191,8 +193,21 @@ impl OsdSurface {
         for w in warnings.lines() {
             log::warn!("{name}: OpenSubdiv: {w}");
         }
+        let simplified = mesh.simplified().to_string();
+        if !simplified.is_empty() {
+            log::warn!("{name}: {simplified}");
+        }
         let params = mesh.patch_infos().map_err(|e| subdivision_error(name, &e))?.iter().map(patch_param_of).collect();
-        Ok(OsdSurface { name: name.to_string(), mesh, desc, params, control_faces: topology.face_count(), warnings, primvars: sources })
+        Ok(OsdSurface {
+            name: name.to_string(),
+            mesh,
+            desc,
+            params,
+            control_faces: topology.face_count(),
+            warnings,
+            simplified,
+            primvars: sources,
+        })
     }
 
     /// Bytes this surface holds, by part (docs/memory.md): OpenSubdiv's tables and points (C++),
@@ -477,6 +492,10 @@ impl LimitSurface for OsdSurface {
 
     fn control_face_count(&self) -> usize {
         self.control_faces
+    }
+
+    fn simplified(&self) -> Option<&str> {
+        (!self.simplified.is_empty()).then_some(self.simplified.as_str())
     }
 
     /// Primvar channel `channel` (in [`OsdSurface::with_primvars`] order) at the patch's own

@@ -17,10 +17,14 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::{Duration, SystemTime};
 
-/// How long the first bytes of a texture file may take to arrive before it is refused: a file
-/// on a hung network mount would otherwise stop the render for good (OpenImageIO's format
-/// probes block with it).
+/// How long reading a texture file may take before it is refused (plus [`READ_RATE`]'s time for
+/// its size): a file on a hung network mount would otherwise stop the render for good
+/// (OpenImageIO's reads block with it).
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// The slowest read rate allowed on top of [`OPEN_TIMEOUT`], bytes per second (8 MB/s): a large
+/// texture on a slow but working disk is not refused.
+pub const READ_RATE: u64 = 8_000_000;
 
 /// The cache's size limit when `$MIPRAY_TEXTURE_CACHE_MB` does not set one, MB (10^6 bytes).
 pub const DEFAULT_LIMIT_MB: u64 = 4096;
@@ -29,14 +33,17 @@ pub const DEFAULT_LIMIT_MB: u64 = 4096;
 const SUFFIX: &str = ".linear.exr";
 
 /// Why a texture file is not opened: `path` is refused before OpenImageIO sees it unless it is
-/// a regular file whose first bytes arrive within `timeout`. A device (`/dev/zero`), a FIFO or
-/// a socket would have OpenImageIO's format probes read for ever.
+/// a regular file whose every byte arrives within `timeout` plus its size at [`READ_RATE`]. A
+/// device (`/dev/zero`), a FIFO or a socket would have OpenImageIO's format probes read for
+/// ever. Once read whole, the file is in the page cache: OpenImageIO's own reads, the linear
+/// copy's conversion and its content hash then find it there (a mount that stalls after this
+/// read and also loses the cached pages can still block them).
 pub fn check_source(path: &Path, timeout: Duration) -> Result<(), String> {
     let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
     if !meta.is_file() {
         return Err(format!("not a regular file ({}); a texture must be an image file", kind_of(&meta)));
     }
-    probe(path, timeout)
+    probe(path, timeout + Duration::from_secs(meta.len() / READ_RATE))
 }
 
 /// What a non-regular file is, for the message.
@@ -56,17 +63,14 @@ fn kind_of(meta: &std::fs::Metadata) -> &'static str {
     }
 }
 
-/// Reads the first bytes of `path` on a thread of its own and waits at most `timeout` for them.
-/// A read that never returns leaves that thread blocked (nothing can cancel a blocked read) but
-/// not the render.
+/// Reads `path` to its end on a thread of its own and waits at most `timeout` for it. A read
+/// that never returns leaves that thread blocked (nothing can cancel a blocked read) but not
+/// the render. A file that sends its first bytes and then stalls is refused too.
 pub fn probe(path: &Path, timeout: Duration) -> Result<(), String> {
     let (send, receive) = mpsc::channel();
     let owned = path.to_path_buf();
     let spawned = std::thread::Builder::new().name("mipray-texture-probe".into()).spawn(move || {
-        let read = File::open(&owned).and_then(|mut f| {
-            let mut head = [0u8; 512];
-            f.read(&mut head)
-        });
+        let read = File::open(&owned).and_then(|f| std::io::copy(&mut std::io::BufReader::with_capacity(1 << 20, f), &mut std::io::sink()));
         let _ = send.send(read.map(|_| ()).map_err(|e| e.to_string()));
     });
     if spawned.is_err() {
@@ -76,7 +80,7 @@ pub fn probe(path: &Path, timeout: Duration) -> Result<(), String> {
     match receive.recv_timeout(timeout) {
         Ok(Ok(())) => Ok(()),
         Ok(Err(e)) => Err(format!("cannot read: {e}")),
-        Err(_) => Err(format!("reading its first bytes took longer than {} s; refused", timeout.as_secs_f32())),
+        Err(_) => Err(format!("reading it took longer than {} s; refused", timeout.as_secs_f32())),
     }
 }
 
@@ -346,6 +350,32 @@ mod tests {
         let ok = scratch("probe-ok").join("f.png");
         std::fs::write(&ok, b"\x89PNG").unwrap();
         probe(&ok, Duration::from_secs(5)).unwrap();
+    }
+
+    #[test]
+    fn a_file_that_sends_a_header_then_stalls_is_refused_in_time() {
+        // Only its first bytes were waited for: a file whose reading stalled after a valid
+        // header passed, and OpenImageIO's read then blocked for good. A FIFO whose writer sends
+        // a PNG signature and keeps the pipe open stands for a mount that stalls mid-file.
+        let dir = scratch("stall");
+        let fifo = dir.join("stalls.png");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let (done_send, done_receive) = mpsc::channel::<()>();
+        let writer_path = fifo.clone();
+        let writer = std::thread::spawn(move || {
+            use std::io::Write;
+            let mut w = OpenOptions::new().write(true).open(&writer_path).unwrap();
+            w.write_all(b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR").unwrap();
+            w.flush().unwrap();
+            // Hold the pipe open (no end of file) until the probe has given up.
+            let _ = done_receive.recv_timeout(Duration::from_secs(30));
+        });
+        let err = probe(&fifo, Duration::from_millis(500)).unwrap_err();
+        assert!(err.contains("longer than"), "{err}");
+        done_send.send(()).unwrap();
+        writer.join().unwrap();
     }
 
     #[test]

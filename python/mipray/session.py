@@ -79,6 +79,9 @@ def open_stage(
     file_path = os.fspath(path)
     root = _open_layer(file_path, "")
     session = _open_layer(session_layer, "session layer ") if session_layer else None
+    for layer in (root, session):
+        if layer is not None:
+            _refuse_special_dependencies(layer)
     try:
         session = session or Sdf.Layer.CreateAnonymous()
         with _usd_diagnostics():
@@ -116,6 +119,51 @@ def _open_layer(path: str, what: str) -> Sdf.Layer:
     if not layer:
         raise StageError(f"{path}: cannot open {what}as a USD layer", path=path)
     return layer
+
+
+def _refuse_special_dependencies(top: Sdf.Layer) -> None:
+    """Refuse every layer ``top`` brings in that is a FIFO, a device or a directory.
+
+    Sublayers, references and payloads (in variants too, and theirs in turn) are checked; the
+    error names the file and the layer that asks for it. Composing would have USD read a FIFO
+    or a device for ever.
+
+    Layers that are not local files (inside a package, through a custom resolver) or that fail
+    to open are left to USD, whose composition errors are reported as before.
+    """
+    seen = {top.identifier}
+    pending = [top]
+    while pending:
+        layer = pending.pop()
+        for asset in layer.GetCompositionAssetDependencies():
+            path = _local_path(layer, asset)
+            if path is None:
+                continue
+            if not os.path.isfile(path):
+                raise StageError(
+                    f"{path}: not a regular file ({_kind_of(path)}); a USD layer must be a "
+                    f"file (brought in by {layer.identifier})",
+                    path=path,
+                )
+            try:
+                dependency = Sdf.Layer.FindOrOpen(path)
+            except Tf.ErrorException:
+                continue  # USD reports it when composing
+            if dependency and dependency.identifier not in seen:
+                seen.add(dependency.identifier)
+                pending.append(dependency)
+
+
+def _local_path(layer: Sdf.Layer, asset: str) -> str | None:
+    """The local file an asset path of ``layer`` names, when it names an existing one."""
+    if not asset or "[" in asset:  # a package's inner file: read through its package
+        return None
+    try:
+        resolved = Sdf.ComputeAssetPathRelativeToLayer(layer, asset)
+    except Tf.ErrorException:
+        return None
+    path = resolved or asset
+    return path if os.path.exists(path) else None
 
 
 def _kind_of(path: str) -> str:

@@ -177,6 +177,13 @@ pub trait LimitSurface: Send + Sync {
         None
     }
 
+    /// What this surface made cheaper than its exact definition to bound the work it costs, in
+    /// one line (say, bilinear end caps around a vertex of very high valence). `None` — the
+    /// default — when it is exact. Listed in the stats' `scene.simplified`.
+    fn simplified(&self) -> Option<&str> {
+        None
+    }
+
     /// The surface's closed-form ray test when it has one (implicit gprims and points,
     /// [`crate::implicit`]): the tracer then tests each patch exactly instead of tessellating
     /// it. `None` — the default — for surfaces that are tessellated.

@@ -402,7 +402,7 @@ fn markdown(doc: &Value) -> String {
         }
     }
     s += "\n";
-    s += "| mode | budget | capacity (entries, c/m/f) | cold tessellations (c/m/f) | misses (c/m/f) | hit rate (c/m/f) | recomputed vertices | wall s | peak RSS MB | image vs unbounded |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    s += "| mode | budget | capacity (entries, c/m/f) | cold tessellations (c/m/f) | misses (c/m/f) | hit rate (c/m/f) | recomputed vertices | wall s | peak RSS MB | image vs unbounded | warned too small (tier: geometryCacheMb that fits) |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
     for r in &rows {
         let gc = &r["stats"]["geometry_cache"];
         let tiers = gc["tiers"].as_array().cloned().unwrap_or_default();
@@ -430,8 +430,14 @@ fn markdown(doc: &Value) -> String {
                 r["max_abs_diff_vs_unbounded"].as_f64().unwrap_or(0.0)
             )
         };
+        // The tiers the render warned about: more evicted tessellations rebuilt than distinct.
+        let warned: Vec<String> = gc["too_small"]
+            .as_array()
+            .map(|l| l.iter().map(|t| format!("{}: {}", t["tier"].as_str().unwrap_or("?"), t["total_mb"])).collect())
+            .unwrap_or_default();
+        let warned = if warned.is_empty() { "—".to_string() } else { warned.join(", ") };
         s += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.0} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.0} | {} | {} |\n",
             mode,
             if mode == "unbounded" { "∞".to_string() } else { format!("{} MB", r["budget_mb"]) },
             if mode == "unbounded" { "—".to_string() } else { pick("capacity_entries") },
@@ -441,7 +447,8 @@ fn markdown(doc: &Value) -> String {
             fmt_count(gc["recomputed_vertices"].as_f64().unwrap_or(0.0)),
             r["wall_s_median"].as_f64().unwrap_or(0.0),
             r["stats"]["memory"]["peak_rss_bytes"].as_f64().unwrap_or(0.0) / 1e6,
-            img
+            img,
+            warned
         );
     }
     s += "\n";

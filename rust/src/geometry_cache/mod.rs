@@ -414,12 +414,90 @@ pub struct GeometryCache<E: CacheEntry> {
     tiers: [TierCache<E>; 3],
     /// Split subpatches' ids, kept as long as the entries they name.
     split_ids: SplitIdTables,
+    /// Per tier: its budget was already reported too small ([`GeometryCache::too_small`] warns
+    /// once per cache, not once per render or pass).
+    warned_too_small: [std::sync::atomic::AtomicBool; 3],
+}
+
+/// `bytes` in MB (10^6 bytes) for a message, with three decimals below 1 MB.
+fn megabytes(bytes: u64) -> String {
+    let mb = bytes as f64 / 1e6;
+    if mb < 1.0 {
+        format!("{mb:.3} MB")
+    } else {
+        format!("{mb:.1} MB")
+    }
+}
+
+/// A tier whose budget is too small for what renders used of it: a render rebuilt more evicted
+/// entries than the tier has ever built distinct ones (each entry built more than twice on
+/// average), the cliff where an LRU thrashes and renders slow by orders of magnitude.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct TooSmall {
+    /// "coarse", "medium" or "fine".
+    pub tier: &'static str,
+    /// The tier's budget, bytes.
+    pub budget_bytes: u64,
+    /// Distinct tessellations the tier has built over the cache's life.
+    pub distinct: u64,
+    /// Evicted tessellations the render built again (its misses).
+    pub rebuilt: u64,
+    /// A tier budget that holds every distinct tessellation, bytes (at the tier's entry size).
+    pub fits_bytes: u64,
+    /// The total budget (`geometryCacheMb`, MB = 10^6 bytes, rounded up) that gives the tier
+    /// `fits_bytes` in this mode.
+    pub total_mb: u64,
 }
 impl<E: CacheEntry> GeometryCache<E> {
     /// An empty cache.
     pub fn new(config: CacheConfig) -> Self {
         let tiers = Tier::ALL.map(|t| TierCache::new(config.shard_count(t), config.tier_budget_bytes(t), config.mode != CacheMode::None));
-        Self { config, tiers, split_ids: SplitIdTables::default() }
+        Self { config, tiers, split_ids: SplitIdTables::default(), warned_too_small: Default::default() }
+    }
+
+    /// The tiers whose budget was too small for the render that began when the stats were
+    /// `before` (see [`TooSmall`]). Each is also logged as a warning naming the tier and the
+    /// budget that would fit, the first time only for this cache.
+    pub fn too_small(&self, before: &CacheStats) -> Vec<TooSmall> {
+        let now = self.stats();
+        let render = now.since(before);
+        let mut out = Vec::new();
+        for t in Tier::ALL {
+            let Some(budget) = self.config.tier_budget_bytes(t) else { continue };
+            let distinct = now.tiers[t.index()].cold_tessellations;
+            let rebuilt = render.tiers[t.index()].misses;
+            if budget == 0 || rebuilt <= distinct.max(1) {
+                continue;
+            }
+            // The real entry size once one is built (a budget below it stores nothing at all).
+            let largest = self.tiers[t.index()].largest_entry_bytes();
+            let entry_bytes = if largest > 0 { largest } else { self.config.entry_bytes[t.index()] } as u64;
+            let fits_bytes = distinct * entry_bytes;
+            // The share of the total each mode gives the tier (CacheConfig::multires, ::single).
+            let total_bytes = if self.config.mode == CacheMode::Multires { 3 * fits_bytes } else { fits_bytes };
+            let too_small = TooSmall {
+                tier: t.name(),
+                budget_bytes: budget as u64,
+                distinct,
+                rebuilt,
+                fits_bytes,
+                total_mb: total_bytes.div_ceil(1_000_000),
+            };
+            if !self.warned_too_small[t.index()].swap(true, std::sync::atomic::Ordering::Relaxed) {
+                log::warn!(
+                    "geometry cache: the {} tier's budget of {} is too small for this render: it rebuilt evicted \
+                     tessellations {} times, of {} distinct; geometryCacheMb {} ({} for the tier) would hold them all",
+                    too_small.tier,
+                    megabytes(budget as u64),
+                    rebuilt,
+                    distinct,
+                    too_small.total_mb,
+                    megabytes(fits_bytes),
+                );
+            }
+            out.push(too_small);
+        }
+        out
     }
 
     /// The configuration the cache was made with.

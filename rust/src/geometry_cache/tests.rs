@@ -798,3 +798,48 @@ fn split_ids_are_dense_and_the_same_for_every_thread_and_render() {
     assert_eq!(cache.split_ids(4, 2, 40).id(children[0]), 40);
     assert!(cache.split_id_bytes() >= 500 * 12, "{}", cache.split_id_bytes());
 }
+
+#[test]
+fn a_tier_too_small_for_the_working_set_is_reported_with_a_budget_that_fits() {
+    // 10 fine grids of 100 bytes in a 500-byte fine tier, swept in order three times: LRU evicts
+    // each just before it is needed again (the cliff), so every lookup after the first sweep
+    // rebuilds. A brute-force truth: 10 distinct, 20 rebuilt, 1000 bytes would hold them.
+    let cache: GeometryCache<Grid> = GeometryCache::new(budgets(0, 0, 500).with_entry_bytes([1, 1, 100]));
+    let before = cache.stats();
+    let mut built = 0u64;
+    for _ in 0..3 {
+        for s in 0..10 {
+            cache.get_or_build(key(0, s, Tier::Fine), || {
+                built += 1;
+                Grid { id: u64::from(s), bytes: 100, verts: 1 }
+            });
+        }
+    }
+    assert_eq!(built, 30, "LRU thrashes: every lookup builds");
+    let report = cache.too_small(&before);
+    let expected = TooSmall { tier: "fine", budget_bytes: 500, distinct: 10, rebuilt: 20, fits_bytes: 1000, total_mb: 1 };
+    assert_eq!(report, vec![expected]);
+
+    // A budget below one entry stores nothing: every lookup after the first sweep rebuilds.
+    let none_fit: GeometryCache<Grid> = GeometryCache::new(budgets(0, 0, 50).with_entry_bytes([1, 1, 100]));
+    let before = none_fit.stats();
+    for _ in 0..3 {
+        for s in 0..10 {
+            none_fit.get_or_build(key(0, s, Tier::Fine), || Grid { id: u64::from(s), bytes: 100, verts: 1 });
+        }
+    }
+    let expected = TooSmall { tier: "fine", budget_bytes: 50, distinct: 10, rebuilt: 20, fits_bytes: 1000, total_mb: 1 };
+    assert_eq!(none_fit.too_small(&before), vec![expected]);
+    assert!(none_fit.too_small(&before).len() == 1, "reported every render (warned once)");
+
+    // With that budget the same sweeps rebuild nothing and nothing is reported.
+    let fits: GeometryCache<Grid> = GeometryCache::new(budgets(0, 0, 1000).with_entry_bytes([1, 1, 100]));
+    let before = fits.stats();
+    for _ in 0..3 {
+        for s in 0..10 {
+            fits.get_or_build(key(0, s, Tier::Fine), || Grid { id: u64::from(s), bytes: 100, verts: 1 });
+        }
+    }
+    assert_eq!(fits.stats().since(&before).tiers[Tier::Fine.index()].misses, 0);
+    assert!(fits.too_small(&before).is_empty());
+}
