@@ -130,7 +130,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         surface.evaluate_points(patch, &uv, &mut points);
         // The same points v fastest: runs of one u, which a regular patch contracts along u
         // first (and u fastest, above, along v first).
-        let uv_t: Vec<[f32; 2]> = uv.iter().enumerate().map(|(k, _)| uv[(k % side) * side + k / side]).collect();
+        let uv_t: Vec<[f32; 2]> = (0..uv.len()).map(|k| uv[(k % side) * side + k / side]).collect();
         let mut points_t = Vec::new();
         surface.evaluate_points(patch, &uv_t, &mut points_t);
         for j in 0..side {

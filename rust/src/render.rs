@@ -205,17 +205,6 @@ pub fn render_with_cache(
             let left_out = tracer.dropped.list();
             obj.insert("dropped_prims".into(), Value::from(left_out.iter().map(ToString::to_string).collect::<Vec<_>>()));
             obj.insert("internal_errors".into(), Value::from(left_out.iter().filter(|d| d.internal).count()));
-            if let Some(Value::Object(cache_stats)) = obj.get_mut("geometry_cache") {
-                // Tiers whose budget this render outgrew (warned once per cache).
-                let too_small = tracer.cache.too_small(&cache_before);
-                cache_stats.insert("too_small".into(), serde_json::to_value(too_small).unwrap_or(Value::Null));
-            }
-            if let Some(Value::Object(scene_stats)) = obj.get_mut("scene") {
-                // Surfaces made cheaper than exact to bound their work, each naming its prim.
-                let simplified: Vec<String> =
-                    scene.meshes.iter().filter_map(|m| m.surface.simplified().map(|s| format!("{}: {s}", m.name))).collect();
-                scene_stats.insert("simplified".into(), Value::from(simplified));
-            }
             if let Some(Value::Object(render)) = obj.get_mut("render") {
                 // The pixels rendered, in whole-frame pixels: [x0, y0, x1, y1), row 0 at the top.
                 render.insert("data_window".into(), serde_json::json!([window.x.start, window.y.start, window.x.end, window.y.end]));

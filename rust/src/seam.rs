@@ -313,7 +313,7 @@ pub fn seam_extent_with(
         // The fitted deviation at every sample, four samples a lane (x, y, z apart): a grid's
         // seam extent was measured one sample at a time, and at 31 samples per chord that was
         // most of what making a coarse grid cost.
-        let side = frame.filter(|_| normals).map(|f| f.e1);
+        let side = frame.map(|f| f.e1);
         let (mut chord_sq, mut low, mut high) = (Vec4::ZERO, Vec4::ZERO, Vec4::ZERO);
         let [p0, p1, p2] = &FIT_WEIGHTS;
         for ((w0, w1), w2) in p0.iter().zip(p1).zip(p2) {

@@ -40,6 +40,11 @@ pub fn collect(
     instances: usize,
     cache_before: &crate::geometry_cache::CacheStats,
 ) -> Value {
+    let mut geometry_cache = serde_json::to_value(tracer.cache.stats().since(cache_before)).unwrap_or(Value::Null);
+    if let Value::Object(g) = &mut geometry_cache {
+        // Tiers whose budget this render outgrew (warned once per cache).
+        g.insert("too_small".into(), serde_json::to_value(tracer.cache.too_small(cache_before)).unwrap_or(Value::Null));
+    }
     let rays: serde_json::Map<String, Value> =
         RayKind::ALL.iter().enumerate().map(|(i, k)| (k.name().to_string(), json!(counters.rays[i]))).collect();
     let rates: serde_json::Map<String, Value> =
@@ -72,7 +77,7 @@ pub fn collect(
             "cutout_limit_rays": counters.cutout_limit,
             "dropped_samples": figures.dropped_samples,
         },
-        "geometry_cache": serde_json::to_value(tracer.cache.stats().since(cache_before)).unwrap_or(Value::Null),
+        "geometry_cache": geometry_cache,
         "scene": {
             "control_faces": control_faces,
             "subpatches": subpatches,
@@ -85,6 +90,8 @@ pub fn collect(
             "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
             "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
             "lights": tracer.scene().lights.iter().map(|l| l.describe(&|m| tracer.scene().mesh_name(m))).collect::<Vec<Value>>(),
+            // Surfaces made cheaper than exact to bound their work, each naming its prim.
+            "simplified": tracer.scene().meshes.iter().filter_map(|m| m.surface.simplified().map(|s| format!("{}: {s}", m.name))).collect::<Vec<String>>(),
         },
         "texture_cache": tracer.scene().textures.as_ref().map_or(Value::Null, |t| t.stats()),
         "memory": { "peak_rss_bytes": peak_rss_bytes() },

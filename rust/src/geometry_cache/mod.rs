@@ -297,6 +297,17 @@ impl CacheConfig {
         }
     }
 
+    /// The total budget that gives `tier` at least `tier_bytes` in this config's mode (what
+    /// [`CacheConfig::multires`] and [`CacheConfig::single`] split); 0 when the mode has no
+    /// budget or does not use the tier.
+    pub const fn total_for_tier(&self, tier: Tier, tier_bytes: u64) -> u64 {
+        match (self.mode, tier) {
+            (CacheMode::Multires, _) => 3 * tier_bytes,
+            (CacheMode::Single, Tier::Fine) => tier_bytes,
+            _ => 0,
+        }
+    }
+
     /// Only the fine tier, with all of `total_bytes`.
     pub const fn single(total_bytes: usize) -> Self {
         Self { mode: CacheMode::Single, budget_bytes: [0, 0, total_bytes], entry_bytes: Self::NOMINAL_ENTRY_BYTES, shards: 0 }
@@ -473,8 +484,7 @@ impl<E: CacheEntry> GeometryCache<E> {
             let largest = self.tiers[t.index()].largest_entry_bytes();
             let entry_bytes = if largest > 0 { largest } else { self.config.entry_bytes[t.index()] } as u64;
             let fits_bytes = distinct * entry_bytes;
-            // The share of the total each mode gives the tier (CacheConfig::multires, ::single).
-            let total_bytes = if self.config.mode == CacheMode::Multires { 3 * fits_bytes } else { fits_bytes };
+            let total_bytes = self.config.total_for_tier(t, fits_bytes);
             let too_small = TooSmall {
                 tier: t.name(),
                 budget_bytes: budget as u64,
