@@ -44,7 +44,7 @@ fn traverse_bvh(bvh: &CwBvh, ray: BvhRay, any_hit: bool, mut test: impl FnMut(us
     let mut state = bvh.new_traversal(ray.direction);
     let mut node;
     'traversal: {
-        obvhs::traverse!(bvh, node, state, node.intersect_ray(&clipped, state.oct_inv4), {
+        obvhs::traverse!(bvh, node, state, crate::bvh::intersect_node(node, &clipped, state.oct_inv4), {
             if let Some(t) = test(state.primitive_id as usize) {
                 if any_hit {
                     break 'traversal;
