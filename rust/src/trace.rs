@@ -110,6 +110,8 @@ impl TraceCounters {
 #[derive(Clone, Copy, Debug)]
 struct Origin {
     instance: u32,
+    /// The root subpatch of `instance` the ray leaves.
+    subpatch: u32,
     /// Render units.
     chord_error: f32,
     /// 1 / |cos| between the ray and the surface (capped): a gap across the surface is this
@@ -122,7 +124,37 @@ struct Origin {
 impl Origin {
     fn of(hit: &Hit, ray: &Ray) -> Origin {
         let cos = ray.d.dot(hit.ng);
-        Origin { instance: hit.instance, chord_error: hit.chord_error, inv_cos: 1.0 / cos.abs().max(0.05), along_ng: cos > 0.0 }
+        Origin {
+            instance: hit.instance,
+            subpatch: hit.subpatch,
+            chord_error: hit.chord_error,
+            inv_cos: 1.0 / cos.abs().max(0.05),
+            along_ng: cos > 0.0,
+        }
+    }
+
+    /// Whether the one-quad grid `tess` (object space) of the subpatch the ray leaves cannot
+    /// stop it: both of its triangles face, by a margin over rounding, the side the ray leaves
+    /// to along object-space `d` (`handed` −1 for a left-handed mesh, as [`Hit::ng`]).
+    ///
+    /// Two triangles sharing an edge that both face `d` project along `d` side by side, without
+    /// overlap: the ray's line crosses the quad at most once, and a crossing the way the ray
+    /// left is its own surface at another rate, never an occluder. So the quad and its seam
+    /// boxes need no test. Ambient occlusion and other wide rays read the coarse one-quad grid
+    /// of the subpatch they leave (its box holds their origin), and that test was most of the
+    /// grid tests they made. A triangle facing the other way (a fold, a ray grazing the
+    /// surface) leaves the quad to the full test and its window rule.
+    fn passes_own_quad(&self, tess: &Tessellation, d: Vec3A, handed: f32) -> bool {
+        if tess.n != 2 || tess.domain != crate::tessellate::GridDomain::Square {
+            return false;
+        }
+        let p = |k: usize| Vec3A::from(tess.verts[k]);
+        let (p00, p10, p01, p11) = (p(0), p(1), p(2), p(3));
+        let side = if self.along_ng { handed } else { -handed };
+        // The dot product of d with a cross product is within a few ulps of |d| |n|: ask for
+        // more than a thousand times that.
+        let faces = |n: Vec3A| side * d.dot(n) > 1e-4 * d.length() * n.length();
+        faces((p10 - p00).cross(p11 - p00)) && faces((p11 - p00).cross(p01 - p00))
     }
 
     /// A hit on the origin's own instance at `t` whose winding normal has cosine `cos` with the
@@ -534,6 +566,9 @@ impl<'s> Tracer<'s> {
                 let (tier, stride) = rate.tier_and_stride();
                 let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
                 let tess = self.lookup(instance.mesh, geom, cell, tier);
+                if rate == Rate::R1 && own.is_some_and(|o| o.subpatch == si as u32 && o.passes_own_quad(&tess, d, sign)) {
+                    return None;
+                }
                 // The grid's chord error was probed at its own spacing; read at a merged stride
                 // its quads are `stride` times wider, and a chord's sag grows with its square.
                 let chord_error = tess.chord_error * (stride * stride) as f32;
@@ -730,5 +765,76 @@ impl<'s> Tracer<'s> {
     /// The normal matrix of a hit's instance at the hit's time.
     pub fn hit_normal_matrix(&self, hit: &Hit) -> Mat3A {
         self.instances[hit.instance as usize].pose(hit.time).normal_from_object
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tessellate::GridDomain;
+
+    fn quad(p: [Vec3A; 4]) -> Tessellation {
+        Tessellation {
+            n: 2,
+            verts: p.iter().map(|v| v.to_array()).collect::<Vec<_>>().into(),
+            sub_boxes: Default::default(),
+            chord_error: 0.0,
+            seam_radius: 0.0,
+            seam_normal: Default::default(),
+            domain: GridDomain::Square,
+        }
+    }
+
+    #[test]
+    fn an_own_quad_passed_over_is_crossed_at_most_once_the_way_the_ray_left() {
+        // Random bent quads (p00, p10, p01, p11) and directions: wherever the rule lets a ray
+        // pass its own quad unseen, no line along that direction crosses the quad twice, and any
+        // crossing goes the way the ray leaves (so it cannot be the far wall of a fold).
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let (mut passed, mut refused) = (0, 0);
+        for _ in 0..4000 {
+            let bend = next().abs() * 1.5;
+            let p = [
+                Vec3A::new(0.0, 0.0, next() * bend),
+                Vec3A::new(1.0, 0.0, next() * bend),
+                Vec3A::new(0.0, 1.0, next() * bend),
+                Vec3A::new(1.0, 1.0, next() * bend),
+            ];
+            let tess = quad(p);
+            let d = Vec3A::new(next(), next(), next()).normalize_or(Vec3A::Z);
+            for along_ng in [true, false] {
+                for handed in [1.0, -1.0] {
+                    let origin = Origin { instance: 0, subpatch: 0, chord_error: 0.0, inv_cos: 1.0, along_ng };
+                    if !origin.passes_own_quad(&tess, d, handed) {
+                        refused += 1;
+                        continue;
+                    }
+                    passed += 1;
+                    let side = if along_ng { handed } else { -handed };
+                    for _ in 0..20 {
+                        let at = Vec3A::new(next() * 0.7 + 0.5, next() * 0.7 + 0.5, 0.0);
+                        let ray = WatertightRay::new(at - d * 10.0, d);
+                        let tris = [(p[0], p[1], p[3]), (p[0], p[3], p[2])];
+                        let crossings: Vec<(f32, Vec3A)> = tris
+                            .iter()
+                            .filter_map(|(a, b, c)| ray.hit_triangle(*a, *b, *c, f32::INFINITY).map(|h| (h.0, (*b - *a).cross(*c - *a))))
+                            .collect();
+                        // A line through the shared diagonal meets both halves at one point.
+                        let once = crossings.len() <= 1 || (crossings[0].0 - crossings[1].0).abs() < 1e-4;
+                        assert!(once, "{p:?} crossed {} times along {d}", crossings.len());
+                        for (_, n) in crossings {
+                            assert!(side * d.dot(n) > 0.0, "{p:?}: crossed against the way the ray left");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(passed > 1000 && refused > 1000, "passed {passed}, refused {refused}");
     }
 }
