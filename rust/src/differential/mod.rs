@@ -366,6 +366,14 @@ impl RayDifferential {
         self.distribution(dir, sp, c)
     }
 
+    /// [`RayDifferential::hemisphere_checked`] for the many rays of one footprint (ambient
+    /// occlusion's, a final gather's): the footprint is sanitized once, not once a ray.
+    pub fn hemisphere_fan(&self) -> HemisphereFan {
+        let (s, cs) = self.sanitized();
+        let ((dpdx, a), (dpdy, b)) = (sanitize(s.dpdx), sanitize(s.dpdy));
+        HemisphereFan { dpdx, dpdy, clamped: cs | a | b }
+    }
+
     /// A path-tracing ray, one sample per bounce (§2.5; §4.6's worst case), from the hit `self`
     /// was transferred to, sampled with density `pdf_sr` at path depth `depth` (1 for the first
     /// bounce), `n_paths` paths per pixel reaching that depth. Spread
@@ -398,6 +406,29 @@ impl RayDifferential {
         };
         *self = r;
         c
+    }
+}
+
+/// A footprint prepared for hemisphere rays ([`RayDifferential::hemisphere_fan`]).
+#[derive(Clone, Copy, Debug)]
+pub struct HemisphereFan {
+    /// The footprint's origin derivatives, sanitized (world units per pixel step).
+    dpdx: Vec3A,
+    dpdy: Vec3A,
+    /// Whether sanitizing the footprint clamped anything.
+    clamped: bool,
+}
+
+impl HemisphereFan {
+    /// [`RayDifferential::hemisphere_checked`]`(dir, pdf_sr, n_rays)` of the footprint, bit for
+    /// bit, and whether it clamped.
+    pub fn ray(&self, dir: Vec3A, pdf_sr: f32, n_rays: u32) -> (RayDifferential, bool) {
+        let (spread, c) = pdf_spread(pdf_sr, n_rays);
+        let (s, cs) = sanitize_spread(spread);
+        let dir = dir.normalize_or_zero();
+        let ((e1, e2), cd) = if dir == Vec3A::ZERO { ((Vec3A::X, Vec3A::Y), true) } else { (dir.any_orthonormal_pair(), false) };
+        let ((dddx, cx), (dddy, cy)) = (sanitize(e1 * s), sanitize(e2 * s));
+        (RayDifferential { dpdx: self.dpdx, dpdy: self.dpdy, dddx, dddy }, self.clamped | c | cs | cd | cx | cy)
     }
 }
 

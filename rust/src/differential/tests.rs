@@ -432,3 +432,33 @@ fn no_nan_escapes_any_public_function() {
     }
     assert!(flagged > 0);
 }
+
+#[test]
+fn a_hemisphere_fan_gives_each_ray_the_differential_and_clamp_flag_of_hemisphere_checked() {
+    // Footprints ordinary, huge, infinite and NaN; directions unit, unnormalised and zero;
+    // densities ordinary, zero and NaN: the fan's ray is hemisphere_checked's, bit for bit.
+    let big = MAX_DIFFERENTIAL * 4.0;
+    let footprints = [
+        RayDifferential::new(Vec3A::new(0.01, 0.0, 0.002), Vec3A::new(0.0, 0.02, 0.0), Vec3A::new(1e-3, 0.0, 0.0), Vec3A::ZERO),
+        RayDifferential { dpdx: Vec3A::new(big, big, 0.0), dpdy: Vec3A::new(f32::INFINITY, 0.0, 1.0), dddx: Vec3A::X, dddy: Vec3A::Y },
+        RayDifferential { dpdx: Vec3A::new(f32::NAN, 0.0, 0.0), dpdy: Vec3A::new(0.0, 1e-30, 0.0), dddx: Vec3A::ZERO, dddy: Vec3A::ZERO },
+    ];
+    let dirs = [Vec3A::Z, Vec3A::new(0.3, -0.4, 0.866), Vec3A::new(3.0, 4.0, 0.0), Vec3A::ZERO];
+    let mut clamped = 0;
+    for fp in &footprints {
+        let fan = fp.hemisphere_fan();
+        for d in dirs {
+            for pdf in [0.3, 1.0 / std::f32::consts::PI, 0.0, f32::NAN] {
+                for n in [1, 64] {
+                    let (want, wc) = fp.hemisphere_checked(d, pdf, n);
+                    let (got, gc) = fan.ray(d, pdf, n);
+                    let bits = |r: &RayDifferential| [r.dpdx, r.dpdy, r.dddx, r.dddy].map(|v| v.to_array().map(f32::to_bits));
+                    assert_eq!(bits(&got), bits(&want), "{fp:?} {d} {pdf} {n}");
+                    assert_eq!(gc, wc);
+                    clamped += usize::from(gc);
+                }
+            }
+        }
+    }
+    assert!(clamped > 0 && clamped < footprints.len() * dirs.len() * 8, "{clamped} clamped");
+}

@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 use glam::Vec3A;
 
 use crate::bsdf::Scattering;
-use crate::differential::RayDifferential;
+use crate::differential::{HemisphereFan, RayDifferential};
 use crate::error::RenderError;
 use crate::irradiance_cache::{estimate, stats_object, HemisphereEstimate, HemisphereRay, IrradianceCache, PrepassPoint, Quantity, Strata};
 use crate::material::ResolvedSurface;
@@ -159,6 +159,7 @@ impl Hemisphere {
         }
         let strata = Strata::for_rays(self.samples);
         let (t, b) = frame(sp.ns);
+        let fan = footprint.hemisphere_fan();
         let mut open = 0u32;
         for k in 0..strata.phi {
             for j in 0..strata.theta {
@@ -167,7 +168,7 @@ impl Hemisphere {
                 if d.dot(sp.ng) <= 0.0 {
                     continue;
                 }
-                let r = hemisphere_ray(sp, hit, footprint, d, pdf, strata, self.distance, RayKind::Ao, counters);
+                let r = hemisphere_ray(sp, hit, &fan, d, pdf, strata, self.distance, RayKind::Ao, counters);
                 if !visibility::occluded_from(tracer, &r, hit, counters) {
                     open += 1;
                 }
@@ -256,7 +257,7 @@ impl Hemisphere {
 pub fn hemisphere_ray(
     sp: &ShadingPoint,
     hit: &Hit,
-    footprint: &RayDifferential,
+    fan: &HemisphereFan,
     d: Vec3A,
     pdf: f32,
     strata: Strata,
@@ -264,7 +265,7 @@ pub fn hemisphere_ray(
     kind: RayKind,
     counters: &mut TraceCounters,
 ) -> Ray {
-    let (diff, clamped) = footprint.hemisphere_checked(d, pdf, strata.rays());
+    let (diff, clamped) = fan.ray(d, pdf, strata.rays());
     counters.differential_clamps += u64::from(clamped);
     Ray { o: offset_origin(sp.p, hit.p_error, sp.ng, d), d, t_min: 0.0, t_max: distance, diff, kind, time: hit.time }
 }
@@ -290,6 +291,7 @@ pub fn gather(
     mut shade: impl FnMut(Option<&Hit>, &Ray, &mut Sampler, &mut TraceCounters) -> Vec3A,
 ) -> Vec<HemisphereRay> {
     let (t, b) = frame(sp.ns);
+    let fan = footprint.hemisphere_fan();
     let mut out = vec![HemisphereRay { dir: Vec3A::Z, distance: f32::INFINITY, value: Vec3A::ZERO }; strata.rays() as usize];
     for k in 0..strata.phi {
         for j in 0..strata.theta {
@@ -300,7 +302,7 @@ pub fn gather(
             if d.dot(sp.ng) <= 0.0 {
                 continue;
             }
-            let r = hemisphere_ray(sp, hit, footprint, d, pdf, strata, distance, kind, counters);
+            let r = hemisphere_ray(sp, hit, &fan, d, pdf, strata, distance, kind, counters);
             let found = visibility::first_opaque_from(tracer, &r, hit, counters);
             // A ray that reaches nothing within a finite `distance` (ambient occlusion's) counts
             // as reaching that far: what lies beyond does not change the integral until it
