@@ -411,6 +411,10 @@ pub struct CurveHit {
     /// Camera-facing ribbons: a hit of a ray leaving the curve near its origin is the same
     /// ribbon turned toward the new ray, passed over either way within the own-surface window.
     pub facing: bool,
+    /// How far the surface hit may lie from where another ray finds it (object units): 0 for
+    /// tubes and oriented ribbons, whose surface is fixed; a camera-facing ribbon turns to
+    /// face each ray, so a ray leaving it meets it again anywhere within its half width.
+    pub uncertainty: f32,
 }
 
 impl CurvesSurface {
@@ -667,7 +671,8 @@ impl CurvesSurface {
             let r = bezier1(&self.half_widths[seg], u).0.max(f64::MIN_POSITIVE);
             ((p - c).dot(w) / r * 0.5 + 0.5).clamp(0.0, 1.0) as f32
         };
-        Some(CurveHit { t: tf, u: u as f32, v, n: nv, facing: self.faces_ray() })
+        let uncertainty = if self.faces_ray() { bezier1(&self.half_widths[seg], u).0 as f32 } else { 0.0 };
+        Some(CurveHit { t: tf, u: u as f32, v, n: nv, facing: self.faces_ray(), uncertainty })
     }
 }
 

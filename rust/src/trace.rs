@@ -343,6 +343,12 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.exact().is_some()).map(|(g, _)| g.subpatches.len()).sum()
     }
 
+    /// Root subpatches that are curve segments ([`crate::curves`]), tessellated along their
+    /// length only (included in [`Tracer::subpatch_count`]).
+    pub fn curve_segment_count(&self) -> usize {
+        self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.curves().is_some()).map(|(g, _)| g.subpatches.len()).sum()
+    }
+
     /// The scene being traced.
     pub fn scene(&self) -> &'s Scene {
         self.scene
@@ -710,7 +716,7 @@ impl<'s> Tracer<'s> {
             let mut t_from = ray.t_min;
             let found = loop {
                 let Some(h) = curves.intersect(seg, &tess, stride, o, d, t_from, t_best) else { break None };
-                let window = own.map_or(0.0, |org| (org.chord_error + chord_error * inst.scale) * org.inv_cos);
+                let window = own.map_or(0.0, |org| (org.chord_error + (chord_error + h.uncertainty) * inst.scale) * org.inv_cos);
                 match own {
                     Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), h.facing) => t_from = next_up(h.t),
                     _ => break Some(h),
@@ -718,6 +724,8 @@ impl<'s> Tracer<'s> {
             };
             let h = found?;
             t_best = h.t;
+            // A ray leaving a camera-facing ribbon skips it within its half width too.
+            let chord_error = chord_error + h.uncertainty;
             let local =
                 LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error, seam: h.facing };
             best = Some((local, si as u32));
