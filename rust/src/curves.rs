@@ -506,11 +506,17 @@ impl CurvesSurface {
         self.style == Style::Ribbon && self.normals.is_empty()
     }
 
-    /// The length of the segment's control polygon: at least its arc length, the size a rate
-    /// is chosen from.
-    pub fn control_length(&self, seg: usize) -> f32 {
-        let c = self.control_points(seg);
-        (c[1] - c[0]).length() + (c[2] - c[1]).length() + (c[3] - c[2]).length()
+    /// How far one straight piece may stray from the segment (object units): ⅛ of the bound
+    /// on the Bézier's second derivative (6 × its control points' largest second difference)
+    /// plus the half width's; n pieces stray 1/n² of it. The tracer chooses the rate from
+    /// it — as many pieces as keep that sag within the ray's beam — so a straight hair
+    /// segment takes one piece whatever its length and only bends are refined.
+    pub fn sag_of_one_piece(&self, seg: usize) -> f32 {
+        let c = self.cps[seg].map(dv);
+        let second = 6.0 * (c[2] - c[1] * 2.0 + c[0]).length().max((c[3] - c[2] * 2.0 + c[1]).length());
+        let w = self.half_widths[seg].map(f64::from);
+        let second_w = 6.0 * (w[2] - 2.0 * w[1] + w[0]).abs().max((w[3] - 2.0 * w[2] + w[1]).abs());
+        ((second + second_w) / 8.0) as f32
     }
 
     /// The fixed axis the frame around segment `seg` is built from: the coordinate axis least
@@ -587,7 +593,7 @@ impl CurvesSurface {
     /// entry: `n` = pieces + 1, `verts` holds the n centreline points, then n entries of
     /// (half width, 0, 0) for tubes and camera-facing ribbons or the half-width vector across an
     /// oriented ribbon. `chord_error` bounds how far the curve strays from the polyline
-    /// (object units: ⅛ of the second derivative's bound times the piece length squared).
+    /// (object units: [`CurvesSurface::sag_of_one_piece`] over pieces², plus rounding).
     pub fn tessellate(&self, seg: usize, pieces: usize) -> Tessellation {
         let n = pieces + 1;
         let mut verts = Vec::with_capacity(2 * n);
@@ -601,10 +607,8 @@ impl CurvesSurface {
         }
         verts.extend(across);
         let c = self.cps[seg].map(dv);
-        let second = 6.0 * (c[2] - c[1] * 2.0 + c[0]).length().max((c[3] - c[2] * 2.0 + c[1]).length());
-        let h = 1.0 / pieces as f64;
         let scale = c.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
-        let chord_error = (second * h * h / 8.0) as f32 + gamma(8) * scale as f32;
+        let chord_error = self.sag_of_one_piece(seg) / (pieces * pieces) as f32 + gamma(8) * scale as f32;
         Tessellation {
             n,
             verts: verts.into(),

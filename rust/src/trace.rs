@@ -652,12 +652,11 @@ impl<'s> Tracer<'s> {
 
     /// The nearest hit on a curve ([`crate::curves`]): the bottom-level BVH's leaves are its
     /// segments; a segment whose box the ray enters is tessellated into linear pieces at the
-    /// rate the ray's beam width asks for (pieces about as long as the beam is wide, from its
-    /// control polygon's length; straight segments at one piece), looked up in the geometry
-    /// cache like a subpatch's grid (coarse 1 piece, medium 4, fine 16, read at stride 2 for 2
-    /// and 8), and its pieces tested. Beams asking for more than 16 pieces get 16: a piece's
-    /// sag falls with the square of its length, so the cubic's chord error there is far below
-    /// the beam (counted in `finer_than_fine`).
+    /// rate the ray's beam width asks for (as many pieces as keep their sag from the curve
+    /// within the beam; straight segments at one piece), looked up in the geometry cache like
+    /// a subpatch's grid (coarse 1 piece, medium 4, fine 16, read at stride 2 for 2 and 8), and
+    /// its pieces tested. Beams asking for more than 16 pieces get 16 (counted in
+    /// `finer_than_fine`): the sag there is at most 1/256 of one piece's.
     #[allow(clippy::too_many_arguments)]
     fn nearest_curve(
         &self,
@@ -687,8 +686,11 @@ impl<'s> Tracer<'s> {
             let seg = sp.patch as usize;
             let (t_enter, _) = wray.hit_box(&sp.bounds(), ray.t_min, t_best)?;
             counters.ray_subpatch_tests += 1;
-            let size = curves.control_length(seg) * inst.scale;
-            let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[kind]);
+            // Pieces whose sag (falling with the square of their count) is within the beam; a
+            // beam of no usable width asks for the finest rate, as for subpatches.
+            let beam = ray.beam_width(t_enter) * self.tess_factor * self.kind_factor[kind];
+            let sag = curves.sag_of_one_piece(seg) * inst.scale;
+            let needed = if beam.is_finite() && beam > 0.0 && sag.is_finite() { (sag / beam).sqrt() } else { 16.0 };
             let rate = if self.single {
                 Rate::R16
             } else if curves.is_straight(seg) {
