@@ -16,7 +16,7 @@ RECORD  := $(VENV)/bin/mipray-record
 EXAMPLE ?= subdiv_showcase
 WIDTH   ?= 320
 OUT     ?= out
-EXAMPLE_FILES := examples/subdiv_showcase.usda examples/forest.usda examples/render_settings.usda examples/textured.usda examples/implicit_prims.usda
+EXAMPLE_FILES := examples/subdiv_showcase.usda examples/forest.usda examples/render_settings.usda examples/textured.usda examples/implicit_prims.usda examples/curves.usda
 # Textures of examples/textured.usda: drawn by a script, made into tiled MIP maps by maketx.
 TEXTURES := examples/textures/bricks_color.tx examples/textures/bricks_height.tx
 # pyo3's build script finds Python through this when cargo checks mipray-py.

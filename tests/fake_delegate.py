@@ -142,9 +142,15 @@ class FakeRenderDelegate:
             raise ValueError(f"{path}: face_materials and face_material_indices go together")
         if face_materials is not None:
             _check_array(path, "face_material_indices", face_material_indices, np.int32, 1)
-            # Points: one entry per point (each point's sphere is a face of its own).
-            points_prim = gprim is not None and gprim.get("type") == "Points"
-            faces = len(points) if points_prim else len(face_vertex_counts)
+            # Points: one entry per point (each point's sphere is a face of its own);
+            # curves: one per curve.
+            kind = gprim.get("type") if gprim is not None else None
+            if kind == "Points":
+                faces = len(points)
+            elif kind == "Curves":
+                faces = len(gprim["curve_vertex_counts"])  # type: ignore[index, arg-type]
+            else:
+                faces = len(face_vertex_counts)
             if len(face_material_indices) != faces:
                 raise ValueError(f"{path}: face_material_indices has the wrong length")
             if int(face_material_indices.max(initial=-1)) >= len(face_materials):

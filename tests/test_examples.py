@@ -131,3 +131,26 @@ def test_render_settings_example_renders_its_aovs(native, tmp_path: Path) -> Non
     assert pixels.shape[:2] == (68, 120)  # the settings' 16:9, 120 wide
     assert {"R", "A", "Z", "N.x", "primId", "instanceId"} <= set(names)
     assert np.isfinite(pixels).all()
+
+
+def test_curves_example_syncs_every_curve_without_a_warning(fake, caplog) -> None:
+    stage = Usd.Stage.Open(str(EXAMPLES / "curves.usda"))
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    assert scene.delegate_errors == []
+    assert [r.getMessage() for r in caplog.records] == []
+    curves = {p: kw["gprim"] for p, kw in fake.meshes().items() if kw["gprim"]["type"] == "Curves"}
+    assert set(curves) == {
+        "/World/Hair",
+        "/World/Tube",
+        "/World/Ribbon",
+        "/World/Facing",
+        "/World/Ring",
+        "/World/Spiral",
+    }
+    assert len(curves["/World/Hair"]["curve_vertex_counts"]) == 2000
+    assert curves["/World/Ribbon"]["style"] == curves["/World/Facing"]["style"] == "ribbon"
+    assert "normals" in curves["/World/Ribbon"] and "normals" not in curves["/World/Facing"]
+    # The spiral's 9 knot spans are 9 Bézier segments.
+    assert curves["/World/Spiral"]["curve_vertex_counts"] == [28]

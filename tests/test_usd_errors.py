@@ -114,11 +114,11 @@ def test_breaking_a_synced_mesh_removes_it(fake) -> None:
 
 def test_unsupported_types_warn_once_per_type(fake, caplog) -> None:
     stage = new_stage()
-    # (Implicit gprims such as Sphere render now: NurbsPatch is still unsupported.)
+    # (Implicit gprims and BasisCurves render now: NurbsPatch and HermiteCurves do not.)
     for i in range(3):
         UsdGeom.NurbsPatch.Define(stage, f"/S{i}")
     for i in range(2):
-        UsdGeom.BasisCurves.Define(stage, f"/C{i}")
+        UsdGeom.HermiteCurves.Define(stage, f"/C{i}")
     UsdGeom.NurbsPatch.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
     UsdGeom.Xform.Define(stage, "/JustAGroup")
     stage.DefinePrim("/Untyped")
@@ -130,7 +130,7 @@ def test_unsupported_types_warn_once_per_type(fake, caplog) -> None:
         scene.sync()  # a second sync does not repeat the warnings
     warnings = sorted(r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
     assert warnings == [
-        "mipray: skipping 2 prims of unsupported type BasisCurves",
+        "mipray: skipping 2 prims of unsupported type HermiteCurves",
         "mipray: skipping 3 prims of unsupported type NurbsPatch",
     ]
     assert set(fake.meshes()) == {"/Cube"}

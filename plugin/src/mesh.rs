@@ -1,11 +1,12 @@
 //! The mesh Rprim: a USD mesh's data as the scene delegate gives it, and its synced state —
 //! the limit surface (OpenSubdiv for subdivision schemes, bilinear patches for `none`, the
-//! core's exact surfaces for implicit gprims and points).
+//! core's exact surfaces for implicit gprims and points, the core's curves for BasisCurves).
 
 use std::sync::Arc;
 
 use glam::Mat4;
 use mipray::bilinear::BilinearSurface;
+use mipray::curves::{Basis, CurveType, CurvesDesc, CurvesSurface, Interpolation, Style, Wrap};
 use mipray::implicit::{ImplicitSurface, PointsSurface, Shape};
 use mipray::patch::LimitSurface;
 use mipray::topology::{MeshTopology, Scheme};
@@ -146,6 +147,9 @@ impl MeshData {
         if let Some(Gprim::Points { widths }) = &self.gprim {
             PointsSurface::check(&self.points, widths)?;
         }
+        if let Some(Gprim::Curves(c)) = &self.gprim {
+            CurvesSurface::new(&c.desc(&self.points))?;
+        }
         Ok(())
     }
 
@@ -154,6 +158,8 @@ impl MeshData {
     pub fn face_count(&self) -> usize {
         match self.gprim {
             Some(Gprim::Points { .. }) => self.points.len(),
+            // Each curve is a face: uniform displayColor colours it.
+            Some(Gprim::Curves(ref c)) => c.counts.len(),
             _ => self.topology.face_vertex_counts.len(),
         }
     }
@@ -167,6 +173,43 @@ pub enum Gprim {
     /// `Points`: spheres at [`MeshData::points`] of diameters `widths` (one for all, one per
     /// point, or none for USD's default width 1).
     Points { widths: Vec<f32> },
+    /// `BasisCurves` (and `NurbsCurves`, converted to Bézier segments in Python): vertices
+    /// in [`MeshData::points`].
+    Curves(CurvesSpec),
+}
+
+/// A BasisCurves prim's attributes besides its points (see [`mipray::curves`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CurvesSpec {
+    pub counts: Vec<i32>,
+    pub curve_type: CurveType,
+    pub basis: Basis,
+    pub wrap: Wrap,
+    /// Diameters; empty for USD's fallback width 1.
+    pub widths: Vec<f32>,
+    pub widths_interpolation: Interpolation,
+    /// Ribbon orientation; empty for none.
+    pub normals: Vec<[f32; 3]>,
+    pub normals_interpolation: Interpolation,
+    pub style: Style,
+}
+
+impl CurvesSpec {
+    /// The core's description of these curves over `points`.
+    pub fn desc<'a>(&'a self, points: &'a [[f32; 3]]) -> CurvesDesc<'a> {
+        CurvesDesc {
+            points,
+            counts: &self.counts,
+            curve_type: self.curve_type,
+            basis: self.basis,
+            wrap: self.wrap,
+            widths: &self.widths,
+            widths_interpolation: self.widths_interpolation,
+            normals: &self.normals,
+            normals_interpolation: self.normals_interpolation,
+            style: self.style,
+        }
+    }
 }
 
 impl Default for MeshData {
@@ -198,6 +241,7 @@ pub enum Surface {
     Bilinear(Arc<BilinearSurface>),
     Implicit(Arc<ImplicitSurface>),
     Points(Arc<PointsSurface>),
+    Curves(Arc<CurvesSurface>),
 }
 
 impl Surface {
@@ -207,6 +251,7 @@ impl Surface {
             Surface::Bilinear(s) => s.clone(),
             Surface::Implicit(s) => s.clone(),
             Surface::Points(s) => s.clone(),
+            Surface::Curves(s) => s.clone(),
         }
     }
 }
@@ -333,6 +378,11 @@ impl MeshPrim {
             Some(Gprim::Points { widths }) => {
                 return Ok(Surface::Points(Arc::new(
                     PointsSurface::new(self.data.points.clone(), widths).map_err(mipray::error::MeshError::Invalid)?,
+                )))
+            }
+            Some(Gprim::Curves(c)) => {
+                return Ok(Surface::Curves(Arc::new(
+                    CurvesSurface::new(&c.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?,
                 )))
             }
             None => {}

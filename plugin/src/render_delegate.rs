@@ -531,10 +531,11 @@ impl RenderDelegate {
         // The authored bound, else the displacement's own (exact) one, else the setting.
         mesh.displacement_bound =
             m.data.displacement_bound.or(mesh.displacement.as_ref().map(DisplacementShader::bound)).unwrap_or(default_displacement_bound);
-        if mesh.surface.exact().is_some() {
-            // Exact surfaces are not tessellated, so there is nothing to displace.
+        if mesh.surface.exact().is_some() || mesh.surface.curves().is_some() {
+            // Exact surfaces are not tessellated, and curves are tessellated along their length
+            // only, so there is nothing to displace.
             if mesh.displacement.take().is_some() {
-                log::warn!("{}: displacement is not applied to implicit prims and points", m.path);
+                log::warn!("{}: displacement is not applied to implicit prims, points and curves", m.path);
             }
             mesh.displacement_bound = 0.0;
         }

@@ -137,7 +137,14 @@ class RenderDelegate:
                 "X", "Y" or "Z"), or ``{"type": "Points", "widths"}``: spheres
                 at ``points`` of diameters ``widths`` (one, one per point, or
                 none for USD's default 1). ``st`` is the surface's (u, v)
-                (see ``mipray::implicit``).
+                (see ``mipray::implicit``). Or curves, ray traced as curves
+                with ``points`` their vertices: ``{"type": "Curves",
+                "curve_vertex_counts", "curve_type" ("linear", "cubic"),
+                "basis" ("bezier", "bspline", "catmullRom"), "wrap"
+                ("nonperiodic", "periodic", "pinned"), "style" ("tube",
+                "ribbon"), "widths", "widths_interpolation", "normals" (N×3),
+                "normals_interpolation"}`` (USD's tokens; see
+                ``mipray::curves``); each curve is a face of the face table.
             primvars: primvars interpolated over the surface as authored, by
                 role: ``"normals"`` (authored normals, (N, 3), used for
                 shading; meant for polygonal meshes) or a UsdPreviewSurface

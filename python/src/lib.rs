@@ -670,6 +670,7 @@ fn read_gprim(path: &str, d: &Bound<'_, PyDict>) -> PyResult<Gprim> {
             };
             return Ok(Gprim::Points { widths });
         }
+        "Curves" => return read_curves(path, d).map(Gprim::Curves),
         "Sphere" => Shape::Sphere { radius: float("radius")? },
         "Cube" => Shape::Cube { size: float("size")? },
         "Cylinder" => Shape::Cylinder {
@@ -685,10 +686,55 @@ fn read_gprim(path: &str, d: &Bound<'_, PyDict>) -> PyResult<Gprim> {
             axis: axis()?,
         },
         "Plane" => Shape::Plane { width: float("width")?, length: float("length")?, axis: axis()? },
-        other => return Err(value_error(path, format!("gprim type '{other}' is not an implicit prim or Points"))),
+        other => return Err(value_error(path, format!("gprim type '{other}' is not an implicit prim, Points or Curves"))),
     };
     ImplicitSurface::new(shape).map_err(|e| value_error(path, e))?;
     Ok(Gprim::Implicit(shape))
+}
+
+/// A `Curves` gprim dict: `curve_vertex_counts` (ints), `curve_type` (`linear`, `cubic`),
+/// `basis` (`bezier`, `bspline`, `catmullRom`), `wrap` (`nonperiodic`, `periodic`, `pinned`),
+/// `style` (`tube`, `ribbon`), `widths` (floats) and `widths_interpolation`, `normals` (N×3
+/// floats) and `normals_interpolation` (USD's interpolation tokens). Counts and primvar
+/// lengths are checked with the points by the delegate's `set_mesh`.
+fn read_curves(path: &str, d: &Bound<'_, PyDict>) -> PyResult<hd_mipray::mesh::CurvesSpec> {
+    use mipray::curves::{Basis, CurveType, Interpolation, Style, Wrap};
+    let token = |key: &str, default: &str| -> PyResult<String> {
+        match d.get_item(key)? {
+            Some(v) => v.extract().map_err(|_| value_error(path, format!("{key} must be a token"))),
+            None => Ok(default.to_string()),
+        }
+    };
+    let bad = |attr: &str, t: &str| value_error(path, format!("{attr} '{t}' is not a USD token for it"));
+    let ty = token("curve_type", "cubic")?;
+    let basis = token("basis", "bezier")?;
+    let wrap = token("wrap", "nonperiodic")?;
+    let style = token("style", "tube")?;
+    let wi = token("widths_interpolation", "vertex")?;
+    let ni = token("normals_interpolation", "vertex")?;
+    let counts: Vec<i32> = match d.get_item("curve_vertex_counts")? {
+        Some(v) => v.extract().map_err(|_| value_error(path, "curveVertexCounts must be integers"))?,
+        None => return Err(value_error(path, "Curves needs curve_vertex_counts")),
+    };
+    let widths: Vec<f32> = match d.get_item("widths")? {
+        Some(v) => v.extract().map_err(|_| value_error(path, "widths must be numbers"))?,
+        None => Vec::new(),
+    };
+    let normals: Vec<[f32; 3]> = match d.get_item("normals")? {
+        Some(v) => v.extract().map_err(|_| value_error(path, "normals must be N×3 numbers"))?,
+        None => Vec::new(),
+    };
+    Ok(hd_mipray::mesh::CurvesSpec {
+        counts,
+        curve_type: CurveType::from_usd(&ty).ok_or_else(|| bad("type", &ty))?,
+        basis: Basis::from_usd(&basis).ok_or_else(|| bad("basis", &basis))?,
+        wrap: Wrap::from_usd(&wrap).ok_or_else(|| bad("wrap", &wrap))?,
+        widths,
+        widths_interpolation: Interpolation::from_usd(&wi).ok_or_else(|| bad("widths interpolation", &wi))?,
+        normals,
+        normals_interpolation: Interpolation::from_usd(&ni).ok_or_else(|| bad("normals interpolation", &ni))?,
+        style: Style::from_usd(&style).ok_or_else(|| bad("style", &style))?,
+    })
 }
 
 fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<TextureInput> {

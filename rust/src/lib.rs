@@ -33,6 +33,7 @@ pub mod bounds;
 pub mod bsdf;
 pub mod bvh;
 pub mod camera;
+pub mod curves;
 pub mod differential;
 pub mod displacement;
 pub mod dropped;

@@ -190,4 +190,11 @@ pub trait LimitSurface: Send + Sync {
     fn exact(&self) -> Option<&dyn crate::implicit::ExactSurface> {
         None
     }
+
+    /// The surface's curves when it is one (USD BasisCurves, [`crate::curves`]): the tracer then
+    /// tessellates each segment into linear pieces at the ray's rate and tests those. `None` —
+    /// the default — for every other surface.
+    fn curves(&self) -> Option<&crate::curves::CurvesSurface> {
+        None
+    }
 }

@@ -60,7 +60,9 @@ pub fn collect(
     let subpatches = tracer.subpatch_count() as u64;
     // Patches intersected exactly (implicit gprims, points) are never tessellated.
     let exact_patches = tracer.exact_patch_count() as u64;
-    let full_verts = (subpatches - exact_patches) * 17 * 17;
+    // Curve segments' finest tessellation is 17 centreline points and their widths.
+    let curve_segments = tracer.curve_segment_count() as u64;
+    let full_verts = (subpatches - exact_patches - curve_segments) * 17 * 17 + curve_segments * 17 * 2;
     json!({
         "render": {
             "wall_s": figures.wall_s,
@@ -82,6 +84,7 @@ pub fn collect(
             "control_faces": control_faces,
             "subpatches": subpatches,
             "exact_patches": exact_patches,
+            "curve_segments": curve_segments,
             "instances": instances,
             "full_tessellation_vertices": full_verts,
             "full_tessellation_bytes": full_verts * 12,

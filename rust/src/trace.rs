@@ -375,6 +375,12 @@ impl<'s> Tracer<'s> {
         self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.exact().is_some()).map(|(g, _)| g.subpatches.len()).sum()
     }
 
+    /// Root subpatches that are curve segments ([`crate::curves`]), tessellated along their
+    /// length only (included in [`Tracer::subpatch_count`]).
+    pub fn curve_segment_count(&self) -> usize {
+        self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.curves().is_some()).map(|(g, _)| g.subpatches.len()).sum()
+    }
+
     /// The scene being traced.
     pub fn scene(&self) -> &'s Scene {
         self.scene
@@ -496,6 +502,10 @@ impl<'s> Tracer<'s> {
         }
         if let Some(exact) = mesh.surface.exact() {
             let (h, si) = self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
+            return Some(self.hit(ii, ray, &inst, h, si));
+        }
+        if let Some(curves) = mesh.surface.curves() {
+            let (h, si) = self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
             return Some(self.hit(ii, ray, &inst, h, si));
         }
         let wray = WatertightRay::new(o, d);
@@ -669,6 +679,92 @@ impl<'s> Tracer<'s> {
             let h = found?;
             t_best = h.t;
             let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error, seam: false };
+            best = Some((local, si as u32));
+            Some(h.t)
+        });
+        best
+    }
+
+    /// The nearest hit on a curve ([`crate::curves`]): the bottom-level BVH's leaves are its
+    /// segments; a segment whose box the ray enters is tessellated into linear pieces at the
+    /// rate the ray's beam width asks for (as many pieces as keep their sag from the curve
+    /// within the beam; straight segments at one piece), looked up in the geometry cache like
+    /// a subpatch's grid (coarse 1 piece, medium 4, fine 16, read at stride 2 for 2 and 8), and
+    /// its pieces tested. Beams asking for more than 16 pieces get 16 (counted in
+    /// `finer_than_fine`): the sag there is at most 1/256 of one piece's.
+    #[allow(clippy::too_many_arguments)]
+    fn nearest_curve(
+        &self,
+        ii: usize,
+        curves: &crate::curves::CurvesSurface,
+        o: Vec3A,
+        d: Vec3A,
+        ray: &Ray,
+        t_max: f32,
+        inst: &Pose,
+        counters: &mut TraceCounters,
+        any_hit: bool,
+        origin: Option<Origin>,
+    ) -> Option<(LocalHit, u32)> {
+        let instance = &self.instances[ii];
+        let geom = &self.meshes[instance.mesh];
+        let blas = geom.bvh.as_ref()?;
+        let sign = if self.scene.meshes[instance.mesh].left_handed { -1.0 } else { 1.0 };
+        let own = origin.filter(|org| org.instance == ii as u32);
+        let kind = Self::kind_index(ray.kind);
+        let wray = WatertightRay::new(o, d);
+        let mut best: Option<(LocalHit, u32)> = None;
+        let mut t_best = t_max;
+        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
+            let si = blas.primitive_indices[id] as usize;
+            let sp = &geom.subpatches[si];
+            let seg = sp.patch as usize;
+            let (t_enter, _) = wray.hit_box(&sp.bounds(), ray.t_min, t_best)?;
+            counters.ray_subpatch_tests += 1;
+            // Pieces whose sag (falling with the square of their count) is within the beam; a
+            // beam of no usable width asks for the finest rate, as for subpatches.
+            let beam = ray.beam_width(t_enter) * self.tess_factor * self.kind_factor[kind];
+            let sag = curves.sag_of_one_piece(seg) * inst.scale;
+            let needed = if beam.is_finite() && beam > 0.0 && sag.is_finite() { (sag / beam).sqrt() } else { 16.0 };
+            let rate = if self.single {
+                Rate::R16
+            } else if curves.is_straight(seg) {
+                Rate::R1
+            } else {
+                Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
+            };
+            if needed > 16.0 && !curves.is_straight(seg) {
+                counters.finer_than_fine += 1;
+            }
+            counters.rate_tests[rate as usize] += 1;
+            counters.rate_tests_by_kind[kind][rate as usize] += 1;
+            let (tier, stride) = rate.tier_and_stride();
+            let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
+            let mesh = &self.scene.meshes[instance.mesh];
+            let key = CacheKey {
+                mesh: Self::cache_mesh(mesh, instance.mesh),
+                generation: mesh.generation,
+                subpatch: geom.child_ids.id(cell),
+                tier,
+            };
+            let tess = self.cache.get_or_build(key, || curves.tessellate(seg, crate::curves::tier_pieces(tier)));
+            // Merged pieces sag four times as far as the stored ones.
+            let chord_error = tess.chord_error * (stride * stride) as f32;
+            let mut t_from = ray.t_min;
+            let found = loop {
+                let Some(h) = curves.intersect(seg, &tess, stride, o, d, t_from, t_best) else { break None };
+                let window = own.map_or(0.0, |org| (org.chord_error + (chord_error + h.uncertainty) * inst.scale) * org.inv_cos);
+                match own {
+                    Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), h.facing) => t_from = next_up(h.t),
+                    _ => break Some(h),
+                }
+            };
+            let h = found?;
+            t_best = h.t;
+            // A ray leaving a camera-facing ribbon skips it within its half width too.
+            let chord_error = chord_error + h.uncertainty;
+            let local =
+                LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error, seam: h.facing };
             best = Some((local, si as u32));
             Some(h.t)
         });

@@ -1,9 +1,10 @@
-"""Read implicit gprims and ``UsdGeom.Points`` into ``set_mesh`` arguments.
+"""Read implicit gprims, ``UsdGeom.Points`` and curves into ``set_mesh`` arguments.
 
 ``Sphere``, ``Cube``, ``Cylinder``, ``Cylinder_1``, ``Cone``, ``Capsule``,
 ``Capsule_1`` and ``Plane`` cross as their schema attributes (the ``gprim``
 argument), ``Points`` as its ``points`` and ``widths``; the core intersects
 them exactly (``rust/src/implicit.rs``, which also documents their ``st``).
+``BasisCurves`` and ``NurbsCurves`` are read by :mod:`mipray.usd.curves`.
 ``extent`` plays no part in the shape. A size that leaves nothing to render
 (a zero radius, say) is refused with one line naming the prim and attribute.
 """
@@ -18,9 +19,10 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
+from .curves import CURVE_TYPES, curves_arguments
 from .material import lambertian
 
-__all__ = ["GPRIM_TYPES", "gprim_arguments", "is_renderable_gprim", "point_colors"]
+__all__ = ["GPRIM_TYPES", "curve_colors", "gprim_arguments", "is_renderable_gprim", "point_colors"]
 
 #: The gprims besides ``Mesh`` that render, by schema class.
 GPRIM_TYPES: tuple[type, ...] = (
@@ -31,6 +33,7 @@ GPRIM_TYPES: tuple[type, ...] = (
     UsdGeom.Capsule,
     UsdGeom.Plane,
     UsdGeom.Points,
+    *CURVE_TYPES,
     *(t for t in (getattr(UsdGeom, "Cylinder_1", None), getattr(UsdGeom, "Capsule_1", None)) if t),
 )
 
@@ -113,7 +116,8 @@ def gprim_arguments(
 ) -> dict[str, Any] | None:
     """``set_mesh`` keyword arguments (without path and shading) of a non-mesh gprim.
 
-    Returns None for a Points prim without points (valid USD that renders nothing).
+    Returns None for a Points or curves prim without points (valid USD that renders
+    nothing).
 
     Raises:
         PrimError: a size that is not a positive number (the message names the
@@ -125,6 +129,10 @@ def gprim_arguments(
         positions, gprim = _points(prim, time)
         if len(positions) == 0:
             return None
+    elif any(prim.IsA(t) for t in CURVE_TYPES):
+        if not prim.GetAttribute("points").Get(time):
+            return None
+        positions, gprim = curves_arguments(prim, time)
     else:
         positions, gprim = np.zeros((0, 3), dtype=np.float32), _shape(prim, time)
     gprim_schema = UsdGeom.Gprim(prim)
@@ -169,6 +177,34 @@ def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str,
     unique, inverse = np.unique(np.clip(values, 0.0, 1.0), axis=0, return_inverse=True)
     path = str(prim.GetPath())
     # Rounded to float32 as the colours were when they crossed as an array.
+    colours = np.ascontiguousarray(unique, dtype=np.float32)
+    return {
+        "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],
+        "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
+    }
+
+
+def curve_colors(prim: Usd.Prim, time: Usd.TimeCode, n_curves: int) -> dict[str, Any]:
+    """Per-curve (``uniform``) ``displayColor`` as ``set_mesh``'s face material table.
+
+    Each curve is a "face" of its own; ``{}`` for any other interpolation (the prim's one
+    colour, :func:`mipray.usd.material.compute_albedo`'s).
+    """
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+    if not primvar or not primvar.HasValue():
+        return {}
+    if primvar.GetInterpolation() != UsdGeom.Tokens.uniform:
+        return {}
+    values = np.asarray(primvar.ComputeFlattened(time) or [], dtype=np.float64).reshape(-1, 3)
+    if len(values) <= 1:
+        return {}
+    if len(values) != n_curves:
+        raise PrimError(
+            str(prim.GetPath()),
+            f"primvars:displayColor (uniform) has {len(values)} values for {n_curves} curves",
+        )
+    unique, inverse = np.unique(np.clip(values, 0.0, 1.0), axis=0, return_inverse=True)
+    path = str(prim.GetPath())
     colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
         "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],

@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
+from .curves import CURVE_TYPES
 from .face_albedo import compute_surface_albedo, material_subsets
-from .gprim import gprim_arguments, point_colors
+from .gprim import curve_colors, gprim_arguments, point_colors
 from .material import compute_albedo, lambertian
 from .mesh import mesh_arguments
 from .primvars import primvar_argument, read_normals
@@ -165,7 +166,7 @@ def _read_gprim(
     *,
     prototype: bool,
 ) -> MeshRead:
-    """:func:`read_mesh` for an implicit gprim or a Points prim: one colour, no subsets."""
+    """:func:`read_mesh` for an implicit gprim, a Points or a curves prim: no subsets."""
     args = gprim_arguments(prim, time, transform)
     if args is None:
         return MeshRead(None, (), data_varies)
@@ -173,6 +174,8 @@ def _read_gprim(
     args["material"] = lambertian(str(prim.GetPath()), own.rgb)
     if prim.IsA(UsdGeom.Points) and own.source != "material":
         args.update(point_colors(prim, time, len(args["points"])))
+    elif any(prim.IsA(t) for t in CURVE_TYPES) and own.source != "material":
+        args.update(curve_colors(prim, time, len(args["gprim"]["curve_vertex_counts"])))
     args.update(shading_arguments(prim, time, surface_st=True))
     if prototype:
         args["prototype"] = True

@@ -1,0 +1,268 @@
+"""Read ``UsdGeom.BasisCurves`` and ``UsdGeom.NurbsCurves`` into ``set_mesh`` arguments.
+
+BasisCurves cross as authored (points, ``curveVertexCounts``, ``type``, ``basis``,
+``wrap``, ``widths`` and ``normals`` with their interpolations); the core converts them
+to Bézier segments and ray traces them as curves (``rust/src/curves.rs``). NurbsCurves are
+converted here to cubic Bézier segments, one per knot span, and cross as a bezier
+BasisCurves: each span's polynomial is evaluated at four parameters by de Boor's algorithm
+and interpolated (exact for degree up to 3; higher degrees are refused). Rational curves
+(``pointWeights`` not all 1) are evaluated without their weights, with one warning.
+
+What a curve looks like across: authored ``normals`` make it a ribbon facing them;
+otherwise the token attribute ``mipray:curveStyle`` says ``tube`` (the default) or
+``ribbon`` (flat, facing each ray, as Storm draws ribbons without normals).
+
+Bad input gets one line naming the prim and the attribute:
+
+* ``curveVertexCounts`` that the type, basis and wrap cannot make segments of, or that
+  do not add up to the points: the prim is skipped (the delegate refuses it).
+* ``widths`` of the wrong length for their interpolation: the curves render at USD's
+  fallback width 1 (warned).
+* ``normals`` of the wrong length: the curves render as tubes (warned).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Usd, UsdGeom
+
+from ..errors import PrimError
+
+__all__ = ["CURVE_TYPES", "curves_arguments", "segment_end_count"]
+
+_log = logging.getLogger(__name__)
+_warned: set[str] = set()
+
+#: The curve schemas that render.
+CURVE_TYPES: tuple[type, ...] = (UsdGeom.BasisCurves, UsdGeom.NurbsCurves)
+
+
+def _warn_once(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        _log.warning("mipray: %s", message)
+
+
+def segment_end_count(n: int, curve_type: str, basis: str, wrap: str) -> int:
+    """How many ``varying`` values a curve of ``n`` vertices has (UsdGeomBasisCurves)."""
+    if curve_type == "linear":
+        return n
+    if basis == "bezier":
+        return n // 3 if wrap == "periodic" else (n - 4) // 3 + 2
+    return n - 2 if wrap == "nonperiodic" else n
+
+
+def _expected(interpolation: str, counts: NDArray[np.int32], kind: tuple[str, str, str]) -> int:
+    if interpolation == "constant":
+        return 1
+    if interpolation == "uniform":
+        return len(counts)
+    if interpolation in ("varying", "faceVarying"):
+        return sum(segment_end_count(int(n), *kind) for n in counts)
+    return int(counts.sum())
+
+
+def _primvar_checked(
+    path: str,
+    name: str,
+    values: NDArray[Any],
+    interpolation: str,
+    counts: NDArray[np.int32],
+    kind: tuple[str, str, str],
+    fallback: str,
+) -> bool:
+    """Whether ``values`` fit ``interpolation``; warns (naming the fallback) when not."""
+    want = _expected(interpolation, counts, kind)
+    if len(values) == want:
+        return True
+    _warn_once(
+        f"{path}: {name} has {len(values)} values but {interpolation} interpolation wants "
+        f"{want}; {fallback}"
+    )
+    return False
+
+
+def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
+    curves = UsdGeom.BasisCurves(prim)
+    path = str(prim.GetPath())
+    points = np.asarray(curves.GetPointsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
+    counts = np.asarray(curves.GetCurveVertexCountsAttr().Get(time) or [], dtype=np.int32)
+    curve_type = str(curves.GetTypeAttr().Get(time) or "cubic")
+    basis = str(curves.GetBasisAttr().Get(time) or "bezier")
+    wrap = str(curves.GetWrapAttr().Get(time) or "nonperiodic")
+    kind = (curve_type, basis, wrap)
+    gprim: dict[str, Any] = {
+        "type": "Curves",
+        "curve_vertex_counts": counts.tolist(),
+        "curve_type": curve_type,
+        "basis": basis,
+        "wrap": wrap,
+    }
+    if int(counts.sum()) != len(points):
+        # The delegate would refuse it too; said here with the attribute's USD name.
+        raise PrimError(
+            path,
+            f"curveVertexCounts add up to {int(counts.sum())} vertices but points has "
+            f"{len(points)}",
+        )
+    widths = np.asarray(curves.GetWidthsAttr().Get(time) or [], dtype=np.float32).reshape(-1)
+    if len(widths):
+        interpolation = str(curves.GetWidthsInterpolation())
+        if _primvar_checked(
+            path, "widths", widths, interpolation, counts, kind, "using the fallback width 1"
+        ):
+            gprim["widths"] = widths.tolist()
+            gprim["widths_interpolation"] = interpolation
+    normals = np.asarray(curves.GetNormalsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
+    style_attr = prim.GetAttribute("mipray:curveStyle")
+    style = str(style_attr.Get(time)) if style_attr and style_attr.HasValue() else "tube"
+    if style not in ("tube", "ribbon"):
+        _warn_once(f"{path}: mipray:curveStyle '{style}' is not tube or ribbon; using tube")
+        style = "tube"
+    if len(normals):
+        interpolation = str(curves.GetNormalsInterpolation())
+        if _primvar_checked(
+            path, "normals", normals, interpolation, counts, kind, "rendering tubes instead"
+        ):
+            gprim["normals"] = normals.tolist()
+            gprim["normals_interpolation"] = interpolation
+            style = "ribbon"
+    gprim["style"] = style
+    return points, gprim
+
+
+def _de_boor(
+    knots: NDArray[np.float64], cps: NDArray[np.float64], p: int, k: int, u: float
+) -> NDArray[np.float64]:
+    """The B-spline of degree ``p`` at ``u`` in knot span ``k`` (de Boor's algorithm)."""
+    d: list[NDArray[np.float64]] = [
+        np.array(cps[j + k - p], dtype=np.float64) for j in range(p + 1)
+    ]
+    for r in range(1, p + 1):
+        for j in range(p, r - 1, -1):
+            den = knots[j + 1 + k - r] - knots[j + k - p]
+            alpha = 0.0 if den == 0 else (u - knots[j + k - p]) / den
+            d[j] = (1.0 - alpha) * d[j - 1] + alpha * d[j]
+    return d[p]
+
+
+#: Bézier control points from a cubic's values at t = 0, 1/3, 2/3, 1 (the inverse of the
+#: Bernstein matrix at those parameters).
+_FROM_SAMPLES = np.linalg.inv(
+    np.array(
+        [
+            [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
+            for t in (0, 1 / 3, 2 / 3, 1)
+        ]
+    )
+)
+
+
+def _nurbs_to_bezier(
+    path: str, cps: NDArray[np.float64], order: int, knots: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """One NURBS curve's cubic Bézier control points (3k + 1 for k spans)."""
+    p = order - 1
+    n = len(cps)
+    if not 1 <= p <= 3:
+        raise PrimError(path, f"order = {order}: curves of degree above 3 are not rendered")
+    if len(knots) != n + order:
+        raise PrimError(
+            path,
+            f"knots has {len(knots)} values for {n} points of order {order} (want {n + order})",
+        )
+    if np.any(np.diff(knots) < 0):
+        raise PrimError(path, "knots decrease")
+    out: list[NDArray[np.float64]] = []
+    for k in range(p, n):
+        a, b = knots[k], knots[k + 1]
+        if not a < b:
+            continue
+        samples = np.array(
+            [_de_boor(knots, cps, p, k, a + (b - a) * s) for s in (0, 1 / 3, 2 / 3, 1)]
+        )
+        bez = _FROM_SAMPLES @ samples
+        out.extend(bez if not out else bez[1:])
+    if not out:
+        raise PrimError(path, "knots span no parameter range: nothing to render")
+    return np.array(out)
+
+
+def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
+    curves = UsdGeom.NurbsCurves(prim)
+    path = str(prim.GetPath())
+    points = np.asarray(curves.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
+    counts = np.asarray(curves.GetCurveVertexCountsAttr().Get(time) or [], dtype=np.int64)
+    orders = np.asarray(curves.GetOrderAttr().Get(time) or [], dtype=np.int64)
+    knots = np.asarray(curves.GetKnotsAttr().Get(time) or [], dtype=np.float64)
+    if int(counts.sum()) != len(points):
+        raise PrimError(
+            path,
+            f"curveVertexCounts add up to {int(counts.sum())} vertices but points has "
+            f"{len(points)}",
+        )
+    if len(orders) != len(counts):
+        raise PrimError(path, f"order has {len(orders)} values for {len(counts)} curves")
+    weights = curves.GetPointWeightsAttr().Get(time)
+    if weights is not None and len(weights) and not np.allclose(np.asarray(weights), 1.0):
+        _warn_once(f"{path}: pointWeights (a rational curve) are not applied")
+    widths = np.asarray(curves.GetWidthsAttr().Get(time) or [], dtype=np.float64).reshape(-1)
+    w_interp = str(curves.GetWidthsInterpolation()) if len(widths) else "constant"
+    if len(widths) and not (
+        (w_interp == "constant" and len(widths) == 1)
+        or (w_interp == "uniform" and len(widths) == len(counts))
+        or (w_interp == "vertex" and len(widths) == len(points))
+    ):
+        _warn_once(
+            f"{path}: widths has {len(widths)} values for {w_interp} interpolation "
+            "(NurbsCurves: constant, uniform or vertex widths); using the fallback width 1"
+        )
+        widths = np.zeros(0)
+    out_points: list[NDArray[np.float64]] = []
+    out_widths: list[NDArray[np.float64]] = []
+    out_counts: list[int] = []
+    start, kstart = 0, 0
+    for count, order in zip(counts.tolist(), orders.tolist(), strict=True):
+        cps = points[start : start + count]
+        curve_knots = knots[kstart : kstart + count + order]
+        bez = _nurbs_to_bezier(path, cps, order, curve_knots)
+        out_points.append(bez)
+        out_counts.append(len(bez))
+        if w_interp == "vertex" and len(widths):
+            w = widths[start : start + count].reshape(-1, 1)
+            out_widths.append(_nurbs_to_bezier(path, w, order, curve_knots).reshape(-1))
+        start += count
+        kstart += count + order
+    gprim: dict[str, Any] = {
+        "type": "Curves",
+        "curve_vertex_counts": out_counts,
+        "curve_type": "cubic",
+        "basis": "bezier",
+        "wrap": "nonperiodic",
+        "style": "tube",
+    }
+    if len(widths):
+        if w_interp == "vertex":
+            gprim["widths"] = np.concatenate(out_widths).tolist()
+        else:
+            gprim["widths"] = widths.tolist()
+        gprim["widths_interpolation"] = w_interp
+    return np.concatenate(out_points).astype(np.float32), gprim
+
+
+def curves_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode
+) -> tuple[NDArray[np.float32], dict[str, Any]]:
+    """A curves prim's vertices and its ``gprim`` argument for ``set_mesh``.
+
+    Raises:
+        PrimError: the prim cannot be rendered (the message names the attribute).
+
+    """
+    if prim.IsA(UsdGeom.NurbsCurves):
+        return _nurbs_curves(prim, time)
+    return _basis_curves(prim, time)

@@ -1,0 +1,181 @@
+"""BasisCurves and NurbsCurves from USD: what crosses to the delegate, NURBS converted to
+Bézier segments against a direct B-spline evaluation, bad input (one line naming the prim
+and the attribute, the prim skipped or falling back), and renders (a tube's width on screen
+against the pinhole camera, per-curve colours)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from pxr import Sdf, UsdGeom
+
+import mipray
+from mipray.usd import UsdSceneDelegate
+from mipray.usd.curves import _nurbs_to_bezier
+
+from stages import add_camera, add_distant_light, new_stage
+
+
+def _bezier(c: np.ndarray, t: float) -> np.ndarray:
+    s = 1 - t
+    return s**3 * c[0] + 3 * s * s * t * c[1] + 3 * s * t * t * c[2] + t**3 * c[3]
+
+
+def _cox_de_boor(knots: np.ndarray, i: int, p: int, u: float) -> float:
+    """The B-spline basis function N_{i,p}(u), by its recursive definition (half-open spans)."""
+    if p == 0:
+        return 1.0 if knots[i] <= u < knots[i + 1] else 0.0
+    out = 0.0
+    if knots[i + p] > knots[i]:
+        out += (u - knots[i]) / (knots[i + p] - knots[i]) * _cox_de_boor(knots, i, p - 1, u)
+    if knots[i + p + 1] > knots[i + 1]:
+        out += (
+            (knots[i + p + 1] - u)
+            / (knots[i + p + 1] - knots[i + 1])
+            * _cox_de_boor(knots, i + 1, p - 1, u)
+        )
+    return out
+
+
+@pytest.mark.parametrize(
+    ("order", "knots"),
+    [
+        (4, [0, 0, 0, 0, 1, 2, 3, 3, 3, 3]),  # clamped cubic, 3 spans
+        (4, [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]),  # uniform unclamped cubic
+        (3, [0, 0, 0, 1, 1.5, 3, 4, 4, 4]),  # quadratic, uneven knots
+        (2, [0, 0, 1, 2, 3, 4, 5, 5]),  # linear
+    ],
+)
+def test_nurbs_become_bezier_segments_on_the_same_curve(order, knots) -> None:
+    rng = np.random.default_rng(3)
+    knots = np.asarray(knots, dtype=np.float64)
+    n = len(knots) - order
+    cps = rng.uniform(-2, 2, (n, 3))
+    bez = _nurbs_to_bezier("/N", cps, order, knots)
+    assert (len(bez) - 1) % 3 == 0
+    p = order - 1
+    spans = [(knots[k], knots[k + 1]) for k in range(p, n) if knots[k] < knots[k + 1]]
+    assert (len(bez) - 1) // 3 == len(spans)
+    for s, (a, b) in enumerate(spans):
+        seg = bez[3 * s : 3 * s + 4]
+        for t in (0.0, 0.2, 0.5, 0.9):
+            u = a + (b - a) * t
+            want = sum(_cox_de_boor(knots, i, p, u) * cps[i] for i in range(n))
+            np.testing.assert_allclose(_bezier(seg, t), want, atol=1e-9)
+
+
+def test_basis_curves_attributes_cross_to_the_delegate(fake) -> None:
+    stage = new_stage()
+    c = UsdGeom.BasisCurves.Define(stage, "/Hair")
+    c.CreatePointsAttr([(0, 0, 0), (0, 1, 0), (1, 2, 0), (1, 3, 0), (5, 0, 0), (5, 1, 0)])
+    c.CreateCurveVertexCountsAttr([4, 2])
+    c.CreateTypeAttr("linear")
+    c.CreateWidthsAttr([0.1, 0.2])
+    c.SetWidthsInterpolation("uniform")
+    r = UsdGeom.BasisCurves.Define(stage, "/Ribbon")
+    r.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)])
+    r.CreateCurveVertexCountsAttr([4])
+    r.CreateBasisAttr("catmullRom")
+    r.CreateWrapAttr("pinned")
+    r.CreateNormalsAttr([(0, 0, 1)] * 4)
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    assert scene.delegate_errors == []
+    hair = fake.meshes()["/Hair"]["gprim"]
+    assert hair["type"] == "Curves" and hair["curve_type"] == "linear"
+    assert hair["curve_vertex_counts"] == [4, 2]
+    assert hair["widths"] == pytest.approx([0.1, 0.2])
+    assert hair["widths_interpolation"] == "uniform"
+    assert hair["style"] == "tube"
+    ribbon = fake.meshes()["/Ribbon"]["gprim"]
+    assert (ribbon["basis"], ribbon["wrap"], ribbon["style"]) == ("catmullRom", "pinned", "ribbon")
+    assert ribbon["normals_interpolation"] == "vertex"
+
+
+def test_wrong_counts_skip_the_prim_and_wrong_widths_fall_back_by_name(native, caplog) -> None:
+    stage = new_stage()
+    bad = UsdGeom.BasisCurves.Define(stage, "/World/BadCounts")
+    bad.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0), (4, 0, 0)])
+    bad.CreateCurveVertexCountsAttr([5])  # a bezier needs 4 + 3k
+    wide = UsdGeom.BasisCurves.Define(stage, "/World/BadWidths")
+    wide.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)])
+    wide.CreateCurveVertexCountsAttr([4])
+    wide.CreateWidthsAttr([0.1, 0.2, 0.3])  # vertex wants 4
+    UsdGeom.Sphere.Define(stage, "/World/Good")
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, native.RenderDelegate())
+        scene.sync()
+    assert [str(e) for e in scene.delegate_errors] == [
+        "/World/BadCounts: curveVertexCounts[0]: curve 0 has 5 vertices; a bezier curve "
+        "needs 4 + 3k"
+    ]
+    lines = [r.getMessage() for r in caplog.records if "BadWidths" in r.getMessage()]
+    assert lines == [
+        "mipray: /World/BadWidths: widths has 3 values but vertex interpolation wants 4; "
+        "using the fallback width 1"
+    ]
+
+
+def _render(stage, width: int, aovs: list[str]) -> dict[str, np.ndarray]:
+    with mipray.RenderSession(stage) as session:
+        r = session.render("/World/Camera", width=width, aovs=aovs, camera_light=False)
+    return {k: v[..., 0] if v.shape[-1] == 1 else v for k, v in r.aovs.items()}
+
+
+def test_a_tube_covers_the_pixels_a_pinhole_camera_predicts(native) -> None:
+    # A vertical tube of width w, 8 units in front of a 50 mm lens with a 20 mm film back:
+    # its silhouette is the tangents at asin(r / 8), so it covers 2·50·tan(asin(r / 8)) mm
+    # of the film's 20 mm.
+    stage = new_stage()
+    w = 0.4
+    c = UsdGeom.BasisCurves.Define(stage, "/World/Tube")
+    c.CreatePointsAttr([(0, -3, 0), (0, -1, 0), (0, 1, 0), (0, 3, 0)])
+    c.CreateCurveVertexCountsAttr([4])
+    c.CreateWidthsAttr([w])
+    c.SetWidthsInterpolation("constant")
+    cam = add_camera(stage, "/World/Camera", eye=(0.0, 0.0, 8.0))
+    cam.CreateHorizontalApertureAttr(20.0)
+    cam.CreateVerticalApertureAttr(20.0)
+    add_distant_light(stage, "/World/Sun")
+    width = 200
+    r = _render(stage, width, ["color", "alpha"])
+    span = 2 * 50 * np.tan(np.arcsin(w / 2 / 8)) / 20 * width  # pixels
+    # One sample a pixel, at its centre: the centres within the span are covered.
+    centres = np.arange(width) + 0.5 - width / 2
+    predicted = np.abs(centres) < span / 2
+    for row in range(width // 2 - 20, width // 2 + 20):
+        np.testing.assert_array_equal(r["alpha"][row] > 0.5, predicted)
+    assert predicted.sum() == 26  # 25.008 pixels wide, centred on a pixel boundary
+    lit = r["color"][r["alpha"] > 0.99]
+    assert np.isfinite(r["color"]).all() and lit.mean() > 0.01
+
+
+def test_nurbs_curves_and_uniform_colours_render(native) -> None:
+    stage = new_stage()
+    n = UsdGeom.NurbsCurves.Define(stage, "/World/Nurbs")
+    n.CreatePointsAttr([(-3, -1, 0), (-1, 1, 0), (1, -1, 0), (3, 1, 0), (-3, 1, 0), (3, 1.5, 0)])
+    n.CreateCurveVertexCountsAttr([4, 2])
+    n.CreateOrderAttr([4, 2])
+    n.CreateKnotsAttr([0, 0, 0, 0, 1, 1, 1, 1, 0, 0, 1, 1])
+    n.CreateWidthsAttr([0.3])
+    n.SetWidthsInterpolation("constant")
+    primvar = UsdGeom.PrimvarsAPI(n).CreatePrimvar(
+        "displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.uniform
+    )
+    primvar.Set([(1, 0, 0), (0, 0, 1)])
+    cam = add_camera(stage, "/World/Camera", eye=(0.0, 0.0, 8.0))
+    cam.CreateHorizontalApertureAttr(20.0)
+    cam.CreateVerticalApertureAttr(20.0)
+    sun = add_distant_light(stage, "/World/Sun")
+    sun.CreateAngleAttr(0.0)
+    width = 100
+    r = _render(stage, width, ["color", "alpha"])
+    assert r["alpha"].sum() > 100
+    # The cubic through (0, 0) is red at the image centre; the straight one at y ≈ 1.25 blue.
+    centre = r["color"][width // 2, width // 2]
+    assert centre[0] > 10 * centre[2], centre
+    row = round(width / 2 - 1.25 / (8 * 10 / 50) * width / 2)
+    blue = r["color"][row - 1 : row + 2, width // 2 + 20].max(axis=0)
+    assert blue[2] > 10 * blue[0], blue
