@@ -145,6 +145,14 @@ impl LightBounds {
                 normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
                 cos_theta_e: 0.0,
             },
+            LightShape::Mesh(m) => LightBounds {
+                lo: m.bounds().min,
+                hi: m.bounds().max,
+                // Its whole area facing the point at best (an upper bound, as the others').
+                phi: lum * m.area(),
+                normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
+                cos_theta_e: 0.0,
+            },
             _ => return None,
         };
         // A shaped light emits only within its cone about its axis (focus only dims it: the
