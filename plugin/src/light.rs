@@ -1,4 +1,6 @@
-//! Light Sprims (UsdLux): distant, sphere, rect, disk, cylinder and dome lights.
+//! Light Sprims (UsdLux): distant, sphere, rect, disk, cylinder and dome lights; and emissive
+//! meshes (`MeshLightAPI`, `GeometryLight`), which are mesh Rprims whose surface becomes a light
+//! ([`mesh_light`]).
 
 use glam::{Mat4, Vec3A};
 use mipray::light::{Light, LightShape};
@@ -170,4 +172,69 @@ impl LightPrim {
         l.shadowed_by = resolve(&self.links.no_shadow);
         l
     }
+}
+
+/// A mesh's light inputs (UsdLux `MeshLightAPI` on it, or a `GeometryLight` naming it): what
+/// every light has but a transform and a shape, which are the mesh's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshLightData {
+    pub intensity: f32,
+    pub exposure: f32,
+    /// Linear RGB, the colour temperature folded in.
+    pub color: [f32; 3],
+    pub normalize: bool,
+    pub shadow_enable: bool,
+    pub links: LinkData,
+}
+
+/// Vertices per side of the grid each patch of an emissive subdivision surface (or gprim) is
+/// tessellated at for lighting: 4×4 quads, 32 triangles a patch. A polygonal mesh's patches are
+/// its faces, flat or bilinear, taken at their corners (2 triangles a quad).
+pub const MESH_LIGHT_GRID: usize = 5;
+
+/// The render-space triangles of `surface` placed by `transform` (object to render, column
+/// vectors), oriented so their right-hand normals point out of the front face: USD's
+/// right-handed winding, flipped for `left_handed` and for a transform that mirrors.
+pub fn light_triangles(surface: &dyn mipray::patch::LimitSurface, transform: &Mat4, left_handed: bool, grid: usize) -> Vec<[Vec3A; 3]> {
+    let n = grid.max(2);
+    let flip = left_handed != (transform.determinant() < 0.0);
+    let mut out = Vec::with_capacity(surface.patch_count() * 2 * (n - 1) * (n - 1));
+    let mut g = mipray::patch::GridSamples::default();
+    for patch in 0..surface.patch_count() {
+        surface.evaluate_grid(patch, mipray::patch::UvRect::UNIT, n, false, &mut g);
+        let at = |i: usize, j: usize| transform.transform_point3a(Vec3A::from(g.p[j * n + i]));
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let (p00, p10, p11, p01) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                // u then v: dP/du × dP/dv is the patch's front normal.
+                for t in [[p00, p10, p11], [p00, p11, p01]] {
+                    out.push(if flip { [t[0], t[2], t[1]] } else { t });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The core light an emissive mesh `path` makes: its surface's triangles ([`light_triangles`],
+/// polygonal meshes at their corners, others at [`MESH_LIGHT_GRID`]) emitting
+/// `color · intensity · 2^exposure` as radiance from their front (both sides when
+/// `double_sided`), divided by their area with `normalize` (UsdLux). `None` when the surface
+/// has no area.
+pub fn mesh_light(
+    path: &str,
+    light: &MeshLightData,
+    surface: &dyn mipray::patch::LimitSurface,
+    polygonal: bool,
+    transform: &Mat4,
+    left_handed: bool,
+    double_sided: bool,
+) -> Option<Light> {
+    let grid = if polygonal { 2 } else { MESH_LIGHT_GRID };
+    let tris = mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?;
+    let f = |x: f32| if x.is_finite() { x } else { 0.0 };
+    let color = Vec3A::from(light.color.map(f));
+    let mut l = Light::usd_area(path, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
+    l.casts_shadows = light.shadow_enable;
+    Some(l)
 }

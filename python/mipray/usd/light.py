@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Sdf, Usd, UsdLux
+from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from ..errors import PrimError
 
@@ -52,6 +52,7 @@ __all__ = [
     "distant_light_arguments",
     "link_arguments",
     "linking_authored",
+    "mesh_light_arguments",
 ]
 
 #: The non-distant UsdLux light types mipray renders, and their ``set_light`` kind.
@@ -276,6 +277,43 @@ def area_light_arguments(
         raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
     if not np.isfinite(transform).all():
         raise PrimError(path, "the world transform is not finite")
+    return args
+
+
+def mesh_light_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any] | None:
+    """``RenderDelegate.set_mesh``'s ``light`` for a Mesh with ``MeshLightAPI``; None otherwise.
+
+    The mesh then is a light, not a surface: its limit surface, tessellated for lighting,
+    emits ``color * intensity * 2**exposure`` as radiance from its front faces (both sides
+    when ``doubleSided``), divided by its area with ``normalize`` (UsdLux's ``LightAPI``
+    inputs and fallbacks; ``colorTemperature`` as for every light). Its bound material is not
+    rendered and does not tint the light (``light:materialSyncMode`` is not read).
+
+    Raises:
+        PrimError: a non-finite or negative value.
+
+    """
+    if not (prim.IsA(UsdGeom.Mesh) and prim.HasAPI(UsdLux.MeshLightAPI)):
+        return None
+    path = str(prim.GetPath())
+    light = UsdLux.LightAPI(prim)
+
+    def get(attr: Usd.Attribute, default: Any) -> Any:
+        value = attr.Get(time) if attr else None
+        return default if value is None else value
+
+    args: dict[str, Any] = {
+        "intensity": float(get(light.GetIntensityAttr(), 1.0)),
+        "exposure": float(get(light.GetExposureAttr(), 0.0)),
+        "color": _color(prim, time),
+        "normalize": bool(get(light.GetNormalizeAttr(), False)),
+        "shadow_enable": bool(get(prim.GetAttribute("inputs:shadow:enable"), True)),
+    }
+    for key in ("intensity", "exposure"):
+        if not math.isfinite(args[key]):
+            raise PrimError(path, f"inputs:{key} is not finite")
+    if args["intensity"] < 0.0:
+        raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
     return args
 
 

@@ -54,6 +54,7 @@ from .light import (
     camera_light_arguments,
     distant_light_arguments,
     link_arguments,
+    mesh_light_arguments,
 )
 from .mesh_sync import read_mesh
 from .mtlx_files import load_mtlx_references
@@ -109,6 +110,7 @@ class _Record:
     # A skinned mesh's posed world bounds (min, max); skinned meshes are re-read, not moved.
     posed_bounds: tuple[Any, Any] | None = None
     rigid: bool = False  # a rigidly deformed skinned mesh: its pose is a transform
+    light: bool = False  # a mesh that is a light (MeshLightAPI)
 
 
 _NO_RECORD = _Record("none", -1, in_delegate=False)
@@ -268,7 +270,7 @@ class UsdSceneDelegate:
     @property
     def light_paths(self) -> list[str]:
         """Paths of the synced stage lights (not the camera light)."""
-        return [p for p, r in self._records.items() if r.kind == "light"]
+        return [p for p, r in self._records.items() if r.kind == "light" or r.light]
 
     @property
     def is_dirty(self) -> bool:
@@ -677,7 +679,14 @@ class UsdSceneDelegate:
                     record.in_delegate = False
                     self._records[path] = record
                     return
+                light = mesh_light_arguments(prim, time)
+                if light is not None:
+                    links = link_arguments(prim, time, self._gprim_paths)
+                    read.args["light"] = {**light, **links}
+                    record.light = True
+                    record.might_vary = might_vary or record.might_vary
                 self.delegate.set_mesh(path, **read.args)
+                self._track_links(path, links if light is not None else {})
             elif prim.IsA(UsdGeom.PointInstancer):
                 state, own_varies = self._instancing.sync_point_instancer(
                     prim,
