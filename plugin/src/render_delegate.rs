@@ -367,7 +367,9 @@ impl RenderDelegate {
                     l.shadowed_by = resolve(&data.links.no_shadow);
                     out.push(l);
                 }
-                None => self.warn_once(format!("{} mesh light", m.path), format!("{}: the mesh light has no area; it emits nothing", m.path)),
+                None => {
+                    self.warn_once(format!("{} mesh light", m.path), format!("{}: the mesh light has no area; it emits nothing", m.path))
+                }
             }
         }
         out

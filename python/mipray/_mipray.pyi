@@ -69,6 +69,7 @@ class RenderDelegate:
         primvars: dict[str, dict[str, object]] | None = None,
         face_materials: list[dict[str, object]] | None = None,
         face_material_indices: NDArray[np.int32] | None = None,
+        light: dict[str, object] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -155,6 +156,13 @@ class RenderDelegate:
                 (holes included; one per point for Points): an index into
                 ``face_materials``, or -1 for the mesh's ``material``. Given
                 together with ``face_materials``.
+            light: UsdLux ``MeshLightAPI``: the mesh is then an area light and
+                not a surface (its material unread): ``{"intensity",
+                "exposure", "color", "normalize", "shadow_enable", "unlit",
+                "no_shadow"}`` as :meth:`set_light` takes them, every key
+                optional. Its limit surface, tessellated for lighting (polygons
+                at their corners, subdivision patches 4×4), emits from its
+                front faces (both with ``double_sided``).
 
         Raises:
             PrimDataError: the data is inconsistent (the one check of a mesh's

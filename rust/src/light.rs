@@ -1,4 +1,5 @@
-//! Lights (UsdLux): distant, sphere, rect, disk, cylinder and dome; `ShapingAPI` on sphere, rect and disk
+//! Lights (UsdLux): distant, sphere, rect, disk, cylinder, dome and emissive meshes (`MeshLightAPI`:
+//! [`TriangleLight`], sampled uniformly by area); `ShapingAPI` on sphere, rect and disk
 //! lights ([`Shaping`]); light and shadow linking ([`Light::illuminates`],
 //! [`Light::shadowed_by`]: what the direct-lighting estimator and shadow rays honour).
 //!

@@ -1,4 +1,4 @@
-"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder and dome lights, and the camera light.
+"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder, dome and mesh lights; the camera light.
 
 ``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
 others into ``RenderDelegate.set_light`` with their shape; a stage with no
