@@ -161,3 +161,33 @@ def test_mesh_lights_are_linked_and_named_in_the_stats(native) -> None:
     assert entry["triangles"] == 2 and math.isclose(entry["area"], 1.0, rel_tol=1e-6)
     assert entry["not_illuminating"] == ["/World/Ground"]
     assert entry["two_sided"] is False
+
+
+def test_a_geometry_light_makes_its_mesh_a_light_and_letting_go_makes_it_a_surface(
+    native,
+) -> None:
+    stage = stage_with_camera()
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Glow")
+    a = HALF
+    mesh.CreatePointsAttr([(-a, -a, H), (a, -a, H), (a, a, H), (-a, a, H)])
+    mesh.CreateFaceVertexCountsAttr([4])
+    mesh.CreateFaceVertexIndicesAttr([0, 3, 2, 1])  # facing down
+    mesh.CreateSubdivisionSchemeAttr("none")
+    geometry_light = UsdLux.GeometryLight.Define(stage, "/World/GeoLight")
+    geometry_light.CreateIntensityAttr(3.0)
+    geometry_light.CreateGeometryRel().AddTarget("/World/Glow")
+    with mipray.RenderSession(stage) as session:
+        lit = session.render("/World/Cam", width=33, settings={"samples": 64}, camera_light=False)
+        (entry,) = lit.stats["scene"]["lights"]
+        assert (entry["name"], entry["kind"], entry["triangles"]) == ("/World/Glow", "mesh", 2)
+        image = np.asarray(lit.aovs["color"][..., :3], dtype=np.float64)
+        x, y = floor_xy(image, stage)
+        truth = 3.0 * lambert_square(x, y) * ALBEDO / math.pi
+        lit_px = truth > 0.05 * truth.max()
+        assert abs(float((image[..., 0][lit_px] / truth[lit_px]).mean()) - 1.0) < 0.01
+        # Without the light, the mesh is a grey surface again, lit by nothing: black, and the
+        # stage has no light left (no headlight here: camera_light is off).
+        stage.RemovePrim("/World/GeoLight")
+        dark = session.render("/World/Cam", width=33, settings={}, camera_light=False)
+        assert dark.stats["scene"]["lights"] == []
+        assert float(np.asarray(dark.aovs["color"]).max()) == 0.0

@@ -26,6 +26,10 @@ are listed as unsupported. Light and shadow linking (``collection:lightLink``,
 (``unlit``, ``no_shadow``); the scene delegate re-resolves them whenever the
 stage changes. Meshes inside native-instance prototypes are matched by their
 prototype path (``/__Prototype_1/...``), which only ``includeRoot`` reaches.
+
+A Mesh with ``MeshLightAPI``, or named by a ``GeometryLight``'s ``geometry``, is a mesh
+light: ``RenderDelegate.set_mesh`` gets ``light`` (:func:`mesh_light_arguments`,
+:func:`emitter_arguments`) and the core samples its tessellated limit surface by area.
 """
 
 from __future__ import annotations
@@ -50,6 +54,8 @@ __all__ = [
     "authored_properties",
     "camera_light_arguments",
     "distant_light_arguments",
+    "emitter_arguments",
+    "geometry_light_targets",
     "link_arguments",
     "linking_authored",
     "mesh_light_arguments",
@@ -295,6 +301,39 @@ def mesh_light_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any] |
     """
     if not (prim.IsA(UsdGeom.Mesh) and prim.HasAPI(UsdLux.MeshLightAPI)):
         return None
+    return emitter_arguments(prim, time)
+
+
+def geometry_light_targets(light: Usd.Prim) -> list[str]:
+    """The Mesh prims a ``UsdLux.GeometryLight``'s ``geometry`` relationship names.
+
+    Each becomes a mesh light with the GeometryLight's inputs
+    (:func:`emitter_arguments` of the light prim), as with ``MeshLightAPI``; its own
+    transform places it (the GeometryLight's is not read). A target that is not a Mesh is
+    skipped with one warning naming both.
+    """
+    rel = UsdLux.GeometryLight(light).GetGeometryRel()
+    out = []
+    for target in rel.GetForwardedTargets() if rel else []:
+        prim = light.GetStage().GetPrimAtPath(target)
+        if prim and prim.IsA(UsdGeom.Mesh):
+            out.append(str(target))
+        else:
+            _warn_once(
+                f"{light.GetPath()}: geometry target {target} is not a Mesh; it does not emit"
+            )
+    return out
+
+
+def emitter_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
+    """The ``LightAPI`` inputs of a mesh light as ``set_mesh``'s ``light`` takes them.
+
+    ``prim`` is the Mesh with ``MeshLightAPI`` or the ``GeometryLight`` naming it.
+
+    Raises:
+        PrimError: a non-finite or negative value.
+
+    """
     path = str(prim.GetPath())
     light = UsdLux.LightAPI(prim)
 

@@ -57,6 +57,7 @@ RENDERED_TYPES: tuple[type, ...] = (
     UsdGeom.Camera,
     UsdLux.DistantLight,
     *(t for t, _ in AREA_LIGHT_TYPES),
+    UsdLux.GeometryLight,
 )
 
 #: The UsdPreviewSurface inputs :mod:`mipray.usd.shading` reads (displacement only from a
