@@ -52,7 +52,33 @@ pub struct ShapingData {
     pub cone_softness: f32,
     pub focus: f32,
     pub focus_tint: [f32; 3],
+    /// `shaping:ies:*`, when a file is authored.
+    pub ies: Option<IesData>,
 }
+
+/// A light's IES profile: the file as read when the light was set (or why it could not be),
+/// `ies:angleScale` and `ies:normalize`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IesData {
+    pub file: String,
+    pub profile: Result<mipray::light::IesProfile, String>,
+    pub angle_scale: f32,
+    pub normalize: bool,
+}
+
+impl IesData {
+    /// Reads and parses `file` (an error is kept, to be warned about when the light is used).
+    pub fn read(file: &str, angle_scale: f32, normalize: bool) -> IesData {
+        let profile = std::fs::read(file)
+            .map_err(|e| e.to_string())
+            .and_then(|bytes| mipray::light::IesProfile::parse(&String::from_utf8_lossy(&bytes)));
+        IesData { file: file.to_string(), profile, angle_scale, normalize }
+    }
+}
+
+/// Lights and files already warned about (a bad IES file is named once, not every render).
+static IES_WARNED: std::sync::Mutex<std::collections::BTreeSet<(String, String)>> =
+    std::sync::Mutex::new(std::collections::BTreeSet::new());
 
 /// Light and shadow linking, resolved by the scene delegate: the mesh prims (paths) a light's
 /// `collection:lightLink` leaves out, and those its `collection:shadowLink` leaves out.
@@ -154,6 +180,27 @@ impl LightPrim {
         {
             let axis = m.transform_vector3a(Vec3A::NEG_Z);
             l.shaping = mipray::light::Shaping::new(axis, sh.cone_angle_deg, sh.cone_softness, sh.focus, Vec3A::from(sh.focus_tint.map(f)));
+            match sh.ies.as_ref().map(|ies| (ies, &ies.profile)) {
+                Some((ies, Ok(profile))) => {
+                    let shaping = mipray::light::IesShaping {
+                        profile: profile.clone(),
+                        file: ies.file.clone(),
+                        // UsdLux: the scale must stay above −1 (1 + s divides θ).
+                        angle_scale: if ies.angle_scale.is_finite() { ies.angle_scale.max(-0.99) } else { 0.0 },
+                        normalize: ies.normalize,
+                        x: m.transform_vector3a(Vec3A::X).normalize_or(Vec3A::X),
+                        y: m.transform_vector3a(Vec3A::Y).normalize_or(Vec3A::Y),
+                    };
+                    l.shaping = Some(mipray::light::Shaping::with_ies(l.shaping.take(), axis, shaping));
+                }
+                Some((ies, Err(e))) => {
+                    let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                    if warned.insert((self.path.clone(), ies.file.clone())) {
+                        log::warn!("{}: cannot read IES profile {}: {e}; the light renders without it", self.path, ies.file);
+                    }
+                }
+                None => {}
+            }
         }
         l
     }

@@ -289,6 +289,9 @@ class RenderDelegate:
         focus_tint: tuple[float, float, float] = ...,  # (0.0, 0.0, 0.0)
         unlit: list[str] = ...,  # []
         no_shadow: list[str] = ...,  # []
+        ies_file: str | None = None,
+        ies_angle_scale: float = 0.0,
+        ies_normalize: bool = False,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
 
@@ -302,7 +305,10 @@ class RenderDelegate:
         soft shadows with ``shadowSamples`` rays each. ``cone_angle``
         (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are
         UsdLux's ShapingAPI on sphere, rect and disk lights (the defaults
-        shape nothing); ``unlit`` and ``no_shadow`` name the mesh prims the
+        shape nothing); ``ies_file``, ``ies_angle_scale`` and ``ies_normalize``
+        are its IES profile (LM-63, TILT=NONE, type C: a file that cannot be
+        read or parsed is named in one warning and the light renders without
+        it); ``unlit`` and ``no_shadow`` name the mesh prims the
         light's light- and shadow-linking collections leave out.
 
         Raises:

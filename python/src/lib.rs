@@ -12,7 +12,7 @@ use std::path::Path;
 
 use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
-use hd_mipray::light::{AreaKind, DistantLightData, LightPrim, LinkData, MeshLightData, ShapingData};
+use hd_mipray::light::{AreaKind, DistantLightData, IesData, LightPrim, LinkData, MeshLightData, ShapingData};
 
 use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
@@ -455,7 +455,7 @@ impl RenderDelegate {
     /// ``cone_angle`` (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are UsdLux's
     /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
     /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new()))]
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -479,8 +479,12 @@ impl RenderDelegate {
         focus_tint: (f32, f32, f32),
         unlit: Vec<String>,
         no_shadow: Vec<String>,
+        ies_file: Option<String>,
+        ies_angle_scale: f32,
+        ies_normalize: bool,
     ) -> PyResult<()> {
         let vals = [
+            ies_angle_scale,
             intensity,
             exposure,
             color.0,
@@ -525,8 +529,13 @@ impl RenderDelegate {
             "dome" => AreaKind::Dome { texture },
             _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk, cylinder or dome"))),
         };
-        let shaping =
-            Some(ShapingData { cone_angle_deg: cone_angle, cone_softness, focus, focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2] });
+        let shaping = Some(ShapingData {
+            cone_angle_deg: cone_angle,
+            cone_softness,
+            focus,
+            focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2],
+            ies: ies_file.map(|file| IesData::read(&file, ies_angle_scale, ies_normalize)),
+        });
         self.inner.set_light(LightPrim { path: path.to_string(), data, area: Some(area), shaping, links });
         Ok(())
     }

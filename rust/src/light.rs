@@ -32,7 +32,10 @@ use glam::{Mat4, Vec3A};
 use crate::sampling::{cosine_hemisphere, frame};
 
 mod env;
+mod ies;
 mod mesh;
+
+pub use ies::IesProfile;
 
 pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
 pub use mesh::{TriangleHit, TriangleLight};
@@ -175,7 +178,7 @@ impl RectTexture {
 ///
 /// The factor depends only on ω, so a spot of cone angle α pointing down from height h lights a
 /// floor inside radius h·tan α and nothing outside (for a small light).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Shaping {
     /// Unit, render space: where the light points (its local −Z).
     pub axis: Vec3A,
@@ -187,6 +190,58 @@ pub struct Shaping {
     pub focus: f32,
     /// `focusTint`, linear RGB.
     pub focus_tint: Vec3A,
+    /// `ies:file`, `ies:angleScale`, `ies:normalize` ([`IesShaping`]).
+    pub ies: Option<std::sync::Arc<IesShaping>>,
+}
+
+/// An IES profile on a light (UsdLux `ShapingAPI`'s `ies:*` inputs), evaluated as
+/// [`IesProfile`] documents: the candela toward the emission direction, divided by the
+/// profile's mean with `normalize`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IesShaping {
+    pub profile: IesProfile,
+    /// The file, for stats and messages.
+    pub file: String,
+    /// `ies:angleScale`, > −1.
+    pub angle_scale: f32,
+    pub normalize: bool,
+    /// The light's local +X and +Y in render space (unit): the azimuth's frame.
+    pub x: Vec3A,
+    pub y: Vec3A,
+}
+
+impl IesShaping {
+    /// What radiance emitted along unit `w` (away from the light, whose −Z is `axis`) is
+    /// multiplied by.
+    pub fn factor(&self, axis: Vec3A, w: Vec3A) -> f32 {
+        use std::f32::consts::PI;
+        let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
+        // hdEmbree's azimuth: of the direction toward the light, in the light's XY plane.
+        let phi = (-w.dot(self.y)).atan2(-w.dot(self.x));
+        let scale = 1.0 + self.angle_scale;
+        let theta = if scale > 0.0 { ((theta - PI) / scale + PI).clamp(0.0, PI) } else { theta };
+        let c = self.profile.candela(theta, phi);
+        if self.normalize {
+            let m = self.profile.mean();
+            if m > 0.0 {
+                c / m
+            } else {
+                0.0
+            }
+        } else {
+            c
+        }
+    }
+
+    /// The largest [`IesShaping::factor`] (an upper bound for the light tree's importance).
+    pub fn peak(&self) -> f32 {
+        let m = self.profile.mean();
+        match (self.normalize, m > 0.0) {
+            (true, true) => self.profile.peak() / m,
+            (true, false) => 0.0,
+            _ => self.profile.peak(),
+        }
+    }
 }
 
 impl Shaping {
@@ -202,8 +257,22 @@ impl Shaping {
             softness: finite(softness, 0.0).clamp(0.0, 1.0),
             focus,
             focus_tint: if focus_tint.is_finite() { focus_tint.max(Vec3A::ZERO) } else { Vec3A::ZERO },
+            ies: None,
         };
         (cone < PI || focus > 0.0).then_some(s)
+    }
+
+    /// `shaping` (or, if `None`, no cone or focus about `axis`) with the IES profile `ies`.
+    pub fn with_ies(shaping: Option<Shaping>, axis: Vec3A, ies: IesShaping) -> Shaping {
+        let base = shaping.unwrap_or(Shaping {
+            axis: axis.normalize_or(Vec3A::NEG_Z),
+            cone: PI,
+            softness: 0.0,
+            focus: 0.0,
+            focus_tint: Vec3A::ZERO,
+            ies: None,
+        });
+        Shaping { ies: Some(std::sync::Arc::new(ies)), ..base }
     }
 
     /// What radiance emitted along unit `w` (away from the light) is multiplied by (RGB).
@@ -213,6 +282,9 @@ impl Shaping {
         if self.focus > 0.0 {
             let ff = cos_off.abs().powf(self.focus);
             f = self.focus_tint + (Vec3A::ONE - self.focus_tint) * ff;
+        }
+        if let Some(ies) = &self.ies {
+            f *= ies.factor(self.axis, w);
         }
         if self.cone < PI {
             let theta = cos_off.acos();
@@ -710,6 +782,15 @@ impl Light {
                 "focus": s.focus,
                 "focus_tint": [s.focus_tint.x, s.focus_tint.y, s.focus_tint.z],
             });
+            if let Some(ies) = &s.ies {
+                out["shaping"]["ies"] = serde_json::json!({
+                    "file": ies.file,
+                    "angle_scale": ies.angle_scale,
+                    "normalize": ies.normalize,
+                    "mean_candela": ies.profile.mean(),
+                    "peak_candela": ies.profile.peak(),
+                });
+            }
         }
         if !self.illuminates.is_all() {
             out["not_illuminating"] = serde_json::json!(names(&self.illuminates));

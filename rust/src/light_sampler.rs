@@ -169,7 +169,11 @@ impl LightBounds {
         // A light of non-finite radiance stays in, with a nominal power: its samples carry the
         // non-finite value to the render loop, which drops them and counts them (no NaN reaches
         // the film, and the stats say a light is broken). Only lights that emit nothing leave.
-        let phi = if b.phi.is_finite() { b.phi } else { 1.0 };
+        // An IES profile scales the emission by up to its peak (a candela value, or the peak
+        // over the mean when normalized).
+        let peak = light.shaping.as_ref().and_then(|s| s.ies.as_ref()).map_or(1.0, |ies| ies.peak());
+        let phi = b.phi * peak;
+        let phi = if phi.is_finite() { phi } else { 1.0 };
         (phi > 0.0 && b.lo.is_finite() && b.hi.is_finite()).then_some(LightBounds { phi, ..b })
     }
 

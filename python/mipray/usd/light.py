@@ -16,12 +16,14 @@ warning naming the light; a value nothing sensible can be made of (non-finite,
 negative intensity or colour, zero size) is a ``PrimError`` naming the light,
 which skips that light only.
 
-``ShapingAPI`` on sphere, rect and disk lights (``shaping:cone:angle``,
-``cone:softness``, ``focus``, ``focusTint``, with the schema's fallbacks once the
-API is applied) goes to the core, which applies it as Hydra's hdEmbree does
-(``mipray::light::Shaping``); IES profiles and shaping on distant and dome lights
-are listed as unsupported. Light and shadow linking (``collection:lightLink``,
-``collection:shadowLink``) are resolved here with usd-core's
+``ShapingAPI`` on sphere, rect, disk and cylinder lights (``shaping:cone:angle``,
+``cone:softness``, ``focus``, ``focusTint``, and the IES profile ``ies:file``,
+``ies:angleScale``, ``ies:normalize``, with the schema's fallbacks once the API is
+applied) goes to the core, which applies it as Hydra's hdEmbree does
+(``mipray::light::Shaping``, ``mipray::light::IesProfile``); an IES file that cannot be
+read or parsed is named in one warning and the light renders without it. Shaping on
+distant and dome lights is listed as unsupported. Light and shadow linking
+(``collection:lightLink``, ``collection:shadowLink``) are resolved here with usd-core's
 ``ComputeMembershipQuery`` into the mesh prims each collection leaves out
 (``unlit``, ``no_shadow``); the scene delegate re-resolves them whenever the
 stage changes. Meshes inside native-instance prototypes are matched by their
@@ -73,9 +75,17 @@ _warned: set[str] = set()
 
 #: The light kinds ``ShapingAPI`` shapes (as Hydra's hdEmbree: area lights with a position).
 SHAPED_KINDS = frozenset({"sphere", "rect", "disk", "cylinder"})
-#: The ``ShapingAPI`` inputs mipray reads on those (IES profiles are not read).
+#: The ``ShapingAPI`` inputs mipray reads on those (IES profiles included).
 SHAPING_INPUTS = frozenset(
-    {"shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint"}
+    {
+        "shaping:cone:angle",
+        "shaping:cone:softness",
+        "shaping:focus",
+        "shaping:focusTint",
+        "shaping:ies:file",
+        "shaping:ies:angleScale",
+        "shaping:ies:normalize",
+    }
 )
 #: UsdLux's linking collections and the ``set_light`` argument each resolves to: the mesh prims
 #: the light does not illuminate, and those that do not block its shadow rays.
@@ -245,6 +255,16 @@ def area_light_arguments(
         for key in ("cone_angle", "cone_softness", "focus", "focus_tint"):
             if not np.isfinite(args[key]).all():
                 raise PrimError(path, f"inputs:shaping {key} {args[key]} is not finite")
+        ies = shaping.GetShapingIesFileAttr()
+        ies_file = ies.Get(time) if ies else None
+        if isinstance(ies_file, Sdf.AssetPath) and ies_file.path:
+            from .shading import _resolve
+
+            args["ies_file"] = _resolve(ies, ies_file)
+            args["ies_angle_scale"] = float(shaping.GetShapingIesAngleScaleAttr().Get(time))
+            args["ies_normalize"] = bool(shaping.GetShapingIesNormalizeAttr().Get(time))
+            if not math.isfinite(args["ies_angle_scale"]):
+                raise PrimError(path, "inputs:shaping:ies:angleScale is not finite")
         if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
             _warn_once(
                 f"{path}: inputs:shaping:cone:softness {args['cone_softness']:g} is clipped to "
