@@ -53,7 +53,7 @@ _CHECKER: list[Any] = []
 _SHADING = frozenset(
     (
         "material face_materials face_material_indices displacement_texture gprim primvars "
-        "st_values st_indices st_interpolation double_sided prototype"
+        "st_values st_indices st_interpolation double_sided prototype light"
     ).split()
 )
 
@@ -124,6 +124,7 @@ class FakeRenderDelegate:
         primvars: dict[str, dict[str, object]] | None = None,
         face_materials: list[dict[str, object]] | None = None,
         face_material_indices: NDArray[np.int32] | None = None,
+        light: dict[str, object] | None = None,
     ) -> None:
         kwargs = locals_without_self(locals())
         for role, pv in (primvars or {}).items():
@@ -231,6 +232,9 @@ class FakeRenderDelegate:
         focus_tint: tuple[float, float, float] = (0.0, 0.0, 0.0),
         unlit: list[str] | None = None,
         no_shadow: list[str] | None = None,
+        ies_file: str | None = None,
+        ies_angle_scale: float = 0.0,
+        ies_normalize: bool = False,
     ) -> None:
         self._set("set_light", path, dict(locals_without_self(locals())))
 

@@ -58,7 +58,10 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     light.GetShadowLinkCollectionAPI().CreateIncludeRootAttr(False)
 
     emitter = add_cube(stage, "/World/Emitter").GetPrim()
-    UsdLux.MeshLightAPI.Apply(emitter)
+    UsdLux.MeshLightAPI.Apply(emitter)  # rendered: a light
+    emitter.CreateAttribute("light:materialSyncMode", Sdf.ValueTypeNames.Token).Set(
+        "materialGlowTintsLight"
+    )
 
     # An instanceable Mesh: USD instances its descendants, not its own geometry.
     add_cube(stage, "/Protos/Box")
@@ -126,7 +129,9 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
             Unsupported(key_path, "light input inputs:diffuse"),
-            Unsupported("/World/Emitter", "MeshLightAPI"),
+            Unsupported(
+                "/World/Emitter", "MeshLightAPI light:materialSyncMode = materialGlowTintsLight"
+            ),
             Unsupported(
                 "/World/InstMesh",
                 "instanceable gprim (its own geometry is not instanced) Mesh",

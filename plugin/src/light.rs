@@ -1,4 +1,6 @@
-//! Light Sprims (UsdLux): distant, sphere, rect, disk, cylinder and dome lights.
+//! Light Sprims (UsdLux): distant, sphere, rect, disk, cylinder and dome lights; and emissive
+//! meshes (`MeshLightAPI`, `GeometryLight`), which are mesh Rprims whose surface becomes a light
+//! ([`mesh_light`]).
 
 use glam::{Mat4, Vec3A};
 use mipray::light::{Light, LightShape};
@@ -50,7 +52,33 @@ pub struct ShapingData {
     pub cone_softness: f32,
     pub focus: f32,
     pub focus_tint: [f32; 3],
+    /// `shaping:ies:*`, when a file is authored.
+    pub ies: Option<IesData>,
 }
+
+/// A light's IES profile: the file as read when the light was set (or why it could not be),
+/// `ies:angleScale` and `ies:normalize`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IesData {
+    pub file: String,
+    pub profile: Result<mipray::light::IesProfile, String>,
+    pub angle_scale: f32,
+    pub normalize: bool,
+}
+
+impl IesData {
+    /// Reads and parses `file` (an error is kept, to be warned about when the light is used).
+    pub fn read(file: &str, angle_scale: f32, normalize: bool) -> IesData {
+        let profile = std::fs::read(file)
+            .map_err(|e| e.to_string())
+            .and_then(|bytes| mipray::light::IesProfile::parse(&String::from_utf8_lossy(&bytes)));
+        IesData { file: file.to_string(), profile, angle_scale, normalize }
+    }
+}
+
+/// Lights and files already warned about (a bad IES file is named once, not every render).
+static IES_WARNED: std::sync::Mutex<std::collections::BTreeSet<(String, String)>> =
+    std::sync::Mutex::new(std::collections::BTreeSet::new());
 
 /// Light and shadow linking, resolved by the scene delegate: the mesh prims (paths) a light's
 /// `collection:lightLink` leaves out, and those its `collection:shadowLink` leaves out.
@@ -152,6 +180,27 @@ impl LightPrim {
         {
             let axis = m.transform_vector3a(Vec3A::NEG_Z);
             l.shaping = mipray::light::Shaping::new(axis, sh.cone_angle_deg, sh.cone_softness, sh.focus, Vec3A::from(sh.focus_tint.map(f)));
+            match sh.ies.as_ref().map(|ies| (ies, &ies.profile)) {
+                Some((ies, Ok(profile))) => {
+                    let shaping = mipray::light::IesShaping {
+                        profile: profile.clone(),
+                        file: ies.file.clone(),
+                        // UsdLux: the scale must stay above −1 (1 + s divides θ).
+                        angle_scale: if ies.angle_scale.is_finite() { ies.angle_scale.max(-0.99) } else { 0.0 },
+                        normalize: ies.normalize,
+                        x: m.transform_vector3a(Vec3A::X).normalize_or(Vec3A::X),
+                        y: m.transform_vector3a(Vec3A::Y).normalize_or(Vec3A::Y),
+                    };
+                    l.shaping = Some(mipray::light::Shaping::with_ies(l.shaping.take(), axis, shaping));
+                }
+                Some((ies, Err(e))) => {
+                    let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                    if warned.insert((self.path.clone(), ies.file.clone())) {
+                        log::warn!("{}: cannot read IES profile {}: {e}; the light renders without it", self.path, ies.file);
+                    }
+                }
+                None => {}
+            }
         }
         l
     }
@@ -170,4 +219,69 @@ impl LightPrim {
         l.shadowed_by = resolve(&self.links.no_shadow);
         l
     }
+}
+
+/// A mesh's light inputs (UsdLux `MeshLightAPI` on it, or a `GeometryLight` naming it): what
+/// every light has but a transform and a shape, which are the mesh's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshLightData {
+    pub intensity: f32,
+    pub exposure: f32,
+    /// Linear RGB, the colour temperature folded in.
+    pub color: [f32; 3],
+    pub normalize: bool,
+    pub shadow_enable: bool,
+    pub links: LinkData,
+}
+
+/// Vertices per side of the grid each patch of an emissive subdivision surface (or gprim) is
+/// tessellated at for lighting: 4×4 quads, 32 triangles a patch. A polygonal mesh's patches are
+/// its faces, flat or bilinear, taken at their corners (2 triangles a quad).
+pub const MESH_LIGHT_GRID: usize = 5;
+
+/// The render-space triangles of `surface` placed by `transform` (object to render, column
+/// vectors), oriented so their right-hand normals point out of the front face: USD's
+/// right-handed winding, flipped for `left_handed` and for a transform that mirrors.
+pub fn light_triangles(surface: &dyn mipray::patch::LimitSurface, transform: &Mat4, left_handed: bool, grid: usize) -> Vec<[Vec3A; 3]> {
+    let n = grid.max(2);
+    let flip = left_handed != (transform.determinant() < 0.0);
+    let mut out = Vec::with_capacity(surface.patch_count() * 2 * (n - 1) * (n - 1));
+    let mut g = mipray::patch::GridSamples::default();
+    for patch in 0..surface.patch_count() {
+        surface.evaluate_grid(patch, mipray::patch::UvRect::UNIT, n, false, &mut g);
+        let at = |i: usize, j: usize| transform.transform_point3a(Vec3A::from(g.p[j * n + i]));
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let (p00, p10, p11, p01) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                // u then v: dP/du × dP/dv is the patch's front normal.
+                for t in [[p00, p10, p11], [p00, p11, p01]] {
+                    out.push(if flip { [t[0], t[2], t[1]] } else { t });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The core light an emissive mesh `path` makes: its surface's triangles ([`light_triangles`],
+/// polygonal meshes at their corners, others at [`MESH_LIGHT_GRID`]) emitting
+/// `color · intensity · 2^exposure` as radiance from their front (both sides when
+/// `double_sided`), divided by their area with `normalize` (UsdLux). `None` when the surface
+/// has no area.
+pub fn mesh_light(
+    path: &str,
+    light: &MeshLightData,
+    surface: &dyn mipray::patch::LimitSurface,
+    polygonal: bool,
+    transform: &Mat4,
+    left_handed: bool,
+    double_sided: bool,
+) -> Option<Light> {
+    let grid = if polygonal { 2 } else { MESH_LIGHT_GRID };
+    let tris = mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?;
+    let f = |x: f32| if x.is_finite() { x } else { 0.0 };
+    let color = Vec3A::from(light.color.map(f));
+    let mut l = Light::usd_area(path, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
+    l.casts_shadows = light.shadow_enable;
+    Some(l)
 }

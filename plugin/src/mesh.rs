@@ -55,6 +55,9 @@ pub struct MeshData {
     /// Set for gprims other than meshes, which are intersected exactly: their shape replaces
     /// `topology` (and, for an implicit gprim, `points`).
     pub gprim: Option<Gprim>,
+    /// UsdLux `MeshLightAPI` (or a `GeometryLight` naming this prim): the surface is then a
+    /// light and not geometry ([`crate::light::mesh_light`]).
+    pub light: Option<crate::light::MeshLightData>,
 }
 
 /// Where each primvar sits among a surface's 2-float channels ([`MeshData::channels`]).
@@ -230,6 +233,7 @@ impl Default for MeshData {
             primvar_inputs: Vec::new(),
             displacement_texture: None,
             gprim: None,
+            light: None,
         }
     }
 }
@@ -315,6 +319,7 @@ impl MeshPrim {
         if self.data.double_sided != new.double_sided
             || self.data.face_materials != new.face_materials
             || self.data.material != new.material
+            || self.data.light != new.light
         {
             d = d | DirtyBits::MATERIAL;
         }

@@ -316,7 +316,8 @@ impl RenderDelegate {
         // costs nothing, and one placed 10,000 times is one core mesh.
         let mut index: HashMap<&str, Option<usize>> = HashMap::new();
         let mut place = |scene: &mut Scene, path: &str, transform: Mat4| {
-            let Some((path, m)) = self.meshes.get_key_value(path) else { return };
+            // An emissive mesh is a light, not geometry (added with the lights below).
+            let Some((path, m)) = self.meshes.get_key_value(path).filter(|(_, m)| m.data.light.is_none()) else { return };
             let slot = *index.entry(path.as_str()).or_insert_with(|| self.core_mesh(m, default_displacement_bound, scene));
             if let Some(idx) = slot {
                 match &m.motion {
@@ -341,8 +342,37 @@ impl RenderDelegate {
         let sampler = self.sampler();
         let mesh_index = |p: &str| index.get(p).copied().flatten();
         scene.lights = self.lights.values().map(|l| l.to_scene_light(sampler.as_ref(), &mesh_index)).collect();
+        scene.lights.extend(self.mesh_lights(&mesh_index));
         scene.textures = sampler;
         Ok(scene)
+    }
+
+    /// The emissive meshes' lights (placed on their own, at their transform at the shutter's
+    /// open: mesh lights are not instanced or motion blurred), their links resolved by
+    /// `mesh_index`. A mesh light whose surface did not sync, or has no area, is left out
+    /// with one warning.
+    fn mesh_lights(&self, mesh_index: &dyn Fn(&str) -> Option<usize>) -> Vec<mipray::light::Light> {
+        let mut out = Vec::new();
+        for m in self.meshes.values().filter(|m| !m.data.prototype) {
+            let (Some(data), Some(surface)) = (&m.data.light, &m.surface) else { continue };
+            let polygonal = matches!(surface, crate::mesh::Surface::Bilinear(_));
+            let limit = surface.as_limit_surface();
+            let d = &m.data;
+            match crate::light::mesh_light(&m.path, data, limit.as_ref(), polygonal, &d.transform, d.topology.left_handed, d.double_sided) {
+                Some(mut l) => {
+                    let resolve = |paths: &[String]| {
+                        mipray::light::MeshFilter::excluding(paths.iter().filter_map(|p| mesh_index(p)).map(|i| i as u32).collect())
+                    };
+                    l.illuminates = resolve(&data.links.unlit);
+                    l.shadowed_by = resolve(&data.links.no_shadow);
+                    out.push(l);
+                }
+                None => {
+                    self.warn_once(format!("{} mesh light", m.path), format!("{}: the mesh light has no area; it emits nothing", m.path))
+                }
+            }
+        }
+        out
     }
 
     /// The texture `tex` feeding UsdPreviewSurface input `input`, or `None` (warned once,

@@ -69,6 +69,7 @@ class RenderDelegate:
         primvars: dict[str, dict[str, object]] | None = None,
         face_materials: list[dict[str, object]] | None = None,
         face_material_indices: NDArray[np.int32] | None = None,
+        light: dict[str, object] | None = None,
     ) -> None:
         """Add or replace a mesh (an Rprim).
 
@@ -162,6 +163,13 @@ class RenderDelegate:
                 (holes included; one per point for Points): an index into
                 ``face_materials``, or -1 for the mesh's ``material``. Given
                 together with ``face_materials``.
+            light: UsdLux ``MeshLightAPI``: the mesh is then an area light and
+                not a surface (its material unread): ``{"intensity",
+                "exposure", "color", "normalize", "shadow_enable", "unlit",
+                "no_shadow"}`` as :meth:`set_light` takes them, every key
+                optional. Its limit surface, tessellated for lighting (polygons
+                at their corners, subdivision patches 4×4), emits from its
+                front faces (both with ``double_sided``).
 
         Raises:
             PrimDataError: the data is inconsistent (the one check of a mesh's
@@ -288,6 +296,9 @@ class RenderDelegate:
         focus_tint: tuple[float, float, float] = ...,  # (0.0, 0.0, 0.0)
         unlit: list[str] = ...,  # []
         no_shadow: list[str] = ...,  # []
+        ies_file: str | None = None,
+        ies_angle_scale: float = 0.0,
+        ies_normalize: bool = False,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
 
@@ -301,7 +312,10 @@ class RenderDelegate:
         soft shadows with ``shadowSamples`` rays each. ``cone_angle``
         (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are
         UsdLux's ShapingAPI on sphere, rect and disk lights (the defaults
-        shape nothing); ``unlit`` and ``no_shadow`` name the mesh prims the
+        shape nothing); ``ies_file``, ``ies_angle_scale`` and ``ies_normalize``
+        are its IES profile (LM-63, TILT=NONE, type C: a file that cannot be
+        read or parsed is named in one warning and the light renders without
+        it); ``unlit`` and ``no_shadow`` name the mesh prims the
         light's light- and shadow-linking collections leave out.
 
         Raises:

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
-use hd_mipray::light::{AreaKind, DistantLightData, LightPrim, LinkData, ShapingData};
+use hd_mipray::light::{AreaKind, DistantLightData, IesData, LightPrim, LinkData, MeshLightData, ShapingData};
 
 use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
@@ -208,7 +208,7 @@ impl RenderDelegate {
     }
 
     /// Inserts or updates a mesh. See the stubs for argument meanings.
-    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, displacement_bound=None, displacement=None, prototype=false, st_values=None, st_indices=None, st_interpolation="faceVarying", displacement_texture=None, material=None, gprim=None, primvars=None, face_materials=None, face_material_indices=None))]
+    #[pyo3(signature = (path, *, points, face_vertex_counts, face_vertex_indices, transform, scheme="catmullClark", interpolate_boundary="edgeAndCorner", face_varying_linear_interpolation="cornersPlus1", triangle_subdivision_rule="catmullClark", crease_indices=None, crease_lengths=None, crease_sharpnesses=None, corner_indices=None, corner_sharpnesses=None, hole_indices=None, left_handed=false, double_sided=false, displacement_bound=None, displacement=None, prototype=false, st_values=None, st_indices=None, st_interpolation="faceVarying", displacement_texture=None, material=None, gprim=None, primvars=None, face_materials=None, face_material_indices=None, light=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_mesh(
         &mut self,
@@ -241,8 +241,10 @@ impl RenderDelegate {
         primvars: Option<&Bound<'_, PyDict>>,
         face_materials: Option<Vec<Bound<'_, PyDict>>>,
         face_material_indices: Option<PyReadonlyArray1<'_, i32>>,
+        light: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<()> {
         let gprim = gprim.map(|g| read_gprim(path, g)).transpose()?;
+        let light = light.map(|d| read_mesh_light(path, d)).transpose()?;
         let pts = points.as_array();
         let shape = pts.shape();
         if shape.len() != 2 || shape[1] != 3 {
@@ -318,6 +320,7 @@ impl RenderDelegate {
                 primvar_inputs,
                 displacement_texture,
                 gprim,
+                light,
             },
         );
         // The delegate checks the data, once; what it refuses is not kept, and is an error
@@ -452,7 +455,7 @@ impl RenderDelegate {
     /// ``cone_angle`` (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are UsdLux's
     /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
     /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new()))]
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -476,8 +479,12 @@ impl RenderDelegate {
         focus_tint: (f32, f32, f32),
         unlit: Vec<String>,
         no_shadow: Vec<String>,
+        ies_file: Option<String>,
+        ies_angle_scale: f32,
+        ies_normalize: bool,
     ) -> PyResult<()> {
         let vals = [
+            ies_angle_scale,
             intensity,
             exposure,
             color.0,
@@ -522,8 +529,13 @@ impl RenderDelegate {
             "dome" => AreaKind::Dome { texture },
             _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk, cylinder or dome"))),
         };
-        let shaping =
-            Some(ShapingData { cone_angle_deg: cone_angle, cone_softness, focus, focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2] });
+        let shaping = Some(ShapingData {
+            cone_angle_deg: cone_angle,
+            cone_softness,
+            focus,
+            focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2],
+            ies: ies_file.map(|file| IesData::read(&file, ies_angle_scale, ies_normalize)),
+        });
         self.inner.set_light(LightPrim { path: path.to_string(), data, area: Some(area), shaping, links });
         Ok(())
     }
@@ -646,6 +658,33 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 /// `set_mesh`'s `gprim` dict: `type` (Sphere, Cube, Cylinder, Capsule, Plane, Points) and the
 /// shape's sizes (`radius`, `size`, `radius_bottom`, `radius_top`, `height`, `width`,
 /// `length`, `axis`; `widths` for Points). Sizes are checked here, so a bad one names the prim.
+/// `set_mesh`'s ``light``: ``{"intensity", "exposure", "color", "normalize", "shadow_enable",
+/// "unlit", "no_shadow"}``, every key optional (UsdLux's fallbacks; no links).
+fn read_mesh_light(path: &str, d: &Bound<'_, PyDict>) -> PyResult<MeshLightData> {
+    fn get<'py, T: for<'a> FromPyObject<'a, 'py>>(path: &str, d: &Bound<'py, PyDict>, key: &str, default: T) -> PyResult<T> {
+        match d.get_item(key)? {
+            Some(v) => v.extract().map_err(|_| value_error(path, format!("light {key} has the wrong type"))),
+            None => Ok(default),
+        }
+    }
+    let color: (f32, f32, f32) = get(path, d, "color", (1.0, 1.0, 1.0))?;
+    let l = MeshLightData {
+        intensity: get(path, d, "intensity", 1.0)?,
+        exposure: get(path, d, "exposure", 0.0)?,
+        color: [color.0, color.1, color.2],
+        normalize: get(path, d, "normalize", false)?,
+        shadow_enable: get(path, d, "shadow_enable", true)?,
+        links: LinkData { unlit: get(path, d, "unlit", Vec::new())?, no_shadow: get(path, d, "no_shadow", Vec::new())? },
+    };
+    if ![l.intensity, l.exposure, l.color[0], l.color[1], l.color[2]].iter().all(|v| v.is_finite()) {
+        return Err(value_error(path, "light inputs must be finite"));
+    }
+    if l.intensity < 0.0 || l.color.iter().any(|c| *c < 0.0) {
+        return Err(value_error(path, "light intensity and color must be >= 0"));
+    }
+    Ok(l)
+}
+
 fn read_gprim(path: &str, d: &Bound<'_, PyDict>) -> PyResult<Gprim> {
     use mipray::implicit::{Axis, ImplicitSurface, Shape};
     let kind: String = d.get_item("type")?.ok_or_else(|| value_error(path, "gprim has no type"))?.extract()?;

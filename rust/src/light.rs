@@ -1,4 +1,5 @@
-//! Lights (UsdLux): distant, sphere, rect, disk, cylinder and dome; `ShapingAPI` on sphere, rect and disk
+//! Lights (UsdLux): distant, sphere, rect, disk, cylinder, dome and emissive meshes (`MeshLightAPI`:
+//! [`TriangleLight`], sampled uniformly by area); `ShapingAPI` on sphere, rect and disk
 //! lights ([`Shaping`]); light and shadow linking ([`Light::illuminates`],
 //! [`Light::shadowed_by`]: what the direct-lighting estimator and shadow rays honour).
 //!
@@ -31,8 +32,13 @@ use glam::{Mat4, Vec3A};
 use crate::sampling::{cosine_hemisphere, frame};
 
 mod env;
+mod ies;
+mod mesh;
+
+pub use ies::IesProfile;
 
 pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
+pub use mesh::{TriangleHit, TriangleLight};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightShape {
@@ -53,6 +59,16 @@ pub enum LightShape {
     Cylinder { center: Vec3A, axis: Vec3A, radius: f32, e1: Vec3A, e2: Vec3A },
     /// Radiance from every direction: uniform, or a latlong environment texture.
     Dome(Option<EnvTexture>),
+    /// An emissive mesh (UsdLux `MeshLightAPI`, `GeometryLight`) as tessellated for lighting,
+    /// emitting from its triangles' front sides (both with `two_sided`).
+    Mesh(std::sync::Arc<TriangleLight>),
+}
+
+impl PartialEq for TriangleLight {
+    /// The same mesh light (its triangles are not compared).
+    fn eq(&self, o: &Self) -> bool {
+        std::ptr::eq(self, o)
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -162,7 +178,7 @@ impl RectTexture {
 ///
 /// The factor depends only on ω, so a spot of cone angle α pointing down from height h lights a
 /// floor inside radius h·tan α and nothing outside (for a small light).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Shaping {
     /// Unit, render space: where the light points (its local −Z).
     pub axis: Vec3A,
@@ -174,6 +190,58 @@ pub struct Shaping {
     pub focus: f32,
     /// `focusTint`, linear RGB.
     pub focus_tint: Vec3A,
+    /// `ies:file`, `ies:angleScale`, `ies:normalize` ([`IesShaping`]).
+    pub ies: Option<std::sync::Arc<IesShaping>>,
+}
+
+/// An IES profile on a light (UsdLux `ShapingAPI`'s `ies:*` inputs), evaluated as
+/// [`IesProfile`] documents: the candela toward the emission direction, divided by the
+/// profile's mean with `normalize`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IesShaping {
+    pub profile: IesProfile,
+    /// The file, for stats and messages.
+    pub file: String,
+    /// `ies:angleScale`, > −1.
+    pub angle_scale: f32,
+    pub normalize: bool,
+    /// The light's local +X and +Y in render space (unit): the azimuth's frame.
+    pub x: Vec3A,
+    pub y: Vec3A,
+}
+
+impl IesShaping {
+    /// What radiance emitted along unit `w` (away from the light, whose −Z is `axis`) is
+    /// multiplied by.
+    pub fn factor(&self, axis: Vec3A, w: Vec3A) -> f32 {
+        use std::f32::consts::PI;
+        let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
+        // hdEmbree's azimuth: of the direction toward the light, in the light's XY plane.
+        let phi = (-w.dot(self.y)).atan2(-w.dot(self.x));
+        let scale = 1.0 + self.angle_scale;
+        let theta = if scale > 0.0 { ((theta - PI) / scale + PI).clamp(0.0, PI) } else { theta };
+        let c = self.profile.candela(theta, phi);
+        if self.normalize {
+            let m = self.profile.mean();
+            if m > 0.0 {
+                c / m
+            } else {
+                0.0
+            }
+        } else {
+            c
+        }
+    }
+
+    /// The largest [`IesShaping::factor`] (an upper bound for the light tree's importance).
+    pub fn peak(&self) -> f32 {
+        let m = self.profile.mean();
+        match (self.normalize, m > 0.0) {
+            (true, true) => self.profile.peak() / m,
+            (true, false) => 0.0,
+            _ => self.profile.peak(),
+        }
+    }
 }
 
 impl Shaping {
@@ -189,8 +257,22 @@ impl Shaping {
             softness: finite(softness, 0.0).clamp(0.0, 1.0),
             focus,
             focus_tint: if focus_tint.is_finite() { focus_tint.max(Vec3A::ZERO) } else { Vec3A::ZERO },
+            ies: None,
         };
         (cone < PI || focus > 0.0).then_some(s)
+    }
+
+    /// `shaping` (or, if `None`, no cone or focus about `axis`) with the IES profile `ies`.
+    pub fn with_ies(shaping: Option<Shaping>, axis: Vec3A, ies: IesShaping) -> Shaping {
+        let base = shaping.unwrap_or(Shaping {
+            axis: axis.normalize_or(Vec3A::NEG_Z),
+            cone: PI,
+            softness: 0.0,
+            focus: 0.0,
+            focus_tint: Vec3A::ZERO,
+            ies: None,
+        });
+        Shaping { ies: Some(std::sync::Arc::new(ies)), ..base }
     }
 
     /// What radiance emitted along unit `w` (away from the light) is multiplied by (RGB).
@@ -200,6 +282,9 @@ impl Shaping {
         if self.focus > 0.0 {
             let ff = cos_off.abs().powf(self.focus);
             f = self.focus_tint + (Vec3A::ONE - self.focus_tint) * ff;
+        }
+        if let Some(ies) = &self.ies {
+            f *= ies.factor(self.axis, w);
         }
         if self.cone < PI {
             let theta = cos_off.acos();
@@ -385,6 +470,14 @@ impl Light {
                 }
                 (shape_area(shape) * normal.dot(d).abs() / (d2 * d2.sqrt())).min(2.0 * PI)
             }
+            LightShape::Mesh(m) => {
+                // Its area over the distance² to its bounds' centre: an estimate, as for rects.
+                let d2 = (m.bounds().center() - p).length_squared();
+                if !(d2 > 0.0) {
+                    return 4.0 * PI;
+                }
+                (m.area() / d2).min(4.0 * PI)
+            }
             LightShape::Cylinder { center, axis, radius, .. } => {
                 // Its largest projected area over the distance²: an estimate, as for rects.
                 let d2 = (*center - p).length_squared();
@@ -440,7 +533,7 @@ impl Light {
                 let distance = (b - disc.sqrt()).max(0.0);
                 LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
-            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. }) => {
+            shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. } | LightShape::Mesh(_)) => {
                 let (y, ny, area) = sample_planar(shape, u1, u2)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
@@ -449,9 +542,20 @@ impl Light {
                 }
                 let dist = dist2.sqrt();
                 let wi = d / dist;
-                let cos_l = -ny.dot(wi);
-                if cos_l <= 0.0 {
+                let cos_l = match shape {
+                    LightShape::Mesh(m) if m.two_sided => ny.dot(wi).abs(),
+                    _ => -ny.dot(wi),
+                };
+                if !(cos_l > 0.0) {
                     return None;
+                }
+                if let LightShape::Mesh(m) = shape {
+                    // A nearer part of the mesh in front of the sampled point hides it: the
+                    // directions kept are those whose nearest emitting crossing is the sample,
+                    // so the density is that crossing's, as `intersect` finds it.
+                    if m.intersect(p, wi, dist * (1.0 - 1e-3)).is_some() {
+                        return None;
+                    }
                 }
                 let mut radiance = self.radiance_scale;
                 if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, shape) {
@@ -510,6 +614,7 @@ impl Light {
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
             LightShape::Cylinder { .. } => self.intersect_cylinder(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
+            LightShape::Mesh(_) => self.intersect_mesh(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
         }
     }
 
@@ -545,6 +650,7 @@ impl Light {
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(o, d, t_max),
             LightShape::Cylinder { .. } => self.intersect_cylinder(o, d, t_max),
+            LightShape::Mesh(_) => self.intersect_mesh(o, d, t_max),
             _ => None,
         }
     }
@@ -583,6 +689,14 @@ impl Light {
             return None;
         }
         Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * shape_area(&self.shape)) })
+    }
+
+    /// The mesh's nearest emitting side along the ray ([`TriangleLight::intersect`]), with the
+    /// density of area sampling there.
+    fn intersect_mesh(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+        let LightShape::Mesh(m) = &self.shape else { return None };
+        let h = m.intersect(o, d, t_max)?;
+        Some(LightHit { t: h.t, radiance: self.radiance_scale, pdf: h.t * h.t / (h.cos * m.area()) })
     }
 
     fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
@@ -652,9 +766,15 @@ impl Light {
             LightShape::Disk { .. } => "disk",
             LightShape::Cylinder { .. } => "cylinder",
             LightShape::Dome(_) => "dome",
+            LightShape::Mesh(_) => "mesh",
         };
         let names = |f: &MeshFilter| -> Vec<&str> { f.excluded().iter().filter_map(|&m| mesh_name(m)).collect() };
         let mut out = serde_json::json!({ "name": self.name, "kind": kind, "casts_shadows": self.casts_shadows });
+        if let LightShape::Mesh(m) = &self.shape {
+            out["triangles"] = serde_json::json!(m.len());
+            out["area"] = serde_json::json!(m.area());
+            out["two_sided"] = serde_json::json!(m.two_sided);
+        }
         if let Some(s) = &self.shaping {
             out["shaping"] = serde_json::json!({
                 "cone_angle_deg": s.cone.to_degrees(),
@@ -662,6 +782,15 @@ impl Light {
                 "focus": s.focus,
                 "focus_tint": [s.focus_tint.x, s.focus_tint.y, s.focus_tint.z],
             });
+            if let Some(ies) = &s.ies {
+                out["shaping"]["ies"] = serde_json::json!({
+                    "file": ies.file,
+                    "angle_scale": ies.angle_scale,
+                    "normalize": ies.normalize,
+                    "mean_candela": ies.profile.mean(),
+                    "peak_candela": ies.profile.peak(),
+                });
+            }
         }
         if !self.illuminates.is_all() {
             out["not_illuminating"] = serde_json::json!(names(&self.illuminates));
@@ -704,11 +833,12 @@ pub fn shape_area(shape: &LightShape) -> f32 {
         LightShape::Rect { u, v, .. } => 4.0 * u.cross(*v).length(),
         LightShape::Disk { u, v, .. } => PI * u.cross(*v).length(),
         LightShape::Cylinder { axis, radius, .. } => 2.0 * PI * radius * 2.0 * axis.length(),
+        LightShape::Mesh(m) => m.area(),
         _ => 0.0,
     }
 }
 
-/// A uniformly distributed point on a rect, disk or cylinder light: (point, emitting normal,
+/// A uniformly distributed point on a rect, disk, cylinder or mesh light: (point, emitting normal,
 /// area).
 fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, f32)> {
     let area = shape_area(shape);
@@ -726,6 +856,10 @@ fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, 
             let r = u1.sqrt();
             let phi = 2.0 * PI * u2;
             Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area))
+        }
+        LightShape::Mesh(m) => {
+            let (p, n) = m.sample(u1, u2);
+            Some((p, n, area))
         }
         _ => None,
     }
@@ -771,6 +905,54 @@ mod tests {
         assert!((normalized.radiance_scale.x - 1.0 / PI).abs() < 1e-6);
         // Behind the disk nothing arrives.
         assert_eq!(irradiance(&light, Vec3A::new(0.0, 0.0, 4.0), Vec3A::NEG_Z, 1000), 0.0);
+    }
+
+    /// Lambert's exact irradiance at `p` (normal `n`) from a polygon of uniform radiance 1
+    /// (vertices in order): E = ½ Σ θᵢ (n · γᵢ), θᵢ the angle each edge subtends, γᵢ the unit
+    /// normal of the plane through p and the edge.
+    fn lambert_polygon(poly: &[Vec3A], p: Vec3A, n: Vec3A) -> f32 {
+        let mut e = 0.0f64;
+        for i in 0..poly.len() {
+            let (a, b) = ((poly[i] - p).normalize(), (poly[(i + 1) % poly.len()] - p).normalize());
+            let theta = f64::from(a.dot(b).clamp(-1.0, 1.0)).acos();
+            e += theta * f64::from(n.dot(a.cross(b).normalize()));
+        }
+        (0.5 * e).abs() as f32
+    }
+
+    #[test]
+    fn mesh_light_irradiance_is_lamberts_and_its_density_is_consistent() {
+        // A non-convex L-shaped polygon, tilted, facing the origin, fan-triangulated from a
+        // vertex of the concave corner's neighbour so every triangle lies inside it.
+        let tilt = Mat4::from_rotation_x(0.4) * Mat4::from_translation(glam::Vec3::new(0.3, -0.2, 2.0));
+        let outline: Vec<Vec3A> = [(0.0, 0.0), (0.0, 2.0), (1.0, 2.0), (1.0, 1.0), (2.0, 1.0), (2.0, 0.0)]
+            .iter()
+            .map(|&(x, y)| tilt.transform_point3a(Vec3A::new(x - 1.0, y - 1.0, 0.0)))
+            .collect();
+        // Triangles (0,1,2), (0,2,3), (0,3,4), (0,4,5) cover the L; the outline runs clockwise
+        // seen from +Z, so they face −Z's image, toward the origin.
+        let tris: Vec<[Vec3A; 3]> = (1..5).map(|i| [outline[0], outline[i], outline[i + 1]]).collect();
+        let mesh = TriangleLight::new(tris, false).unwrap();
+        assert!((mesh.area() - 3.0).abs() < 1e-5);
+        let light = Light::usd_area("/m", LightShape::Mesh(mesh.clone()), 1.0, 0.0, Vec3A::ONE, false);
+        for (p, n) in [(Vec3A::ZERO, Vec3A::Z), (Vec3A::new(0.5, 0.3, 0.2), Vec3A::new(0.3, 0.1, 1.0).normalize())] {
+            let e = irradiance(&light, p, n, 400_000);
+            let expected = lambert_polygon(&outline, p, n);
+            assert!((e - expected).abs() < 0.01 * expected, "{e} vs {expected} at {p}");
+        }
+        // What light sampling picks, BSDF sampling's rays meet with the same density.
+        let mut s = Sampler::new(3, 1, 4);
+        for _ in 0..200 {
+            let ls = light.sample(Vec3A::ZERO, Vec3A::Z, s.next_f32(), s.next_f32()).unwrap();
+            let pdf = light.pdf(Vec3A::ZERO, Vec3A::Z, ls.wi);
+            assert!((pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "{pdf} vs {}", ls.pdf);
+            let hit = light.intersect(Vec3A::ZERO, ls.wi, f32::INFINITY).unwrap();
+            assert!((hit.t - ls.distance).abs() < 1e-4 && hit.radiance == ls.radiance);
+        }
+        // Behind it nothing arrives; normalize divides by the area.
+        assert_eq!(irradiance(&light, Vec3A::new(0.0, 0.0, 6.0), Vec3A::NEG_Z, 1000), 0.0);
+        let normalized = Light::usd_area("/m", LightShape::Mesh(mesh), 1.0, 0.0, Vec3A::ONE, true);
+        assert!((normalized.radiance_scale.x - 1.0 / 3.0).abs() < 1e-6);
     }
 
     #[test]

@@ -145,6 +145,14 @@ impl LightBounds {
                 normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
                 cos_theta_e: 0.0,
             },
+            LightShape::Mesh(m) => LightBounds {
+                lo: m.bounds().min,
+                hi: m.bounds().max,
+                // Its whole area facing the point at best (an upper bound, as the others').
+                phi: lum * m.area(),
+                normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
+                cos_theta_e: 0.0,
+            },
             _ => return None,
         };
         // A shaped light emits only within its cone about its axis (focus only dims it: the
@@ -161,7 +169,11 @@ impl LightBounds {
         // A light of non-finite radiance stays in, with a nominal power: its samples carry the
         // non-finite value to the render loop, which drops them and counts them (no NaN reaches
         // the film, and the stats say a light is broken). Only lights that emit nothing leave.
-        let phi = if b.phi.is_finite() { b.phi } else { 1.0 };
+        // An IES profile scales the emission by up to its peak (a candela value, or the peak
+        // over the mean when normalized).
+        let peak = light.shaping.as_ref().and_then(|s| s.ies.as_ref()).map_or(1.0, |ies| ies.peak());
+        let phi = b.phi * peak;
+        let phi = if phi.is_finite() { phi } else { 1.0 };
         (phi > 0.0 && b.lo.is_finite() && b.hi.is_finite()).then_some(LightBounds { phi, ..b })
     }
 

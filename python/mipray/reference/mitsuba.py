@@ -22,8 +22,10 @@ What maps how (render space is USD world space in both renderers):
   → ``directional`` of irradiance intensity·2^exposure·color; sphere → a
   ``sphere`` shape with an ``area`` emitter of that radiance (÷ area with
   ``normalize``) and a black BSDF; rect → ``rectangle``, disk → ``disk``,
-  both emitting along the light's -Z; dome (no texture) → ``constant``. Camera
-  rays see lights in both renderers (the dome as the background).
+  both emitting along the light's -Z; dome (no texture) → ``constant``; a
+  polygonal mesh with MeshLightAPI → ``area`` emitters on its triangles (front
+  faces, and a turned-over copy when ``doubleSided``), black. Camera rays see
+  lights in both renderers (the dome as the background).
 - Materials (UsdPreviewSurface, clamped as mipray clamps them), wrapped in
   ``twosided`` because mipray shades both sides of a surface: no specular
   (F0 = 0, no clearcoat) → ``diffuse`` (exact); a full metal (metallic
@@ -776,6 +778,9 @@ def scene_dict(
         tris = _triangles(path, args, points)
         if len(tris) == 0:
             continue
+        if args.get("light") is not None:
+            scene.update(_mesh_light(mi, path, args, points, tris, f"mesh_{k}"))
+            continue
         own = material_mapping(path, args.get("material"))
         cap.materials[path] = own
         # Per-face materials (GeomSubsets, per-face displayColor as lambertian ones).
@@ -811,6 +816,44 @@ def scene_dict(
                     raise PrimError(path, "a texture on a mesh without st")
             scene[f"mesh_{k}_{g + 1}"] = _mesh(mi, f"{path}[{g}]", points, sel, props, st)
     return scene
+
+
+def _mesh_light(
+    mi: Any, path: str, args: dict[str, Any], points: NDArray[np.float64], tris: Any, key: str
+) -> dict[str, Any]:
+    """A mesh light (``set_mesh``'s ``light``) as Mitsuba area emitters on its triangles.
+
+    Black (mipray's mesh lights reflect nothing), emitting from the front faces, and from
+    the turned-over copy too when ``double_sided``. Only polygonal meshes: a subdivision
+    surface's lighting tessellation is mipray's own.
+
+    Raises:
+        PrimError: a subdivision mesh light, or one that casts no shadows.
+
+    """
+    light = args["light"]
+    if args.get("scheme", "catmullClark") != "none":
+        raise PrimError(path, "a subdivision mesh light is not exported to Mitsuba")
+    if not light.get("shadow_enable", True):
+        raise PrimError(path, "inputs:shadow:enable is off: Mitsuba's lights always cast shadows")
+    radiance = _light_radiance(light)
+    if light.get("normalize"):
+        corners = points[tris[:, :3]]
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        area = 0.5 * float(np.linalg.norm(cross, axis=1).sum())
+        radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
+    black = {"type": "diffuse", "reflectance": _spectrum((0.0, 0.0, 0.0))}
+
+    def props() -> Any:
+        p = mi.Properties()
+        p["bsdf"] = mi.load_dict(black)
+        p["emitter"] = mi.load_dict({"type": "area", "radiance": _spectrum(radiance)})
+        return p
+
+    out = {key: _mesh(mi, path, points, tris, props())}
+    if args.get("double_sided"):
+        out[f"{key}_back"] = _mesh(mi, f"{path} back", *_back_faces(points, tris), props())
+    return out
 
 
 def _back_faces(

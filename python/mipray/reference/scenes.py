@@ -290,6 +290,34 @@ def _disk_light() -> Usd.Stage:
     return stage
 
 
+def _mesh_light() -> Usd.Stage:
+    stage = _stage()
+    _still_life(stage)
+    # An L of three unit squares (0.8 units here), high above the objects and out of the
+    # frame (where the rect light sits), facing the origin: its right-hand normal e1 × e2 is
+    # the direction d from it to the origin.
+    c, s = (-1.0, 4.5, -2.0), 0.8
+    length = math.sqrt(1.0 + 4.5**2 + 2.0**2)
+    d = (1.0 / length, -4.5 / length, 2.0 / length)
+    across = math.hypot(d[0], d[2])
+    u = (-d[2] / across, 0.0, d[0] / across)  # d × +Y, normalized
+    v = (d[1] * u[2] - d[2] * u[1], d[2] * u[0] - d[0] * u[2], d[0] * u[1] - d[1] * u[0])
+    e1, e2 = tuple(s * x for x in u), tuple(s * x for x in v)
+    grid = [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1), (0, 2), (1, 2)]
+    points = [
+        tuple(c[k] + (x - 1.0) * e1[k] + (y - 1.0) * e2[k] for k in range(3)) for x, y in grid
+    ]
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Glow")
+    mesh.CreatePointsAttr([Gf.Vec3f(*p) for p in points])
+    mesh.CreateFaceVertexCountsAttr([4, 4, 4])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 4, 3, 1, 2, 5, 4, 3, 4, 7, 6])
+    mesh.CreateSubdivisionSchemeAttr("none")
+    light = UsdLux.MeshLightAPI.Apply(mesh.GetPrim())
+    UsdLux.LightAPI(light).CreateIntensityAttr(12.0)
+    UsdLux.LightAPI(light).CreateColorAttr(Gf.Vec3f(1.0, 0.85, 0.7))
+    return stage
+
+
 def _dome() -> Usd.Stage:
     stage = _stage()
     _still_life(stage)
@@ -712,6 +740,14 @@ SCENES: tuple[Scene, ...] = (
         "disk_light",
         "the same under a normalized disk light",
         _disk_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "mesh_light",
+        "the same under an L-shaped polygonal mesh with MeshLightAPI (one-sided, facing the "
+        "objects from above): area sampling over its triangles against Mitsuba's area emitter",
+        _mesh_light,
         settings={"shadowSamples": 4},
         integrator=_direct(4),
     ),

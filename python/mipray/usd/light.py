@@ -1,4 +1,4 @@
-"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder and dome lights, and the camera light.
+"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder, dome and mesh lights; the camera light.
 
 ``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
 others into ``RenderDelegate.set_light`` with their shape; a stage with no
@@ -16,16 +16,22 @@ warning naming the light; a value nothing sensible can be made of (non-finite,
 negative intensity or colour, zero size) is a ``PrimError`` naming the light,
 which skips that light only.
 
-``ShapingAPI`` on sphere, rect and disk lights (``shaping:cone:angle``,
-``cone:softness``, ``focus``, ``focusTint``, with the schema's fallbacks once the
-API is applied) goes to the core, which applies it as Hydra's hdEmbree does
-(``mipray::light::Shaping``); IES profiles and shaping on distant and dome lights
-are listed as unsupported. Light and shadow linking (``collection:lightLink``,
-``collection:shadowLink``) are resolved here with usd-core's
+``ShapingAPI`` on sphere, rect, disk and cylinder lights (``shaping:cone:angle``,
+``cone:softness``, ``focus``, ``focusTint``, and the IES profile ``ies:file``,
+``ies:angleScale``, ``ies:normalize``, with the schema's fallbacks once the API is
+applied) goes to the core, which applies it as Hydra's hdEmbree does
+(``mipray::light::Shaping``, ``mipray::light::IesProfile``); an IES file that cannot be
+read or parsed is named in one warning and the light renders without it. Shaping on
+distant and dome lights is listed as unsupported. Light and shadow linking
+(``collection:lightLink``, ``collection:shadowLink``) are resolved here with usd-core's
 ``ComputeMembershipQuery`` into the mesh prims each collection leaves out
 (``unlit``, ``no_shadow``); the scene delegate re-resolves them whenever the
 stage changes. Meshes inside native-instance prototypes are matched by their
 prototype path (``/__Prototype_1/...``), which only ``includeRoot`` reaches.
+
+A Mesh with ``MeshLightAPI``, or named by a ``GeometryLight``'s ``geometry``, is a mesh
+light: ``RenderDelegate.set_mesh`` gets ``light`` (:func:`mesh_light_arguments`,
+:func:`emitter_arguments`) and the core samples its tessellated limit surface by area.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Sdf, Usd, UsdLux
+from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from ..errors import PrimError
 
@@ -50,8 +56,11 @@ __all__ = [
     "authored_properties",
     "camera_light_arguments",
     "distant_light_arguments",
+    "emitter_arguments",
+    "geometry_light_targets",
     "link_arguments",
     "linking_authored",
+    "mesh_light_arguments",
 ]
 
 #: The non-distant UsdLux light types mipray renders, and their ``set_light`` kind.
@@ -66,9 +75,17 @@ _warned: set[str] = set()
 
 #: The light kinds ``ShapingAPI`` shapes (as Hydra's hdEmbree: area lights with a position).
 SHAPED_KINDS = frozenset({"sphere", "rect", "disk", "cylinder"})
-#: The ``ShapingAPI`` inputs mipray reads on those (IES profiles are not read).
+#: The ``ShapingAPI`` inputs mipray reads on those (IES profiles included).
 SHAPING_INPUTS = frozenset(
-    {"shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint"}
+    {
+        "shaping:cone:angle",
+        "shaping:cone:softness",
+        "shaping:focus",
+        "shaping:focusTint",
+        "shaping:ies:file",
+        "shaping:ies:angleScale",
+        "shaping:ies:normalize",
+    }
 )
 #: UsdLux's linking collections and the ``set_light`` argument each resolves to: the mesh prims
 #: the light does not illuminate, and those that do not block its shadow rays.
@@ -238,6 +255,16 @@ def area_light_arguments(
         for key in ("cone_angle", "cone_softness", "focus", "focus_tint"):
             if not np.isfinite(args[key]).all():
                 raise PrimError(path, f"inputs:shaping {key} {args[key]} is not finite")
+        ies = shaping.GetShapingIesFileAttr()
+        ies_file = ies.Get(time) if ies else None
+        if isinstance(ies_file, Sdf.AssetPath) and ies_file.path:
+            from .shading import _resolve
+
+            args["ies_file"] = _resolve(ies, ies_file)
+            args["ies_angle_scale"] = float(shaping.GetShapingIesAngleScaleAttr().Get(time))
+            args["ies_normalize"] = bool(shaping.GetShapingIesNormalizeAttr().Get(time))
+            if not math.isfinite(args["ies_angle_scale"]):
+                raise PrimError(path, "inputs:shaping:ies:angleScale is not finite")
         if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
             _warn_once(
                 f"{path}: inputs:shaping:cone:softness {args['cone_softness']:g} is clipped to "
@@ -276,6 +303,76 @@ def area_light_arguments(
         raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
     if not np.isfinite(transform).all():
         raise PrimError(path, "the world transform is not finite")
+    return args
+
+
+def mesh_light_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any] | None:
+    """``RenderDelegate.set_mesh``'s ``light`` for a Mesh with ``MeshLightAPI``; None otherwise.
+
+    The mesh then is a light, not a surface: its limit surface, tessellated for lighting,
+    emits ``color * intensity * 2**exposure`` as radiance from its front faces (both sides
+    when ``doubleSided``), divided by its area with ``normalize`` (UsdLux's ``LightAPI``
+    inputs and fallbacks; ``colorTemperature`` as for every light). Its bound material is not
+    rendered and does not tint the light (``light:materialSyncMode`` is not read).
+
+    Raises:
+        PrimError: a non-finite or negative value.
+
+    """
+    if not (prim.IsA(UsdGeom.Mesh) and prim.HasAPI(UsdLux.MeshLightAPI)):
+        return None
+    return emitter_arguments(prim, time)
+
+
+def geometry_light_targets(light: Usd.Prim) -> list[str]:
+    """The Mesh prims a ``UsdLux.GeometryLight``'s ``geometry`` relationship names.
+
+    Each becomes a mesh light with the GeometryLight's inputs
+    (:func:`emitter_arguments` of the light prim), as with ``MeshLightAPI``; its own
+    transform places it (the GeometryLight's is not read). A target that is not a Mesh is
+    skipped with one warning naming both.
+    """
+    rel = UsdLux.GeometryLight(light).GetGeometryRel()
+    out = []
+    for target in rel.GetForwardedTargets() if rel else []:
+        prim = light.GetStage().GetPrimAtPath(target)
+        if prim and prim.IsA(UsdGeom.Mesh):
+            out.append(str(target))
+        else:
+            _warn_once(
+                f"{light.GetPath()}: geometry target {target} is not a Mesh; it does not emit"
+            )
+    return out
+
+
+def emitter_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
+    """The ``LightAPI`` inputs of a mesh light as ``set_mesh``'s ``light`` takes them.
+
+    ``prim`` is the Mesh with ``MeshLightAPI`` or the ``GeometryLight`` naming it.
+
+    Raises:
+        PrimError: a non-finite or negative value.
+
+    """
+    path = str(prim.GetPath())
+    light = UsdLux.LightAPI(prim)
+
+    def get(attr: Usd.Attribute, default: Any) -> Any:
+        value = attr.Get(time) if attr else None
+        return default if value is None else value
+
+    args: dict[str, Any] = {
+        "intensity": float(get(light.GetIntensityAttr(), 1.0)),
+        "exposure": float(get(light.GetExposureAttr(), 0.0)),
+        "color": _color(prim, time),
+        "normalize": bool(get(light.GetNormalizeAttr(), False)),
+        "shadow_enable": bool(get(prim.GetAttribute("inputs:shadow:enable"), True)),
+    }
+    for key in ("intensity", "exposure"):
+        if not math.isfinite(args[key]):
+            raise PrimError(path, f"inputs:{key} is not finite")
+    if args["intensity"] < 0.0:
+        raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
     return args
 
 

@@ -51,6 +51,7 @@ class RenderDelegateLike(Protocol):
         primvars: dict[str, dict[str, object]] | None = ...,
         face_materials: list[dict[str, object]] | None = ...,
         face_material_indices: NDArray[np.int32] | None = ...,
+        light: dict[str, object] | None = ...,
     ) -> None:
         """Add or replace a mesh."""
 
@@ -129,6 +130,9 @@ class RenderDelegateLike(Protocol):
         focus_tint: tuple[float, float, float] = ...,
         unlit: list[str] = ...,
         no_shadow: list[str] = ...,
+        ies_file: str | None = ...,
+        ies_angle_scale: float = ...,
+        ies_normalize: bool = ...,
     ) -> None:
         """Add or replace a sphere, rect, disk or dome light (``kind``)."""
 

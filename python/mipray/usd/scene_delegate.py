@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,7 +54,10 @@ from .light import (
     area_light_arguments,
     camera_light_arguments,
     distant_light_arguments,
+    emitter_arguments,
+    geometry_light_targets,
     link_arguments,
+    mesh_light_arguments,
 )
 from .mesh_sync import read_mesh
 from .mtlx_files import load_mtlx_references
@@ -109,6 +113,7 @@ class _Record:
     # A skinned mesh's posed world bounds (min, max); skinned meshes are re-read, not moved.
     posed_bounds: tuple[Any, Any] | None = None
     rigid: bool = False  # a rigidly deformed skinned mesh: its pose is a transform
+    light: bool = False  # a mesh that is a light (MeshLightAPI)
 
 
 _NO_RECORD = _Record("none", -1, in_delegate=False)
@@ -227,6 +232,8 @@ class UsdSceneDelegate:
         # Before anything is read: .mtlx references usd-core cannot compose.
         load_mtlx_references(stage)
         self._linked: set[str] = set()  # lights whose linking leaves some meshes out
+        # GeometryLights and the meshes their ``geometry`` names (those meshes are lights).
+        self._geometry_lights: dict[str, list[str]] = {}
         self._gprims: list[str] | None = None  # the stage's gprim paths, this sync
 
     # ------------------------------------------------------------------ state
@@ -268,7 +275,7 @@ class UsdSceneDelegate:
     @property
     def light_paths(self) -> list[str]:
         """Paths of the synced stage lights (not the camera light)."""
-        return [p for p, r in self._records.items() if r.kind == "light"]
+        return [p for p, r in self._records.items() if r.kind == "light" or r.light]
 
     @property
     def is_dirty(self) -> bool:
@@ -677,7 +684,18 @@ class UsdSceneDelegate:
                     record.in_delegate = False
                     self._records[path] = record
                     return
+                light, light_prim = mesh_light_arguments(prim, time), prim
+                owner = self._geometry_light_of(path)
+                if light is None and owner is not None:
+                    light_prim = self.stage.GetPrimAtPath(owner)
+                    light = emitter_arguments(light_prim, time)
+                if light is not None:
+                    links = link_arguments(light_prim, time, self._gprim_paths)
+                    read.args["light"] = {**light, **links}
+                    record.light = True
+                    record.might_vary = might_vary or record.might_vary
                 self.delegate.set_mesh(path, **read.args)
+                self._track_links(path, links if light is not None else {})
             elif prim.IsA(UsdGeom.PointInstancer):
                 state, own_varies = self._instancing.sync_point_instancer(
                     prim,
@@ -703,6 +721,15 @@ class UsdSceneDelegate:
                 record = _Record("light", order, might_vary=might_vary)
                 self.delegate.set_distant_light(path, **{**args, **links})
                 self._track_links(path, links)
+            elif prim.IsA(UsdLux.GeometryLight):
+                # No prim of its own in the delegate: its meshes are the light. Re-synced
+                # whenever the stage changes (with the linked lights), it re-sends the meshes
+                # it names now and those it named before.
+                before = self._geometry_lights.get(path, [])
+                self._geometry_lights[path] = geometry_light_targets(prim)
+                record = _Record("light", order, might_vary=might_vary, in_delegate=False)
+                self._linked.add(path)
+                self._resync_meshes([*before, *self._geometry_lights[path]], xform_cache, memo)
             elif any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES):
                 args = area_light_arguments(prim, time, transform) or {}
                 links = link_arguments(prim, time, self._gprim_paths)
@@ -726,6 +753,26 @@ class UsdSceneDelegate:
         self._errors.pop(path, None)
         self.sync_counts[path] = self.sync_counts.get(path, 0) + 1
         _log.debug("mipray: synced %s %s", record.kind, path)
+
+    def _geometry_light_of(self, mesh: str) -> str | None:
+        """The GeometryLight whose ``geometry`` names ``mesh`` (the first by path), if any."""
+        owners = sorted(light for light, meshes in self._geometry_lights.items() if mesh in meshes)
+        return owners[0] if owners else None
+
+    def _resync_meshes(
+        self,
+        paths: Iterable[str],
+        xform_cache: UsdGeom.XformCache | None = None,
+        memo: dict[str, bool] | None = None,
+    ) -> None:
+        """Send the synced meshes among ``paths`` again (a GeometryLight's, as it changes)."""
+        xform_cache = xform_cache or UsdGeom.XformCache(self.time)
+        for mesh in sorted(set(paths)):
+            prim, record = self.stage.GetPrimAtPath(mesh), self._records.get(mesh)
+            if prim and record is not None and record.kind == "mesh":
+                self._sync_prim(
+                    prim, xform_cache, {} if memo is None else memo, record.order, Counter()
+                )
 
     def _gprim_paths(self) -> list[str]:
         """Every gprim on the stage (PointInstancer prototypes' included), once per sync."""
@@ -754,6 +801,9 @@ class UsdSceneDelegate:
         record = self._records.pop(path, None)
         self._moving.discard(path)
         self._linked.discard(path)
+        if path in self._geometry_lights:
+            # Its meshes are surfaces again.
+            self._resync_meshes(self._geometry_lights.pop(path))
         if record is not None and record.kind == "instance":
             self._instancing.remove_instance(path)
         elif record is not None and record.instancer is not None:

@@ -57,6 +57,7 @@ RENDERED_TYPES: tuple[type, ...] = (
     UsdGeom.Camera,
     UsdLux.DistantLight,
     *(t for t, _ in AREA_LIGHT_TYPES),
+    UsdLux.GeometryLight,
 )
 
 #: The UsdPreviewSurface inputs :mod:`mipray.usd.shading` reads (displacement only from a
@@ -150,6 +151,22 @@ def _shaping(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
     """ShapingAPI inputs not read: IES profiles, and any shaping on lights it does not shape."""
     shaped = any(prim.IsA(t) for t, k in AREA_LIGHT_TYPES if k in SHAPED_KINDS)
     return _applied("ShapingAPI", SHAPING_INPUTS if shaped else frozenset())(prim, time)
+
+
+def _mesh_light(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
+    """A mesh light's ``light:materialSyncMode`` when authored: its material is never read.
+
+    The mesh emits its light inputs only (``mipray.usd.light.mesh_light_arguments``); on
+    anything but a Mesh, the API itself (no other gprim becomes a light).
+    """
+    if "MeshLightAPI" not in prim.GetAppliedSchemas():
+        return []
+    if not prim.IsA(UsdGeom.Mesh):
+        return ["MeshLightAPI"]
+    mode = prim.GetAttribute("light:materialSyncMode")
+    if mode and mode.HasAuthoredValue() and str(mode.Get(time)) != "noMaterialResponse":
+        return [f"light:materialSyncMode = {mode.Get(time)}"]
+    return []
 
 
 def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
@@ -338,7 +355,7 @@ TABLE: tuple[Row, ...] = (
     Row("material binding to no Material", "prim", _missing_material),
     Row("ShapingAPI", "prim", _shaping),
     Row("ShadowAPI", "prim", _applied("ShadowAPI", frozenset({"shadow:enable"}))),
-    Row("MeshLightAPI", "prim", _applied("MeshLightAPI", presence=True)),
+    Row("MeshLightAPI", "prim", _mesh_light),
     Row("light input", "prim", _light_inputs),
     Row("camera clippingPlanes", "prim", _clipping_planes),
     Row(

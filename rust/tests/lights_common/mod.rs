@@ -29,6 +29,7 @@ pub fn area(shape: LightShape, l: f32) -> Light {
         LightShape::Dome(_) => "/dome",
         LightShape::Distant { .. } => "/distant",
         LightShape::Cylinder { .. } => "/cylinder",
+        LightShape::Mesh(_) => "/mesh",
     };
     Light::usd_area(name, shape, l, 0.0, Vec3A::ONE, false)
 }
