@@ -50,13 +50,19 @@ pub struct BenchSceneSpec {
     pub face_res: usize,
     pub seed: u64,
     pub kind: BenchKind,
+    /// Build each object's OpenSubdiv tables when a ray first reaches it
+    /// ([`mipray::lazy_surface::LazySurface`], as the delegate does) rather than up front.
+    pub lazy: bool,
+    /// The camera's focal length, mm on a 36 mm aperture (24: the whole grid in view; longer
+    /// lenses see fewer objects).
+    pub focal_length: f32,
 }
 
 impl Default for BenchSceneSpec {
     /// 24 × 20 objects of 6·13² = 1014 control faces: about 1.8 GB of vertices if every
     /// subpatch were tessellated at 17×17.
     fn default() -> Self {
-        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1, kind: BenchKind::Cubes }
+        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1, kind: BenchKind::Cubes, lazy: false, focal_length: 24.0 }
     }
 }
 
@@ -65,7 +71,7 @@ impl BenchSceneSpec {
     /// 80 segments × 40 rings (3,200 control faces, two valence-80 poles each), 307k control
     /// faces in all.
     pub fn latlong() -> Self {
-        BenchSceneSpec { grid: (12, 8), face_res: 40, seed: 1, kind: BenchKind::LatLong }
+        BenchSceneSpec { grid: (12, 8), face_res: 40, seed: 1, kind: BenchKind::LatLong, lazy: false, focal_length: 24.0 }
     }
 }
 
@@ -203,8 +209,23 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
             let latlong = spec.kind == BenchKind::LatLong;
             let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
             let name = format!("/objects/blob_{i}_{j}");
-            let surface = OsdSurface::new(&name, &topo, &pts)?;
-            let mut mesh = Mesh::new(&name, Arc::new(surface));
+            let surface: Arc<dyn mipray::patch::LimitSurface> = if spec.lazy {
+                let hull = mipray::bounds::Bounds3::from_points(pts.iter().map(|&p| p.into()));
+                let faces = topo.face_count();
+                let n = name.clone();
+                Arc::new(mipray::lazy_surface::LazySurface::new(
+                    hull,
+                    faces,
+                    Box::new(move || {
+                        OsdSurface::new(&n, &topo, &pts)
+                            .map(|s| Arc::new(s) as Arc<dyn mipray::patch::LimitSurface>)
+                            .map_err(|e| e.to_string())
+                    }),
+                ))
+            } else {
+                Arc::new(OsdSurface::new(&name, &topo, &pts)?)
+            };
+            let mut mesh = Mesh::new(&name, surface);
             mesh.material = if (i + j) % 2 == 0 { chrome } else { matte };
             if k % 3 == 0 && !latlong {
                 mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 }.into());
@@ -232,7 +253,7 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
     let eye = Vec3::new(0.0, -9.0, 6.0);
     scene.camera = Camera {
         render_from_camera: Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z),
-        focal_length: 24.0,
+        focal_length: spec.focal_length,
         horizontal_aperture: 36.0,
         vertical_aperture: 24.0,
         clipping_range: (0.1, 1e5),

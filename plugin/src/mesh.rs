@@ -7,6 +7,7 @@ use std::sync::Arc;
 use glam::Mat4;
 use mipray::bilinear::BilinearSurface;
 use mipray::implicit::{ImplicitSurface, PointsSurface, Shape};
+use mipray::lazy_surface::LazySurface;
 use mipray::patch::LimitSurface;
 use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::OsdSurface;
@@ -195,6 +196,8 @@ impl Default for MeshData {
 #[derive(Clone)]
 pub enum Surface {
     Osd(Arc<OsdSurface>),
+    /// An OpenSubdiv surface built when a ray first reaches the mesh (the default).
+    LazyOsd(Arc<LazySurface>),
     Bilinear(Arc<BilinearSurface>),
     Implicit(Arc<ImplicitSurface>),
     Points(Arc<PointsSurface>),
@@ -204,6 +207,7 @@ impl Surface {
     pub fn as_limit_surface(&self) -> Arc<dyn LimitSurface> {
         match self {
             Surface::Osd(s) => s.clone(),
+            Surface::LazyOsd(s) => s.clone(),
             Surface::Bilinear(s) => s.clone(),
             Surface::Implicit(s) => s.clone(),
             Surface::Points(s) => s.clone(),
@@ -231,6 +235,9 @@ pub struct MeshPrim {
     /// Its world transform over the camera's shutter, when it moves within it (set by
     /// [`crate::render_delegate::Delegate::set_motion`]); replaces `data.transform` for renders.
     pub motion: Option<std::sync::Arc<mipray::motion::MotionTransform>>,
+    /// Build an OpenSubdiv surface when a ray first reaches it rather than at sync (the
+    /// default): a mesh no ray reaches then costs its bounds, not its patch table.
+    pub lazy: bool,
 }
 
 impl MeshPrim {
@@ -247,6 +254,7 @@ impl MeshPrim {
             invalid,
             cache_id,
             motion: None,
+            lazy: true,
         }
     }
 
@@ -346,6 +354,9 @@ impl MeshPrim {
                 return Ok(Surface::Osd(s.clone()));
             }
         }
+        if self.lazy && t.scheme != Scheme::None {
+            return Ok(Surface::LazyOsd(Arc::new(self.lazy_osd(primvars))));
+        }
         Ok(match t.scheme {
             Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?.with_primvars(
                 t,
@@ -361,6 +372,29 @@ impl MeshPrim {
                 &primvars,
             )?)),
         })
+    }
+}
+
+impl MeshPrim {
+    /// An OpenSubdiv surface of the mesh's data built on first use, placed by the hull of its
+    /// control points (which holds its limit surface: every subdivision rule is a convex
+    /// combination). It keeps its own copy of the topology, points and primvars to build from.
+    fn lazy_osd(&self, primvars: Vec<mipray::texture::Primvar2>) -> LazySurface {
+        let hull = mipray::bounds::Bounds3::from_points(self.data.points.iter().map(|&p| p.into()));
+        let (path, topology, points) = (self.path.clone(), self.data.topology.clone(), self.data.points.clone());
+        let faces = topology.face_count();
+        LazySurface::new(
+            hull,
+            faces,
+            Box::new(move || {
+                let s = if primvars.is_empty() {
+                    OsdSurface::new(&path, &topology, &points)
+                } else {
+                    OsdSurface::with_primvars(&path, &topology, &points, &mipray_bridge::OsdOptions::default(), &primvars)
+                };
+                s.map(|s| Arc::new(s) as Arc<dyn LimitSurface>).map_err(|e| e.to_string())
+            }),
+        )
     }
 }
 
