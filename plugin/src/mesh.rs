@@ -197,7 +197,7 @@ impl Default for MeshData {
 pub enum Surface {
     Osd(Arc<OsdSurface>),
     /// An OpenSubdiv surface built when a ray first reaches the mesh (the default).
-    LazyOsd(Arc<LazySurface>),
+    LazyOsd(Arc<LazySurface<OsdSurface>>),
     Bilinear(Arc<BilinearSurface>),
     Implicit(Arc<ImplicitSurface>),
     Points(Arc<PointsSurface>),
@@ -354,6 +354,18 @@ impl MeshPrim {
                 return Ok(Surface::Osd(s.clone()));
             }
         }
+        if let (true, Some(Surface::LazyOsd(s))) = (points_only, self.surface.as_ref()) {
+            // A built lazy surface refines its kept topology again, as an eager one does.
+            let mut s = s.clone();
+            self.surface = None;
+            if let Some(lazy) = Arc::get_mut(&mut s) {
+                if let Some(osd) = lazy.built_mut().and_then(Arc::get_mut) {
+                    osd.update_points(&self.data.points)?;
+                    lazy.rebase(self.hull(), self.osd_builder(Vec::new()));
+                    return Ok(Surface::LazyOsd(s));
+                }
+            }
+        }
         if self.lazy && t.scheme != Scheme::None {
             return Ok(Surface::LazyOsd(Arc::new(self.lazy_osd(primvars))));
         }
@@ -379,22 +391,26 @@ impl MeshPrim {
     /// An OpenSubdiv surface of the mesh's data built on first use, placed by the hull of its
     /// control points (which holds its limit surface: every subdivision rule is a convex
     /// combination). It keeps its own copy of the topology, points and primvars to build from.
-    fn lazy_osd(&self, primvars: Vec<mipray::texture::Primvar2>) -> LazySurface {
-        let hull = mipray::bounds::Bounds3::from_points(self.data.points.iter().map(|&p| p.into()));
+    fn lazy_osd(&self, primvars: Vec<mipray::texture::Primvar2>) -> LazySurface<OsdSurface> {
+        LazySurface::new(self.hull(), self.data.topology.face_count(), self.osd_builder(primvars))
+    }
+
+    /// Object space.
+    fn hull(&self) -> mipray::bounds::Bounds3 {
+        mipray::bounds::Bounds3::from_points(self.data.points.iter().map(|&p| p.into()))
+    }
+
+    /// Builds the mesh's OpenSubdiv surface from a copy of its data as it is now.
+    fn osd_builder(&self, primvars: Vec<mipray::texture::Primvar2>) -> mipray::lazy_surface::SurfaceBuilder<OsdSurface> {
         let (path, topology, points) = (self.path.clone(), self.data.topology.clone(), self.data.points.clone());
-        let faces = topology.face_count();
-        LazySurface::new(
-            hull,
-            faces,
-            Box::new(move || {
-                let s = if primvars.is_empty() {
-                    OsdSurface::new(&path, &topology, &points)
-                } else {
-                    OsdSurface::with_primvars(&path, &topology, &points, &mipray_bridge::OsdOptions::default(), &primvars)
-                };
-                s.map(|s| Arc::new(s) as Arc<dyn LimitSurface>).map_err(|e| e.to_string())
-            }),
-        )
+        Box::new(move || {
+            let s = if primvars.is_empty() {
+                OsdSurface::new(&path, &topology, &points)
+            } else {
+                OsdSurface::with_primvars(&path, &topology, &points, &mipray_bridge::OsdOptions::default(), &primvars)
+            };
+            s.map(Arc::new).map_err(|e| e.to_string())
+        })
     }
 }
 

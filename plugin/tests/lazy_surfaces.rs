@@ -81,3 +81,27 @@ fn lazy_surfaces_give_the_eager_image_and_skip_meshes_no_ray_reaches() {
     assert!(again.buffers[0].data.iter().zip(&lazy.buffers[0].data).all(|(a, b)| a.to_bits() == b.to_bits()));
     assert_eq!(d.mesh("/a").unwrap().surface_syncs, 1);
 }
+
+#[test]
+fn new_points_on_a_built_lazy_surface_give_the_eager_image() {
+    let mut d = delegate(false);
+    render(&mut d);
+    let moved = |d: &mut RenderDelegate| {
+        let (t, p) = common::cube_sphere(3, Scheme::CatmullClark);
+        let p: Vec<[f32; 3]> = p.iter().map(|q| [q[0] * 1.2, q[1] * 0.9, q[2]]).collect();
+        let mut m = common::grey_mesh("/a", (t, p), 0.7);
+        m.transform = Mat4::from_translation(Vec3::new(-1.2, 0.0, 0.0));
+        d.set_mesh("/a", m);
+    };
+    moved(&mut d);
+    assert!(d.sync().is_empty());
+    assert_eq!(d.mesh("/a").unwrap().surface_syncs, 2);
+    assert!(is_built(&d, "/a"), "refined again in place at sync, not replaced by an unbuilt surface");
+    let lazy = render(&mut d);
+    let mut e = delegate(true);
+    moved(&mut e);
+    let eager = render(&mut e);
+    for (a, b) in eager.buffers.iter().zip(&lazy.buffers) {
+        assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()), "{:?} differs", a.aov);
+    }
+}

@@ -20,34 +20,54 @@ use crate::bounds::Bounds3;
 use crate::patch::{GridSamples, LimitSurface, PatchParam, SurfacePoint, UvRect};
 
 /// Builds a surface; `Err` is one line saying why it cannot be built (without the prim's name).
-pub type SurfaceBuilder = Box<dyn Fn() -> Result<Arc<dyn LimitSurface>, String> + Send + Sync>;
+pub type SurfaceBuilder<S = dyn LimitSurface> = Box<dyn Fn() -> Result<Arc<S>, String> + Send + Sync>;
 
 /// A tessellated limit surface built on first use. Surfaces intersected exactly
 /// ([`LimitSurface::exact`]) are cheap and are never wrapped: a builder returning one is
 /// refused when it runs.
-pub struct LazySurface {
+///
+/// `S` is the built surface's type (any, by default): a caller that names it (the delegate's
+/// `LazySurface<OsdSurface>`) can reach the built surface to update it in place.
+pub struct LazySurface<S: ?Sized + LimitSurface = dyn LimitSurface> {
     /// Object space; contains the built surface (see the module's note).
     bounds: Bounds3,
     control_faces: usize,
-    build: SurfaceBuilder,
-    built: OnceLock<Result<Arc<dyn LimitSurface>, String>>,
+    build: SurfaceBuilder<S>,
+    built: OnceLock<Result<Arc<S>, String>>,
 }
 
-impl std::fmt::Debug for LazySurface {
+impl<S: ?Sized + LimitSurface> std::fmt::Debug for LazySurface<S> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LazySurface").field("bounds", &self.bounds).field("built", &self.is_built()).finish()
     }
 }
 
-impl LazySurface {
+impl<S: ?Sized + LimitSurface> LazySurface<S> {
     /// A surface of `control_faces` faces whose limit surface lies within `bounds` (object
     /// space), made by `build` when first needed.
-    pub fn new(bounds: Bounds3, control_faces: usize, build: SurfaceBuilder) -> Self {
+    pub fn new(bounds: Bounds3, control_faces: usize, build: SurfaceBuilder<S>) -> Self {
         LazySurface { bounds, control_faces, build, built: OnceLock::new() }
     }
 
+    /// With no one else holding it: the built surface to change in place (new points);
+    /// `None` when it is not built (or failed to build). The caller then sets the bounds and
+    /// builder that match the change ([`LazySurface::rebase`]).
+    pub fn built_mut(&mut self) -> Option<&mut Arc<S>> {
+        match self.built.get_mut() {
+            Some(Ok(s)) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// New bounds and builder for a surface changed in place, so that a rebuild makes what it
+    /// now is.
+    pub fn rebase(&mut self, bounds: Bounds3, build: SurfaceBuilder<S>) {
+        self.bounds = bounds;
+        self.build = build;
+    }
+
     /// The built surface, building it now if no one has; `Err` says why it cannot be built.
-    pub fn get(&self) -> Result<&Arc<dyn LimitSurface>, &str> {
+    pub fn get(&self) -> Result<&Arc<S>, &str> {
         self.built
             .get_or_init(|| {
                 let s = (self.build)()?;
@@ -66,19 +86,19 @@ impl LazySurface {
     }
 
     /// The built surface, if built and buildable, without building it.
-    pub fn built(&self) -> Option<&Arc<dyn LimitSurface>> {
+    pub fn built(&self) -> Option<&Arc<S>> {
         self.built.get().and_then(|r| r.as_ref().ok())
     }
 
     #[inline]
-    fn inner(&self) -> Option<&dyn LimitSurface> {
+    fn inner(&self) -> Option<&S> {
         self.get().ok().map(|s| s.as_ref())
     }
 }
 
 /// Forwards to the built surface. A surface that failed to build has no patches: the tracer
 /// asks [`LimitSurface::prepare`] first and leaves such a mesh out, so nothing asks for one.
-impl LimitSurface for LazySurface {
+impl<S: ?Sized + LimitSurface> LimitSurface for LazySurface<S> {
     fn patch_count(&self) -> usize {
         self.inner().map_or(0, |s| s.patch_count())
     }
@@ -137,7 +157,7 @@ impl LimitSurface for LazySurface {
     }
 
     fn is_built(&self) -> bool {
-        LazySurface::is_built(self)
+        LazySurface::<S>::is_built(self)
     }
 }
 

@@ -56,7 +56,7 @@ fn status_kb(field: &str) -> u64 {
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-memory [--scene latlong|cubes] [--grid X,Y] [--face-res N] [--out FILE.md] [--no-sync-table]");
+    eprintln!("usage: mipray-memory [--scene latlong|cubes] [--grid X,Y] [--face-res N] [--focal MM] [--out FILE.md] [--no-sync-table] [--usda FILE [--creased]]");
     std::process::exit(2)
 }
 
@@ -65,6 +65,7 @@ fn main() {
     let mut spec = BenchSceneSpec::latlong();
     let mut out: Option<String> = None;
     let (mut sync_run, mut sync_table) = (None::<String>, true);
+    let (mut usda, mut creased) = (None::<String>, false);
     let mut it = args.iter();
     while let Some(k) = it.next() {
         let mut v = || it.next().cloned().unwrap_or_else(|| usage());
@@ -84,8 +85,18 @@ fn main() {
             // One row of the sync table, in a process of its own (peak RSS is per process).
             "--sync-run" => sync_run = Some(v()),
             "--focal" => spec.focal_length = v().parse().unwrap_or_else(|_| usage()),
+            // The scene as a USD stage instead, to measure it through usd-core and Python.
+            "--usda" => usda = Some(v()),
+            "--creased" => creased = true,
             _ => usage(),
         }
+    }
+    if let Some(path) = usda {
+        if let Err(e) = hd_mipray::bench_scene::write_usda(&spec, creased, std::path::Path::new(&path)) {
+            eprintln!("mipray-memory: {path}: {e}");
+            std::process::exit(1);
+        }
+        return;
     }
     let (width, height, spp, ao) = if spec.kind == BenchKind::LatLong { (240, 160, 4, 0) } else { (200, 134, 1, 16) };
     let opts = RenderOptions {
