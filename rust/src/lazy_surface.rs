@@ -184,7 +184,7 @@ mod tests {
         let eager = BilinearSurface::new(&t, &p).unwrap();
         let calls = Arc::new(AtomicUsize::new(0));
         let c = calls.clone();
-        let lazy = LazySurface::new(
+        let lazy: LazySurface = LazySurface::new(
             Bounds3::from_points(p.iter().map(|&q| q.into())),
             1,
             Box::new(move || {
@@ -209,7 +209,7 @@ mod tests {
 
     #[test]
     fn a_failed_build_is_reported_and_has_no_patches() {
-        let lazy = LazySurface::new(Bounds3::EMPTY, 3, Box::new(|| Err("refused by the builder".into())));
+        let lazy: LazySurface = LazySurface::new(Bounds3::EMPTY, 3, Box::new(|| Err("refused by the builder".into())));
         assert_eq!(lazy.prepare(), Err("refused by the builder".to_string()));
         assert_eq!(lazy.patch_count(), 0);
         assert_eq!(lazy.control_face_count(), 3);
