@@ -277,6 +277,7 @@ fn sync_table_md() -> String {
             }
         }
     }
+    md += "\nPeak memory of whole stages rendered through usd-core and Python (the issue's 365k-face and million-face targets): docs/memory-usd.md.\n";
     md += "\nSync is the scene's construction: eager makes every mesh's OpenSubdiv tables (in series here; the delegate syncs in parallel), lazy only the control hulls, and the tables are made during the render by the first ray to reach each mesh, on the render's threads. Peak RSS falls by the tables of the meshes no ray reaches.\n";
     md
 }
