@@ -353,9 +353,25 @@ impl<'s> Tracer<'s> {
         self.meshes[mesh].get_or_init(|| self.build_lazy(mesh))
     }
 
+    /// Builds a mesh reached for the first time. The BVH builder runs rayon work, and a render
+    /// thread waiting in a rayon join steals other render jobs, which may trace into this very
+    /// mesh and re-enter its `OnceLock` (see [`GeometryCache::get_or_build`]): so the build runs
+    /// on a thread of its own, whose rayon work goes to a pool that runs nothing else, while the
+    /// render thread blocks without stealing.
     #[cold]
     fn build_lazy(&self, mesh: usize) -> MeshGeometry {
-        let g = Self::build_geometry(&self.cache, &self.dropped, &self.scene.meshes[mesh], mesh);
+        static BUILD_POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
+        let pool = BUILD_POOL.get_or_init(|| {
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            rayon::ThreadPoolBuilder::new().num_threads(threads).thread_name(|i| format!("mipray-build-{i}")).build().ok()
+        });
+        let build = || Self::build_geometry(&self.cache, &self.dropped, &self.scene.meshes[mesh], mesh);
+        let g = std::thread::scope(|s| {
+            // Without a pool of its own (threads could not be started), in rayon's global pool,
+            // which renders do not run in.
+            let built = s.spawn(|| pool.as_ref().map_or_else(build, |p| p.install(build)));
+            built.join().unwrap_or_else(|payload| std::panic::resume_unwind(payload))
+        });
         self.lazy_built.fetch_add(1, Ordering::Relaxed);
         g
     }
