@@ -50,13 +50,19 @@ pub struct BenchSceneSpec {
     pub face_res: usize,
     pub seed: u64,
     pub kind: BenchKind,
+    /// Build each object's OpenSubdiv tables when a ray first reaches it
+    /// ([`mipray::lazy_surface::LazySurface`], as the delegate does) rather than up front.
+    pub lazy: bool,
+    /// The camera's focal length, mm on a 36 mm aperture (24: the whole grid in view; longer
+    /// lenses see fewer objects).
+    pub focal_length: f32,
 }
 
 impl Default for BenchSceneSpec {
     /// 24 × 20 objects of 6·13² = 1014 control faces: about 1.8 GB of vertices if every
     /// subpatch were tessellated at 17×17.
     fn default() -> Self {
-        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1, kind: BenchKind::Cubes }
+        BenchSceneSpec { grid: (24, 20), face_res: 13, seed: 1, kind: BenchKind::Cubes, lazy: false, focal_length: 24.0 }
     }
 }
 
@@ -65,7 +71,7 @@ impl BenchSceneSpec {
     /// 80 segments × 40 rings (3,200 control faces, two valence-80 poles each), 307k control
     /// faces in all.
     pub fn latlong() -> Self {
-        BenchSceneSpec { grid: (12, 8), face_res: 40, seed: 1, kind: BenchKind::LatLong }
+        BenchSceneSpec { grid: (12, 8), face_res: 40, seed: 1, kind: BenchKind::LatLong, lazy: false, focal_length: 24.0 }
     }
 }
 
@@ -203,8 +209,23 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
             let latlong = spec.kind == BenchKind::LatLong;
             let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
             let name = format!("/objects/blob_{i}_{j}");
-            let surface = OsdSurface::new(&name, &topo, &pts)?;
-            let mut mesh = Mesh::new(&name, Arc::new(surface));
+            let surface: Arc<dyn mipray::patch::LimitSurface> = if spec.lazy {
+                let hull = mipray::bounds::Bounds3::from_points(pts.iter().map(|&p| p.into()));
+                let faces = topo.face_count();
+                let n = name.clone();
+                Arc::new(mipray::lazy_surface::LazySurface::new(
+                    hull,
+                    faces,
+                    Box::new(move || {
+                        OsdSurface::new(&n, &topo, &pts)
+                            .map(|s| Arc::new(s) as Arc<dyn mipray::patch::LimitSurface>)
+                            .map_err(|e| e.to_string())
+                    }),
+                ))
+            } else {
+                Arc::new(OsdSurface::new(&name, &topo, &pts)?)
+            };
+            let mut mesh = Mesh::new(&name, surface);
             mesh.material = if (i + j) % 2 == 0 { chrome } else { matte };
             if k % 3 == 0 && !latlong {
                 mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 }.into());
@@ -232,7 +253,7 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
     let eye = Vec3::new(0.0, -9.0, 6.0);
     scene.camera = Camera {
         render_from_camera: Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z),
-        focal_length: 24.0,
+        focal_length: spec.focal_length,
         horizontal_aperture: 36.0,
         vertical_aperture: 24.0,
         clipping_range: (0.1, 1e5),
@@ -251,4 +272,111 @@ impl BilinearGround {
             MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
         mipray::bilinear::BilinearSurface::new(&topo, &[[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]])
     }
+}
+
+/// Writes the scene of `spec` as a USD stage (text, `.usda`), for measuring it as a user renders
+/// a stage: through usd-core, the Python scene delegate and `mipray-record`. The same objects,
+/// placements, materials (UsdPreviewSurface: chrome as metallic at roughness 0, matte as
+/// diffuse), ground, sun and camera as [`build`]. With `creased`, each cube blob's twelve cube
+/// edges are semi-sharp creases (sharpness 3; cube blobs only). Displacement is not written.
+///
+/// # Errors
+/// Writing the file.
+pub fn write_usda(spec: &BenchSceneSpec, creased: bool, path: &std::path::Path) -> std::io::Result<()> {
+    use std::fmt::Write as _;
+    use std::io::Write as _;
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let matrix = |m: Mat4| {
+        // USD's matrices act on row vectors: its rows are glam's columns.
+        let c = m.to_cols_array_2d();
+        let row = |r: [f32; 4]| format!("({}, {}, {}, {})", r[0], r[1], r[2], r[3]);
+        format!("( {}, {}, {}, {} )", row(c[0]), row(c[1]), row(c[2]), row(c[3]))
+    };
+    let join = |v: &mut dyn Iterator<Item = String>| v.collect::<Vec<_>>().join(", ");
+    writeln!(f, "#usda 1.0\n(\n    defaultPrim = \"World\"\n    metersPerUnit = 1\n    upAxis = \"Z\"\n)\n")?;
+    writeln!(f, "def Xform \"World\"\n{{")?;
+    writeln!(f, "    def Scope \"Looks\"\n    {{")?;
+    for (name, diffuse, metallic, roughness) in
+        [("chrome", "(0.05, 0.05, 0.05)", 1.0, 0.0), ("matte", "(0.6, 0.55, 0.5)", 0.0, 1.0), ("ground", "(0.4, 0.4, 0.4)", 0.0, 1.0)]
+    {
+        writeln!(
+            f,
+            "        def Material \"{name}\"\n        {{\n            token outputs:surface.connect = </World/Looks/{name}/pbr.outputs:surface>\n            def Shader \"pbr\"\n            {{\n                uniform token info:id = \"UsdPreviewSurface\"\n                color3f inputs:diffuseColor = {diffuse}\n                float inputs:metallic = {metallic}\n                float inputs:roughness = {roughness}\n                token outputs:surface\n            }}\n        }}"
+        )?;
+    }
+    writeln!(f, "    }}")?;
+    let (gx, gy) = spec.grid;
+    let spacing = 2.6;
+    for j in 0..gy {
+        for i in 0..gx {
+            let k = (j * gx + i) as u64;
+            let seed = object_seed(spec.seed, k);
+            let latlong = spec.kind == BenchKind::LatLong;
+            let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
+            let s = 0.8 + 0.4 * rand01(seed, 7);
+            let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * spacing;
+            let y = j as f32 * spacing;
+            let xf = Mat4::from_translation(Vec3::new(x, y, s))
+                * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU)
+                * Mat4::from_rotation_x(if latlong { rand01(seed, 9) * std::f32::consts::PI } else { 0.0 })
+                * Mat4::from_scale(Vec3::splat(s));
+            let mut body = String::new();
+            let _ = writeln!(body, "        uniform token subdivisionScheme = \"catmullClark\"");
+            let _ =
+                writeln!(body, "        int[] faceVertexCounts = [{}]", join(&mut topo.face_vertex_counts.iter().map(|c| c.to_string())));
+            let _ =
+                writeln!(body, "        int[] faceVertexIndices = [{}]", join(&mut topo.face_vertex_indices.iter().map(|c| c.to_string())));
+            let _ =
+                writeln!(body, "        point3f[] points = [{}]", join(&mut pts.iter().map(|p| format!("({}, {}, {})", p[0], p[1], p[2]))));
+            if creased && !latlong {
+                // Edges between faces of different cube sides (faces come side by side, n² each).
+                let per_side = spec.face_res * spec.face_res;
+                let mut sides: std::collections::HashMap<(i32, i32), usize> = std::collections::HashMap::new();
+                let mut creases = Vec::new();
+                for (face, q) in topo.face_vertex_indices.chunks(4).enumerate() {
+                    for e in 0..4 {
+                        let (a, b) = (q[e], q[(e + 1) % 4]);
+                        let key = (a.min(b), a.max(b));
+                        match sides.get(&key) {
+                            Some(&side) if side != face / per_side => creases.push(key),
+                            Some(_) => {}
+                            None => {
+                                sides.insert(key, face / per_side);
+                            }
+                        }
+                    }
+                }
+                let _ = writeln!(body, "        int[] creaseIndices = [{}]", join(&mut creases.iter().map(|(a, b)| format!("{a}, {b}"))));
+                let _ = writeln!(body, "        int[] creaseLengths = [{}]", join(&mut creases.iter().map(|_| "2".to_string())));
+                let _ = writeln!(body, "        float[] creaseSharpnesses = [{}]", join(&mut creases.iter().map(|_| "3".to_string())));
+            }
+            let material = if (i + j) % 2 == 0 { "chrome" } else { "matte" };
+            writeln!(
+                f,
+                "    def Mesh \"blob_{i}_{j}\" (\n        prepend apiSchemas = [\"MaterialBindingAPI\"]\n    )\n    {{\n{body}        rel material:binding = </World/Looks/{material}>\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}",
+                matrix(xf)
+            )?;
+        }
+    }
+    let half = 200.0;
+    writeln!(
+        f,
+        "    def Mesh \"ground\" (\n        prepend apiSchemas = [\"MaterialBindingAPI\"]\n    )\n    {{\n        uniform token subdivisionScheme = \"none\"\n        int[] faceVertexCounts = [4]\n        int[] faceVertexIndices = [0, 1, 2, 3]\n        point3f[] points = [(-{half}, -{half}, 0), ({half}, -{half}, 0), ({half}, {half}, 0), (-{half}, {half}, 0)]\n        rel material:binding = </World/Looks/ground>\n    }}"
+    )?;
+    // The sun shines along (0.4, 0.6, −0.7); a distant light shines down its own −Z.
+    let sun = Camera::look_at(Vec3::ZERO, Vec3::new(0.4, 0.6, -0.7), Vec3::Z);
+    writeln!(
+        f,
+        "    def DistantLight \"sun\"\n    {{\n        float inputs:intensity = 2.5\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}",
+        matrix(sun)
+    )?;
+    let eye = Vec3::new(0.0, -9.0, 6.0);
+    let cam = Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z);
+    writeln!(
+        f,
+        "    def Camera \"camera\"\n    {{\n        float focalLength = {}\n        float horizontalAperture = 36\n        float verticalAperture = 24\n        float2 clippingRange = (0.1, 100000)\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}\n}}",
+        spec.focal_length,
+        matrix(cam)
+    )?;
+    f.flush()
 }

@@ -8,6 +8,7 @@ use glam::Mat4;
 use mipray::bilinear::BilinearSurface;
 use mipray::curves::{Basis, CurveType, CurvesDesc, CurvesSurface, Interpolation, Style, Wrap};
 use mipray::implicit::{ImplicitSurface, PointsSurface, Shape};
+use mipray::lazy_surface::LazySurface;
 use mipray::patch::LimitSurface;
 use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::OsdSurface;
@@ -242,6 +243,8 @@ impl Default for MeshData {
 #[derive(Clone)]
 pub enum Surface {
     Osd(Arc<OsdSurface>),
+    /// An OpenSubdiv surface built when a ray first reaches the mesh (the default).
+    LazyOsd(Arc<LazySurface<OsdSurface>>),
     Bilinear(Arc<BilinearSurface>),
     Implicit(Arc<ImplicitSurface>),
     Points(Arc<PointsSurface>),
@@ -252,6 +255,7 @@ impl Surface {
     pub fn as_limit_surface(&self) -> Arc<dyn LimitSurface> {
         match self {
             Surface::Osd(s) => s.clone(),
+            Surface::LazyOsd(s) => s.clone(),
             Surface::Bilinear(s) => s.clone(),
             Surface::Implicit(s) => s.clone(),
             Surface::Points(s) => s.clone(),
@@ -280,6 +284,9 @@ pub struct MeshPrim {
     /// Its world transform over the camera's shutter, when it moves within it (set by
     /// [`crate::render_delegate::Delegate::set_motion`]); replaces `data.transform` for renders.
     pub motion: Option<std::sync::Arc<mipray::motion::MotionTransform>>,
+    /// Build an OpenSubdiv surface when a ray first reaches it rather than at sync (the
+    /// default): a mesh no ray reaches then costs its bounds, not its patch table.
+    pub lazy: bool,
 }
 
 impl MeshPrim {
@@ -296,6 +303,7 @@ impl MeshPrim {
             invalid,
             cache_id,
             motion: None,
+            lazy: true,
         }
     }
 
@@ -401,6 +409,21 @@ impl MeshPrim {
                 return Ok(Surface::Osd(s.clone()));
             }
         }
+        if let (true, Some(Surface::LazyOsd(s))) = (points_only, self.surface.as_ref()) {
+            // A built lazy surface refines its kept topology again, as an eager one does.
+            let mut s = s.clone();
+            self.surface = None;
+            if let Some(lazy) = Arc::get_mut(&mut s) {
+                if let Some(osd) = lazy.built_mut().and_then(Arc::get_mut) {
+                    osd.update_points(&self.data.points)?;
+                    lazy.rebase(self.hull(), self.osd_builder(Vec::new()));
+                    return Ok(Surface::LazyOsd(s));
+                }
+            }
+        }
+        if self.lazy && t.scheme != Scheme::None {
+            return Ok(Surface::LazyOsd(Arc::new(self.lazy_osd(primvars))));
+        }
         Ok(match t.scheme {
             Scheme::None => Surface::Bilinear(Arc::new(BilinearSurface::new(t, &self.data.points)?.with_primvars(
                 t,
@@ -415,6 +438,33 @@ impl MeshPrim {
                 &mipray_bridge::OsdOptions::default(),
                 &primvars,
             )?)),
+        })
+    }
+}
+
+impl MeshPrim {
+    /// An OpenSubdiv surface of the mesh's data built on first use, placed by the hull of its
+    /// control points (which holds its limit surface: every subdivision rule is a convex
+    /// combination). It keeps its own copy of the topology, points and primvars to build from.
+    fn lazy_osd(&self, primvars: Vec<mipray::texture::Primvar2>) -> LazySurface<OsdSurface> {
+        LazySurface::new(self.hull(), self.data.topology.face_count(), self.osd_builder(primvars))
+    }
+
+    /// Object space.
+    fn hull(&self) -> mipray::bounds::Bounds3 {
+        mipray::bounds::Bounds3::from_points(self.data.points.iter().map(|&p| p.into()))
+    }
+
+    /// Builds the mesh's OpenSubdiv surface from a copy of its data as it is now.
+    fn osd_builder(&self, primvars: Vec<mipray::texture::Primvar2>) -> mipray::lazy_surface::SurfaceBuilder<OsdSurface> {
+        let (path, topology, points) = (self.path.clone(), self.data.topology.clone(), self.data.points.clone());
+        Box::new(move || {
+            let s = if primvars.is_empty() {
+                OsdSurface::new(&path, &topology, &points)
+            } else {
+                OsdSurface::with_primvars(&path, &topology, &points, &mipray_bridge::OsdOptions::default(), &primvars)
+            };
+            s.map(Arc::new).map_err(|e| e.to_string())
         })
     }
 }

@@ -50,11 +50,20 @@ pub struct RenderDelegate {
     textures: Option<(OiioTextureOptions, Arc<OiioTextureSystem>)>,
     /// Texture problems already reported, so each is said once, not once per render.
     warned: Mutex<HashSet<String>>,
+    /// Build OpenSubdiv surfaces at sync rather than when a ray first reaches them (benchmarks
+    /// and tests compare the two; off by default).
+    eager_surfaces: bool,
 }
 
 impl RenderDelegate {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Builds OpenSubdiv surfaces at sync (`true`) or when a ray first reaches them (`false`,
+    /// the default), from the next sync of each mesh on.
+    pub fn set_eager_surfaces(&mut self, eager: bool) {
+        self.eager_surfaces = eager;
     }
 
     /// Inserts a mesh, or updates it and marks dirty exactly what changed. The data is checked
@@ -253,6 +262,9 @@ impl RenderDelegate {
         // Meshes sync in parallel (each builds its own OpenSubdiv tables); results are taken in
         // path order, so errors and cache invalidations come out as a serial sync's would.
         let mut dirty: Vec<&mut MeshPrim> = self.meshes.values_mut().filter(|m| !m.dirty.is_clean()).collect();
+        for m in &mut dirty {
+            m.lazy = !self.eager_surfaces;
+        }
         let results: Vec<Option<Result<bool, DelegateError>>> = dirty
             .par_iter_mut()
             .with_max_len(1)

@@ -48,6 +48,7 @@ pub mod implicit;
 pub mod integrator;
 pub mod intersect;
 pub mod irradiance_cache;
+pub mod lazy_surface;
 pub mod light;
 pub mod light_sampler;
 pub mod material;

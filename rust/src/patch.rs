@@ -197,4 +197,24 @@ pub trait LimitSurface: Send + Sync {
     fn curves(&self) -> Option<&crate::curves::CurvesSurface> {
         None
     }
+
+    /// Conservative object-space bounds of the whole surface when it builds its patches on
+    /// first use ([`crate::lazy_surface::LazySurface`]): the tracer then places its instances
+    /// by these and builds the mesh's subpatches only when a ray reaches one. `None` — the
+    /// default — for a surface built already.
+    fn lazy_bounds(&self) -> Option<Bounds3> {
+        None
+    }
+
+    /// Builds what the surface builds on first use, now. `Err` says why it cannot be built (the
+    /// tracer then leaves the mesh out); a surface built already has nothing to do.
+    fn prepare(&self) -> Result<(), String> {
+        Ok(())
+    }
+
+    /// Whether the surface's patches exist (always, but for one built on first use that no one
+    /// has used yet).
+    fn is_built(&self) -> bool {
+        true
+    }
 }

@@ -90,7 +90,13 @@ pub fn collect(
             "full_tessellation_bytes": full_verts * 12,
             "bvh_bytes": tracer.bvh_bytes(),
             "subpatch_bytes": tracer.subpatch_bytes(),
-            "split_subpatches": tracer.mesh_geometry().iter().map(|m| m.child_ids.len()).sum::<usize>(),
+            "split_subpatches": tracer.mesh_geometry().map(|m| m.child_ids.len()).sum::<usize>(),
+            // Meshes whose patches are built on first use: how many rays reached (their
+            // subpatches are counted above), how many none did (never built), and how many of
+            // their grids left the bounds they were placed by (rays may have missed those).
+            "meshes_built_on_first_use": tracer.lazy_meshes_built(),
+            "meshes_not_reached": tracer.meshes_not_reached(),
+            "lazy_bounds_escaped": tracer.lazy_bounds_escaped.load(std::sync::atomic::Ordering::Relaxed),
             "displaced_vertices_outside_bounds": tracer.displaced_outside.load(std::sync::atomic::Ordering::Relaxed),
             "lights": tracer.scene().lights.iter().map(|l| l.describe(&|m| tracer.scene().mesh_name(m))).collect::<Vec<Value>>(),
             // Surfaces made cheaper than exact to bound their work, each naming its prim.

@@ -3,7 +3,7 @@
 //! multiresolution geometry cache (the paper's §5) → watertight quad tests.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use glam::{Mat3A, Mat4, Vec3A};
 use obvhs::cwbvh::CwBvh;
@@ -234,7 +234,9 @@ impl InstanceData {
 /// The scene prepared for tracing: BVHs at both levels and the geometry cache.
 pub struct Tracer<'s> {
     scene: &'s Scene,
-    meshes: Vec<MeshGeometry>,
+    /// Per mesh, its subpatches and BVH: set when the tracer is made, or by the first ray that
+    /// reaches a mesh whose surface is built on first use.
+    meshes: Vec<OnceLock<MeshGeometry>>,
     instances: Vec<InstanceData>,
     tlas: Option<CwBvh>,
     pub cache: Arc<GeometryCache<Tessellation>>,
@@ -251,6 +253,10 @@ pub struct Tracer<'s> {
     pub displaced_outside: AtomicU64,
     /// Prims left out: geometry that cannot be traced, and meshes whose work panicked.
     pub dropped: DroppedPrims,
+    /// Meshes built on first use that this render built.
+    lazy_built: AtomicU64,
+    /// Tessellations of meshes built on first use that left the bounds the meshes were placed by.
+    pub lazy_bounds_escaped: AtomicU64,
 }
 
 impl<'s> Tracer<'s> {
@@ -267,30 +273,29 @@ impl<'s> Tracer<'s> {
     pub fn with_cache(scene: &'s Scene, cache: Arc<GeometryCache<Tessellation>>, single: bool, tess_factor: f32) -> Self {
         use rayon::prelude::*;
         let dropped = DroppedPrims::new(scene.meshes.len());
-        let meshes: Vec<MeshGeometry> = scene
+        // A surface built on first use is placed by its own bounds; its subpatches and BVH wait
+        // for the first ray that reaches it (`Tracer::geometry`).
+        let meshes: Vec<OnceLock<MeshGeometry>> = scene
             .meshes
             .par_iter()
             .enumerate()
             .map(|(i, m)| {
-                let split_ids = |roots| cache.split_ids(Self::cache_mesh(m, i), m.generation, roots);
-                match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| MeshGeometry::build(m, split_ids))) {
-                    Ok(Ok(g)) => g,
-                    Ok(Err(reason)) => {
-                        dropped.refuse(&m.name, reason);
-                        MeshGeometry::empty()
-                    }
-                    Err(payload) => {
-                        dropped.fail(i, &m.name, payload.as_ref());
-                        MeshGeometry::empty()
-                    }
+                if m.surface.lazy_bounds().is_some() && !m.surface.is_built() {
+                    return OnceLock::new();
                 }
+                OnceLock::from(Self::build_geometry(&cache, &dropped, m, i))
             })
             .collect();
         let mut boxes = Vec::new();
         let mut instances = Vec::new();
         for inst in &scene.instances {
-            let Some(g) = meshes.get(inst.mesh) else { continue };
-            if g.bvh.is_none() {
+            let Some(slot) = meshes.get(inst.mesh) else { continue };
+            let mesh_bounds = match slot.get() {
+                Some(g) if g.bvh.is_none() => continue,
+                Some(g) => g.bounds,
+                None => Self::declared_bounds(&scene.meshes[inst.mesh]),
+            };
+            if mesh_bounds.is_empty() {
                 continue;
             }
             let name = &scene.meshes[inst.mesh].name;
@@ -311,8 +316,8 @@ impl<'s> Tracer<'s> {
                 continue;
             }
             let bounds = match &inst.motion {
-                Some(m) => m.swept_bounds(&g.bounds),
-                None => g.bounds.transformed(&render_from_object),
+                Some(m) => m.swept_bounds(&mesh_bounds),
+                None => mesh_bounds.transformed(&render_from_object),
             };
             if !bounds.is_traceable() {
                 dropped
@@ -337,7 +342,81 @@ impl<'s> Tracer<'s> {
             bounds,
             displaced_outside: AtomicU64::new(0),
             dropped,
+            lazy_built: AtomicU64::new(0),
+            lazy_bounds_escaped: AtomicU64::new(0),
         }
+    }
+
+    /// Root subpatches and BVH of mesh `i`; a mesh that cannot be traced is refused (recorded
+    /// in `dropped`) and gets an empty geometry, and a panic in its work fails it.
+    fn build_geometry(cache: &GeometryCache<Tessellation>, dropped: &DroppedPrims, m: &crate::scene::Mesh, i: usize) -> MeshGeometry {
+        let split_ids = |roots| cache.split_ids(Self::cache_mesh(m, i), m.generation, roots);
+        let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            m.surface.prepare()?;
+            MeshGeometry::build(m, split_ids)
+        }));
+        match built {
+            Ok(Ok(g)) => g,
+            Ok(Err(reason)) => {
+                dropped.refuse(&m.name, reason);
+                MeshGeometry::empty()
+            }
+            Err(payload) => {
+                dropped.fail(i, &m.name, payload.as_ref());
+                MeshGeometry::empty()
+            }
+        }
+    }
+
+    /// Object-space bounds of a mesh built on first use, before it is built: its surface's own,
+    /// grown by the displacement bound as its subpatches' are, and by room for the rounding of
+    /// evaluated points where the surface touches them (a planar mesh's box has no depth).
+    fn declared_bounds(m: &crate::scene::Mesh) -> Bounds3 {
+        match m.surface.lazy_bounds() {
+            Some(b) if !b.is_empty() => b.expanded(m.displacement_bound.max(0.0) + 1e-5 * b.max_abs()),
+            _ => Bounds3::EMPTY,
+        }
+    }
+
+    /// Mesh `mesh`'s root subpatches and BVH, built by the first ray that reaches a mesh built
+    /// on first use (the others wait for it).
+    #[inline]
+    fn geometry(&self, mesh: usize) -> &MeshGeometry {
+        self.meshes[mesh].get_or_init(|| self.build_lazy(mesh))
+    }
+
+    /// Builds a mesh reached for the first time. The BVH builder runs rayon work, and a render
+    /// thread waiting in a rayon join steals other render jobs, which may trace into this very
+    /// mesh and re-enter its `OnceLock` (see [`GeometryCache::get_or_build`]): so the build runs
+    /// on a thread of its own, whose rayon work goes to a pool that runs nothing else, while the
+    /// render thread blocks without stealing.
+    #[cold]
+    fn build_lazy(&self, mesh: usize) -> MeshGeometry {
+        static BUILD_POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
+        let pool = BUILD_POOL.get_or_init(|| {
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            rayon::ThreadPoolBuilder::new().num_threads(threads).thread_name(|i| format!("mipray-build-{i}")).build().ok()
+        });
+        let build = || Self::build_geometry(&self.cache, &self.dropped, &self.scene.meshes[mesh], mesh);
+        let g = std::thread::scope(|s| {
+            // Without a pool of its own (threads could not be started), in rayon's global pool,
+            // which renders do not run in.
+            let built = s.spawn(|| pool.as_ref().map_or_else(build, |p| p.install(build)));
+            built.join().unwrap_or_else(|payload| std::panic::resume_unwind(payload))
+        });
+        self.lazy_built.fetch_add(1, Ordering::Relaxed);
+        g
+    }
+
+    /// Meshes whose subpatches no ray has asked for in this render (built on first use, and not
+    /// reached), so never built.
+    pub fn meshes_not_reached(&self) -> usize {
+        self.meshes.iter().filter(|m| m.get().is_none()).count()
+    }
+
+    /// Meshes built on first use that rays have reached (and so built) in this render.
+    pub fn lazy_meshes_built(&self) -> u64 {
+        self.lazy_built.load(Ordering::Relaxed)
     }
 
     /// Coarsens (factor > 1) or refines the tessellation for incoherent rays (ambient
@@ -366,13 +445,19 @@ impl<'s> Tracer<'s> {
 
     /// Root subpatches over all meshes (each counted once, however many instances).
     pub fn subpatch_count(&self) -> usize {
-        self.meshes.iter().map(|m| m.subpatches.len()).sum()
+        self.mesh_geometry().map(|m| m.subpatches.len()).sum()
     }
 
     /// Root subpatches of surfaces intersected exactly ([`crate::implicit`]), which are never
     /// tessellated (included in [`Tracer::subpatch_count`]).
     pub fn exact_patch_count(&self) -> usize {
-        self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.exact().is_some()).map(|(g, _)| g.subpatches.len()).sum()
+        self.meshes
+            .iter()
+            .zip(&self.scene.meshes)
+            .filter(|(_, m)| m.surface.exact().is_some())
+            .filter_map(|(g, _)| g.get())
+            .map(|g| g.subpatches.len())
+            .sum()
     }
 
     /// Root subpatches that are curve segments ([`crate::curves`]), tessellated along their
@@ -388,18 +473,19 @@ impl<'s> Tracer<'s> {
 
     /// Bytes of the root subpatches (their bounds are the bottom-level BVHs' primitives).
     pub fn subpatch_bytes(&self) -> usize {
-        self.meshes.iter().map(|m| m.subpatches.len() * std::mem::size_of::<RootSubpatch>()).sum()
+        self.mesh_geometry().map(|m| m.subpatches.len() * std::mem::size_of::<RootSubpatch>()).sum()
     }
 
     /// Bytes of every BVH (both levels), for the stats.
     pub fn bvh_bytes(&self) -> usize {
-        self.meshes.iter().filter_map(|m| m.bvh.as_ref()).map(crate::bvh::bvh_bytes).sum::<usize>()
+        self.mesh_geometry().filter_map(|m| m.bvh.as_ref()).map(crate::bvh::bvh_bytes).sum::<usize>()
             + self.tlas.as_ref().map_or(0, crate::bvh::bvh_bytes)
     }
 
-    /// The scene's root subpatches and the render-space instance placements, for statistics.
-    pub fn mesh_geometry(&self) -> &[MeshGeometry] {
-        &self.meshes
+    /// The meshes' root subpatches and BVHs built so far (a mesh built on first use that no
+    /// ray has reached has none), for statistics.
+    pub fn mesh_geometry(&self) -> impl Iterator<Item = &MeshGeometry> {
+        self.meshes.iter().filter_map(OnceLock::get)
     }
 
     /// The closest hit along `ray` in (t_min, t_max), or `None`.
@@ -489,7 +575,7 @@ impl<'s> Tracer<'s> {
         origin: Option<Origin>,
     ) -> Option<Hit> {
         let instance = &self.instances[ii];
-        let geom = &self.meshes[instance.mesh];
+        let geom = self.geometry(instance.mesh);
         let blas = geom.bvh.as_ref()?;
         let mesh = &self.scene.meshes[instance.mesh];
         let inst = instance.pose(ray.time);
@@ -609,7 +695,7 @@ impl<'s> Tracer<'s> {
     fn hit(&self, ii: usize, ray: &Ray, inst: &Pose, h: LocalHit, si: u32) -> Hit {
         let instance = &self.instances[ii];
         let mesh = &self.scene.meshes[instance.mesh];
-        let sp = &self.meshes[instance.mesh].subpatches[si as usize];
+        let sp = &self.geometry(instance.mesh).subpatches[si as usize];
         let u = h.rect.u0 + (h.rect.u1 - h.rect.u0) * h.uv.0;
         let v = h.rect.v0 + (h.rect.v1 - h.rect.v0) * h.uv.1;
         let p = ray.at(h.t);
@@ -657,7 +743,7 @@ impl<'s> Tracer<'s> {
         origin: Option<Origin>,
     ) -> Option<(LocalHit, u32)> {
         let instance = &self.instances[ii];
-        let geom = &self.meshes[instance.mesh];
+        let geom = self.geometry(instance.mesh);
         let blas = geom.bvh.as_ref()?;
         let sign = if self.scene.meshes[instance.mesh].left_handed { -1.0 } else { 1.0 };
         let own = origin.filter(|org| org.instance == ii as u32);
@@ -791,6 +877,9 @@ impl<'s> Tracer<'s> {
                 bound: mesh.displacement_bound,
             });
             let (t, outside) = tessellate_reusing(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch, spare);
+            if mesh.surface.lazy_bounds().is_some() {
+                self.check_declared(mesh, &sub.bounds, &t);
+            }
             if outside > 0 && self.displaced_outside.fetch_add(u64::from(outside), Ordering::Relaxed) == 0 {
                 log::warn!(
                     "{}: displaced vertices leave their subpatch bounds; raise primvars:displacementBound (now {})",
@@ -800,6 +889,27 @@ impl<'s> Tracer<'s> {
             }
             t
         })
+    }
+
+    /// Counts (and reports once per render) a grid of a mesh built on first use that leaves the
+    /// bounds the mesh's instances were placed by: rays entered them through those bounds, so
+    /// they may have missed that part. `sub_bounds` (the subpatch's box) holds the grid but for displaced vertices, which are
+    /// counted apart: a box inside the declared bounds needs no look at the vertices.
+    fn check_declared(&self, mesh: &crate::scene::Mesh, sub_bounds: &Bounds3, t: &Tessellation) {
+        let declared = Self::declared_bounds(mesh);
+        if declared.contains(sub_bounds.min) && declared.contains(sub_bounds.max) {
+            return;
+        }
+        if let Some(v) = t.verts.iter().find(|v| !declared.contains(Vec3A::from(**v))) {
+            if self.lazy_bounds_escaped.fetch_add(1, Ordering::Relaxed) == 0 {
+                log::warn!(
+                    "{}: a tessellation vertex {v:?} lies outside the bounds its mesh was placed by ({:?}..{:?}); rays there may miss it",
+                    mesh.name,
+                    declared.min,
+                    declared.max
+                );
+            }
+        }
     }
 
     /// Descends from `cell` (whose fine tessellation is `tess`) to split children at

@@ -122,7 +122,7 @@ fn vm_kb(field: &str) -> u64 {
 /// One configuration, in this process: prints one JSON object.
 fn run_one(mode: &str, mb: f64, raw: &str, a: &Args) -> i32 {
     let t0 = Instant::now();
-    let scene = match build(&BenchSceneSpec { grid: a.grid, face_res: a.face_res, seed: 1, kind: a.kind }) {
+    let scene = match build(&BenchSceneSpec { grid: a.grid, face_res: a.face_res, seed: 1, kind: a.kind, ..BenchSceneSpec::default() }) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("mipray-bench-cache: scene: {e}");
