@@ -463,7 +463,13 @@ impl<'s> Tracer<'s> {
     /// Root subpatches that are curve segments ([`crate::curves`]), tessellated along their
     /// length only (included in [`Tracer::subpatch_count`]).
     pub fn curve_segment_count(&self) -> usize {
-        self.meshes.iter().zip(&self.scene.meshes).filter(|(_, m)| m.surface.curves().is_some()).map(|(g, _)| g.subpatches.len()).sum()
+        self.meshes
+            .iter()
+            .zip(&self.scene.meshes)
+            .filter(|(_, m)| m.surface.curves().is_some())
+            .filter_map(|(g, _)| g.get())
+            .map(|g| g.subpatches.len())
+            .sum()
     }
 
     /// The scene being traced.
@@ -793,7 +799,7 @@ impl<'s> Tracer<'s> {
         origin: Option<Origin>,
     ) -> Option<(LocalHit, u32)> {
         let instance = &self.instances[ii];
-        let geom = &self.meshes[instance.mesh];
+        let geom = self.geometry(instance.mesh);
         let blas = geom.bvh.as_ref()?;
         let sign = if self.scene.meshes[instance.mesh].left_handed { -1.0 } else { 1.0 };
         let own = origin.filter(|org| org.instance == ii as u32);
