@@ -159,7 +159,7 @@ fn chord_quad(e: usize, k: usize, q: usize) -> (usize, usize) {
 /// completing the frame across the chord. `None` for a chord of zero or non-finite length.
 /// Computed the same way when tessellating and when intersecting, from the same vertices, so
 /// the extents measured in it are the ones the box is built with.
-fn chord_frame(vert: impl Fn(usize, usize) -> Vec3A, e: usize, k: usize, n: usize, stride: usize) -> Option<ChordFrame> {
+fn chord_frame(vert: impl Fn(usize, usize) -> Vec3A, e: usize, k: usize, n: usize, stride: usize, triangle: bool) -> Option<ChordFrame> {
     let q = (n - 1) / stride;
     let at = |m: usize| {
         let (i, j) = edge_vertex(e, m, n);
@@ -175,7 +175,15 @@ fn chord_frame(vert: impl Fn(usize, usize) -> Vec3A, e: usize, k: usize, n: usiz
     let (qi, qj) = chord_quad(e, k, q);
     let p00 = vert(qi * stride, qj * stride);
     let p10 = vert((qi + 1) * stride, qj * stride);
-    let far = if e == DIAGONAL { vert(qi * stride, (qj + 1) * stride) } else { vert((qi + 1) * stride, (qj + 1) * stride) };
+    // A triangle grid's quad on the diagonal is its lower-left half alone (its (1, 1) corner is
+    // the basis extrapolated beyond the patch): the far corner of edges 0 and 3's last chords
+    // there, as of the diagonal's, is (0, 1). With (1, 1) those chords' frames, so their boxes
+    // and seam hits' normals, could face the wrong side (issue 23).
+    let far = if e == DIAGONAL || (triangle && qi + qj + 1 == q) {
+        vert(qi * stride, (qj + 1) * stride)
+    } else {
+        vert((qi + 1) * stride, (qj + 1) * stride)
+    };
     let ng = (p10 - p00).cross(far - p00);
     let e1 = (ng - axis * ng.dot(axis)).normalize_or_zero();
     let (e1, e2) = if e1 != Vec3A::ZERO && e1.is_finite() { (e1, axis.cross(e1)) } else { axis.any_orthonormal_pair() };
@@ -275,7 +283,9 @@ pub fn seam_extent_with(
     let max_abs = verts.iter().fold(0.0f32, |m, v| m.max(v[0].abs()).max(v[1].abs()).max(v[2].abs()));
     let q = (n - 1) as f32;
     let (mut dev_sq, mut below, mut above): (f32, f32, f32) = (0.0, 0.0, 0.0);
-    let edges = SeamEdges::ALL.within(GridDomain::of(surface.patch_param(patch).kind, &rect));
+    let domain = GridDomain::of(surface.patch_param(patch).kind, &rect);
+    let triangle = domain == GridDomain::LowerTriangle;
+    let edges = SeamEdges::ALL.within(domain);
     let chords = || (0..=DIAGONAL).filter(move |&e| edges.contains(e)).flat_map(move |e| (0..n - 1).map(move |k| (e, k)));
     let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
     // Every probe of every chord in one evaluation: positions only.
@@ -290,7 +300,7 @@ pub fn seam_extent_with(
     let mut probes = Vec::with_capacity(uv.len());
     surface.evaluate_points(patch, &uv, &mut probes);
     for ((e, k), curve) in chords().zip(probes.chunks_exact(SEAM_PROBES)) {
-        let frame = if normals { chord_frame(at, e, k, n, 1) } else { None };
+        let frame = if normals { chord_frame(at, e, k, n, 1, triangle) } else { None };
         let (ia, ja) = edge_vertex(e, k, n);
         let (ib, jb) = edge_vertex(e, k + 1, n);
         // The edge curve's deviation from the chord, D(τ) = c(τ) − (a + (b − a)τ) over the
@@ -462,7 +472,8 @@ impl SeamBox {
 pub fn seam_box(tess: &Tessellation, e: usize, k: usize, stride: usize) -> Option<(SeamBox, Vec3A)> {
     let n = tess.n;
     let vert = |i: usize, j: usize| tess.vert(i, j);
-    let f = chord_frame(vert, e, k, n, stride)?;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    let f = chord_frame(vert, e, k, n, stride, triangle)?;
     let base = tess.seam_radius;
     let (mut below, mut above) = tess.seam_normal.extents(base);
     let mut extra: f32 = 0.0;
@@ -479,7 +490,7 @@ pub fn seam_box(tess: &Tessellation, e: usize, k: usize, stride: usize) -> Optio
             (skipped_lo, skipped_hi) = (skipped_lo.min(h), skipped_hi.max(h));
         }
         for s in 0..stride {
-            match chord_frame(vert, e, k * stride + s, n, 1) {
+            match chord_frame(vert, e, k * stride + s, n, 1, triangle) {
                 Some(short) => turn = turn.max((short.e1 - f.e1).length()),
                 None => turn = 2.0,
             }
