@@ -182,11 +182,9 @@ impl RayDifferential {
     }
 
     fn from_spread_checked(dpdx: Vec3A, dpdy: Vec3A, dir: Vec3A, spread: f32) -> (Self, bool) {
-        let (s, cs) = sanitize_spread(spread);
-        let dir = dir.normalize_or_zero();
-        let ((e1, e2), cd) = if dir == Vec3A::ZERO { ((Vec3A::X, Vec3A::Y), true) } else { (dir.any_orthonormal_pair(), false) };
-        let (r, c) = Self::new_checked(dpdx, dpdy, e1 * s, e2 * s);
-        (r, c | cs | cd)
+        let ((dpdx, a), (dpdy, b)) = (sanitize(dpdx), sanitize(dpdy));
+        let (dddx, dddy, c) = spread_directions(dir, spread);
+        (Self { dpdx, dpdy, dddx, dddy }, a | b | c)
     }
 
     /// The beam width at distance `t` along the ray, in world units per pixel step: the larger
@@ -424,12 +422,20 @@ impl HemisphereFan {
     /// bit, and whether it clamped.
     pub fn ray(&self, dir: Vec3A, pdf_sr: f32, n_rays: u32) -> (RayDifferential, bool) {
         let (spread, c) = pdf_spread(pdf_sr, n_rays);
-        let (s, cs) = sanitize_spread(spread);
-        let dir = dir.normalize_or_zero();
-        let ((e1, e2), cd) = if dir == Vec3A::ZERO { ((Vec3A::X, Vec3A::Y), true) } else { (dir.any_orthonormal_pair(), false) };
-        let ((dddx, cx), (dddy, cy)) = (sanitize(e1 * s), sanitize(e2 * s));
-        (RayDifferential { dpdx: self.dpdx, dpdy: self.dpdy, dddx, dddy }, self.clamped | c | cs | cd | cx | cy)
+        let (dddx, dddy, cd) = spread_directions(dir, spread);
+        (RayDifferential { dpdx: self.dpdx, dpdy: self.dpdy, dddx, dddy }, self.clamped | c | cd)
     }
+}
+
+/// The direction derivatives of an isotropic spread of `spread` radians around `dir` (two
+/// orthonormal vectors perpendicular to it, times the spread), sanitized, and whether anything
+/// was clamped (the spread, a zero direction, the vectors).
+fn spread_directions(dir: Vec3A, spread: f32) -> (Vec3A, Vec3A, bool) {
+    let (s, cs) = sanitize_spread(spread);
+    let dir = dir.normalize_or_zero();
+    let ((e1, e2), cd) = if dir == Vec3A::ZERO { ((Vec3A::X, Vec3A::Y), true) } else { (dir.any_orthonormal_pair(), false) };
+    let ((dddx, cx), (dddy, cy)) = (sanitize(e1 * s), sanitize(e2 * s));
+    (dddx, dddy, cs | cd | cx | cy)
 }
 
 /// The directional spread, in radians, of one of `n_rays` rays importance-sampled with density
