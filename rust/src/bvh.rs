@@ -223,6 +223,130 @@ fn intersect_node_sse2(node: &CwBvhNode, ray: &obvhs::ray::Ray, oct_inv4: u32) -
     }
 }
 
+/// Visits the primitives of `bvh` whose boxes `ray` enters, nearest boxes first. `test(id)`
+/// tests leaf primitive `id` (an index into `bvh.primitive_indices`) against the ray, clipped to
+/// the nearest hit so far, and returns its hit distance; later boxes beyond it are skipped.
+/// With `any_hit`, the first hit ends the traversal: obvhs's `ray_traverse` would go on popping
+/// its stack through every box nearer than the hit, which an occlusion query never needs.
+///
+/// obvhs's own traversal order (its `traverse!` macro) over a state of the project's own
+/// ([`Walk`]): obvhs's `new_traversal` zeroes a 32-entry stack and branches on each direction
+/// component, ~60 instructions a traversal, and a shadow or AO ray makes two or three (the
+/// top level and each instance it enters).
+#[inline(always)]
+pub fn walk(bvh: &CwBvh, ray: obvhs::ray::Ray, any_hit: bool, mut test: impl FnMut(usize) -> Option<f32>) {
+    // The `traverse!` macro names `UVec2` unqualified.
+    use glam::UVec2;
+    let mut clipped = ray;
+    let mut storage = std::mem::MaybeUninit::uninit();
+    let mut state = Walk::new(bvh, ray.direction, &mut storage);
+    let mut node;
+    'traversal: {
+        obvhs::traverse!(bvh, node, state, intersect_node(node, &clipped, state.oct_inv4), {
+            if let Some(t) = test(state.primitive_id as usize) {
+                if any_hit {
+                    break 'traversal;
+                }
+                if t < clipped.tmax {
+                    clipped.tmax = t;
+                }
+            }
+        });
+    }
+}
+
+/// The state obvhs's `traverse!` macro walks a CWBVH with (the fields it names), as obvhs's
+/// `Traversal` starts it, but with a stack that is not zeroed first.
+struct Walk<'s> {
+    stack: WalkStack<'s>,
+    current_group: glam::UVec2,
+    primitive_group: glam::UVec2,
+    oct_inv4: u32,
+    primitive_id: u32,
+    hitmask: u32,
+}
+
+impl<'s> Walk<'s> {
+    #[inline(always)]
+    fn new(bvh: &CwBvh, direction: Vec3A, storage: &'s mut std::mem::MaybeUninit<[glam::UVec2; WALK_STACK]>) -> Walk<'s> {
+        Walk {
+            stack: WalkStack { data: storage, index: 0 },
+            current_group: if bvh.nodes.is_empty() { glam::UVec2::ZERO } else { glam::uvec2(0, 0x8000_0000) },
+            primitive_group: glam::UVec2::ZERO,
+            oct_inv4: octant_inv4(direction),
+            primitive_id: 0,
+            hitmask: 0,
+        }
+    }
+}
+
+/// obvhs's traversal stack depth (`TRAVERSAL_STACK_SIZE`, private to obvhs 0.4; see
+/// [`MAX_DEPTH`]).
+const WALK_STACK: usize = MAX_DEPTH as usize + 1;
+
+/// obvhs's `StackStack` without its initialisation: an entry is read only after it was pushed
+/// (the macro pops only a non-empty stack), so the zeroes were never read.
+struct WalkStack<'s> {
+    // A local of the walk's caller, not a field: inside the state, LLVM merged the array's
+    // undefined contents with the zeroed fields beside it into one 268-byte memset.
+    data: &'s mut std::mem::MaybeUninit<[glam::UVec2; WALK_STACK]>,
+    index: usize,
+}
+
+impl obvhs::faststack::FastStack<glam::UVec2> for WalkStack<'_> {
+    #[inline(always)]
+    fn push(&mut self, v: glam::UVec2) {
+        // As obvhs's: a push past the top overwrites the last entry (MAX_DEPTH keeps trees
+        // shallower than that).
+        // SAFETY: index < WALK_STACK always (clamped below).
+        unsafe { self.data.as_mut_ptr().cast::<glam::UVec2>().add(self.index).write(v) };
+        self.index = (self.index + 1).min(WALK_STACK - 1);
+    }
+    #[inline(always)]
+    fn pop_fast(&mut self) -> glam::UVec2 {
+        debug_assert!(self.index > 0, "pop_fast on an empty traversal stack");
+        self.index = self.index.saturating_sub(1);
+        // SAFETY: the traversal pops only after `is_empty` said no, so entry `index` was pushed.
+        unsafe { self.data.as_ptr().cast::<glam::UVec2>().add(self.index).read() }
+    }
+    #[inline(always)]
+    fn pop(&mut self) -> Option<glam::UVec2> {
+        (self.index > 0).then(|| self.pop_fast())
+    }
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.index
+    }
+    #[inline(always)]
+    fn is_empty(&self) -> bool {
+        self.index == 0
+    }
+    #[inline(always)]
+    fn clear(&mut self) {
+        self.index = 0;
+    }
+}
+
+/// obvhs's `ray_get_octant_inv4` (private to obvhs 0.4): per byte, bit 2 set when x is not
+/// negative, bit 1 for y, bit 0 for z (−0.0 counts as not negative, as obvhs's `< 0.0` has it),
+/// read from one vector comparison instead of three branches.
+#[inline(always)]
+fn octant_inv4(d: Vec3A) -> u32 {
+    const BY_NEGATIVE: [u32; 8] = {
+        let mut t = [0u32; 8];
+        let mut m = 0;
+        while m < 8 {
+            let x = if m & 1 == 0 { 0x0404_0404 } else { 0 };
+            let y = if m & 2 == 0 { 0x0202_0202 } else { 0 };
+            let z = if m & 4 == 0 { 0x0101_0101 } else { 0 };
+            t[m] = x | y | z;
+            m += 1;
+        }
+        t
+    };
+    BY_NEGATIVE[(d.cmplt(Vec3A::ZERO).bitmask() & 7) as usize]
+}
+
 /// Bytes a BVH occupies (nodes and index array), for the stats.
 pub fn bvh_bytes(bvh: &CwBvh) -> usize {
     std::mem::size_of_val(bvh.nodes.as_slice()) + std::mem::size_of_val(bvh.primitive_indices.as_slice())
@@ -317,6 +441,64 @@ mod tests {
         }
         // The rays must enter some nodes and miss others, or the comparison says little.
         assert!(entered > tested / 500 && entered < tested, "{entered} of {tested} nodes entered");
+    }
+
+    #[test]
+    fn octant_is_obvhs_own() {
+        let bvh = build_bvh(&[Bounds3 { min: Vec3A::ZERO, max: Vec3A::ONE }]).unwrap();
+        for x in [-2.0f32, -0.0, 0.0, 3.0] {
+            for y in [-1.0f32, -0.0, 0.0, 0.5] {
+                for z in [-7.0f32, -0.0, 0.0, 1e-30] {
+                    let d = Vec3A::new(x, y, z);
+                    assert_eq!(octant_inv4(d), bvh.new_traversal(d).oct_inv4, "{d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn walk_visits_what_obvhs_traversal_visits() {
+        // Deep enough trees that the stack is pushed and popped; every primitive a closest-hit
+        // walk tests, in obvhs's order, with each hit clipping the ray as obvhs's does.
+        let mut seed = 7u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let boxes: Vec<Bounds3> = (0..3000)
+            .map(|_| {
+                let c = Vec3A::new(next(), next(), next()) * 100.0;
+                Bounds3 { min: c, max: c + Vec3A::splat(0.5 + next() * 4.0) }
+            })
+            .collect();
+        let bvh = build_bvh(&boxes).unwrap();
+        let mut walked = 0usize;
+        for r in 0..400 {
+            let o = Vec3A::new(next(), next(), next()) * 140.0 - 20.0;
+            let d = (Vec3A::new(next(), next(), next()) * 2.0 - 1.0).normalize_or(Vec3A::X) + Vec3A::ZERO;
+            let ray = Ray::new(o, d, 0.0, f32::INFINITY);
+            // Every fifth box "hits" at its entry distance, so the walk's clipping matters.
+            let hit_at = |id: usize| {
+                let b = &boxes[bvh.primitive_indices[id] as usize];
+                let t0 = (b.min - o) * ray.inv_direction;
+                let t1 = (b.max - o) * ray.inv_direction;
+                let (near, far) = (t0.min(t1).max_element().max(0.0), t0.max(t1).min_element());
+                (near <= far && bvh.primitive_indices[id] % 5 == 0).then_some(near)
+            };
+            let (mut ours, mut theirs) = (Vec::new(), Vec::new());
+            walk(&bvh, ray, false, |id| {
+                ours.push(id);
+                hit_at(id)
+            });
+            let mut hit = RayHit::none();
+            bvh.ray_traverse(ray, &mut hit, |_, id| {
+                theirs.push(id);
+                hit_at(id).unwrap_or(f32::INFINITY)
+            });
+            assert_eq!(ours, theirs, "ray {r}");
+            walked += ours.len();
+        }
+        assert!(walked > 400, "the rays must reach primitives: {walked}");
     }
 
     #[test]

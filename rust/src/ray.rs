@@ -20,6 +20,12 @@ impl RayKind {
     pub const ALL: [RayKind; 7] =
         [RayKind::Camera, RayKind::Shadow, RayKind::Reflection, RayKind::Refraction, RayKind::Glossy, RayKind::Diffuse, RayKind::Ao];
 
+    /// Position in [`RayKind::ALL`] (the per-kind counters' index): the declaration order.
+    #[inline]
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
     /// The stats name (`render.rays.<name>`).
     pub const fn name(self) -> &'static str {
         match self {
@@ -117,6 +123,13 @@ pub const fn gamma(n: i32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_kind_s_index_is_its_place_in_all() {
+        for (i, k) in RayKind::ALL.into_iter().enumerate() {
+            assert_eq!(k.index(), i, "{k:?}");
+        }
+    }
 
     #[test]
     fn offset_moves_to_the_requested_side_and_is_nonzero() {

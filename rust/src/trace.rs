@@ -10,11 +10,11 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::Ray as BvhRay;
 
 use crate::bounds::Bounds3;
-use crate::bvh::build_bvh;
+use crate::bvh::{build_bvh, walk};
 use crate::dropped::DroppedPrims;
 use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
 pub use crate::hit::Hit;
-use crate::intersect::WatertightRay;
+use crate::intersect::{BoxRay, WatertightRay};
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
@@ -29,32 +29,6 @@ use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceP
 #[inline]
 pub fn positive_zeros(d: Vec3A) -> Vec3A {
     d + Vec3A::ZERO
-}
-
-/// Visits the primitives of `bvh` whose boxes `ray` enters, nearest boxes first. `test(id)`
-/// tests leaf primitive `id` (an index into `bvh.primitive_indices`) against the ray, clipped to
-/// the nearest hit so far, and returns its hit distance; later boxes beyond it are skipped.
-/// With `any_hit`, the first hit ends the traversal: obvhs's `ray_traverse` would go on popping
-/// its stack through every box nearer than the hit, which an occlusion query never needs.
-#[inline(always)]
-fn traverse_bvh(bvh: &CwBvh, ray: BvhRay, any_hit: bool, mut test: impl FnMut(usize) -> Option<f32>) {
-    // The `traverse!` macro names `UVec2` unqualified.
-    use glam::UVec2;
-    let mut clipped = ray;
-    let mut state = bvh.new_traversal(ray.direction);
-    let mut node;
-    'traversal: {
-        obvhs::traverse!(bvh, node, state, crate::bvh::intersect_node(node, &clipped, state.oct_inv4), {
-            if let Some(t) = test(state.primitive_id as usize) {
-                if any_hit {
-                    break 'traversal;
-                }
-                if t < clipped.tmax {
-                    clipped.tmax = t;
-                }
-            }
-        });
-    }
 }
 
 /// Per-thread counters, summed into the render stats at the end (no shared atomics on the hot
@@ -535,7 +509,7 @@ impl<'s> Tracer<'s> {
     }
 
     fn kind_index(kind: RayKind) -> usize {
-        RayKind::ALL.iter().position(|k| *k == kind).unwrap_or(0)
+        kind.index()
     }
 
     fn trace(&self, ray: &Ray, counters: &mut TraceCounters, any_hit: bool, origin: Option<Origin>) -> Option<Hit> {
@@ -547,7 +521,7 @@ impl<'s> Tracer<'s> {
         let bray = BvhRay::new(ray.o, positive_zeros(ray.d), ray.t_min, ray.t_max);
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
-        traverse_bvh(tlas, bray, any_hit, |id| {
+        walk(tlas, bray, any_hit, |id| {
             let ii = tlas.primitive_indices[id] as usize;
             let h = self.test_instance(ii, ray, t_best, counters, any_hit, origin)?;
             t_best = h.t;
@@ -609,20 +583,23 @@ impl<'s> Tracer<'s> {
             let (h, si) = self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
             return Some(self.hit(ii, ray, &inst, h, si));
         }
-        let wray = WatertightRay::new(o, d);
+        let box_ray = BoxRay::new(o, d);
         // The hull that placed a lazy mesh is looser than its subpatches' bounds: a ray that
         // misses those cannot enter any subpatch box (the slab test is monotone in the box), so
         // it skips the BLAS (measured: 13 % more instance entries without this).
-        if instance.placed_by_hull && wray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
+        if instance.placed_by_hull && box_ray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
             return None;
         }
+        // Made at the instance's first grid test: most instance entries test none.
+        let mut watertight: Option<WatertightRay> = None;
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
-        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
+        walk(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
             let si = blas.primitive_indices[id] as usize;
             let sp = &geom.subpatches[si];
             let sp_bounds = sp.bounds();
-            let (t_enter, _) = wray.hit_box(&sp_bounds, ray.t_min, t_best)?;
+            let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
+            let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
             counters.ray_subpatch_tests += 1;
             // The rate is sized by the patch itself: its box less the displacement bound it was
             // grown by (displacement finer than the grid is filtered to its spacing, so the
@@ -770,7 +747,7 @@ impl<'s> Tracer<'s> {
         let own = origin.filter(|org| org.instance == ii as u32);
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
-        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
+        walk(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
             let si = blas.primitive_indices[id] as usize;
             let patch = geom.subpatches[si].patch as usize;
             counters.ray_subpatch_tests += 1;
@@ -822,7 +799,7 @@ impl<'s> Tracer<'s> {
         let wray = WatertightRay::new(o, d);
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
-        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
+        walk(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
             let si = blas.primitive_indices[id] as usize;
             let sp = &geom.subpatches[si];
             let seg = sp.patch as usize;
