@@ -644,7 +644,7 @@ impl<'s> Tracer<'s> {
                 let t_limit = t_best;
                 nearest_not_own(tess.chord_error, &mut |t_from| {
                     let (mut t_max, mut found) = (t_limit, None);
-                    self.hit_split(instance.mesh, geom, root, &tess, depth, &wray, t_from, &mut t_max, &mut found);
+                    self.hit_split(instance.mesh, geom, root, &tess, depth, wray, t_from, &mut t_max, &mut found);
                     found
                 })
             } else {
@@ -668,7 +668,7 @@ impl<'s> Tracer<'s> {
                 let chord_error = tess.chord_error * (stride * stride) as f32;
                 let edges = self.seam_edges(cell);
                 nearest_not_own(chord_error, &mut |t_from| {
-                    intersect_with_seams(&wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
+                    intersect_with_seams(wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
                         t: h.t,
                         uv: (h.u, h.v),
                         rect: UvRect::UNIT,
