@@ -112,6 +112,9 @@ struct Origin {
     instance: u32,
     /// The root subpatch of `instance` the ray leaves.
     subpatch: u32,
+    /// Unit geometric normal of the triangle the ray starts on, turned to the side the ray
+    /// leaves on (render space).
+    side: Vec3A,
     /// Render units.
     chord_error: f32,
     /// 1 / |cos| between the ray and the surface (capped): a gap across the surface is this
@@ -127,6 +130,7 @@ impl Origin {
         Origin {
             instance: hit.instance,
             subpatch: hit.subpatch,
+            side: if cos > 0.0 { hit.ng } else { -hit.ng },
             chord_error: hit.chord_error,
             inv_cos: 1.0 / cos.abs().max(0.05),
             along_ng: cos > 0.0,
@@ -164,11 +168,12 @@ impl Origin {
     /// it and is crossed the same way; the same surface met from the side the ray travels in —
     /// the far wall of a closed shell, a bump beside the origin — is crossed the other way, and
     /// blocks at any distance: a ray leaving a closed surface on one side meets it next from
-    /// that side.
-    /// A seam box is no surface to cross: within the window it is passed over either way (it
-    /// stands off the surface by up to the coarse grid's chord error, as the grids do).
-    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, seam: bool) -> bool {
-        t < window && (seam || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
+    /// that side. Seam boxes are judged the same way, by their boundary quad's normal: passing
+    /// one over whichever way the ray went let rays out through the crack it closes (issue 23).
+    /// `either_way` passes a hit over whichever way it is crossed: a camera-facing curve
+    /// ribbon has no inside.
+    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, either_way: bool) -> bool {
+        t < window && (either_way || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
     }
 }
 
@@ -183,8 +188,6 @@ struct LocalHit {
     quads: u32,
     /// Object units.
     chord_error: f32,
-    /// On a seam box ([`crate::intersect::GridHit::seam`]).
-    seam: bool,
 }
 
 struct InstanceData {
@@ -595,6 +598,17 @@ impl<'s> Tracer<'s> {
         let mesh = &self.scene.meshes[instance.mesh];
         let inst = instance.pose(ray.time);
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
+        let own = origin.filter(|org| org.instance == ii as u32);
+        // A ray leaving this instance starts beyond every tessellation of its own subpatch that
+        // it may test (see `Tracer::lift`); the hit point is then on the grid it meets.
+        let lifted;
+        let ray = match own {
+            Some(org) if mesh.surface.exact().is_none() => {
+                lifted = Ray { o: ray.o + org.side * self.lift(instance.mesh, geom, org, ray, &inst, displacement_pad), ..*ray };
+                &lifted
+            }
+            _ => ray,
+        };
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         if !(o.is_finite() && d.is_finite()) {
@@ -624,13 +638,7 @@ impl<'s> Tracer<'s> {
             let sp_bounds = sp.bounds();
             let (t_enter, _) = wray.hit_box(&sp_bounds, ray.t_min, t_best)?;
             counters.ray_subpatch_tests += 1;
-            // The rate is sized by the patch itself: its box less the displacement bound it was
-            // grown by (displacement finer than the grid is filtered to its spacing, so the
-            // bound is no reason to tessellate finer).
-            let size = (sp_bounds.diagonal().max_element() - displacement_pad).max(0.0) * inst.scale;
-            let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
-            let own = origin.filter(|org| org.instance == ii as u32);
-            let depth = if sp.affine { 0 } else { split_depth(needed) };
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
             let kind = Self::kind_index(ray.kind);
             // Near the ray's origin, skip the surface's own other tessellations: closer than the
             // two tessellations' chord errors (along the ray), a hit on the instance the ray
@@ -653,7 +661,7 @@ impl<'s> Tracer<'s> {
                 let mut t_from = ray.t_min;
                 loop {
                     let h = search(t_from)?;
-                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), h.seam) {
+                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), false) {
                         return Some(h);
                     }
                     t_from = next_up(h.t);
@@ -671,13 +679,6 @@ impl<'s> Tracer<'s> {
                     found
                 })
             } else {
-                let rate = if self.single {
-                    Rate::R16
-                } else if sp.affine {
-                    Rate::R1
-                } else {
-                    Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
-                };
                 counters.rate_tests[rate as usize] += 1;
                 counters.rate_tests_by_kind[kind][rate as usize] += 1;
                 let (tier, stride) = rate.tier_and_stride();
@@ -698,7 +699,6 @@ impl<'s> Tracer<'s> {
                         ng: h.ng,
                         quads: rate.quads() as u32,
                         chord_error,
-                        seam: h.seam,
                     })
                 })
             };
@@ -709,6 +709,53 @@ impl<'s> Tracer<'s> {
         });
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
+    }
+
+    /// The split depth (0: none) and, unsplit, the rate at which `ray` tests root subpatch `sp`
+    /// (bounds `sp_bounds`, object space; its instance's largest stretch `scale`) when it
+    /// reaches its box at `t_enter`.
+    fn rate_for(&self, sp: &RootSubpatch, sp_bounds: &Bounds3, displacement_pad: f32, scale: f32, ray: &Ray, t_enter: f32) -> (u32, Rate) {
+        // The rate is sized by the patch itself: its box less the displacement bound it was
+        // grown by (displacement finer than the grid is filtered to its spacing, so the bound is
+        // no reason to tessellate finer).
+        let size = (sp_bounds.diagonal().max_element() - displacement_pad).max(0.0) * scale;
+        let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+        let depth = if sp.affine { 0 } else { split_depth(needed) };
+        let rate = if self.single {
+            Rate::R16
+        } else if sp.affine {
+            Rate::R1
+        } else {
+            Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
+        };
+        (depth, rate)
+    }
+
+    /// How far (render units) to move a ray leaving the surface at `org` off it, to the side
+    /// it leaves on, before testing the instance it leaves (mesh `mesh_index`, posed `inst`).
+    ///
+    /// The ray may test the subpatch it starts on at a coarser rate than the grid its origin is
+    /// on, and a coarser grid stands up to its chord error off the surface, on either side: a
+    /// ray starting on the far side of it (a coarse facet hanging above a concave fine grid)
+    /// is outside the closed surface it tests and can leave without crossing it, however
+    /// crossings near the origin are judged (issue 23). The origin is within its own grid's
+    /// chord error of the limit surface, the coarser grid within its own: moved by both, it is
+    /// on the side the ray leaves on of every tessellation of its subpatch, so the ray crosses
+    /// the surface wherever it gets through it. Only this instance's test is moved, so no other
+    /// object's contact shadow is lost.
+    fn lift(&self, mesh_index: usize, geom: &MeshGeometry, org: Origin, ray: &Ray, inst: &Pose, displacement_pad: f32) -> f32 {
+        let Some(sp) = geom.subpatches.get(org.subpatch as usize) else { return 0.0 };
+        let (depth, rate) = self.rate_for(sp, &sp.bounds(), displacement_pad, inst.scale, ray, ray.t_min);
+        let cell = ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 };
+        let chord_error = if depth > 0 {
+            // Split children's chords are 2^depth times shorter than the root's fine ones: their
+            // sag is 4^depth times smaller.
+            self.lookup(mesh_index, geom, cell, Tier::Fine).chord_error / (1u32 << (2 * depth)) as f32
+        } else {
+            let (tier, stride) = rate.tier_and_stride();
+            self.lookup(mesh_index, geom, cell, tier).chord_error * (stride * stride) as f32
+        };
+        org.chord_error + chord_error * inst.scale
     }
 
     /// The render-space hit of `ray` from its hit `h` on root subpatch `si` of instance `ii`
@@ -785,7 +832,7 @@ impl<'s> Tracer<'s> {
             };
             let h = found?;
             t_best = h.t;
-            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error, seam: false };
+            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error };
             best = Some((local, si as u32));
             Some(h.t)
         });
@@ -871,7 +918,7 @@ impl<'s> Tracer<'s> {
             // A ray leaving a camera-facing ribbon skips it within its half width too.
             let chord_error = chord_error + h.uncertainty;
             let local =
-                LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error, seam: h.facing };
+                LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error };
             best = Some((local, si as u32));
             Some(h.t)
         });
@@ -961,7 +1008,6 @@ impl<'s> Tracer<'s> {
                     ng: h.ng,
                     quads: 16 << cell.depth,
                     chord_error: tess.chord_error,
-                    seam: h.seam,
                 });
             }
             return;
