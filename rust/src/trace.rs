@@ -747,15 +747,21 @@ impl<'s> Tracer<'s> {
         let Some(sp) = geom.subpatches.get(org.subpatch as usize) else { return 0.0 };
         let (depth, rate) = self.rate_for(sp, &sp.bounds(), displacement_pad, inst.scale, ray, ray.t_min);
         let cell = ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 };
-        let chord_error = if depth > 0 {
+        // Its seam boxes stand off it by up to their radius too (seam-box hits are crossings
+        // like grid hits, `Origin::is_own_other_rate`): the origin goes past those as well, or a
+        // grazing ray leaving a convex surface meets the boxes' bulge beside it.
+        let off = |t: Tessellation| t.chord_error + t.seam_radius;
+        let off = if depth > 0 {
             // Split children's chords are 2^depth times shorter than the root's fine ones: their
             // sag is 4^depth times smaller.
-            self.lookup(mesh_index, geom, cell, Tier::Fine).chord_error / (1u32 << (2 * depth)) as f32
+            off(self.lookup(mesh_index, geom, cell, Tier::Fine)) / (1u32 << (2 * depth)) as f32
         } else {
+            // Read at a merged stride the chords are `stride` times longer, their sag `stride`²
+            // times larger.
             let (tier, stride) = rate.tier_and_stride();
-            self.lookup(mesh_index, geom, cell, tier).chord_error * (stride * stride) as f32
+            off(self.lookup(mesh_index, geom, cell, tier)) * (stride * stride) as f32
         };
-        org.chord_error + chord_error * inst.scale
+        org.chord_error + off * inst.scale
     }
 
     /// The render-space hit of `ray` from its hit `h` on root subpatch `si` of instance `ii`
