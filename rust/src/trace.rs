@@ -599,47 +599,60 @@ impl<'s> Tracer<'s> {
         let inst = instance.pose(ray.time);
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
         let own = origin.filter(|org| org.instance == ii as u32);
-        // A ray leaving this instance starts beyond every tessellation of its own subpatch that
-        // it may test (see `Tracer::lift`); the hit point is then on the grid it meets.
+        if mesh.surface.exact().is_some() || mesh.surface.curves().is_some() {
+            let o = inst.object_from_render.transform_point3a(ray.o);
+            let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
+            if !(o.is_finite() && d.is_finite()) {
+                // A render-space ray far beyond the scene can overflow in a small object's space.
+                return None;
+            }
+            let (h, si) = match (mesh.surface.exact(), mesh.surface.curves()) {
+                (Some(exact), _) => self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?,
+                (None, Some(curves)) => self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?,
+                (None, None) => return None,
+            };
+            return Some(self.hit(ii, ray, &inst, h, si));
+        }
+        // A ray leaving this instance tests the subpatch it starts on first, at the rate chosen
+        // where it starts: that one look-up gives both the lift (see `Tracer::lift`) and the
+        // grid the test reads, so the lift costs no look-up of its own and every look-up is
+        // still one test. The traversal below then passes that subpatch by.
+        let first = own.and_then(|org| {
+            let sp = geom.subpatches.get(org.subpatch as usize)?;
+            let (depth, rate) = self.rate_for(sp, &sp.bounds(), displacement_pad, inst.scale, ray, ray.t_min);
+            let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
+            let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
+            Some((org, depth, rate, tess))
+        });
+        // Moved off the surface by the lift, the ray starts beyond every tessellation of its
+        // own subpatch that it tests; the hit point is then on the grid it meets.
         let lifted;
-        let ray = match own {
-            Some(org) if mesh.surface.exact().is_none() => {
-                lifted = Ray { o: ray.o + org.side * self.lift(instance.mesh, geom, org, ray, &inst, displacement_pad), ..*ray };
+        let ray = match &first {
+            Some((org, depth, rate, tess)) => {
+                lifted = Ray { o: ray.o + org.side * Self::lift(org, tess, *depth, *rate, inst.scale), ..*ray };
                 &lifted
             }
-            _ => ray,
+            None => ray,
         };
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         if !(o.is_finite() && d.is_finite()) {
-            // A render-space ray far beyond the scene can overflow in a small object's space.
             return None;
-        }
-        if let Some(exact) = mesh.surface.exact() {
-            let (h, si) = self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
-            return Some(self.hit(ii, ray, &inst, h, si));
-        }
-        if let Some(curves) = mesh.surface.curves() {
-            let (h, si) = self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
-            return Some(self.hit(ii, ray, &inst, h, si));
         }
         let wray = WatertightRay::new(o, d);
         // The hull that placed a lazy mesh is looser than its subpatches' bounds: a ray that
         // misses those cannot enter any subpatch box (the slab test is monotone in the box), so
-        // it skips the BLAS (measured: 13 % more instance entries without this).
-        if instance.placed_by_hull && wray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
+        // it skips the BLAS (measured: 13 % more instance entries without this). A ray leaving
+        // the mesh starts on it.
+        if first.is_none() && instance.placed_by_hull && wray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
             return None;
         }
-        let mut best: Option<(LocalHit, u32)> = None;
-        let mut t_best = t_max;
-        traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
-            let si = blas.primitive_indices[id] as usize;
-            let sp = &geom.subpatches[si];
-            let sp_bounds = sp.bounds();
-            let (t_enter, _) = wray.hit_box(&sp_bounds, ray.t_min, t_best)?;
+        let kind = Self::kind_index(ray.kind);
+        let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+        // Root subpatch `si` tested at split depth `depth` (0: none) or else `rate`, from its
+        // looked-up `tess` (the fine tier when split), for a hit before `t_best`.
+        let test = |counters: &mut TraceCounters, si: usize, depth: u32, rate: Rate, tess: Tessellation, t_best: f32| {
             counters.ray_subpatch_tests += 1;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
-            let kind = Self::kind_index(ray.kind);
             // Near the ray's origin, skip the surface's own other tessellations: closer than the
             // two tessellations' chord errors (along the ray), a hit on the instance the ray
             // starts from that crosses it the way the ray left is the surface meeting itself at
@@ -654,7 +667,6 @@ impl<'s> Tracer<'s> {
             // The nearest hit at or after `search`'s t_min that is not the surface at another
             // rate: hits within the window that cross the surface the way the ray left it are
             // passed over one by one (the next search starts at the hit's t).
-            let sign = if mesh.left_handed { -1.0 } else { 1.0 };
             let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
                 let Some(o) = own else { return search(ray.t_min) };
                 let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
@@ -667,30 +679,26 @@ impl<'s> Tracer<'s> {
                     t_from = next_up(h.t);
                 }
             };
-            let found = if depth > 0 {
+            let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
+            if depth > 0 {
                 counters.finer_than_fine += 1;
                 counters.rate_tests_by_kind[kind][5] += 1;
-                let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                let tess = self.lookup(instance.mesh, geom, root, Tier::Fine);
-                let t_limit = t_best;
                 nearest_not_own(tess.chord_error, &mut |t_from| {
-                    let (mut t_max, mut found) = (t_limit, None);
+                    let (mut t_max, mut found) = (t_best, None);
                     self.hit_split(instance.mesh, geom, root, &tess, depth, &wray, t_from, &mut t_max, &mut found);
                     found
                 })
             } else {
                 counters.rate_tests[rate as usize] += 1;
                 counters.rate_tests_by_kind[kind][rate as usize] += 1;
-                let (tier, stride) = rate.tier_and_stride();
-                let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                let tess = self.lookup(instance.mesh, geom, cell, tier);
                 if rate == Rate::R1 && own.is_some_and(|o| o.subpatch == si as u32 && o.passes_own_quad(&tess, d, sign)) {
                     return None;
                 }
                 // The grid's chord error was probed at its own spacing; read at a merged stride
                 // its quads are `stride` times wider, and a chord's sag grows with its square.
+                let stride = rate.tier_and_stride().1;
                 let chord_error = tess.chord_error * (stride * stride) as f32;
-                let edges = self.seam_edges(cell);
+                let edges = self.seam_edges(root);
                 nearest_not_own(chord_error, &mut |t_from| {
                     intersect_with_seams(&wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
                         t: h.t,
@@ -701,12 +709,35 @@ impl<'s> Tracer<'s> {
                         chord_error,
                     })
                 })
-            };
-            let h = found?;
-            t_best = h.t;
-            best = Some((h, si as u32));
-            Some(h.t)
-        });
+            }
+        };
+        let mut best: Option<(LocalHit, u32)> = None;
+        let mut t_best = t_max;
+        let first_si = first.as_ref().map(|(org, ..)| org.subpatch as usize);
+        if let Some((org, depth, rate, tess)) = first {
+            if let Some(h) = test(counters, org.subpatch as usize, depth, rate, tess, t_best) {
+                t_best = h.t;
+                best = Some((h, org.subpatch));
+            }
+        }
+        if !(any_hit && best.is_some()) {
+            traverse_bvh(blas, BvhRay::new(o, d, ray.t_min, t_best), any_hit, |id| {
+                let si = blas.primitive_indices[id] as usize;
+                if first_si == Some(si) {
+                    return None;
+                }
+                let sp = &geom.subpatches[si];
+                let sp_bounds = sp.bounds();
+                let (t_enter, _) = wray.hit_box(&sp_bounds, ray.t_min, t_best)?;
+                let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+                let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
+                let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
+                let h = test(counters, si, depth, rate, tess, t_best)?;
+                t_best = h.t;
+                best = Some((h, si as u32));
+                Some(h.t)
+            });
+        }
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
     }
@@ -732,7 +763,9 @@ impl<'s> Tracer<'s> {
     }
 
     /// How far (render units) to move a ray leaving the surface at `org` off it, to the side
-    /// it leaves on, before testing the instance it leaves (mesh `mesh_index`, posed `inst`).
+    /// it leaves on, before testing the instance it leaves (largest stretch `scale`), when it
+    /// tests the subpatch it starts on at split depth `depth` (0: none) or else `rate`, from
+    /// `tess` (object space; the fine tier when split).
     ///
     /// The ray may test the subpatch it starts on at a coarser rate than the grid its origin is
     /// on, and a coarser grid stands up to its chord error off the surface, on either side: a
@@ -743,25 +776,22 @@ impl<'s> Tracer<'s> {
     /// on the side the ray leaves on of every tessellation of its subpatch, so the ray crosses
     /// the surface wherever it gets through it. Only this instance's test is moved, so no other
     /// object's contact shadow is lost.
-    fn lift(&self, mesh_index: usize, geom: &MeshGeometry, org: Origin, ray: &Ray, inst: &Pose, displacement_pad: f32) -> f32 {
-        let Some(sp) = geom.subpatches.get(org.subpatch as usize) else { return 0.0 };
-        let (depth, rate) = self.rate_for(sp, &sp.bounds(), displacement_pad, inst.scale, ray, ray.t_min);
-        let cell = ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 };
+    fn lift(org: &Origin, tess: &Tessellation, depth: u32, rate: Rate, scale: f32) -> f32 {
         // Its seam boxes stand off it by up to their radius too (seam-box hits are crossings
         // like grid hits, `Origin::is_own_other_rate`): the origin goes past those as well, or a
         // grazing ray leaving a convex surface meets the boxes' bulge beside it.
-        let off = |t: Tessellation| t.chord_error + t.seam_radius;
+        let off = tess.chord_error + tess.seam_radius;
         let off = if depth > 0 {
             // Split children's chords are 2^depth times shorter than the root's fine ones: their
             // sag is 4^depth times smaller.
-            off(self.lookup(mesh_index, geom, cell, Tier::Fine)) / (1u32 << (2 * depth)) as f32
+            off / (1u32 << (2 * depth)) as f32
         } else {
             // Read at a merged stride the chords are `stride` times longer, their sag `stride`²
             // times larger.
-            let (tier, stride) = rate.tier_and_stride();
-            off(self.lookup(mesh_index, geom, cell, tier)) * (stride * stride) as f32
+            let stride = rate.tier_and_stride().1;
+            off * (stride * stride) as f32
         };
-        org.chord_error + off * inst.scale
+        org.chord_error + off * scale
     }
 
     /// The render-space hit of `ray` from its hit `h` on root subpatch `si` of instance `ii`
@@ -923,8 +953,7 @@ impl<'s> Tracer<'s> {
             t_best = h.t;
             // A ray leaving a camera-facing ribbon skips it within its half width too.
             let chord_error = chord_error + h.uncertainty;
-            let local =
-                LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error };
+            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error };
             best = Some((local, si as u32));
             Some(h.t)
         });
