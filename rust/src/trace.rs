@@ -613,13 +613,25 @@ impl<'s> Tracer<'s> {
             };
             return Some(self.hit(ii, ray, &inst, h, si));
         }
-        // A ray leaving this instance tests the subpatch it starts on first, at the rate chosen
-        // where it starts: that one look-up gives both the lift (see `Tracer::lift`) and the
-        // grid the test reads, so the lift costs no look-up of its own and every look-up is
-        // still one test. The traversal below then passes that subpatch by.
+        let o = inst.object_from_render.transform_point3a(ray.o);
+        let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
+        if !(o.is_finite() && d.is_finite()) {
+            // A render-space ray far beyond the scene can overflow in a small object's space.
+            return None;
+        }
+        let mut wray = WatertightRay::new(o, d);
+        // A ray leaving this instance that enters the box of the subpatch it starts on tests
+        // that subpatch first, at the rate chosen where it enters: that one look-up gives both
+        // the lift (see `Tracer::lift`) and the grid the test reads, so the lift costs no
+        // look-up of its own and every look-up is still one test. The traversal below then
+        // passes that subpatch by. A ray that misses the box (most rays leaving a flat or
+        // convex patch: the spawn offset puts them outside it) meets no tessellation of that
+        // subpatch, and is not lifted.
         let first = own.and_then(|org| {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
-            let (depth, rate) = self.rate_for(sp, &sp.bounds(), displacement_pad, inst.scale, ray, ray.t_min);
+            let sp_bounds = sp.bounds();
+            let (t_enter, _) = wray.hit_box(&sp_bounds, ray.t_min, t_max)?;
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
             Some((org, depth, rate, tess))
@@ -630,20 +642,16 @@ impl<'s> Tracer<'s> {
         let ray = match &first {
             Some((org, depth, rate, tess)) => {
                 lifted = Ray { o: ray.o + org.side * Self::lift(org, tess, *depth, *rate, inst.scale), ..*ray };
+                wray.o = inst.object_from_render.transform_point3a(lifted.o);
                 &lifted
             }
             None => ray,
         };
-        let o = inst.object_from_render.transform_point3a(ray.o);
-        let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
-        if !(o.is_finite() && d.is_finite()) {
-            return None;
-        }
-        let wray = WatertightRay::new(o, d);
+        let o = wray.o;
         // The hull that placed a lazy mesh is looser than its subpatches' bounds: a ray that
         // misses those cannot enter any subpatch box (the slab test is monotone in the box), so
-        // it skips the BLAS (measured: 13 % more instance entries without this). A ray leaving
-        // the mesh starts on it.
+        // it skips the BLAS (measured: 13 % more instance entries without this). A ray that
+        // tests its own subpatch first is in the mesh's bounds.
         if first.is_none() && instance.placed_by_hull && wray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
             return None;
         }
