@@ -178,9 +178,11 @@ fn no_light_from_inside_a_closed_shell_gets_out() {
     assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
 }
 
-// Not yet passing (issue 23, see docs/cracks.md): displacement filtered at two grid spacings
-// leaves cracks along subpatch edges that seam boxes (measured on the undisplaced surface) do
-// not close; a few pixels in 5,760 still leak. Run with `--ignored` to see the figures.
+// Not yet passing (issue 23, see docs/cracks.md, "Not yet closed: displaced shells"):
+// neighbouring displaced subpatches tested at different rates displace their shared edge by
+// displacement filtered at two grid spacings, and the seam boxes (sized on the undisplaced
+// edge curve) do not close the holes that leaves; 4 pixels of 10,080 leak. Run with
+// `--ignored` to see the figures.
 #[test]
 #[ignore = "issue 23: light still leaks through cracks of displaced shells"]
 fn no_light_crosses_a_closed_displaced_shell() {
