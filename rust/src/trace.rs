@@ -1126,7 +1126,7 @@ mod tests {
             let d = Vec3A::new(next(), next(), next()).normalize_or(Vec3A::Z);
             for along_ng in [true, false] {
                 for handed in [1.0, -1.0] {
-                    let origin = Origin { instance: 0, subpatch: 0, chord_error: 0.0, inv_cos: 1.0, along_ng };
+                    let origin = Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng };
                     if !origin.passes_own_quad(&tess, d, handed) {
                         refused += 1;
                         continue;
