@@ -1,6 +1,7 @@
 //! No light crosses a closed surface (issue 23): a camera inside a closed, bumpy shell lit only
 //! from outside sees exactly nothing, and a shell lit only from inside shows nothing outside —
-//! for every integrator, subdivision scheme, displacement and tessellation rate.
+//! for every integrator, subdivision scheme and tessellation rate (displaced shells: ignored,
+//! see the last test).
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -139,11 +140,11 @@ const INTEGRATORS: [IntegratorKind; 4] = [IntegratorKind::Direct, IntegratorKind
 /// its inner side, where every occlusion ray must be blocked.
 const LIT_INTEGRATORS: [IntegratorKind; 3] = [IntegratorKind::Direct, IntegratorKind::ColorBleeding, IntegratorKind::Path];
 
-/// Every (shell, integrator, tess factor) whose render is not exactly 0 everywhere, for
-/// `lights`, the camera placements `views` and `integrators`.
-fn leaks(lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)], integrators: &[IntegratorKind]) -> Vec<String> {
+/// Every (shell, integrator, tess factor) whose render is not exactly 0 everywhere, for the
+/// `shells`, `lights`, the camera placements `views` and `integrators`.
+fn leaks(shells: &[Shell], lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)], integrators: &[IntegratorKind]) -> Vec<String> {
     let mut leaks = Vec::new();
-    for shell in [Shell::CatmullClark, Shell::Loop, Shell::Displaced] {
+    for &shell in shells {
         let mut scene = shell_scene(shell);
         scene.lights = lights();
         for &(eye, target) in views {
@@ -162,22 +163,30 @@ fn leaks(lights: fn() -> Vec<Light>, views: &[(Vec3, Vec3)], integrators: &[Inte
     leaks
 }
 
-// Not yet passing (issue 23, see docs/cracks.md): the crossing rule closed most leaks, but
-// rays still get out of the Loop and the displaced shells (and one Catmull-Clark pixel) where a
-// ray leaves a fine grid and runs between it and a coarser grid of the same surface without
-// crossing the coarser one. Run with `--ignored` to see the figures.
+const OUTSIDE_VIEWS: [(Vec3, Vec3); 2] = [(Vec3::ZERO, Vec3::new(1.0, 0.2, 0.3)), (Vec3::new(0.5, -0.5, 0.5), Vec3::new(-1.0, 0.3, -0.6))];
+const INSIDE_VIEWS: [(Vec3, Vec3); 2] = [(Vec3::new(0.0, 2.0, 9.0), Vec3::ZERO), (Vec3::new(-7.0, -3.0, 1.0), Vec3::ZERO)];
+
 #[test]
-#[ignore = "issue 23: light still leaks through Loop and displaced shells"]
 fn no_light_from_outside_reaches_a_camera_inside_a_closed_shell() {
-    let views = [(Vec3::ZERO, Vec3::new(1.0, 0.2, 0.3)), (Vec3::new(0.5, -0.5, 0.5), Vec3::new(-1.0, 0.3, -0.6))];
-    let leaks = leaks(lights_outside, &views, &INTEGRATORS);
+    let leaks = leaks(&[Shell::CatmullClark, Shell::Loop], lights_outside, &OUTSIDE_VIEWS, &INTEGRATORS);
     assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
 }
 
 #[test]
-#[ignore = "issue 23: light still leaks through Loop and displaced shells"]
 fn no_light_from_inside_a_closed_shell_gets_out() {
-    let views = [(Vec3::new(0.0, 2.0, 9.0), Vec3::ZERO), (Vec3::new(-7.0, -3.0, 1.0), Vec3::ZERO)];
-    let leaks = leaks(lights_inside, &views, &LIT_INTEGRATORS);
+    let leaks = leaks(&[Shell::CatmullClark, Shell::Loop], lights_inside, &INSIDE_VIEWS, &LIT_INTEGRATORS);
     assert!(leaks.is_empty(), "light crossed the shell:\n{}", leaks.join("\n"));
+}
+
+// Not yet passing (issue 23, see docs/cracks.md, "Not yet closed: displaced shells"):
+// neighbouring displaced subpatches tested at different rates displace their shared edge by
+// displacement filtered at two grid spacings, and the seam boxes (sized on the undisplaced
+// edge curve) do not close the holes that leaves; 4 pixels of 10,080 leak. Run with
+// `--ignored` to see the figures.
+#[test]
+#[ignore = "issue 23: light still leaks through cracks of displaced shells"]
+fn no_light_crosses_a_closed_displaced_shell() {
+    let mut found = leaks(&[Shell::Displaced], lights_outside, &OUTSIDE_VIEWS, &INTEGRATORS);
+    found.extend(leaks(&[Shell::Displaced], lights_inside, &INSIDE_VIEWS, &LIT_INTEGRATORS));
+    assert!(found.is_empty(), "light crossed the shell:\n{}", found.join("\n"));
 }

@@ -86,6 +86,9 @@ struct Origin {
     instance: u32,
     /// The root subpatch of `instance` the ray leaves.
     subpatch: u32,
+    /// Unit geometric normal of the triangle the ray starts on, turned to the side the ray
+    /// leaves on (render space).
+    side: Vec3A,
     /// Render units.
     chord_error: f32,
     /// 1 / |cos| between the ray and the surface (capped): a gap across the surface is this
@@ -101,6 +104,7 @@ impl Origin {
         Origin {
             instance: hit.instance,
             subpatch: hit.subpatch,
+            side: if cos > 0.0 { hit.ng } else { -hit.ng },
             chord_error: hit.chord_error,
             inv_cos: 1.0 / cos.abs().max(0.05),
             along_ng: cos > 0.0,
@@ -138,11 +142,12 @@ impl Origin {
     /// it and is crossed the same way; the same surface met from the side the ray travels in —
     /// the far wall of a closed shell, a bump beside the origin — is crossed the other way, and
     /// blocks at any distance: a ray leaving a closed surface on one side meets it next from
-    /// that side.
-    /// A seam box is no surface to cross: within the window it is passed over either way (it
-    /// stands off the surface by up to the coarse grid's chord error, as the grids do).
-    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, seam: bool) -> bool {
-        t < window && (seam || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
+    /// that side. Seam boxes are judged the same way, by their boundary quad's normal: passing
+    /// one over whichever way the ray went let rays out through the crack it closes (issue 23).
+    /// `either_way` passes a hit over whichever way it is crossed: a camera-facing curve
+    /// ribbon has no inside.
+    fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, either_way: bool) -> bool {
+        t < window && (either_way || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
     }
 }
 
@@ -157,8 +162,6 @@ struct LocalHit {
     quads: u32,
     /// Object units.
     chord_error: f32,
-    /// On a seam box ([`crate::intersect::GridHit::seam`]).
-    seam: bool,
 }
 
 struct InstanceData {
@@ -569,123 +572,215 @@ impl<'s> Tracer<'s> {
         let mesh = &self.scene.meshes[instance.mesh];
         let inst = instance.pose(ray.time);
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
+        let own = origin.filter(|org| org.instance == ii as u32);
+        if mesh.surface.exact().is_some() || mesh.surface.curves().is_some() {
+            let o = inst.object_from_render.transform_point3a(ray.o);
+            let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
+            if !(o.is_finite() && d.is_finite()) {
+                // A render-space ray far beyond the scene can overflow in a small object's space.
+                return None;
+            }
+            let (h, si) = match (mesh.surface.exact(), mesh.surface.curves()) {
+                (Some(exact), _) => self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?,
+                (None, Some(curves)) => self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?,
+                (None, None) => return None,
+            };
+            return Some(self.hit(ii, ray, &inst, h, si));
+        }
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         if !(o.is_finite() && d.is_finite()) {
             // A render-space ray far beyond the scene can overflow in a small object's space.
             return None;
         }
-        if let Some(exact) = mesh.surface.exact() {
-            let (h, si) = self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
-            return Some(self.hit(ii, ray, &inst, h, si));
-        }
-        if let Some(curves) = mesh.surface.curves() {
-            let (h, si) = self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?;
-            return Some(self.hit(ii, ray, &inst, h, si));
-        }
-        let box_ray = BoxRay::new(o, d);
+        let mut box_ray = BoxRay::new(o, d);
+        // A ray leaving this instance that enters the box of the subpatch it starts on tests
+        // that subpatch first, at the rate chosen where it enters: that one look-up gives both
+        // the lift (see `Tracer::lift`) and the grid the test reads, so the lift costs no
+        // look-up of its own and every look-up is still one test. The traversal below then
+        // passes that subpatch by. A ray that misses the box (most rays leaving a flat or
+        // convex patch: the spawn offset puts them outside it) meets no tessellation of that
+        // subpatch, and is not lifted. Displaced meshes are not lifted: their grids' chord
+        // errors hold the whole displacement bound, and a lift that large would hide the
+        // mesh's own bumps beside the origin from the ray (lost contact occlusion).
+        let first = own.filter(|_| mesh.displacement_bound <= 0.0).and_then(|org| {
+            let sp = geom.subpatches.get(org.subpatch as usize)?;
+            let sp_bounds = sp.bounds();
+            let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+            let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
+            let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
+            Some((org, depth, rate, tess))
+        });
+        // Moved off the surface by the lift, the ray starts beyond every tessellation of its
+        // own subpatch that it tests; the hit point is then on the grid it meets.
+        let lifted;
+        let ray = match &first {
+            Some((org, depth, rate, tess)) => {
+                lifted = Ray { o: ray.o + org.side * Self::lift(org, tess, *depth, *rate, inst.scale), ..*ray };
+                box_ray = BoxRay::new(inst.object_from_render.transform_point3a(lifted.o), d);
+                &lifted
+            }
+            None => ray,
+        };
+        let o = box_ray.o;
         // The hull that placed a lazy mesh is looser than its subpatches' bounds: a ray that
         // misses those cannot enter any subpatch box (the slab test is monotone in the box), so
-        // it skips the BLAS (measured: 13 % more instance entries without this).
-        if instance.placed_by_hull && box_ray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
+        // it skips the BLAS (measured: 13 % more instance entries without this). A ray that
+        // tests its own subpatch first is in the mesh's bounds.
+        if first.is_none() && instance.placed_by_hull && box_ray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
             return None;
         }
+        let kind = Self::kind_index(ray.kind);
+        let sign = if mesh.left_handed { -1.0 } else { 1.0 };
+        // Root subpatch `si` tested at split depth `depth` (0: none) or else `rate`, from its
+        // looked-up `tess` (the fine tier when split), for a hit before `t_best`.
         // Made at the instance's first grid test: most instance entries test none.
         let mut watertight: Option<WatertightRay> = None;
+        let test =
+            |counters: &mut TraceCounters, wray: &WatertightRay, si: usize, depth: u32, rate: Rate, tess: Tessellation, t_best: f32| {
+                counters.ray_subpatch_tests += 1;
+                // Near the ray's origin, skip the surface's own other tessellations: closer than the
+                // two tessellations' chord errors (along the ray), a hit on the instance the ray
+                // starts from that crosses it the way the ray left is the surface meeting itself at
+                // another rate. A coarser grid there stands up to its chord error above the fine
+                // grid the ray starts on (a facet touching the limit surface at its corners, where
+                // the fine chords sag below it), and would shadow it. Only subpatches near the
+                // origin can be hit that close, so this is the rule "the origin's own subpatch and
+                // the neighbours whose boxes hold it" without a box test (and without depending on
+                // how tight the boxes are). A hit crossing the other way is the surface itself in
+                // the ray's path and blocks however near (see `Origin::is_own_other_rate`): without
+                // that, grazing rays left closed shells through the window (issue 23).
+                // The nearest hit at or after `search`'s t_min that is not the surface at another
+                // rate: hits within the window that cross the surface the way the ray left it are
+                // passed over one by one (the next search starts at the hit's t).
+                let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
+                    let Some(o) = own else { return search(ray.t_min) };
+                    let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
+                    let mut t_from = ray.t_min;
+                    loop {
+                        let h = search(t_from)?;
+                        if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), false) {
+                            return Some(h);
+                        }
+                        t_from = next_up(h.t);
+                    }
+                };
+                let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
+                if depth > 0 {
+                    counters.finer_than_fine += 1;
+                    counters.rate_tests_by_kind[kind][5] += 1;
+                    nearest_not_own(tess.chord_error, &mut |t_from| {
+                        let (mut t_max, mut found) = (t_best, None);
+                        self.hit_split(instance.mesh, geom, root, &tess, depth, wray, t_from, &mut t_max, &mut found);
+                        found
+                    })
+                } else {
+                    counters.rate_tests[rate as usize] += 1;
+                    counters.rate_tests_by_kind[kind][rate as usize] += 1;
+                    if rate == Rate::R1 && own.is_some_and(|o| o.subpatch == si as u32 && o.passes_own_quad(&tess, d, sign)) {
+                        return None;
+                    }
+                    // The grid's chord error was probed at its own spacing; read at a merged stride
+                    // its quads are `stride` times wider, and a chord's sag grows with its square.
+                    let stride = rate.tier_and_stride().1;
+                    let chord_error = tess.chord_error * (stride * stride) as f32;
+                    let edges = self.seam_edges(root);
+                    nearest_not_own(chord_error, &mut |t_from| {
+                        intersect_with_seams(wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
+                            t: h.t,
+                            uv: (h.u, h.v),
+                            rect: UvRect::UNIT,
+                            ng: h.ng,
+                            quads: rate.quads() as u32,
+                            chord_error,
+                        })
+                    })
+                }
+            };
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
-        walk(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
-            let si = blas.primitive_indices[id] as usize;
-            let sp = &geom.subpatches[si];
-            let sp_bounds = sp.bounds();
-            let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
+        let first_si = first.as_ref().map(|(org, ..)| org.subpatch as usize);
+        if let Some((org, depth, rate, tess)) = first {
             let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
-            counters.ray_subpatch_tests += 1;
-            // The rate is sized by the patch itself: its box less the displacement bound it was
-            // grown by (displacement finer than the grid is filtered to its spacing, so the
-            // bound is no reason to tessellate finer).
-            let size = (sp_bounds.diagonal().max_element() - displacement_pad).max(0.0) * inst.scale;
-            let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
-            let own = origin.filter(|org| org.instance == ii as u32);
-            let depth = if sp.affine { 0 } else { split_depth(needed) };
-            let kind = Self::kind_index(ray.kind);
-            // Near the ray's origin, skip the surface's own other tessellations: closer than the
-            // two tessellations' chord errors (along the ray), a hit on the instance the ray
-            // starts from that crosses it the way the ray left is the surface meeting itself at
-            // another rate. A coarser grid there stands up to its chord error above the fine
-            // grid the ray starts on (a facet touching the limit surface at its corners, where
-            // the fine chords sag below it), and would shadow it. Only subpatches near the
-            // origin can be hit that close, so this is the rule "the origin's own subpatch and
-            // the neighbours whose boxes hold it" without a box test (and without depending on
-            // how tight the boxes are). A hit crossing the other way is the surface itself in
-            // the ray's path and blocks however near (see `Origin::is_own_other_rate`): without
-            // that, grazing rays left closed shells through the window (issue 23).
-            // The nearest hit at or after `search`'s t_min that is not the surface at another
-            // rate: hits within the window that cross the surface the way the ray left it are
-            // passed over one by one (the next search starts at the hit's t).
-            let sign = if mesh.left_handed { -1.0 } else { 1.0 };
-            let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
-                let Some(o) = own else { return search(ray.t_min) };
-                let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
-                let mut t_from = ray.t_min;
-                loop {
-                    let h = search(t_from)?;
-                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), h.seam) {
-                        return Some(h);
-                    }
-                    t_from = next_up(h.t);
-                }
-            };
-            let found = if depth > 0 {
-                counters.finer_than_fine += 1;
-                counters.rate_tests_by_kind[kind][5] += 1;
-                let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                let tess = self.lookup(instance.mesh, geom, root, Tier::Fine);
-                let t_limit = t_best;
-                nearest_not_own(tess.chord_error, &mut |t_from| {
-                    let (mut t_max, mut found) = (t_limit, None);
-                    self.hit_split(instance.mesh, geom, root, &tess, depth, wray, t_from, &mut t_max, &mut found);
-                    found
-                })
-            } else {
-                let rate = if self.single {
-                    Rate::R16
-                } else if sp.affine {
-                    Rate::R1
-                } else {
-                    Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
-                };
-                counters.rate_tests[rate as usize] += 1;
-                counters.rate_tests_by_kind[kind][rate as usize] += 1;
-                let (tier, stride) = rate.tier_and_stride();
-                let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                let tess = self.lookup(instance.mesh, geom, cell, tier);
-                if rate == Rate::R1 && own.is_some_and(|o| o.subpatch == si as u32 && o.passes_own_quad(&tess, d, sign)) {
+            if let Some(h) = test(counters, wray, org.subpatch as usize, depth, rate, tess, t_best) {
+                t_best = h.t;
+                best = Some((h, org.subpatch));
+            }
+        }
+        if !(any_hit && best.is_some()) {
+            walk(blas, BvhRay::new(o, d, ray.t_min, t_best), any_hit, |id| {
+                let si = blas.primitive_indices[id] as usize;
+                if first_si == Some(si) {
                     return None;
                 }
-                // The grid's chord error was probed at its own spacing; read at a merged stride
-                // its quads are `stride` times wider, and a chord's sag grows with its square.
-                let chord_error = tess.chord_error * (stride * stride) as f32;
-                let edges = self.seam_edges(cell);
-                nearest_not_own(chord_error, &mut |t_from| {
-                    intersect_with_seams(wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
-                        t: h.t,
-                        uv: (h.u, h.v),
-                        rect: UvRect::UNIT,
-                        ng: h.ng,
-                        quads: rate.quads() as u32,
-                        chord_error,
-                        seam: h.seam,
-                    })
-                })
-            };
-            let h = found?;
-            t_best = h.t;
-            best = Some((h, si as u32));
-            Some(h.t)
-        });
+                let sp = &geom.subpatches[si];
+                let sp_bounds = sp.bounds();
+                let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
+                let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+                let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
+                let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
+                let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
+                let h = test(counters, wray, si, depth, rate, tess, t_best)?;
+                t_best = h.t;
+                best = Some((h, si as u32));
+                Some(h.t)
+            });
+        }
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
+    }
+
+    /// The split depth (0: none) and, unsplit, the rate at which `ray` tests root subpatch `sp`
+    /// (bounds `sp_bounds`, object space; its instance's largest stretch `scale`) when it
+    /// reaches its box at `t_enter`.
+    fn rate_for(&self, sp: &RootSubpatch, sp_bounds: &Bounds3, displacement_pad: f32, scale: f32, ray: &Ray, t_enter: f32) -> (u32, Rate) {
+        // The rate is sized by the patch itself: its box less the displacement bound it was
+        // grown by (displacement finer than the grid is filtered to its spacing, so the bound is
+        // no reason to tessellate finer).
+        let size = (sp_bounds.diagonal().max_element() - displacement_pad).max(0.0) * scale;
+        let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+        let depth = if sp.affine { 0 } else { split_depth(needed) };
+        let rate = if self.single {
+            Rate::R16
+        } else if sp.affine {
+            Rate::R1
+        } else {
+            Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
+        };
+        (depth, rate)
+    }
+
+    /// How far (render units) to move a ray leaving the surface at `org` off it, to the side
+    /// it leaves on, before testing the instance it leaves (largest stretch `scale`), when it
+    /// tests the subpatch it starts on at split depth `depth` (0: none) or else `rate`, from
+    /// `tess` (object space; the fine tier when split).
+    ///
+    /// The ray may test the subpatch it starts on at a coarser rate than the grid its origin is
+    /// on, and a coarser grid stands up to its chord error off the surface, on either side: a
+    /// ray starting on the far side of it (a coarse facet hanging above a concave fine grid)
+    /// is outside the closed surface it tests and can leave without crossing it, however
+    /// crossings near the origin are judged (issue 23). The origin is within its own grid's
+    /// chord error of the limit surface, the coarser grid within its own: moved by both, it is
+    /// on the side the ray leaves on of every tessellation of its subpatch, so the ray crosses
+    /// the surface wherever it gets through it. Only this instance's test is moved, so no other
+    /// object's contact shadow is lost.
+    fn lift(org: &Origin, tess: &Tessellation, depth: u32, rate: Rate, scale: f32) -> f32 {
+        // Its seam boxes stand off it by up to their radius too (seam-box hits are crossings
+        // like grid hits, `Origin::is_own_other_rate`): the origin goes past those as well, or a
+        // grazing ray leaving a convex surface meets the boxes' bulge beside it.
+        let off = tess.chord_error + tess.seam_radius;
+        let off = if depth > 0 {
+            // Split children's chords are 2^depth times shorter than the root's fine ones: their
+            // sag is 4^depth times smaller.
+            off / (1u32 << (2 * depth)) as f32
+        } else {
+            // Read at a merged stride the chords are `stride` times longer, their sag `stride`²
+            // times larger.
+            let stride = rate.tier_and_stride().1;
+            off * (stride * stride) as f32
+        };
+        org.chord_error + off * scale
     }
 
     /// The render-space hit of `ray` from its hit `h` on root subpatch `si` of instance `ii`
@@ -762,7 +857,7 @@ impl<'s> Tracer<'s> {
             };
             let h = found?;
             t_best = h.t;
-            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error, seam: false };
+            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error };
             best = Some((local, si as u32));
             Some(h.t)
         });
@@ -847,8 +942,7 @@ impl<'s> Tracer<'s> {
             t_best = h.t;
             // A ray leaving a camera-facing ribbon skips it within its half width too.
             let chord_error = chord_error + h.uncertainty;
-            let local =
-                LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error, seam: h.facing };
+            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error };
             best = Some((local, si as u32));
             Some(h.t)
         });
@@ -938,7 +1032,6 @@ impl<'s> Tracer<'s> {
                     ng: h.ng,
                     quads: 16 << cell.depth,
                     chord_error: tess.chord_error,
-                    seam: h.seam,
                 });
             }
             return;
@@ -1014,7 +1107,7 @@ mod tests {
             let d = Vec3A::new(next(), next(), next()).normalize_or(Vec3A::Z);
             for along_ng in [true, false] {
                 for handed in [1.0, -1.0] {
-                    let origin = Origin { instance: 0, subpatch: 0, chord_error: 0.0, inv_cos: 1.0, along_ng };
+                    let origin = Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng };
                     if !origin.passes_own_quad(&tess, d, handed) {
                         refused += 1;
                         continue;
