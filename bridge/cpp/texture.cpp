@@ -130,6 +130,9 @@ struct OiioTexSys::Impl {
   TextureSystem* ts = nullptr;
   uint64_t id = 0;
   bool finest = false;
+  // The cache's tiling and MIP emulation, for the private caches of channel_levels.
+  int autotile = 64;
+  bool automip = true;
   // Handle table: written under `open_mutex`, read lock-free. Slots never change once set.
   std::unique_ptr<std::atomic<TextureSystem::TextureHandle*>[]> table;
   uint32_t capacity = 0;
@@ -176,8 +179,10 @@ std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& o) {
     m.cache->attribute("max_open_files", std::max(o.max_open_files, 1));
     // Untiled, un-MIP-mapped images still work (tiles and levels emulated), just less well than
     // `maketx` output.
-    m.cache->attribute("autotile", std::max(o.autotile, 0));
-    m.cache->attribute("automip", o.automip ? 1 : 0);
+    m.autotile = std::max(o.autotile, 0);
+    m.automip = o.automip;
+    m.cache->attribute("autotile", m.autotile);
+    m.cache->attribute("automip", m.automip ? 1 : 0);
     // Colour and alpha as the file stores them, never premultiplied on read (OpenImageIO's
     // default for PNG and others): UsdUVTexture's rgb and a are independent outputs, as Hydra's
     // image reader (hioOiio, oiio:UnassociatedAlpha) gives them.
@@ -326,6 +331,104 @@ rust::Vec<float> OiioTexSys::texels(uint32_t handle, uint32_t max_width, uint32_
     throw;
   } catch (...) {
     throw std::runtime_error("unknown C++ exception while reading texels");
+  }
+}
+
+namespace {
+
+uint8_t code_of(TextureOpt::Wrap w) {
+  switch (w) {
+    case TextureOpt::WrapBlack: return 1;
+    case TextureOpt::WrapClamp: return 2;
+    case TextureOpt::WrapPeriodic: return 3;
+    case TextureOpt::WrapMirror: return 4;
+    default: return 0;
+  }
+}
+
+// Destroys a private ImageCache however its user returns.
+struct CacheGuard {
+  OIIO::ImageCache* cache;
+  ~CacheGuard() {
+    if (cache) OIIO::ImageCache::destroy(cache);
+  }
+};
+
+}  // namespace
+
+rust::Vec<OiioLevel> OiioTexSys::channel_levels(uint32_t handle, int32_t channel,
+                                                rust::Slice<uint8_t> wrap) const {
+  try {
+    Impl& m = *impl;
+    if (wrap.size() < 2) throw std::runtime_error("channel_levels: wrap needs 2 entries");
+    std::string path;
+    {
+      std::lock_guard<std::mutex> lock(m.open_mutex);
+      if (handle >= m.paths.size()) throw std::runtime_error("unknown texture handle");
+      path = m.paths[handle];
+    }
+    // Private, so the texels read once here neither evict the lookups' tiles nor count in their
+    // statistics; set up as the lookups' cache, so automip makes the levels their lookups read.
+    CacheGuard ic{OIIO::ImageCache::create(false)};
+    if (!ic.cache) throw std::runtime_error("OpenImageIO could not create an ImageCache");
+    ic.cache->attribute("max_memory_MB", 256.0f);
+    ic.cache->attribute("autotile", m.autotile);
+    ic.cache->attribute("automip", m.automip ? 1 : 0);
+    ic.cache->attribute("unassociatedalpha", 1);
+    const OIIO::ustring name(path);
+    OIIO::ImageSpec spec;
+    if (!ic.cache->get_imagespec(name, spec, 0, 0)) {
+      std::string err = one_line(ic.cache->geterror());
+      throw std::runtime_error(err.empty() ? "cannot read the image header" : err);
+    }
+    if (spec.x != 0 || spec.y != 0 || spec.full_x != 0 || spec.full_y != 0 ||
+        spec.full_width != spec.width || spec.full_height != spec.height || spec.depth > 1)
+      throw std::runtime_error("its data window is not its display window, or it is a volume");
+    if (channel < 0 || channel >= spec.nchannels)
+      throw std::runtime_error("it has no channel " + std::to_string(channel));
+    TextureOpt::Wrap sw = TextureOpt::WrapDefault, tw = TextureOpt::WrapDefault;
+    const std::string modes = spec.get_string_attribute("wrapmodes");
+    if (!modes.empty()) TextureOpt::parse_wrapmodes(modes.c_str(), sw, tw);
+    wrap[0] = code_of(sw);
+    wrap[1] = code_of(tw);
+    OIIO::TypeDesc fmt = OIIO::TypeDesc::FLOAT;
+    uint8_t code = 3;
+    switch (OIIO::TypeDesc::BASETYPE(spec.format.basetype)) {
+      case OIIO::TypeDesc::UINT8: fmt = OIIO::TypeDesc::UINT8; code = 0; break;
+      case OIIO::TypeDesc::UINT16: fmt = OIIO::TypeDesc::UINT16; code = 1; break;
+      case OIIO::TypeDesc::HALF: fmt = OIIO::TypeDesc::HALF; code = 2; break;
+      default: break;
+    }
+    rust::Vec<OiioLevel> out;
+    for (int level = 0;; ++level) {
+      OIIO::ImageSpec ls;
+      if (!ic.cache->get_imagespec(name, ls, 0, level)) {
+        (void)ic.cache->geterror();
+        if (level == 0) throw std::runtime_error("cannot read the first MIP level's header");
+        break;
+      }
+      const std::size_t bytes = std::size_t(ls.width) * std::size_t(ls.height) * fmt.size();
+      std::vector<uint8_t> buf(bytes);
+      if (!ic.cache->get_pixels(name, 0, level, ls.x, ls.x + ls.width, ls.y, ls.y + ls.height,
+                                ls.z, ls.z + 1, channel, channel + 1, fmt, buf.data())) {
+        std::string err = one_line(ic.cache->geterror());
+        throw std::runtime_error("MIP level " + std::to_string(level) + ": " +
+                                 (err.empty() ? "cannot read its pixels" : err));
+      }
+      OiioLevel l;
+      l.width = uint32_t(ls.width);
+      l.height = uint32_t(ls.height);
+      l.format = code;
+      l.bytes.reserve(bytes);
+      for (uint8_t b : buf) l.bytes.push_back(b);
+      out.push_back(std::move(l));
+      if (ls.width <= 1 && ls.height <= 1) break;
+    }
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while reading MIP levels");
   }
 }
 

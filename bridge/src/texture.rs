@@ -18,7 +18,8 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use mipray::texture::serde_json::{json, Map, Value};
 use mipray::texture::{
-    texels_by_lookups, usd_uv_channel, FilterMode, Lookup, SourceColorSpace, Texels, TextureError, TextureHandle, TextureSampler, Wrap,
+    texels_by_lookups, usd_uv_channel, ChannelLevels, FilterMode, LevelTexels, Lookup, SourceColorSpace, TexelLevel, Texels, TextureError,
+    TextureHandle, TextureSampler, Wrap,
 };
 
 use crate::ffi::bridge as ffi;
@@ -91,6 +92,37 @@ impl std::fmt::Debug for OiioTextureSystem {
 
 fn system_error(message: impl Into<String>) -> TextureError {
     TextureError { path: "(texture system)".into(), message: message.into() }
+}
+
+fn wrap_of_code(code: u8) -> Wrap {
+    match code {
+        1 => Wrap::Black,
+        2 => Wrap::Clamp,
+        3 => Wrap::Periodic,
+        4 => Wrap::Mirror,
+        _ => Wrap::FromFile,
+    }
+}
+
+/// A level's bytes (native byte order) as texels of its format.
+fn level_texels(l: ffi::OiioLevel) -> Result<TexelLevel, String> {
+    let texels = l.width as usize * l.height as usize;
+    let size = match l.format {
+        0 => 1,
+        1 | 2 => 2,
+        _ => 4,
+    };
+    if l.bytes.len() != texels * size {
+        return Err(format!("a {}x{} MIP level came with {} bytes", l.width, l.height, l.bytes.len()));
+    }
+    let u16s = || l.bytes.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+    let texels = match l.format {
+        0 => LevelTexels::U8(l.bytes.clone()),
+        1 => LevelTexels::U16(u16s()),
+        2 => LevelTexels::Half(u16s()),
+        _ => LevelTexels::F32(l.bytes.chunks_exact(4).map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]])).collect()),
+    };
+    Ok(TexelLevel { width: l.width, height: l.height, texels })
 }
 
 fn wrap_code(w: Wrap) -> u8 {
@@ -386,6 +418,22 @@ impl TextureSampler for OiioTextureSystem {
                 texels_by_lookups(self, handle, max_width, channels)
             }
         }
+    }
+
+    /// Read once, in full, through a private ImageCache (OpenImageIO's own levels, or automip's
+    /// for a file without them; see `OiioTexSys::channel_levels`), so the lookups' budget and
+    /// statistics are untouched. `None` for a channel the file lacks (a constant by
+    /// UsdUVTexture's rule: looked up point by point, which answers it).
+    fn channel_levels(&self, handle: TextureHandle, channel: u32) -> Option<Result<ChannelLevels, String>> {
+        let n = self.file_channels.get(handle.index() as usize).map_or(0, |c| u32::from(c.load(Ordering::Relaxed)));
+        let source = usd_uv_channel(n, channel)?;
+        let mut wrap = [0u8; 2];
+        let raw = match self.sys.channel_levels(handle.index(), i32::try_from(source).unwrap_or(i32::MAX), &mut wrap) {
+            Ok(raw) => raw,
+            Err(e) => return Some(Err(e.what().to_string())),
+        };
+        let levels = raw.into_iter().map(level_texels).collect::<Result<Vec<_>, String>>();
+        Some(levels.map(|levels| ChannelLevels { levels, file_wrap: wrap.map(wrap_of_code) }))
     }
 
     fn filter_mode(&self) -> FilterMode {
