@@ -192,12 +192,12 @@ struct Axis {
 impl Axis {
     /// Along an axis of `n` texels at coordinate `c` (texture units, 0 at the first texel's
     /// edge): texel centres at (i + ½)/n, as OpenImageIO places them.
-    #[inline]
+    #[inline(always)]
     fn new(c: f32, n: u32, wrap: Wrap) -> Axis {
         let nf = n as f32;
         let last = i64::from(n) - 1;
         let split = |x: f32| {
-            let i = x.floor();
+            let i = floor(x);
             (i as i64, x - i)
         };
         match wrap {
@@ -212,7 +212,7 @@ impl Axis {
                 Axis { i: [i.clamp(0, last) as usize, (i + 1).clamp(0, last) as usize], keep: [inside(i), inside(i + 1)], f }
             }
             Wrap::Periodic => {
-                let (i, f) = split((c - c.floor()) * nf - 0.5);
+                let (i, f) = split((c - floor(c)) * nf - 0.5);
                 // i within [−1, n − 1] (n − 1 when the product rounds up to n).
                 let a = if i < 0 { last } else { i.min(last) };
                 let b = if i + 1 > last { 0 } else { i + 1 };
@@ -220,7 +220,7 @@ impl Axis {
             }
             Wrap::Mirror => {
                 // One period is the image and its mirror image: 2n texels.
-                let (i, f) = split((c - 2.0 * (c * 0.5).floor()) * nf - 0.5);
+                let (i, f) = split((c - 2.0 * floor(c * 0.5)) * nf - 0.5);
                 let period = 2 * i64::from(n);
                 let fold = |k: i64| {
                     let k = k.rem_euclid(period);
@@ -243,6 +243,23 @@ impl Axis {
         let r0 = row(ay.i[0], ay.keep[0]);
         let r1 = row(ay.i[1], ay.keep[1]);
         r0 + (r1 - r0) * ay.f
+    }
+}
+
+/// `x.floor()` without a call: x86-64's baseline (SSE2) has no rounding instruction, so
+/// `f32::floor` calls libm's, which cost more than the rest of a bilinear lookup. Exact: a
+/// float of magnitude 2²³ or more is an integer already; NaN stays NaN (−0 becomes +0).
+#[inline(always)]
+fn floor(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let i = x as i32 as f32;
+        if i > x {
+            i - 1.0
+        } else {
+            i
+        }
+    } else {
+        x
     }
 }
 
@@ -406,6 +423,36 @@ mod tests {
 
     fn pyramid(levels: Vec<TexelLevel>, wrap: Wrap) -> TexturePyramid {
         TexturePyramid::new("t.tx", 0, ChannelLevels { levels, file_wrap: [wrap; 2] }, FilterMode::Differentials).unwrap()
+    }
+
+    #[test]
+    fn floor_is_std_floor() {
+        for x in [
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            1.5,
+            -1.5,
+            2.999_999_8,
+            -2.999_999_8,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            1e20,
+            -1e20,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ] {
+            assert_eq!(floor(x), x.floor(), "{x}");
+        }
+        for k in 0..100_000 {
+            let x = (k as f32 - 50_000.0) * 0.013_7;
+            assert_eq!(floor(x), x.floor(), "{x}");
+        }
+        assert!(floor(f32::NAN).is_nan());
     }
 
     #[test]
