@@ -356,75 +356,118 @@ struct CacheGuard {
 
 }  // namespace
 
-rust::Vec<OiioLevel> OiioTexSys::channel_levels(uint32_t handle, int32_t channel,
-                                                rust::Slice<uint8_t> wrap) const {
+namespace {
+
+// A private ImageCache for reading a texture's levels once, set up as `m`'s (so automip makes
+// the levels the lookups read), and the texture's name and first level's header in it.
+struct LevelReader {
+  CacheGuard ic;
+  OIIO::ustring name;
+  OIIO::ImageSpec spec;
+};
+
+std::unique_ptr<LevelReader> level_reader(OiioTexSys::Impl& m, uint32_t handle, int32_t channel) {
+  std::string path;
+  {
+    std::lock_guard<std::mutex> lock(m.open_mutex);
+    if (handle >= m.paths.size()) throw std::runtime_error("unknown texture handle");
+    path = m.paths[handle];
+  }
+  auto r = std::make_unique<LevelReader>();
+  r->ic.cache = OIIO::ImageCache::create(false);
+  if (!r->ic.cache) throw std::runtime_error("OpenImageIO could not create an ImageCache");
+  r->ic.cache->attribute("max_memory_MB", 256.0f);
+  r->ic.cache->attribute("autotile", m.autotile);
+  r->ic.cache->attribute("automip", m.automip ? 1 : 0);
+  r->ic.cache->attribute("unassociatedalpha", 1);
+  r->name = OIIO::ustring(path);
+  if (!r->ic.cache->get_imagespec(r->name, r->spec, 0, 0)) {
+    std::string err = one_line(r->ic.cache->geterror());
+    throw std::runtime_error(err.empty() ? "cannot read the image header" : err);
+  }
+  const OIIO::ImageSpec& s = r->spec;
+  if (s.x != 0 || s.y != 0 || s.full_x != 0 || s.full_y != 0 || s.full_width != s.width ||
+      s.full_height != s.height || s.depth > 1)
+    throw std::runtime_error("its data window is not its display window, or it is a volume");
+  if (channel < 0 || channel >= s.nchannels)
+    throw std::runtime_error("it has no channel " + std::to_string(channel));
+  return r;
+}
+
+// The levels' headers, finest first (automip's beyond the file's own), down to 1×1 at most.
+template <class F>
+void for_each_level(LevelReader& r, F f) {
+  for (int level = 0;; ++level) {
+    OIIO::ImageSpec ls = r.spec;
+    if (level > 0 && !r.ic.cache->get_imagespec(r.name, ls, 0, level)) {
+      (void)r.ic.cache->geterror();
+      break;
+    }
+    f(level, ls);
+    if (ls.width <= 1 && ls.height <= 1) break;
+  }
+}
+
+OIIO::TypeDesc format_of(uint8_t code) {
+  switch (code) {
+    case 0: return OIIO::TypeDesc::UINT8;
+    case 1: return OIIO::TypeDesc::UINT16;
+    case 2: return OIIO::TypeDesc::HALF;
+    default: return OIIO::TypeDesc::FLOAT;
+  }
+}
+
+}  // namespace
+
+rust::Vec<OiioLevel> OiioTexSys::level_shapes(uint32_t handle, int32_t channel,
+                                              rust::Slice<uint8_t> wrap) const {
   try {
-    Impl& m = *impl;
-    if (wrap.size() < 2) throw std::runtime_error("channel_levels: wrap needs 2 entries");
-    std::string path;
-    {
-      std::lock_guard<std::mutex> lock(m.open_mutex);
-      if (handle >= m.paths.size()) throw std::runtime_error("unknown texture handle");
-      path = m.paths[handle];
-    }
-    // Private, so the texels read once here neither evict the lookups' tiles nor count in their
-    // statistics; set up as the lookups' cache, so automip makes the levels their lookups read.
-    CacheGuard ic{OIIO::ImageCache::create(false)};
-    if (!ic.cache) throw std::runtime_error("OpenImageIO could not create an ImageCache");
-    ic.cache->attribute("max_memory_MB", 256.0f);
-    ic.cache->attribute("autotile", m.autotile);
-    ic.cache->attribute("automip", m.automip ? 1 : 0);
-    ic.cache->attribute("unassociatedalpha", 1);
-    const OIIO::ustring name(path);
-    OIIO::ImageSpec spec;
-    if (!ic.cache->get_imagespec(name, spec, 0, 0)) {
-      std::string err = one_line(ic.cache->geterror());
-      throw std::runtime_error(err.empty() ? "cannot read the image header" : err);
-    }
-    if (spec.x != 0 || spec.y != 0 || spec.full_x != 0 || spec.full_y != 0 ||
-        spec.full_width != spec.width || spec.full_height != spec.height || spec.depth > 1)
-      throw std::runtime_error("its data window is not its display window, or it is a volume");
-    if (channel < 0 || channel >= spec.nchannels)
-      throw std::runtime_error("it has no channel " + std::to_string(channel));
+    if (wrap.size() < 2) throw std::runtime_error("level_shapes: wrap needs 2 entries");
+    std::unique_ptr<LevelReader> r = level_reader(*impl, handle, channel);
     TextureOpt::Wrap sw = TextureOpt::WrapDefault, tw = TextureOpt::WrapDefault;
-    const std::string modes = spec.get_string_attribute("wrapmodes");
+    const std::string modes = r->spec.get_string_attribute("wrapmodes");
     if (!modes.empty()) TextureOpt::parse_wrapmodes(modes.c_str(), sw, tw);
     wrap[0] = code_of(sw);
     wrap[1] = code_of(tw);
-    OIIO::TypeDesc fmt = OIIO::TypeDesc::FLOAT;
     uint8_t code = 3;
-    switch (OIIO::TypeDesc::BASETYPE(spec.format.basetype)) {
-      case OIIO::TypeDesc::UINT8: fmt = OIIO::TypeDesc::UINT8; code = 0; break;
-      case OIIO::TypeDesc::UINT16: fmt = OIIO::TypeDesc::UINT16; code = 1; break;
-      case OIIO::TypeDesc::HALF: fmt = OIIO::TypeDesc::HALF; code = 2; break;
+    switch (OIIO::TypeDesc::BASETYPE(r->spec.format.basetype)) {
+      case OIIO::TypeDesc::UINT8: code = 0; break;
+      case OIIO::TypeDesc::UINT16: code = 1; break;
+      case OIIO::TypeDesc::HALF: code = 2; break;
       default: break;
     }
     rust::Vec<OiioLevel> out;
-    for (int level = 0;; ++level) {
-      OIIO::ImageSpec ls;
-      if (!ic.cache->get_imagespec(name, ls, 0, level)) {
-        (void)ic.cache->geterror();
-        if (level == 0) throw std::runtime_error("cannot read the first MIP level's header");
-        break;
-      }
+    for_each_level(*r, [&](int, const OIIO::ImageSpec& ls) {
+      out.push_back(OiioLevel{uint32_t(ls.width), uint32_t(ls.height), code});
+    });
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while reading MIP level headers");
+  }
+}
+
+void OiioTexSys::read_levels(uint32_t handle, int32_t channel, uint8_t format,
+                             rust::Slice<uint8_t> out) const {
+  try {
+    std::unique_ptr<LevelReader> r = level_reader(*impl, handle, channel);
+    const OIIO::TypeDesc fmt = format_of(format);
+    std::size_t at = 0;
+    for_each_level(*r, [&](int level, const OIIO::ImageSpec& ls) {
       const std::size_t bytes = std::size_t(ls.width) * std::size_t(ls.height) * fmt.size();
-      std::vector<uint8_t> buf(bytes);
-      if (!ic.cache->get_pixels(name, 0, level, ls.x, ls.x + ls.width, ls.y, ls.y + ls.height,
-                                ls.z, ls.z + 1, channel, channel + 1, fmt, buf.data())) {
-        std::string err = one_line(ic.cache->geterror());
+      if (at + bytes > out.size())
+        throw std::runtime_error("MIP level " + std::to_string(level) + " does not fit");
+      if (!r->ic.cache->get_pixels(r->name, 0, level, ls.x, ls.x + ls.width, ls.y,
+                                   ls.y + ls.height, ls.z, ls.z + 1, channel, channel + 1, fmt,
+                                   out.data() + at)) {
+        std::string err = one_line(r->ic.cache->geterror());
         throw std::runtime_error("MIP level " + std::to_string(level) + ": " +
                                  (err.empty() ? "cannot read its pixels" : err));
       }
-      OiioLevel l;
-      l.width = uint32_t(ls.width);
-      l.height = uint32_t(ls.height);
-      l.format = code;
-      l.bytes.reserve(bytes);
-      for (uint8_t b : buf) l.bytes.push_back(b);
-      out.push_back(std::move(l));
-      if (ls.width <= 1 && ls.height <= 1) break;
-    }
-    return out;
+      at += bytes;
+    });
+    if (at != out.size()) throw std::runtime_error("the MIP levels changed while being read");
   } catch (const std::exception&) {
     throw;
   } catch (...) {

@@ -118,15 +118,13 @@ pub(crate) mod bridge {
         fill: f32,
     }
 
-    /// One MIP level of one channel, as the file stores it (see `OiioTexSys::channel_levels`).
-    #[derive(Clone, Debug, Default)]
+    /// The shape of one MIP level of a texture (see `OiioTexSys::level_shapes`).
+    #[derive(Clone, Copy, Debug, Default)]
     struct OiioLevel {
         width: u32,
         height: u32,
         /// 0 uint8, 1 uint16, 2 half, 3 float.
         format: u8,
-        /// width × height texels of that format, native byte order, rows top first.
-        bytes: Vec<u8>,
     }
 
     /// One named statistic.
@@ -263,10 +261,14 @@ pub(crate) mod bridge {
         /// The first MIP level at most `max_width` wide (up to `channels` channels), scanlines
         /// top first; width, height, channels into `dims[0..3]`.
         fn texels(self: &OiioTexSys, handle: u32, max_width: u32, channels: u32, dims: &mut [i32]) -> Result<Vec<f32>>;
-        /// Every MIP level of file channel `channel` (automip's for a file without levels), in
-        /// the file's format (float for formats other than uint8, uint16, half), finest first;
-        /// the file's wrap codes (s, t; 0 when it names none) into `wrap[0..2]`.
-        fn channel_levels(self: &OiioTexSys, handle: u32, channel: i32, wrap: &mut [u8]) -> Result<Vec<OiioLevel>>;
+        /// The MIP levels (automip's for a file without levels) of a texture with file channel
+        /// `channel`, finest first, and the format they are read in (the file's; float for
+        /// formats other than uint8, uint16, half); the file's wrap codes (s, t; 0 when it names
+        /// none) into `wrap[0..2]`.
+        fn level_shapes(self: &OiioTexSys, handle: u32, channel: i32, wrap: &mut [u8]) -> Result<Vec<OiioLevel>>;
+        /// Channel `channel` of every level `level_shapes` gave, one after another in `out`
+        /// (native byte order, rows top first), in format `format`.
+        fn read_levels(self: &OiioTexSys, handle: u32, channel: i32, format: u8, out: &mut [u8]) -> Result<()>;
         fn cache_stats(self: &OiioTexSys) -> Result<Vec<OiioStat>>;
         fn file_stats(self: &OiioTexSys, handle: u32) -> Result<Vec<OiioStat>>;
         /// OpenImageIO's statistics report (level 1..=5), for logs.

@@ -104,25 +104,24 @@ fn wrap_of_code(code: u8) -> Wrap {
     }
 }
 
-/// A level's bytes (native byte order) as texels of its format.
-fn level_texels(l: ffi::OiioLevel) -> Result<TexelLevel, String> {
-    let texels = l.width as usize * l.height as usize;
-    let size = match l.format {
+/// Bytes a texel of `OiioLevel` format code `format` takes.
+fn texel_size(format: u8) -> usize {
+    match format {
         0 => 1,
         1 | 2 => 2,
         _ => 4,
-    };
-    if l.bytes.len() != texels * size {
-        return Err(format!("a {}x{} MIP level came with {} bytes", l.width, l.height, l.bytes.len()));
     }
-    let u16s = || l.bytes.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
-    let texels = match l.format {
-        0 => LevelTexels::U8(l.bytes.clone()),
+}
+
+/// Texels of format code `format` from `bytes` (native byte order).
+fn texels_of(format: u8, bytes: &[u8]) -> LevelTexels {
+    let u16s = || bytes.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+    match format {
+        0 => LevelTexels::U8(bytes.to_vec()),
         1 => LevelTexels::U16(u16s()),
         2 => LevelTexels::Half(u16s()),
-        _ => LevelTexels::F32(l.bytes.chunks_exact(4).map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]])).collect()),
-    };
-    Ok(TexelLevel { width: l.width, height: l.height, texels })
+        _ => LevelTexels::F32(bytes.chunks_exact(4).map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]])).collect()),
+    }
 }
 
 fn wrap_code(w: Wrap) -> u8 {
@@ -427,13 +426,34 @@ impl TextureSampler for OiioTextureSystem {
     fn channel_levels(&self, handle: TextureHandle, channel: u32) -> Option<Result<ChannelLevels, String>> {
         let n = self.file_channels.get(handle.index() as usize).map_or(0, |c| u32::from(c.load(Ordering::Relaxed)));
         let source = usd_uv_channel(n, channel)?;
+        let channel = i32::try_from(source).unwrap_or(i32::MAX);
         let mut wrap = [0u8; 2];
-        let raw = match self.sys.channel_levels(handle.index(), i32::try_from(source).unwrap_or(i32::MAX), &mut wrap) {
-            Ok(raw) => raw,
-            Err(e) => return Some(Err(e.what().to_string())),
+        let mut read = || -> Result<ChannelLevels, String> {
+            let shapes = self.sys.level_shapes(handle.index(), channel, &mut wrap).map_err(|e| e.what().to_string())?;
+            let format = shapes.first().map_or(3, |s| s.format);
+            let size = texel_size(format);
+            let total = shapes
+                .iter()
+                .try_fold(0usize, |sum, s| (s.width as usize).checked_mul(s.height as usize)?.checked_mul(size)?.checked_add(sum));
+            let total = total.filter(|&t| t <= mipray::displacement_texture::MAX_PYRAMID_BYTES).ok_or_else(|| {
+                format!(
+                    "its MIP levels take more than the {} MB the store keeps of one texture",
+                    mipray::displacement_texture::MAX_PYRAMID_BYTES >> 20
+                )
+            })?;
+            // One buffer the C++ side fills without growing it, split into levels here.
+            let mut bytes = vec![0u8; total];
+            self.sys.read_levels(handle.index(), channel, format, &mut bytes).map_err(|e| e.what().to_string())?;
+            let mut levels = Vec::with_capacity(shapes.len());
+            let mut at = 0;
+            for s in &shapes {
+                let n = s.width as usize * s.height as usize * size;
+                levels.push(TexelLevel { width: s.width, height: s.height, texels: texels_of(format, &bytes[at..at + n]) });
+                at += n;
+            }
+            Ok(ChannelLevels { levels, file_wrap: wrap.map(wrap_of_code) })
         };
-        let levels = raw.into_iter().map(level_texels).collect::<Result<Vec<_>, String>>();
-        Some(levels.map(|levels| ChannelLevels { levels, file_wrap: wrap.map(wrap_of_code) }))
+        Some(read())
     }
 
     fn filter_mode(&self) -> FilterMode {
