@@ -130,6 +130,9 @@ struct OiioTexSys::Impl {
   TextureSystem* ts = nullptr;
   uint64_t id = 0;
   bool finest = false;
+  // The cache's tiling and MIP emulation, for the private caches of channel_levels.
+  int autotile = 64;
+  bool automip = true;
   // Handle table: written under `open_mutex`, read lock-free. Slots never change once set.
   std::unique_ptr<std::atomic<TextureSystem::TextureHandle*>[]> table;
   uint32_t capacity = 0;
@@ -176,8 +179,10 @@ std::unique_ptr<OiioTexSys> oiio_texsys_new(const OiioTexOptions& o) {
     m.cache->attribute("max_open_files", std::max(o.max_open_files, 1));
     // Untiled, un-MIP-mapped images still work (tiles and levels emulated), just less well than
     // `maketx` output.
-    m.cache->attribute("autotile", std::max(o.autotile, 0));
-    m.cache->attribute("automip", o.automip ? 1 : 0);
+    m.autotile = std::max(o.autotile, 0);
+    m.automip = o.automip;
+    m.cache->attribute("autotile", m.autotile);
+    m.cache->attribute("automip", m.automip ? 1 : 0);
     // Colour and alpha as the file stores them, never premultiplied on read (OpenImageIO's
     // default for PNG and others): UsdUVTexture's rgb and a are independent outputs, as Hydra's
     // image reader (hioOiio, oiio:UnassociatedAlpha) gives them.
@@ -326,6 +331,147 @@ rust::Vec<float> OiioTexSys::texels(uint32_t handle, uint32_t max_width, uint32_
     throw;
   } catch (...) {
     throw std::runtime_error("unknown C++ exception while reading texels");
+  }
+}
+
+namespace {
+
+uint8_t code_of(TextureOpt::Wrap w) {
+  switch (w) {
+    case TextureOpt::WrapBlack: return 1;
+    case TextureOpt::WrapClamp: return 2;
+    case TextureOpt::WrapPeriodic: return 3;
+    case TextureOpt::WrapMirror: return 4;
+    default: return 0;
+  }
+}
+
+// Destroys a private ImageCache however its user returns.
+struct CacheGuard {
+  OIIO::ImageCache* cache;
+  ~CacheGuard() {
+    if (cache) OIIO::ImageCache::destroy(cache);
+  }
+};
+
+}  // namespace
+
+namespace {
+
+// A private ImageCache for reading a texture's levels once, set up as `m`'s (so automip makes
+// the levels the lookups read), and the texture's name and first level's header in it.
+struct LevelReader {
+  CacheGuard ic;
+  OIIO::ustring name;
+  OIIO::ImageSpec spec;
+};
+
+std::unique_ptr<LevelReader> level_reader(OiioTexSys::Impl& m, uint32_t handle, int32_t channel) {
+  std::string path;
+  {
+    std::lock_guard<std::mutex> lock(m.open_mutex);
+    if (handle >= m.paths.size()) throw std::runtime_error("unknown texture handle");
+    path = m.paths[handle];
+  }
+  auto r = std::make_unique<LevelReader>();
+  r->ic.cache = OIIO::ImageCache::create(false);
+  if (!r->ic.cache) throw std::runtime_error("OpenImageIO could not create an ImageCache");
+  r->ic.cache->attribute("max_memory_MB", 256.0f);
+  r->ic.cache->attribute("autotile", m.autotile);
+  r->ic.cache->attribute("automip", m.automip ? 1 : 0);
+  r->ic.cache->attribute("unassociatedalpha", 1);
+  r->name = OIIO::ustring(path);
+  if (!r->ic.cache->get_imagespec(r->name, r->spec, 0, 0)) {
+    std::string err = one_line(r->ic.cache->geterror());
+    throw std::runtime_error(err.empty() ? "cannot read the image header" : err);
+  }
+  const OIIO::ImageSpec& s = r->spec;
+  if (s.x != 0 || s.y != 0 || s.full_x != 0 || s.full_y != 0 || s.full_width != s.width ||
+      s.full_height != s.height || s.depth > 1)
+    throw std::runtime_error("its data window is not its display window, or it is a volume");
+  if (channel < 0 || channel >= s.nchannels)
+    throw std::runtime_error("it has no channel " + std::to_string(channel));
+  return r;
+}
+
+// The levels' headers, finest first (automip's beyond the file's own), down to 1×1 at most.
+template <class F>
+void for_each_level(LevelReader& r, F f) {
+  for (int level = 0;; ++level) {
+    OIIO::ImageSpec ls = r.spec;
+    if (level > 0 && !r.ic.cache->get_imagespec(r.name, ls, 0, level)) {
+      (void)r.ic.cache->geterror();
+      break;
+    }
+    f(level, ls);
+    if (ls.width <= 1 && ls.height <= 1) break;
+  }
+}
+
+OIIO::TypeDesc format_of(uint8_t code) {
+  switch (code) {
+    case 0: return OIIO::TypeDesc::UINT8;
+    case 1: return OIIO::TypeDesc::UINT16;
+    case 2: return OIIO::TypeDesc::HALF;
+    default: return OIIO::TypeDesc::FLOAT;
+  }
+}
+
+}  // namespace
+
+rust::Vec<OiioLevel> OiioTexSys::level_shapes(uint32_t handle, int32_t channel,
+                                              rust::Slice<uint8_t> wrap) const {
+  try {
+    if (wrap.size() < 2) throw std::runtime_error("level_shapes: wrap needs 2 entries");
+    std::unique_ptr<LevelReader> r = level_reader(*impl, handle, channel);
+    TextureOpt::Wrap sw = TextureOpt::WrapDefault, tw = TextureOpt::WrapDefault;
+    const std::string modes = r->spec.get_string_attribute("wrapmodes");
+    if (!modes.empty()) TextureOpt::parse_wrapmodes(modes.c_str(), sw, tw);
+    wrap[0] = code_of(sw);
+    wrap[1] = code_of(tw);
+    uint8_t code = 3;
+    switch (OIIO::TypeDesc::BASETYPE(r->spec.format.basetype)) {
+      case OIIO::TypeDesc::UINT8: code = 0; break;
+      case OIIO::TypeDesc::UINT16: code = 1; break;
+      case OIIO::TypeDesc::HALF: code = 2; break;
+      default: break;
+    }
+    rust::Vec<OiioLevel> out;
+    for_each_level(*r, [&](int, const OIIO::ImageSpec& ls) {
+      out.push_back(OiioLevel{uint32_t(ls.width), uint32_t(ls.height), code});
+    });
+    return out;
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while reading MIP level headers");
+  }
+}
+
+void OiioTexSys::read_levels(uint32_t handle, int32_t channel, uint8_t format,
+                             rust::Slice<uint8_t> out) const {
+  try {
+    std::unique_ptr<LevelReader> r = level_reader(*impl, handle, channel);
+    const OIIO::TypeDesc fmt = format_of(format);
+    std::size_t at = 0;
+    for_each_level(*r, [&](int level, const OIIO::ImageSpec& ls) {
+      const std::size_t bytes = std::size_t(ls.width) * std::size_t(ls.height) * fmt.size();
+      if (at + bytes > out.size())
+        throw std::runtime_error("MIP level " + std::to_string(level) + " does not fit");
+      if (!r->ic.cache->get_pixels(r->name, 0, level, ls.x, ls.x + ls.width, ls.y,
+                                   ls.y + ls.height, ls.z, ls.z + 1, channel, channel + 1, fmt,
+                                   out.data() + at)) {
+        std::string err = one_line(r->ic.cache->geterror());
+        throw std::runtime_error("MIP level " + std::to_string(level) + ": " +
+                                 (err.empty() ? "cannot read its pixels" : err));
+      }
+      at += bytes;
+    });
+    if (at != out.size()) throw std::runtime_error("the MIP levels changed while being read");
+  } catch (const std::exception&) {
+    throw;
+  } catch (...) {
+    throw std::runtime_error("unknown C++ exception while reading MIP levels");
   }
 }
 

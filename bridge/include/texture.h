@@ -19,6 +19,7 @@ namespace mipray_bridge {
 struct OiioTexOptions;
 struct OiioLookup;
 struct OiioStat;
+struct OiioLevel;
 
 // Opaque to Rust.
 class OiioTexSys {
@@ -42,6 +43,17 @@ class OiioTexSys {
   // height and channel count into dims[0..3]. Throws naming the reason.
   rust::Vec<float> texels(uint32_t handle, uint32_t max_width, uint32_t channels,
                           rust::Slice<int32_t> dims) const;
+  // The MIP levels of a texture with file channel `channel` (the levels automip makes for a
+  // file without any), finest first, each with the format it is read in (the file's own: uint8,
+  // uint16, half; float for any other); the wrap modes the file names into wrap[0..2] (0 when
+  // none). Throws naming the reason.
+  rust::Vec<OiioLevel> level_shapes(uint32_t handle, int32_t channel,
+                                    rust::Slice<uint8_t> wrap) const;
+  // Channel `channel` of every level level_shapes gave, one after another into `out` (its exact
+  // size), in `format`: read once through a private ImageCache set up as this one, so neither
+  // this system's tiles nor its statistics change. Throws naming the reason.
+  void read_levels(uint32_t handle, int32_t channel, uint8_t format,
+                   rust::Slice<uint8_t> out) const;
   // The ImageCache's statistics, under mipray's names (see texture.cpp).
   rust::Vec<OiioStat> cache_stats() const;
   // One file's statistics (tiles and bytes read, re-reads, I/O time).

@@ -118,6 +118,15 @@ pub(crate) mod bridge {
         fill: f32,
     }
 
+    /// The shape of one MIP level of a texture (see `OiioTexSys::level_shapes`).
+    #[derive(Clone, Copy, Debug, Default)]
+    struct OiioLevel {
+        width: u32,
+        height: u32,
+        /// 0 uint8, 1 uint16, 2 half, 3 float.
+        format: u8,
+    }
+
     /// One named statistic.
     #[derive(Clone, Debug, Default)]
     struct OiioStat {
@@ -252,6 +261,14 @@ pub(crate) mod bridge {
         /// The first MIP level at most `max_width` wide (up to `channels` channels), scanlines
         /// top first; width, height, channels into `dims[0..3]`.
         fn texels(self: &OiioTexSys, handle: u32, max_width: u32, channels: u32, dims: &mut [i32]) -> Result<Vec<f32>>;
+        /// The MIP levels (automip's for a file without levels) of a texture with file channel
+        /// `channel`, finest first, and the format they are read in (the file's; float for
+        /// formats other than uint8, uint16, half); the file's wrap codes (s, t; 0 when it names
+        /// none) into `wrap[0..2]`.
+        fn level_shapes(self: &OiioTexSys, handle: u32, channel: i32, wrap: &mut [u8]) -> Result<Vec<OiioLevel>>;
+        /// Channel `channel` of every level `level_shapes` gave, one after another in `out`
+        /// (native byte order, rows top first), in format `format`.
+        fn read_levels(self: &OiioTexSys, handle: u32, channel: i32, format: u8, out: &mut [u8]) -> Result<()>;
         fn cache_stats(self: &OiioTexSys) -> Result<Vec<OiioStat>>;
         fn file_stats(self: &OiioTexSys, handle: u32) -> Result<Vec<OiioStat>>;
         /// OpenImageIO's statistics report (level 1..=5), for logs.

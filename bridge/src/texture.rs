@@ -18,7 +18,8 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use mipray::texture::serde_json::{json, Map, Value};
 use mipray::texture::{
-    texels_by_lookups, usd_uv_channel, FilterMode, Lookup, SourceColorSpace, Texels, TextureError, TextureHandle, TextureSampler, Wrap,
+    texels_by_lookups, usd_uv_channel, ChannelLevels, FilterMode, LevelTexels, Lookup, SourceColorSpace, TexelLevel, Texels, TextureError,
+    TextureHandle, TextureSampler, Wrap,
 };
 
 use crate::ffi::bridge as ffi;
@@ -91,6 +92,36 @@ impl std::fmt::Debug for OiioTextureSystem {
 
 fn system_error(message: impl Into<String>) -> TextureError {
     TextureError { path: "(texture system)".into(), message: message.into() }
+}
+
+fn wrap_of_code(code: u8) -> Wrap {
+    match code {
+        1 => Wrap::Black,
+        2 => Wrap::Clamp,
+        3 => Wrap::Periodic,
+        4 => Wrap::Mirror,
+        _ => Wrap::FromFile,
+    }
+}
+
+/// Bytes a texel of `OiioLevel` format code `format` takes.
+fn texel_size(format: u8) -> usize {
+    match format {
+        0 => 1,
+        1 | 2 => 2,
+        _ => 4,
+    }
+}
+
+/// Texels of format code `format` from `bytes` (native byte order).
+fn texels_of(format: u8, bytes: &[u8]) -> LevelTexels {
+    let u16s = || bytes.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+    match format {
+        0 => LevelTexels::U8(bytes.to_vec()),
+        1 => LevelTexels::U16(u16s()),
+        2 => LevelTexels::Half(u16s()),
+        _ => LevelTexels::F32(bytes.chunks_exact(4).map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]])).collect()),
+    }
 }
 
 fn wrap_code(w: Wrap) -> u8 {
@@ -386,6 +417,43 @@ impl TextureSampler for OiioTextureSystem {
                 texels_by_lookups(self, handle, max_width, channels)
             }
         }
+    }
+
+    /// Read once, in full, through a private ImageCache (OpenImageIO's own levels, or automip's
+    /// for a file without them; see `OiioTexSys::channel_levels`), so the lookups' budget and
+    /// statistics are untouched. `None` for a channel the file lacks (a constant by
+    /// UsdUVTexture's rule: looked up point by point, which answers it).
+    fn channel_levels(&self, handle: TextureHandle, channel: u32) -> Option<Result<ChannelLevels, String>> {
+        let n = self.file_channels.get(handle.index() as usize).map_or(0, |c| u32::from(c.load(Ordering::Relaxed)));
+        let source = usd_uv_channel(n, channel)?;
+        let channel = i32::try_from(source).unwrap_or(i32::MAX);
+        let mut wrap = [0u8; 2];
+        let mut read = || -> Result<ChannelLevels, String> {
+            let shapes = self.sys.level_shapes(handle.index(), channel, &mut wrap).map_err(|e| e.what().to_string())?;
+            let format = shapes.first().map_or(3, |s| s.format);
+            let size = texel_size(format);
+            let total = shapes
+                .iter()
+                .try_fold(0usize, |sum, s| (s.width as usize).checked_mul(s.height as usize)?.checked_mul(size)?.checked_add(sum));
+            let total = total.filter(|&t| t <= mipray::displacement_texture::MAX_PYRAMID_BYTES).ok_or_else(|| {
+                format!(
+                    "its MIP levels take more than the {} MB the store keeps of one texture",
+                    mipray::displacement_texture::MAX_PYRAMID_BYTES >> 20
+                )
+            })?;
+            // One buffer the C++ side fills without growing it, split into levels here.
+            let mut bytes = vec![0u8; total];
+            self.sys.read_levels(handle.index(), channel, format, &mut bytes).map_err(|e| e.what().to_string())?;
+            let mut levels = Vec::with_capacity(shapes.len());
+            let mut at = 0;
+            for s in &shapes {
+                let n = s.width as usize * s.height as usize * size;
+                levels.push(TexelLevel { width: s.width, height: s.height, texels: texels_of(format, &bytes[at..at + n]) });
+                at += n;
+            }
+            Ok(ChannelLevels { levels, file_wrap: wrap.map(wrap_of_code) })
+        };
+        Some(read())
     }
 
     fn filter_mode(&self) -> FilterMode {

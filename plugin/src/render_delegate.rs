@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 
 use mipray::displacement::{DisplacementShader, TextureDisplacement};
+use mipray::displacement_texture::DisplacementTextures;
 use mipray::material::{Input, Material, TexturedColor};
 use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler, UdimSampler};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
@@ -46,8 +47,9 @@ pub struct RenderDelegate {
     /// costs only that prim's tessellations.
     cache: Option<(CacheConfig, Arc<GeometryCache<Tessellation>>)>,
     /// OpenImageIO's texture system, made on the first render that needs one, remade when the
-    /// texture settings change.
-    textures: Option<(OiioTextureOptions, Arc<OiioTextureSystem>)>,
+    /// texture settings change; with the store of the displacement textures read through it
+    /// (kept across renders with it, so a texture is read once).
+    textures: Option<(OiioTextureOptions, Arc<OiioTextureSystem>, Arc<DisplacementTextures>)>,
     /// Texture problems already reported, so each is said once, not once per render.
     warned: Mutex<HashSet<String>>,
     /// Build OpenSubdiv surfaces at sync rather than when a ray first reaches them (benchmarks
@@ -187,12 +189,14 @@ impl RenderDelegate {
             .lights
             .values()
             .any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) } | AreaKind::Rect { texture: Some(_), .. })));
-        if !needed || matches!(&self.textures, Some((o, _)) if *o == options) {
+        if !needed || matches!(&self.textures, Some((o, _, _)) if *o == options) {
             return Ok(());
         }
         let had = self.textures.is_some();
         let system = OiioTextureSystem::new(options).map_err(|e| DelegateError::prim("textures", e))?;
-        self.textures = Some((options, Arc::new(system)));
+        let system = Arc::new(system);
+        let store = Arc::new(DisplacementTextures::new(system.clone()));
+        self.textures = Some((options, system, store));
         if had {
             for m in self.meshes.values_mut().filter(|m| m.data.displacement_texture.is_some()) {
                 m.generation = m.generation.wrapping_add(1);
@@ -214,7 +218,7 @@ impl RenderDelegate {
 
     /// The texture system as the core's trait, if one was prepared.
     fn sampler(&self) -> Option<Arc<dyn TextureSampler>> {
-        self.textures.as_ref().map(|(_, t)| t.clone() as Arc<dyn TextureSampler>)
+        self.textures.as_ref().map(|(_, t, _)| t.clone() as Arc<dyn TextureSampler>)
     }
 
     /// The geometry cache for `config`: the one kept from earlier renders if its settings are
@@ -505,10 +509,10 @@ impl RenderDelegate {
 
     /// A texture displacement for `input`, or `None` (warned once) when unreadable.
     fn texture_displacement(&self, path: &str, input: &crate::material::TextureInput) -> Option<DisplacementShader> {
-        let sampler = self.sampler()?;
-        match TextureDisplacement::new_encoded(sampler.clone(), &input.file, input.color_space, 0) {
+        let store = self.textures.as_ref().map(|(_, _, store)| store.clone())?;
+        match TextureDisplacement::in_store(&store, &input.file, input.color_space, 0) {
             Ok(mut d) => {
-                self.warn_data_decoded(path, "displacement", input, sampler.as_ref(), d.texture());
+                self.warn_data_decoded(path, "displacement", input, store.sampler().as_ref(), d.texture());
                 let c = (input.channel as usize).min(3);
                 d.lookup = input.lookup();
                 d.scale = input.scale[c];

@@ -5,8 +5,10 @@
 //! Two shaders ([`DisplacementShader`]): the built-in procedural [`Displacement`], and
 //! [`TextureDisplacement`] — UsdPreviewSurface `displacement` fed by a UsdUVTexture — which reads
 //! the texture at each grid vertex's `st` with filter widths of one grid step in `st`, so a
-//! coarse tier reads a coarse MIP level (few tiles) and a fine tier a fine one: the texture
-//! counterpart of the tessellation MIP map (the paper's §2.6).
+//! coarse tier reads a coarse MIP level and a fine tier a fine one: the texture counterpart of
+//! the tessellation MIP map (the paper's §2.6). The texture's levels are kept and filtered by
+//! the core's displacement texture store ([`crate::displacement_texture`]), read once through
+//! the texture sampler; a sampler that gives no levels is asked point by point.
 //!
 //! The built-in procedural displacement is fBm of gradient noise over object-space position, so
 //! tests and benchmarks need no image files. It is filtered at the grid's own spacing: octaves
@@ -16,10 +18,11 @@
 //! bit-reproducible across platforms and thread counts.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use glam::Vec3A;
 
+use crate::displacement_texture::{DisplacementTextures, TexturePyramid};
 use crate::patch::{LimitSurface, UvRect};
 use crate::texture::{Lookup, SourceColorSpace, TextureError, TextureHandle, TextureSampler};
 
@@ -87,12 +90,14 @@ impl Displacement {
 /// `texel[channel] · scale + bias` object units along the limit normal, the texel filtered over one
 /// grid step in `st` (see [`TextureDisplacement::grid_offsets`]).
 pub struct TextureDisplacement {
+    store: Arc<DisplacementTextures>,
     sampler: Arc<dyn TextureSampler>,
     texture: TextureHandle,
     path: String,
     /// The surface's 2-float primvar channel holding `st` ([`LimitSurface::face_varying`]).
     pub st_channel: usize,
-    /// Channel (UsdUVTexture output `r` = 0, `g` = 1, …) and wrap modes.
+    /// Channel (UsdUVTexture output `r` = 0, `g` = 1, …) and wrap modes. The channel is read
+    /// from the store at the first lookup: set it before.
     pub lookup: Lookup,
     /// UsdUVTexture `scale` and `bias` of that channel: object units per texel unit, and object
     /// units.
@@ -106,6 +111,9 @@ pub struct TextureDisplacement {
     /// for integer images; a float image's own range if it strays outside.
     pub value_range: [f32; 2],
     failed: AtomicU64,
+    /// The store's pyramid of the channel, found at the first lookup (`None`: looked up point
+    /// by point through the sampler).
+    pyramid: OnceLock<Option<Arc<TexturePyramid>>>,
 }
 
 impl std::fmt::Debug for TextureDisplacement {
@@ -146,8 +154,24 @@ impl TextureDisplacement {
         space: SourceColorSpace,
         st_channel: usize,
     ) -> Result<Self, TextureError> {
+        Self::in_store(&Arc::new(DisplacementTextures::new(sampler)), path, space, st_channel)
+    }
+
+    /// [`TextureDisplacement::new_encoded`] through `store`'s sampler, its texels kept in
+    /// `store` (shared with every displacement made with it: a texture is kept once).
+    ///
+    /// # Errors
+    /// As [`TextureDisplacement::new`].
+    pub fn in_store(
+        store: &Arc<DisplacementTextures>,
+        path: &str,
+        space: SourceColorSpace,
+        st_channel: usize,
+    ) -> Result<Self, TextureError> {
+        let sampler = store.sampler().clone();
         let texture = sampler.handle_encoded(path, space)?;
         Ok(TextureDisplacement {
+            store: store.clone(),
             sampler,
             texture,
             path: path.to_string(),
@@ -159,7 +183,19 @@ impl TextureDisplacement {
             st_fallback: [0.0; 2],
             value_range: [0.0, 1.0],
             failed: AtomicU64::new(0),
+            pyramid: OnceLock::new(),
         })
+    }
+
+    /// The store its texels are kept in.
+    pub fn store(&self) -> &Arc<DisplacementTextures> {
+        &self.store
+    }
+
+    /// The kept levels it filters, read at the first call; `None` when they could not be had
+    /// (lookups then go through the sampler).
+    pub fn pyramid(&self) -> Option<&Arc<TexturePyramid>> {
+        self.pyramid.get_or_init(|| self.store.pyramid(self.texture, self.lookup.first_channel, &self.path)).as_ref()
     }
 
     /// The texture's handle in its sampler.
@@ -203,15 +239,36 @@ impl TextureDisplacement {
     }
 
     /// Displacement (object units) at `st`, the texel filtered over the footprint spanned by
-    /// `dst_dx`, `dst_dy` (texture units per step; see [`crate::texture`]).
+    /// `dst_dx`, `dst_dy` (texture units per step; see [`crate::texture`]) by the store's
+    /// trilinear filter ([`TexturePyramid::sample`]), or through the sampler when the store
+    /// has no levels of it.
+    #[inline]
     pub fn offset_st(&self, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2]) -> f32 {
+        let Some(p) = self.pyramid() else {
+            return self.offset_st_sampled(st, dst_dx, dst_dy);
+        };
+        match p.sample(st, dst_dx, dst_dy, [self.lookup.wrap_s, self.lookup.wrap_t]) {
+            Some(v) if v.is_finite() => v * self.scale + self.bias,
+            _ => self.failed_lookup(),
+        }
+    }
+
+    /// [`TextureDisplacement::offset_st`] through the sampler's own filter, one lookup
+    /// (OpenImageIO's `texture()` in the bridge): the path when the store has no levels, and
+    /// the reference the store's filter is measured against.
+    pub fn offset_st_sampled(&self, st: [f32; 2], dst_dx: [f32; 2], dst_dy: [f32; 2]) -> f32 {
         let mut texel = [0.0f32; 1];
         if self.sampler.sample(self.texture, st, dst_dx, dst_dy, &self.lookup, &mut texel) && texel[0].is_finite() {
             texel[0] * self.scale + self.bias
         } else {
-            self.failed.fetch_add(1, Ordering::Relaxed);
-            self.fallback
+            self.failed_lookup()
         }
+    }
+
+    #[cold]
+    fn failed_lookup(&self) -> f32 {
+        self.failed.fetch_add(1, Ordering::Relaxed);
+        self.fallback
     }
 
     /// Displacement (object units) at (u, v) of `patch`, filtered over a step of `uv_step` in

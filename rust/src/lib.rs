@@ -36,6 +36,7 @@ pub mod camera;
 pub mod curves;
 pub mod differential;
 pub mod displacement;
+pub mod displacement_texture;
 pub mod dropped;
 pub mod effects;
 pub mod error;

@@ -103,6 +103,11 @@ pub fn collect(
             "simplified": tracer.scene().meshes.iter().filter_map(|m| m.surface.simplified().map(|s| format!("{}: {s}", m.name))).collect::<Vec<String>>(),
         },
         "texture_cache": tracer.scene().textures.as_ref().map_or(Value::Null, |t| t.stats()),
+        // The displacement texture store's own memory (its texels are not in texture_cache).
+        "displacement_textures": crate::displacement_texture::stats(tracer.scene().meshes.iter().filter_map(|m| match &m.displacement {
+            Some(crate::displacement::DisplacementShader::Texture(t)) => Some(t.store()),
+            _ => None,
+        })),
         "memory": { "peak_rss_bytes": peak_rss_bytes() },
         "effects": { "enabled": effects },
     })

@@ -288,6 +288,19 @@ pub trait TextureSampler: Send + Sync {
         texels_by_lookups(self, handle, max_width, channels)
     }
 
+    /// Every MIP level of UsdUVTexture output channel `channel` (r = 0, g = 1, …; mapped onto the
+    /// file's channels by [`usd_uv_channel`]) of `handle`, finest first, each texel in the
+    /// file's own format, with the wrap modes the file names: what the core's displacement
+    /// texture store ([`crate::displacement_texture`]) keeps and filters itself.
+    ///
+    /// `None` (the default) when the sampler does not hand out its levels, or the channel is a
+    /// constant the file lacks: the caller then looks each point up through
+    /// [`TextureSampler::sample`]. `Some(Err(reason))` when it should have but could not (the
+    /// caller warns once, naming the file, and looks points up the same way).
+    fn channel_levels(&self, _handle: TextureHandle, _channel: u32) -> Option<Result<ChannelLevels, String>> {
+        None
+    }
+
     /// The filter mode every lookup uses.
     fn filter_mode(&self) -> FilterMode;
 
@@ -300,6 +313,70 @@ impl std::fmt::Debug for dyn TextureSampler {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "TextureSampler({:?})", self.filter_mode())
     }
+}
+
+/// One MIP level's texels of one channel, as the file stores them ([`TextureSampler::channel_levels`]):
+/// row-major, the **first row at the top** of the image (t = 1), as [`Texels`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelLevel {
+    pub width: u32,
+    pub height: u32,
+    pub texels: LevelTexels,
+}
+
+/// Texel values in the file's own format, so that keeping them loses nothing: a texel's value
+/// is what OpenImageIO reads it as (an 8-bit value v as v / 255, a 16-bit one as v / 65535).
+#[derive(Clone, Debug, PartialEq)]
+pub enum LevelTexels {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    /// IEEE 754 binary16 bit patterns (OpenEXR's half).
+    Half(Vec<u16>),
+    F32(Vec<f32>),
+}
+
+impl LevelTexels {
+    /// Texels held.
+    pub fn len(&self) -> usize {
+        match self {
+            LevelTexels::U8(v) => v.len(),
+            LevelTexels::U16(v) | LevelTexels::Half(v) => v.len(),
+            LevelTexels::F32(v) => v.len(),
+        }
+    }
+
+    /// Whether it holds no texel.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bytes a texel takes.
+    pub fn texel_bytes(&self) -> usize {
+        match self {
+            LevelTexels::U8(_) => 1,
+            LevelTexels::U16(_) | LevelTexels::Half(_) => 2,
+            LevelTexels::F32(_) => 4,
+        }
+    }
+
+    /// The format's name for stats: `uint8`, `uint16`, `half`, `float`.
+    pub fn format_name(&self) -> &'static str {
+        match self {
+            LevelTexels::U8(_) => "uint8",
+            LevelTexels::U16(_) => "uint16",
+            LevelTexels::Half(_) => "half",
+            LevelTexels::F32(_) => "float",
+        }
+    }
+}
+
+/// A texture channel's MIP levels, finest first ([`TextureSampler::channel_levels`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelLevels {
+    pub levels: Vec<TexelLevel>,
+    /// The wrap modes (s, t) the file names, what [`Wrap::FromFile`] reads as (never
+    /// `FromFile` itself).
+    pub file_wrap: [Wrap; 2],
 }
 
 /// A texture's texels at one resolution (see [`TextureSampler::texels`]): row-major, `channels`
