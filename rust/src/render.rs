@@ -132,7 +132,7 @@ pub fn render_with_cache(
         }
         let single = options.cache.mode == CacheMode::Single;
         let cache = cache.unwrap_or_else(|| Arc::new(GeometryCache::new(options.cache)));
-        let budget = options.geometry_memory_mb.is_finite().then(|| (options.geometry_memory_mb * 1e6) as usize);
+        let budget = options.geometry_memory_mb.is_finite().then_some((options.geometry_memory_mb * 1e6) as usize);
         let mut tracer = Tracer::with_budget(scene, cache, single, options.tess_factor, budget).map_err(RenderError::Settings)?;
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
         tracer.set_seams(options.seams);
