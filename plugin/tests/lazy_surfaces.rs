@@ -192,3 +192,33 @@ fn a_geometry_budget_drops_and_rebuilds_meshes_and_keeps_the_image() {
     let Err(e) = render_with(&mut many(false), 10.0, 2) else { panic!("a 10 MB budget was taken") };
     assert!(e.contains("geometryMemoryMb=10 cannot hold") && e.contains("it needs at least 30.") && !e.contains('\n'), "{e}");
 }
+
+/// The irradiance cache's pre-pass traces on threads of its own chunks (pinned per chunk): under
+/// a budget that drops meshes its records, and so the image, are the unbounded ones.
+#[test]
+fn a_geometry_budget_keeps_the_irradiance_cache_prepass_image() {
+    let render_ic = |budget_mb: f64| {
+        let pass = RenderPass {
+            camera: "/cam".into(),
+            width: 32,
+            height: 32,
+            aovs: vec![Aov::Color, Aov::Depth],
+            settings: RenderSettings {
+                samples: 1,
+                threads: 2,
+                ao_samples: 8,
+                irradiance_cache: true,
+                geometry_memory_mb: budget_mb,
+                ..RenderSettings::default()
+            },
+        };
+        pass.execute(&mut many(false), &NoProgress).map_err(|e| e.to_string()).unwrap()
+    };
+    let unbounded = render_ic(f64::INFINITY);
+    let roomy = render_ic(1e6);
+    let b = &roomy.stats["geometry_budget"];
+    let fixed: u64 = b["fixed_bytes"].as_object().unwrap().values().map(|v| v.as_u64().unwrap()).sum();
+    let small = render_ic(fixed as f64 / 1e6 + b["peak_held_bytes"].as_u64().unwrap() as f64 / 4e6);
+    assert!(small.stats["geometry_budget"]["drops"].as_u64().unwrap() > 0, "{}", small.stats["geometry_budget"]);
+    same_bits(&unbounded, &small);
+}
