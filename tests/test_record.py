@@ -336,3 +336,20 @@ def test_list_settings_prints_every_renderer_setting(native, capsys) -> None:
         assert words[0] == key and words[1] == (default or "(unset)"), line
         assert line.endswith(description), line
     assert any(line.split()[0] == "irradianceCache" for line in lines)
+
+
+def test_infinite_settings_and_the_geometry_budget_reach_the_renderer(
+    native, capsys, scene_file: Path, tmp_path: Path
+) -> None:
+    # `inf` is a value of the settings whose range is unbounded above; the geometry budget
+    # takes it (no bound) and refuses, in one line with the minimum, a budget below the
+    # geometry cache's own.
+    base = [scene_file, "--imageWidth", "16", "--camera", "/World/main_cam", "--frames", "1"]
+    inf = ["--setting", "aoDistance=inf", "--setting", "geometryMemoryMb=inf"]
+    code, _, err = run([*base[:1], tmp_path / "a.exr", *base[1:], *inf], capsys)
+    assert code == 0, err
+    small = ["--setting", "geometryMemoryMb=5"]
+    code, _, err = run([*base[:1], tmp_path / "b.exr", *base[1:], *small], capsys)
+    assert code != 0
+    lines = [line for line in err.splitlines() if "geometryMemoryMb" in line]
+    assert len(lines) == 1 and "it needs at least 30" in lines[0], err

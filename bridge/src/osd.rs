@@ -498,6 +498,12 @@ impl LimitSurface for OsdSurface {
         (!self.simplified.is_empty()).then_some(self.simplified.as_str())
     }
 
+    /// [`OsdSurface::memory`]'s parts summed (without the patch map's quadtree and the
+    /// allocator's headers, about a tenth more: docs/memory.md); 0 when the report fails.
+    fn memory_bytes(&self) -> usize {
+        self.memory().map_or(0, |parts| parts.iter().map(|(_, b)| b).sum())
+    }
+
     /// Primvar channel `channel` (in [`OsdSurface::with_primvars`] order) at the patch's own
     /// (u, v), with derivatives with respect to them. `None` for an unknown channel or patch.
     fn face_varying(&self, channel: usize, patch: usize, u: f32, v: f32) -> Option<Value2> {

@@ -40,6 +40,11 @@ pub(crate) fn py_to_json(v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
         return Ok(i.into());
     }
     if let Ok(f) = v.extract::<f64>() {
+        // JSON has no infinity (serde_json would make it null, refused as "not a finite
+        // number"): the settings table spells it `inf` (`aoDistance`, `geometryMemoryMb`).
+        if f == f64::INFINITY {
+            return Ok("inf".into());
+        }
         return Ok(f.into());
     }
     if let Ok(s) = v.extract::<String>() {

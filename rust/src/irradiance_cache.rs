@@ -547,6 +547,8 @@ impl IrradianceCache {
                     if cancelled() {
                         return (Vec::new(), c);
                     }
+                    // The geometry a budget drops meanwhile stays readable (as per pixel).
+                    let _pin = crate::geometry_budget::pin();
                     let pts = chunk
                         .iter()
                         .filter_map(|&(x, y)| visit(x, y, &mut c).map(|pt| ((y * width + x) as u64, pt)))
@@ -569,6 +571,8 @@ impl IrradianceCache {
                     if cancelled() {
                         return (Vec::new(), c);
                     }
+                    // The geometry a budget drops meanwhile stays readable (as per pixel).
+                    let _pin = crate::geometry_budget::pin();
                     let recs = chunk
                         .iter()
                         .filter_map(|(pixel, pt)| {

@@ -14,6 +14,7 @@
 //! rule is a convex combination); an end-cap approximation could in principle bulge out of it,
 //! which the tracer checks when it builds the mesh and reports (`geometry.lazy_bounds_escaped`).
 
+use std::sync::atomic::{AtomicPtr, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use crate::bounds::Bounds3;
@@ -28,35 +29,64 @@ pub type SurfaceBuilder<S = dyn LimitSurface> = Box<dyn Fn() -> Result<Arc<S>, S
 ///
 /// `S` is the built surface's type (any, by default): a caller that names it (the delegate's
 /// `LazySurface<OsdSurface>`) can reach the built surface to update it in place.
-pub struct LazySurface<S: ?Sized + LimitSurface = dyn LimitSurface> {
+///
+/// A geometry budget may drop the built surface ([`LimitSurface::release`]); the next use builds
+/// it again. References it handed out stay valid while the thread holding them stays pinned
+/// ([`crate::geometry_budget`]).
+pub struct LazySurface<S: ?Sized + LimitSurface + 'static = dyn LimitSurface> {
     /// Object space; contains the built surface (see the module's note).
     bounds: Bounds3,
     control_faces: usize,
     build: SurfaceBuilder<S>,
-    built: OnceLock<Result<Arc<S>, String>>,
+    /// The built surface (`Box::into_raw`), or null: not built, failed, or dropped by a budget.
+    built: AtomicPtr<Arc<S>>,
+    /// Why the build failed; a failure is final (the builder would fail again).
+    failed: OnceLock<String>,
+    /// Serializes builds and drops: one build at a time, the other threads wait for it.
+    lock: parking_lot::Mutex<()>,
+    /// Builds that ran (a surface dropped and built again counts twice).
+    builds: AtomicU64,
 }
 
-impl<S: ?Sized + LimitSurface> std::fmt::Debug for LazySurface<S> {
+impl<S: ?Sized + LimitSurface + 'static> std::fmt::Debug for LazySurface<S> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LazySurface").field("bounds", &self.bounds).field("built", &self.is_built()).finish()
     }
 }
 
-impl<S: ?Sized + LimitSurface> LazySurface<S> {
+impl<S: ?Sized + LimitSurface + 'static> Drop for LazySurface<S> {
+    fn drop(&mut self) {
+        let p = *self.built.get_mut();
+        if !p.is_null() {
+            // SAFETY: the pointer came from `Box::into_raw` and, unlinked only here or by
+            // `release` (which nulls it first), is owned by this surface alone.
+            drop(unsafe { Box::from_raw(p) });
+        }
+    }
+}
+
+impl<S: ?Sized + LimitSurface + 'static> LazySurface<S> {
     /// A surface of `control_faces` faces whose limit surface lies within `bounds` (object
     /// space), made by `build` when first needed.
     pub fn new(bounds: Bounds3, control_faces: usize, build: SurfaceBuilder<S>) -> Self {
-        LazySurface { bounds, control_faces, build, built: OnceLock::new() }
+        LazySurface {
+            bounds,
+            control_faces,
+            build,
+            built: AtomicPtr::new(std::ptr::null_mut()),
+            failed: OnceLock::new(),
+            lock: parking_lot::Mutex::new(()),
+            builds: AtomicU64::new(0),
+        }
     }
 
     /// With no one else holding it: the built surface to change in place (new points);
     /// `None` when it is not built (or failed to build). The caller then sets the bounds and
     /// builder that match the change ([`LazySurface::rebase`]).
     pub fn built_mut(&mut self) -> Option<&mut Arc<S>> {
-        match self.built.get_mut() {
-            Some(Ok(s)) => Some(s),
-            _ => None,
-        }
+        let p = *self.built.get_mut();
+        // SAFETY: `&mut self` excludes every other reference to the surface.
+        (!p.is_null()).then(|| unsafe { &mut *p })
     }
 
     /// New bounds and builder for a surface changed in place, so that a rebuild makes what it
@@ -66,28 +96,59 @@ impl<S: ?Sized + LimitSurface> LazySurface<S> {
         self.build = build;
     }
 
-    /// The built surface, building it now if no one has; `Err` says why it cannot be built.
+    /// The built surface, building it now if it is not built; `Err` says why it cannot be
+    /// built.
+    #[inline]
     pub fn get(&self) -> Result<&Arc<S>, &str> {
-        self.built
-            .get_or_init(|| {
-                let s = (self.build)()?;
-                if s.exact().is_some() {
-                    return Err("an exactly intersected surface cannot be built lazily".into());
-                }
-                Ok(s)
-            })
-            .as_ref()
-            .map_err(String::as_str)
+        match self.built() {
+            Some(s) => Ok(s),
+            None => self.build_now(),
+        }
     }
 
-    /// Whether the surface has been built (or its build tried and failed).
+    #[cold]
+    fn build_now(&self) -> Result<&Arc<S>, &str> {
+        let _one = self.lock.lock();
+        if let Some(s) = self.built() {
+            return Ok(s);
+        }
+        if let Some(e) = self.failed.get() {
+            return Err(e);
+        }
+        self.builds.fetch_add(1, Ordering::Relaxed);
+        let built = (self.build)().and_then(|s| match s.exact() {
+            Some(_) => Err("an exactly intersected surface cannot be built lazily".to_string()),
+            None => Ok(s),
+        });
+        match built {
+            Ok(s) => {
+                let p = Box::into_raw(Box::new(s));
+                self.built.store(p, Ordering::Release);
+                // SAFETY: just made; freed only by `release` (deferred past the pins) or drop.
+                Ok(unsafe { &*p })
+            }
+            Err(e) => Err(self.failed.get_or_init(|| e)),
+        }
+    }
+
+    /// Whether the surface is built now (or its build was tried and failed).
     pub fn is_built(&self) -> bool {
-        self.built.get().is_some()
+        !self.built.load(Ordering::Acquire).is_null() || self.failed.get().is_some()
     }
 
     /// The built surface, if built and buildable, without building it.
+    #[inline]
     pub fn built(&self) -> Option<&Arc<S>> {
-        self.built.get().and_then(|r| r.as_ref().ok())
+        let p = self.built.load(Ordering::Acquire);
+        // SAFETY: a non-null pointer is a live `Box<Arc<S>>`: `release` unlinks it before
+        // retiring it, and frees it only once the threads pinned then unpin (the contract of
+        // `LimitSurface::release`).
+        (!p.is_null()).then(|| unsafe { &*p })
+    }
+
+    /// Times the surface was built (more than once when a budget dropped it in between).
+    pub fn builds(&self) -> u64 {
+        self.builds.load(Ordering::Relaxed)
     }
 
     #[inline]
@@ -98,7 +159,7 @@ impl<S: ?Sized + LimitSurface> LazySurface<S> {
 
 /// Forwards to the built surface. A surface that failed to build has no patches: the tracer
 /// asks [`LimitSurface::prepare`] first and leaves such a mesh out, so nothing asks for one.
-impl<S: ?Sized + LimitSurface> LimitSurface for LazySurface<S> {
+impl<S: ?Sized + LimitSurface + 'static> LimitSurface for LazySurface<S> {
     fn patch_count(&self) -> usize {
         self.inner().map_or(0, |s| s.patch_count())
     }
@@ -159,6 +220,24 @@ impl<S: ?Sized + LimitSurface> LimitSurface for LazySurface<S> {
     fn is_built(&self) -> bool {
         LazySurface::<S>::is_built(self)
     }
+
+    fn memory_bytes(&self) -> usize {
+        self.built().map_or(0, |s| s.memory_bytes())
+    }
+
+    unsafe fn release(&self) -> bool {
+        // A build in progress is in use: leave it.
+        let Some(_one) = self.lock.try_lock() else { return false };
+        let p = self.built.swap(std::ptr::null_mut(), Ordering::AcqRel);
+        if p.is_null() {
+            return false;
+        }
+        // SAFETY: unlinked above, so no new reference can be made to it; the references made
+        // before are held by pinned threads (the caller's contract), and `retire` frees it
+        // after they unpin.
+        crate::geometry_budget::retire(unsafe { Box::from_raw(p) });
+        true
+    }
 }
 
 #[cfg(test)]
@@ -205,6 +284,34 @@ mod tests {
         assert_eq!(lazy.evaluate(0, 0.3, 0.7), eager.evaluate(0, 0.3, 0.7));
         assert_eq!(lazy.patch_bounds(0), eager.patch_bounds(0));
         assert!(lazy.lazy_bounds().unwrap().contains(lazy.evaluate(0, 0.5, 0.5).p));
+    }
+
+    #[test]
+    fn a_released_surface_is_built_again_the_same() {
+        let calls = Arc::new(AtomicUsize::new(0));
+        let c = calls.clone();
+        let (_, p) = quad();
+        let lazy: LazySurface = LazySurface::new(
+            Bounds3::from_points(p.iter().map(|&q| q.into())),
+            1,
+            Box::new(move || {
+                c.fetch_add(1, Ordering::SeqCst);
+                let (t, p) = quad();
+                Ok(Arc::new(BilinearSurface::new(&t, &p).map_err(|e| e.to_string())?) as Arc<dyn LimitSurface>)
+            }),
+        );
+        // SAFETY: no reference into the surface is held.
+        assert!(!unsafe { lazy.release() }, "nothing built, nothing to drop");
+        let before = {
+            let _pin = crate::geometry_budget::pin();
+            lazy.evaluate(0, 0.25, 0.5)
+        };
+        assert!(lazy.is_built());
+        // SAFETY: as above.
+        assert!(unsafe { lazy.release() });
+        assert!(!lazy.is_built());
+        assert_eq!(lazy.evaluate(0, 0.25, 0.5), before);
+        assert_eq!((calls.load(Ordering::SeqCst), lazy.builds()), (2, 2), "built again on the next use");
     }
 
     #[test]

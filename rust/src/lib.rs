@@ -41,6 +41,7 @@ pub mod dropped;
 pub mod effects;
 pub mod error;
 pub mod film;
+pub mod geometry_budget;
 pub mod geometry_cache;
 pub mod hit;
 pub mod image_io;

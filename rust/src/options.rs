@@ -26,6 +26,10 @@ pub struct RenderOptions {
     /// The geometry cache: mode and per-tier budgets. Default: multires, 30 MB (10 MB a tier,
     /// the paper's).
     pub cache: CacheConfig,
+    /// The whole geometry memory of the render in MB (10^6 bytes), `geometryMemoryMb`: the
+    /// cache's budget plus the meshes' patch data, root subpatches and BVHs
+    /// ([`crate::geometry_budget`]). Infinite (the default): no bound beyond the cache's.
+    pub geometry_memory_mb: f64,
     /// AOVs to produce (parsed where names come in: an unknown name never gets this far).
     pub aovs: Vec<crate::aov::Aov>,
     /// Ambient-occlusion rays per shading point (0: no ambient occlusion). AO lights diffuse

@@ -217,4 +217,25 @@ pub trait LimitSurface: Send + Sync {
     fn is_built(&self) -> bool {
         true
     }
+
+    /// Heap bytes of what the surface built (its patch tables, points and records): what
+    /// dropping it gives back. An estimate (capacities, not the allocator's overhead); 0 — the
+    /// default — when the surface does not say.
+    fn memory_bytes(&self) -> usize {
+        0
+    }
+
+    /// Drops what a surface built on first use has built, so that the next use builds it
+    /// again (the same surface, bit for bit); `false` when there is nothing to drop or it is
+    /// being built now. The memory is freed once no pinned thread can hold a reference into it
+    /// ([`crate::geometry_budget`]). The default drops nothing.
+    ///
+    /// # Safety
+    /// Every thread that may hold a reference the surface handed out (an evaluation in
+    /// progress) must be pinned ([`crate::geometry_budget::pin`]) while it does: an unpinned
+    /// reference could outlive the memory. A [`crate::trace::Tracer`] with a geometry budget
+    /// calls it, during a render whose readers are pinned.
+    unsafe fn release(&self) -> bool {
+        false
+    }
 }

@@ -131,10 +131,9 @@ pub fn render_with_cache(
             return Err(RenderError::Cancelled);
         }
         let single = options.cache.mode == CacheMode::Single;
-        let mut tracer = match cache {
-            Some(c) => Tracer::with_cache(scene, c, single, options.tess_factor),
-            None => Tracer::new(scene, options.cache, options.tess_factor),
-        };
+        let cache = cache.unwrap_or_else(|| Arc::new(GeometryCache::new(options.cache)));
+        let budget = options.geometry_memory_mb.is_finite().then_some((options.geometry_memory_mb * 1e6) as usize);
+        let mut tracer = Tracer::with_budget(scene, cache, single, options.tess_factor, budget).map_err(RenderError::Settings)?;
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
         tracer.set_seams(options.seams);
         let cache_before = tracer.cache.stats();
@@ -307,6 +306,8 @@ fn render_tile(
             let pixel = (y * options.width + x) as u64;
             let i = (y - y0) * tw + (x - x0);
             let sum = &mut state.sums[i];
+            // What a geometry budget drops during the pixel stays readable until it ends.
+            let _pin = crate::geometry_budget::pin();
             for s in samples.clone() {
                 let mut sampler = Sampler::new(options.seed, pixel, s as u64);
                 let (jx, jy) = if s == 0 { (0.5, 0.5) } else { (sampler.next_f32(), sampler.next_f32()) };

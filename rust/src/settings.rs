@@ -527,6 +527,8 @@ settings_table! {
         "multires only: the medium (5×5) tier's budget in MB";
     "geometryCacheFineMb": geometry_cache_fine_mb: Option<f64> = None, closed(0.0, 1e6), GeometryCache,
         "multires only: the fine (17×17) tier's budget in MB";
+    "geometryMemoryMb": geometry_memory_mb: f64 = f64::INFINITY, above(0.0, f64::INFINITY), Render => geometry_memory_mb,
+        "the render's whole geometry memory in MB (10^6 bytes): the geometry cache's budget, the meshes' patch tables, subpatch records and BVHs; meshes built on first use that no ray has entered lately are dropped and built again when reached, the image unchanged (inf: no bound)";
     "textureFilter": texture_filter: FilterMode = FilterMode::Differentials, choice::<FilterMode>(), Textures,
         "texture MIP level choice: differentials (filter widths from the ray differentials) or finest (the paper's 6.3.3 experiment)";
     "textureCacheMb": texture_cache_mb: f32 = 10.0, above(0.0, 1e6), Textures,

@@ -102,6 +102,8 @@ pub fn collect(
             // Surfaces made cheaper than exact to bound their work, each naming its prim.
             "simplified": tracer.scene().meshes.iter().filter_map(|m| m.surface.simplified().map(|s| format!("{}: {s}", m.name))).collect::<Vec<String>>(),
         },
+        // The geometry memory budget (`geometryMemoryMb`), when one is set.
+        "geometry_budget": tracer.budget().map_or(Value::Null, crate::geometry_budget::Budget::stats),
         "texture_cache": tracer.scene().textures.as_ref().map_or(Value::Null, |t| t.stats()),
         // The displacement texture store's own memory (its texels are not in texture_cache).
         "displacement_textures": crate::displacement_texture::stats(tracer.scene().meshes.iter().filter_map(|m| match &m.displacement {

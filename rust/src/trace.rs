@@ -2,7 +2,7 @@
 //! on-demand tessellation at the rate the ray's beam width asks for, looked up in the
 //! multiresolution geometry cache (the paper's §5) → watertight quad tests.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicPtr, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use glam::{Mat3A, Mat4, Vec3A};
@@ -12,6 +12,7 @@ use obvhs::ray::Ray as BvhRay;
 use crate::bounds::Bounds3;
 use crate::bvh::{build_bvh, walk};
 use crate::dropped::DroppedPrims;
+use crate::geometry_budget::{Budget, HeldBytes};
 use crate::geometry_cache::{CacheConfig, CacheKey, CacheMode, GeometryCache, Tier};
 pub use crate::hit::Hit;
 use crate::intersect::{BoxRay, WatertightRay};
@@ -211,12 +212,66 @@ impl InstanceData {
     }
 }
 
+/// A mesh's root subpatches and BVH as the tracer holds them: built when the tracer is made, or
+/// by the first ray that reaches a mesh built on first use; a geometry budget may drop a lazy
+/// mesh's (and its surface's patch data) and the next ray to reach it builds them again.
+struct MeshSlot {
+    /// `Box::into_raw` of the built geometry, or null (not built yet, or dropped). Dropped
+    /// geometry is freed once the threads pinned then unpin ([`crate::geometry_budget`]).
+    geom: AtomicPtr<MeshGeometry>,
+    /// Serializes the mesh's builds and drops, and holds what its built data is counted as.
+    state: parking_lot::Mutex<SlotState>,
+    /// Set when a ray enters the mesh, cleared as the drop sweep's hand passes: CLOCK's second
+    /// chance, the usual stand-in for LRU, since a last-use time stored by every entry would
+    /// write a cache line all render threads share; this writes only when the bit was clear.
+    referenced: AtomicBool,
+    /// Built on first use, so a budget may drop it.
+    lazy: bool,
+}
+
+#[derive(Default)]
+struct SlotState {
+    /// Counted in the budget's figures.
+    held: HeldBytes,
+    /// Builds of the mesh in this render.
+    builds: u32,
+    /// Root subpatches at the last build (counted in the stats whether held now or dropped).
+    roots: usize,
+}
+
+impl MeshSlot {
+    fn new(built: Option<MeshGeometry>, lazy: bool) -> Self {
+        let geom = built.map_or(std::ptr::null_mut(), |g| Box::into_raw(Box::new(g)));
+        MeshSlot { geom: AtomicPtr::new(geom), state: Default::default(), referenced: AtomicBool::new(false), lazy }
+    }
+
+    /// The built geometry, if any.
+    #[inline]
+    fn get(&self) -> Option<&MeshGeometry> {
+        let p = self.geom.load(Ordering::Acquire);
+        // SAFETY: a non-null pointer is a live box: a drop unlinks it before retiring it, and
+        // retired geometry outlives the pins of the threads that could have read it (a
+        // budgeted tracer's readers are pinned; an unbudgeted tracer drops nothing).
+        (!p.is_null()).then(|| unsafe { &*p })
+    }
+}
+
+impl Drop for MeshSlot {
+    fn drop(&mut self) {
+        let p = *self.geom.get_mut();
+        if !p.is_null() {
+            // SAFETY: owned by the slot alone (see `MeshSlot::get`).
+            drop(unsafe { Box::from_raw(p) });
+        }
+    }
+}
+
 /// The scene prepared for tracing: BVHs at both levels and the geometry cache.
 pub struct Tracer<'s> {
     scene: &'s Scene,
     /// Per mesh, its subpatches and BVH: set when the tracer is made, or by the first ray that
     /// reaches a mesh whose surface is built on first use.
-    meshes: Vec<OnceLock<MeshGeometry>>,
+    meshes: Vec<MeshSlot>,
     instances: Vec<InstanceData>,
     tlas: Option<CwBvh>,
     pub cache: Arc<GeometryCache<Tessellation>>,
@@ -237,6 +292,8 @@ pub struct Tracer<'s> {
     lazy_built: AtomicU64,
     /// Tessellations of meshes built on first use that left the bounds the meshes were placed by.
     pub lazy_bounds_escaped: AtomicU64,
+    /// The geometry memory budget, when one is set ([`Tracer::with_budget`]).
+    budget: Option<Budget>,
 }
 
 impl<'s> Tracer<'s> {
@@ -251,19 +308,41 @@ impl<'s> Tracer<'s> {
     /// are keyed by their [`crate::scene::Mesh::cache_id`], so entries of unchanged meshes are
     /// hit again by the next render.
     pub fn with_cache(scene: &'s Scene, cache: Arc<GeometryCache<Tessellation>>, single: bool, tess_factor: f32) -> Self {
+        match Self::with_budget(scene, cache, single, tess_factor, None) {
+            Ok(t) => t,
+            Err(_) => unreachable!("only a budget can be refused"),
+        }
+    }
+
+    /// As [`Tracer::with_cache`], keeping the render's geometry memory — the cache's budget, the
+    /// meshes' patch data, root subpatches and BVHs — within `budget` bytes when one is given
+    /// ([`crate::geometry_budget`]): every mesh built on first use is then placed by its bounds
+    /// and may be dropped and built again, whether or not its surface was built already.
+    ///
+    /// # Errors
+    /// A budget below what cannot be dropped (the cache's budget, the top-level BVH and
+    /// instances, meshes built up front, an unbounded cache): one line with the minimum.
+    pub fn with_budget(
+        scene: &'s Scene,
+        cache: Arc<GeometryCache<Tessellation>>,
+        single: bool,
+        tess_factor: f32,
+        budget: Option<usize>,
+    ) -> Result<Self, String> {
         use rayon::prelude::*;
         let dropped = DroppedPrims::new(scene.meshes.len());
         // A surface built on first use is placed by its own bounds; its subpatches and BVH wait
         // for the first ray that reaches it (`Tracer::geometry`).
-        let meshes: Vec<OnceLock<MeshGeometry>> = scene
+        let meshes: Vec<MeshSlot> = scene
             .meshes
             .par_iter()
             .enumerate()
             .map(|(i, m)| {
-                if m.surface.lazy_bounds().is_some() && !m.surface.is_built() {
-                    return OnceLock::new();
+                let lazy = m.surface.lazy_bounds().is_some();
+                if lazy && (budget.is_some() || !m.surface.is_built()) {
+                    return MeshSlot::new(None, true);
                 }
-                OnceLock::from(Self::build_geometry(&cache, &dropped, m, i))
+                MeshSlot::new(Some(Self::build_geometry(&cache, &dropped, m, i)), false)
             })
             .collect();
         let mut boxes = Vec::new();
@@ -315,7 +394,11 @@ impl<'s> Tracer<'s> {
         }
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |a, b| a.union(b));
         let tlas = build_bvh(&boxes);
-        Tracer {
+        let budget = match budget {
+            Some(total) => Some(Self::make_budget(scene, &cache, &meshes, tlas.as_ref(), instances.len(), total)?),
+            None => None,
+        };
+        let tracer = Tracer {
             scene,
             meshes,
             instances,
@@ -330,7 +413,110 @@ impl<'s> Tracer<'s> {
             dropped,
             lazy_built: AtomicU64::new(0),
             lazy_bounds_escaped: AtomicU64::new(0),
+            budget,
+        };
+        if tracer.budget.is_some() {
+            // Surfaces built by an earlier render count from the start, and may have to go.
+            for (slot, m) in tracer.meshes.iter().zip(&scene.meshes) {
+                if slot.lazy {
+                    let held = HeldBytes { surface: m.surface.memory_bytes(), ..Default::default() };
+                    let mut st = slot.state.lock();
+                    tracer.account(&mut st, held);
+                }
+            }
+            tracer.keep_budget(usize::MAX);
         }
+        Ok(tracer)
+    }
+
+    /// The budget's fixed part: what this render holds that no drop gives back.
+    fn make_budget(
+        scene: &Scene,
+        cache: &GeometryCache<Tessellation>,
+        meshes: &[MeshSlot],
+        tlas: Option<&CwBvh>,
+        instances: usize,
+        total: usize,
+    ) -> Result<Budget, String> {
+        let config = cache.config();
+        let cache_bytes = match config.mode {
+            CacheMode::Multires => config.budget_bytes.iter().sum(),
+            CacheMode::Single => config.budget_bytes[Tier::Fine.index()],
+            CacheMode::None => 0,
+            CacheMode::Unbounded => {
+                return Err("geometryMemoryMb needs a bounded geometry cache (cacheMode multires, single or none), not unbounded".into())
+            }
+        };
+        let top = tlas.map_or(0, crate::bvh::bvh_bytes) + instances * std::mem::size_of::<InstanceData>();
+        let eager: usize = meshes
+            .iter()
+            .zip(&scene.meshes)
+            .filter(|(s, _)| !s.lazy)
+            .map(|(s, m)| {
+                let g = s.get().map_or(0, |g| {
+                    g.subpatches.capacity() * std::mem::size_of::<RootSubpatch>() + g.bvh.as_ref().map_or(0, crate::bvh::bvh_bytes)
+                });
+                g + m.surface.memory_bytes()
+            })
+            .sum();
+        Budget::new(total, vec![("geometry_cache", cache_bytes), ("top_level_bvh_and_instances", top), ("meshes_built_up_front", eager)])
+    }
+
+    /// Counts mesh data going from what `st` holds to `new`.
+    fn account(&self, st: &mut SlotState, new: HeldBytes) {
+        if let Some(b) = &self.budget {
+            b.account(st.held, new);
+        }
+        st.held = new;
+    }
+
+    /// Drops the built data of meshes no ray has entered since the sweep last passed them
+    /// (CLOCK), until the droppable data fits the budget again; mesh `keep` (the one just
+    /// built, in use) and meshes being built stay. When even that cannot fit the budget the
+    /// render goes on over it (counted: the meshes in use need the memory).
+    fn keep_budget(&self, keep: usize) {
+        let Some(b) = &self.budget else { return };
+        if b.held().total() <= b.limit() {
+            return;
+        }
+        let mut hand = b.hand.lock();
+        let n = self.meshes.len();
+        let mut looked = 0;
+        while b.held().total() > b.limit() && looked < 2 * n {
+            let i = *hand;
+            *hand = (i + 1) % n;
+            looked += 1;
+            let slot = &self.meshes[i];
+            if !slot.lazy || i == keep {
+                continue;
+            }
+            if slot.referenced.load(Ordering::Relaxed) {
+                slot.referenced.store(false, Ordering::Relaxed);
+                continue;
+            }
+            let Some(mut st) = slot.state.try_lock() else { continue };
+            if st.held.total() == 0 {
+                continue;
+            }
+            let p = slot.geom.swap(std::ptr::null_mut(), Ordering::AcqRel);
+            if !p.is_null() {
+                // SAFETY: unlinked above; readers that loaded it are pinned (see `geometry`).
+                crate::geometry_budget::retire(unsafe { Box::from_raw(p) });
+            }
+            // SAFETY: a budgeted tracer's readers are pinned (`render` pins per pixel and per
+            // pre-pass chunk; `geometry` checks it in debug builds).
+            unsafe { self.scene.meshes[i].surface.release() };
+            self.account(&mut st, HeldBytes::default());
+            b.drops.fetch_add(1, Ordering::Relaxed);
+        }
+        if b.held().total() > b.limit() {
+            b.over.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// The geometry budget, when the tracer keeps one: its figures for the stats.
+    pub fn budget(&self) -> Option<&Budget> {
+        self.budget.as_ref()
     }
 
     /// Root subpatches and BVH of mesh `i`; a mesh that cannot be traced is refused (recorded
@@ -365,39 +551,78 @@ impl<'s> Tracer<'s> {
     }
 
     /// Mesh `mesh`'s root subpatches and BVH, built by the first ray that reaches a mesh built
-    /// on first use (the others wait for it).
+    /// on first use (the others wait for it), or again after a budget dropped them. With a
+    /// budget, the reference lives as long as the calling thread's pin.
     #[inline]
     fn geometry(&self, mesh: usize) -> &MeshGeometry {
-        self.meshes[mesh].get_or_init(|| self.build_lazy(mesh))
+        debug_assert!(self.budget.is_none() || crate::geometry_budget::is_pinned(), "a budgeted tracer read by an unpinned thread");
+        match self.meshes[mesh].get() {
+            Some(g) => g,
+            None => self.build_lazy(mesh),
+        }
     }
 
-    /// Builds a mesh reached for the first time. The BVH builder runs rayon work, and a render
-    /// thread waiting in a rayon join steals other render jobs, which may trace into this very
-    /// mesh and re-enter its `OnceLock` (see [`GeometryCache::get_or_build`]): so the build runs
-    /// on a thread of its own, whose rayon work goes to a pool that runs nothing else, while the
-    /// render thread blocks without stealing.
+    /// Builds a mesh reached for the first time (or again, after a budget dropped it), then
+    /// keeps the budget. The BVH builder runs rayon work, and a render thread waiting in a rayon
+    /// join steals other render jobs, which may trace into this very mesh and re-enter its build
+    /// lock (see [`GeometryCache::get_or_build`]): so the build runs on a thread of its own,
+    /// whose rayon work goes to a pool that runs nothing else, while the render thread blocks
+    /// without stealing.
     #[cold]
-    fn build_lazy(&self, mesh: usize) -> MeshGeometry {
+    #[inline(never)]
+    fn build_lazy(&self, mesh: usize) -> &MeshGeometry {
+        let slot = &self.meshes[mesh];
+        let mut st = slot.state.lock();
+        if let Some(g) = slot.get() {
+            return g;
+        }
+        let g = self.build_geometry_apart(mesh);
+        let held = HeldBytes {
+            surface: self.scene.meshes[mesh].surface.memory_bytes(),
+            roots: g.subpatches.capacity() * std::mem::size_of::<RootSubpatch>(),
+            bvh: g.bvh.as_ref().map_or(0, crate::bvh::bvh_bytes),
+        };
+        let p = Box::into_raw(Box::new(g));
+        slot.geom.store(p, Ordering::Release);
+        slot.referenced.store(true, Ordering::Relaxed);
+        st.builds += 1;
+        st.roots = self.meshes[mesh].get().map_or(0, |g| g.subpatches.len());
+        if st.builds == 1 {
+            self.lazy_built.fetch_add(1, Ordering::Relaxed);
+        } else if let Some(b) = &self.budget {
+            b.rebuilds.fetch_add(1, Ordering::Relaxed);
+        }
+        self.account(&mut st, held);
+        drop(st);
+        self.keep_budget(mesh);
+        // SAFETY: just made; a drop by another thread retires it past this thread's pin.
+        unsafe { &*p }
+    }
+
+    /// Builds a mesh's geometry on a thread of its own (see [`Tracer::build_lazy`]).
+    fn build_geometry_apart(&self, mesh: usize) -> MeshGeometry {
         static BUILD_POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
         let pool = BUILD_POOL.get_or_init(|| {
             let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
             rayon::ThreadPoolBuilder::new().num_threads(threads).thread_name(|i| format!("mipray-build-{i}")).build().ok()
         });
-        let build = || Self::build_geometry(&self.cache, &self.dropped, &self.scene.meshes[mesh], mesh);
-        let g = std::thread::scope(|s| {
+        let build = || {
+            // The build reads the surface, which a budget may drop meanwhile.
+            let _pin = crate::geometry_budget::pin();
+            Self::build_geometry(&self.cache, &self.dropped, &self.scene.meshes[mesh], mesh)
+        };
+        std::thread::scope(|s| {
             // Without a pool of its own (threads could not be started), in rayon's global pool,
             // which renders do not run in.
             let built = s.spawn(|| pool.as_ref().map_or_else(build, |p| p.install(build)));
             built.join().unwrap_or_else(|payload| std::panic::resume_unwind(payload))
-        });
-        self.lazy_built.fetch_add(1, Ordering::Relaxed);
-        g
+        })
     }
 
     /// Meshes whose subpatches no ray has asked for in this render (built on first use, and not
     /// reached), so never built.
     pub fn meshes_not_reached(&self) -> usize {
-        self.meshes.iter().filter(|m| m.get().is_none()).count()
+        self.meshes.iter().filter(|m| m.lazy && m.state.lock().builds == 0).count()
     }
 
     /// Meshes built on first use that rays have reached (and so built) in this render.
@@ -431,7 +656,8 @@ impl<'s> Tracer<'s> {
 
     /// Root subpatches over all meshes (each counted once, however many instances).
     pub fn subpatch_count(&self) -> usize {
-        self.mesh_geometry().map(|m| m.subpatches.len()).sum()
+        // A mesh a budget dropped counts the roots it had.
+        self.meshes.iter().map(|s| s.get().map_or_else(|| s.state.lock().roots, |g| g.subpatches.len())).sum()
     }
 
     /// Root subpatches of surfaces intersected exactly ([`crate::implicit`]), which are never
@@ -477,7 +703,7 @@ impl<'s> Tracer<'s> {
     /// The meshes' root subpatches and BVHs built so far (a mesh built on first use that no
     /// ray has reached has none), for statistics.
     pub fn mesh_geometry(&self) -> impl Iterator<Item = &MeshGeometry> {
-        self.meshes.iter().filter_map(OnceLock::get)
+        self.meshes.iter().filter_map(MeshSlot::get)
     }
 
     /// The closest hit along `ray` in (t_min, t_max), or `None`.
@@ -628,8 +854,15 @@ impl<'s> Tracer<'s> {
         // misses those cannot enter any subpatch box (the slab test is monotone in the box), so
         // it skips the BLAS (measured: 13 % more instance entries without this). A ray that
         // tests its own subpatch first is in the mesh's bounds.
-        if first.is_none() && instance.placed_by_hull && box_ray.hit_box(&geom.bounds, ray.t_min, t_max).is_none() {
-            return None;
+        if instance.placed_by_hull {
+            if first.is_none() {
+                box_ray.hit_box(&geom.bounds, ray.t_min, t_max)?;
+            }
+            // Recently used, for the budget's drop sweep: written only when the sweep cleared it.
+            let used = &self.meshes[instance.mesh].referenced;
+            if !used.load(Ordering::Relaxed) {
+                used.store(true, Ordering::Relaxed);
+            }
         }
         let kind = Self::kind_index(ray.kind);
         let sign = if mesh.left_handed { -1.0 } else { 1.0 };
