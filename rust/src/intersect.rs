@@ -214,7 +214,8 @@ const MAX_ROW: usize = 17;
 /// Each vertex is sheared into the ray's frame once per call (not once per triangle that uses
 /// it) and the diagonal's edge function is shared by a quad's two triangles: the arithmetic of
 /// every triangle is what [`WatertightRay::hit_triangle`] does, so the hits are the same bits.
-fn hit_quads(
+#[allow(clippy::too_many_arguments)]
+fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -222,6 +223,7 @@ fn hit_quads(
     t_min: f32,
     best: &mut Option<GridHit>,
     t_max: &mut f32,
+    accept: &A,
 ) {
     let (i0, i1, j0, j1) = range;
     if i1 <= i0 || j1 <= j0 {
@@ -232,23 +234,24 @@ fn hit_quads(
     // instructions (callgrind: docs/throughput-callgrind.md). The widths a tier's grid or
     // sub-box makes: 2, 3, 5, 9, 17.
     match i1 - i0 + 1 {
-        0..=2 => hit_quads_rows::<2>(ray, tess, stride, range, t_min, best, t_max),
-        3 => hit_quads_rows::<3>(ray, tess, stride, range, t_min, best, t_max),
-        4..=5 => hit_quads_rows::<5>(ray, tess, stride, range, t_min, best, t_max),
-        6..=9 => hit_quads_rows::<9>(ray, tess, stride, range, t_min, best, t_max),
-        10..=MAX_ROW => hit_quads_rows::<MAX_ROW>(ray, tess, stride, range, t_min, best, t_max),
+        0..=2 => hit_quads_rows::<2, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        3 => hit_quads_rows::<3, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        4..=5 => hit_quads_rows::<5, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        6..=9 => hit_quads_rows::<9, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        10..=MAX_ROW => hit_quads_rows::<MAX_ROW, A>(ray, tess, stride, range, t_min, best, t_max, accept),
         _ => {
             // Wider than any tier's grid: test it in column strips.
             let mid = i0 + (MAX_ROW - 1);
-            hit_quads(ray, tess, stride, (i0, mid, j0, j1), t_min, best, t_max);
-            hit_quads(ray, tess, stride, (mid, i1, j0, j1), t_min, best, t_max);
+            hit_quads(ray, tess, stride, (i0, mid, j0, j1), t_min, best, t_max, accept);
+            hit_quads(ray, tess, stride, (mid, i1, j0, j1), t_min, best, t_max, accept);
         }
     }
 }
 
 /// [`hit_quads`] for rows of at most `W` vertices (`i1 − i0 + 1 ≤ W`, checked by the caller).
 #[inline(always)]
-fn hit_quads_rows<const W: usize>(
+#[allow(clippy::too_many_arguments)]
+fn hit_quads_rows<const W: usize, A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -256,6 +259,7 @@ fn hit_quads_rows<const W: usize>(
     t_min: f32,
     best: &mut Option<GridHit>,
     t_max: &mut f32,
+    accept: &A,
 ) {
     let q = (tess.n - 1) / stride;
     let inv_q = 1.0 / q as f32;
@@ -288,15 +292,12 @@ fn hit_quads_rows<const W: usize>(
                 // On the diagonal: the half (p00, p10, p01), corners (0,0), (1,0), (0,1).
                 if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s01, edge(s01, s10), edge(s00, s01), edge(s10, s00), *t_max) {
                     if t > t_min {
-                        *t_max = t;
                         let (p00, p10, p01) = (corner(0, 0), corner(1, 0), corner(0, 1));
-                        *best = Some(GridHit {
-                            t,
-                            u: (i as f32 + b1) * inv_q,
-                            v: (j as f32 + b2) * inv_q,
-                            ng: (p10 - p00).cross(p01 - p00),
-                            seam: false,
-                        });
+                        let ng = (p10 - p00).cross(p01 - p00);
+                        if accept(t, ng) {
+                            *t_max = t;
+                            *best = Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng, seam: false });
+                        }
                     }
                 }
                 continue;
@@ -306,30 +307,24 @@ fn hit_quads_rows<const W: usize>(
             let diagonal = edge(s00, s11);
             if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s11, edge(s11, s10), diagonal, edge(s10, s00), *t_max) {
                 if t > t_min {
-                    *t_max = t;
                     let (lu, lv) = (b1 + b2, b2);
                     let (p00, p10, p11) = (corner(0, 0), corner(1, 0), corner(1, 1));
-                    *best = Some(GridHit {
-                        t,
-                        u: (i as f32 + lu) * inv_q,
-                        v: (j as f32 + lv) * inv_q,
-                        ng: (p10 - p00).cross(p11 - p00),
-                        seam: false,
-                    });
+                    let ng = (p10 - p00).cross(p11 - p00);
+                    if accept(t, ng) {
+                        *t_max = t;
+                        *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
+                    }
                 }
             }
             if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s11, s01, edge(s01, s11), edge(s00, s01), -diagonal, *t_max) {
                 if t > t_min {
-                    *t_max = t;
                     let (lu, lv) = (b1, b1 + b2);
                     let (p00, p11, p01) = (corner(0, 0), corner(1, 1), corner(0, 1));
-                    *best = Some(GridHit {
-                        t,
-                        u: (i as f32 + lu) * inv_q,
-                        v: (j as f32 + lv) * inv_q,
-                        ng: (p11 - p00).cross(p01 - p00),
-                        seam: false,
-                    });
+                    let ng = (p11 - p00).cross(p01 - p00);
+                    if accept(t, ng) {
+                        *t_max = t;
+                        *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
+                    }
                 }
             }
         }
@@ -340,6 +335,21 @@ fn hit_quads_rows<const W: usize>(
 /// The closest hit of `ray` with `tess` read at vertex `stride` (1, or 2 for merged quads), in
 /// (`t_min`, `t_max`). Fine grids are entered through their sub-boxes.
 pub fn intersect_tessellation(ray: &WatertightRay, tess: &Tessellation, stride: usize, t_min: f32, t_max: f32) -> Option<GridHit> {
+    intersect_tessellation_accepting(ray, tess, stride, t_min, t_max, &|_, _| true)
+}
+
+/// [`intersect_tessellation`]'s closest hit among those `accept(t, ng)` takes (`ng` the hit
+/// triangle's unnormalised normal): one pass over the grid where a caller passing hits over
+/// would search it again from each (a ray leaving a displaced surface passed several of its
+/// own grids' hits, each a whole search).
+pub fn intersect_tessellation_accepting<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    t_min: f32,
+    t_max: f32,
+    accept: &A,
+) -> Option<GridHit> {
     if tess.domain == GridDomain::Empty {
         return None;
     }
@@ -351,12 +361,12 @@ pub fn intersect_tessellation(ray: &WatertightRay, tess: &Tessellation, stride: 
         for (b, bb) in tess.sub_boxes.iter().enumerate() {
             if ray.hit_box(bb, t_min, t_best).is_some() {
                 let (bi, bj) = (b % 4 * per, b / 4 * per);
-                hit_quads(ray, tess, stride, (bi, bi + per, bj, bj + per), t_min, &mut best, &mut t_best);
+                hit_quads(ray, tess, stride, (bi, bi + per, bj, bj + per), t_min, &mut best, &mut t_best, accept);
             }
         }
     } else {
         let q = (tess.n - 1) / stride;
-        hit_quads(ray, tess, stride, (0, q, 0, q), t_min, &mut best, &mut t_best);
+        hit_quads(ray, tess, stride, (0, q, 0, q), t_min, &mut best, &mut t_best, accept);
     }
     best
 }
@@ -381,6 +391,47 @@ mod tests {
             seam_normal: Default::default(),
             domain: GridDomain::Square,
         }
+    }
+
+    #[test]
+    fn an_accepting_search_finds_what_searching_again_past_each_refused_hit_finds() {
+        // A folded grid (a wave standing up out of its plane), crossed by rays that meet it
+        // several times: refusing hits by distance and facing, one pass must give the hit that
+        // the search-again loop the tracer used gives.
+        let n = 17;
+        let mut t = flat_grid(n);
+        let verts: Vec<[f32; 3]> = t.verts.iter().map(|p| [p[0], p[1], 0.3 * (p[0] * 19.0).sin()]).collect();
+        t.verts = verts.into();
+        let mut seed = 3u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let (mut refused_some, mut found) = (0, 0);
+        for r in 0..400 {
+            let o = Vec3A::new(-0.2, next(), next() * 0.4 - 0.2);
+            let d = Vec3A::new(1.0, next() * 0.2 - 0.1, next() * 0.1 - 0.05);
+            let ray = WatertightRay::new(o, d);
+            let window = next() * 0.8;
+            let facing = if r % 2 == 0 { 1.0 } else { -1.0 };
+            let accept = |t: f32, ng: Vec3A| !(t < window && facing * d.dot(ng) > 0.0);
+            for stride in [1, 2] {
+                let one_pass = intersect_tessellation_accepting(&ray, &t, stride, 0.0, f32::INFINITY, &accept);
+                let mut t_from = 0.0;
+                let again = loop {
+                    match intersect_tessellation(&ray, &t, stride, t_from, f32::INFINITY) {
+                        Some(h) if !accept(h.t, h.ng) => {
+                            refused_some += 1;
+                            t_from = crate::ray::next_up(h.t);
+                        }
+                        h => break h,
+                    }
+                };
+                assert_eq!(one_pass, again, "ray {r}, stride {stride}");
+                found += usize::from(one_pass.is_some());
+            }
+        }
+        assert!(refused_some > 100 && found > 100, "{refused_some} refused, {found} found");
     }
 
     #[test]

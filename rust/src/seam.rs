@@ -26,7 +26,7 @@
 
 use glam::{Vec3A, Vec4};
 
-use crate::intersect::{intersect_tessellation, GridHit, WatertightRay};
+use crate::intersect::{intersect_tessellation_accepting, GridHit, WatertightRay};
 use crate::patch::{LimitSurface, UvRect};
 use crate::tessellate::{GridDomain, Tessellation};
 
@@ -518,6 +518,20 @@ pub fn intersect_seams(
     t_min: f32,
     t_max: f32,
 ) -> Option<GridHit> {
+    intersect_seams_accepting(ray, tess, stride, edges, t_min, t_max, &|_, _| true)
+}
+
+/// [`intersect_seams`]'s closest hit among those `accept(t, ng)` takes (see
+/// [`crate::intersect::intersect_tessellation_accepting`]).
+pub fn intersect_seams_accepting<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    edges: SeamEdges,
+    t_min: f32,
+    t_max: f32,
+    accept: &A,
+) -> Option<GridHit> {
     let n = tess.n;
     if n < 2 || stride == 0 || (n - 1) % stride != 0 || edges == SeamEdges::NONE {
         return None;
@@ -599,6 +613,9 @@ pub fn intersect_seams(
             let p = ray.o + ray.d * far;
             let lambda = ((p - sb.a).dot(sb.axis) / sb.len).clamp(0.0, 1.0);
             let (u, v) = edge_uv(e, (k as f32 + lambda) / q as f32);
+            if !accept(far, ng) {
+                continue;
+            }
             t_best = far;
             best = Some(GridHit { t: far, u, v, ng, seam: true });
         }
@@ -671,12 +688,26 @@ pub fn intersect_with_seams(
     t_min: f32,
     t_max: f32,
 ) -> Option<GridHit> {
+    intersect_with_seams_accepting(ray, tess, stride, edges, t_min, t_max, &|_, _| true)
+}
+
+/// [`intersect_with_seams`]'s closest hit among those `accept(t, ng)` takes, in one pass (see
+/// [`crate::intersect::intersect_tessellation_accepting`]).
+pub fn intersect_with_seams_accepting<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    edges: SeamEdges,
+    t_min: f32,
+    t_max: f32,
+    accept: &A,
+) -> Option<GridHit> {
     if !may_hit_grid_or_seams(ray, tess, stride, edges, t_min, t_max) {
         return None;
     }
-    let grid = intersect_tessellation(ray, tess, stride, t_min, t_max);
+    let grid = intersect_tessellation_accepting(ray, tess, stride, t_min, t_max, accept);
     let limit = grid.map_or(t_max, |h| h.t);
-    intersect_seams(ray, tess, stride, edges, t_min, limit).or(grid)
+    intersect_seams_accepting(ray, tess, stride, edges, t_min, limit, accept).or(grid)
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use crate::intersect::{BoxRay, WatertightRay};
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
-use crate::seam::{intersect_with_seams, SeamEdges};
+use crate::seam::{intersect_with_seams, intersect_with_seams_accepting, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, RootSubpatch};
 use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceParams, Rate, Tessellation};
 
@@ -919,15 +919,21 @@ impl<'s> Tracer<'s> {
                     let stride = rate.tier_and_stride().1;
                     let chord_error = tess.chord_error * (stride * stride) as f32;
                     let edges = self.seam_edges(root);
-                    nearest_not_own(chord_error, &mut |t_from| {
-                        intersect_with_seams(wray, &tess, stride, edges, t_from, t_best).map(|h| LocalHit {
-                            t: h.t,
-                            uv: (h.u, h.v),
-                            rect: UvRect::UNIT,
-                            ng: h.ng,
-                            quads: rate.quads() as u32,
-                            chord_error,
-                        })
+                    // The rule of `nearest_not_own` applied to each hit inside the one search:
+                    // searching again from each hit passed over cost a displaced AO ray several
+                    // grid searches.
+                    let window = own.map(|o| (o.chord_error + chord_error * inst.scale) * o.inv_cos);
+                    let accept = |t: f32, ng: Vec3A| match (own, window) {
+                        (Some(o), Some(window)) => !o.is_own_other_rate(t, window, sign * d.dot(ng), false),
+                        _ => true,
+                    };
+                    intersect_with_seams_accepting(wray, &tess, stride, edges, ray.t_min, t_best, &accept).map(|h| LocalHit {
+                        t: h.t,
+                        uv: (h.u, h.v),
+                        rect: UvRect::UNIT,
+                        ng: h.ng,
+                        quads: rate.quads() as u32,
+                        chord_error,
                     })
                 }
             };
