@@ -387,3 +387,51 @@ pub fn mesh_light(
     l.casts_shadows = light.shadow_enable;
     Some(l)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prim(path: &str, transform: Mat4, area: AreaKind) -> LightPrim {
+        LightPrim {
+            path: path.into(),
+            data: DistantLightData {
+                transform,
+                intensity: 1.0,
+                exposure: 0.0,
+                color: [1.0; 3],
+                angle_deg: 0.0,
+                normalize: false,
+                shadow_enable: true,
+            },
+            area: Some(area),
+            shaping: None,
+            links: LinkData::default(),
+        }
+    }
+
+    #[test]
+    fn portals_attach_to_the_domes_that_take_them_and_are_no_lights() {
+        // A 2 × 1 window at height 3, scaled by 2 along X, rotated 90° about Z: its X axis
+        // becomes +Y, its −Z stays down.
+        let m = Mat4::from_translation(glam::Vec3::new(0.0, 0.0, 3.0))
+            * Mat4::from_rotation_z(std::f32::consts::FRAC_PI_2)
+            * Mat4::from_scale(glam::Vec3::new(2.0, 1.0, 1.0));
+        let window = prim("/Window", m, AreaKind::Portal { width: 2.0, height: 1.0 });
+        let all = prim("/Sky", Mat4::IDENTITY, AreaKind::Dome { texture: None, portals: None });
+        let none = prim("/Other", Mat4::IDENTITY, AreaKind::Dome { texture: None, portals: Some(vec!["/Missing".into()]) });
+        let lights = scene_lights([&window, &all, &none].into_iter(), None, &|_| None);
+        let names: Vec<&str> = lights.iter().map(|l| l.name.as_str()).collect();
+        assert_eq!(names, ["/Sky", "/Other"]);
+        let p = &lights[0].portals[0];
+        assert_eq!(p.name, "/Window");
+        // 2 × 2 (scaled) by 1.
+        assert!((p.area() - 4.0).abs() < 1e-4, "{}", p.area());
+        assert!((p.normal - Vec3A::NEG_Z).length() < 1e-5 && (p.center - Vec3A::new(0.0, 0.0, 3.0)).length() < 1e-5);
+        assert!((p.u - Vec3A::new(0.0, 2.0, 0.0)).length() < 1e-5, "{}", p.u);
+        assert!(lights[1].portals.is_empty());
+        // A mirroring transform keeps the light's −Z as the way light passes.
+        let flipped = prim("/W2", Mat4::from_scale(glam::Vec3::new(-1.0, 1.0, 1.0)), AreaKind::Portal { width: 1.0, height: 1.0 });
+        assert!((flipped.portal().unwrap().normal - Vec3A::NEG_Z).length() < 1e-6);
+    }
+}
