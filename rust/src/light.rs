@@ -599,7 +599,7 @@ impl Light {
                 }
                 let choice = portal::PortalChoice::at(&self.portals, p);
                 let q = choice.fraction();
-                let through = if q > 0.0 { choice.pdf(&self.portals, p, wi) } else { 0.0 };
+                let through = if q > 0.0 { choice.pdf(wi) } else { 0.0 };
                 q * through + (1.0 - q) * dome_pdf(env.as_ref(), n, wi)
             }
             LightShape::Sphere { center, radius } => {
@@ -769,7 +769,7 @@ impl Light {
         let choice = portal::PortalChoice::at(&self.portals, p);
         let q = choice.fraction();
         let wi = if u1 < q {
-            choice.sample(&self.portals, p, u1 / q, u2)?.0
+            choice.sample(u1 / q, u2)?
         } else {
             // u1 rescaled over the dome's share; the portal branch may have q = 0.
             dome_sample(env, n, ((u1 - q) / (1.0 - q)).clamp(0.0, 1.0 - f32::EPSILON), u2)?.0
@@ -1061,6 +1061,25 @@ mod tests {
         let above = Vec3A::new(0.0, 0.0, 3.0);
         assert_eq!(guided.pdf(above, Vec3A::Z, Vec3A::Z), plain.pdf(above, Vec3A::Z, Vec3A::Z));
         assert_eq!(guided.describe(&|_| None)["portals"][0]["name"], "/Window");
+        // Two portals, a wall window (passing light along +X) overlapping the ceiling one's
+        // directions from some points and facing away from others: chosen by weight, their
+        // densities add, and the estimate stays Lambert's and the dome's.
+        let side = Portal {
+            name: "/Side".into(),
+            center: Vec3A::new(-1.5, 0.0, 1.5),
+            u: Vec3A::new(0.0, 0.6, 0.0),
+            v: Vec3A::new(0.0, 0.0, 0.8),
+            normal: Vec3A::X,
+        };
+        let mut both = plain.clone();
+        both.portals = vec![window.clone(), side].into();
+        for q in [p, Vec3A::new(-2.0, 0.0, 0.5)] {
+            let exact = f64::from(lambert_polygon(&[c - u - v, c + u - v, c + u + v, c - u + v], q, Vec3A::Z));
+            let (m, _) = window_irradiance(&both, &window, q, 400_000);
+            assert!((m - exact).abs() < 0.02 * exact, "{m} vs Lambert's {exact} at {q}");
+            let e = irradiance(&both, q, Vec3A::Z, 400_000);
+            assert!((e - PI).abs() < 0.01 * PI, "{e} at {q}");
+        }
     }
 
     #[test]

@@ -115,17 +115,17 @@ impl Portal {
     }
 }
 
-/// The portals guiding one dome light at a point: which to choose and with what probability.
-pub(crate) struct PortalChoice {
-    weights: Vec<f32>,
+/// The portals guiding one dome light at a point: which to choose and with what probability
+/// (weights recomputed as needed rather than stored: no allocation per light sample).
+pub(crate) struct PortalChoice<'a> {
+    portals: &'a [Portal],
+    p: Vec3A,
     total: f32,
 }
 
-impl PortalChoice {
-    pub(crate) fn at(portals: &[Portal], p: Vec3A) -> Self {
-        let weights: Vec<f32> = portals.iter().map(|q| q.weight(p)).collect();
-        let total = weights.iter().sum();
-        PortalChoice { weights, total }
+impl<'a> PortalChoice<'a> {
+    pub(crate) fn at(portals: &'a [Portal], p: Vec3A) -> Self {
+        PortalChoice { portals, p, total: portals.iter().map(|q| q.weight(p)).sum() }
     }
 
     /// The share Q of light samples drawn through portals here (0 when none faces the point).
@@ -138,15 +138,16 @@ impl PortalChoice {
     }
 
     /// A direction through a portal chosen by weight, from uniform `u1` (reused within the
-    /// chosen portal's share) and `u2`: (direction, Σₖ Pₖ pₖ(ω), the portal-mixture density).
-    pub(crate) fn sample(&self, portals: &[Portal], p: Vec3A, u1: f32, u2: f32) -> Option<(Vec3A, f32)> {
+    /// chosen portal's share) and `u2`.
+    pub(crate) fn sample(&self, u1: f32, u2: f32) -> Option<Vec3A> {
         if !(self.total > 0.0) {
             return None;
         }
         let target = u1 * self.total;
         let mut acc = 0.0;
         let mut pick = None;
-        for (k, &w) in self.weights.iter().enumerate() {
+        for (k, q) in self.portals.iter().enumerate() {
+            let w = q.weight(self.p);
             if w > 0.0 {
                 pick = Some((k, ((target - acc) / w).clamp(0.0, 1.0 - f32::EPSILON)));
                 if target < acc + w {
@@ -156,15 +157,24 @@ impl PortalChoice {
             }
         }
         let (k, u) = pick?;
-        let (wi, _) = portals[k].sample(p, u, u2)?;
-        Some((wi, self.pdf(portals, p, wi)))
+        self.portals[k].sample(self.p, u, u2).map(|(wi, _)| wi)
     }
 
     /// Σₖ Pₖ pₖ(`wi`): the density of [`PortalChoice::sample`] (overlapping portals add).
-    pub(crate) fn pdf(&self, portals: &[Portal], p: Vec3A, wi: Vec3A) -> f32 {
+    pub(crate) fn pdf(&self, wi: Vec3A) -> f32 {
         if !(self.total > 0.0) {
             return 0.0;
         }
-        portals.iter().zip(&self.weights).filter(|(_, w)| **w > 0.0).map(|(q, w)| w / self.total * q.pdf(p, wi)).sum()
+        self.portals
+            .iter()
+            .map(|q| {
+                let w = q.weight(self.p);
+                if w > 0.0 {
+                    w / self.total * q.pdf(self.p, wi)
+                } else {
+                    0.0
+                }
+            })
+            .sum()
     }
 }
