@@ -133,3 +133,21 @@ def test_a_portals_light_inputs_are_listed_unsupported_and_a_domes_portals_are_r
     assert [(u.prim, u.what) for u in found] == [
         ("/World/Window", "light input inputs:intensity")
     ], found
+
+
+def test_the_scene_delegate_sends_portals_and_a_domes_portal_targets(fake) -> None:
+    from mipray.usd import UsdSceneDelegate
+
+    stage = room(portal=True, portals_rel=["/World/Window"])
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    window = fake.prims["/World/Window"].kwargs
+    assert (window["kind"], window["width"], window["height"]) == ("portal", 1.0, 1.0)
+    np.testing.assert_allclose(np.asarray(window["transform"])[3, :3], (0.0, 0.0, TOP))
+    assert fake.prims["/World/Sky"].kwargs["portals"] == ["/World/Window"]
+    # A portal is not a light: a stage with portals only is lit from the camera.
+    assert "/World/Window" not in scene.light_paths
+    # Without the relationship, the dome takes every portal (``portals`` left unset).
+    scene = UsdSceneDelegate(room(portal=True), type(fake)())
+    scene.sync()
+    assert scene.delegate.prims["/World/Sky"].kwargs.get("portals") is None
