@@ -18,7 +18,8 @@
 //! light samples a direction toward it from a shading point with a solid-angle density
 //! ([`Light::sample`], [`Light::pdf`]): a sphere uniformly over the cone it subtends, a rect or
 //! disk uniformly over its area, a distant light uniformly over its cone, a textured dome by its
-//! importance table ([`EnvTexture`]) and a uniform dome cosine-weighted about the normal. Rays
+//! importance table ([`EnvTexture`]) and a uniform dome cosine-weighted about the normal; a dome
+//! with `PortalLight`s mostly through them ([`Portal`]: a mixture that keeps what it delivers). Rays
 //! found by BSDF sampling meet area lights through [`Light::intersect`] (lights are not geometry
 //! in the BVH) and, when they escape, dome and distant lights through [`Light::environment`] /
 //! [`crate::scene::Scene::environment`], so the two strategies can be weighted by multiple importance
