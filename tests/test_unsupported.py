@@ -44,7 +44,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     )
     UsdGeom.NurbsPatch.Define(stage, "/World/Ball")
     UsdGeom.NurbsPatch.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
-    UsdLux.PortalLight.Define(stage, "/World/Tube")
+    UsdLux.PluginLight.Define(stage, "/World/Tube")
 
     key = add_distant_light(stage, "/World/Key").GetPrim()
     shaping = UsdLux.ShapingAPI.Apply(key)
@@ -125,7 +125,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
         [
             Unsupported(cam, "camera clippingPlanes 1 plane(s)"),
             Unsupported("/World/Ball", "prim type NurbsPatch"),
-            Unsupported("/World/Tube", "prim type PortalLight"),
+            Unsupported("/World/Tube", "prim type PluginLight"),
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
             Unsupported(key_path, "light input inputs:diffuse"),
@@ -190,19 +190,19 @@ def test_invisible_and_excluded_prims_are_not_listed(fake) -> None:
 def test_headlight_standing_in_for_unsupported_lights_is_listed(fake) -> None:
     stage = new_stage()
     add_cube(stage, "/Cube")
-    UsdLux.PortalLight.Define(stage, "/Tube")
+    UsdLux.PluginLight.Define(stage, "/Tube")
     scene = UsdSceneDelegate(stage, fake)
     scene.watch()
     camera = scene.resolve_camera()
     assert scene.update_camera_light(camera)
     assert scene.unsupported == [
         Unsupported("/Tube", HEADLIGHT),
-        Unsupported("/Tube", "prim type PortalLight"),
+        Unsupported("/Tube", "prim type PluginLight"),
     ]
     add_distant_light(stage, "/Key")
     scene.sync()
     assert not scene.update_camera_light(camera)
-    assert scene.unsupported == [Unsupported("/Tube", "prim type PortalLight")]
+    assert scene.unsupported == [Unsupported("/Tube", "prim type PluginLight")]
 
 
 def _settings(stage: Usd.Stage, lpe: str) -> None:

@@ -39,9 +39,19 @@ pub enum AreaKind {
         radius: f32,
         length: f32,
     },
-    /// An environment: constant radiance, or a latlong texture (resolved file path).
+    /// An environment: constant radiance, or a latlong texture (resolved file path). `portals`:
+    /// the PortalLight prims its `portals` relationship names (`None`: not authored, and every
+    /// portal of the scene guides it).
     Dome {
         texture: Option<String>,
+        portals: Option<Vec<String>>,
+    },
+    /// A UsdLux.PortalLight: a `width` × `height` rect in the light's XY plane passing a dome's
+    /// light along its −Z. Not a light itself: it guides the domes' sampling
+    /// ([`scene_lights`], [`mipray::light::Portal`]).
+    Portal {
+        width: f32,
+        height: f32,
     },
 }
 
@@ -146,7 +156,10 @@ impl LightPrim {
                         let (e1, e2) = axis.normalize_or(Vec3A::X).any_orthonormal_pair();
                         LightShape::Cylinder { center, axis, radius: f(radius) * s, e1, e2 }
                     }
-                    AreaKind::Dome { texture } => {
+                    // Not a light: a dark rect for callers that ask anyway ([`scene_lights`]
+                    // leaves portals out of the scene's lights).
+                    AreaKind::Portal { .. } => LightShape::Rect { center, u: Vec3A::ZERO, v: Vec3A::ZERO, normal },
+                    AreaKind::Dome { texture, .. } => {
                         let env = texture.as_ref().zip(textures).and_then(|(file, sampler)| {
                             match sampler.handle_encoded(file, mipray::texture::SourceColorSpace::Auto) {
                                 // The light's rotation only: directions, and densities over them, must
@@ -165,6 +178,7 @@ impl LightPrim {
                         LightShape::Dome(env)
                     }
                 };
+                let color = if matches!(kind, AreaKind::Portal { .. }) { Vec3A::ZERO } else { color };
                 Light::usd_area(&self.path, shape, f(d.intensity), f(d.exposure), color, d.normalize)
             }
         };
@@ -219,6 +233,94 @@ impl LightPrim {
         l.shadowed_by = resolve(&self.links.no_shadow);
         l
     }
+}
+
+impl LightPrim {
+    /// A PortalLight's portal in render space; `None` for every other light (and a degenerate
+    /// portal).
+    pub fn portal(&self) -> Option<mipray::light::Portal> {
+        let Some(AreaKind::Portal { width, height }) = self.area else { return None };
+        let m = &self.data.transform;
+        let u = m.transform_vector3a(Vec3A::X * (width * 0.5));
+        let v = m.transform_vector3a(Vec3A::Y * (height * 0.5));
+        // The plane's normal (a sheared transform's −Z need not be perpendicular to it), on
+        // the side of the light's −Z.
+        let mut normal = u.cross(v).normalize_or_zero();
+        if !(normal.dot(m.transform_vector3a(Vec3A::NEG_Z)) > 0.0) {
+            normal = -normal;
+        }
+        let center = m.transform_point3a(Vec3A::ZERO);
+        (normal != Vec3A::ZERO && (center + u + v).is_finite()).then(|| mipray::light::Portal {
+            name: self.path.clone(),
+            center,
+            u,
+            v,
+            normal,
+        })
+    }
+}
+
+/// Portal and dome pairs already warned about.
+static PORTALS_WARNED: std::sync::Mutex<std::collections::BTreeSet<(String, String)>> =
+    std::sync::Mutex::new(std::collections::BTreeSet::new());
+
+fn warn_portal_once(a: &str, b: &str, message: std::fmt::Arguments<'_>) {
+    let mut warned = PORTALS_WARNED.lock().unwrap_or_else(|p| p.into_inner());
+    if warned.insert((a.to_string(), b.to_string())) {
+        log::warn!("{message}");
+    }
+}
+
+/// The scene's lights from its light prims ([`LightPrim::to_scene_light`]): PortalLights are
+/// not lights but guide the domes: each dome gets the portals its `portals` relationship names,
+/// or, when that is not authored, every portal of the scene. A portal no dome uses, and a
+/// `portals` target that is no PortalLight of the scene, are named in one warning each.
+pub fn scene_lights<'a>(
+    prims: impl Iterator<Item = &'a LightPrim>,
+    textures: Option<&std::sync::Arc<dyn mipray::texture::TextureSampler>>,
+    mesh_index: &dyn Fn(&str) -> Option<usize>,
+) -> Vec<Light> {
+    let prims: Vec<&LightPrim> = prims.collect();
+    let portals: std::collections::BTreeMap<&str, mipray::light::Portal> =
+        prims.iter().filter_map(|l| l.portal().map(|p| (l.path.as_str(), p))).collect();
+    let mut used = std::collections::BTreeSet::new();
+    let mut out = Vec::new();
+    for prim in prims.iter().filter(|l| !matches!(l.area, Some(AreaKind::Portal { .. }))) {
+        let mut light = prim.to_scene_light(textures, mesh_index);
+        if let Some(AreaKind::Dome { portals: named, .. }) = &prim.area {
+            let chosen: Vec<mipray::light::Portal> = match named {
+                None => portals.values().cloned().collect(),
+                Some(paths) => paths
+                    .iter()
+                    .filter_map(|p| {
+                        let found = portals.get(p.as_str()).cloned();
+                        if found.is_none() {
+                            warn_portal_once(
+                                &prim.path,
+                                p,
+                                format_args!(
+                                    "{}: portals target {p} is not a PortalLight of the scene; it does not guide the dome",
+                                    prim.path
+                                ),
+                            );
+                        }
+                        found
+                    })
+                    .collect(),
+            };
+            used.extend(chosen.iter().map(|p| p.name.clone()));
+            light.portals = chosen.into();
+        }
+        out.push(light);
+    }
+    for path in portals.keys().filter(|p| !used.contains(**p)) {
+        warn_portal_once(
+            path,
+            "",
+            format_args!("{path}: PortalLight guides no dome light (none on the stage names it or takes every portal)"),
+        );
+    }
+    out
 }
 
 /// A mesh's light inputs (UsdLux `MeshLightAPI` on it, or a `GeometryLight` naming it): what
@@ -284,4 +386,52 @@ pub fn mesh_light(
     let mut l = Light::usd_area(path, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
     l.casts_shadows = light.shadow_enable;
     Some(l)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prim(path: &str, transform: Mat4, area: AreaKind) -> LightPrim {
+        LightPrim {
+            path: path.into(),
+            data: DistantLightData {
+                transform,
+                intensity: 1.0,
+                exposure: 0.0,
+                color: [1.0; 3],
+                angle_deg: 0.0,
+                normalize: false,
+                shadow_enable: true,
+            },
+            area: Some(area),
+            shaping: None,
+            links: LinkData::default(),
+        }
+    }
+
+    #[test]
+    fn portals_attach_to_the_domes_that_take_them_and_are_no_lights() {
+        // A 2 × 1 window at height 3, scaled by 2 along X, rotated 90° about Z: its X axis
+        // becomes +Y, its −Z stays down.
+        let m = Mat4::from_translation(glam::Vec3::new(0.0, 0.0, 3.0))
+            * Mat4::from_rotation_z(std::f32::consts::FRAC_PI_2)
+            * Mat4::from_scale(glam::Vec3::new(2.0, 1.0, 1.0));
+        let window = prim("/Window", m, AreaKind::Portal { width: 2.0, height: 1.0 });
+        let all = prim("/Sky", Mat4::IDENTITY, AreaKind::Dome { texture: None, portals: None });
+        let none = prim("/Other", Mat4::IDENTITY, AreaKind::Dome { texture: None, portals: Some(vec!["/Missing".into()]) });
+        let lights = scene_lights([&window, &all, &none].into_iter(), None, &|_| None);
+        let names: Vec<&str> = lights.iter().map(|l| l.name.as_str()).collect();
+        assert_eq!(names, ["/Sky", "/Other"]);
+        let p = &lights[0].portals[0];
+        assert_eq!(p.name, "/Window");
+        // 2 × 2 (scaled) by 1.
+        assert!((p.area() - 4.0).abs() < 1e-4, "{}", p.area());
+        assert!((p.normal - Vec3A::NEG_Z).length() < 1e-5 && (p.center - Vec3A::new(0.0, 0.0, 3.0)).length() < 1e-5);
+        assert!((p.u - Vec3A::new(0.0, 2.0, 0.0)).length() < 1e-5, "{}", p.u);
+        assert!(lights[1].portals.is_empty());
+        // A mirroring transform keeps the light's −Z as the way light passes.
+        let flipped = prim("/W2", Mat4::from_scale(glam::Vec3::new(-1.0, 1.0, 1.0)), AreaKind::Portal { width: 1.0, height: 1.0 });
+        assert!((flipped.portal().unwrap().normal - Vec3A::NEG_Z).length() < 1e-6);
+    }
 }

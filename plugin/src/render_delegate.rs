@@ -188,7 +188,7 @@ impl RenderDelegate {
         }) || self
             .lights
             .values()
-            .any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_) } | AreaKind::Rect { texture: Some(_), .. })));
+            .any(|l| matches!(&l.area, Some(AreaKind::Dome { texture: Some(_), .. } | AreaKind::Rect { texture: Some(_), .. })));
         if !needed || matches!(&self.textures, Some((o, _, _)) if *o == options) {
             return Ok(());
         }
@@ -357,7 +357,7 @@ impl RenderDelegate {
         }
         let sampler = self.sampler();
         let mesh_index = |p: &str| index.get(p).copied().flatten();
-        scene.lights = self.lights.values().map(|l| l.to_scene_light(sampler.as_ref(), &mesh_index)).collect();
+        scene.lights = crate::light::scene_lights(self.lights.values(), sampler.as_ref(), &mesh_index);
         scene.lights.extend(self.mesh_lights(&mesh_index));
         scene.textures = sampler;
         Ok(scene)

@@ -299,14 +299,19 @@ class RenderDelegate:
         ies_file: str | None = None,
         ies_angle_scale: float = 0.0,
         ies_normalize: bool = False,
+        portals: list[str] | None = None,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
 
         ``kind`` is ``distant`` (as :meth:`set_distant_light`), ``sphere``
         (``radius``), ``rect`` (``width`` × ``height``, emitting along local
         -Z), ``disk`` (``radius``, along -Z), ``cylinder`` (``radius``,
-        ``length``, along local X, no end caps) or ``dome`` (radiance from every
-        direction: constant, or the latlong ``texture`` file, +Y up). Area
+        ``length``, along local X, no end caps), ``dome`` (radiance from every
+        direction: constant, or the latlong ``texture`` file, +Y up; ``portals``:
+        the PortalLight paths its ``portals`` relationship names, ``None`` for
+        every portal of the scene) or ``portal`` (a UsdLux.PortalLight,
+        ``width`` × ``height`` passing light along -Z: it emits nothing and
+        guides the domes' light sampling, ``mipray::light::Portal``). Area
         lights emit radiance ``color * intensity
         * 2**exposure``, divided by their area with ``normalize``; they cast
         soft shadows with ``shadowSamples`` rays each. ``cone_angle``

@@ -451,11 +451,13 @@ impl RenderDelegate {
 
     /// Inserts or replaces a UsdLux light of any kind: ``distant`` (as `set_distant_light`),
     /// ``sphere`` (radius), ``rect`` (width, height), ``disk`` (radius), ``cylinder`` (radius,
-    /// length, along local X) or ``dome``.
+    /// length, along local X), ``dome`` (``portals``: the PortalLight paths its ``portals``
+    /// relationship names; ``None``, every portal guides it) or ``portal`` (width, height: a
+    /// PortalLight, which guides the domes' sampling and emits nothing itself).
     /// ``cone_angle`` (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are UsdLux's
     /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
     /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false))]
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false, portals=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -482,6 +484,7 @@ impl RenderDelegate {
         ies_file: Option<String>,
         ies_angle_scale: f32,
         ies_normalize: bool,
+        portals: Option<Vec<String>>,
     ) -> PyResult<()> {
         let vals = [
             ies_angle_scale,
@@ -526,8 +529,11 @@ impl RenderDelegate {
             "rect" => AreaKind::Rect { width: size("width", width)?, height: size("height", height)?, texture },
             "disk" => AreaKind::Disk { radius: size("radius", radius)? },
             "cylinder" => AreaKind::Cylinder { radius: size("radius", radius)?, length: size("length", length)? },
-            "dome" => AreaKind::Dome { texture },
-            _ => return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk, cylinder or dome"))),
+            "dome" => AreaKind::Dome { texture, portals },
+            "portal" => AreaKind::Portal { width: size("width", width)?, height: size("height", height)? },
+            _ => {
+                return Err(value_error(path, format!("light kind '{kind}' is not distant, sphere, rect, disk, cylinder, dome or portal")))
+            }
         };
         let shaping = Some(ShapingData {
             cone_angle_deg: cone_angle,

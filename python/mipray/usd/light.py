@@ -1,4 +1,4 @@
-"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder, dome and mesh lights; the camera light.
+"""Lights: ``UsdLux`` distant, sphere, rect, disk, cylinder, dome, mesh and portal lights.
 
 ``UsdLux.DistantLight`` goes into ``RenderDelegate.set_distant_light``; the
 others into ``RenderDelegate.set_light`` with their shape; a stage with no
@@ -28,6 +28,11 @@ distant and dome lights is listed as unsupported. Light and shadow linking
 (``unlit``, ``no_shadow``); the scene delegate re-resolves them whenever the
 stage changes. Meshes inside native-instance prototypes are matched by their
 prototype path (``/__Prototype_1/...``), which only ``includeRoot`` reaches.
+
+A ``PortalLight`` (:func:`portal_arguments`) is no light: a ``width`` × ``height`` rect that
+guides the light sampling of the dome lights (``mipray::light::Portal``: it changes how a dome
+is sampled, never what it contributes). A dome whose ``portals`` relationship is authored is
+guided by the portals it names; one without, by every portal of the stage.
 
 A Mesh with ``MeshLightAPI``, or named by a ``GeometryLight``'s ``geometry``, is a mesh
 light: ``RenderDelegate.set_mesh`` gets ``light`` (:func:`mesh_light_arguments`,
@@ -61,6 +66,7 @@ __all__ = [
     "link_arguments",
     "linking_authored",
     "mesh_light_arguments",
+    "portal_arguments",
 ]
 
 #: The non-distant UsdLux light types mipray renders, and their ``set_light`` kind.
@@ -286,6 +292,10 @@ def area_light_arguments(
             args["texture"] = _resolve(attr, value)
         elif isinstance(value, str) and value:
             args["texture"] = value
+        if kind == "dome":
+            rel = prim.GetRelationship("portals")
+            if rel and rel.HasAuthoredTargets():
+                args["portals"] = [str(t) for t in rel.GetForwardedTargets()]
         if "texture" in args and kind == "dome":
             layout = str(get("texture:format", "automatic"))
             if layout not in ("automatic", "latlong"):
@@ -301,6 +311,31 @@ def area_light_arguments(
             raise PrimError(path, f"inputs:{key} is {args[key]}; it must be > 0")
     if args["intensity"] < 0.0:
         raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
+    if not np.isfinite(transform).all():
+        raise PrimError(path, "the world transform is not finite")
+    return args
+
+
+def portal_arguments(
+    prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
+) -> dict[str, Any]:
+    """``RenderDelegate.set_light`` keyword arguments for a ``UsdLux.PortalLight``.
+
+    Its ``width`` and ``height`` (fallback 1) in the light's units, passing light along its
+    local -Z; its ``LightAPI`` inputs are not read (:mod:`mipray.usd.unsupported` lists them).
+
+    Raises:
+        PrimError: a non-finite or non-positive size, or a non-finite transform.
+
+    """
+    path = str(prim.GetPath())
+    args: dict[str, Any] = {"kind": "portal", "transform": transform}
+    for key in ("width", "height"):
+        attr = prim.GetAttribute(f"inputs:{key}")
+        value = attr.Get(time) if attr else None
+        args[key] = 1.0 if value is None else float(value)
+        if not (math.isfinite(args[key]) and args[key] > 0.0):
+            raise PrimError(path, f"inputs:{key} is {args[key]}; it must be finite and > 0")
     if not np.isfinite(transform).all():
         raise PrimError(path, "the world transform is not finite")
     return args

@@ -58,6 +58,7 @@ from .light import (
     geometry_light_targets,
     link_arguments,
     mesh_light_arguments,
+    portal_arguments,
 )
 from .mesh_sync import read_mesh
 from .mtlx_files import load_mtlx_references
@@ -102,7 +103,9 @@ class SyncError:
 class _Record:
     """What the scene delegate remembers about one synced (or failed) prim."""
 
-    kind: str  # "mesh", "camera", "light", "instancer" (PointInstancer) or "instance"
+    # "mesh", "camera", "light", "portal" (a PortalLight: guides domes, lights nothing),
+    # "instancer" (PointInstancer) or "instance"
+    kind: str
     order: int  # traversal order, to pick "the first camera"
     in_delegate: bool = True  # False for a mesh with no faces, and for instance prims
     might_vary: bool = False  # re-sync when the time changes
@@ -129,6 +132,8 @@ def _kind(prim: Usd.Prim) -> str:
         return "instancer"
     if prim.IsA(UsdGeom.Camera):
         return "camera"
+    if prim.IsA(UsdLux.PortalLight):
+        return "portal"
     return "light"
 
 
@@ -730,6 +735,10 @@ class UsdSceneDelegate:
                 record = _Record("light", order, might_vary=might_vary, in_delegate=False)
                 self._linked.add(path)
                 self._resync_meshes([*before, *self._geometry_lights[path]], xform_cache, memo)
+            elif prim.IsA(UsdLux.PortalLight):
+                args = portal_arguments(prim, time, transform)
+                record = _Record("portal", order, might_vary=might_vary)
+                self.delegate.set_light(path, **args)
             elif any(prim.IsA(t) for t, _ in AREA_LIGHT_TYPES):
                 args = area_light_arguments(prim, time, transform) or {}
                 links = link_arguments(prim, time, self._gprim_paths)

@@ -58,6 +58,7 @@ RENDERED_TYPES: tuple[type, ...] = (
     UsdLux.DistantLight,
     *(t for t, _ in AREA_LIGHT_TYPES),
     UsdLux.GeometryLight,
+    UsdLux.PortalLight,
 )
 
 #: The UsdPreviewSurface inputs :mod:`mipray.usd.shading` reads (displacement only from a
@@ -185,7 +186,15 @@ def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
     if prim.IsA(UsdLux.DomeLight) and fmt and fmt.HasAuthoredValue():
         if str(fmt.Get(time)) not in ("automatic", "latlong"):
             unread.append(f"inputs:texture:format = {fmt.Get(time)}")
-    return unread + authored_properties(prim, ["light:filters", "portals"])
+    if prim.IsA(UsdLux.PortalLight):
+        # A portal only guides domes: none of its light inputs but its size is read.
+        unread = [
+            p.GetName()
+            for p in prim.GetAuthoredProperties()
+            if p.GetName().startswith("inputs:")
+            and p.GetName() not in ("inputs:width", "inputs:height")
+        ]
+    return unread + authored_properties(prim, ["light:filters"])
 
 
 def _clipping_planes(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
