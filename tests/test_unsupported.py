@@ -187,6 +187,19 @@ def test_invisible_and_excluded_prims_are_not_listed(fake) -> None:
     assert scene.unsupported == []
 
 
+def test_prims_under_an_untyped_root_are_audited(fake) -> None:
+    # A production stage's /World is often a bare `def` (no type, so no purpose of its own):
+    # what lies under it is rendered, and what is not supported there must be listed too.
+    stage = new_stage()
+    stage.DefinePrim("/World")
+    UsdGeom.NurbsPatch.Define(stage, "/World/Patch")
+    UsdGeom.NurbsPatch.Define(stage, "/World/Guide").CreatePurposeAttr("guide")
+    add_cube(stage, "/World/Cube")
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    assert [u.prim for u in scene.unsupported] == ["/World/Patch"]
+
+
 def test_headlight_standing_in_for_unsupported_lights_is_listed(fake) -> None:
     stage = new_stage()
     add_cube(stage, "/Cube")

@@ -172,7 +172,14 @@ def test_a_skeleton_whose_joints_do_not_resolve_warns_once_and_renders_at_rest(
         scene.sync()
     assert scene.delegate_errors == []
     np.testing.assert_allclose(world_points(fake.meshes()["/World/Arm/Mesh"]), rest, atol=1e-6)
-    said = [r.getMessage() for r in caplog.records if "/World/Arm/Mesh" in r.getMessage()]
+    # The stage audit's own line (deformation blur is not rendered, whatever the pose) is
+    # another fact about the prim; the posing problem is said once.
+    said = [
+        r.getMessage()
+        for r in caplog.records
+        if "/World/Arm/Mesh" in r.getMessage()
+        and not r.getMessage().startswith("mipray: not rendered:")
+    ]
     assert said == [
         f"mipray: /World/Arm/Mesh: cannot pose the skinned mesh: {problem}; rendering its rest pose"
     ]

@@ -422,7 +422,9 @@ def _rendered_prims(
             if imageable.GetVisibilityAttr().Get(time) == UsdGeom.Tokens.invisible:
                 continue
             info = imageable.ComputePurposeInfo(parent_info)
-        if info.purpose not in purposes:
+        # Above every imageable prim (an untyped /World) the purpose is not yet computed: an
+        # empty token, which is the default purpose, not one the render leaves out.
+        if (info.purpose or UsdGeom.Tokens.default_) not in purposes:
             continue
         path = str(prim.GetPath())
         # Inside a prototype (/__Prototype_1/A/B): named under the instance (/inst/A/B).
