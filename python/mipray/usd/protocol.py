@@ -133,8 +133,9 @@ class RenderDelegateLike(Protocol):
         ies_file: str | None = ...,
         ies_angle_scale: float = ...,
         ies_normalize: bool = ...,
+        portals: list[str] | None = ...,
     ) -> None:
-        """Add or replace a sphere, rect, disk or dome light (``kind``)."""
+        """Add or replace a UsdLux light of any kind (``kind``), portals included."""
 
     def remove(self, path: str) -> None:
         """Remove a prim."""
