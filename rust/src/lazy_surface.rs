@@ -257,21 +257,26 @@ mod tests {
         (t, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.5], [0.0, 1.0, 0.0]])
     }
 
+    /// The bilinear `quad()` (control points `p`) built on first use, each build counted in `calls`.
+    fn counted_quad(calls: Arc<AtomicUsize>, p: &[[f32; 3]]) -> LazySurface {
+        LazySurface::new(
+            Bounds3::from_points(p.iter().map(|&q| q.into())),
+            1,
+            Box::new(move || {
+                calls.fetch_add(1, Ordering::SeqCst);
+                let (t, p) = quad();
+                Ok(Arc::new(BilinearSurface::new(&t, &p).map_err(|e| e.to_string())?) as Arc<dyn LimitSurface>)
+            }),
+        )
+    }
+
     #[test]
     fn builds_once_on_first_use_and_forwards() {
         let (t, p) = quad();
         let eager = BilinearSurface::new(&t, &p).unwrap();
         let calls = Arc::new(AtomicUsize::new(0));
         let c = calls.clone();
-        let lazy: LazySurface = LazySurface::new(
-            Bounds3::from_points(p.iter().map(|&q| q.into())),
-            1,
-            Box::new(move || {
-                c.fetch_add(1, Ordering::SeqCst);
-                let (t, p) = quad();
-                Ok(Arc::new(BilinearSurface::new(&t, &p).map_err(|e| e.to_string())?) as Arc<dyn LimitSurface>)
-            }),
-        );
+        let lazy = counted_quad(c, &p);
         assert_eq!(lazy.control_face_count(), 1);
         assert!(lazy.lazy_bounds().is_some());
         assert_eq!(calls.load(Ordering::SeqCst), 0, "nothing built before use");
@@ -291,15 +296,7 @@ mod tests {
         let calls = Arc::new(AtomicUsize::new(0));
         let c = calls.clone();
         let (_, p) = quad();
-        let lazy: LazySurface = LazySurface::new(
-            Bounds3::from_points(p.iter().map(|&q| q.into())),
-            1,
-            Box::new(move || {
-                c.fetch_add(1, Ordering::SeqCst);
-                let (t, p) = quad();
-                Ok(Arc::new(BilinearSurface::new(&t, &p).map_err(|e| e.to_string())?) as Arc<dyn LimitSurface>)
-            }),
-        );
+        let lazy = counted_quad(c, &p);
         // SAFETY: no reference into the surface is held.
         assert!(!unsafe { lazy.release() }, "nothing built, nothing to drop");
         let before = {
