@@ -332,17 +332,19 @@ fn hit_quads_rows<const W: usize, A: Fn(f32, Vec3A) -> bool>(
     }
 }
 
-/// The closest hit of `ray` with `tess` read at vertex `stride` (1, or 2 for merged quads), in
-/// (`t_min`, `t_max`). Fine grids are entered through their sub-boxes.
-pub fn intersect_tessellation(ray: &WatertightRay, tess: &Tessellation, stride: usize, t_min: f32, t_max: f32) -> Option<GridHit> {
-    intersect_tessellation_accepting(ray, tess, stride, t_min, t_max, &|_, _| true)
+/// Takes every hit: the `accept` of [`intersect_tessellation`] and the seam tests for callers
+/// that pass none over.
+#[inline(always)]
+pub fn every_hit(_t: f32, _ng: Vec3A) -> bool {
+    true
 }
 
-/// [`intersect_tessellation`]'s closest hit among those `accept(t, ng)` takes (`ng` the hit
-/// triangle's unnormalised normal): one pass over the grid where a caller passing hits over
-/// would search it again from each (a ray leaving a displaced surface passed several of its
-/// own grids' hits, each a whole search).
-pub fn intersect_tessellation_accepting<A: Fn(f32, Vec3A) -> bool>(
+/// The closest hit of `ray` with `tess` read at vertex `stride` (1, or 2 for merged quads), in
+/// (`t_min`, `t_max`), among those `accept(t, ng)` takes ([`every_hit`]: all; `ng` the hit
+/// triangle's unnormalised normal). Fine grids are entered through their sub-boxes. The filter
+/// runs inside the one pass: a caller passing hits over would otherwise search the grid again
+/// from each (a ray leaving a displaced surface passed several of its own grids' hits).
+pub fn intersect_tessellation<A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -416,10 +418,10 @@ mod tests {
             let facing = if r % 2 == 0 { 1.0 } else { -1.0 };
             let accept = |t: f32, ng: Vec3A| !(t < window && facing * d.dot(ng) > 0.0);
             for stride in [1, 2] {
-                let one_pass = intersect_tessellation_accepting(&ray, &t, stride, 0.0, f32::INFINITY, &accept);
+                let one_pass = intersect_tessellation(&ray, &t, stride, 0.0, f32::INFINITY, &accept);
                 let mut t_from = 0.0;
                 let again = loop {
-                    match intersect_tessellation(&ray, &t, stride, t_from, f32::INFINITY) {
+                    match intersect_tessellation(&ray, &t, stride, t_from, f32::INFINITY, &every_hit) {
                         Some(h) if !accept(h.t, h.ng) => {
                             refused_some += 1;
                             t_from = crate::ray::next_up(h.t);
@@ -440,7 +442,7 @@ mod tests {
         for &(x, y) in &[(0.1f32, 0.2f32), (0.9, 0.05), (0.5, 0.5), (0.33, 0.77)] {
             let r = WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
             for stride in [1, 2] {
-                let h = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY).unwrap();
+                let h = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY, &every_hit).unwrap();
                 assert!((h.t - 1.0).abs() < 1e-6 && (h.u - x).abs() < 1e-5 && (h.v - y).abs() < 1e-5, "{h:?}");
                 assert!(h.ng.z > 0.0, "counter-clockwise grid faces +z");
             }
@@ -456,7 +458,7 @@ mod tests {
                 let (x, y) = (i as f32 / 8.0, j as f32 / 8.0);
                 let d = Vec3A::new(0.3, -0.2, -1.0);
                 let r = WatertightRay::new(Vec3A::new(x, y, 0.0) - d * 2.0, d);
-                let h = intersect_tessellation(&r, &t, 1, 0.0, f32::INFINITY);
+                let h = intersect_tessellation(&r, &t, 1, 0.0, f32::INFINITY, &every_hit);
                 let inside = (0.0..=1.0).contains(&x) && (0.0..=1.0).contains(&y);
                 assert_eq!(h.is_some(), inside, "({x}, {y})");
             }
@@ -472,7 +474,7 @@ mod tests {
         {
             for stride in [1, 2] {
                 let r = WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
-                let h = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY);
+                let h = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY, &every_hit);
                 assert_eq!(h.is_some(), inside, "({x}, {y}) at stride {stride}");
                 if let Some(h) = h {
                     assert!((h.u - x).abs() < 1e-5 && (h.v - y).abs() < 1e-5 && h.ng.z > 0.0, "{h:?}");
@@ -480,7 +482,15 @@ mod tests {
             }
         }
         t.domain = GridDomain::Empty;
-        assert!(intersect_tessellation(&WatertightRay::new(Vec3A::new(0.1, 0.1, 1.0), Vec3A::NEG_Z), &t, 1, 0.0, f32::INFINITY).is_none());
+        assert!(intersect_tessellation(
+            &WatertightRay::new(Vec3A::new(0.1, 0.1, 1.0), Vec3A::NEG_Z),
+            &t,
+            1,
+            0.0,
+            f32::INFINITY,
+            &every_hit
+        )
+        .is_none());
     }
 
     /// The grid test as it was before it shared sheared vertices and edges: every quad's two
@@ -553,7 +563,7 @@ mod tests {
                     let o = Vec3A::new(ox, oy, if below { -oz } else { oz });
                     let r = WatertightRay::new(o, target - o);
                     for stride in [1usize, 2].into_iter().filter(|s| (n - 1) % s == 0) {
-                        let got = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY);
+                        let got = intersect_tessellation(&r, &t, stride, 0.0, f32::INFINITY, &every_hit);
                         let want = per_triangle(&r, &t, stride, f32::INFINITY);
                         assert_eq!(
                             got.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits())),

@@ -26,7 +26,7 @@
 
 use glam::{Vec3A, Vec4};
 
-use crate::intersect::{intersect_tessellation_accepting, GridHit, WatertightRay};
+use crate::intersect::{intersect_tessellation, GridHit, WatertightRay};
 use crate::patch::{LimitSurface, UvRect};
 use crate::tessellate::{GridDomain, Tessellation};
 
@@ -510,20 +510,9 @@ pub fn seam_box(tess: &Tessellation, e: usize, k: usize, stride: usize) -> Optio
 /// (`t_min`, `t_max`): where the ray leaves the first box it passes through from outside. The
 /// hit's (u, v) is the nearest point of the chord, in the grid's [0, 1]²; its normal is the
 /// boundary quad's (the winding of [`crate::intersect`]'s triangles).
-pub fn intersect_seams(
-    ray: &WatertightRay,
-    tess: &Tessellation,
-    stride: usize,
-    edges: SeamEdges,
-    t_min: f32,
-    t_max: f32,
-) -> Option<GridHit> {
-    intersect_seams_accepting(ray, tess, stride, edges, t_min, t_max, &|_, _| true)
-}
-
-/// [`intersect_seams`]'s closest hit among those `accept(t, ng)` takes (see
-/// [`crate::intersect::intersect_tessellation_accepting`]).
-pub fn intersect_seams_accepting<A: Fn(f32, Vec3A) -> bool>(
+/// Hits `accept(t, ng)` refuses are passed over inside the search (see
+/// [`crate::intersect::intersect_tessellation`]).
+pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -680,20 +669,9 @@ fn may_hit_grid_or_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize
 
 /// The closest hit of `ray` with the grid `tess` read at `stride` and with the seam boxes of
 /// its `edges` ([`SeamEdges::NONE`]: the grid alone, as without seams), in (`t_min`, `t_max`).
-pub fn intersect_with_seams(
-    ray: &WatertightRay,
-    tess: &Tessellation,
-    stride: usize,
-    edges: SeamEdges,
-    t_min: f32,
-    t_max: f32,
-) -> Option<GridHit> {
-    intersect_with_seams_accepting(ray, tess, stride, edges, t_min, t_max, &|_, _| true)
-}
-
-/// [`intersect_with_seams`]'s closest hit among those `accept(t, ng)` takes, in one pass (see
-/// [`crate::intersect::intersect_tessellation_accepting`]).
-pub fn intersect_with_seams_accepting<A: Fn(f32, Vec3A) -> bool>(
+/// Hits `accept(t, ng)` refuses are passed over inside the one search (see
+/// [`crate::intersect::intersect_tessellation`]).
+pub fn intersect_with_seams<A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -705,9 +683,9 @@ pub fn intersect_with_seams_accepting<A: Fn(f32, Vec3A) -> bool>(
     if !may_hit_grid_or_seams(ray, tess, stride, edges, t_min, t_max) {
         return None;
     }
-    let grid = intersect_tessellation_accepting(ray, tess, stride, t_min, t_max, accept);
+    let grid = intersect_tessellation(ray, tess, stride, t_min, t_max, accept);
     let limit = grid.map_or(t_max, |h| h.t);
-    intersect_seams_accepting(ray, tess, stride, edges, t_min, limit, accept).or(grid)
+    intersect_seams(ray, tess, stride, edges, t_min, limit, accept).or(grid)
 }
 
 #[cfg(test)]
@@ -745,15 +723,16 @@ mod tests {
         let t = grid(5, |u, v| [u, v, 0.0], 0.01);
         // Parallel to the plane's normal just outside the u = 1 edge, within the radius.
         let down = |x: f32| WatertightRay::new(Vec3A::new(x, 0.5, 1.0), Vec3A::NEG_Z);
-        let h = intersect_seams(&down(1.005), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).expect("inside the seam box");
+        let h = intersect_seams(&down(1.005), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit)
+            .expect("inside the seam box");
         assert!(h.t > 1.0 && h.t <= 1.0 + 0.01 * 1.5, "leaves the box below the plane: {h:?}");
         assert!((h.u - 1.0).abs() < 1e-6 && (h.v - 0.5).abs() < 1e-3);
         assert!(h.ng.z > 0.0);
-        assert!(intersect_seams(&down(1.02), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).is_none());
+        assert!(intersect_seams(&down(1.02), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
         // Edge 1 left out: no seam there.
-        assert!(intersect_seams(&down(1.005), &t, 1, SeamEdges(0b1101), 0.0, f32::INFINITY).is_none());
+        assert!(intersect_seams(&down(1.005), &t, 1, SeamEdges(0b1101), 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
         // A grid hit closer than the box exit wins (t_max is the grid's hit).
-        assert!(intersect_seams(&down(0.995), &t, 1, SeamEdges::ALL, 0.0, 1.0).is_none());
+        assert!(intersect_seams(&down(0.995), &t, 1, SeamEdges::ALL, 0.0, 1.0, &crate::intersect::every_hit).is_none());
     }
 
     #[test]
@@ -762,18 +741,19 @@ mod tests {
         t.domain = GridDomain::LowerTriangle;
         let down = |x: f32, y: f32| WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
         // Just beyond the diagonal, next to it: the diagonal's seam box.
-        let h = intersect_seams(&down(0.505, 0.505), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).expect("diagonal seam");
+        let h = intersect_seams(&down(0.505, 0.505), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit)
+            .expect("diagonal seam");
         assert!((h.u + h.v - 1.0).abs() < 1e-5 && h.ng.z > 0.0, "{h:?}");
         // Just beyond u = 1 at v = 0.5: outside the triangle, no seam there.
-        assert!(intersect_seams(&down(1.005, 0.5), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).is_none());
-        assert!(intersect_seams(&down(0.5, -0.005), &t, 2, SeamEdges::ALL, 0.0, f32::INFINITY).is_some());
+        assert!(intersect_seams(&down(1.005, 0.5), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
+        assert!(intersect_seams(&down(0.5, -0.005), &t, 2, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_some());
     }
 
     #[test]
     fn rays_starting_inside_a_seam_box_ignore_it() {
         let t = grid(2, |u, v| [u, v, 0.0], 0.01);
         let r = WatertightRay::new(Vec3A::new(1.0, 0.5, 0.0), Vec3A::new(1.0, 0.0, 0.01).normalize());
-        assert!(intersect_seams(&r, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).is_none());
+        assert!(intersect_seams(&r, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
     }
 
     #[test]
@@ -781,8 +761,14 @@ mod tests {
         // A roof: the middle vertex of each u-edge is 0.1 above the chord of stride 2.
         let t = grid(3, |u, v| [u, v, 0.2 * (0.5 - (u - 0.5).abs())], 0.0);
         let r = WatertightRay::new(Vec3A::new(0.5, -0.05, 1.0), Vec3A::NEG_Z);
-        assert!(intersect_seams(&r, &t, 2, SeamEdges(1), 0.0, f32::INFINITY).is_some(), "within 0.1 of the stride-2 chord");
-        assert!(intersect_seams(&r, &t, 1, SeamEdges(1), 0.0, f32::INFINITY).is_none(), "stride 1 has radius 0");
+        assert!(
+            intersect_seams(&r, &t, 2, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit).is_some(),
+            "within 0.1 of the stride-2 chord"
+        );
+        assert!(
+            intersect_seams(&r, &t, 1, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none(),
+            "stride 1 has radius 0"
+        );
     }
 
     /// One patch given by a function of (u, v), for measuring seams on known edge curves.
@@ -858,8 +844,12 @@ mod tests {
             let c = (b - a).normalize();
             let p = (a + b) * 0.5 + Vec3A::new(c.y, -c.x, 0.0) * (0.5 * t.seam_radius);
             let down = WatertightRay::new(p + Vec3A::Z, Vec3A::NEG_Z);
-            assert!(crate::intersect::intersect_tessellation(&down, &t, 1, 0.0, f32::INFINITY).is_none(), "outside the grid");
-            let h = intersect_with_seams(&down, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY).expect("inside the seam box");
+            assert!(
+                crate::intersect::intersect_tessellation(&down, &t, 1, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none(),
+                "outside the grid"
+            );
+            let h = intersect_with_seams(&down, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit)
+                .expect("inside the seam box");
             assert!((h.t - 1.0).abs() < 1e-6, "n {n}: hit {} off the plane", h.t - 1.0);
             for stride in [2usize, 4].into_iter().filter(|s| (n - 1) % s == 0) {
                 let (sb, _) = seam_box(&t, 0, 0, stride).unwrap();

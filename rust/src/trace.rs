@@ -19,7 +19,7 @@ use crate::intersect::{BoxRay, WatertightRay};
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
-use crate::seam::{intersect_with_seams, intersect_with_seams_accepting, SeamEdges};
+use crate::seam::{intersect_with_seams, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, RootSubpatch};
 use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceParams, Rate, Tessellation};
 
@@ -150,6 +150,44 @@ impl Origin {
     fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, either_way: bool) -> bool {
         t < window && (either_way || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
     }
+}
+
+/// A ray in an instance's object space, with what its leaf tests read of the instance.
+#[derive(Clone, Copy)]
+struct Local {
+    o: Vec3A,
+    d: Vec3A,
+    /// −1 for a left-handed mesh (its winding normals face inward), else 1.
+    sign: f32,
+    /// Where the ray leaves this instance's surface, if it does.
+    own: Option<Origin>,
+    /// The instance's largest stretch (render units per object unit).
+    scale: f32,
+}
+
+/// The nearest leaf hit of the ray (`o`, `d`: object space) in a bottom-level BVH within
+/// (`t_min`, `t_max`): `test(si, t_best)` tests root subpatch `si` for a hit before `t_best`.
+/// With `any_hit` the first hit ends the walk.
+#[inline(always)]
+fn nearest_leaf(
+    blas: &CwBvh,
+    o: Vec3A,
+    d: Vec3A,
+    t_min: f32,
+    t_max: f32,
+    any_hit: bool,
+    mut test: impl FnMut(usize, f32) -> Option<LocalHit>,
+) -> Option<(LocalHit, u32)> {
+    let mut best: Option<(LocalHit, u32)> = None;
+    let mut t_best = t_max;
+    walk(blas, BvhRay::new(o, d, t_min, t_max), any_hit, |id| {
+        let si = blas.primitive_indices[id] as usize;
+        let h = test(si, t_best)?;
+        t_best = h.t;
+        best = Some((h, si as u32));
+        Some(h.t)
+    });
+    best
 }
 
 /// A hit within one subpatch: t, (u, v) local to the tested grid's domain `rect`, the object-
@@ -799,25 +837,21 @@ impl<'s> Tracer<'s> {
         let inst = instance.pose(ray.time);
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
         let own = origin.filter(|org| org.instance == ii as u32);
-        if mesh.surface.exact().is_some() || mesh.surface.curves().is_some() {
-            let o = inst.object_from_render.transform_point3a(ray.o);
-            let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
-            if !(o.is_finite() && d.is_finite()) {
-                // A render-space ray far beyond the scene can overflow in a small object's space.
-                return None;
-            }
-            let (h, si) = match (mesh.surface.exact(), mesh.surface.curves()) {
-                (Some(exact), _) => self.nearest_exact(ii, exact, o, d, ray, t_max, &inst, counters, any_hit, origin)?,
-                (None, Some(curves)) => self.nearest_curve(ii, curves, o, d, ray, t_max, &inst, counters, any_hit, origin)?,
-                (None, None) => return None,
-            };
-            return Some(self.hit(ii, ray, &inst, h, si));
-        }
+        let sign = if mesh.left_handed { -1.0 } else { 1.0 };
         let o = inst.object_from_render.transform_point3a(ray.o);
         let d = positive_zeros(inst.object_from_render.transform_vector3a(ray.d));
         if !(o.is_finite() && d.is_finite()) {
             // A render-space ray far beyond the scene can overflow in a small object's space.
             return None;
+        }
+        let ray_in = Local { o, d, sign, own, scale: inst.scale };
+        if let Some(exact) = mesh.surface.exact() {
+            let (h, si) = self.nearest_exact(geom, blas, exact, &ray_in, ray, t_max, counters, any_hit)?;
+            return Some(self.hit(ii, ray, &inst, h, si));
+        }
+        if let Some(curves) = mesh.surface.curves() {
+            let (h, si) = self.nearest_curve(instance.mesh, geom, blas, curves, &ray_in, ray, t_max, counters, any_hit)?;
+            return Some(self.hit(ii, ray, &inst, h, si));
         }
         let mut box_ray = BoxRay::new(o, d);
         // A ray leaving this instance that enters the box of the subpatch it starts on tests
@@ -865,7 +899,6 @@ impl<'s> Tracer<'s> {
             }
         }
         let kind = Self::kind_index(ray.kind);
-        let sign = if mesh.left_handed { -1.0 } else { 1.0 };
         // Root subpatch `si` tested at split depth `depth` (0: none) or else `rate`, from its
         // looked-up `tess` (the fine tier when split), for a hit before `t_best`.
         // Made at the instance's first grid test: most instance entries test none.
@@ -927,7 +960,7 @@ impl<'s> Tracer<'s> {
                         (Some(o), Some(window)) => !o.is_own_other_rate(t, window, sign * d.dot(ng), false),
                         _ => true,
                     };
-                    intersect_with_seams_accepting(wray, &tess, stride, edges, ray.t_min, t_best, &accept).map(|h| LocalHit {
+                    intersect_with_seams(wray, &tess, stride, edges, ray.t_min, t_best, &accept).map(|h| LocalHit {
                         t: h.t,
                         uv: (h.u, h.v),
                         rect: UvRect::UNIT,
@@ -948,8 +981,7 @@ impl<'s> Tracer<'s> {
             }
         }
         if !(any_hit && best.is_some()) {
-            walk(blas, BvhRay::new(o, d, ray.t_min, t_best), any_hit, |id| {
-                let si = blas.primitive_indices[id] as usize;
+            let rest = nearest_leaf(blas, o, d, ray.t_min, t_best, any_hit, |si, t_best| {
                 if first_si == Some(si) {
                     return None;
                 }
@@ -960,11 +992,9 @@ impl<'s> Tracer<'s> {
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
                 let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
-                let h = test(counters, wray, si, depth, rate, tess, t_best)?;
-                t_best = h.t;
-                best = Some((h, si as u32));
-                Some(h.t)
+                test(counters, wray, si, depth, rate, tess, t_best)
             });
+            best = rest.or(best);
         }
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
@@ -1063,44 +1093,30 @@ impl<'s> Tracer<'s> {
     #[allow(clippy::too_many_arguments)]
     fn nearest_exact(
         &self,
-        ii: usize,
+        geom: &MeshGeometry,
+        blas: &CwBvh,
         exact: &dyn crate::implicit::ExactSurface,
-        o: Vec3A,
-        d: Vec3A,
+        local: &Local,
         ray: &Ray,
         t_max: f32,
-        inst: &Pose,
         counters: &mut TraceCounters,
         any_hit: bool,
-        origin: Option<Origin>,
     ) -> Option<(LocalHit, u32)> {
-        let instance = &self.instances[ii];
-        let geom = self.geometry(instance.mesh);
-        let blas = geom.bvh.as_ref()?;
-        let sign = if self.scene.meshes[instance.mesh].left_handed { -1.0 } else { 1.0 };
-        let own = origin.filter(|org| org.instance == ii as u32);
-        let mut best: Option<(LocalHit, u32)> = None;
-        let mut t_best = t_max;
-        walk(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
-            let si = blas.primitive_indices[id] as usize;
+        let Local { o, d, sign, own, scale } = *local;
+        nearest_leaf(blas, o, d, ray.t_min, t_max, any_hit, |si, t_best| {
             let patch = geom.subpatches[si].patch as usize;
             counters.ray_subpatch_tests += 1;
             let mut t_from = ray.t_min;
-            let found = loop {
+            let h = loop {
                 let Some(h) = exact.intersect(patch, o, d, t_from, t_best) else { break None };
-                let window = own.map_or(0.0, |org| (org.chord_error + h.error * inst.scale) * org.inv_cos);
+                let window = own.map_or(0.0, |org| (org.chord_error + h.error * scale) * org.inv_cos);
                 match own {
                     Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), false) => t_from = h.t,
                     _ => break Some(h),
                 }
-            };
-            let h = found?;
-            t_best = h.t;
-            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error };
-            best = Some((local, si as u32));
-            Some(h.t)
-        });
-        best
+            }?;
+            Some(LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: 0, chord_error: h.error })
+        })
     }
 
     /// The nearest hit on a curve ([`crate::curves`]): the bottom-level BVH's leaves are its
@@ -1113,28 +1129,20 @@ impl<'s> Tracer<'s> {
     #[allow(clippy::too_many_arguments)]
     fn nearest_curve(
         &self,
-        ii: usize,
+        mesh_index: usize,
+        geom: &MeshGeometry,
+        blas: &CwBvh,
         curves: &crate::curves::CurvesSurface,
-        o: Vec3A,
-        d: Vec3A,
+        local: &Local,
         ray: &Ray,
         t_max: f32,
-        inst: &Pose,
         counters: &mut TraceCounters,
         any_hit: bool,
-        origin: Option<Origin>,
     ) -> Option<(LocalHit, u32)> {
-        let instance = &self.instances[ii];
-        let geom = self.geometry(instance.mesh);
-        let blas = geom.bvh.as_ref()?;
-        let sign = if self.scene.meshes[instance.mesh].left_handed { -1.0 } else { 1.0 };
-        let own = origin.filter(|org| org.instance == ii as u32);
+        let Local { o, d, sign, own, scale } = *local;
         let kind = Self::kind_index(ray.kind);
-        let wray = WatertightRay::new(o, d);
-        let mut best: Option<(LocalHit, u32)> = None;
-        let mut t_best = t_max;
-        walk(blas, BvhRay::new(o, d, ray.t_min, t_max), any_hit, |id| {
-            let si = blas.primitive_indices[id] as usize;
+        let wray = BoxRay::new(o, d);
+        nearest_leaf(blas, o, d, ray.t_min, t_max, any_hit, |si, t_best| {
             let sp = &geom.subpatches[si];
             let seg = sp.patch as usize;
             let (t_enter, _) = wray.hit_box(&sp.bounds(), ray.t_min, t_best)?;
@@ -1142,7 +1150,7 @@ impl<'s> Tracer<'s> {
             // Pieces whose sag (falling with the square of their count) is within the beam; a
             // beam of no usable width asks for the finest rate, as for subpatches.
             let beam = ray.beam_width(t_enter) * self.tess_factor * self.kind_factor[kind];
-            let sag = curves.sag_of_one_piece(seg) * inst.scale;
+            let sag = curves.sag_of_one_piece(seg) * scale;
             let needed = if beam.is_finite() && beam > 0.0 && sag.is_finite() { (sag / beam).sqrt() } else { 16.0 };
             let rate = if self.single {
                 Rate::R16
@@ -1158,34 +1166,26 @@ impl<'s> Tracer<'s> {
             counters.rate_tests_by_kind[kind][rate as usize] += 1;
             let (tier, stride) = rate.tier_and_stride();
             let cell = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-            let mesh = &self.scene.meshes[instance.mesh];
-            let key = CacheKey {
-                mesh: Self::cache_mesh(mesh, instance.mesh),
-                generation: mesh.generation,
-                subpatch: geom.child_ids.id(cell),
-                tier,
-            };
+            let mesh = &self.scene.meshes[mesh_index];
+            let key =
+                CacheKey { mesh: Self::cache_mesh(mesh, mesh_index), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
             let tess = self.cache.get_or_build(key, || curves.tessellate(seg, crate::curves::tier_pieces(tier)));
             // Merged pieces sag four times as far as the stored ones.
             let chord_error = tess.chord_error * (stride * stride) as f32;
             let mut t_from = ray.t_min;
             let found = loop {
                 let Some(h) = curves.intersect(seg, &tess, stride, o, d, t_from, t_best) else { break None };
-                let window = own.map_or(0.0, |org| (org.chord_error + (chord_error + h.uncertainty) * inst.scale) * org.inv_cos);
+                let window = own.map_or(0.0, |org| (org.chord_error + (chord_error + h.uncertainty) * scale) * org.inv_cos);
                 match own {
                     Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), h.facing) => t_from = next_up(h.t),
                     _ => break Some(h),
                 }
             };
             let h = found?;
-            t_best = h.t;
             // A ray leaving a camera-facing ribbon skips it within its half width too.
             let chord_error = chord_error + h.uncertainty;
-            let local = LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error };
-            best = Some((local, si as u32));
-            Some(h.t)
-        });
-        best
+            Some(LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.n, quads: rate.quads() as u32, chord_error })
+        })
     }
 
     /// The mesh's key in the cache.
@@ -1262,7 +1262,7 @@ impl<'s> Tracer<'s> {
     ) {
         let root_rect = UvRect::UNIT;
         if u32::from(cell.depth) >= target_depth {
-            if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best) {
+            if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best, &crate::intersect::every_hit) {
                 *t_best = h.t;
                 *best = Some(LocalHit {
                     t: h.t,

@@ -101,7 +101,7 @@ proptest! {
         };
         let target = Vec3A::new(x, y, z);
         let ray = WatertightRay::new(target - dir * 3.0, dir);
-        prop_assert!(intersect_tessellation(&ray, &tess, stride, 0.0, f32::INFINITY).is_some(), "missed ({x}, {y}) at stride {stride}");
+        prop_assert!(intersect_tessellation(&ray, &tess, stride, 0.0, f32::INFINITY, &mipray::intersect::every_hit).is_some(), "missed ({x}, {y}) at stride {stride}");
     }
 }
 
