@@ -166,9 +166,12 @@ struct Local {
 }
 
 /// The nearest leaf hit of the ray (`o`, `d`: object space) in a bottom-level BVH within
-/// (`t_min`, `t_max`): `test(si, t_best)` tests root subpatch `si` for a hit before `t_best`.
-/// With `any_hit` the first hit ends the walk.
+/// (`t_min`, `t_max`), or `best` (a hit at `t_max` already found, if any) when none is nearer:
+/// `test(si, t_best)` tests root subpatch `si` for a hit before `t_best`. With `any_hit` the
+/// first hit ends the walk. (`best` is passed in, not merged after: moving the hits through a
+/// second `Option` cost the plain AO ray 44 instructions.)
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn nearest_leaf(
     blas: &CwBvh,
     o: Vec3A,
@@ -176,9 +179,9 @@ fn nearest_leaf(
     t_min: f32,
     t_max: f32,
     any_hit: bool,
+    mut best: Option<(LocalHit, u32)>,
     mut test: impl FnMut(usize, f32) -> Option<LocalHit>,
 ) -> Option<(LocalHit, u32)> {
-    let mut best: Option<(LocalHit, u32)> = None;
     let mut t_best = t_max;
     walk(blas, BvhRay::new(o, d, t_min, t_max), any_hit, |id| {
         let si = blas.primitive_indices[id] as usize;
@@ -981,7 +984,7 @@ impl<'s> Tracer<'s> {
             }
         }
         if !(any_hit && best.is_some()) {
-            let rest = nearest_leaf(blas, o, d, ray.t_min, t_best, any_hit, |si, t_best| {
+            best = nearest_leaf(blas, o, d, ray.t_min, t_best, any_hit, best, |si, t_best| {
                 if first_si == Some(si) {
                     return None;
                 }
@@ -994,7 +997,6 @@ impl<'s> Tracer<'s> {
                 let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
                 test(counters, wray, si, depth, rate, tess, t_best)
             });
-            best = rest.or(best);
         }
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
@@ -1090,6 +1092,9 @@ impl<'s> Tracer<'s> {
     /// BVH's leaves are its patches, each tested in closed form (no tessellation, no rate:
     /// `quads` is 0). The hit's chord error is its floating-point error bound, so rays leaving
     /// the surface skip it only within rounding, by the same rule as tessellated surfaces.
+    // Kept out of trace_instance: inlined, they cost the subpatch path ~28 instructions a
+    // plain AO ray (callgrind).
+    #[inline(never)]
     #[allow(clippy::too_many_arguments)]
     fn nearest_exact(
         &self,
@@ -1103,7 +1108,7 @@ impl<'s> Tracer<'s> {
         any_hit: bool,
     ) -> Option<(LocalHit, u32)> {
         let Local { o, d, sign, own, scale } = *local;
-        nearest_leaf(blas, o, d, ray.t_min, t_max, any_hit, |si, t_best| {
+        nearest_leaf(blas, o, d, ray.t_min, t_max, any_hit, None, |si, t_best| {
             let patch = geom.subpatches[si].patch as usize;
             counters.ray_subpatch_tests += 1;
             let mut t_from = ray.t_min;
@@ -1126,6 +1131,9 @@ impl<'s> Tracer<'s> {
     /// a subpatch's grid (coarse 1 piece, medium 4, fine 16, read at stride 2 for 2 and 8), and
     /// its pieces tested. Beams asking for more than 16 pieces get 16 (counted in
     /// `finer_than_fine`): the sag there is at most 1/256 of one piece's.
+    // Kept out of trace_instance: inlined, they cost the subpatch path ~28 instructions a
+    // plain AO ray (callgrind).
+    #[inline(never)]
     #[allow(clippy::too_many_arguments)]
     fn nearest_curve(
         &self,
@@ -1142,7 +1150,7 @@ impl<'s> Tracer<'s> {
         let Local { o, d, sign, own, scale } = *local;
         let kind = Self::kind_index(ray.kind);
         let wray = BoxRay::new(o, d);
-        nearest_leaf(blas, o, d, ray.t_min, t_max, any_hit, |si, t_best| {
+        nearest_leaf(blas, o, d, ray.t_min, t_max, any_hit, None, |si, t_best| {
             let sp = &geom.subpatches[si];
             let seg = sp.patch as usize;
             let (t_enter, _) = wray.hit_box(&sp.bounds(), ray.t_min, t_best)?;
