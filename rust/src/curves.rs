@@ -43,7 +43,7 @@ use crate::bounds::Bounds3;
 use crate::geometry_cache::Tier;
 use crate::patch::{LimitSurface, PatchKind, PatchParam, SurfacePoint};
 use crate::ray::gamma;
-use crate::tessellate::{GridDomain, SubBoxes, Tessellation};
+use crate::tessellate::{GridBoxes, GridDomain, Tessellation};
 
 /// USD's `type`: straight segments between vertices, or cubic segments of a basis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -612,7 +612,7 @@ impl CurvesSurface {
         Tessellation {
             n,
             verts: verts.into(),
-            sub_boxes: SubBoxes::NONE,
+            boxes: GridBoxes::NONE,
             chord_error,
             seam_radius: 0.0,
             seam_normal: Default::default(),

@@ -357,10 +357,11 @@ pub fn intersect_tessellation<A: Fn(f32, Vec3A) -> bool>(
     }
     let mut best = None;
     let mut t_best = t_max;
-    if tess.sub_boxes.len() == 16 {
+    let sub_boxes = tess.boxes.sub_boxes();
+    if sub_boxes.len() == 16 {
         // Each sub-box covers 4×4 quads at stride 1, i.e. (4 / stride)² quads at this stride.
         let per = 4 / stride;
-        for (b, bb) in tess.sub_boxes.iter().enumerate() {
+        for (b, bb) in sub_boxes.iter().enumerate() {
             if ray.hit_box(bb, t_min, t_best).is_some() {
                 let (bi, bj) = (b % 4 * per, b / 4 * per);
                 hit_quads(ray, tess, stride, (bi, bi + per, bj, bj + per), t_min, &mut best, &mut t_best, accept);
@@ -387,7 +388,7 @@ mod tests {
         Tessellation {
             n,
             verts: verts.into(),
-            sub_boxes: Default::default(),
+            boxes: Default::default(),
             chord_error: 0.0,
             seam_radius: 0.0,
             seam_normal: Default::default(),

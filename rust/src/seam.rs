@@ -622,15 +622,30 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
 /// culls test (so a seam box passing them passes this) and every sub-box.
 fn may_hit_grid_or_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize, edges: SeamEdges, t_min: f32, t_max: f32) -> bool {
     let n = tess.n;
-    if n < 2 || stride == 0 || (n - 1) % stride != 0 || tess.domain == GridDomain::Empty {
+    if n < 2 || stride == 0 || tess.domain == GridDomain::Empty {
         // Left to the tests themselves (which find nothing or refuse the same way).
         return true;
     }
+    if let Some(cull) = tess.boxes.cull(stride) {
+        return ray.hit_box(cull, t_min, t_max).is_some();
+    }
+    if (n - 1) % stride != 0 {
+        return true;
+    }
+    ray.hit_box(&gathered_cull_box(tess, stride, edges), t_min, t_max).is_some()
+}
+
+/// The box a ray must meet to hit `tess` read at `stride`, or the seam boxes of its `edges`:
+/// the vertices read at that stride, grown by the seams' largest reach from their chords (as
+/// `intersect_seams` bounds it) and a triangle test's rounding slack.
+fn gathered_cull_box(tess: &Tessellation, stride: usize, edges: SeamEdges) -> crate::bounds::Bounds3 {
+    let n = tess.n;
     let verts: &[[f32; 3]] = &tess.verts;
     let mut bb = crate::bounds::Bounds3::EMPTY;
-    if tess.sub_boxes.len() == 16 {
-        for b in tess.sub_boxes.iter() {
-            bb = bb.union(b);
+    if stride == 1 {
+        // Coarse grids (4 vertices) come here at every test: no stepping.
+        for v in verts {
+            bb.grow(Vec3A::from(*v));
         }
     } else {
         for j in (0..n).step_by(stride) {
@@ -639,7 +654,6 @@ fn may_hit_grid_or_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize
             }
         }
     }
-    // The seams' largest reach from their chords, as `intersect_seams` bounds it.
     let base = tess.seam_radius;
     let mut reach: f32 = 0.0;
     let edges = edges.within(tess.domain);
@@ -664,7 +678,20 @@ fn may_hit_grid_or_seams(ray: &WatertightRay, tess: &Tessellation, stride: usize
     // A triangle's hit is computed in the ray's sheared frame: a few ulps of slack so that
     // rounding never puts a grazing hit outside the box.
     let pad = 1.8 * reach + crate::ray::gamma(8) * bb.max_abs();
-    ray.hit_box(&bb.expanded(pad), t_min, t_max).is_some()
+    bb.expanded(pad)
+}
+
+/// The cull box at `stride` stored with a medium or fine grid
+/// ([`crate::tessellate::GridBoxes::cull`]): [`gathered_cull_box`] with every seam edge (the
+/// diagonal too) the grid's domain has, so it holds the box any test of the grid at that stride
+/// would gather, whichever edges that test's neighbours seam. Empty where the stride does not
+/// divide the grid (such a test gathers nothing: it is left to the test itself).
+pub(crate) fn cull_box(tess: &Tessellation, stride: usize) -> crate::bounds::Bounds3 {
+    if tess.n >= 2 && (tess.n - 1) % stride == 0 {
+        gathered_cull_box(tess, stride, SeamEdges(SeamEdges::ALL.0 | 1 << DIAGONAL))
+    } else {
+        crate::bounds::Bounds3::EMPTY
+    }
 }
 
 /// The closest hit of `ray` with the grid `tess` read at `stride` and with the seam boxes of
@@ -691,6 +718,7 @@ pub fn intersect_with_seams<A: Fn(f32, Vec3A) -> bool>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tessellate::GridBoxes;
 
     fn grid(n: usize, f: impl Fn(f32, f32) -> [f32; 3], seam_radius: f32) -> Tessellation {
         let mut verts = Vec::new();
@@ -702,12 +730,53 @@ mod tests {
         Tessellation {
             n,
             verts: verts.into(),
-            sub_boxes: Default::default(),
+            boxes: Default::default(),
             chord_error: 0.0,
             seam_radius,
             seam_normal: Default::default(),
             domain: GridDomain::Square,
         }
+    }
+
+    /// The cull box kept with a grid is an early out only: searched with it or with the box
+    /// gathered at each test, every ray finds the same hit, at either stride, with any seam
+    /// edges, on square and triangle grids; and it holds the gathered box.
+    #[test]
+    fn a_stored_cull_box_changes_no_hit() {
+        let mut state = 0x9e37_79b9_u32;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32
+        };
+        let mut checked = 0;
+        for (n, domain) in [(5, GridDomain::Square), (17, GridDomain::Square), (5, GridDomain::LowerTriangle)] {
+            let bumps: Vec<f32> = (0..n * n).map(|_| 0.1 * (rnd() - 0.5)).collect();
+            let at = |u: f32, v: f32| bumps[(v * (n - 1) as f32).round() as usize * n + (u * (n - 1) as f32).round() as usize];
+            let mut bare = grid(n, |u, v| [u, v, 0.3 * u * v + at(u, v)], 0.02);
+            bare.domain = domain;
+            let mut kept = bare.clone();
+            kept.boxes = GridBoxes::refill_for_test(std::array::from_fn(|s| cull_box(&bare, s + 1)));
+            for stride in 1..=2 {
+                for edges in [SeamEdges::ALL, SeamEdges::NONE, SeamEdges(0b0101), SeamEdges(0b1010)] {
+                    let gathered = gathered_cull_box(&bare, stride, edges);
+                    let cull = kept.boxes.cull(stride).expect("kept");
+                    assert!(cull.min.cmple(gathered.min).all() && cull.max.cmpge(gathered.max).all(), "{cull:?} holds {gathered:?}");
+                    for _ in 0..400 {
+                        let o = Vec3A::new(1.4 * rnd() - 0.2, 1.4 * rnd() - 0.2, 1.0);
+                        let target = Vec3A::new(1.4 * rnd() - 0.2, 1.4 * rnd() - 0.2, 0.2 * rnd() - 0.1);
+                        let r = WatertightRay::new(o, (target - o).normalize());
+                        let search =
+                            |t: &Tessellation| intersect_with_seams(&r, t, stride, edges, 0.0, f32::INFINITY, &crate::intersect::every_hit);
+                        let (a, b) = (search(&bare), search(&kept));
+                        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+                        checked += usize::from(a.is_some());
+                    }
+                }
+            }
+        }
+        assert!(checked > 1000, "most rays aim at the grid: {checked}");
     }
 
     #[test]
@@ -803,7 +872,7 @@ mod tests {
         Tessellation {
             n,
             verts: verts.into(),
-            sub_boxes: Default::default(),
+            boxes: Default::default(),
             chord_error: 0.0,
             seam_radius,
             seam_normal,

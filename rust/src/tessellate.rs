@@ -91,16 +91,16 @@ pub fn split_depth(needed: f32) -> u32 {
 /// hands out `Tessellation`s made from them (see [`crate::geometry_cache`]), so both are laid out
 /// to be small and cheap to make: a coarse grid's 4 vertices are inline (no heap allocation at
 /// all: the coarse tier holds hundreds of thousands of them), a medium or fine grid's vertices
-/// and a fine grid's sub-boxes live in one shared, immutable allocation each, so a copy is a
-/// reference-count increment. 88 bytes (pinned by a test).
+/// and its boxes live in one shared, immutable allocation each, so a copy is a
+/// reference-count increment. 96 bytes (pinned by a test).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tessellation {
     /// Vertices per side.
     pub n: usize,
     /// `n × n` vertices, u fastest (index `j * n + i`): 12 bytes each, as in the paper.
     pub verts: GridVerts,
-    /// Fine tier only: 4×4 boxes, each over 4×4 quads (row-major, u fastest); empty otherwise.
-    pub sub_boxes: SubBoxes,
+    /// Medium and fine tiers: the cull box, and a fine grid's 4×4 sub-boxes ([`GridBoxes`]).
+    pub boxes: GridBoxes,
     /// Fine tier only: an estimate of how far the limit surface strays from the grid's quads
     /// (object units): twice the largest distance, at 16 probe points, between the surface and
     /// the bilinear quad under it. Pads the bounds of split children.
@@ -196,56 +196,77 @@ impl std::fmt::Debug for GridVerts {
     }
 }
 
-/// A fine grid's 4×4 sub-bounding boxes, read as a slice of 16 (or of none, for the other
-/// tiers): `Deref<Target = [Bounds3]>`. Shared behind one `Arc`, so a clone copies a pointer.
+/// The boxes a medium or fine grid is tested with, kept in one shared, immutable allocation
+/// (a clone copies a pointer): the grid's *cull boxes* at strides 1 and 2, which a ray must
+/// meet to hit the grid read at that stride or any of its seam boxes (see [`crate::seam`]),
+/// and for a fine grid also its 4×4 *sub-boxes*,
+/// each over 4×4 quads (row-major, u fastest). Made once at tessellation, so a test reads one
+/// box instead of gathering it from the vertices and the seams' reach (which cost a displaced
+/// AO ray more than a tenth of its instructions). Coarse and hand-made grids have none: their
+/// tests gather the box themselves.
 #[derive(Clone, Default, PartialEq)]
-pub struct SubBoxes(Option<Arc<[Bounds3; 16]>>);
+pub struct GridBoxes(Option<Arc<[Bounds3]>>);
 
-impl SubBoxes {
-    /// No sub-boxes (coarse and medium grids).
-    pub const NONE: SubBoxes = SubBoxes(None);
+/// The strides a grid's cull boxes are kept for: the rates read a medium or fine grid at
+/// strides 1 and 2 ([`Rate::tier_and_stride`]).
+pub const CULL_STRIDES: usize = 2;
 
-    /// The boxes as a slice: 16 or none.
+impl GridBoxes {
+    /// No boxes (coarse and hand-made grids).
+    pub const NONE: GridBoxes = GridBoxes(None);
+
+    /// The cull box at `stride` (1 or 2): every vertex and every seam box of the grid read at
+    /// that stride, within the rounding slack of a triangle test (object space). `None`: gather
+    /// it.
     #[inline]
-    pub fn as_slice(&self) -> &[Bounds3] {
-        self.0.as_deref().map_or(&[], |b| b.as_slice())
+    pub fn cull(&self, stride: usize) -> Option<&Bounds3> {
+        self.0.as_deref().filter(|_| stride <= CULL_STRIDES)?.get(stride.wrapping_sub(1))
     }
 
-    /// Heap bytes the boxes hold (their 16-byte reference counts and 16 boxes), or 0.
+    /// The 16 sub-boxes of a fine grid, or none.
+    #[inline]
+    pub fn sub_boxes(&self) -> &[Bounds3] {
+        match self.0.as_deref() {
+            Some(b) if b.len() == CULL_STRIDES + 16 => &b[CULL_STRIDES..],
+            _ => &[],
+        }
+    }
+
+    /// Heap bytes the boxes hold (their 16-byte reference counts and the boxes), or 0.
     pub fn heap_bytes(&self) -> usize {
-        self.0.as_ref().map_or(0, |_| 2 * std::mem::size_of::<usize>() + std::mem::size_of::<[Bounds3; 16]>())
+        self.0.as_ref().map_or(0, |b| 2 * std::mem::size_of::<usize>() + std::mem::size_of_val::<[Bounds3]>(b))
     }
 
-    /// `boxes`, in `spare`'s block if it has one and nothing else shares it (an evicted
-    /// entry's), else in a new one.
-    fn refill(boxes: [Bounds3; 16], spare: SubBoxes) -> Self {
+    /// How many boxes there are (what the cache's budget counts).
+    pub fn len(&self) -> usize {
+        self.0.as_ref().map_or(0, |b| b.len())
+    }
+
+    /// `cull` (by stride) followed by `sub_boxes`, in `spare`'s block if it has one of that
+    /// size and nothing else shares it (an evicted entry's), else in a new one.
+    fn refill(cull: [Bounds3; CULL_STRIDES], sub_boxes: &[Bounds3], spare: GridBoxes) -> Self {
         if let Some(mut block) = spare.0 {
-            if let Some(dst) = Arc::get_mut(&mut block) {
-                *dst = boxes;
-                return SubBoxes(Some(block));
+            if let Some(dst) = Arc::get_mut(&mut block).filter(|d| d.len() == CULL_STRIDES + sub_boxes.len()) {
+                dst[..CULL_STRIDES].copy_from_slice(&cull);
+                dst[CULL_STRIDES..].copy_from_slice(sub_boxes);
+                return GridBoxes(Some(block));
             }
         }
-        boxes.into()
+        GridBoxes(Some(cull.into_iter().chain(sub_boxes.iter().copied()).collect()))
     }
 }
 
-impl From<[Bounds3; 16]> for SubBoxes {
-    fn from(b: [Bounds3; 16]) -> Self {
-        SubBoxes(Some(Arc::new(b)))
+#[cfg(test)]
+impl GridBoxes {
+    /// Cull boxes alone, as a medium grid keeps them.
+    pub(crate) fn refill_for_test(cull: [Bounds3; CULL_STRIDES]) -> Self {
+        GridBoxes::refill(cull, &[], GridBoxes::NONE)
     }
 }
 
-impl std::ops::Deref for SubBoxes {
-    type Target = [Bounds3];
-    #[inline]
-    fn deref(&self) -> &[Bounds3] {
-        self.as_slice()
-    }
-}
-
-impl std::fmt::Debug for SubBoxes {
+impl std::fmt::Debug for GridBoxes {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        self.as_slice().fmt(f)
+        f.debug_struct("GridBoxes").field("cull", &[self.cull(1), self.cull(2)]).field("sub_boxes", &self.sub_boxes()).finish()
     }
 }
 
@@ -291,7 +312,7 @@ enum StoredRepr {
     Grid {
         n: u32,
         verts: Arc<[[f32; 3]]>,
-        sub_boxes: SubBoxes,
+        boxes: GridBoxes,
         chord_error: f32,
         seam_radius: f32,
         seam_normal: SeamNormal,
@@ -301,10 +322,10 @@ enum StoredRepr {
 
 impl StoredTessellation {
     /// The shared blocks this entry holds, for a new tessellation to refill.
-    fn into_blocks(self) -> (Option<Arc<[[f32; 3]]>>, SubBoxes) {
+    fn into_blocks(self) -> (Option<Arc<[[f32; 3]]>>, GridBoxes) {
         match self.0 {
-            StoredRepr::Quad { .. } => (None, SubBoxes::NONE),
-            StoredRepr::Grid { verts, sub_boxes, .. } => (Some(verts), sub_boxes),
+            StoredRepr::Quad { .. } => (None, GridBoxes::NONE),
+            StoredRepr::Grid { verts, boxes, .. } => (Some(verts), boxes),
         }
     }
 }
@@ -319,7 +340,7 @@ impl CacheEntry for Tessellation {
 
     fn byte_size(&self) -> usize {
         self.verts.len() * std::mem::size_of::<[f32; 3]>()
-            + self.sub_boxes.len() * std::mem::size_of::<Bounds3>()
+            + self.boxes.len() * std::mem::size_of::<Bounds3>()
             + 2 * std::mem::size_of::<f32>()
     }
 
@@ -330,7 +351,7 @@ impl CacheEntry for Tessellation {
     fn to_stored(&self) -> StoredTessellation {
         let (chord_error, seam_radius, seam_normal, domain) = (self.chord_error, self.seam_radius, self.seam_normal, self.domain);
         StoredTessellation(match &self.verts.0 {
-            VertStore::Quad(verts) if self.n == 2 && self.sub_boxes.is_empty() => {
+            VertStore::Quad(verts) if self.n == 2 && self.boxes.len() == 0 => {
                 StoredRepr::Quad { verts: *verts, chord_error, seam_radius, seam_normal, domain }
             }
             store => StoredRepr::Grid {
@@ -340,7 +361,7 @@ impl CacheEntry for Tessellation {
                     VertStore::Shared(v) => Arc::clone(v),
                     VertStore::Quad(v) => Arc::from(v.as_slice()),
                 },
-                sub_boxes: self.sub_boxes.clone(),
+                boxes: self.boxes.clone(),
                 chord_error,
                 seam_radius,
                 seam_normal,
@@ -354,16 +375,16 @@ impl CacheEntry for Tessellation {
             StoredRepr::Quad { verts, chord_error, seam_radius, seam_normal, domain } => Tessellation {
                 n: 2,
                 verts: GridVerts(VertStore::Quad(*verts)),
-                sub_boxes: SubBoxes::NONE,
+                boxes: GridBoxes::NONE,
                 chord_error: *chord_error,
                 seam_radius: *seam_radius,
                 seam_normal: *seam_normal,
                 domain: *domain,
             },
-            StoredRepr::Grid { n, verts, sub_boxes, chord_error, seam_radius, seam_normal, domain } => Tessellation {
+            StoredRepr::Grid { n, verts, boxes, chord_error, seam_radius, seam_normal, domain } => Tessellation {
                 n: *n as usize,
                 verts: GridVerts(VertStore::Shared(Arc::clone(verts))),
-                sub_boxes: sub_boxes.clone(),
+                boxes: boxes.clone(),
                 chord_error: *chord_error,
                 seam_radius: *seam_radius,
                 seam_normal: *seam_normal,
@@ -383,7 +404,7 @@ impl Tessellation {
     /// Heap bytes this tessellation holds outside itself: 0 for a coarse grid, the shared
     /// vertex block (and a fine grid's shared sub-boxes) otherwise. Shared with every clone.
     pub fn heap_bytes(&self) -> usize {
-        self.verts.heap_bytes() + self.sub_boxes.heap_bytes()
+        self.verts.heap_bytes() + self.boxes.heap_bytes()
     }
 }
 
@@ -422,7 +443,7 @@ pub fn tessellate_reusing(
     scratch: &mut GridSamples,
     spare: Option<StoredTessellation>,
 ) -> (Tessellation, u32) {
-    let (spare_verts, spare_boxes) = spare.map_or((None, SubBoxes::NONE), StoredTessellation::into_blocks);
+    let (spare_verts, spare_boxes) = spare.map_or((None, GridBoxes::NONE), StoredTessellation::into_blocks);
     let n = tier.verts_per_side() as usize;
     surface.evaluate_grid(sub.patch as usize, sub.rect, n, displace.is_some(), scratch);
     // Measured on the undisplaced grid: seams follow the limit surface's edges. Displaced, the
@@ -446,9 +467,9 @@ pub fn tessellate_reusing(
     }
     let verts = GridVerts::refill(&scratch.p, spare_verts);
     let domain = GridDomain::of(surface.patch_param(sub.patch as usize).kind, &sub.rect);
-    let mut t = Tessellation { n, verts, sub_boxes: SubBoxes::NONE, chord_error: 0.0, seam_radius, seam_normal, domain };
-    if tier == Tier::Fine {
-        let boxes: [Bounds3; 16] = std::array::from_fn(|b| {
+    let mut t = Tessellation { n, verts, boxes: GridBoxes::NONE, chord_error: 0.0, seam_radius, seam_normal, domain };
+    let sub_boxes: Option<[Bounds3; 16]> = (tier == Tier::Fine).then(|| {
+        std::array::from_fn(|b| {
             let (bi, bj) = (b % 4 * 4, b / 4 * 4);
             let mut bb = Bounds3::EMPTY;
             for j in bj..=bj + 4 {
@@ -457,14 +478,17 @@ pub fn tessellate_reusing(
                 }
             }
             bb
-        });
-        t.sub_boxes = SubBoxes::refill(boxes, spare_boxes);
-    }
+        })
+    });
     t.chord_error = 2.0 * probe_chord_error(surface, sub, &t);
     if let Some(d) = displace {
         // The probe measures the undisplaced surface; displacement detail finer than the
         // grid is filtered out, so what remains strays from the quads by at most its bound.
         t.chord_error += d.bound.min(2.0 * d.displacement.bound());
+    }
+    if tier != Tier::Coarse {
+        let cull = std::array::from_fn(|s| crate::seam::cull_box(&t, s + 1));
+        t.boxes = GridBoxes::refill(cull, sub_boxes.as_ref().map_or(&[], |b| b.as_slice()), spare_boxes);
     }
     (t, outside)
 }
@@ -552,19 +576,19 @@ mod tests {
                 assert_eq!(fine.verts[2 * j * 17 + 2 * i], nine.p[j * 9 + i]);
             }
         }
-        assert_eq!(fine.sub_boxes.len(), 16);
-        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 16 * std::mem::size_of::<Bounds3>() + 8);
+        assert_eq!(fine.boxes.sub_boxes().len(), 16);
+        assert_eq!(fine.byte_size(), 17 * 17 * 12 + 18 * std::mem::size_of::<Bounds3>() + 8);
         let (medium, _) = tessellate(&s, &sub, Tier::Medium, None, &mut scratch);
         assert_eq!(medium.verts.len(), 25);
-        assert!(medium.sub_boxes.is_empty());
+        assert!(medium.boxes.sub_boxes().is_empty() && medium.boxes.cull(2).is_some());
     }
 
     /// The layout the cache's memory figures rest on (see the `geometry_cache` module docs): a
-    /// coarse grid is 88 bytes with its vertices inline; a clone of a medium or fine one shares
+    /// coarse grid is 96 bytes with its vertices inline; a clone of a medium or fine one shares
     /// its vertices and boxes.
     #[test]
     fn entries_are_compact_and_clones_share_their_grids() {
-        assert_eq!(std::mem::size_of::<Tessellation>(), 88);
+        assert_eq!(std::mem::size_of::<Tessellation>(), 96);
         assert_eq!(std::mem::size_of::<StoredTessellation>(), 64);
         assert_eq!(std::mem::size_of::<Option<StoredTessellation>>(), 64);
         let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.7]];
@@ -576,23 +600,23 @@ mod tests {
         let (coarse, _) = tessellate(&s, &sub, Tier::Coarse, None, &mut scratch);
         assert_eq!((coarse.verts.len(), coarse.heap_bytes(), coarse.byte_size()), (4, 0, 56));
         let (medium, _) = tessellate(&s, &sub, Tier::Medium, None, &mut scratch);
-        assert_eq!(medium.heap_bytes(), 16 + 300);
+        assert_eq!(medium.heap_bytes(), 16 + 300 + 16 + 64);
         let (fine, _) = tessellate(&s, &sub, Tier::Fine, None, &mut scratch);
-        assert_eq!(fine.heap_bytes(), 16 + 3468 + 16 + 512);
+        assert_eq!(fine.heap_bytes(), 16 + 3468 + 16 + 576);
         // What the cache hands out equals what was built, and shares its grids.
         for t in [&coarse, &medium, &fine] {
             assert_eq!(&Tessellation::from_stored(&t.to_stored()), t);
         }
         let copy = Tessellation::from_stored(&fine.to_stored());
         assert!(std::ptr::eq(copy.verts.as_slice(), fine.verts.as_slice()));
-        assert!(std::ptr::eq(copy.sub_boxes.as_slice(), fine.sub_boxes.as_slice()));
+        assert!(std::ptr::eq(copy.boxes.sub_boxes(), fine.boxes.sub_boxes()));
         // Rebuilt into an evicted entry's blocks: the same grid, in those very blocks (unless
         // something still shares them).
         let spare = fine.to_stored();
-        let (verts_at, boxes_at) = (fine.verts.as_ptr(), fine.sub_boxes.as_ptr());
+        let (verts_at, boxes_at) = (fine.verts.as_ptr(), fine.boxes.sub_boxes().as_ptr());
         drop((fine, copy));
         let (refilled, _) = tessellate_reusing(&s, &sub, Tier::Fine, None, &mut scratch, Some(spare));
-        assert!(std::ptr::eq(refilled.verts.as_ptr(), verts_at) && std::ptr::eq(refilled.sub_boxes.as_ptr(), boxes_at));
+        assert!(std::ptr::eq(refilled.verts.as_ptr(), verts_at) && std::ptr::eq(refilled.boxes.sub_boxes().as_ptr(), boxes_at));
         assert_eq!(refilled, tessellate(&s, &sub, Tier::Fine, None, &mut scratch).0);
         let held = refilled.clone();
         let (fresh, _) = tessellate_reusing(&s, &sub, Tier::Fine, None, &mut scratch, Some(refilled.to_stored()));
@@ -602,7 +626,7 @@ mod tests {
         assert_eq!(medium_again, medium, "a block of another tier's size is not used");
         let fine = held;
         // Odd shapes (only tests make them) round-trip too.
-        let odd = Tessellation { n: 3, verts: vec![[1.0, 2.0, 3.0]; 4].into(), sub_boxes: fine.sub_boxes.clone(), ..coarse.clone() };
+        let odd = Tessellation { n: 3, verts: vec![[1.0, 2.0, 3.0]; 4].into(), boxes: fine.boxes.clone(), ..coarse.clone() };
         assert_eq!(Tessellation::from_stored(&odd.to_stored()), odd);
         let v: GridVerts = vec![[1.0, 2.0, 3.0]; 4].into();
         assert_eq!(format!("{v:?}"), format!("{:?}", vec![[1.0f32, 2.0, 3.0]; 4]));

@@ -1321,7 +1321,7 @@ mod tests {
         Tessellation {
             n: 2,
             verts: p.iter().map(|v| v.to_array()).collect::<Vec<_>>().into(),
-            sub_boxes: Default::default(),
+            boxes: Default::default(),
             chord_error: 0.0,
             seam_radius: 0.0,
             seam_normal: Default::default(),

@@ -75,7 +75,7 @@ proptest! {
         let n = 5;
         let verts: Vec<[f32; 3]> = (0..n * n).map(|i| [(i % n) as f32 / 4.0, (i / n) as f32 / 4.0, heights[i]]).collect();
         let domain = if triangle { GridDomain::LowerTriangle } else { GridDomain::Square };
-        let tess = Tessellation { n, verts: verts.into(), sub_boxes: Default::default(), chord_error: 0.0, seam_radius: 0.0, seam_normal: Default::default(), domain };
+        let tess = Tessellation { n, verts: verts.into(), boxes: Default::default(), chord_error: 0.0, seam_radius: 0.0, seam_normal: Default::default(), domain };
         // A point on interior grid line k (at this stride's lines: 1, 2, 3 or just 2), at
         // parameter s along it; s on a vertex now and then.
         let line = (if stride == 2 { 2 } else { k }) as f32 / 4.0;

@@ -37,8 +37,8 @@
 //! # What the budget counts
 //! A tier's budget is compared with the sum of its resident entries' [`CacheEntry::byte_size`]:
 //! the tessellation payload, as the paper counts it (12 bytes a vertex, §5.2, plus for a
-//! [`Tessellation`](crate::tessellate::Tessellation) its two error floats and a fine grid's 16
-//! sub-boxes), so capacities and hit rates compare with its tables (208,333 / 33,333 / 2,883
+//! [`Tessellation`](crate::tessellate::Tessellation) its two error floats, a medium or fine
+//! grid's two cull boxes and a fine grid's 16 sub-boxes), so capacities and hit rates compare with its tables (208,333 / 33,333 / 2,883
 //! bare-vertex entries at 10 MB). Counting the bookkeeping too would cut the coarse tier to
 //! about half the paper's entries (and its hit rate with it), so the bookkeeping is kept small
 //! and fixed instead. A resident entry is one slot of its shard's LRU slab, holding the entry by
@@ -50,13 +50,14 @@
 //! | tier | counted | real, per resident entry | before this layout |
 //! |---|---|---|---|
 //! | coarse (vertices inline) | 56 B | 88-byte node + 11–21 B of index: 113 B | 244 B |
-//! | medium | 308 B | node, index and a 316-byte shared vertex block (336 with malloc's header): 448 B | 506 B |
-//! | fine | 3,988 B | node, index and 3,484- and 528-byte shared blocks: ~4,150 B | ~4,200 B |
+//! | medium | 372 B | node, index, a 316-byte shared vertex block (336 with malloc's header) and an 80-byte one of cull boxes (96): ~544 B | 506 B |
+//! | fine | 4,052 B | node, index and 3,484- and 592-byte shared blocks: ~4,210 B | ~4,200 B |
 //!
 //! (measured filling an unbounded cache; before, a coarse entry was an `Arc` of a 72-byte struct,
 //! a separate vertex `Vec`, a 40-byte LRU node and a 33-byte hash-map slot at the map's load.)
-//! So a full default 30 MB (10 MB a tier: 178,571 / 32,467 / 2,507 tessellations) takes about
-//! 20 + 14.5 + 10.5 = 45 MB; in the geometry cache benchmark (`docs/cache-benchmark.md`) the
+//! So a full default 30 MB (10 MB a tier: 178,571 / 26,881 / 2,467 tessellations) takes about
+//! 20 + 14.6 + 10.4 = 45 MB (the cull boxes, added later, are counted: they cost the medium
+//! tier a sixth of its entries); in the geometry cache benchmark (`docs/cache-benchmark.md`) the
 //! render's peak RSS is 44 MB above the same render in `none` mode, against 78 MB before. Builds
 //! also refill evicted entries' blocks ([`GeometryCache::get_or_build_reusing`]) rather than
 //! free and allocate them, which spares the allocator the holes that churn leaves in its

@@ -686,11 +686,11 @@ fn vertex_vectors_are_entries() {
 
 /// A coarse tessellation as the renderer caches it (4 vertices inline).
 fn coarse_tessellation(x: f32) -> crate::tessellate::Tessellation {
-    use crate::tessellate::{GridDomain, SubBoxes, Tessellation};
+    use crate::tessellate::{GridBoxes, GridDomain, Tessellation};
     Tessellation {
         n: 2,
         verts: vec![[x, 0.0, 0.0]; 4].into(),
-        sub_boxes: SubBoxes::NONE,
+        boxes: GridBoxes::NONE,
         chord_error: 0.0,
         seam_radius: 0.0,
         seam_normal: Default::default(),
