@@ -558,14 +558,37 @@ struct OsdMesh::Impl {
   // and the tracer sizes rates by the patch rather than by its neighbourhood. Padded by a few
   // ulps of the coordinates for the rounding of the conversion and of evaluation in floats.
   void regular_bezier_bounds(std::size_t patch, float lo[3], float hi[3]) const {
+    double b[4][4][3];
+    regular_bezier_net(patch, b);
+    double mx = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      double l = std::numeric_limits<double>::infinity(), h = -l;
+      for (int r = 0; r < 4; ++r)
+        for (int a = 0; a < 4; ++a) {
+          l = std::min(l, b[r][a][c]);
+          h = std::max(h, b[r][a][c]);
+        }
+      lo[c] = float(l);
+      hi[c] = float(h);
+      mx = std::max({mx, std::fabs(l), std::fabs(h)});
+    }
+    const float pad = float(8.0 * std::numeric_limits<float>::epsilon() * mx);
+    for (int c = 0; c < 3; ++c) {
+      lo[c] -= pad;
+      hi[c] += pad;
+    }
+  }
+
+  // A regular patch's Bézier control net, b[t row][s column][xyz] (see regular_bezier_bounds).
+  void regular_bezier_net(std::size_t patch, double b[4][4][3]) const {
     Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handles[patch]);
     bool ends[4];
     regular_ends(patch, ends);
     double q[4][4][3];  // [t row][s column][xyz]
-    for (int b = 0; b < 4; ++b)
+    for (int r = 0; r < 4; ++r)
       for (int a = 0; a < 4; ++a)
         for (int c = 0; c < 3; ++c)
-          q[b][a][c] = control_points[3 * std::size_t(cvs[4 * b + a]) + std::size_t(c)];
+          q[r][a][c] = control_points[3 * std::size_t(cvs[4 * r + a]) + std::size_t(c)];
     for (int c = 0; c < 3; ++c) {
       for (int r = 0; r < 4; ++r) {
         if (ends[0]) q[r][0][c] = 2.0 * q[r][1][c] - q[r][2][c];
@@ -582,28 +605,70 @@ struct OsdMesh::Impl {
       out[2] = (p1 + 2.0 * p2) / 3.0;
       out[3] = (p1 + 4.0 * p2 + p3) / 6.0;
     };
-    double mx = 0.0;
     for (int c = 0; c < 3; ++c) {
       double rows[4][4];  // Bézier along s, per B-spline row
       for (int r = 0; r < 4; ++r) to_bezier(q[r][0][c], q[r][1][c], q[r][2][c], q[r][3][c], rows[r]);
-      double l = std::numeric_limits<double>::infinity(), h = -l;
       for (int a = 0; a < 4; ++a) {
         double col[4];
         to_bezier(rows[0][a], rows[1][a], rows[2][a], rows[3][a], col);
-        for (double x : col) {
-          l = std::min(l, x);
-          h = std::max(h, x);
-        }
+        for (int r = 0; r < 4; ++r) b[r][a][c] = col[r];
       }
-      lo[c] = float(l);
-      hi[c] = float(h);
-      mx = std::max({mx, std::fabs(l), std::fabs(h)});
     }
-    const float pad = float(8.0 * std::numeric_limits<float>::epsilon() * mx);
-    for (int c = 0; c < 3; ++c) {
-      lo[c] -= pad;
-      hi[c] += pad;
-    }
+  }
+
+  // A cone holding the direction of dP/ds × dP/dt over a regular patch, up to sign: axis into
+  // out[0..3], the sine of its half-angle into out[3]. dP/ds is a non-negative combination of
+  // the Bézier net's differences along s, so it lies in their cone (axis a, half-angle α); so
+  // for t (b, β). For unit u within α of a and v within β of b, |u×v − a×b| ≤ |u−a| + |v−b| ≤
+  // 2 sin(α/2) + 2 sin(β/2) =: δ, so the angle γ between u×v and a×b has
+  // sin γ ≤ δ / (|a×b| − δ). False when a cone is not narrower than a half-space, a difference
+  // vanishes, or δ is not below |a×b| (then no cone is claimed).
+  bool regular_normal_cone(std::size_t patch, double out[4]) const {
+    double b[4][4][3];
+    regular_bezier_net(patch, b);
+    auto cone = [](const double (*d)[3], int n, double axis[3], double& sin_half) -> bool {
+      double sum[3] = {0, 0, 0};
+      double mx = 0.0;
+      for (int k = 0; k < n; ++k) mx = std::max(mx, std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]));
+      if (!(mx > 0.0) || !std::isfinite(mx)) return false;
+      for (int k = 0; k < n; ++k) {
+        const double l = std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]);
+        if (!(l > 1e-9 * mx)) return false;
+        for (int c = 0; c < 3; ++c) sum[c] += d[k][c] / l;
+      }
+      const double ls = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
+      if (!(ls > 0.0)) return false;
+      for (int c = 0; c < 3; ++c) axis[c] = sum[c] / ls;
+      double min_cos = 1.0;
+      for (int k = 0; k < n; ++k) {
+        const double l = std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]);
+        min_cos = std::min(min_cos, (d[k][0] * axis[0] + d[k][1] * axis[1] + d[k][2] * axis[2]) / l);
+      }
+      if (!(min_cos > 0.0)) return false;
+      // sin(α/2) = sqrt((1 − cos α) / 2)
+      sin_half = std::sqrt(std::max(0.0, (1.0 - min_cos) * 0.5));
+      return true;
+    };
+    double du[12][3], dv[12][3];
+    int k = 0;
+    for (int r = 0; r < 4; ++r)
+      for (int a = 0; a < 3; ++a, ++k)
+        for (int c = 0; c < 3; ++c) du[k][c] = b[r][a + 1][c] - b[r][a][c];
+    k = 0;
+    for (int r = 0; r < 3; ++r)
+      for (int a = 0; a < 4; ++a, ++k)
+        for (int c = 0; c < 3; ++c) dv[k][c] = b[r + 1][a][c] - b[r][a][c];
+    double a[3], bb[3], sa = 0.0, sb = 0.0;
+    if (!cone(du, 12, a, sa) || !cone(dv, 12, bb, sb)) return false;
+    const double n[3] = {a[1] * bb[2] - a[2] * bb[1], a[2] * bb[0] - a[0] * bb[2], a[0] * bb[1] - a[1] * bb[0]};
+    const double ln = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    const double delta = 2.0 * sa + 2.0 * sb;
+    if (!(ln - delta > 1e-12)) return false;
+    const double sin_g = delta / (ln - delta);
+    if (!(sin_g < 1.0)) return false;
+    for (int c = 0; c < 3; ++c) out[c] = n[c] / ln;
+    out[3] = sin_g;
+    return true;
   }
 
   // Evaluates at the patch's local (s, t). Derivative outputs may be null (then not computed);
@@ -779,6 +844,14 @@ bool OsdMesh::patch_bound(std::size_t patch, rust::Slice<float> out) const noexc
     out[std::size_t(a)] = lo[a];
     out[std::size_t(a) + 3] = hi[a];
   }
+  return true;
+}
+
+bool OsdMesh::patch_normal_cone(std::size_t patch, rust::Slice<float> out) const noexcept {
+  if (patch >= impl->handles.size() || out.size() < 4 || !impl->is_regular(patch)) return false;
+  double c[4];
+  if (!impl->regular_normal_cone(patch, c)) return false;
+  for (int k = 0; k < 4; ++k) out[std::size_t(k)] = float(c[k]);
   return true;
 }
 

@@ -34,6 +34,7 @@ class OsdMesh {
   std::size_t ptex_face_count() const;
   rust::Vec<OsdPatchInfo> patch_infos() const;
   bool patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept;
+  bool patch_normal_cone(std::size_t patch, rust::Slice<float> out) const noexcept;
   rust::Vec<uint64_t> memory_parts() const;
   bool base_points(rust::Slice<float> out) const noexcept;
   void update_points(const OsdMeshDesc& desc, rust::Slice<const float> points);

@@ -163,6 +163,11 @@ pub(crate) mod bridge {
         /// A patch's bounds into `out[0..6]` (min xyz, max xyz): a regular patch's Bézier hull,
         /// any other patch's control hull. False for a bad index or a short `out`.
         fn patch_bound(self: &OsdMesh, patch: usize, out: &mut [f32]) -> bool;
+        /// A cone holding the direction (up to sign) of a regular patch's normal dP/du × dP/dv
+        /// everywhere on it, from its Bézier net: axis into `out[0..3]`, the sine of its
+        /// half-angle into `out[3]`. False for an irregular patch (end caps), a bad index, a
+        /// short `out`, or a patch whose normals no cone narrower than a half-space holds.
+        fn patch_normal_cone(self: &OsdMesh, patch: usize, out: &mut [f32]) -> bool;
         /// Bytes held, by part: control points, patch vertex indices, patch params, end-cap
         /// (local point) stencils, per-patch handles and types with the ptex-to-face map,
         /// primvar values. Not counted: the patch map's quadtree and OpenSubdiv's small members.

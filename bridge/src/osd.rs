@@ -437,6 +437,18 @@ impl LimitSurface for OsdSurface {
         Bounds3 { min: Vec3A::new(b[0], b[1], b[2]), max: Vec3A::new(b[3], b[4], b[5]) }
     }
 
+    /// Regular patches only (from their Bézier nets, see the bridge's `patch_normal_cone`);
+    /// `None` for end caps and patches whose normals turn too far.
+    fn patch_normal_cone(&self, patch: usize) -> Option<mipray::patch::NormalCone> {
+        let mut c = [0.0f32; 4];
+        if !self.mesh.patch_normal_cone(patch, &mut c) {
+            return None;
+        }
+        // Widened a little for the rounding to f32 of the axis and sine.
+        let sin_half_angle = (c[3] + 1e-5).min(1.0);
+        (sin_half_angle < 1.0).then(|| mipray::patch::NormalCone { axis: Vec3A::new(c[0], c[1], c[2]), sin_half_angle })
+    }
+
     /// # Panics
     /// If `patch >= patch_count()`.
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {

@@ -200,6 +200,10 @@ impl<S: ?Sized + LimitSurface + 'static> LimitSurface for LazySurface<S> {
         self.inner().is_some_and(|s| s.patch_is_affine(patch))
     }
 
+    fn patch_normal_cone(&self, patch: usize) -> Option<crate::patch::NormalCone> {
+        self.inner().and_then(|s| s.patch_normal_cone(patch))
+    }
+
     fn face_varying(&self, channel: usize, patch: usize, u: f32, v: f32) -> Option<([f32; 2], [f32; 2], [f32; 2])> {
         self.inner()?.face_varying(channel, patch, u, v)
     }

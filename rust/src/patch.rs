@@ -103,6 +103,38 @@ impl UvRect {
     }
 }
 
+/// A cone of directions: every unit vector within the half-angle whose sine is
+/// `sin_half_angle` of `axis` (unit, object space), or of `-axis`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NormalCone {
+    pub axis: Vec3A,
+    /// In [0, 1): the cone is narrower than a half-space.
+    pub sin_half_angle: f32,
+}
+
+impl NormalCone {
+    /// The largest |component| along each object axis a unit vector in the cone has: how far,
+    /// per unit of displacement, a point displaced along such a normal can move along that
+    /// axis. At most 1; 1 for an axis within the cone.
+    pub fn reach(&self) -> Vec3A {
+        let g = self.sin_half_angle.clamp(0.0, 1.0).asin();
+        let a = self.axis.normalize_or_zero();
+        if !(a.length_squared() > 0.5 && g.is_finite()) {
+            return Vec3A::ONE;
+        }
+        let f = |c: f32| {
+            // The angle between the axis (either sign) and the object axis, less the cone's.
+            let phi = c.abs().min(1.0).acos() - g;
+            if phi <= 0.0 {
+                1.0
+            } else {
+                phi.cos()
+            }
+        };
+        Vec3A::new(f(a.x), f(a.y), f(a.z))
+    }
+}
+
 /// Positions (and optionally first derivatives) on an n×n vertex grid, row-major with u fastest:
 /// index `j * n + i`.
 #[derive(Clone, Debug, Default)]
@@ -126,6 +158,14 @@ pub trait LimitSurface: Send + Sync {
     /// Conservative object-space bounds of the patch's limit surface: the hull of its control
     /// points (every basis used here is a convex combination of its control points).
     fn patch_bounds(&self, patch: usize) -> Bounds3;
+
+    /// A cone holding the direction (up to sign) of the normal `dpdu × dpdv` everywhere on the
+    /// patch, when the implementation can bound it (see [`NormalCone`]). It lets a displaced
+    /// patch's box grow by the displacement bound along the normal only, not in every
+    /// direction. `None` — the default, and the safe answer — when it cannot.
+    fn patch_normal_cone(&self, _patch: usize) -> Option<NormalCone> {
+        None
+    }
 
     /// The limit surface and its first and second derivatives at the patch's own (u, v).
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint;
@@ -237,5 +277,36 @@ pub trait LimitSurface: Send + Sync {
     /// calls it, during a render whose readers are pinned.
     unsafe fn release(&self) -> bool {
         false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `reach` against brute force: unit vectors sampled on the cone's rim and inside it (either
+    /// sign) never have a larger |component| than it says, and the rim comes within 1e-3 of it.
+    #[test]
+    fn a_cone_s_reach_is_its_largest_component_per_axis() {
+        for (axis, sin) in [(Vec3A::Z, 0.0), (Vec3A::new(0.3, -0.5, 0.8), 0.2), (Vec3A::new(1.0, 1.0, 0.0), 0.6), (Vec3A::X, 0.99)] {
+            let cone = NormalCone { axis: axis.normalize(), sin_half_angle: sin };
+            let reach = cone.reach();
+            let a = axis.normalize();
+            let (t1, t2) = a.any_orthonormal_pair();
+            let g = f32::asin(sin);
+            let mut seen = Vec3A::ZERO;
+            for i in 0..=20 {
+                let angle = g * i as f32 / 20.0;
+                for k in 0..360 {
+                    let phi = (k as f32).to_radians();
+                    let n = a * angle.cos() + (t1 * phi.cos() + t2 * phi.sin()) * angle.sin();
+                    for m in [n, -n] {
+                        assert!(m.abs().cmple(reach + 1e-5).all(), "{m:?} beyond {reach:?} for {cone:?}");
+                        seen = seen.max(m.abs());
+                    }
+                }
+            }
+            assert!((reach - seen).abs().max_element() < 1e-3, "reach {reach:?} vs sampled {seen:?}");
+        }
     }
 }

@@ -1,10 +1,12 @@
 //! Subpatches (the paper's §5.1): every patch of a mesh is a root subpatch with conservative
-//! object-space bounds — its control hull grown by the displacement bound — and a bottom-level
+//! object-space bounds — its control hull grown by the displacement bound, along the patch's
+//! normals where the surface can bound them ([`crate::patch::NormalCone`]) — and a bottom-level
 //! BVH over them. Tessellation happens later, on demand, per subpatch.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
+use glam::Vec3A;
 use obvhs::cwbvh::CwBvh;
 use parking_lot::Mutex;
 
@@ -39,12 +41,39 @@ pub struct RootSubpatch {
     max: [f32; 3],
     /// See [`Subpatch::affine`].
     pub affine: bool,
+    /// How far, per axis, the box was grown beyond the patch's hull, in 255ths of the
+    /// displacement bound (255: all of it; less where the patch's normals lean away from the
+    /// axis): the rate is sized by the hull, not by the growth.
+    grow: [u8; 3],
 }
 
 impl RootSubpatch {
-    /// The root of `patch`, bounded by `bounds`.
+    /// The root of `patch`, bounded by `bounds` (grown uniformly by the displacement bound, if
+    /// any).
     pub fn new(patch: u32, bounds: Bounds3, affine: bool) -> Self {
-        RootSubpatch { min: bounds.min.into(), patch, max: bounds.max.into(), affine }
+        RootSubpatch { min: bounds.min.into(), patch, max: bounds.max.into(), affine, grow: [255; 3] }
+    }
+
+    /// The root of `patch` whose limit surface lies in `hull`, displaced along normals whose
+    /// largest |component| per axis is `reach` ([`crate::patch::NormalCone::reach`]) by at most
+    /// `bound` (object units) either way.
+    pub fn displaced(patch: u32, hull: Bounds3, reach: Vec3A, bound: f32, affine: bool) -> Self {
+        // Rounded up, with a margin for the rounding of the normal the tessellator displaces
+        // along (single precision, ~1e-7 of a unit vector).
+        let grow = (reach + 1e-3).min(Vec3A::ONE).to_array().map(|r| (r * 255.0).ceil().clamp(0.0, 255.0) as u8);
+        let g = Self::fractions(grow) * bound;
+        RootSubpatch { min: (hull.min - g).into(), patch, max: (hull.max + g).into(), affine, grow }
+    }
+
+    fn fractions(grow: [u8; 3]) -> Vec3A {
+        Vec3A::new(f32::from(grow[0]), f32::from(grow[1]), f32::from(grow[2])) / 255.0
+    }
+
+    /// The size the rate is chosen by (object units): the largest side of the patch's hull,
+    /// i.e. of its box less the growth by `pad` (twice the displacement bound it was grown by).
+    #[inline]
+    pub fn hull_size(&self, bounds: &Bounds3, pad: f32) -> f32 {
+        (bounds.diagonal() - Self::fractions(self.grow) * pad).max_element().max(0.0)
     }
 
     /// Object space, grown by the mesh's displacement bound.
@@ -162,9 +191,19 @@ impl MeshGeometry {
         let s = &mesh.surface;
         let grow = mesh.displacement_bound.max(0.0);
         let mut subpatches: Vec<RootSubpatch> = (0..s.patch_count())
-            .map(|i| (i, s.patch_bounds(i).expanded(grow)))
+            .map(|i| (i, s.patch_bounds(i)))
             .filter(|(_, b)| !b.is_empty())
-            .map(|(i, b)| RootSubpatch::new(i as u32, b, mesh.displacement.is_none() && s.patch_is_affine(i)))
+            .map(|(i, hull)| {
+                let affine = mesh.displacement.is_none() && s.patch_is_affine(i);
+                // Displacement moves points along the normal only: where the surface bounds
+                // its normals, the box grows by the bound along them (a displaced AO ray tested
+                // 1.9 subpatches with boxes grown every way, against 0.73 with none).
+                let cone = (grow > 0.0).then(|| s.patch_normal_cone(i)).flatten();
+                match cone {
+                    Some(c) => RootSubpatch::displaced(i as u32, hull, c.reach(), grow, affine),
+                    None => RootSubpatch::new(i as u32, hull.expanded(grow), affine),
+                }
+            })
             .collect();
         if let Some(sp) = subpatches.iter().find(|sp| !sp.bounds().is_traceable()) {
             return Err(format!(

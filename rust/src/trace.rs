@@ -1009,7 +1009,7 @@ impl<'s> Tracer<'s> {
         // The rate is sized by the patch itself: its box less the displacement bound it was
         // grown by (displacement finer than the grid is filtered to its spacing, so the bound is
         // no reason to tessellate finer).
-        let size = (sp_bounds.diagonal().max_element() - displacement_pad).max(0.0) * scale;
+        let size = sp.hull_size(sp_bounds, displacement_pad) * scale;
         let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
         let depth = if sp.affine { 0 } else { split_depth(needed) };
         let rate = if self.single {
