@@ -42,8 +42,8 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam")).CreateClippingPlanesAttr(
         [(0.0, 1.0, 0.0, 0.0)]
     )
-    UsdGeom.NurbsPatch.Define(stage, "/World/Ball")
-    UsdGeom.NurbsPatch.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.TetMesh.Define(stage, "/World/Ball")
+    UsdGeom.TetMesh.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
     UsdLux.PluginLight.Define(stage, "/World/Tube")
 
     key = add_distant_light(stage, "/World/Key").GetPrim()
@@ -124,7 +124,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     return sorted(
         [
             Unsupported(cam, "camera clippingPlanes 1 plane(s)"),
-            Unsupported("/World/Ball", "prim type NurbsPatch"),
+            Unsupported("/World/Ball", "prim type TetMesh"),
             Unsupported("/World/Tube", "prim type PluginLight"),
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
@@ -179,8 +179,8 @@ def test_one_of_each_is_listed_exactly(fake, caplog) -> None:
 
 def test_invisible_and_excluded_prims_are_not_listed(fake) -> None:
     stage = new_stage()
-    UsdGeom.NurbsPatch.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
-    UsdGeom.NurbsPatch.Define(stage, "/Guide").CreatePurposeAttr("guide")
+    UsdGeom.TetMesh.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.TetMesh.Define(stage, "/Guide").CreatePurposeAttr("guide")
     add_cube(stage, "/Cube")
     scene = UsdSceneDelegate(stage, fake)
     scene.sync()
@@ -192,8 +192,8 @@ def test_prims_under_an_untyped_root_are_audited(fake) -> None:
     # what lies under it is rendered, and what is not supported there must be listed too.
     stage = new_stage()
     stage.DefinePrim("/World")
-    UsdGeom.NurbsPatch.Define(stage, "/World/Patch")
-    UsdGeom.NurbsPatch.Define(stage, "/World/Guide").CreatePurposeAttr("guide")
+    UsdGeom.TetMesh.Define(stage, "/World/Patch")
+    UsdGeom.TetMesh.Define(stage, "/World/Guide").CreatePurposeAttr("guide")
     add_cube(stage, "/World/Cube")
     scene = UsdSceneDelegate(stage, fake)
     scene.sync()
