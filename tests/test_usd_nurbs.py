@@ -62,8 +62,10 @@ def test_a_nurbs_patch_crosses_as_its_attributes(fake, caplog) -> None:
     assert g["u_range"] == (0.0, 0.75) and "v_range" not in g
     assert g["weights"][1] == pytest.approx(_H)
     assert kw["points"].shape == (45, 3)
-    # Unsupported: the prim is no longer in the audit, but its trim curves are warned about.
-    assert scene.unsupported == []
+    # The prim type is rendered; its trim curves are listed and warned about once.
+    assert [(u.prim, u.what) for u in scene.unsupported] == [
+        ("/Ball", "NurbsPatch trim curves 1 loop(s)")
+    ]
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert warnings == [
         "mipray: /Ball: trimCurve:* (trim curves) are not applied; rendering the untrimmed surface"
