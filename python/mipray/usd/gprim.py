@@ -207,11 +207,13 @@ def gprim_arguments(
     }
 
 
-def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str, Any]:
+def point_colors(
+    prim: Usd.Prim, time: Usd.TimeCode, n_points: int, opacity: float = 1.0
+) -> dict[str, Any]:
     """Per-point ``displayColor`` of a Points prim as ``set_mesh``'s face material table.
 
     Each point is a "face" of its own; ``{}`` when the prim has one colour
-    (constant, or a single value).
+    (constant, or a single value). ``opacity`` is the prim's ``displayOpacity``.
 
     Raises:
         PrimError: a per-point ``displayColor`` whose length is not the point count.
@@ -237,16 +239,19 @@ def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str,
     # Rounded to float32 as the colours were when they crossed as an array.
     colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
-        "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],
+        "face_materials": [lambertian(f"{path}[{k}]", c, opacity) for k, c in enumerate(colours)],
         "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
     }
 
 
-def curve_colors(prim: Usd.Prim, time: Usd.TimeCode, n_curves: int) -> dict[str, Any]:
+def curve_colors(
+    prim: Usd.Prim, time: Usd.TimeCode, n_curves: int, opacity: float = 1.0
+) -> dict[str, Any]:
     """Per-curve (``uniform``) ``displayColor`` as ``set_mesh``'s face material table.
 
     Each curve is a "face" of its own; ``{}`` for any other interpolation (the prim's one
-    colour, :func:`mipray.usd.material.compute_albedo`'s).
+    colour, :func:`mipray.usd.material.compute_albedo`'s). ``opacity`` is the prim's
+    ``displayOpacity``.
     """
     primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
     if not primvar or not primvar.HasValue():
@@ -265,6 +270,6 @@ def curve_colors(prim: Usd.Prim, time: Usd.TimeCode, n_curves: int) -> dict[str,
     path = str(prim.GetPath())
     colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
-        "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],
+        "face_materials": [lambertian(f"{path}[{k}]", c, opacity) for k, c in enumerate(colours)],
         "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
     }
