@@ -130,7 +130,7 @@ impl Interpolation {
 }
 
 impl Style {
-    /// USD's `type` attribute of BasisCurves' `curveStyle`-like role (`tube`, `ribbon`); the
+    /// The `primvars:mipray:curveStyle` token (`tube`, `ribbon`); the
     /// empty token is a tube.
     pub fn from_usd(token: &str) -> Option<Self> {
         match token {
