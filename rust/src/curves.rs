@@ -501,6 +501,11 @@ impl CurvesSurface {
         self.style
     }
 
+    /// True for round tubes (neither ribbon).
+    pub fn is_tube(&self) -> bool {
+        !self.faces_ray() && self.normals.is_empty()
+    }
+
     /// True for ribbons without authored normals, which face each ray.
     pub fn faces_ray(&self) -> bool {
         self.style == Style::Ribbon && self.normals.is_empty()
