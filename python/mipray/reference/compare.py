@@ -241,7 +241,8 @@ def report(results: Sequence[Comparison], command: str, picture_path: str) -> st
         "(`scalar_rgb` variant) exactly as mipray's scene delegate hands it to the renderer",
         "(`mipray.reference.mitsuba`): the same triangles, camera, lights and UsdPreviewSurface",
         "inputs; implicit gprims (the `implicit*` and `points` scenes) as Mitsuba's analytic",
-        "sphere, cylinder and disk shapes. Both renderers render it twice (seeds 0 and 1).",
+        "sphere, cylinder and disk shapes, BasisCurves (the `curves_*` scenes) as its",
+        "`linearcurve` and `bsplinecurve`. Both renderers render it twice (seeds 0 and 1).",
         "",
         "How to read the table (`mipray.reference.compare`): *seeds* is the RMSE between a",
         "renderer's two seeds — its own noise, 2σ² in the mean square; *expected* is the RMSE",
@@ -309,7 +310,11 @@ def report(results: Sequence[Comparison], command: str, picture_path: str) -> st
         "*implicit_disk*, *points*), and the test renders each again with Mitsuba's radius",
         "(the points' widths) 5 % larger than mipray's: every one of them must exceed the bound.",
         "At the test's size and samples they did with ratios 2.0 (cylinder), 4.3 (disk), 3.8",
-        "(sphere) and 2.8 (points), against 1.01–1.08 with the right radius.",
+        "(sphere) and 2.8 (points), against 1.01–1.08 with the right radius. The curves' scenes",
+        "(*curves_linear*, *curves_bspline*: tubes whose ends lie below the ground, one width",
+        "per curve) are checked the same way: 1.53 and 1.56 with widths 5 % larger, 1.12 with",
+        "the right ones. The linear one found that mipray shaded a polyline's joint spheres",
+        "with the cylinder's normal (ratio 1.53 at this page's size before the fix).",
         "",
     ]
     return "\n".join(lines)
