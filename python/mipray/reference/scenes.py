@@ -649,48 +649,48 @@ def _points(radius_scale: float = 1.0) -> Usd.Stage:
     return stage
 
 
-def _arches(basis: str) -> Callable[[float], Usd.Stage]:
+def _arches(basis: str, width_scale: float) -> Usd.Stage:
     """Three round tubes arching over the ground, ``linear`` or cubic ``bspline``.
 
     Each curve's ends lie below the ground, so how a renderer closes a tube's end (mipray: a
     sphere; Mitsuba's B-spline: not) plays no part; widths are one per curve (uniform), since
     a tube of varying radius is a frustum per piece in mipray and a swept sphere in Mitsuba.
     """
-
-    def build(width_scale: float = 1.0) -> Usd.Stage:
-        stage = _stage()
-        curves = UsdGeom.BasisCurves.Define(stage, "/World/Arches")
-        points: list[Gf.Vec3f] = []
-        counts = []
-        for x0, z0, height, span, turn in (
-            (-0.9, 0.6, 1.6, 1.4, 0.3),
-            (0.6, -0.3, 2.1, 1.8, -0.5),
-            (0.1, -1.4, 1.2, 2.6, 0.1),
-        ):
-            n = 9
-            for i in range(n):
-                t = -0.25 + 1.5 * i / (n - 1)
-                y = height * math.sin(math.pi * t) - 0.3
-                x = x0 + span * (t - 0.5)
-                points.append(Gf.Vec3f(x, y, z0 + turn * (t - 0.5) ** 2))
-            counts.append(n)
-        curves.CreatePointsAttr(points)
-        curves.CreateCurveVertexCountsAttr(counts)
-        if basis == "linear":
-            curves.CreateTypeAttr("linear")
-        else:
-            curves.CreateTypeAttr("cubic")
-            curves.CreateBasisAttr(basis)
-        curves.CreateWidthsAttr([0.56 * width_scale, 0.48 * width_scale, 0.4 * width_scale])
-        curves.SetWidthsInterpolation(UsdGeom.Tokens.uniform)
-        _on_ground(stage, curves, (0.7, 0.35, 0.15))
-        return stage
-
-    return build
+    stage = _stage()
+    curves = UsdGeom.BasisCurves.Define(stage, "/World/Arches")
+    points: list[Gf.Vec3f] = []
+    counts = []
+    for x0, z0, height, span, turn in (
+        (-0.9, 0.6, 1.6, 1.4, 0.3),
+        (0.6, -0.3, 2.1, 1.8, -0.5),
+        (0.1, -1.4, 1.2, 2.6, 0.1),
+    ):
+        n = 9
+        for i in range(n):
+            t = -0.25 + 1.5 * i / (n - 1)
+            y = height * math.sin(math.pi * t) - 0.3
+            x = x0 + span * (t - 0.5)
+            points.append(Gf.Vec3f(x, y, z0 + turn * (t - 0.5) ** 2))
+        counts.append(n)
+    curves.CreatePointsAttr(points)
+    curves.CreateCurveVertexCountsAttr(counts)
+    if basis == "linear":
+        curves.CreateTypeAttr("linear")
+    else:
+        curves.CreateTypeAttr("cubic")
+        curves.CreateBasisAttr(basis)
+    curves.CreateWidthsAttr([0.56 * width_scale, 0.48 * width_scale, 0.4 * width_scale])
+    curves.SetWidthsInterpolation(UsdGeom.Tokens.uniform)
+    _on_ground(stage, curves, (0.7, 0.35, 0.15))
+    return stage
 
 
-_linear_arches = _arches("linear")
-_bspline_arches = _arches("bspline")
+def _linear_arches(width_scale: float = 1.0) -> Usd.Stage:
+    return _arches("linear", width_scale)
+
+
+def _bspline_arches(width_scale: float = 1.0) -> Usd.Stage:
+    return _arches("bspline", width_scale)
 
 
 #: Per implicit-prim and curves scene: its builder with the primitive's radius (or widths)
