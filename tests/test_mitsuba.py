@@ -4,8 +4,8 @@ Each scene of :mod:`mipray.reference.scenes` is rendered by both renderers at
 two seeds; the test fails when the RMSE between them is more than the two
 renders' own noise explains (see :mod:`mipray.reference.compare`):
 rmse ≤ √((1.3·expected)² + (0.01·mean)²), and the implicit primitives' and curves'
-scenes (Sphere, Cylinder, a disk, Points, linear and bspline curves) must fail that bound
-with a radius 5 % off.
+scenes (Sphere, Cylinder, a disk, Points, linear and bspline curves, and the NURBS sphere
+against Mitsuba's analytic one) must fail that bound with a radius 5 % off.
 docs/mitsuba-comparison.md has the figures at a larger size.
 """
 

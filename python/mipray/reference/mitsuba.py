@@ -57,6 +57,8 @@ What maps how (render space is USD world space in both renderers):
   ``bspline`` → ``bsplinecurve``; widths constant, uniform or vertex (half of each, times
   the transform's uniform scale; USD's fallback width 1 when none). Ribbons, other bases,
   periodic and pinned curves, varying widths and non-uniform scales are refused.
+  NurbsPatch has no Mitsuba shape and is refused: a comparison scene of one gives
+  Mitsuba a stand-in stage (the analytic sphere a NURBS sphere is exactly).
 
 Everything Mitsuba cannot represent the way mipray renders it raises
 :class:`~mipray.errors.PrimError` naming the prim, rather than rendering a
@@ -482,6 +484,8 @@ def _analytic_shapes(path: str, args: dict[str, Any]) -> list[dict[str, Any]]:
     g = args["gprim"]
     if g["type"] == "Curves":
         return [_curves_shape(path, args)]
+    if g["type"] == "Nurbs":
+        raise PrimError(path, "Mitsuba has no NURBS surfaces (a scene may give it a stand-in)")
     world = _column_matrix(args)
 
     def shape(kind: str, local: NDArray[np.float64]) -> dict[str, Any]:

@@ -50,6 +50,10 @@ class Scene:
     integrator: dict[str, Any] = field(default_factory=lambda: {"type": "direct"})
     #: Image width in pixels (the height follows the camera's aspect).
     width: int = 64
+    #: The stage Mitsuba renders in this one's place, when the scene's surface has no Mitsuba
+    #: shape but is exactly one Mitsuba has (a NURBS sphere: its analytic sphere); None: the
+    #: same stage.
+    mitsuba_stand_in: Callable[[], Usd.Stage] | None = None
 
 
 # ----------------------------------------------------------------------------- building blocks
@@ -631,6 +635,37 @@ def _one_disk(radius_scale: float = 1.0) -> Usd.Stage:
     return stage
 
 
+def _nurbs_sphere() -> Usd.Stage:
+    """:func:`_one_sphere`'s sphere, 1.1 in radius, as a rational biquadratic NurbsPatch.
+
+    The nine-point circle swept along the five-point half circle, weights 1 and √½.
+    """
+    stage = _stage()
+    patch = UsdGeom.NurbsPatch.Define(stage, "/World/Ball")
+    h = math.sqrt(0.5)
+    circle = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0)]
+    profile = [(0, -1), (1, -1), (1, 0), (1, 1), (0, 1)]
+    points, weights = [], []
+    for j, (r, y) in enumerate(profile):
+        for i, (x, z) in enumerate(circle):
+            points.append(Gf.Vec3f(1.1 * x * r, 1.1 * y, 1.1 * z * r))
+            weights.append((h if i % 2 else 1.0) * (h if j % 2 else 1.0))
+    patch.CreatePointsAttr(points)
+    patch.CreatePointWeightsAttr(weights)
+    patch.CreateUVertexCountAttr(9)
+    patch.CreateVVertexCountAttr(5)
+    patch.CreateUOrderAttr(3)
+    patch.CreateVOrderAttr(3)
+    patch.CreateUKnotsAttr([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1])
+    patch.CreateVKnotsAttr([0, 0, 0, 0.5, 0.5, 1, 1, 1])
+    # Swept about +Y from −Y to +Y, u around: dP/du × dP/dv points inward, so the patch is
+    # left-handed for an outward front (as the sphere's).
+    patch.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    patch.AddTranslateOp().Set(Gf.Vec3d(0.3, 1.1, 0.0))
+    _on_ground(stage, patch, (0.15, 0.3, 0.7))
+    return stage
+
+
 def _points(radius_scale: float = 1.0) -> Usd.Stage:
     stage = _stage()
     points = UsdGeom.Points.Define(stage, "/World/Beads")
@@ -702,6 +737,8 @@ RADIUS_SCALED: dict[str, Callable[[float], Usd.Stage]] = {
     "points": _points,
     "curves_linear": _linear_arches,
     "curves_bspline": _bspline_arches,
+    # Mitsuba's stand-in for the NURBS sphere is the implicit one.
+    "nurbs_sphere": _one_sphere,
 }
 
 
@@ -759,6 +796,13 @@ SCENES: tuple[Scene, ...] = (
         "UsdGeom.Points of five widths (vertex interpolation) as exact spheres, against a "
         "Mitsuba sphere per point",
         _points,
+    ),
+    Scene(
+        "nurbs_sphere",
+        "implicit_sphere's sphere as a rational biquadratic NurbsPatch (eight Bézier patches "
+        "tessellated on demand at the beam's rate) against Mitsuba's analytic sphere",
+        _nurbs_sphere,
+        mitsuba_stand_in=_one_sphere,
     ),
     Scene(
         "curves_linear",
