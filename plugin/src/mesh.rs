@@ -157,7 +157,7 @@ impl MeshData {
             CurvesSurface::new(&c.desc(&self.points))?;
         }
         if let Some(Gprim::Nurbs(n)) = &self.gprim {
-            NurbsSurface::new(&n.desc(&self.points))?;
+            NurbsSurface::check(&n.desc(&self.points))?;
         }
         Ok(())
     }

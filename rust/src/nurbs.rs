@@ -135,38 +135,48 @@ fn insert_knot(p: usize, knots: &mut Vec<f64>, net: &mut Vec<f64>, width: usize,
     *net = out;
 }
 
-/// Raises every knot in `range` (and its ends) to multiplicity `p` and lists the Bézier spans.
-/// `net` holds `knots.len() − p − 1` points of `width` values.
-fn bezier_spans(p: usize, knots: &[f64], net: Vec<f64>, width: usize, range: [f64; 2]) -> Spans {
-    let mut knots = knots.to_vec();
-    let mut net = net;
-    let mut breaks: Vec<f64> = knots.iter().copied().filter(|&k| range[0] < k && k < range[1]).collect();
-    breaks.extend(range);
-    breaks.sort_by(f64::total_cmp);
-    breaks.dedup();
-    for &t in &breaks {
-        let s = knots.iter().filter(|&&x| x == t).count();
-        for _ in s..p {
-            insert_knot(p, &mut knots, &mut net, width, t);
-        }
-    }
+/// The Bézier segments of each non-empty knot span inside `range` (clipped to it), one after
+/// another in the returned net. `net` holds `knots.len() − p − 1` points of `width` values.
+///
+/// Each span is cut out on its own: its p + 1 control points and 2p + 2 knots are a B-spline
+/// whose domain is the span, and raising the span's ends to multiplicity p there makes its
+/// net the Bézier one. The work is O(p² · width) a span, where inserting into the whole
+/// knot vector would copy the whole net for each knot.
+fn bezier_spans(p: usize, knots: &[f64], net: &[f64], width: usize, range: [f64; 2]) -> Spans {
     let n = net.len() / width;
     let len = range[1] - range[0];
-    let spans = (p..n)
-        .filter(|&i| knots[i] < knots[i + 1] && knots[i] >= range[0] && knots[i + 1] <= range[1])
-        .map(|i| (i - p, (knots[i] - range[0]) / len, (knots[i + 1] - range[0]) / len))
-        .collect();
-    Spans { spans, net }
+    let mut spans = Vec::new();
+    let mut out = Vec::new();
+    for i in p..n {
+        let (a, b) = (knots[i].max(range[0]), knots[i + 1].min(range[1]));
+        if !(a < b) {
+            continue;
+        }
+        let mut local_knots = knots[i - p..=i + p + 1].to_vec();
+        let mut local = net[(i - p) * width..(i + 1) * width].to_vec();
+        for t in [a, b] {
+            let s = local_knots.iter().filter(|&&x| x == t).count();
+            for _ in s..p {
+                insert_knot(p, &mut local_knots, &mut local, width, t);
+            }
+        }
+        // The span [a, b] is now a Bézier segment: the p + 1 points before its end knot.
+        let Some(j) = (p..local_knots.len() - p - 1).find(|&j| local_knots[j] == a && local_knots[j + 1] == b) else {
+            continue;
+        };
+        spans.push((out.len() / width, (a - range[0]) / len, (b - range[0]) / len));
+        out.extend_from_slice(&local[(j - p) * width..(j + 1) * width]);
+    }
+    Spans { spans, net: out }
 }
 
 impl NurbsSurface {
-    /// Cuts the NURBS surface into Bézier patches.
+    /// Every check [`NurbsSurface::new`] makes, without building anything: the rendered
+    /// ranges in u and v.
     ///
     /// # Errors
-    /// One line naming the USD attribute: counts that do not match the points, orders below 2
-    /// or above [`MAX_ORDER`], knots of the wrong length, decreasing or spanning nothing, a
-    /// range outside the knots, non-finite points, weights that are not positive and finite.
-    pub fn new(d: &NurbsDesc<'_>) -> Result<NurbsSurface, String> {
+    /// As [`NurbsSurface::new`].
+    pub fn check(d: &NurbsDesc<'_>) -> Result<([f64; 2], [f64; 2]), String> {
         let (nu, nv) = (d.u_count, d.v_count);
         if nu.checked_mul(nv) != Some(d.points.len()) {
             return Err(format!("points has {} values but uVertexCount × vVertexCount = {nu} × {nv}", d.points.len()));
@@ -183,6 +193,18 @@ impl NurbsSurface {
         if let Some(i) = d.weights.iter().position(|w| !(w.is_finite() && *w > 0.0)) {
             return Err(format!("pointWeights[{i}] = {} must be a positive number", d.weights[i]));
         }
+        Ok((u_range, v_range))
+    }
+
+    /// Cuts the NURBS surface into Bézier patches.
+    ///
+    /// # Errors
+    /// One line naming the USD attribute: counts that do not match the points, orders below 2
+    /// or above [`MAX_ORDER`], knots of the wrong length, decreasing or spanning nothing, a
+    /// range outside the knots, non-finite points, weights that are not positive and finite.
+    pub fn new(d: &NurbsDesc<'_>) -> Result<NurbsSurface, String> {
+        let (u_range, v_range) = Self::check(d)?;
+        let (nu, nv) = (d.u_count, d.v_count);
         let (p, q) = (d.u_order - 1, d.v_order - 1);
         let weight = |i: usize| d.weights.get(i).copied().unwrap_or(1.0);
         let rational = d.weights.windows(2).any(|w| w[0] != w[1]);
@@ -197,7 +219,7 @@ impl NurbsSurface {
                 net.extend([x * w, y * w, z * w, w]);
             }
         }
-        let us = bezier_spans(p, d.u_knots, net, nv * 4, u_range);
+        let us = bezier_spans(p, d.u_knots, &net, nv * 4, u_range);
         let nu2 = us.net.len() / (nv * 4);
         // Then along v, with v the outer index (net[v][u'][4]).
         let mut net = Vec::with_capacity(us.net.len());
@@ -206,7 +228,7 @@ impl NurbsSurface {
                 net.extend_from_slice(&us.net[(u * nv + v) * 4..(u * nv + v + 1) * 4]);
             }
         }
-        let vs = bezier_spans(q, d.v_knots, net, nu2 * 4, v_range);
+        let vs = bezier_spans(q, d.v_knots, &net, nu2 * 4, v_range);
         let mut s = NurbsSurface { p, q, cps: Vec::new(), bounds: Vec::new(), affine: Vec::new(), st: Vec::new(), rational };
         for &(v0, t0, t1) in &vs.spans {
             for &(u0, s0, s1) in &us.spans {
@@ -493,9 +515,32 @@ mod tests {
         d.v_range = Some([0.5, 2.5]);
         check_against_brute(&d);
         assert_eq!(NurbsSurface::new(&d).unwrap().patch_count(), 2 * 3);
+        // A range inside one span: one patch across u.
+        d.u_range = Some([3.2, 3.9]);
+        check_against_brute(&d);
+        assert_eq!(NurbsSurface::new(&d).unwrap().patch_count(), 3);
         // Polynomial: no weights.
         d.weights = &[];
         check_against_brute(&d);
+        // A larger net of many spans, with knots of every multiplicity up to the order.
+        let (pts, ws) = net(40, 30);
+        let uk: Vec<f64> = (0..44).map(|i| f64::from((i / 2) as u32) + if i % 7 == 0 { 0.25 } else { 0.0 }).collect();
+        let mut uk = uk;
+        uk.sort_by(f64::total_cmp);
+        let vk: Vec<f64> = (0..33).map(|i| f64::from(((i as i32 - 2).clamp(0, 28) / 3) as u32)).collect();
+        let big = NurbsDesc {
+            points: &pts,
+            weights: &ws,
+            u_count: 40,
+            v_count: 30,
+            u_order: 4,
+            v_order: 3,
+            u_knots: &uk,
+            v_knots: &vk,
+            u_range: None,
+            v_range: None,
+        };
+        check_against_brute(&big);
     }
 
     #[test]
