@@ -527,7 +527,7 @@ mod tests {
         let uk: Vec<f64> = (0..44).map(|i| f64::from((i / 2) as u32) + if i % 7 == 0 { 0.25 } else { 0.0 }).collect();
         let mut uk = uk;
         uk.sort_by(f64::total_cmp);
-        let vk: Vec<f64> = (0..33).map(|i| f64::from(((i as i32 - 2).clamp(0, 28) / 3) as u32)).collect();
+        let vk: Vec<f64> = (0_i32..33).map(|i| f64::from((i - 2).clamp(0, 28) / 3)).collect();
         let big = NurbsDesc {
             points: &pts,
             weights: &ws,
