@@ -686,7 +686,9 @@ def curves(path: Path) -> None:
     facing.CreateCurveVertexCountsAttr([3])
     facing.CreateWidthsAttr([0.2])
     facing.SetWidthsInterpolation(UsdGeom.Tokens.constant)
-    facing.GetPrim().CreateAttribute("mipray:curveStyle", Sdf.ValueTypeNames.Token).Set("ribbon")
+    UsdGeom.PrimvarsAPI(facing.GetPrim()).CreatePrimvar(
+        "mipray:curveStyle", Sdf.ValueTypeNames.Token, UsdGeom.Tokens.constant
+    ).Set("ribbon")
     ring = UsdGeom.BasisCurves.Define(stage, "/World/Ring")
     ring.CreateWrapAttr("periodic")
     k = 0.5523

@@ -404,7 +404,11 @@ def display_color(args: dict[str, Any], path: str) -> tuple[float, float, float]
     material = args.get("material")
     if material is None or material.get("name") != path:
         return None
-    assert material == lambertian(path, material["diffuseColor"]), material
+    # A displayOpacity makes it partly transparent (opacity, ior 1): still the display colour.
+    see_through = "ior" in material
+    assert material == lambertian(
+        path, material["diffuseColor"], material.get("opacity", 1.0), see_through=see_through
+    ), material
     return material["diffuseColor"]
 
 

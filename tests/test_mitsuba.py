@@ -3,8 +3,9 @@
 Each scene of :mod:`mipray.reference.scenes` is rendered by both renderers at
 two seeds; the test fails when the RMSE between them is more than the two
 renders' own noise explains (see :mod:`mipray.reference.compare`):
-rmse ≤ √((1.3·expected)² + (0.01·mean)²), and the implicit primitives' scenes
-(Sphere, Cylinder, a disk, Points) must fail that bound with a radius 5 % off.
+rmse ≤ √((1.3·expected)² + (0.01·mean)²), and the implicit primitives' and curves'
+scenes (Sphere, Cylinder, a disk, Points, linear and bspline curves, and the NURBS sphere
+against Mitsuba's analytic one) must fail that bound with a radius 5 % off.
 docs/mitsuba-comparison.md has the figures at a larger size.
 """
 
@@ -136,6 +137,20 @@ def test_what_mitsuba_cannot_render_alike_is_refused_naming_the_prim() -> None:
     UsdLux.DistantLight(soft.GetPrimAtPath("/World/Sun")).GetAngleAttr().Set(2.0)
     with pytest.raises(mipray.PrimError, match=r"/World/Sun.*angle"):
         mitsuba.scene_dict(mitsuba.capture(soft), 8)
+    # Curves Mitsuba has no shape for: a catmullRom basis, a ribbon.
+    for basis, normals, message in (
+        ("catmullRom", None, "no catmullRom curves"),
+        ("bspline", [(0, 0, 1)] * 4, "ribbons are not exported"),
+    ):
+        stage = _one_mesh_stage(scheme="none")
+        curve = UsdGeom.BasisCurves.Define(stage, "/World/Hair")
+        curve.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 1, 0), (3, 1, 0)])
+        curve.CreateCurveVertexCountsAttr([4])
+        curve.CreateBasisAttr(basis)
+        if normals:
+            curve.CreateNormalsAttr(normals)
+        with pytest.raises(mipray.PrimError, match=rf"/World/Hair.*{message}"):
+            mitsuba.scene_dict(mitsuba.capture(stage), 8)
     # Textured inputs other than a lambertian diffuseColor.
     with pytest.raises(mipray.PrimError, match=r"/m.*textured inputs \(roughness\)"):
         mitsuba.material_mapping("/m", {"textures": {"roughness": {"file": "r.png"}}})

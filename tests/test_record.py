@@ -245,14 +245,14 @@ def test_skipped_prims_still_exit_0(capsys, tmp_path: Path, fake_native) -> None
     add_cube(stage, "/Good")
     add_cube(stage, "/Bad", counts=[4, 4, 4])
     add_camera(stage, "/Cam")
-    UsdGeom.NurbsPatch.Define(stage, "/Patch")
+    UsdGeom.TetMesh.Define(stage, "/Patch")
     path = tmp_path / "s.usda"
     stage.GetRootLayer().Export(str(path))
     code, out, err = run([path, tmp_path / "o.exr", "-w", "8"], capsys)
     assert code == 0
     assert out == f"{tmp_path / 'o.exr'}\n"
     assert "mipray-record: error: skipping /Bad: faceVertexCounts add up to 12" in err
-    assert "mipray-record: warning: skipping 1 prim of unsupported type NurbsPatch" in err
+    assert "mipray-record: warning: skipping 1 prim of unsupported type TetMesh" in err
 
 
 def test_no_camera_uses_framing_camera_and_camera_light(

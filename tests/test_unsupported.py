@@ -42,9 +42,19 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam")).CreateClippingPlanesAttr(
         [(0.0, 1.0, 0.0, 0.0)]
     )
-    UsdGeom.NurbsPatch.Define(stage, "/World/Ball")
-    UsdGeom.NurbsPatch.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.TetMesh.Define(stage, "/World/Ball")
+    UsdGeom.TetMesh.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
     UsdLux.PluginLight.Define(stage, "/World/Tube")
+    # A bilinear NurbsPatch with a trim loop (rendered untrimmed; its reader warns).
+    trimmed = UsdGeom.NurbsPatch.Define(stage, "/World/Trimmed")
+    trimmed.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)])
+    for attr in (trimmed.CreateUVertexCountAttr, trimmed.CreateVVertexCountAttr):
+        attr(2)
+    for attr in (trimmed.CreateUOrderAttr, trimmed.CreateVOrderAttr):
+        attr(2)
+    for attr in (trimmed.CreateUKnotsAttr, trimmed.CreateVKnotsAttr):
+        attr([0.0, 0.0, 1.0, 1.0])
+    trimmed.CreateTrimCurveCountsAttr([1])
 
     key = add_distant_light(stage, "/World/Key").GetPrim()
     shaping = UsdLux.ShapingAPI.Apply(key)
@@ -124,8 +134,9 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     return sorted(
         [
             Unsupported(cam, "camera clippingPlanes 1 plane(s)"),
-            Unsupported("/World/Ball", "prim type NurbsPatch"),
+            Unsupported("/World/Ball", "prim type TetMesh"),
             Unsupported("/World/Tube", "prim type PluginLight"),
+            Unsupported("/World/Trimmed", "NurbsPatch trim curves 1 loop(s)"),
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
             Unsupported(key_path, "light input inputs:diffuse"),
@@ -170,8 +181,9 @@ def test_one_of_each_is_listed_exactly(fake, caplog) -> None:
     rows = {r.what for r in TABLE if r.scope not in ("render var", "render settings")}
     assert {r for r in rows if not any(u.what.startswith(r) for u in expected)} == set()
     warnings = [r.getMessage() for r in caplog.records if "not rendered" in r.getMessage()]
-    # One warning per thing, except what its reader warns about itself (types, shaders).
-    listed = {u.what for u in expected if not u.what.startswith(("prim type", "surface shader"))}
+    # One warning per thing, except what its reader warns about itself (types, shaders, trims).
+    readers = ("prim type", "surface shader", "NurbsPatch trim curves")
+    listed = {u.what for u in expected if not u.what.startswith(readers)}
     assert len(warnings) == len(listed)
     for what in listed:
         assert sum(f"not rendered: {what} on " in w for w in warnings) == 1, what
@@ -179,8 +191,8 @@ def test_one_of_each_is_listed_exactly(fake, caplog) -> None:
 
 def test_invisible_and_excluded_prims_are_not_listed(fake) -> None:
     stage = new_stage()
-    UsdGeom.NurbsPatch.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
-    UsdGeom.NurbsPatch.Define(stage, "/Guide").CreatePurposeAttr("guide")
+    UsdGeom.TetMesh.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.TetMesh.Define(stage, "/Guide").CreatePurposeAttr("guide")
     add_cube(stage, "/Cube")
     scene = UsdSceneDelegate(stage, fake)
     scene.sync()
@@ -192,8 +204,8 @@ def test_prims_under_an_untyped_root_are_audited(fake) -> None:
     # what lies under it is rendered, and what is not supported there must be listed too.
     stage = new_stage()
     stage.DefinePrim("/World")
-    UsdGeom.NurbsPatch.Define(stage, "/World/Patch")
-    UsdGeom.NurbsPatch.Define(stage, "/World/Guide").CreatePurposeAttr("guide")
+    UsdGeom.TetMesh.Define(stage, "/World/Patch")
+    UsdGeom.TetMesh.Define(stage, "/World/Guide").CreatePurposeAttr("guide")
     add_cube(stage, "/World/Cube")
     scene = UsdSceneDelegate(stage, fake)
     scene.sync()

@@ -94,6 +94,53 @@ def test_basis_curves_attributes_cross_to_the_delegate(fake) -> None:
     assert ribbon["normals_interpolation"] == "vertex"
 
 
+def _line(stage, path: str) -> UsdGeom.BasisCurves:
+    c = UsdGeom.BasisCurves.Define(stage, path)
+    c.CreatePointsAttr([(0, 0, 0), (1, 0, 0)])
+    c.CreateCurveVertexCountsAttr([2])
+    c.CreateTypeAttr("linear")
+    return c
+
+
+def test_curve_style_is_a_primvar_and_the_old_attribute_is_deprecated(fake, caplog) -> None:
+    stage = new_stage()
+    api = UsdGeom.PrimvarsAPI
+    new = _line(stage, "/New").GetPrim()
+    api(new).CreatePrimvar("mipray:curveStyle", Sdf.ValueTypeNames.Token, "constant").Set("ribbon")
+    old = _line(stage, "/Old").GetPrim()
+    old.CreateAttribute("mipray:curveStyle", Sdf.ValueTypeNames.Token).Set("ribbon")
+    both = _line(stage, "/Both").GetPrim()
+    both.CreateAttribute("mipray:curveStyle", Sdf.ValueTypeNames.Token).Set("ribbon")
+    api(both).CreatePrimvar("mipray:curveStyle", Sdf.ValueTypeNames.Token, "constant").Set("tube")
+    bad = _line(stage, "/Bad").GetPrim()
+    api(bad).CreatePrimvar("mipray:curveStyle", Sdf.ValueTypeNames.Token, "constant").Set("flat")
+    # The primvar inherits as primvars do: from an ancestor.
+    group = UsdGeom.Xform.Define(stage, "/Group").GetPrim()
+    api(group).CreatePrimvar("mipray:curveStyle", Sdf.ValueTypeNames.Token, "constant").Set(
+        "ribbon"
+    )
+    _line(stage, "/Group/Child")
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+        scene.mark_all_dirty()
+        scene.sync()  # warned once
+    style = {p: kw["gprim"]["style"] for p, kw in fake.meshes().items()}
+    assert style == {
+        "/New": "ribbon",
+        "/Old": "ribbon",
+        "/Both": "tube",
+        "/Bad": "tube",
+        "/Group/Child": "ribbon",
+    }
+    warnings = sorted(r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
+    assert warnings == [
+        "mipray: /Bad: primvars:mipray:curveStyle 'flat' is not tube or ribbon; using tube",
+        "mipray: /Old: mipray:curveStyle is deprecated: author the constant token primvar "
+        "primvars:mipray:curveStyle instead",
+    ]
+
+
 def test_wrong_counts_skip_the_prim_and_wrong_widths_fall_back_by_name(native, caplog) -> None:
     stage = new_stage()
     bad = UsdGeom.BasisCurves.Define(stage, "/World/BadCounts")

@@ -114,12 +114,12 @@ def test_breaking_a_synced_mesh_removes_it(fake) -> None:
 
 def test_unsupported_types_warn_once_per_type(fake, caplog) -> None:
     stage = new_stage()
-    # (Implicit gprims and BasisCurves render now: NurbsPatch and HermiteCurves do not.)
+    # (Implicit gprims, curves and NurbsPatch render now: TetMesh and HermiteCurves do not.)
     for i in range(3):
-        UsdGeom.NurbsPatch.Define(stage, f"/S{i}")
+        UsdGeom.TetMesh.Define(stage, f"/S{i}")
     for i in range(2):
         UsdGeom.HermiteCurves.Define(stage, f"/C{i}")
-    UsdGeom.NurbsPatch.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
+    UsdGeom.TetMesh.Define(stage, "/Hidden").CreateVisibilityAttr("invisible")
     UsdGeom.Xform.Define(stage, "/JustAGroup")
     stage.DefinePrim("/Untyped")
     add_cube(stage, "/Cube")
@@ -131,7 +131,7 @@ def test_unsupported_types_warn_once_per_type(fake, caplog) -> None:
     warnings = sorted(r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
     assert warnings == [
         "mipray: skipping 2 prims of unsupported type HermiteCurves",
-        "mipray: skipping 3 prims of unsupported type NurbsPatch",
+        "mipray: skipping 3 prims of unsupported type TetMesh",
     ]
     assert set(fake.meshes()) == {"/Cube"}
     assert scene.delegate_errors == []

@@ -1,6 +1,7 @@
 //! The mesh Rprim: a USD mesh's data as the scene delegate gives it, and its synced state —
 //! the limit surface (OpenSubdiv for subdivision schemes, bilinear patches for `none`, the
-//! core's exact surfaces for implicit gprims and points, the core's curves for BasisCurves).
+//! core's exact surfaces for implicit gprims and points, the core's curves for BasisCurves, its
+//! rational Bézier patches for NurbsPatch).
 
 use std::sync::Arc;
 
@@ -9,6 +10,7 @@ use mipray::bilinear::BilinearSurface;
 use mipray::curves::{Basis, CurveType, CurvesDesc, CurvesSurface, Interpolation, Style, Wrap};
 use mipray::implicit::{ImplicitSurface, PointsSurface, Shape};
 use mipray::lazy_surface::LazySurface;
+use mipray::nurbs::{NurbsDesc, NurbsSurface};
 use mipray::patch::LimitSurface;
 use mipray::topology::{MeshTopology, Scheme};
 use mipray_bridge::OsdSurface;
@@ -154,6 +156,9 @@ impl MeshData {
         if let Some(Gprim::Curves(c)) = &self.gprim {
             CurvesSurface::new(&c.desc(&self.points))?;
         }
+        if let Some(Gprim::Nurbs(n)) = &self.gprim {
+            NurbsSurface::check(&n.desc(&self.points))?;
+        }
         Ok(())
     }
 
@@ -164,6 +169,8 @@ impl MeshData {
             Some(Gprim::Points { .. }) => self.points.len(),
             // Each curve is a face: uniform displayColor colours it.
             Some(Gprim::Curves(ref c)) => c.counts.len(),
+            // The front end sends NURBS no face table (a NurbsPatch has one colour).
+            Some(Gprim::Nurbs(_)) => 1,
             _ => self.topology.face_vertex_counts.len(),
         }
     }
@@ -180,6 +187,42 @@ pub enum Gprim {
     /// `BasisCurves` (and `NurbsCurves`, converted to Bézier segments in Python): vertices
     /// in [`MeshData::points`].
     Curves(CurvesSpec),
+    /// `NurbsPatch`: control points in [`MeshData::points`] (u fastest).
+    Nurbs(NurbsSpec),
+}
+
+/// A NurbsPatch prim's attributes besides its points (see [`mipray::nurbs`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NurbsSpec {
+    pub u_count: usize,
+    pub v_count: usize,
+    pub u_order: usize,
+    pub v_order: usize,
+    pub u_knots: Vec<f64>,
+    pub v_knots: Vec<f64>,
+    /// `uRange` / `vRange`; `None` for the knots' whole domain.
+    pub u_range: Option<[f64; 2]>,
+    pub v_range: Option<[f64; 2]>,
+    /// `pointWeights`; empty for a polynomial surface.
+    pub weights: Vec<f64>,
+}
+
+impl NurbsSpec {
+    /// The core's description of this patch over `points`.
+    pub fn desc<'a>(&'a self, points: &'a [[f32; 3]]) -> NurbsDesc<'a> {
+        NurbsDesc {
+            points,
+            weights: &self.weights,
+            u_count: self.u_count,
+            v_count: self.v_count,
+            u_order: self.u_order,
+            v_order: self.v_order,
+            u_knots: &self.u_knots,
+            v_knots: &self.v_knots,
+            u_range: self.u_range,
+            v_range: self.v_range,
+        }
+    }
 }
 
 /// A BasisCurves prim's attributes besides its points (see [`mipray::curves`]).
@@ -249,6 +292,7 @@ pub enum Surface {
     Implicit(Arc<ImplicitSurface>),
     Points(Arc<PointsSurface>),
     Curves(Arc<CurvesSurface>),
+    Nurbs(Arc<NurbsSurface>),
 }
 
 impl Surface {
@@ -260,6 +304,7 @@ impl Surface {
             Surface::Implicit(s) => s.clone(),
             Surface::Points(s) => s.clone(),
             Surface::Curves(s) => s.clone(),
+            Surface::Nurbs(s) => s.clone(),
         }
     }
 }
@@ -396,6 +441,11 @@ impl MeshPrim {
             Some(Gprim::Curves(c)) => {
                 return Ok(Surface::Curves(Arc::new(
                     CurvesSurface::new(&c.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?,
+                )))
+            }
+            Some(Gprim::Nurbs(n)) => {
+                return Ok(Surface::Nurbs(Arc::new(
+                    NurbsSurface::new(&n.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?,
                 )))
             }
             None => {}

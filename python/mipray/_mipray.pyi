@@ -146,6 +146,13 @@ class RenderDelegate:
                 "ribbon"), "widths", "widths_interpolation", "normals" (N×3),
                 "normals_interpolation"}`` (USD's tokens; see
                 ``mipray::curves``); each curve is a face of the face table.
+                Or a NURBS surface (UsdGeom.NurbsPatch), tessellated on demand
+                like a subdivision surface, ``points`` its control points (u
+                fastest): ``{"type": "Nurbs", "u_vertex_count",
+                "v_vertex_count", "u_order", "v_order", "u_knots", "v_knots",
+                "u_range", "v_range" (two floats or None), "weights" (one per
+                point, or empty)}``; ``st`` is the knots' (u, v) normalized
+                over the range (see ``mipray::nurbs``).
             primvars: primvars interpolated over the surface as authored, by
                 role: ``"normals"`` (authored normals, (N, 3), used for
                 shading; meant for polygonal meshes) or a UsdPreviewSurface

@@ -716,6 +716,7 @@ fn read_gprim(path: &str, d: &Bound<'_, PyDict>) -> PyResult<Gprim> {
             return Ok(Gprim::Points { widths });
         }
         "Curves" => return read_curves(path, d).map(Gprim::Curves),
+        "Nurbs" => return read_nurbs(path, d).map(Gprim::Nurbs),
         "Sphere" => Shape::Sphere { radius: float("radius")? },
         "Cube" => Shape::Cube { size: float("size")? },
         "Cylinder" => Shape::Cylinder {
@@ -731,7 +732,7 @@ fn read_gprim(path: &str, d: &Bound<'_, PyDict>) -> PyResult<Gprim> {
             axis: axis()?,
         },
         "Plane" => Shape::Plane { width: float("width")?, length: float("length")?, axis: axis()? },
-        other => return Err(value_error(path, format!("gprim type '{other}' is not an implicit prim, Points or Curves"))),
+        other => return Err(value_error(path, format!("gprim type '{other}' is not an implicit prim, Points, Curves or Nurbs"))),
     };
     ImplicitSurface::new(shape).map_err(|e| value_error(path, e))?;
     Ok(Gprim::Implicit(shape))
@@ -779,6 +780,47 @@ fn read_curves(path: &str, d: &Bound<'_, PyDict>) -> PyResult<hd_mipray::mesh::C
         normals,
         normals_interpolation: Interpolation::from_usd(&ni).ok_or_else(|| bad("normals interpolation", &ni))?,
         style: Style::from_usd(&style).ok_or_else(|| bad("style", &style))?,
+    })
+}
+
+/// A `Nurbs` gprim dict (a UsdGeom.NurbsPatch): `u_vertex_count`, `v_vertex_count`, `u_order`,
+/// `v_order` (ints), `u_knots`, `v_knots` (floats), optional `u_range`, `v_range` (two floats)
+/// and `weights` (floats, one per point). Counts, knots and weights are checked with the points
+/// by the delegate's `set_mesh`, naming the USD attribute.
+fn read_nurbs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<hd_mipray::mesh::NurbsSpec> {
+    let count = |key: &str, attr: &str| -> PyResult<usize> {
+        let v: i64 = d
+            .get_item(key)?
+            .ok_or_else(|| value_error(path, format!("Nurbs needs {key}")))?
+            .extract()
+            .map_err(|_| value_error(path, format!("{attr} must be an integer")))?;
+        usize::try_from(v).map_err(|_| value_error(path, format!("{attr} = {v} must not be negative")))
+    };
+    let floats = |key: &str, attr: &str| -> PyResult<Vec<f64>> {
+        match d.get_item(key)? {
+            Some(v) => v.extract().map_err(|_| value_error(path, format!("{attr} must be numbers"))),
+            None => Ok(Vec::new()),
+        }
+    };
+    let range = |key: &str, attr: &str| -> PyResult<Option<[f64; 2]>> {
+        match d.get_item(key)? {
+            None => Ok(None),
+            Some(v) if v.is_none() => Ok(None),
+            Some(v) => {
+                v.extract::<(f64, f64)>().map(|(a, b)| Some([a, b])).map_err(|_| value_error(path, format!("{attr} must be two numbers")))
+            }
+        }
+    };
+    Ok(hd_mipray::mesh::NurbsSpec {
+        u_count: count("u_vertex_count", "uVertexCount")?,
+        v_count: count("v_vertex_count", "vVertexCount")?,
+        u_order: count("u_order", "uOrder")?,
+        v_order: count("v_order", "vOrder")?,
+        u_knots: floats("u_knots", "uKnots")?,
+        v_knots: floats("v_knots", "vKnots")?,
+        u_range: range("u_range", "uRange")?,
+        v_range: range("v_range", "vRange")?,
+        weights: floats("weights", "pointWeights")?,
     })
 }
 

@@ -130,7 +130,7 @@ impl Interpolation {
 }
 
 impl Style {
-    /// USD's `type` attribute of BasisCurves' `curveStyle`-like role (`tube`, `ribbon`); the
+    /// The `primvars:mipray:curveStyle` token (`tube`, `ribbon`); the
     /// empty token is a tube.
     pub fn from_usd(token: &str) -> Option<Self> {
         match token {
@@ -499,6 +499,11 @@ impl CurvesSurface {
 
     pub fn style(&self) -> Style {
         self.style
+    }
+
+    /// True for round tubes (neither ribbon).
+    pub fn is_tube(&self) -> bool {
+        !self.faces_ray() && self.normals.is_empty()
     }
 
     /// True for ribbons without authored normals, which face each ray.

@@ -55,6 +55,7 @@ pub mod light;
 pub mod light_sampler;
 pub mod material;
 pub mod motion;
+pub mod nurbs;
 pub mod obj_shape;
 pub mod options;
 pub mod patch;

@@ -477,3 +477,54 @@ fn ray_differentials_on_a_curve_match_real_neighbour_rays() {
     }
     assert!(checked >= 3, "only {checked} pixels checked");
 }
+
+/// The exact outward normal of a union of capsules (a polyline tube of radius r) at `p` on its
+/// surface: from the nearest point of the polyline.
+fn polyline_normal(pts: &[DVec3], p: DVec3) -> DVec3 {
+    let mut best = (f64::INFINITY, DVec3::ZERO);
+    for w in pts.windows(2) {
+        let ab = w[1] - w[0];
+        let t = ((p - w[0]).dot(ab) / ab.dot(ab)).clamp(0.0, 1.0);
+        let q = w[0] + ab * t;
+        let dist = (p - q).length();
+        if dist < best.0 {
+            best = (dist, (p - q) / dist);
+        }
+    }
+    best.1
+}
+
+#[test]
+fn a_linear_tube_shades_its_joints_with_the_spheres_normal() {
+    // A right-angled bend: the joint's sphere is a quarter of the tube's visible outside, where
+    // the tube's parameterization (no normal along the axis) would shade the cylinder going on.
+    let pts = [[-1.5_f32, -0.5, 0.0], [0.0, 1.0, 0.0], [1.5, -0.5, 0.0]];
+    let r = 0.4;
+    let widths = [2.0 * r as f32];
+    let counts = [3];
+    let surface = CurvesSurface::new(&desc(&pts, &counts, CurveType::Linear, Basis::Bezier, &widths)).unwrap();
+    let camera = Camera::perspective(Camera::look_at(Vec3::new(0.3, 1.2, 6.0), Vec3::new(0.0, 0.6, 0.0), Vec3::Y), 30.0);
+    let scene = scene_of(surface, camera);
+    let tracer = Tracer::new(&scene, CacheConfig::default(), 1.0);
+    let poly: Vec<DVec3> = pts.iter().map(|p| DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).collect();
+    let mut counters = TraceCounters::default();
+    let (w, h) = (96, 72);
+    let (mut on_joint, mut hits) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let ray = scene.camera.generate_ray(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            let Some(hit) = tracer.intersect(&ray, &mut counters) else { continue };
+            hits += 1;
+            let sp = mipray::integrator::surface::shading_point(&tracer, &scene, &ray, &hit);
+            let want = polyline_normal(&poly, d(hit.p));
+            let got = d(sp.ns);
+            assert!(got.dot(want) > 0.9999, "pixel ({x}, {y}): shading normal {got} vs the exact {want}");
+            // On the joint's sphere the exact normal leans along both segments' axes.
+            let axial = |a: DVec3, b: DVec3| want.dot((b - a).normalize()).abs();
+            if axial(poly[0], poly[1]) > 0.05 && axial(poly[1], poly[2]) > 0.05 {
+                on_joint += 1;
+            }
+        }
+    }
+    assert!(hits > 500 && on_joint > 20, "{hits} hits, {on_joint} on the joint's sphere");
+}

@@ -52,6 +52,14 @@ What maps how (render space is USD world space in both renderers):
   per point; each ``to_world`` the prim's transform times the shape's own
   scale and axis. Cones, frustums and capsules (Mitsuba has none) are refused.
 
+- Curves (BasisCurves round tubes, nonperiodic) map to Mitsuba's curves, written to a
+  text file of world-space control points and radii: ``linear`` → ``linearcurve``, cubic
+  ``bspline`` → ``bsplinecurve``; widths constant, uniform or vertex (half of each, times
+  the transform's uniform scale; USD's fallback width 1 when none). Ribbons, other bases,
+  periodic and pinned curves, varying widths and non-uniform scales are refused.
+  NurbsPatch has no Mitsuba shape and is refused: a comparison scene of one gives
+  Mitsuba a stand-in stage (the analytic sphere a NURBS sphere is exactly).
+
 Everything Mitsuba cannot represent the way mipray renders it raises
 :class:`~mipray.errors.PrimError` naming the prim, rather than rendering a
 different scene.
@@ -59,8 +67,12 @@ different scene.
 
 from __future__ import annotations
 
+import atexit
 import math
+import shutil
+import tempfile
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -409,9 +421,71 @@ def _axis_matrix(axis: str) -> NDArray[np.float64]:
     return m
 
 
+_curve_files: list[str] = []
+
+
+def _curve_file(text: str) -> str:
+    """A file holding ``text`` for Mitsuba's curve loaders, removed when Python exits."""
+    if not _curve_files:
+        directory = tempfile.mkdtemp(prefix="mipray-mitsuba-curves-")
+        atexit.register(shutil.rmtree, directory, True)
+        _curve_files.append(directory)
+    path = Path(_curve_files[0]) / f"curves{len(_curve_files)}.txt"
+    _curve_files.append(str(path))
+    path.write_text(text)
+    return str(path)
+
+
+def _curves_shape(path: str, args: dict[str, Any]) -> dict[str, Any]:
+    """A curves ``gprim`` as Mitsuba's ``linearcurve`` or ``bsplinecurve`` (module doc)."""
+    g = args["gprim"]
+    if g.get("style", "tube") != "tube" or g.get("normals"):
+        raise PrimError(path, "ribbons are not exported to Mitsuba (its curves are round)")
+    wrap, basis = g.get("wrap", "nonperiodic"), g.get("basis", "bezier")
+    if wrap != "nonperiodic":
+        raise PrimError(path, f"{wrap} curves are not exported to Mitsuba")
+    if g.get("curve_type", "cubic") == "linear":
+        plugin = "linearcurve"
+    elif basis == "bspline":
+        plugin = "bsplinecurve"
+    else:
+        raise PrimError(path, f"Mitsuba has no {basis} curves (only linear and bspline)")
+    counts = np.asarray(g["curve_vertex_counts"], dtype=np.int64)
+    points = _world_points(args)
+    linear = _column_matrix(args)[:3, :3]
+    scale = abs(np.linalg.det(linear)) ** (1.0 / 3.0)
+    if not np.allclose(linear.T @ linear, scale * scale * np.eye(3), rtol=1e-6, atol=1e-9):
+        raise PrimError(path, "curves under a non-uniform scale are not exported to Mitsuba")
+    widths = np.asarray(g.get("widths", []), dtype=np.float64).reshape(-1)
+    interpolation = g.get("widths_interpolation", "vertex")
+    if widths.size == 0:
+        per_vertex = np.ones(len(points))
+    elif interpolation == "constant":
+        per_vertex = np.full(len(points), widths[0])
+    elif interpolation == "uniform":
+        per_vertex = np.repeat(widths, counts)
+    elif interpolation == "vertex":
+        per_vertex = widths
+    else:
+        raise PrimError(path, f"{interpolation} widths are not exported to Mitsuba")
+    radii = per_vertex * scale / 2.0
+    lines, start = [], 0
+    for n in counts.tolist():
+        lines += [
+            " ".join(f"{c:.9g}" for c in (*points[i], radii[i])) for i in range(start, start + n)
+        ]
+        lines.append("")
+        start += n
+    return {"type": plugin, "filename": _curve_file("\n".join(lines))}
+
+
 def _analytic_shapes(path: str, args: dict[str, Any]) -> list[dict[str, Any]]:
     """Mitsuba's analytic shapes (without BSDF) for a ``gprim`` of ``set_mesh`` (module doc)."""
     g = args["gprim"]
+    if g["type"] == "Curves":
+        return [_curves_shape(path, args)]
+    if g["type"] == "Nurbs":
+        raise PrimError(path, "Mitsuba has no NURBS surfaces (a scene may give it a stand-in)")
     world = _column_matrix(args)
 
     def shape(kind: str, local: NDArray[np.float64]) -> dict[str, Any]:

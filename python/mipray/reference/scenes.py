@@ -50,6 +50,10 @@ class Scene:
     integrator: dict[str, Any] = field(default_factory=lambda: {"type": "direct"})
     #: Image width in pixels (the height follows the camera's aspect).
     width: int = 64
+    #: The stage Mitsuba renders in this one's place, when the scene's surface has no Mitsuba
+    #: shape but is exactly one Mitsuba has (a NURBS sphere: its analytic sphere); None: the
+    #: same stage.
+    mitsuba_stand_in: Callable[[], Usd.Stage] | None = None
 
 
 # ----------------------------------------------------------------------------- building blocks
@@ -631,6 +635,37 @@ def _one_disk(radius_scale: float = 1.0) -> Usd.Stage:
     return stage
 
 
+def _nurbs_sphere() -> Usd.Stage:
+    """:func:`_one_sphere`'s sphere, 1.1 in radius, as a rational biquadratic NurbsPatch.
+
+    The nine-point circle swept along the five-point half circle, weights 1 and √½.
+    """
+    stage = _stage()
+    patch = UsdGeom.NurbsPatch.Define(stage, "/World/Ball")
+    h = math.sqrt(0.5)
+    circle = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0)]
+    profile = [(0, -1), (1, -1), (1, 0), (1, 1), (0, 1)]
+    points, weights = [], []
+    for j, (r, y) in enumerate(profile):
+        for i, (x, z) in enumerate(circle):
+            points.append(Gf.Vec3f(1.1 * x * r, 1.1 * y, 1.1 * z * r))
+            weights.append((h if i % 2 else 1.0) * (h if j % 2 else 1.0))
+    patch.CreatePointsAttr(points)
+    patch.CreatePointWeightsAttr(weights)
+    patch.CreateUVertexCountAttr(9)
+    patch.CreateVVertexCountAttr(5)
+    patch.CreateUOrderAttr(3)
+    patch.CreateVOrderAttr(3)
+    patch.CreateUKnotsAttr([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1])
+    patch.CreateVKnotsAttr([0, 0, 0, 0.5, 0.5, 1, 1, 1])
+    # Swept about +Y from −Y to +Y, u around: dP/du × dP/dv points inward, so the patch is
+    # left-handed for an outward front (as the sphere's).
+    patch.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    patch.AddTranslateOp().Set(Gf.Vec3d(0.3, 1.1, 0.0))
+    _on_ground(stage, patch, (0.15, 0.3, 0.7))
+    return stage
+
+
 def _points(radius_scale: float = 1.0) -> Usd.Stage:
     stage = _stage()
     points = UsdGeom.Points.Define(stage, "/World/Beads")
@@ -649,13 +684,61 @@ def _points(radius_scale: float = 1.0) -> Usd.Stage:
     return stage
 
 
-#: Per implicit-prim scene: its builder with the primitive's radius (or widths) scaled, for
-#: checking that the comparison sees a geometric error as small as 5 %.
+def _arches(basis: str, width_scale: float) -> Usd.Stage:
+    """Three round tubes arching over the ground, ``linear`` or cubic ``bspline``.
+
+    Each curve's ends lie below the ground, so how a renderer closes a tube's end (mipray: a
+    sphere; Mitsuba's B-spline: not) plays no part; widths are one per curve (uniform), since
+    a tube of varying radius is a frustum per piece in mipray and a swept sphere in Mitsuba.
+    """
+    stage = _stage()
+    curves = UsdGeom.BasisCurves.Define(stage, "/World/Arches")
+    points: list[Gf.Vec3f] = []
+    counts = []
+    for x0, z0, height, span, turn in (
+        (-0.9, 0.6, 1.6, 1.4, 0.3),
+        (0.6, -0.3, 2.1, 1.8, -0.5),
+        (0.1, -1.4, 1.2, 2.6, 0.1),
+    ):
+        n = 9
+        for i in range(n):
+            t = -0.25 + 1.5 * i / (n - 1)
+            y = height * math.sin(math.pi * t) - 0.3
+            x = x0 + span * (t - 0.5)
+            points.append(Gf.Vec3f(x, y, z0 + turn * (t - 0.5) ** 2))
+        counts.append(n)
+    curves.CreatePointsAttr(points)
+    curves.CreateCurveVertexCountsAttr(counts)
+    if basis == "linear":
+        curves.CreateTypeAttr("linear")
+    else:
+        curves.CreateTypeAttr("cubic")
+        curves.CreateBasisAttr(basis)
+    curves.CreateWidthsAttr([0.56 * width_scale, 0.48 * width_scale, 0.4 * width_scale])
+    curves.SetWidthsInterpolation(UsdGeom.Tokens.uniform)
+    _on_ground(stage, curves, (0.7, 0.35, 0.15))
+    return stage
+
+
+def _linear_arches(width_scale: float = 1.0) -> Usd.Stage:
+    return _arches("linear", width_scale)
+
+
+def _bspline_arches(width_scale: float = 1.0) -> Usd.Stage:
+    return _arches("bspline", width_scale)
+
+
+#: Per implicit-prim and curves scene: its builder with the primitive's radius (or widths)
+#: scaled, for checking that the comparison sees a geometric error as small as 5 %.
 RADIUS_SCALED: dict[str, Callable[[float], Usd.Stage]] = {
     "implicit_sphere": _one_sphere,
     "implicit_cylinder": _one_cylinder,
     "implicit_disk": _one_disk,
     "points": _points,
+    "curves_linear": _linear_arches,
+    "curves_bspline": _bspline_arches,
+    # Mitsuba's stand-in for the NURBS sphere is the implicit one.
+    "nurbs_sphere": _one_sphere,
 }
 
 
@@ -713,6 +796,26 @@ SCENES: tuple[Scene, ...] = (
         "UsdGeom.Points of five widths (vertex interpolation) as exact spheres, against a "
         "Mitsuba sphere per point",
         _points,
+    ),
+    Scene(
+        "nurbs_sphere",
+        "implicit_sphere's sphere as a rational biquadratic NurbsPatch (eight Bézier patches "
+        "tessellated on demand at the beam's rate) against Mitsuba's analytic sphere",
+        _nurbs_sphere,
+        mitsuba_stand_in=_one_sphere,
+    ),
+    Scene(
+        "curves_linear",
+        "linear BasisCurves: three polyline tubes (one width per curve) arching over the "
+        "ground, ray traced as curves (mipray's frusta and joint spheres, tessellated at the "
+        "beam's rate) against Mitsuba's linearcurve",
+        _linear_arches,
+    ),
+    Scene(
+        "curves_bspline",
+        "cubic bspline BasisCurves: the same arches as smooth tubes, mipray's on-demand "
+        "linear pieces within the beam's chord error against Mitsuba's bsplinecurve",
+        _bspline_arches,
     ),
     Scene(
         "implicit_glass",

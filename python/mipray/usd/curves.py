@@ -9,8 +9,12 @@ and interpolated (exact for degree up to 3; higher degrees are refused). Rationa
 (``pointWeights`` not all 1) are evaluated without their weights, with one warning.
 
 What a curve looks like across: authored ``normals`` make it a ribbon facing them;
-otherwise the token attribute ``mipray:curveStyle`` says ``tube`` (the default) or
-``ribbon`` (flat, facing each ray, as Storm draws ribbons without normals).
+otherwise the constant token primvar ``primvars:mipray:curveStyle`` says ``tube`` (the
+default) or ``ribbon`` (flat, facing each ray, as Storm draws ribbons without normals). A
+renderer's own setting on a gprim is a primvar in its namespace, as Arnold's
+``primvars:arnold:mode`` and RenderMan's ``primvars:ri:attributes:*`` are, so it inherits
+and instances as primvars do. The attribute ``mipray:curveStyle`` that earlier versions read
+is still accepted, with one deprecation warning naming the prim.
 
 Bad input gets one line naming the prim and the attribute:
 
@@ -32,7 +36,7 @@ from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
 
-__all__ = ["CURVE_TYPES", "curves_arguments", "segment_end_count"]
+__all__ = ["CURVE_STYLE", "CURVE_TYPES", "curves_arguments", "segment_end_count"]
 
 _log = logging.getLogger(__name__)
 _warned: set[str] = set()
@@ -118,11 +122,7 @@ def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
             gprim["widths"] = widths.tolist()
             gprim["widths_interpolation"] = interpolation
     normals = np.asarray(curves.GetNormalsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
-    style_attr = prim.GetAttribute("mipray:curveStyle")
-    style = str(style_attr.Get(time)) if style_attr and style_attr.HasValue() else "tube"
-    if style not in ("tube", "ribbon"):
-        _warn_once(f"{path}: mipray:curveStyle '{style}' is not tube or ribbon; using tube")
-        style = "tube"
+    style = _curve_style(prim, time)
     if len(normals):
         interpolation = str(curves.GetNormalsInterpolation())
         if _primvar_checked(
@@ -133,6 +133,38 @@ def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
             style = "ribbon"
     gprim["style"] = style
     return points, gprim
+
+
+#: The primvar that says how curves without normals look across, and the attribute it replaced.
+CURVE_STYLE = "primvars:mipray:curveStyle"
+_OLD_CURVE_STYLE = "mipray:curveStyle"
+
+
+def _curve_style(prim: Usd.Prim, time: Usd.TimeCode) -> str:
+    """``tube`` or ``ribbon``: :data:`CURVE_STYLE`, else the deprecated attribute (warned)."""
+    path = str(prim.GetPath())
+    name, value = CURVE_STYLE, None
+    primvar = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance("mipray:curveStyle")
+    if primvar and primvar.HasValue():
+        value = primvar.Get(time)
+    else:
+        old = prim.GetAttribute(_OLD_CURVE_STYLE)
+        if old and old.HasValue():
+            name, value = _OLD_CURVE_STYLE, old.Get(time)
+            _warn_once(
+                f"{path}: {_OLD_CURVE_STYLE} is deprecated: author the constant token primvar "
+                f"{CURVE_STYLE} instead"
+            )
+    if value is None:
+        return "tube"
+    if not isinstance(value, str) and hasattr(value, "__len__"):
+        # A token[] primvar: one value for the prim.
+        value = value[0] if len(value) else "tube"
+    style = str(value)
+    if style not in ("tube", "ribbon"):
+        _warn_once(f"{path}: {name} '{style}' is not tube or ribbon; using tube")
+        return "tube"
+    return style
 
 
 def _de_boor(

@@ -16,6 +16,14 @@ Each control face gets, in order:
    each face on polygonal ones);
 4. else 0.18 grey.
 
+Faces coloured by steps 3 and 4 take ``primvars:displayOpacity`` as their
+opacity: partly transparent as UsdPreviewSurface's ``opacity`` is
+(:func:`mipray.usd.material.lambertian`). A constant one is the faces'
+materials' opacity; any other interpolation crosses as ``primvars["opacity"]``
+(and a uniform ``displayColor`` with it as ``primvars["diffuseColor"]``), read by
+the mesh's own material. A material's faces keep the material's own opacity: in
+USD the display primvars stand in for a material.
+
 A material whose diffuse colour is not a constant (a texture) falls through to
 step 3 for its faces here; a subset bound to a UsdPreviewSurface also sends its
 whole network (textures and every lobe) for its faces
@@ -50,7 +58,7 @@ class SurfaceAlbedo:
     #: Linear RGB for faces without an entry of their own (all faces when the
     #: table is None).
     albedo: tuple[float, float, float]
-    #: (M, 3) float32 distinct per-face colours, or None.
+    #: (M, 4) float32 distinct per-face colours and opacities (``displayOpacity``), or None.
     face_albedos: NDArray[np.float32] | None
     #: (F,) int32 per face: an index into ``face_albedos``; None with it.
     face_albedo_indices: NDArray[np.int32] | None
@@ -60,14 +68,16 @@ class SurfaceAlbedo:
     #: Whether anything read might change over time.
     might_vary: bool
     #: ``set_mesh``'s ``primvars`` entries: ``diffuseColor`` from an interpolated
-    #: ``displayColor``, or empty.
+    #: ``displayColor``, ``opacity`` from an interpolated ``displayOpacity``, or empty.
     primvars: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: The faces ``primvars`` shades when a subset's constant colour takes others; None: all.
     primvar_faces: NDArray[np.int32] | None = None
+    #: The opacity of faces without an entry of their own (``displayOpacity``; 1 without).
+    opacity: float = 1.0
 
     def material(self, path: str) -> dict[str, Any]:
         """``set_mesh``'s ``material`` for the mesh without a UsdPreviewSurface of its own."""
-        return lambertian(path, self.albedo)
+        return lambertian(path, self.albedo, self.opacity, see_through="opacity" in self.primvars)
 
     def face_arguments(self, path: str, args: dict[str, Any], primvars: dict[str, Any]) -> None:
         """Puts the face colours into ``args``'s face material table.
@@ -84,7 +94,7 @@ class SurfaceAlbedo:
             return
         table = self.face_albedo_indices.copy()
         if args.get("material") == self.material(path):
-            own = np.asarray(self.albedo, np.float32)
+            own = np.asarray((*self.albedo, self.opacity), np.float32)
             table[(self.face_albedos[table] == own).all(axis=1)] = -1
         if any(role != "normals" for role in primvars):
             if self.primvar_faces is None or primvars.get("diffuseColor") is not self.primvars.get(
@@ -102,7 +112,9 @@ class SurfaceAlbedo:
             args.pop("face_materials", None)
             args.pop("face_material_indices", None)
             return
-        colours = [lambertian(f"{path}[{k}]", c) for k, c in enumerate(self.face_albedos)]
+        colours = [
+            lambertian(f"{path}[{k}]", c[:3], float(c[3])) for k, c in enumerate(self.face_albedos)
+        ]
         materials = colours + list(subsets or [])
         remap = np.full(len(materials), -1, np.int32)
         remap[kept] = np.arange(len(kept), dtype=np.int32)
@@ -174,22 +186,49 @@ def compute_surface_albedo(
     display: NDArray[np.float64] | None = None
     if color is not None:
         display = np.clip(per_face(color, counts, face_vertex_indices).astype(np.float64), 0, 1)
+    # The display primvars' faces' opacity (1 where a material colours the face).
+    alpha = np.ones((n_faces, 1), np.float64)
+    if opacity is not None:
+        alpha = np.clip(per_face(opacity, counts, face_vertex_indices).astype(np.float64), 0, 1)
+    # A displayOpacity that varies crosses as a primvar of its own interpolation (uniform
+    # too), read by the mesh's own material, and then so does a uniform displayColor: the
+    # faces it shades all take that one material.
+    interpolated_alpha = (
+        opacity is not None and own.source != "material" and opacity.interpolation != "constant"
+    )
+    constant_alpha = 1.0
+    if opacity is not None and own.source != "material" and not interpolated_alpha and n_faces:
+        constant_alpha = float(np.float32(alpha[0, 0]))
     # A colour per point or face-vertex is interpolated over the faces by the renderer.
     interpolated = (
         color is not None
         and own.source != "material"
-        and color.interpolation in ("vertex", "varying", "faceVarying")
+        and (
+            color.interpolation in ("vertex", "varying", "faceVarying")
+            or (interpolated_alpha and color.interpolation == "uniform")
+        )
     )
     # Faces a subset's constant-colour material colours; the primvar colours the rest.
     constant = np.zeros(n_faces, dtype=bool)
 
+    # Per face: linear RGB and opacity.
     if own.source == "material":
-        faces = np.tile(np.asarray(own.rgb, np.float64), (n_faces, 1))
+        faces = np.tile(np.asarray((*own.rgb, 1.0), np.float64), (n_faces, 1))
     elif display is not None:
-        faces = display.copy()
+        faces = np.concatenate([display, alpha], axis=1)
     else:
-        faces = np.tile(np.asarray(DEFAULT_ALBEDO, np.float64), (n_faces, 1))
-    fallback = display if display is not None else np.asarray(DEFAULT_ALBEDO, np.float64)
+        faces = np.concatenate(
+            [np.tile(np.asarray(DEFAULT_ALBEDO, np.float64), (n_faces, 1)), alpha], axis=1
+        )
+    fallback = np.concatenate(
+        [
+            display
+            if display is not None
+            else np.tile(np.asarray(DEFAULT_ALBEDO, np.float64), (n_faces, 1)),
+            alpha,
+        ],
+        axis=1,
+    )
 
     for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
         indices = _face_indices(subset, time, n_faces)
@@ -200,16 +239,20 @@ def compute_surface_albedo(
             might_vary or bound.might_vary or subset.GetIndicesAttr().ValueMightBeTimeVarying()
         )
         if bound.source == "material":
-            faces[indices] = bound.rgb
+            faces[indices] = (*bound.rgb, 1.0)
             constant[indices] = True
         else:  # a textured (or no) material: the display colour, as for the mesh
-            faces[indices] = fallback[indices] if fallback.ndim == 2 else fallback
+            faces[indices] = fallback[indices]
 
     primvars: dict[str, dict[str, Any]] = {}
     primvar_faces: NDArray[np.int32] | None = None
-    if interpolated and not constant.all():
-        assert color is not None
-        primvars["diffuseColor"] = primvar_argument(color)
+    if (interpolated or interpolated_alpha) and not constant.all():
+        if interpolated:
+            assert color is not None
+            primvars["diffuseColor"] = primvar_argument(color)
+        if interpolated_alpha:
+            assert opacity is not None
+            primvars["opacity"] = primvar_argument(opacity)
         if constant.any():
             primvar_faces = np.flatnonzero(~constant).astype(np.int32)
     if n_faces == 0 or (faces == faces[0]).all():
@@ -218,7 +261,16 @@ def compute_surface_albedo(
             if n_faces == 0
             else (float(faces[0, 0]), float(faces[0, 1]), float(faces[0, 2]))
         )
-        return SurfaceAlbedo(rgb, None, None, tuple(paths), might_vary, primvars, primvar_faces)
+        return SurfaceAlbedo(
+            rgb,
+            None,
+            None,
+            tuple(paths),
+            might_vary,
+            primvars,
+            primvar_faces,
+            opacity=constant_alpha,
+        )
     unique, inverse = np.unique(faces, axis=0, return_inverse=True)
     return SurfaceAlbedo(
         own.rgb,
@@ -228,4 +280,5 @@ def compute_surface_albedo(
         might_vary,
         primvars,
         primvar_faces,
+        opacity=constant_alpha,
     )

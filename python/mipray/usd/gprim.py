@@ -5,12 +5,18 @@
 argument), ``Points`` as its ``points`` and ``widths``; the core intersects
 them exactly (``rust/src/implicit.rs``, which also documents their ``st``).
 ``BasisCurves`` and ``NurbsCurves`` are read by :mod:`mipray.usd.curves`.
+``NurbsPatch`` crosses as its control points, orders, knots, ranges and weights;
+the core cuts it into rational Bézier patches tessellated on demand
+(``rust/src/nurbs.rs``). Its trim curves are not applied (one warning naming the
+prim); counts, orders, knots or weights that do not fit are refused by the
+delegate with one line naming the prim and attribute.
 ``extent`` plays no part in the shape. A size that leaves nothing to render
 (a zero radius, say) is refused with one line naming the prim and attribute.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
@@ -24,6 +30,16 @@ from .material import lambertian
 
 __all__ = ["GPRIM_TYPES", "curve_colors", "gprim_arguments", "is_renderable_gprim", "point_colors"]
 
+_log = logging.getLogger(__name__)
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        _log.warning("mipray: %s", message)
+
+
 #: The gprims besides ``Mesh`` that render, by schema class.
 GPRIM_TYPES: tuple[type, ...] = (
     UsdGeom.Sphere,
@@ -33,6 +49,7 @@ GPRIM_TYPES: tuple[type, ...] = (
     UsdGeom.Capsule,
     UsdGeom.Plane,
     UsdGeom.Points,
+    UsdGeom.NurbsPatch,
     *CURVE_TYPES,
     *(t for t in (getattr(UsdGeom, "Cylinder_1", None), getattr(UsdGeom, "Capsule_1", None)) if t),
 )
@@ -111,17 +128,54 @@ def _points(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], di
     return positions, {"type": "Points", "widths": widths}
 
 
+def _count(prim: Usd.Prim, name: str, time: Usd.TimeCode) -> int:
+    value = prim.GetAttribute(name).Get(time)
+    if value is None:
+        raise PrimError(str(prim.GetPath()), f"{name} is not authored")
+    return int(value)
+
+
+def _nurbs_patch(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
+    """A NurbsPatch's control points and its ``gprim`` argument (checked by the delegate)."""
+    patch = UsdGeom.NurbsPatch(prim)
+    path = str(prim.GetPath())
+    positions = np.asarray(patch.GetPointsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
+    gprim: dict[str, Any] = {
+        "type": "Nurbs",
+        "u_vertex_count": _count(prim, "uVertexCount", time),
+        "v_vertex_count": _count(prim, "vVertexCount", time),
+        "u_order": _count(prim, "uOrder", time),
+        "v_order": _count(prim, "vOrder", time),
+        "u_knots": [float(k) for k in patch.GetUKnotsAttr().Get(time) or []],
+        "v_knots": [float(k) for k in patch.GetVKnotsAttr().Get(time) or []],
+    }
+    for key, attr in (("u_range", patch.GetURangeAttr()), ("v_range", patch.GetVRangeAttr())):
+        value = attr.Get(time)
+        if value is not None:
+            gprim[key] = (float(value[0]), float(value[1]))
+    weights = patch.GetPointWeightsAttr().Get(time)
+    if weights is not None and len(weights):
+        gprim["weights"] = [float(w) for w in weights]
+    trims = patch.GetTrimCurveCountsAttr().Get(time)
+    if trims is not None and len(trims):
+        _warn_once(
+            f"{path}: trimCurve:* (trim curves) are not applied; rendering the untrimmed surface"
+        )
+    return positions, gprim
+
+
 def gprim_arguments(
     prim: Usd.Prim, time: Usd.TimeCode, transform: NDArray[np.float64]
 ) -> dict[str, Any] | None:
     """``set_mesh`` keyword arguments (without path and shading) of a non-mesh gprim.
 
-    Returns None for a Points or curves prim without points (valid USD that renders
-    nothing).
+    Returns None for a Points, curves or NurbsPatch prim without points (valid USD
+    that renders nothing).
 
     Raises:
         PrimError: a size that is not a positive number (the message names the
-            attribute), or an ``axis`` that is not X, Y or Z.
+            attribute), an ``axis`` that is not X, Y or Z, or a NurbsPatch's unauthored
+            vertex count or order.
 
     """
     empty_i = np.zeros(0, dtype=np.int32)
@@ -133,6 +187,10 @@ def gprim_arguments(
         if not prim.GetAttribute("points").Get(time):
             return None
         positions, gprim = curves_arguments(prim, time)
+    elif prim.IsA(UsdGeom.NurbsPatch):
+        if not prim.GetAttribute("points").Get(time):
+            return None
+        positions, gprim = _nurbs_patch(prim, time)
     else:
         positions, gprim = np.zeros((0, 3), dtype=np.float32), _shape(prim, time)
     gprim_schema = UsdGeom.Gprim(prim)
@@ -149,11 +207,13 @@ def gprim_arguments(
     }
 
 
-def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str, Any]:
+def point_colors(
+    prim: Usd.Prim, time: Usd.TimeCode, n_points: int, opacity: float = 1.0
+) -> dict[str, Any]:
     """Per-point ``displayColor`` of a Points prim as ``set_mesh``'s face material table.
 
     Each point is a "face" of its own; ``{}`` when the prim has one colour
-    (constant, or a single value).
+    (constant, or a single value). ``opacity`` is the prim's ``displayOpacity``.
 
     Raises:
         PrimError: a per-point ``displayColor`` whose length is not the point count.
@@ -179,16 +239,19 @@ def point_colors(prim: Usd.Prim, time: Usd.TimeCode, n_points: int) -> dict[str,
     # Rounded to float32 as the colours were when they crossed as an array.
     colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
-        "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],
+        "face_materials": [lambertian(f"{path}[{k}]", c, opacity) for k, c in enumerate(colours)],
         "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
     }
 
 
-def curve_colors(prim: Usd.Prim, time: Usd.TimeCode, n_curves: int) -> dict[str, Any]:
+def curve_colors(
+    prim: Usd.Prim, time: Usd.TimeCode, n_curves: int, opacity: float = 1.0
+) -> dict[str, Any]:
     """Per-curve (``uniform``) ``displayColor`` as ``set_mesh``'s face material table.
 
     Each curve is a "face" of its own; ``{}`` for any other interpolation (the prim's one
-    colour, :func:`mipray.usd.material.compute_albedo`'s).
+    colour, :func:`mipray.usd.material.compute_albedo`'s). ``opacity`` is the prim's
+    ``displayOpacity``.
     """
     primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
     if not primvar or not primvar.HasValue():
@@ -207,6 +270,6 @@ def curve_colors(prim: Usd.Prim, time: Usd.TimeCode, n_curves: int) -> dict[str,
     path = str(prim.GetPath())
     colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
-        "face_materials": [lambertian(f"{path}[{k}]", c) for k, c in enumerate(colours)],
+        "face_materials": [lambertian(f"{path}[{k}]", c, opacity) for k, c in enumerate(colours)],
         "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
     }

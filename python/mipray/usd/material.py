@@ -30,28 +30,47 @@ from pxr import Usd, UsdGeom, UsdShade
 
 from .shading import bound_material
 
-__all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo", "lambertian"]
+__all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo", "display_opacity", "lambertian"]
 
 _log = logging.getLogger(__name__)
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        _log.warning("mipray: %s", message)
+
 
 #: Albedo of a prim with neither a usable material nor a display color.
 DEFAULT_ALBEDO: tuple[float, float, float] = (0.18, 0.18, 0.18)
 
 
-def lambertian(name: str, rgb: Any) -> dict[str, Any]:
+def lambertian(
+    name: str, rgb: Any, opacity: float = 1.0, *, see_through: bool = False
+) -> dict[str, Any]:
     """``set_mesh``'s ``material`` for a diffuse colour alone (a display colour, a face's colour).
 
     UsdPreviewSurface's specular workflow with no specular: a lambertian surface of linear
     RGB ``rgb``, the one material model expressing what has no material of its own.
     ``name`` names it in messages (the prim's path, ``path[k]`` for a face colour).
+
+    ``opacity`` below 1 (a ``displayOpacity``), or ``see_through`` (an opacity primvar
+    shades it), makes it partly transparent as UsdPreviewSurface's ``opacity`` does with
+    ``opacityThreshold`` 0: the diffuse weighs ``opacity`` and a pass-through lobe ``1 −
+    opacity``, of ``ior`` 1 so that nothing bends or reflects (Storm's blend).
     """
     r, g, b = (float(c) for c in rgb)
-    return {
+    out: dict[str, Any] = {
         "name": name,
         "diffuseColor": (r, g, b),
         "useSpecularWorkflow": True,
         "specularColor": (0.0, 0.0, 0.0),
     }
+    if opacity < 1.0 or see_through:
+        out["opacity"] = float(opacity)
+        out["ior"] = 1.0
+    return out
 
 
 @dataclass(frozen=True)
@@ -119,6 +138,36 @@ def _display_color(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[float, float, fl
     if primvar.GetInterpolation() != UsdGeom.Tokens.constant and len(values) != 1:
         return None
     return _rgb(values[0])
+
+
+def display_opacity(prim: Usd.Prim, time: Usd.TimeCode) -> float:
+    """A gprim's one ``displayOpacity`` (constant, or a single value), clamped; 1 without one.
+
+    A value that is not a finite number is warned about, naming the prim, and read as 1.
+    """
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayOpacity")
+    if not primvar or not primvar.HasValue():
+        return 1.0
+    values = primvar.ComputeFlattened(time)
+    if not values:
+        return 1.0
+    if primvar.GetInterpolation() != UsdGeom.Tokens.constant and len(values) != 1:
+        _warn_once(
+            f"{prim.GetPath()}: primvars:displayOpacity ({primvar.GetInterpolation()}) varies "
+            "over the prim, which only meshes apply; rendering it opaque"
+        )
+        return 1.0
+    try:
+        value = float(values[0])
+    except (TypeError, ValueError):
+        value = math.nan
+    if not math.isfinite(value):
+        _warn_once(
+            f"{prim.GetPath()}: primvars:displayOpacity {values[0]!r} is not a number; "
+            "rendering it opaque"
+        )
+        return 1.0
+    return min(max(value, 0.0), 1.0)
 
 
 def compute_albedo(prim: Usd.Prim, time: Usd.TimeCode) -> Albedo:

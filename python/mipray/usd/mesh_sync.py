@@ -22,7 +22,7 @@ from ..errors import PrimError
 from .curves import CURVE_TYPES
 from .face_albedo import compute_surface_albedo, material_subsets
 from .gprim import curve_colors, gprim_arguments, point_colors
-from .material import compute_albedo, lambertian
+from .material import compute_albedo, display_opacity, lambertian
 from .mesh import mesh_arguments
 from .primvars import primvar_argument, read_normals
 from .shading import material_might_vary, shading_arguments
@@ -101,6 +101,11 @@ def read_mesh(
     shading = shading_arguments(prim, time, subsets=subsets, face_count=n_faces)
     primvars.update(shading.pop("primvars", {}))
     args.update(shading)
+    if args.get("material") != surface.material(path) and primvars.get(
+        "opacity"
+    ) is surface.primvars.get("opacity"):
+        # A material of the mesh's own took over: displayOpacity stands in for one only.
+        primvars.pop("opacity", None)
     surface.face_arguments(path, args, primvars)
     normals, normals_vary = _normals(mesh, time, args["scheme"], counts, n_points)
     if normals is not None:
@@ -171,11 +176,12 @@ def _read_gprim(
     if args is None:
         return MeshRead(None, (), data_varies)
     own = compute_albedo(prim, time)
-    args["material"] = lambertian(str(prim.GetPath()), own.rgb)
+    alpha = display_opacity(prim, time) if own.source != "material" else 1.0
+    args["material"] = lambertian(str(prim.GetPath()), own.rgb, alpha)
     if prim.IsA(UsdGeom.Points) and own.source != "material":
-        args.update(point_colors(prim, time, len(args["points"])))
+        args.update(point_colors(prim, time, len(args["points"]), alpha))
     elif any(prim.IsA(t) for t in CURVE_TYPES) and own.source != "material":
-        args.update(curve_colors(prim, time, len(args["gprim"]["curve_vertex_counts"])))
+        args.update(curve_colors(prim, time, len(args["gprim"]["curve_vertex_counts"]), alpha))
     args.update(shading_arguments(prim, time, surface_st=True))
     if prototype:
         args["prototype"] = True

@@ -46,6 +46,13 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     if mesh.left_handed {
         ns = -ns;
     }
+    if mesh.surface.curves().is_some_and(|c| c.is_tube() && c.is_straight(hit.patch as usize)) {
+        // A straight tube's pieces (a cylinder or frustum, and the spheres at its joints and
+        // ends) are its exact surface: their normal is the true one. The tube's own
+        // parameterization has no normal along its axis, so on a joint's sphere it would shade
+        // the bend as if the cylinder went on.
+        ns = hit.ng;
+    }
     if ns == Vec3A::ZERO || !ns.is_finite() {
         // Degenerate derivatives (a collapsed edge, a pole): the triangle's normal is all we have.
         ns = hit.ng;
