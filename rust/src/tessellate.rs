@@ -242,6 +242,11 @@ impl GridBoxes {
         self.0.as_ref().map_or(0, |b| b.len())
     }
 
+    /// No boxes: a coarse or hand-made grid.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_none()
+    }
+
     /// `cull` (by stride) followed by `sub_boxes`, in `spare`'s block if it has one of that
     /// size and nothing else shares it (an evicted entry's), else in a new one.
     fn refill(cull: [Bounds3; CULL_STRIDES], sub_boxes: &[Bounds3], spare: GridBoxes) -> Self {
@@ -351,7 +356,7 @@ impl CacheEntry for Tessellation {
     fn to_stored(&self) -> StoredTessellation {
         let (chord_error, seam_radius, seam_normal, domain) = (self.chord_error, self.seam_radius, self.seam_normal, self.domain);
         StoredTessellation(match &self.verts.0 {
-            VertStore::Quad(verts) if self.n == 2 && self.boxes.len() == 0 => {
+            VertStore::Quad(verts) if self.n == 2 && self.boxes.is_empty() => {
                 StoredRepr::Quad { verts: *verts, chord_error, seam_radius, seam_normal, domain }
             }
             store => StoredRepr::Grid {
