@@ -149,7 +149,7 @@ impl LightBounds {
                 lo: m.bounds().min,
                 hi: m.bounds().max,
                 // Its whole area facing the point at best (an upper bound, as the others').
-                phi: lum * m.area(),
+                phi: lum * m.max_area(),
                 normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
                 cos_theta_e: 0.0,
             },
@@ -524,8 +524,9 @@ impl LightSampler {
     }
 
     /// Calls `f(light index, hit)` for every area light the ray from `o` along unit `d` meets
-    /// (on its emitting side) before `t_max`, finding them by the tree's boxes.
-    pub fn for_each_crossed(&self, lights: &[Light], o: Vec3A, d: Vec3A, t_max: f32, mut f: impl FnMut(usize, LightHit)) {
+    /// (on its emitting side) before `t_max`, finding them by the tree's boxes; moving lights
+    /// posed at shutter time `time` (the ray's).
+    pub fn for_each_crossed(&self, lights: &[Light], o: Vec3A, d: Vec3A, t_max: f32, time: f32, mut f: impl FnMut(usize, LightHit)) {
         if self.nodes.is_empty() {
             return;
         }
@@ -543,7 +544,7 @@ impl LightSampler {
             }
             match self.nodes[node].kind {
                 NodeKind::Leaf(light) => {
-                    if let Some(hit) = lights.get(light as usize).and_then(|l| l.intersect(o, d, t_max)) {
+                    if let Some(hit) = lights.get(light as usize).and_then(|l| l.intersect_at(o, d, t_max, time)) {
                         f(light as usize, hit);
                     }
                 }
@@ -777,12 +778,12 @@ mod tests {
         let lights: Vec<Light> = (0..20).map(|i| sphere(Vec3A::new(i as f32 * 2.0, 0.0, 5.0), 0.5, 1.0)).collect();
         let s = LightSampler::new(&lights);
         let mut hits = Vec::new();
-        s.for_each_crossed(&lights, Vec3A::new(14.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, |j, h| hits.push((j, h.t)));
+        s.for_each_crossed(&lights, Vec3A::new(14.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, 0.0, |j, h| hits.push((j, h.t)));
         assert_eq!(hits.len(), 1);
         assert_eq!(hits[0].0, 7);
         assert!((hits[0].1 - 4.5).abs() < 1e-5);
         let mut none = 0;
-        s.for_each_crossed(&lights, Vec3A::new(15.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, |_, _| none += 1);
+        s.for_each_crossed(&lights, Vec3A::new(15.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, 0.0, |_, _| none += 1);
         assert_eq!(none, 0);
     }
 }
