@@ -334,6 +334,9 @@ pub struct MeshLightData {
     pub normalize: bool,
     pub shadow_enable: bool,
     pub links: LinkData,
+    /// UsdLux `materialGlowTintsLight` with a bound material mipray reads: the material's
+    /// `emissiveColor` multiplies `color` (the USD front end decides, `material_tint`).
+    pub tint: bool,
 }
 
 /// Vertices per side of the grid each patch of an emissive subdivision surface (or gprim) is
@@ -365,25 +368,38 @@ pub fn light_triangles(surface: &dyn mipray::patch::LimitSurface, transform: &Ma
     out
 }
 
-/// The core light an emissive mesh `path` makes: its surface's triangles ([`light_triangles`],
+/// The core light an emissive mesh `name` makes: its surface's triangles ([`light_triangles`],
 /// polygonal meshes at their corners, others at [`MESH_LIGHT_GRID`]) emitting
-/// `color · intensity · 2^exposure` as radiance from their front (both sides when
-/// `double_sided`), divided by their area with `normalize` (UsdLux). `None` when the surface
-/// has no area.
+/// `tint · color · intensity · 2^exposure` as radiance from their front (both sides when
+/// `double_sided`), divided by their area with `normalize` (UsdLux; `tint` is the bound
+/// material's emission under `materialGlowTintsLight`, else 1). `transform` places it
+/// (object to render); with `motion` it moves instead ([`mipray::light::TriangleLight::moving`]: `transform`
+/// is then ignored and the emission follows each ray's time). `None` when the surface has no
+/// area.
+#[allow(clippy::too_many_arguments)]
 pub fn mesh_light(
-    path: &str,
+    name: &str,
     light: &MeshLightData,
+    tint: Vec3A,
     surface: &dyn mipray::patch::LimitSurface,
     polygonal: bool,
     transform: &Mat4,
+    motion: Option<&mipray::motion::MotionTransform>,
     left_handed: bool,
     double_sided: bool,
 ) -> Option<Light> {
     let grid = if polygonal { 2 } else { MESH_LIGHT_GRID };
-    let tris = mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?;
+    let tris = match motion {
+        Some(motion) => mipray::light::TriangleLight::moving(
+            light_triangles(surface, &Mat4::IDENTITY, left_handed, grid),
+            double_sided,
+            motion.clone(),
+        )?,
+        None => mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?,
+    };
     let f = |x: f32| if x.is_finite() { x } else { 0.0 };
-    let color = Vec3A::from(light.color.map(f));
-    let mut l = Light::usd_area(path, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
+    let color = Vec3A::from(light.color.map(f)) * Vec3A::from(tint.to_array().map(|x| f(x).max(0.0)));
+    let mut l = Light::usd_area(name, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
     l.casts_shadows = light.shadow_enable;
     Some(l)
 }

@@ -164,12 +164,15 @@ class RenderDelegate:
                 ``face_materials``, or -1 for the mesh's ``material``. Given
                 together with ``face_materials``.
             light: UsdLux ``MeshLightAPI``: the mesh is then an area light and
-                not a surface (its material unread): ``{"intensity",
-                "exposure", "color", "normalize", "shadow_enable", "unlit",
-                "no_shadow"}`` as :meth:`set_light` takes them, every key
-                optional. Its limit surface, tessellated for lighting (polygons
-                at their corners, subdivision patches 4×4), emits from its
-                front faces (both with ``double_sided``).
+                not a surface: ``{"intensity", "exposure", "color",
+                "normalize", "shadow_enable", "unlit", "no_shadow"}`` as
+                :meth:`set_light` takes them, and ``"tint"`` (bool: the
+                material's ``emissiveColor`` multiplies ``color``,
+                UsdLux ``materialGlowTintsLight``), every key optional. Its
+                limit surface, tessellated for lighting (polygons at their
+                corners, subdivision patches 4×4), emits from its front faces
+                (both with ``double_sided``), from every instance of a
+                prototype mesh, posed at each ray's time when it moves.
 
         Raises:
             PrimDataError: the data is inconsistent (the one check of a mesh's

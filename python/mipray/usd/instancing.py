@@ -39,6 +39,7 @@ from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
 from .gprim import is_renderable_gprim
+from .light import material_tint, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
@@ -344,6 +345,11 @@ class Instancing:
             read = read_mesh(prim, walk.time, self._relative(prim, root, walk), prototype=True)
             if read.args is None:
                 return False
+            # A mesh light in a prototype emits from every instance (its links: none).
+            light = mesh_light_arguments(prim, walk.time)
+            if light is not None:
+                tint = material_tint(prim, prim, read.args.get("material"), walk.time)
+                read.args["light"] = {**light, "tint": tint}
             self.delegate.set_mesh(dpath, **read.args)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
