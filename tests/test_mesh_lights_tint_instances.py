@@ -75,6 +75,7 @@ def test_the_bound_materials_emission_tints_the_light(native, caplog) -> None:
         np.testing.assert_allclose(tinted[..., c][lit], tint[c] * plain[..., c][lit], rtol=1e-4)
     (entry,) = stats["scene"]["lights"]
     assert entry["name"] == "/World/Glow" and entry["kind"] == "mesh"
+    np.testing.assert_allclose(entry["radiance"], [intensity * c for c in tint], rtol=1e-6)
     # independent: the light's own colour alone, whatever the material.
     prim.CreateAttribute("light:materialSyncMode", Sdf.ValueTypeNames.Token).Set("independent")
     independent, _ = render_with_stats(stage)

@@ -302,6 +302,7 @@ class RenderDelegate:
         ies_file: str | None = None,
         ies_angle_scale: float = 0.0,
         ies_normalize: bool = False,
+        ies_down: tuple[float, float, float] = ...,  # (0, -1, 0)
         portals: list[str] | None = None,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
@@ -321,10 +322,12 @@ class RenderDelegate:
         (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are
         UsdLux's ShapingAPI on sphere, rect and disk lights (the defaults
         shape nothing); ``ies_file``, ``ies_angle_scale`` and ``ies_normalize``
-        are its IES profile (LM-63, TILT=NONE, type C: a file that cannot be
-        read or parsed is named in one warning and the light renders without
-        it); ``unlit`` and ``no_shadow`` name the mesh prims the
-        light's light- and shadow-linking collections leave out.
+        are its IES profile (LM-63, photometric types A, B and C, tilt tables
+        read at the angle between the light's aim and ``ies_down``, the
+        stage's down: a file that cannot be read or parsed is named in one
+        warning and the light renders without it); ``unlit`` and
+        ``no_shadow`` name the mesh prims the light's light- and
+        shadow-linking collections leave out.
 
         Raises:
             ValueError: a non-finite value or a non-positive size; the message

@@ -37,7 +37,7 @@ mod ies;
 mod mesh;
 mod portal;
 
-pub use ies::IesProfile;
+pub use ies::{IesProfile, Photometry, Tilt};
 pub use portal::{Portal, PORTAL_FRACTION};
 
 pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
@@ -201,19 +201,22 @@ pub struct Shaping {
 }
 
 /// An IES profile on a light (UsdLux `ShapingAPI`'s `ies:*` inputs), evaluated as
-/// [`IesProfile`] documents: the candela toward the emission direction, divided by the
-/// profile's mean with `normalize`.
+/// [`IesProfile`] documents: the candela toward the emission direction (times the tilt
+/// table's factor at the light's tilt), divided by the profile's mean with `normalize`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IesShaping {
     pub profile: IesProfile,
     /// The file, for stats and messages.
     pub file: String,
-    /// `ies:angleScale`, > −1.
+    /// `ies:angleScale`, > −1 (type C profiles only).
     pub angle_scale: f32,
     pub normalize: bool,
     /// The light's local +X and +Y in render space (unit): the azimuth's frame.
     pub x: Vec3A,
     pub y: Vec3A,
+    /// The light's tilt, radians: the angle between its aim (−Z) and the stage's down, at
+    /// which a tilt table is read (0 without one).
+    pub tilt: f32,
 }
 
 impl IesShaping {
@@ -221,12 +224,17 @@ impl IesShaping {
     /// multiplied by.
     pub fn factor(&self, axis: Vec3A, w: Vec3A) -> f32 {
         use std::f32::consts::PI;
-        let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
-        // hdEmbree's azimuth: of the direction toward the light, in the light's XY plane.
-        let phi = (-w.dot(self.y)).atan2(-w.dot(self.x));
-        let scale = 1.0 + self.angle_scale;
-        let theta = if scale > 0.0 { ((theta - PI) / scale + PI).clamp(0.0, PI) } else { theta };
-        let c = self.profile.candela(theta, phi);
+        let c = match self.profile.kind {
+            ies::Photometry::C => {
+                let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
+                // hdEmbree's azimuth: of the direction toward the light, in the light's XY plane.
+                let phi = (-w.dot(self.y)).atan2(-w.dot(self.x));
+                let scale = 1.0 + self.angle_scale;
+                let theta = if scale > 0.0 { ((theta - PI) / scale + PI).clamp(0.0, PI) } else { theta };
+                self.profile.candela(theta, phi)
+            }
+            _ => self.profile.candela_local(Vec3A::new(w.dot(self.x), w.dot(self.y), -w.dot(axis))),
+        } * self.tilt_factor();
         if self.normalize {
             let m = self.profile.mean();
             if m > 0.0 {
@@ -239,13 +247,19 @@ impl IesShaping {
         }
     }
 
+    /// The tilt table's factor at the light's tilt (1 without a table).
+    pub fn tilt_factor(&self) -> f32 {
+        self.profile.tilt.as_ref().map_or(1.0, |t| t.factor(self.tilt))
+    }
+
     /// The largest [`IesShaping::factor`] (an upper bound for the light tree's importance).
     pub fn peak(&self) -> f32 {
         let m = self.profile.mean();
+        let peak = self.profile.peak() * self.tilt_factor();
         match (self.normalize, m > 0.0) {
-            (true, true) => self.profile.peak() / m,
+            (true, true) => peak / m,
             (true, false) => 0.0,
-            _ => self.profile.peak(),
+            _ => peak,
         }
     }
 }
@@ -845,6 +859,8 @@ impl Light {
             out["area"] = serde_json::json!(m.area());
             out["two_sided"] = serde_json::json!(m.two_sided);
             out["moving"] = serde_json::json!(m.is_moving());
+            // What it emits, a bound material's tint included.
+            out["radiance"] = serde_json::json!([self.radiance_scale.x, self.radiance_scale.y, self.radiance_scale.z]);
         }
         if let Some(s) = &self.shaping {
             out["shaping"] = serde_json::json!({
@@ -856,11 +872,19 @@ impl Light {
             if let Some(ies) = &s.ies {
                 out["shaping"]["ies"] = serde_json::json!({
                     "file": ies.file,
+                    "photometric_type": format!("{:?}", ies.profile.kind),
                     "angle_scale": ies.angle_scale,
                     "normalize": ies.normalize,
                     "mean_candela": ies.profile.mean(),
                     "peak_candela": ies.profile.peak(),
                 });
+                if let Some(t) = &ies.profile.tilt {
+                    out["shaping"]["ies"]["tilt"] = serde_json::json!({
+                        "geometry": t.geometry,
+                        "angle_deg": ies.tilt.to_degrees(),
+                        "factor": ies.tilt_factor(),
+                    });
+                }
             }
         }
         if !self.illuminates.is_all() {

@@ -261,6 +261,68 @@ struct Node {
     /// A leaf's exact shape, for tests the bounds are too loose for (a point beside a flat light
     /// is inside its box's bounding sphere).
     shape: Option<Exact>,
+    /// A leaf light's IES profile, which scales its importance toward each point: an index
+    /// into [`LightSampler::profiles`].
+    profile: Option<u32>,
+}
+
+/// A light shaped by an IES profile, as its leaf weighs it: `bounds.phi` holds the profile's
+/// peak, and the importance at p is scaled by the profile's largest value toward p over its
+/// peak.
+#[derive(Clone, Debug)]
+struct Profiled {
+    /// The light's bounding sphere, render space.
+    center: Vec3A,
+    radius: f32,
+    /// Its axis (−Z) and profile.
+    axis: Vec3A,
+    ies: std::sync::Arc<crate::light::IesShaping>,
+}
+
+/// The least share of its peak a profiled light keeps in the tree's weights: a profile that is
+/// zero toward the centre of a wide light may not be zero toward all of it, and a light never
+/// chosen where it does reach would be lost (a bias); this keeps every light choosable.
+const PROFILE_FLOOR: f32 = 1.0 / 256.0;
+
+impl Profiled {
+    fn of(light: &Light) -> Option<Profiled> {
+        let shaping = light.shaping.as_ref()?;
+        let ies = shaping.ies.clone()?;
+        let (center, radius) = match light.shape {
+            LightShape::Sphere { center, radius } => (center, radius),
+            LightShape::Rect { center, u, v, .. } => (center, (u.abs() + v.abs()).length()),
+            LightShape::Disk { center, u, v, .. } => (center, u.length().max(v.length())),
+            LightShape::Cylinder { center, axis, radius, .. } => (center, axis.length() + radius),
+            _ => return None,
+        };
+        Some(Profiled { center, radius, axis: shaping.axis, ies })
+    }
+
+    /// The profile's largest value toward p over its peak, in (0, 1]: the factor toward the
+    /// light's centre and toward four points on its bounding sphere's rim as seen from p (the
+    /// directions a finite light emits toward p span that cone), at least [`PROFILE_FLOOR`].
+    fn share(&self, p: Vec3A) -> f32 {
+        let peak = self.ies.peak();
+        if !(peak > 0.0 && peak.is_finite()) {
+            return 1.0;
+        }
+        let to_p = p - self.center;
+        let d = to_p.length();
+        if !(d > self.radius) {
+            return 1.0;
+        }
+        let w = to_p / d;
+        let mut best = self.ies.factor(self.axis, w);
+        if self.radius > 0.0 {
+            let (t, b) = crate::sampling::frame(w);
+            let r = self.radius / d;
+            for e in [t, -t, b, -b] {
+                // From a rim point of the sphere toward p.
+                best = best.max(self.ies.factor(self.axis, (w - e * r).normalize_or(w)));
+            }
+        }
+        (best / peak).clamp(PROFILE_FLOOR, 1.0)
+    }
 }
 
 /// What a single light's importance can test exactly.
@@ -304,10 +366,13 @@ impl Exact {
 
 impl Node {
     /// The bounds' importance, zero where a leaf's exact shape says it cannot light p.
-    fn importance(&self, p: Vec3A, n: Vec3A) -> f32 {
+    fn importance(&self, p: Vec3A, n: Vec3A, profiles: &[Profiled]) -> f32 {
         match self.shape {
             Some(e) if !e.can_light(p, n) => 0.0,
-            _ => self.bounds.importance(p, n),
+            _ => match self.profile.and_then(|i| profiles.get(i as usize)) {
+                Some(profile) => self.bounds.importance(p, n) * profile.share(p),
+                None => self.bounds.importance(p, n),
+            },
         }
     }
 }
@@ -367,6 +432,10 @@ pub struct LightSampler {
     any_wide: bool,
     /// Per light: its exact shape (area lights), copied into its leaf.
     exact: Vec<Option<Exact>>,
+    /// The IES-profiled lights' weighing, indexed by their leaves.
+    profiles: Vec<Profiled>,
+    /// Per light: its index in `profiles`, copied into its leaf.
+    profiled: Vec<Option<u32>>,
 }
 
 /// The lights as weighed at one shading point: make once per point ([`LightSampler::at`]), then
@@ -387,6 +456,11 @@ impl LightSampler {
         let mut s = LightSampler { trails: vec![None; lights.len()], entry: vec![None; lights.len()], ..Default::default() };
         let mut items: Vec<(LightBounds, u32)> = Vec::new();
         s.exact = lights.iter().map(Exact::of).collect();
+        for l in lights {
+            let p = Profiled::of(l);
+            s.profiled.push(p.is_some().then_some(s.profiles.len() as u32));
+            s.profiles.extend(p);
+        }
         for (i, l) in lights.iter().enumerate() {
             match &l.shape {
                 LightShape::Distant { direction, angle_deg } => {
@@ -445,7 +519,8 @@ impl LightSampler {
         let total = items[1..].iter().fold(items[0].0, |acc, (b, _)| LightBounds::union(&acc, b));
         if items.len() == 1 {
             let shape = self.exact.get(items[0].1 as usize).copied().flatten();
-            self.nodes.push(Node { bounds: total, kind: NodeKind::Leaf(items[0].1), shape });
+            let profile = self.profiled.get(items[0].1 as usize).copied().flatten();
+            self.nodes.push(Node { bounds: total, kind: NodeKind::Leaf(items[0].1), shape, profile });
             self.trails[items[0].1 as usize] = Some(trail);
             return index;
         }
@@ -457,7 +532,7 @@ impl LightSampler {
             items.sort_by(|a, b| a.0.centroid()[dim].total_cmp(&b.0.centroid()[dim]).then(a.1.cmp(&b.1)));
             items.len() / 2
         });
-        self.nodes.push(Node { bounds: total, kind: NodeKind::Interior(0), shape: None });
+        self.nodes.push(Node { bounds: total, kind: NodeKind::Interior(0), shape: None, profile: None });
         let (left, right) = items.split_at_mut(mid);
         self.build(left, depth + 1, trail);
         let second = self.build(right, depth + 1, trail | (1u64 << depth.min(63)));
@@ -507,7 +582,7 @@ impl LightSampler {
             cdf.push(total);
         }
         for &(node, _) in &self.cut {
-            total += self.nodes[node as usize].importance(p, n);
+            total += self.nodes[node as usize].importance(p, n, &self.profiles);
             cdf.push(total);
         }
         LightsAt { sampler: self, p, n, cdf }
@@ -586,8 +661,8 @@ impl LightsAt<'_> {
                 NodeKind::Leaf(light) => return Some((light as usize, prob)),
                 NodeKind::Interior(second) => {
                     let (a, b) = (node + 1, second as usize);
-                    let ia = s.nodes[a].importance(self.p, self.n);
-                    let ib = s.nodes[b].importance(self.p, self.n);
+                    let ia = s.nodes[a].importance(self.p, self.n, &s.profiles);
+                    let ib = s.nodes[b].importance(self.p, self.n, &s.profiles);
                     if !(ia + ib > 0.0) {
                         return None;
                     }
@@ -623,8 +698,8 @@ impl LightsAt<'_> {
                 NodeKind::Leaf(_) => return prob,
                 NodeKind::Interior(second) => {
                     let (a, b) = (node + 1, second as usize);
-                    let ia = s.nodes[a].importance(self.p, self.n);
-                    let ib = s.nodes[b].importance(self.p, self.n);
+                    let ia = s.nodes[a].importance(self.p, self.n, &s.profiles);
+                    let ib = s.nodes[b].importance(self.p, self.n, &s.profiles);
                     if !(ia + ib > 0.0) {
                         return 0.0;
                     }
@@ -716,6 +791,45 @@ mod tests {
 
     fn sphere(c: Vec3A, r: f32, l: f32) -> Light {
         Light::usd_area("/s", LightShape::Sphere { center: c, radius: r }, l, 0.0, Vec3A::ONE, false)
+    }
+
+    /// A small sphere at `c` shaped by a narrow type C beam (1000 cd within 10°, nothing past
+    /// 15°) about `axis`.
+    fn beam(c: Vec3A, axis: Vec3A) -> Light {
+        let ies = crate::light::IesProfile::parse("TILT=NONE\n1 -1 1 3 1 1 2 0 0 0 1 1 10\n0 10 15\n0\n1000 1000 0\n").unwrap();
+        let (x, y) = axis.any_orthonormal_pair();
+        let shaping =
+            crate::light::IesShaping { profile: ies, file: "beam.ies".into(), angle_scale: 0.0, normalize: false, x, y, tilt: 0.0 };
+        let mut l = sphere(c, 0.01, 1.0);
+        l.shaping = Some(crate::light::Shaping::with_ies(None, axis, shaping));
+        l
+    }
+
+    #[test]
+    fn an_ies_beam_weighs_its_light_by_the_profile_toward_the_point() {
+        // Two equal beams at the same distance from p: one aimed at p, one away. Without the
+        // profile in the weights each would be chosen half the time.
+        let lights = vec![beam(Vec3A::new(-1.0, 0.0, 3.0), Vec3A::NEG_Z), beam(Vec3A::new(1.0, 0.0, 3.0), Vec3A::Z)];
+        let s = LightSampler::new(&lights);
+        let (p, n) = (Vec3A::new(-1.0, 0.0, 0.0), Vec3A::Z);
+        let (aimed, away) = (s.pmf(p, n, 0), s.pmf(p, n, 1));
+        assert!(aimed > 0.99 && away > 0.0 && (aimed + away - 1.0).abs() < 1e-5, "{aimed} {away}");
+        // Still unbiased: the estimate with the tree's choices is the beam's I / d² (the other
+        // sends nothing here), the small sphere's intensity being L · πr² · candela.
+        let truth = 1000.0 * PI * 0.01 * 0.01 / 9.0;
+        let mut rng = Sampler::new(4, 5, 6);
+        let (mut e, trials) = (0.0f64, 100_000);
+        for k in 0..trials {
+            let (j, prob) = s.sample(p, n, (k as f32 + 0.5) / trials as f32).unwrap();
+            if let Some(ls) = lights[j].sample(p, n, rng.next_f32(), rng.next_f32()) {
+                e += f64::from(ls.weight().x * ls.wi.dot(n).max(0.0) / prob);
+            }
+        }
+        let e = (e / f64::from(trials)) as f32;
+        assert!((e - truth).abs() < 0.01 * truth, "{e} vs {truth}");
+        // Off the beam of the first, inside neither: both kept at the floor, never dropped.
+        let q = Vec3A::new(0.0, 5.0, 0.0);
+        assert!(s.pmf(q, n, 0) > 0.0 && s.pmf(q, n, 1) > 0.0);
     }
 
     #[test]

@@ -273,6 +273,9 @@ def area_light_arguments(
             args["ies_file"] = _resolve(ies, ies_file)
             args["ies_angle_scale"] = float(shaping.GetShapingIesAngleScaleAttr().Get(time))
             args["ies_normalize"] = bool(shaping.GetShapingIesNormalizeAttr().Get(time))
+            # A tilt table is read at the light's aim's angle from the stage's down.
+            z_up = UsdGeom.GetStageUpAxis(prim.GetStage()) == UsdGeom.Tokens.z
+            args["ies_down"] = (0.0, 0.0, -1.0) if z_up else (0.0, -1.0, 0.0)
             if not math.isfinite(args["ies_angle_scale"]):
                 raise PrimError(path, "inputs:shaping:ies:angleScale is not finite")
         if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
