@@ -378,25 +378,57 @@ impl Node {
 }
 
 /// What the top level knows about a distant or dome light.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Infinite {
     light: u32,
     /// Irradiance luminance on a surface facing it (distant) or π × mean radiance (dome).
     irradiance: f32,
     /// Distant lights: toward the light, and the cone's half-angle; a dome has none.
     cone: Option<(Vec3A, f32, f32)>,
+    /// A dome's PortalLights (empty for others): its importance is what comes through them.
+    portals: std::sync::Arc<[crate::light::Portal]>,
 }
 
+/// The least share of its unportalled importance a dome with portals keeps: it still lights
+/// every direction (the portals only guide its samples), so where no portal faces a point, or
+/// the stage's portals miss an opening, it must stay choosable.
+const PORTAL_IMPORTANCE_FLOOR: f32 = 1.0 / 32.0;
+
 impl Infinite {
-    fn importance(&self, n: Vec3A) -> f32 {
+    /// At point p with normal n (zero: no horizon).
+    fn importance(&self, p: Vec3A, n: Vec3A) -> f32 {
         match self.cone {
             Some((toward, sin_max, cos_max)) if n != Vec3A::ZERO => {
                 let cos_n = n.dot(toward);
                 let sin_n = safe_sqrt(1.0 - cos_n * cos_n);
                 self.irradiance * cos_sub_clamped(sin_n, cos_n, sin_max, cos_max).max(0.0)
             }
+            _ if !self.portals.is_empty() => self.irradiance * portal_share(&self.portals, p, n),
             _ => self.irradiance,
         }
+    }
+}
+
+/// The share of a uniform dome's irradiance at p (normal n) that arrives through `portals`:
+/// Σ solid angle × cosine to n over π (over 2π, the hemisphere, with no normal), each portal's
+/// solid angle estimated from its centre ([`crate::light::Portal::weight`]), capped at 1 and at
+/// least [`PORTAL_IMPORTANCE_FLOOR`].
+fn portal_share(portals: &[crate::light::Portal], p: Vec3A, n: Vec3A) -> f32 {
+    let through: f32 = portals
+        .iter()
+        .map(|q| {
+            let w = q.weight(p);
+            if w > 0.0 && n != Vec3A::ZERO {
+                w * n.dot((q.center - p).normalize_or_zero()).max(0.0) / PI
+            } else {
+                w / (2.0 * PI)
+            }
+        })
+        .sum();
+    if through.is_finite() {
+        through.clamp(PORTAL_IMPORTANCE_FLOOR, 1.0)
+    } else {
+        1.0
     }
 }
 
@@ -471,6 +503,7 @@ impl LightSampler {
                             light: i as u32,
                             irradiance,
                             cone: Some((-*direction, theta_max.sin(), theta_max.cos())),
+                            portals: Vec::new().into(),
                         });
                     }
                 }
@@ -478,7 +511,7 @@ impl LightSampler {
                     let mean = env.as_ref().map_or(Vec3A::ONE, |e| e.mean());
                     let irradiance = nominal(PI * luminance(l.radiance_scale * mean));
                     if irradiance > 0.0 {
-                        s.infinite.push(Infinite { light: i as u32, irradiance, cone: None });
+                        s.infinite.push(Infinite { light: i as u32, irradiance, cone: None, portals: l.portals.clone() });
                     }
                 }
                 _ => {
@@ -578,7 +611,7 @@ impl LightSampler {
         let mut cdf = Vec::with_capacity(self.infinite.len() + self.cut.len());
         let mut total = 0.0f32;
         for i in &self.infinite {
-            total += i.importance(n);
+            total += i.importance(p, n);
             cdf.push(total);
         }
         for &(node, _) in &self.cut {
@@ -830,6 +863,34 @@ mod tests {
         // Off the beam of the first, inside neither: both kept at the floor, never dropped.
         let q = Vec3A::new(0.0, 5.0, 0.0);
         assert!(s.pmf(q, n, 0) > 0.0 && s.pmf(q, n, 1) > 0.0);
+    }
+
+    #[test]
+    fn a_dome_with_portals_weighs_what_comes_through_them() {
+        // A uniform dome beside a sphere light; a 4 × 4 window 4 above p, facing down.
+        let dome = Light::usd_area("/sky", LightShape::Dome(None), 1.0, 0.0, Vec3A::ONE, false);
+        let lamp = sphere(Vec3A::new(3.0, 0.0, 2.0), 0.2, 5.0);
+        let window = crate::light::Portal {
+            name: "/window".into(),
+            center: Vec3A::new(0.0, 0.0, 4.0),
+            u: Vec3A::X * 2.0,
+            v: Vec3A::Y * 2.0,
+            normal: Vec3A::NEG_Z,
+        };
+        let open = LightSampler::new(&[dome.clone(), lamp.clone()]);
+        let mut guided = dome;
+        guided.portals = vec![window].into();
+        let portals = LightSampler::new(&[guided, lamp]);
+        let (p, n) = (Vec3A::ZERO, Vec3A::Z);
+        // The dome's weight relative to the lamp's, scaled by the window's share of the sky:
+        // its solid angle 16 · 1 / 4² = 1 sr, at normal incidence, over π.
+        let ratio = |s: &LightSampler| s.pmf(p, n, 0) / s.pmf(p, n, 1);
+        let share = ratio(&portals) / ratio(&open);
+        assert!((share - 1.0 / PI).abs() < 1e-4, "{share}");
+        // Behind the window (no portal faces the point): the floor, never zero.
+        let (behind, down) = (Vec3A::new(0.0, 0.0, 6.0), Vec3A::NEG_Z);
+        let share = portals.pmf(behind, down, 0) / portals.pmf(behind, down, 1) / (open.pmf(behind, down, 0) / open.pmf(behind, down, 1));
+        assert!((share - PORTAL_IMPORTANCE_FLOOR).abs() < 1e-5, "{share}");
     }
 
     #[test]
