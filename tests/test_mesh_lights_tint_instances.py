@@ -191,3 +191,17 @@ def test_a_moving_mesh_light_gives_lamberts_irradiance_averaged_over_the_shutter
     assert float(np.abs(frozen[lit] / truth[lit] - 1.0).max()) > 0.3
     (entry,) = stats["scene"]["lights"]
     assert entry["moving"] is True
+
+
+def test_an_instanced_mesh_lights_links_are_resolved(native) -> None:
+    stage = stage_with_camera()
+    instanced_squares(stage, native=False)
+    glow = stage.GetPrimAtPath("/World/Lamps/Protos/Lamp/Glow")
+    link = UsdLux.LightAPI(glow).GetLightLinkCollectionAPI()
+    link.CreateIncludeRootAttr(False)
+    link.CreateIncludesRel().AddTarget("/World/Nothing")
+    image, stats = render_with_stats(stage, width=17, samples=4)
+    # The floor is in neither instance's collection: black.
+    assert float(image.max()) == 0.0
+    lights = stats["scene"]["lights"]
+    assert len(lights) == 2 and all(e["not_illuminating"] == ["/World/Ground"] for e in lights)

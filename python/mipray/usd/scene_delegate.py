@@ -233,7 +233,9 @@ class UsdSceneDelegate:
         self._xform_only: set[str] = set()  # records whose transform alone changed in time
         self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
-        self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
+        self._instancing = Instancing(
+            delegate, self.purposes, self.sync_counts, mesh_paths=self._gprim_paths
+        )
         self._poser = SkelPoser()
         # Before anything is read: .mtlx references usd-core cannot compose.
         load_mtlx_references(stage)
