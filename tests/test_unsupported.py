@@ -70,8 +70,10 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     emitter = add_cube(stage, "/World/Emitter").GetPrim()
     UsdLux.MeshLightAPI.Apply(emitter)  # rendered: a light
     emitter.CreateAttribute("light:materialSyncMode", Sdf.ValueTypeNames.Token).Set(
-        "materialGlowTintsLight"
-    )
+        "independent"
+    )  # read: not listed
+    ball = UsdGeom.Sphere.Define(stage, "/World/GlowBall").GetPrim()
+    UsdLux.MeshLightAPI.Apply(ball)  # only a Mesh becomes a light: listed
 
     # An instanceable Mesh: USD instances its descendants, not its own geometry.
     add_cube(stage, "/Protos/Box")
@@ -140,9 +142,7 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
             Unsupported(key_path, "light input inputs:diffuse"),
-            Unsupported(
-                "/World/Emitter", "MeshLightAPI light:materialSyncMode = materialGlowTintsLight"
-            ),
+            Unsupported("/World/GlowBall", "MeshLightAPI"),
             Unsupported(
                 "/World/InstMesh",
                 "instanceable gprim (its own geometry is not instanced) Mesh",

@@ -74,15 +74,23 @@ pub struct IesData {
     pub profile: Result<mipray::light::IesProfile, String>,
     pub angle_scale: f32,
     pub normalize: bool,
+    /// Render space's down (unit; the stage's up axis negated): a tilt table is read at the
+    /// angle between the light's aim and it.
+    pub down: [f32; 3],
 }
 
 impl IesData {
-    /// Reads and parses `file` (an error is kept, to be warned about when the light is used).
-    pub fn read(file: &str, angle_scale: f32, normalize: bool) -> IesData {
+    /// Reads and parses `file` (an error is kept, to be warned about when the light is used);
+    /// a `TILT=<name>` file is read beside it.
+    pub fn read(file: &str, angle_scale: f32, normalize: bool, down: [f32; 3]) -> IesData {
+        let dir = std::path::Path::new(file).parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+        let tilt_file = |name: &str| -> Result<String, String> {
+            std::fs::read(dir.join(name)).map(|b| String::from_utf8_lossy(&b).into_owned()).map_err(|e| e.to_string())
+        };
         let profile = std::fs::read(file)
             .map_err(|e| e.to_string())
-            .and_then(|bytes| mipray::light::IesProfile::parse(&String::from_utf8_lossy(&bytes)));
-        IesData { file: file.to_string(), profile, angle_scale, normalize }
+            .and_then(|bytes| mipray::light::IesProfile::parse_with(&String::from_utf8_lossy(&bytes), &tilt_file));
+        IesData { file: file.to_string(), profile, angle_scale, normalize, down }
     }
 }
 
@@ -196,6 +204,18 @@ impl LightPrim {
             l.shaping = mipray::light::Shaping::new(axis, sh.cone_angle_deg, sh.cone_softness, sh.focus, Vec3A::from(sh.focus_tint.map(f)));
             match sh.ies.as_ref().map(|ies| (ies, &ies.profile)) {
                 Some((ies, Ok(profile))) => {
+                    if profile.kind != mipray::light::Photometry::C && ies.angle_scale != 0.0 {
+                        let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                        if warned.insert((self.path.clone(), format!("{} angleScale", ies.file))) {
+                            log::warn!(
+                                "{}: ies:angleScale applies to type C profiles only; {} is type {:?}, rendered unscaled",
+                                self.path,
+                                ies.file,
+                                profile.kind
+                            );
+                        }
+                    }
+                    let down = Vec3A::from(ies.down).normalize_or(Vec3A::NEG_Y);
                     let shaping = mipray::light::IesShaping {
                         profile: profile.clone(),
                         file: ies.file.clone(),
@@ -204,6 +224,7 @@ impl LightPrim {
                         normalize: ies.normalize,
                         x: m.transform_vector3a(Vec3A::X).normalize_or(Vec3A::X),
                         y: m.transform_vector3a(Vec3A::Y).normalize_or(Vec3A::Y),
+                        tilt: axis.normalize_or(Vec3A::NEG_Z).dot(down).clamp(-1.0, 1.0).acos(),
                     };
                     l.shaping = Some(mipray::light::Shaping::with_ies(l.shaping.take(), axis, shaping));
                 }
@@ -334,6 +355,9 @@ pub struct MeshLightData {
     pub normalize: bool,
     pub shadow_enable: bool,
     pub links: LinkData,
+    /// UsdLux `materialGlowTintsLight` with a bound material mipray reads: the material's
+    /// `emissiveColor` multiplies `color` (the USD front end decides, `material_tint`).
+    pub tint: bool,
 }
 
 /// Vertices per side of the grid each patch of an emissive subdivision surface (or gprim) is
@@ -365,25 +389,38 @@ pub fn light_triangles(surface: &dyn mipray::patch::LimitSurface, transform: &Ma
     out
 }
 
-/// The core light an emissive mesh `path` makes: its surface's triangles ([`light_triangles`],
+/// The core light an emissive mesh `name` makes: its surface's triangles ([`light_triangles`],
 /// polygonal meshes at their corners, others at [`MESH_LIGHT_GRID`]) emitting
-/// `color · intensity · 2^exposure` as radiance from their front (both sides when
-/// `double_sided`), divided by their area with `normalize` (UsdLux). `None` when the surface
-/// has no area.
+/// `tint · color · intensity · 2^exposure` as radiance from their front (both sides when
+/// `double_sided`), divided by their area with `normalize` (UsdLux; `tint` is the bound
+/// material's emission under `materialGlowTintsLight`, else 1). `transform` places it
+/// (object to render); with `motion` it moves instead ([`mipray::light::TriangleLight::moving`]: `transform`
+/// is then ignored and the emission follows each ray's time). `None` when the surface has no
+/// area.
+#[allow(clippy::too_many_arguments)]
 pub fn mesh_light(
-    path: &str,
+    name: &str,
     light: &MeshLightData,
+    tint: Vec3A,
     surface: &dyn mipray::patch::LimitSurface,
     polygonal: bool,
     transform: &Mat4,
+    motion: Option<&mipray::motion::MotionTransform>,
     left_handed: bool,
     double_sided: bool,
 ) -> Option<Light> {
     let grid = if polygonal { 2 } else { MESH_LIGHT_GRID };
-    let tris = mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?;
+    let tris = match motion {
+        Some(motion) => mipray::light::TriangleLight::moving(
+            light_triangles(surface, &Mat4::IDENTITY, left_handed, grid),
+            double_sided,
+            motion.clone(),
+        )?,
+        None => mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?,
+    };
     let f = |x: f32| if x.is_finite() { x } else { 0.0 };
-    let color = Vec3A::from(light.color.map(f));
-    let mut l = Light::usd_area(path, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
+    let color = Vec3A::from(light.color.map(f)) * Vec3A::from(tint.to_array().map(|x| f(x).max(0.0)));
+    let mut l = Light::usd_area(name, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
     l.casts_shadows = light.shadow_enable;
     Some(l)
 }

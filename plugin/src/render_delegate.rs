@@ -331,9 +331,15 @@ impl RenderDelegate {
         // Core mesh index per prim path, added on first placement: a prototype nobody places
         // costs nothing, and one placed 10,000 times is one core mesh.
         let mut index: HashMap<&str, Option<usize>> = HashMap::new();
+        // Where each emissive mesh is placed (instance transform; identity for one on its own).
+        let mut light_places: Vec<(&str, Mat4)> = Vec::new();
         let mut place = |scene: &mut Scene, path: &str, transform: Mat4| {
-            // An emissive mesh is a light, not geometry (added with the lights below).
-            let Some((path, m)) = self.meshes.get_key_value(path).filter(|(_, m)| m.data.light.is_none()) else { return };
+            let Some((path, m)) = self.meshes.get_key_value(path) else { return };
+            if m.data.light.is_some() {
+                // An emissive mesh is a light, not geometry (added with the lights below).
+                light_places.push((path.as_str(), transform));
+                return;
+            }
             let slot = *index.entry(path.as_str()).or_insert_with(|| self.core_mesh(m, default_displacement_bound, scene));
             if let Some(idx) = slot {
                 match &m.motion {
@@ -358,23 +364,49 @@ impl RenderDelegate {
         let sampler = self.sampler();
         let mesh_index = |p: &str| index.get(p).copied().flatten();
         scene.lights = crate::light::scene_lights(self.lights.values(), sampler.as_ref(), &mesh_index);
-        scene.lights.extend(self.mesh_lights(&mesh_index));
+        scene.lights.extend(self.mesh_lights(&light_places, &mesh_index));
         scene.textures = sampler;
         Ok(scene)
     }
 
-    /// The emissive meshes' lights (placed on their own, at their transform at the shutter's
-    /// open: mesh lights are not instanced or motion blurred), their links resolved by
-    /// `mesh_index`. A mesh light whose surface did not sync, or has no area, is left out
-    /// with one warning.
-    fn mesh_lights(&self, mesh_index: &dyn Fn(&str) -> Option<usize>) -> Vec<mipray::light::Light> {
+    /// The emissive meshes' lights, one per placement in `places` (mesh path, instance
+    /// transform: identity for a mesh on its own, which alone can move), their links resolved
+    /// by `mesh_index`. A light placed more than once is named `path[k]`, k its placement's
+    /// order. A mesh light whose surface did not sync, or has no area, is left out with one
+    /// warning.
+    fn mesh_lights(&self, places: &[(&str, Mat4)], mesh_index: &dyn Fn(&str) -> Option<usize>) -> Vec<mipray::light::Light> {
         let mut out = Vec::new();
-        for m in self.meshes.values().filter(|m| !m.data.prototype) {
+        let mut count: HashMap<&str, usize> = HashMap::new();
+        for (path, _) in places {
+            *count.entry(path).or_default() += 1;
+        }
+        let mut seen: HashMap<&str, usize> = HashMap::new();
+        let mut tints: HashMap<&str, Vec3A> = HashMap::new();
+        for &(path, transform) in places {
+            let Some(m) = self.meshes.get(path) else { continue };
+            let k = seen.entry(path).or_default();
+            let name = if count[path] > 1 { format!("{path}[{k}]") } else { path.to_string() };
+            *k += 1;
             let (Some(data), Some(surface)) = (&m.data.light, &m.surface) else { continue };
             let polygonal = matches!(surface, crate::mesh::Surface::Bilinear(_));
             let limit = surface.as_limit_surface();
             let d = &m.data;
-            match crate::light::mesh_light(&m.path, data, limit.as_ref(), polygonal, &d.transform, d.topology.left_handed, d.double_sided) {
+            let tint = *tints.entry(path).or_insert_with(|| if data.tint { self.emission_tint(path, d) } else { Vec3A::ONE });
+            // As for geometry: only a mesh placed on its own moves, and a prototype's sits in its
+            // prototype's space (instance × mesh transform).
+            let motion = m.motion.as_deref().filter(|_| transform == Mat4::IDENTITY);
+            let placed = transform * d.transform;
+            match crate::light::mesh_light(
+                &name,
+                data,
+                tint,
+                limit.as_ref(),
+                polygonal,
+                &placed,
+                motion,
+                d.topology.left_handed,
+                d.double_sided,
+            ) {
                 Some(mut l) => {
                     let resolve = |paths: &[String]| {
                         mipray::light::MeshFilter::excluding(paths.iter().filter_map(|p| mesh_index(p)).map(|i| i as u32).collect())
@@ -383,12 +415,53 @@ impl RenderDelegate {
                     l.shadowed_by = resolve(&data.links.no_shadow);
                     out.push(l);
                 }
-                None => {
-                    self.warn_once(format!("{} mesh light", m.path), format!("{}: the mesh light has no area; it emits nothing", m.path))
-                }
+                None => self.warn_once(format!("{path} mesh light"), format!("{path}: the mesh light has no area; it emits nothing")),
             }
         }
         out
+    }
+
+    /// What mesh light `path`'s bound material multiplies its colour by (UsdLux
+    /// `materialGlowTintsLight`): its UsdPreviewSurface's `emissiveColor`, UsdPreviewSurface's
+    /// fallback black when unauthored (the light then emits nothing: one warning). A textured
+    /// `emissiveColor` tints the whole light by its texture's mean (its coarsest MIP level,
+    /// times scale plus bias; a `<UDIM>` set's first tile), with one warning, since the light's
+    /// emission does not vary over its surface; an unreadable one by its `fallback`.
+    fn emission_tint(&self, path: &str, data: &crate::mesh::MeshData) -> Vec3A {
+        let Some(inputs) = &data.material else { return Vec3A::ONE };
+        let tint = match inputs.textures.iter().find(|(i, _)| *i == Input::EmissiveColor) {
+            Some((input, tex)) => match self.textured_color(path, *input, tex) {
+                Some(t) => {
+                    self.warn_once(
+                        format!("{path} textured tint"),
+                        format!(
+                            "{path}: the mesh light's emissiveColor texture {} tints it by the texture's mean (a mesh light's emission does not vary over it)",
+                            tex.file
+                        ),
+                    );
+                    let mut rgb = [0.0f32; 3];
+                    // Filter widths of the whole image: its coarsest level, the mean.
+                    if t.sampler.sample(t.texture, [0.5, 0.5], [1.0, 0.0], [0.0, 1.0], &t.lookup, &mut rgb) {
+                        Vec3A::from(rgb) * t.scale + t.bias
+                    } else {
+                        t.fallback
+                    }
+                }
+                None => tex.affine(*input).2,
+            },
+            None => inputs.surface.emissive_color,
+        };
+        let tint = if tint.is_finite() { tint.max(Vec3A::ZERO) } else { Vec3A::ZERO };
+        if tint.max_element() <= 0.0 {
+            self.warn_once(
+                format!("{path} black tint"),
+                format!(
+                    "{path}: light:materialSyncMode is materialGlowTintsLight and material {}'s emissiveColor is black, so the mesh light emits nothing (author emissiveColor, or materialSyncMode independent)",
+                    inputs.name
+                ),
+            );
+        }
+        tint
     }
 
     /// The texture `tex` feeding UsdPreviewSurface input `input`, or `None` (warned once,

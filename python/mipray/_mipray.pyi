@@ -171,12 +171,15 @@ class RenderDelegate:
                 ``face_materials``, or -1 for the mesh's ``material``. Given
                 together with ``face_materials``.
             light: UsdLux ``MeshLightAPI``: the mesh is then an area light and
-                not a surface (its material unread): ``{"intensity",
-                "exposure", "color", "normalize", "shadow_enable", "unlit",
-                "no_shadow"}`` as :meth:`set_light` takes them, every key
-                optional. Its limit surface, tessellated for lighting (polygons
-                at their corners, subdivision patches 4×4), emits from its
-                front faces (both with ``double_sided``).
+                not a surface: ``{"intensity", "exposure", "color",
+                "normalize", "shadow_enable", "unlit", "no_shadow"}`` as
+                :meth:`set_light` takes them, and ``"tint"`` (bool: the
+                material's ``emissiveColor`` multiplies ``color``,
+                UsdLux ``materialGlowTintsLight``), every key optional. Its
+                limit surface, tessellated for lighting (polygons at their
+                corners, subdivision patches 4×4), emits from its front faces
+                (both with ``double_sided``), from every instance of a
+                prototype mesh, posed at each ray's time when it moves.
 
         Raises:
             PrimDataError: the data is inconsistent (the one check of a mesh's
@@ -306,6 +309,7 @@ class RenderDelegate:
         ies_file: str | None = None,
         ies_angle_scale: float = 0.0,
         ies_normalize: bool = False,
+        ies_down: tuple[float, float, float] = ...,  # (0, -1, 0)
         portals: list[str] | None = None,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
@@ -325,10 +329,12 @@ class RenderDelegate:
         (degrees), ``cone_softness``, ``focus`` and ``focus_tint`` are
         UsdLux's ShapingAPI on sphere, rect and disk lights (the defaults
         shape nothing); ``ies_file``, ``ies_angle_scale`` and ``ies_normalize``
-        are its IES profile (LM-63, TILT=NONE, type C: a file that cannot be
-        read or parsed is named in one warning and the light renders without
-        it); ``unlit`` and ``no_shadow`` name the mesh prims the
-        light's light- and shadow-linking collections leave out.
+        are its IES profile (LM-63, photometric types A, B and C, tilt tables
+        read at the angle between the light's aim and ``ies_down``, the
+        stage's down: a file that cannot be read or parsed is named in one
+        warning and the light renders without it); ``unlit`` and
+        ``no_shadow`` name the mesh prims the light's light- and
+        shadow-linking collections leave out.
 
         Raises:
             ValueError: a non-finite value or a non-positive size; the message

@@ -73,9 +73,12 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
             why: format!("{camera}: fStop {} focused at {}", cam.f_stop, cam.focus_distance),
         });
     }
+    // Moving mesh lights too: their emission is posed at each ray's time.
+    let moving_lights = scene.lights.iter().filter(|l| matches!(&l.shape, crate::light::LightShape::Mesh(m) if m.is_moving()));
     let moving: Vec<&str> = scene
         .moving_instances()
         .filter_map(|i| scene.meshes.get(i.mesh).map(|m| m.name.as_str()))
+        .chain(moving_lights.map(|l| l.name.as_str()))
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();

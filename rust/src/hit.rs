@@ -54,4 +54,6 @@ pub struct ShadingPoint {
     /// The mesh shaded (index into the scene's meshes; `None` at the camera): which lights
     /// reach it (light linking).
     pub mesh: Option<u32>,
+    /// The shutter time of the ray that found it (0 to 1): moving lights are posed at it.
+    pub time: f32,
 }

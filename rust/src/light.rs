@@ -37,11 +37,11 @@ mod ies;
 mod mesh;
 mod portal;
 
-pub use ies::IesProfile;
+pub use ies::{IesProfile, Photometry, Tilt};
 pub use portal::{Portal, PORTAL_FRACTION};
 
 pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
-pub use mesh::{TriangleHit, TriangleLight};
+pub use mesh::{TriangleHit, TriangleLight, TrianglePoint};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightShape {
@@ -201,19 +201,22 @@ pub struct Shaping {
 }
 
 /// An IES profile on a light (UsdLux `ShapingAPI`'s `ies:*` inputs), evaluated as
-/// [`IesProfile`] documents: the candela toward the emission direction, divided by the
-/// profile's mean with `normalize`.
+/// [`IesProfile`] documents: the candela toward the emission direction (times the tilt
+/// table's factor at the light's tilt), divided by the profile's mean with `normalize`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IesShaping {
     pub profile: IesProfile,
     /// The file, for stats and messages.
     pub file: String,
-    /// `ies:angleScale`, > −1.
+    /// `ies:angleScale`, > −1 (type C profiles only).
     pub angle_scale: f32,
     pub normalize: bool,
     /// The light's local +X and +Y in render space (unit): the azimuth's frame.
     pub x: Vec3A,
     pub y: Vec3A,
+    /// The light's tilt, radians: the angle between its aim (−Z) and the stage's down, at
+    /// which a tilt table is read (0 without one).
+    pub tilt: f32,
 }
 
 impl IesShaping {
@@ -221,12 +224,17 @@ impl IesShaping {
     /// multiplied by.
     pub fn factor(&self, axis: Vec3A, w: Vec3A) -> f32 {
         use std::f32::consts::PI;
-        let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
-        // hdEmbree's azimuth: of the direction toward the light, in the light's XY plane.
-        let phi = (-w.dot(self.y)).atan2(-w.dot(self.x));
-        let scale = 1.0 + self.angle_scale;
-        let theta = if scale > 0.0 { ((theta - PI) / scale + PI).clamp(0.0, PI) } else { theta };
-        let c = self.profile.candela(theta, phi);
+        let c = match self.profile.kind {
+            ies::Photometry::C => {
+                let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
+                // hdEmbree's azimuth: of the direction toward the light, in the light's XY plane.
+                let phi = (-w.dot(self.y)).atan2(-w.dot(self.x));
+                let scale = 1.0 + self.angle_scale;
+                let theta = if scale > 0.0 { ((theta - PI) / scale + PI).clamp(0.0, PI) } else { theta };
+                self.profile.candela(theta, phi)
+            }
+            _ => self.profile.candela_local(Vec3A::new(w.dot(self.x), w.dot(self.y), -w.dot(axis))),
+        } * self.tilt_factor();
         if self.normalize {
             let m = self.profile.mean();
             if m > 0.0 {
@@ -239,13 +247,19 @@ impl IesShaping {
         }
     }
 
+    /// The tilt table's factor at the light's tilt (1 without a table).
+    pub fn tilt_factor(&self) -> f32 {
+        self.profile.tilt.as_ref().map_or(1.0, |t| t.factor(self.tilt))
+    }
+
     /// The largest [`IesShaping::factor`] (an upper bound for the light tree's importance).
     pub fn peak(&self) -> f32 {
         let m = self.profile.mean();
+        let peak = self.profile.peak() * self.tilt_factor();
         match (self.normalize, m > 0.0) {
-            (true, true) => self.profile.peak() / m,
+            (true, true) => peak / m,
             (true, false) => 0.0,
-            _ => self.profile.peak(),
+            _ => peak,
         }
     }
 }
@@ -499,8 +513,15 @@ impl Light {
 
     /// Samples a direction toward the light from point `p` with shading normal `n` (only a
     /// uniform dome uses `n`: it is cosine-sampled about it), with two uniform numbers. `None`
-    /// when the sample cannot light `p` (behind a one-sided light, inside a sphere light).
+    /// when the sample cannot light `p` (behind a one-sided light, inside a sphere light). A
+    /// moving light is taken at the shutter's open ([`Light::sample_at`] for a ray's time).
     pub fn sample(&self, p: Vec3A, n: Vec3A, u1: f32, u2: f32) -> Option<LightSample> {
+        self.sample_at(p, n, u1, u2, 0.0)
+    }
+
+    /// As [`Light::sample`], a moving light (a mesh light under transform motion blur) posed at
+    /// shutter time `time` (the ray's [`crate::ray::Ray::time`]; other lights ignore it).
+    pub fn sample_at(&self, p: Vec3A, n: Vec3A, u1: f32, u2: f32, time: f32) -> Option<LightSample> {
         let sample = match &self.shape {
             LightShape::Distant { direction, angle_deg } => {
                 let toward = -*direction;
@@ -535,7 +556,7 @@ impl Light {
                 LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
             shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. } | LightShape::Mesh(_)) => {
-                let (y, ny, area) = sample_planar(shape, u1, u2)?;
+                let (y, ny, area) = sample_planar(shape, u1, u2, time)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
                 if !(dist2 > 0.0 && dist2.is_finite()) {
@@ -554,7 +575,7 @@ impl Light {
                     // A nearer part of the mesh in front of the sampled point hides it: the
                     // directions kept are those whose nearest emitting crossing is the sample,
                     // so the density is that crossing's, as `intersect` finds it.
-                    if m.intersect(p, wi, dist * (1.0 - 1e-3)).is_some() {
+                    if m.intersect_at(p, wi, dist * (1.0 - 1e-3), time).is_some() {
                         return None;
                     }
                 }
@@ -582,6 +603,11 @@ impl Light {
     /// The solid-angle density with which [`Light::sample`] from `p` (normal `n`) picks
     /// direction `wi` (unit): 0 where it never does, and for a delta light.
     pub fn pdf(&self, p: Vec3A, n: Vec3A, wi: Vec3A) -> f32 {
+        self.pdf_at(p, n, wi, 0.0)
+    }
+
+    /// As [`Light::pdf`] for [`Light::sample_at`] at shutter time `time`.
+    pub fn pdf_at(&self, p: Vec3A, n: Vec3A, wi: Vec3A, time: f32) -> f32 {
         match &self.shape {
             LightShape::Distant { direction, angle_deg } => {
                 if *angle_deg <= 0.0 {
@@ -620,7 +646,7 @@ impl Light {
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
             LightShape::Cylinder { .. } => self.intersect_cylinder(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
-            LightShape::Mesh(_) => self.intersect_mesh(p, wi, f32::INFINITY).map_or(0.0, |h| h.pdf),
+            LightShape::Mesh(_) => self.intersect_mesh(p, wi, f32::INFINITY, time).map_or(0.0, |h| h.pdf),
         }
     }
 
@@ -628,14 +654,19 @@ impl Light {
     /// `t_max` (sphere, rect, disk; `None` for distant and dome lights, which rays meet only by
     /// escaping: [`Light::environment`]).
     pub fn intersect(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
-        let mut hit = self.intersect_shape(o, d, t_max)?;
+        self.intersect_at(o, d, t_max, 0.0)
+    }
+
+    /// As [`Light::intersect`], a moving light posed at shutter time `time`.
+    pub fn intersect_at(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<LightHit> {
+        let mut hit = self.intersect_shape(o, d, t_max, time)?;
         if let Some(shaping) = &self.shaping {
             hit.radiance *= shaping.factor(-d);
         }
         Some(hit)
     }
 
-    fn intersect_shape(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+    fn intersect_shape(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<LightHit> {
         match &self.shape {
             LightShape::Sphere { center, radius } => {
                 let to_c = *center - o;
@@ -656,7 +687,7 @@ impl Light {
             }
             LightShape::Rect { .. } | LightShape::Disk { .. } => self.intersect_planar(o, d, t_max),
             LightShape::Cylinder { .. } => self.intersect_cylinder(o, d, t_max),
-            LightShape::Mesh(_) => self.intersect_mesh(o, d, t_max),
+            LightShape::Mesh(_) => self.intersect_mesh(o, d, t_max, time),
             _ => None,
         }
     }
@@ -697,12 +728,12 @@ impl Light {
         Some(LightHit { t, radiance: self.radiance_scale, pdf: t * t / (cos_l * shape_area(&self.shape)) })
     }
 
-    /// The mesh's nearest emitting side along the ray ([`TriangleLight::intersect`]), with the
-    /// density of area sampling there.
-    fn intersect_mesh(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
+    /// The mesh's nearest emitting side along the ray at shutter time `time`
+    /// ([`TriangleLight::intersect_at`]), with the density of area sampling there.
+    fn intersect_mesh(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<LightHit> {
         let LightShape::Mesh(m) = &self.shape else { return None };
-        let h = m.intersect(o, d, t_max)?;
-        Some(LightHit { t: h.t, radiance: self.radiance_scale, pdf: h.t * h.t / (h.cos * m.area()) })
+        let h = m.intersect_at(o, d, t_max, time)?;
+        Some(LightHit { t: h.t, radiance: self.radiance_scale, pdf: h.t * h.t / (h.cos * h.area) })
     }
 
     fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
@@ -827,6 +858,9 @@ impl Light {
             out["triangles"] = serde_json::json!(m.len());
             out["area"] = serde_json::json!(m.area());
             out["two_sided"] = serde_json::json!(m.two_sided);
+            out["moving"] = serde_json::json!(m.is_moving());
+            // What it emits, a bound material's tint included.
+            out["radiance"] = serde_json::json!([self.radiance_scale.x, self.radiance_scale.y, self.radiance_scale.z]);
         }
         if let Some(s) = &self.shaping {
             out["shaping"] = serde_json::json!({
@@ -838,11 +872,19 @@ impl Light {
             if let Some(ies) = &s.ies {
                 out["shaping"]["ies"] = serde_json::json!({
                     "file": ies.file,
+                    "photometric_type": format!("{:?}", ies.profile.kind),
                     "angle_scale": ies.angle_scale,
                     "normalize": ies.normalize,
                     "mean_candela": ies.profile.mean(),
                     "peak_candela": ies.profile.peak(),
                 });
+                if let Some(t) = &ies.profile.tilt {
+                    out["shaping"]["ies"]["tilt"] = serde_json::json!({
+                        "geometry": t.geometry,
+                        "angle_deg": ies.tilt.to_degrees(),
+                        "factor": ies.tilt_factor(),
+                    });
+                }
             }
         }
         if !self.illuminates.is_all() {
@@ -891,9 +933,10 @@ pub fn shape_area(shape: &LightShape) -> f32 {
     }
 }
 
-/// A uniformly distributed point on a rect, disk, cylinder or mesh light: (point, emitting normal,
-/// area).
-fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, f32)> {
+/// A uniformly distributed point on a rect, disk, cylinder or mesh light (a moving mesh posed at
+/// shutter time `time`): (point, emitting normal, area whose reciprocal is the point's density
+/// per unit area).
+fn sample_planar(shape: &LightShape, u1: f32, u2: f32, time: f32) -> Option<(Vec3A, Vec3A, f32)> {
     let area = shape_area(shape);
     if !(area > 0.0) {
         return None;
@@ -911,8 +954,8 @@ fn sample_planar(shape: &LightShape, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A, 
             Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area))
         }
         LightShape::Mesh(m) => {
-            let (p, n) = m.sample(u1, u2);
-            Some((p, n, area))
+            let s = m.sample_at(u1, u2, time);
+            Some((s.p, s.normal, s.area))
         }
         _ => None,
     }
@@ -971,6 +1014,78 @@ mod tests {
             e += theta * f64::from(n.dot(a.cross(b).normalize()));
         }
         (0.5 * e).abs() as f32
+    }
+
+    #[test]
+    fn a_moving_mesh_light_gives_the_time_average_of_lamberts_irradiance() {
+        use crate::motion::{MotionKey, MotionTransform};
+        // A unit square facing down (its object-space normal −Z), carried from x = −1.5 at
+        // height 2 to x = +1 at height 2.5 and grown to 1.6 × 0.7 over the shutter: translation,
+        // and a scale that deforms it unevenly in x and y (the density then follows the pose).
+        let square = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].map(|(x, y)| Vec3A::new(x, y, 0.0));
+        // Clockwise seen from +Z: the right-hand normal is −Z.
+        let tris = vec![[square[0], square[2], square[1]], [square[0], square[3], square[2]]];
+        let key = |t: f32, x: f32, z: f32, s: glam::Vec3| MotionKey {
+            time: t,
+            render_from_object: Mat4::from_translation(glam::Vec3::new(x, 0.0, z)) * Mat4::from_scale(s),
+        };
+        let motion =
+            MotionTransform::new(vec![key(0.0, -1.5, 2.0, glam::Vec3::ONE), key(1.0, 1.0, 2.5, glam::Vec3::new(1.6, 0.7, 1.0))]).unwrap();
+        let mesh = TriangleLight::moving(tris, false, motion.clone()).unwrap();
+        assert!((mesh.area() - 1.0).abs() < 1e-5 && (mesh.max_area() - 1.12).abs() < 1e-4);
+        let b = mesh.bounds();
+        assert!(b.min.x <= -2.0 + 1e-4 && b.max.x >= 1.8 - 1e-4 && b.min.z <= 2.0 && b.max.z >= 2.5);
+        let light = Light::usd_area("/m", LightShape::Mesh(mesh), 1.0, 0.0, Vec3A::ONE, false);
+        let (p, n) = (Vec3A::new(0.2, 0.1, 0.0), Vec3A::Z);
+        // Truth: Lambert's formula at each pose, averaged over the shutter (midpoint rule).
+        let steps = 2000;
+        let truth = (0..steps)
+            .map(|k| {
+                let x = motion.at((k as f32 + 0.5) / steps as f32);
+                let outline: Vec<Vec3A> = [square[0], square[3], square[2], square[1]].iter().map(|&q| x.transform_point3a(q)).collect();
+                f64::from(lambert_polygon(&outline, p, n))
+            })
+            .sum::<f64>() as f32
+            / steps as f32;
+        // Monte Carlo with a shutter time per sample, as the render loop gives rays.
+        let mut s = Sampler::new(5, 6, 7);
+        let (mut e, samples) = (0.0f64, 400_000);
+        for _ in 0..samples {
+            let time = s.next_f32();
+            if let Some(ls) = light.sample_at(p, n, s.next_f32(), s.next_f32(), time) {
+                e += f64::from(ls.weight().x * ls.wi.dot(n).max(0.0));
+                // BSDF sampling's rays meet the posed light with the same density and distance.
+                let pdf = light.pdf_at(p, n, ls.wi, time);
+                assert!((pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "{pdf} vs {}", ls.pdf);
+                let hit = light.intersect_at(p, ls.wi, f32::INFINITY, time).unwrap();
+                assert!((hit.t - ls.distance).abs() < 1e-4 * ls.distance, "{} vs {}", hit.t, ls.distance);
+            }
+        }
+        let e = (e / f64::from(samples)) as f32;
+        assert!((e - truth).abs() < 0.01 * truth, "{e} vs {truth}");
+        // Not the light frozen at the shutter's open: the test can tell.
+        let frozen = irradiance(&light, p, n, 100_000);
+        assert!((frozen - truth).abs() > 0.1 * truth, "{frozen} vs {truth}");
+        // A mirroring pose keeps the emitting side: the square still lights the floor below.
+        let mirror = MotionTransform::new(vec![
+            MotionKey {
+                time: 0.0,
+                render_from_object: Mat4::from_translation(glam::Vec3::new(0.0, 0.0, 2.0))
+                    * Mat4::from_scale(glam::Vec3::new(-1.0, 1.0, 1.0)),
+            },
+            MotionKey {
+                time: 1.0,
+                render_from_object: Mat4::from_translation(glam::Vec3::new(0.0, 0.1, 2.0))
+                    * Mat4::from_scale(glam::Vec3::new(-1.0, 1.0, 1.0)),
+            },
+        ])
+        .unwrap();
+        let tris = vec![[square[0], square[2], square[1]], [square[0], square[3], square[2]]];
+        let mirrored =
+            Light::usd_area("/m", LightShape::Mesh(TriangleLight::moving(tris, false, mirror).unwrap()), 1.0, 0.0, Vec3A::ONE, false);
+        let ls = mirrored.sample_at(Vec3A::ZERO, Vec3A::Z, 0.3, 0.6, 0.5).unwrap();
+        assert!(ls.wi.z > 0.0 && mirrored.intersect_at(Vec3A::ZERO, Vec3A::Z, f32::INFINITY, 0.5).is_some());
+        assert!(mirrored.intersect_at(Vec3A::new(0.0, 0.0, 4.0), Vec3A::NEG_Z, f32::INFINITY, 0.5).is_none());
     }
 
     #[test]

@@ -149,7 +149,7 @@ impl LightBounds {
                 lo: m.bounds().min,
                 hi: m.bounds().max,
                 // Its whole area facing the point at best (an upper bound, as the others').
-                phi: lum * m.area(),
+                phi: lum * m.max_area(),
                 normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
                 cos_theta_e: 0.0,
             },
@@ -261,6 +261,68 @@ struct Node {
     /// A leaf's exact shape, for tests the bounds are too loose for (a point beside a flat light
     /// is inside its box's bounding sphere).
     shape: Option<Exact>,
+    /// A leaf light's IES profile, which scales its importance toward each point: an index
+    /// into [`LightSampler::profiles`].
+    profile: Option<u32>,
+}
+
+/// A light shaped by an IES profile, as its leaf weighs it: `bounds.phi` holds the profile's
+/// peak, and the importance at p is scaled by the profile's largest value toward p over its
+/// peak.
+#[derive(Clone, Debug)]
+struct Profiled {
+    /// The light's bounding sphere, render space.
+    center: Vec3A,
+    radius: f32,
+    /// Its axis (−Z) and profile.
+    axis: Vec3A,
+    ies: std::sync::Arc<crate::light::IesShaping>,
+}
+
+/// The least share of its peak a profiled light keeps in the tree's weights: a profile that is
+/// zero toward the centre of a wide light may not be zero toward all of it, and a light never
+/// chosen where it does reach would be lost (a bias); this keeps every light choosable.
+const PROFILE_FLOOR: f32 = 1.0 / 256.0;
+
+impl Profiled {
+    fn of(light: &Light) -> Option<Profiled> {
+        let shaping = light.shaping.as_ref()?;
+        let ies = shaping.ies.clone()?;
+        let (center, radius) = match light.shape {
+            LightShape::Sphere { center, radius } => (center, radius),
+            LightShape::Rect { center, u, v, .. } => (center, (u.abs() + v.abs()).length()),
+            LightShape::Disk { center, u, v, .. } => (center, u.length().max(v.length())),
+            LightShape::Cylinder { center, axis, radius, .. } => (center, axis.length() + radius),
+            _ => return None,
+        };
+        Some(Profiled { center, radius, axis: shaping.axis, ies })
+    }
+
+    /// The profile's largest value toward p over its peak, in (0, 1]: the factor toward the
+    /// light's centre and toward four points on its bounding sphere's rim as seen from p (the
+    /// directions a finite light emits toward p span that cone), at least [`PROFILE_FLOOR`].
+    fn share(&self, p: Vec3A) -> f32 {
+        let peak = self.ies.peak();
+        if !(peak > 0.0 && peak.is_finite()) {
+            return 1.0;
+        }
+        let to_p = p - self.center;
+        let d = to_p.length();
+        if !(d > self.radius) {
+            return 1.0;
+        }
+        let w = to_p / d;
+        let mut best = self.ies.factor(self.axis, w);
+        if self.radius > 0.0 {
+            let (t, b) = crate::sampling::frame(w);
+            let r = self.radius / d;
+            for e in [t, -t, b, -b] {
+                // From a rim point of the sphere toward p.
+                best = best.max(self.ies.factor(self.axis, (w - e * r).normalize_or(w)));
+            }
+        }
+        (best / peak).clamp(PROFILE_FLOOR, 1.0)
+    }
 }
 
 /// What a single light's importance can test exactly.
@@ -304,34 +366,69 @@ impl Exact {
 
 impl Node {
     /// The bounds' importance, zero where a leaf's exact shape says it cannot light p.
-    fn importance(&self, p: Vec3A, n: Vec3A) -> f32 {
+    fn importance(&self, p: Vec3A, n: Vec3A, profiles: &[Profiled]) -> f32 {
         match self.shape {
             Some(e) if !e.can_light(p, n) => 0.0,
-            _ => self.bounds.importance(p, n),
+            _ => match self.profile.and_then(|i| profiles.get(i as usize)) {
+                Some(profile) => self.bounds.importance(p, n) * profile.share(p),
+                None => self.bounds.importance(p, n),
+            },
         }
     }
 }
 
 /// What the top level knows about a distant or dome light.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Infinite {
     light: u32,
     /// Irradiance luminance on a surface facing it (distant) or π × mean radiance (dome).
     irradiance: f32,
     /// Distant lights: toward the light, and the cone's half-angle; a dome has none.
     cone: Option<(Vec3A, f32, f32)>,
+    /// A dome's PortalLights (empty for others): its importance is what comes through them.
+    portals: std::sync::Arc<[crate::light::Portal]>,
 }
 
+/// The least share of its unportalled importance a dome with portals keeps: it still lights
+/// every direction (the portals only guide its samples), so where no portal faces a point, or
+/// the stage's portals miss an opening, it must stay choosable.
+const PORTAL_IMPORTANCE_FLOOR: f32 = 1.0 / 32.0;
+
 impl Infinite {
-    fn importance(&self, n: Vec3A) -> f32 {
+    /// At point p with normal n (zero: no horizon).
+    fn importance(&self, p: Vec3A, n: Vec3A) -> f32 {
         match self.cone {
             Some((toward, sin_max, cos_max)) if n != Vec3A::ZERO => {
                 let cos_n = n.dot(toward);
                 let sin_n = safe_sqrt(1.0 - cos_n * cos_n);
                 self.irradiance * cos_sub_clamped(sin_n, cos_n, sin_max, cos_max).max(0.0)
             }
+            _ if !self.portals.is_empty() => self.irradiance * portal_share(&self.portals, p, n),
             _ => self.irradiance,
         }
+    }
+}
+
+/// The share of a uniform dome's irradiance at p (normal n) that arrives through `portals`:
+/// Σ solid angle × cosine to n over π (over 2π, the hemisphere, with no normal), each portal's
+/// solid angle estimated from its centre ([`crate::light::Portal::weight`]), capped at 1 and at
+/// least [`PORTAL_IMPORTANCE_FLOOR`].
+fn portal_share(portals: &[crate::light::Portal], p: Vec3A, n: Vec3A) -> f32 {
+    let through: f32 = portals
+        .iter()
+        .map(|q| {
+            let w = q.weight(p);
+            if w > 0.0 && n != Vec3A::ZERO {
+                w * n.dot((q.center - p).normalize_or_zero()).max(0.0) / PI
+            } else {
+                w / (2.0 * PI)
+            }
+        })
+        .sum();
+    if through.is_finite() {
+        through.clamp(PORTAL_IMPORTANCE_FLOOR, 1.0)
+    } else {
+        1.0
     }
 }
 
@@ -367,6 +464,10 @@ pub struct LightSampler {
     any_wide: bool,
     /// Per light: its exact shape (area lights), copied into its leaf.
     exact: Vec<Option<Exact>>,
+    /// The IES-profiled lights' weighing, indexed by their leaves.
+    profiles: Vec<Profiled>,
+    /// Per light: its index in `profiles`, copied into its leaf.
+    profiled: Vec<Option<u32>>,
 }
 
 /// The lights as weighed at one shading point: make once per point ([`LightSampler::at`]), then
@@ -387,6 +488,11 @@ impl LightSampler {
         let mut s = LightSampler { trails: vec![None; lights.len()], entry: vec![None; lights.len()], ..Default::default() };
         let mut items: Vec<(LightBounds, u32)> = Vec::new();
         s.exact = lights.iter().map(Exact::of).collect();
+        for l in lights {
+            let p = Profiled::of(l);
+            s.profiled.push(p.is_some().then_some(s.profiles.len() as u32));
+            s.profiles.extend(p);
+        }
         for (i, l) in lights.iter().enumerate() {
             match &l.shape {
                 LightShape::Distant { direction, angle_deg } => {
@@ -397,6 +503,7 @@ impl LightSampler {
                             light: i as u32,
                             irradiance,
                             cone: Some((-*direction, theta_max.sin(), theta_max.cos())),
+                            portals: Vec::new().into(),
                         });
                     }
                 }
@@ -404,7 +511,7 @@ impl LightSampler {
                     let mean = env.as_ref().map_or(Vec3A::ONE, |e| e.mean());
                     let irradiance = nominal(PI * luminance(l.radiance_scale * mean));
                     if irradiance > 0.0 {
-                        s.infinite.push(Infinite { light: i as u32, irradiance, cone: None });
+                        s.infinite.push(Infinite { light: i as u32, irradiance, cone: None, portals: l.portals.clone() });
                     }
                 }
                 _ => {
@@ -445,7 +552,8 @@ impl LightSampler {
         let total = items[1..].iter().fold(items[0].0, |acc, (b, _)| LightBounds::union(&acc, b));
         if items.len() == 1 {
             let shape = self.exact.get(items[0].1 as usize).copied().flatten();
-            self.nodes.push(Node { bounds: total, kind: NodeKind::Leaf(items[0].1), shape });
+            let profile = self.profiled.get(items[0].1 as usize).copied().flatten();
+            self.nodes.push(Node { bounds: total, kind: NodeKind::Leaf(items[0].1), shape, profile });
             self.trails[items[0].1 as usize] = Some(trail);
             return index;
         }
@@ -457,7 +565,7 @@ impl LightSampler {
             items.sort_by(|a, b| a.0.centroid()[dim].total_cmp(&b.0.centroid()[dim]).then(a.1.cmp(&b.1)));
             items.len() / 2
         });
-        self.nodes.push(Node { bounds: total, kind: NodeKind::Interior(0), shape: None });
+        self.nodes.push(Node { bounds: total, kind: NodeKind::Interior(0), shape: None, profile: None });
         let (left, right) = items.split_at_mut(mid);
         self.build(left, depth + 1, trail);
         let second = self.build(right, depth + 1, trail | (1u64 << depth.min(63)));
@@ -503,11 +611,11 @@ impl LightSampler {
         let mut cdf = Vec::with_capacity(self.infinite.len() + self.cut.len());
         let mut total = 0.0f32;
         for i in &self.infinite {
-            total += i.importance(n);
+            total += i.importance(p, n);
             cdf.push(total);
         }
         for &(node, _) in &self.cut {
-            total += self.nodes[node as usize].importance(p, n);
+            total += self.nodes[node as usize].importance(p, n, &self.profiles);
             cdf.push(total);
         }
         LightsAt { sampler: self, p, n, cdf }
@@ -524,8 +632,9 @@ impl LightSampler {
     }
 
     /// Calls `f(light index, hit)` for every area light the ray from `o` along unit `d` meets
-    /// (on its emitting side) before `t_max`, finding them by the tree's boxes.
-    pub fn for_each_crossed(&self, lights: &[Light], o: Vec3A, d: Vec3A, t_max: f32, mut f: impl FnMut(usize, LightHit)) {
+    /// (on its emitting side) before `t_max`, finding them by the tree's boxes; moving lights
+    /// posed at shutter time `time` (the ray's).
+    pub fn for_each_crossed(&self, lights: &[Light], o: Vec3A, d: Vec3A, t_max: f32, time: f32, mut f: impl FnMut(usize, LightHit)) {
         if self.nodes.is_empty() {
             return;
         }
@@ -543,7 +652,7 @@ impl LightSampler {
             }
             match self.nodes[node].kind {
                 NodeKind::Leaf(light) => {
-                    if let Some(hit) = lights.get(light as usize).and_then(|l| l.intersect(o, d, t_max)) {
+                    if let Some(hit) = lights.get(light as usize).and_then(|l| l.intersect_at(o, d, t_max, time)) {
                         f(light as usize, hit);
                     }
                 }
@@ -585,8 +694,8 @@ impl LightsAt<'_> {
                 NodeKind::Leaf(light) => return Some((light as usize, prob)),
                 NodeKind::Interior(second) => {
                     let (a, b) = (node + 1, second as usize);
-                    let ia = s.nodes[a].importance(self.p, self.n);
-                    let ib = s.nodes[b].importance(self.p, self.n);
+                    let ia = s.nodes[a].importance(self.p, self.n, &s.profiles);
+                    let ib = s.nodes[b].importance(self.p, self.n, &s.profiles);
                     if !(ia + ib > 0.0) {
                         return None;
                     }
@@ -622,8 +731,8 @@ impl LightsAt<'_> {
                 NodeKind::Leaf(_) => return prob,
                 NodeKind::Interior(second) => {
                     let (a, b) = (node + 1, second as usize);
-                    let ia = s.nodes[a].importance(self.p, self.n);
-                    let ib = s.nodes[b].importance(self.p, self.n);
+                    let ia = s.nodes[a].importance(self.p, self.n, &s.profiles);
+                    let ib = s.nodes[b].importance(self.p, self.n, &s.profiles);
                     if !(ia + ib > 0.0) {
                         return 0.0;
                     }
@@ -717,6 +826,73 @@ mod tests {
         Light::usd_area("/s", LightShape::Sphere { center: c, radius: r }, l, 0.0, Vec3A::ONE, false)
     }
 
+    /// A small sphere at `c` shaped by a narrow type C beam (1000 cd within 10°, nothing past
+    /// 15°) about `axis`.
+    fn beam(c: Vec3A, axis: Vec3A) -> Light {
+        let ies = crate::light::IesProfile::parse("TILT=NONE\n1 -1 1 3 1 1 2 0 0 0 1 1 10\n0 10 15\n0\n1000 1000 0\n").unwrap();
+        let (x, y) = axis.any_orthonormal_pair();
+        let shaping =
+            crate::light::IesShaping { profile: ies, file: "beam.ies".into(), angle_scale: 0.0, normalize: false, x, y, tilt: 0.0 };
+        let mut l = sphere(c, 0.01, 1.0);
+        l.shaping = Some(crate::light::Shaping::with_ies(None, axis, shaping));
+        l
+    }
+
+    #[test]
+    fn an_ies_beam_weighs_its_light_by_the_profile_toward_the_point() {
+        // Two equal beams at the same distance from p: one aimed at p, one away. Without the
+        // profile in the weights each would be chosen half the time.
+        let lights = vec![beam(Vec3A::new(-1.0, 0.0, 3.0), Vec3A::NEG_Z), beam(Vec3A::new(1.0, 0.0, 3.0), Vec3A::Z)];
+        let s = LightSampler::new(&lights);
+        let (p, n) = (Vec3A::new(-1.0, 0.0, 0.0), Vec3A::Z);
+        let (aimed, away) = (s.pmf(p, n, 0), s.pmf(p, n, 1));
+        assert!(aimed > 0.99 && away > 0.0 && (aimed + away - 1.0).abs() < 1e-5, "{aimed} {away}");
+        // Still unbiased: the estimate with the tree's choices is the beam's I / d² (the other
+        // sends nothing here), the small sphere's intensity being L · πr² · candela.
+        let truth = 1000.0 * PI * 0.01 * 0.01 / 9.0;
+        let mut rng = Sampler::new(4, 5, 6);
+        let (mut e, trials) = (0.0f64, 100_000);
+        for k in 0..trials {
+            let (j, prob) = s.sample(p, n, (k as f32 + 0.5) / trials as f32).unwrap();
+            if let Some(ls) = lights[j].sample(p, n, rng.next_f32(), rng.next_f32()) {
+                e += f64::from(ls.weight().x * ls.wi.dot(n).max(0.0) / prob);
+            }
+        }
+        let e = (e / f64::from(trials)) as f32;
+        assert!((e - truth).abs() < 0.01 * truth, "{e} vs {truth}");
+        // Off the beam of the first, inside neither: both kept at the floor, never dropped.
+        let q = Vec3A::new(0.0, 5.0, 0.0);
+        assert!(s.pmf(q, n, 0) > 0.0 && s.pmf(q, n, 1) > 0.0);
+    }
+
+    #[test]
+    fn a_dome_with_portals_weighs_what_comes_through_them() {
+        // A uniform dome beside a sphere light; a 4 × 4 window 4 above p, facing down.
+        let dome = Light::usd_area("/sky", LightShape::Dome(None), 1.0, 0.0, Vec3A::ONE, false);
+        let lamp = sphere(Vec3A::new(3.0, 0.0, 2.0), 0.2, 5.0);
+        let window = crate::light::Portal {
+            name: "/window".into(),
+            center: Vec3A::new(0.0, 0.0, 4.0),
+            u: Vec3A::X * 2.0,
+            v: Vec3A::Y * 2.0,
+            normal: Vec3A::NEG_Z,
+        };
+        let open = LightSampler::new(&[dome.clone(), lamp.clone()]);
+        let mut guided = dome;
+        guided.portals = vec![window].into();
+        let portals = LightSampler::new(&[guided, lamp]);
+        let (p, n) = (Vec3A::ZERO, Vec3A::Z);
+        // The dome's weight relative to the lamp's, scaled by the window's share of the sky:
+        // its solid angle 16 · 1 / 4² = 1 sr, at normal incidence, over π.
+        let ratio = |s: &LightSampler| s.pmf(p, n, 0) / s.pmf(p, n, 1);
+        let share = ratio(&portals) / ratio(&open);
+        assert!((share - 1.0 / PI).abs() < 1e-4, "{share}");
+        // Behind the window (no portal faces the point): the floor, never zero.
+        let (behind, down) = (Vec3A::new(0.0, 0.0, 6.0), Vec3A::NEG_Z);
+        let share = portals.pmf(behind, down, 0) / portals.pmf(behind, down, 1) / (open.pmf(behind, down, 0) / open.pmf(behind, down, 1));
+        assert!((share - PORTAL_IMPORTANCE_FLOOR).abs() < 1e-5, "{share}");
+    }
+
     #[test]
     fn pmf_matches_sampling_frequencies_and_sums_to_one() {
         let mut rng = Sampler::new(9, 9, 9);
@@ -777,12 +953,12 @@ mod tests {
         let lights: Vec<Light> = (0..20).map(|i| sphere(Vec3A::new(i as f32 * 2.0, 0.0, 5.0), 0.5, 1.0)).collect();
         let s = LightSampler::new(&lights);
         let mut hits = Vec::new();
-        s.for_each_crossed(&lights, Vec3A::new(14.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, |j, h| hits.push((j, h.t)));
+        s.for_each_crossed(&lights, Vec3A::new(14.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, 0.0, |j, h| hits.push((j, h.t)));
         assert_eq!(hits.len(), 1);
         assert_eq!(hits[0].0, 7);
         assert!((hits[0].1 - 4.5).abs() < 1e-5);
         let mut none = 0;
-        s.for_each_crossed(&lights, Vec3A::new(15.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, |_, _| none += 1);
+        s.for_each_crossed(&lights, Vec3A::new(15.0, 0.0, 0.0), Vec3A::Z, f32::INFINITY, 0.0, |_, _| none += 1);
         assert_eq!(none, 0);
     }
 }

@@ -898,7 +898,8 @@ def _mesh_light(
     """A mesh light (``set_mesh``'s ``light``) as Mitsuba area emitters on its triangles.
 
     Black (mipray's mesh lights reflect nothing), emitting from the front faces, and from
-    the turned-over copy too when ``double_sided``. Only polygonal meshes: a subdivision
+    the turned-over copy too when ``double_sided``; ``tint`` multiplies the radiance by the
+    material's ``emissiveColor`` as mipray does. Only polygonal meshes: a subdivision
     surface's lighting tessellation is mipray's own.
 
     Raises:
@@ -911,6 +912,13 @@ def _mesh_light(
     if not light.get("shadow_enable", True):
         raise PrimError(path, "inputs:shadow:enable is off: Mitsuba's lights always cast shadows")
     radiance = _light_radiance(light)
+    if light.get("tint"):
+        # UsdLux materialGlowTintsLight: the bound material's emissiveColor multiplies it.
+        material = args.get("material") or {}
+        if "emissiveColor" in (material.get("textures") or {}):
+            raise PrimError(path, "a mesh light tinted by a textured emissiveColor is not exported")
+        tint = _rgb(material.get("emissiveColor"), (0.0, 0.0, 0.0))
+        radiance = (radiance[0] * tint[0], radiance[1] * tint[1], radiance[2] * tint[2])
     if light.get("normalize"):
         corners = points[tris[:, :3]]
         cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])

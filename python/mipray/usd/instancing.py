@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +40,7 @@ from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
 from .gprim import is_renderable_gprim
+from .light import link_arguments, material_tint, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
@@ -237,10 +239,13 @@ class Instancing:
         delegate: RenderDelegateLike,
         purposes: tuple[str, ...],
         sync_counts: dict[str, int],
+        mesh_paths: Callable[[], Iterable[str]] | None = None,
     ) -> None:
         self.delegate = delegate
         self.purposes = purposes
         self.sync_counts = sync_counts
+        #: Every gprim path of the stage, for a prototype mesh light's linking collections.
+        self.mesh_paths = mesh_paths
         #: Member prims that could not be read: USD path → message.
         self.errors: dict[str, str] = {}
         self._holders: dict[str, set[str]] = {}  # delegate path → owners holding it
@@ -344,6 +349,12 @@ class Instancing:
             read = read_mesh(prim, walk.time, self._relative(prim, root, walk), prototype=True)
             if read.args is None:
                 return False
+            # A mesh light in a prototype emits from every instance, linked as resolved now.
+            light = mesh_light_arguments(prim, walk.time)
+            if light is not None:
+                tint = material_tint(prim, prim, read.args.get("material"), walk.time)
+                links = link_arguments(prim, walk.time, self.mesh_paths or (lambda: []))
+                read.args["light"] = {**light, **links, "tint": tint}
             self.delegate.set_mesh(dpath, **read.args)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)

@@ -36,7 +36,10 @@ guided by the portals it names; one without, by every portal of the stage.
 
 A Mesh with ``MeshLightAPI``, or named by a ``GeometryLight``'s ``geometry``, is a mesh
 light: ``RenderDelegate.set_mesh`` gets ``light`` (:func:`mesh_light_arguments`,
-:func:`emitter_arguments`) and the core samples its tessellated limit surface by area.
+:func:`emitter_arguments`) and the core samples its tessellated limit surface by area. Under
+``light:materialSyncMode = materialGlowTintsLight`` (``MeshLightAPI``'s fallback) the bound
+material's emission tints the light (:func:`material_tint`); a mesh light inside a prototype
+(PointInstancer or native instance) emits from every instance.
 """
 
 from __future__ import annotations
@@ -65,6 +68,7 @@ __all__ = [
     "geometry_light_targets",
     "link_arguments",
     "linking_authored",
+    "material_tint",
     "mesh_light_arguments",
     "portal_arguments",
 ]
@@ -269,6 +273,9 @@ def area_light_arguments(
             args["ies_file"] = _resolve(ies, ies_file)
             args["ies_angle_scale"] = float(shaping.GetShapingIesAngleScaleAttr().Get(time))
             args["ies_normalize"] = bool(shaping.GetShapingIesNormalizeAttr().Get(time))
+            # A tilt table is read at the light's aim's angle from the stage's down.
+            z_up = UsdGeom.GetStageUpAxis(prim.GetStage()) == UsdGeom.Tokens.z
+            args["ies_down"] = (0.0, 0.0, -1.0) if z_up else (0.0, -1.0, 0.0)
             if not math.isfinite(args["ies_angle_scale"]):
                 raise PrimError(path, "inputs:shaping:ies:angleScale is not finite")
         if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
@@ -348,7 +355,7 @@ def mesh_light_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any] |
     emits ``color * intensity * 2**exposure`` as radiance from its front faces (both sides
     when ``doubleSided``), divided by its area with ``normalize`` (UsdLux's ``LightAPI``
     inputs and fallbacks; ``colorTemperature`` as for every light). Its bound material is not
-    rendered and does not tint the light (``light:materialSyncMode`` is not read).
+    rendered as a surface; whether its emission tints the light is :func:`material_tint`'s.
 
     Raises:
         PrimError: a non-finite or negative value.
@@ -409,6 +416,42 @@ def emitter_arguments(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
     if args["intensity"] < 0.0:
         raise PrimError(path, f"inputs:intensity is {args['intensity']}; it must be >= 0")
     return args
+
+
+def material_tint(
+    prim: Usd.Prim, light_prim: Usd.Prim, material: dict[str, Any] | None, time: Usd.TimeCode
+) -> bool:
+    """Whether mesh light ``prim``'s bound material tints its light (``set_mesh``'s ``tint``).
+
+    UsdLux's ``light:materialSyncMode`` (read on ``light_prim``: the mesh itself with
+    ``MeshLightAPI``, whose fallback is ``materialGlowTintsLight``; a ``GeometryLight``, whose
+    fallback is ``noMaterialResponse``): with ``materialGlowTintsLight`` the light's colour is
+    multiplied by "the color feeding the emission/glow input of the Material", which for a
+    UsdPreviewSurface (or a MaterialX surface mapped onto one) is ``emissiveColor`` — black
+    when unauthored, so such a light emits nothing (the core warns). With ``independent`` or
+    ``noMaterialResponse``, or no bound material ("as if there is no Material bound"), the
+    light's own inputs alone. ``material`` is the ``set_mesh`` ``material`` argument read for
+    the mesh: a bound material mipray does not read (no UsdPreviewSurface) cannot tint, with
+    one warning naming both. The mesh's own material tints every face (GeomSubsets' materials
+    do not), and a textured ``emissiveColor`` tints by its texture's mean (the core warns).
+    """
+    attr = UsdLux.LightAPI(light_prim).GetMaterialSyncModeAttr()
+    mode = attr.Get(time) if attr else None
+    if str(mode) != "materialGlowTintsLight":
+        return False
+    from .shading import bound_material
+
+    bound = bound_material(prim)
+    if bound is None:
+        return False
+    path, bound_path = str(prim.GetPath()), str(bound.GetPath())
+    if material is None or material.get("name") != bound_path:
+        _warn_once(
+            f"{path}: mesh light's material {bound_path} has no surface mipray reads; "
+            "its emission does not tint the light"
+        )
+        return False
+    return True
 
 
 def _warn_once(message: str) -> None:

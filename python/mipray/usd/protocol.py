@@ -133,6 +133,7 @@ class RenderDelegateLike(Protocol):
         ies_file: str | None = ...,
         ies_angle_scale: float = ...,
         ies_normalize: bool = ...,
+        ies_down: tuple[float, float, float] = ...,
         portals: list[str] | None = ...,
     ) -> None:
         """Add or replace a UsdLux light of any kind (``kind``), portals included."""

@@ -57,6 +57,7 @@ from .light import (
     emitter_arguments,
     geometry_light_targets,
     link_arguments,
+    material_tint,
     mesh_light_arguments,
     portal_arguments,
 )
@@ -232,7 +233,9 @@ class UsdSceneDelegate:
         self._xform_only: set[str] = set()  # records whose transform alone changed in time
         self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
-        self._instancing = Instancing(delegate, self.purposes, self.sync_counts)
+        self._instancing = Instancing(
+            delegate, self.purposes, self.sync_counts, mesh_paths=self._gprim_paths
+        )
         self._poser = SkelPoser()
         # Before anything is read: .mtlx references usd-core cannot compose.
         load_mtlx_references(stage)
@@ -696,7 +699,8 @@ class UsdSceneDelegate:
                     light = emitter_arguments(light_prim, time)
                 if light is not None:
                     links = link_arguments(light_prim, time, self._gprim_paths)
-                    read.args["light"] = {**light, **links}
+                    tint = material_tint(prim, light_prim, read.args.get("material"), time)
+                    read.args["light"] = {**light, **links, "tint": tint}
                     record.light = True
                     record.might_vary = might_vary or record.might_vary
                 self.delegate.set_mesh(path, **read.args)

@@ -155,19 +155,14 @@ def _shaping(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
 
 
 def _mesh_light(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
-    """A mesh light's ``light:materialSyncMode`` when authored: its material is never read.
+    """``MeshLightAPI`` on anything but a Mesh (no other gprim becomes a light).
 
-    The mesh emits its light inputs only (``mipray.usd.light.mesh_light_arguments``); on
-    anything but a Mesh, the API itself (no other gprim becomes a light).
+    On a Mesh every input is read, ``light:materialSyncMode`` included
+    (``mipray.usd.light.material_tint``).
     """
     if "MeshLightAPI" not in prim.GetAppliedSchemas():
         return []
-    if not prim.IsA(UsdGeom.Mesh):
-        return ["MeshLightAPI"]
-    mode = prim.GetAttribute("light:materialSyncMode")
-    if mode and mode.HasAuthoredValue() and str(mode.Get(time)) != "noMaterialResponse":
-        return [f"light:materialSyncMode = {mode.Get(time)}"]
-    return []
+    return [] if prim.IsA(UsdGeom.Mesh) else ["MeshLightAPI"]
 
 
 def _light_inputs(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:

@@ -221,7 +221,7 @@ impl DirectLight {
     /// can find these directions.
     pub fn seen(&self, scene: &Scene, ray: &Ray, t_hit: f32) -> Vec3A {
         let mut sum = Vec3A::ZERO;
-        self.lights.for_each_crossed(&scene.lights, ray.o, ray.d, t_hit, |_, h| sum += h.radiance);
+        self.lights.for_each_crossed(&scene.lights, ray.o, ray.d, t_hit, ray.time, |_, h| sum += h.radiance);
         if t_hit == f32::INFINITY {
             sum += scene.background(ray.d, ray.diff.directional_spread_rad());
         }
@@ -231,12 +231,12 @@ impl DirectLight {
     /// Every light the ray from `from.p` along `wi` meets, ignoring occlusion.
     fn crossed(&self, scene: &Scene, from: &ShadingPoint, wi: Vec3A) -> Vec<Crossed> {
         let mut out: Vec<Crossed> = Vec::new();
-        self.lights.for_each_crossed(&scene.lights, from.p, wi, f32::INFINITY, |j, h| out.push((j, h.t, h.radiance, h.pdf)));
+        self.lights.for_each_crossed(&scene.lights, from.p, wi, f32::INFINITY, from.time, |j, h| out.push((j, h.t, h.radiance, h.pdf)));
         for (j, light) in scene.lights.iter().enumerate() {
             if light.is_infinite() && !light.is_delta() {
                 let radiance = light.environment(wi);
                 if radiance.max_element() > 0.0 {
-                    out.push((j, f32::INFINITY, radiance, light.pdf(from.p, from.ns, wi)));
+                    out.push((j, f32::INFINITY, radiance, light.pdf_at(from.p, from.ns, wi, from.time)));
                 }
             }
         }
@@ -277,7 +277,7 @@ impl DirectLight {
             if !light.illuminates.contains(hit.mesh) {
                 continue;
             }
-            let Some(ls) = light.sample(sp.p, sp.ns, u1, u2) else { continue };
+            let Some(ls) = light.sample_at(sp.p, sp.ns, u1, u2, hit.time) else { continue };
             let f = bsdf.eval(wo, ls.wi);
             if f.total().max_element() <= 0.0 {
                 continue;

@@ -73,7 +73,7 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
         let n = if n.dot(ng_out) < 0.0 { -n } else { n };
         ns = tilt_above(if front { n } else { -n }, ng);
     }
-    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front, mesh: Some(hit.mesh) }
+    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front, mesh: Some(hit.mesh), time: hit.time }
 }
 
 /// The mesh's authored normal at the hit (object space, not normalized), if it has one.

@@ -2,30 +2,92 @@
 //! luminaire emits by vertical and horizontal angle, applied as Hydra's hdEmbree applies them.
 //!
 //! **Reading.** LM-63-1995 and -2002 files (`IESNA:LM-63-1995`, `IESNA:LM-63-2002`, or the
-//! 1986 form without that line): keyword lines up to `TILT=`, which must be `TILT=NONE` (a
-//! tilt table changes the output with the lamp's tilt, which a UsdLux light does not have);
-//! then the numbers, whitespace- or comma-separated over any lines: lamp count, lumens per
-//! lamp, candela multiplier, vertical and horizontal angle counts, photometric type (1 = type
-//! C, the only one read: a type A or B profile is refused), units, the three luminous
-//! dimensions, ballast factor, ballast-lamp photometric factor (the 1995 "future use"), input
-//! watts, the vertical angles, the horizontal angles and the candela values (one row of
-//! vertical angles per horizontal angle). Candela are the file's values × candela multiplier
-//! × ballast factor × ballast-lamp factor.
+//! 1986 form without that line): keyword lines up to `TILT=`; then the tilt data when
+//! `TILT=INCLUDE` (lamp-to-luminaire geometry, the number of tilt angles, the angles, the
+//! multiplying factors), or from the file `TILT=<file>` names (the same four records; read by
+//! the caller's `tilt_file`); then the numbers, whitespace- or comma-separated over any lines:
+//! lamp count, lumens per lamp, candela multiplier, vertical and horizontal angle counts,
+//! photometric type (1 = C, 2 = B, 3 = A), units, the three luminous dimensions, ballast factor,
+//! ballast-lamp photometric factor (the 1995 "future use"), input watts, the vertical angles,
+//! the horizontal angles and the candela values (one row of vertical angles per horizontal
+//! angle). Candela are the file's values × candela multiplier × ballast factor × ballast-lamp
+//! factor.
 //!
-//! **Evaluation.** θ is the angle between the emission direction and the light's −Z (the
-//! profile's nadir, vertical angle 0), φ the azimuth about that axis measured in the light's
-//! XY plane of the direction toward the light (hdEmbree's `atan2(y, x)` of it), folded into
-//! the file's horizontal range by its symmetry (one angle: symmetric about the axis; last
-//! angle 90°: quadrant symmetry; 180°: bilateral; 360°: none). `ies:angleScale` s rescales θ
-//! about the zenith as RenderMan does: θ' = (θ − π)/(1 + s) + π, clamped to [0, π]. Candela
-//! are interpolated bilinearly in (θ', φ); outside the file's vertical range the profile is 0.
-//! With `ies:normalize` the value is divided by the profile's mean candela over the sphere (or
-//! the hemisphere, for a profile spanning no more than 90° + a little), so the shaping keeps
-//! the light's power; without it the factor is the candela value itself.
+//! **Evaluation.** In the light's frame, the luminaire aims along its −Z (the profile's nadir
+//! for type C, its photometric axis — horizontal and vertical angle 0 — for types A and B).
+//!
+//! - Type C: θ is the angle between the emission direction and −Z (vertical angle 0), φ the
+//!   azimuth about that axis measured in the light's XY plane of the direction toward the light
+//!   (hdEmbree's `atan2(y, x)` of it), folded into the file's horizontal range by its symmetry
+//!   (one angle: symmetric about the axis; last angle 90°: quadrant symmetry; 180°: bilateral;
+//!   360°: none). `ies:angleScale` s rescales θ about the zenith as RenderMan does:
+//!   θ' = (θ − π)/(1 + s) + π, clamped to [0, π].
+//! - Type B (LM-63: "the planes share a common horizontal axis"; floodlights): the polar axis
+//!   is the light's X. The vertical angle V turns the photometric plane about X (positive
+//!   toward +Y), the horizontal angle H is the lateral angle within it (positive toward +X):
+//!   for a unit emission direction d, H = asin(d·X), V = atan2(d·Y, −d·Z).
+//! - Type A (LM-63: "the planes are all vertical and share a common vertical axis";
+//!   automotive): the polar axis is the light's Y. H turns the plane about Y (positive toward
+//!   +X), V is the elevation within it (positive toward +Y): V = asin(d·Y),
+//!   H = atan2(d·X, −d·Z).
+//! - For A and B a first angle of 0 means the file gives one side of a symmetric luminaire
+//!   (|H| or |V| is looked up, as LM-63 describes); both cover the hemisphere in front of the
+//!   luminaire (|H|, |V| ≤ 90°) and emit nothing behind it. `angleScale` applies to type C
+//!   only (the front end warns when it is authored on another type).
+//!
+//! Candela are interpolated bilinearly in the two angles; outside the file's range the profile
+//! is 0. With `ies:normalize` the value is divided by the profile's mean candela over the
+//! sphere (or the hemisphere, for a profile spanning no more than 90° + a little; always the
+//! front hemisphere for types A and B), so the shaping keeps the light's power; without it the
+//! factor is the candela value itself.
+//!
+//! **Tilt.** A tilt table multiplies the candela by its factor at the lamp's tilt, interpolated
+//! linearly in the table's angles (clamped to its ends). A UsdLux light's tilt is the angle
+//! between its aim (−Z) and the stage's down (the front end gives it), the reading LM-63 gives
+//! lamp-to-luminaire geometry 1 (lamp vertical); geometries 2 and 3 (a horizontal lamp) are
+//! read the same way (documented in docs/materials.md).
 
-/// A parsed type C profile.
+use glam::Vec3A;
+
+/// LM-63's photometric types.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Photometry {
+    /// Type C (1): vertical angles from the nadir, horizontal angles about it.
+    C,
+    /// Type B (2): photometric planes about the luminaire's horizontal (X) axis.
+    B,
+    /// Type A (3): photometric planes about the luminaire's vertical (Y) axis.
+    A,
+}
+
+/// A tilt table (`TILT=INCLUDE` or `TILT=<file>`): candela multipliers by lamp tilt.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tilt {
+    /// Lamp-to-luminaire geometry, 1 to 3.
+    pub geometry: u8,
+    /// Radians, increasing.
+    pub angles: Vec<f32>,
+    /// One per angle, ≥ 0.
+    pub factors: Vec<f32>,
+}
+
+impl Tilt {
+    /// The factor at tilt `angle` (radians): linear between the table's angles, its end values
+    /// beyond them.
+    pub fn factor(&self, angle: f32) -> f32 {
+        let (i, t) = bracket(&self.angles, angle);
+        let j = (i + 1).min(self.angles.len() - 1);
+        lerp(self.factors[i], self.factors[j], t)
+    }
+}
+
+/// A parsed profile.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IesProfile {
+    /// The photometric type.
+    pub kind: Photometry,
+    /// The tilt table, if the file has one.
+    pub tilt: Option<Tilt>,
     /// Vertical angles, radians, increasing.
     v: Vec<f32>,
     /// Horizontal angles, radians, increasing.
@@ -38,24 +100,41 @@ pub struct IesProfile {
 }
 
 impl IesProfile {
-    /// Parses an LM-63 file's text.
+    /// Parses an LM-63 file's text (a `TILT=<file>` reference is refused: [`IesProfile::parse_with`]).
     ///
     /// # Errors
-    /// A one-line reason: no `TILT=` line, a tilt other than `NONE`, missing or non-numeric
-    /// values, a photometric type other than C, angles that do not increase, negative candela.
+    /// As [`IesProfile::parse_with`].
     pub fn parse(text: &str) -> Result<IesProfile, String> {
+        Self::parse_with(text, &|name| Err(format!("TILT={name}: a tilt file cannot be read here")))
+    }
+
+    /// Parses an LM-63 file's text; `tilt_file` gives the text of the file a `TILT=<file>`
+    /// line names (or why it cannot).
+    ///
+    /// # Errors
+    /// A one-line reason: no `TILT=` line, a tilt table that does not parse (its count, angles
+    /// that do not increase, negative factors, a tilt file that cannot be read), missing or
+    /// non-numeric values, an unknown photometric type, angles that do not increase or lie
+    /// outside the type's range, negative candela.
+    pub fn parse_with(text: &str, tilt_file: &dyn Fn(&str) -> Result<String, String>) -> Result<IesProfile, String> {
         let mut lines = text.lines();
-        let tilt = loop {
+        let tilt_spec = loop {
             let Some(line) = lines.next() else { return Err("no TILT= line".into()) };
             if let Some(rest) = line.trim_start().strip_prefix("TILT=") {
                 break rest.trim().to_string();
             }
         };
-        if !tilt.eq_ignore_ascii_case("NONE") {
-            return Err(format!("TILT={tilt} is not supported (only TILT=NONE)"));
-        }
         let rest: Vec<&str> = lines.collect();
         let mut nums = rest.iter().flat_map(|l| l.split(|c: char| c.is_whitespace() || c == ',')).filter(|t| !t.is_empty());
+        let tilt = if tilt_spec.eq_ignore_ascii_case("NONE") {
+            None
+        } else if tilt_spec.eq_ignore_ascii_case("INCLUDE") {
+            Some(parse_tilt(&mut nums).map_err(|e| format!("TILT=INCLUDE: {e}"))?)
+        } else {
+            let body = tilt_file(&tilt_spec).map_err(|e| format!("TILT={tilt_spec}: {e}"))?;
+            let mut t = body.split(|c: char| c.is_whitespace() || c == ',').filter(|t| !t.is_empty());
+            Some(parse_tilt(&mut t).map_err(|e| format!("TILT={tilt_spec}: {e}"))?)
+        };
         let mut next = |what: &str| -> Result<f64, String> {
             let t = nums.next().ok_or_else(|| format!("the file ends before {what}"))?;
             t.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("{what} '{t}' is not a number"))
@@ -73,9 +152,12 @@ impl IesProfile {
         let ballast = next("the ballast factor")?;
         let ballast_lamp = next("the ballast-lamp photometric factor")?;
         let _watts = next("the input watts")?;
-        if kind != 1.0 {
-            return Err(format!("photometric type {kind} is not supported (only type C, 1)"));
-        }
+        let kind = match kind {
+            1.0 => Photometry::C,
+            2.0 => Photometry::B,
+            3.0 => Photometry::A,
+            _ => return Err(format!("photometric type {kind} is not one of 1 (C), 2 (B), 3 (A)")),
+        };
         let count = |n: f64, what: &str| -> Result<usize, String> {
             if (1.0..=100_000.0).contains(&n) && n.fract() == 0.0 {
                 Ok(n as usize)
@@ -102,10 +184,18 @@ impl IesProfile {
             }
             cd.push(c as f32);
         }
-        if v[0] < 0.0 || v[nv - 1] > std::f32::consts::PI + 1e-4 {
-            return Err("vertical angles outside [0, 180] degrees".into());
+        let (pi, half) = (std::f32::consts::PI, std::f32::consts::FRAC_PI_2);
+        match kind {
+            Photometry::C if v[0] < 0.0 || v[nv - 1] > pi + 1e-4 => return Err("vertical angles outside [0, 180] degrees".into()),
+            Photometry::A | Photometry::B if v[0] < -half - 1e-4 || v[nv - 1] > half + 1e-4 => {
+                return Err("vertical angles outside [-90, 90] degrees (types A and B)".into())
+            }
+            Photometry::A | Photometry::B if h[0] < -half - 1e-4 || h[nh - 1] > half + 1e-4 => {
+                return Err("horizontal angles outside [-90, 90] degrees (types A and B)".into())
+            }
+            _ => {}
         }
-        let mut p = IesProfile { v, h, cd, mean: 0.0, peak: 0.0 };
+        let mut p = IesProfile { kind, tilt, v, h, cd, mean: 0.0, peak: 0.0 };
         p.peak = p.cd.iter().copied().fold(0.0, f32::max);
         p.mean = p.mean_candela();
         Ok(p)
@@ -116,26 +206,65 @@ impl IesProfile {
         self.cd[hi * self.v.len() + vi]
     }
 
-    /// Mean candela over the solid angle the profile covers: the whole sphere, or the
-    /// hemisphere when its vertical angles span no more than 90° (+0.1 rad, as hdEmbree).
-    /// Integrated cell by cell (midpoint rule in θ, the profile's own bilinear values) over
-    /// every azimuth, whatever horizontal symmetry the file uses.
+    /// Mean candela over the solid angle the profile covers: for type C the whole sphere, or
+    /// the hemisphere when its vertical angles span no more than 90° (+0.1 rad, as hdEmbree);
+    /// for types A and B the front hemisphere. Integrated cell by cell (midpoint rule in θ off
+    /// the axis, the profile's own bilinear values) over every azimuth, whatever symmetry the
+    /// file uses.
     fn mean_candela(&self) -> f32 {
-        let span = self.v[self.v.len() - 1] - self.v[0];
-        let sphere = span > std::f32::consts::FRAC_PI_2 + 0.1;
+        let (t0, t1, sphere) = match self.kind {
+            Photometry::C => {
+                let span = self.v[self.v.len() - 1] - self.v[0];
+                (self.v[0], self.v[self.v.len() - 1], span > std::f32::consts::FRAC_PI_2 + 0.1)
+            }
+            Photometry::A | Photometry::B => (0.0, std::f32::consts::FRAC_PI_2, false),
+        };
         let (nt, np) = (720usize, 360usize);
-        let (t0, t1) = (self.v[0], self.v[self.v.len() - 1]);
         let mut sum = 0.0f64;
         for i in 0..nt {
             let theta = t0 + (t1 - t0) * (i as f32 + 0.5) / nt as f32;
             let d_omega = f64::from((t1 - t0) / nt as f32 * theta.sin()) * (2.0 * std::f64::consts::PI / np as f64);
             for j in 0..np {
                 let phi = 2.0 * std::f32::consts::PI * (j as f32 + 0.5) / np as f32;
-                sum += f64::from(self.candela(theta, phi)) * d_omega;
+                let c = match self.kind {
+                    Photometry::C => self.candela(theta, phi),
+                    // θ off the aim (−Z), φ about it.
+                    _ => self.candela_local(Vec3A::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), -theta.cos())),
+                };
+                sum += f64::from(c) * d_omega;
             }
         }
         let area = if sphere { 4.0 } else { 2.0 } * std::f64::consts::PI;
         (sum / area) as f32
+    }
+
+    /// Candela toward unit direction `d` in the light's frame (the luminaire aims along −Z),
+    /// any photometric type ([`IesProfile::candela`]'s θ and φ for type C; see the module
+    /// for A and B), before tilt.
+    pub fn candela_local(&self, d: Vec3A) -> f32 {
+        match self.kind {
+            Photometry::C => self.candela((-d.z).clamp(-1.0, 1.0).acos(), (-d.y).atan2(-d.x)),
+            Photometry::B => self.candela_hv(d.x.clamp(-1.0, 1.0).asin(), d.y.atan2(-d.z)),
+            Photometry::A => self.candela_hv(d.x.atan2(-d.z), d.y.clamp(-1.0, 1.0).asin()),
+        }
+    }
+
+    /// A type A or B profile's candela at horizontal angle `h` and vertical angle `v` (radians),
+    /// bilinear; a file starting at 0 gives |h| (or |v|) its values; 0 outside its range.
+    pub fn candela_hv(&self, h: f32, v: f32) -> f32 {
+        let h = if self.h[0] >= 0.0 { h.abs() } else { h };
+        let v = if self.v[0] >= 0.0 { v.abs() } else { v };
+        let inside = |xs: &[f32], x: f32| x >= xs[0] - 1e-6 && x <= xs[xs.len() - 1] + 1e-6;
+        if !(inside(&self.v, v) && inside(&self.h, h)) {
+            return 0.0;
+        }
+        let (vi, tv) = bracket(&self.v, v);
+        let vj = (vi + 1).min(self.v.len() - 1);
+        let (hi, th) = bracket(&self.h, h);
+        let hj = (hi + 1).min(self.h.len() - 1);
+        let a = lerp(self.at(hi, vi), self.at(hi, vj), tv);
+        let b = lerp(self.at(hj, vi), self.at(hj, vj), tv);
+        lerp(a, b, th)
     }
 
     /// Mean candela over the sphere or hemisphere ([`IesProfile::mean_candela`]).
@@ -186,6 +315,34 @@ impl IesProfile {
     }
 }
 
+/// The four tilt records from `nums`: geometry, count, angles (degrees), factors.
+fn parse_tilt<'a>(nums: &mut impl Iterator<Item = &'a str>) -> Result<Tilt, String> {
+    let mut next = |what: &str| -> Result<f64, String> {
+        let t = nums.next().ok_or_else(|| format!("the tilt data end before {what}"))?;
+        t.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("{what} '{t}' is not a number"))
+    };
+    let geometry = next("the lamp-to-luminaire geometry")?;
+    if !matches!(geometry, 1.0 | 2.0 | 3.0) {
+        return Err(format!("lamp-to-luminaire geometry {geometry} is not 1, 2 or 3"));
+    }
+    let n = next("the tilt angle count")?;
+    if !((1.0..=10_000.0).contains(&n) && n.fract() == 0.0) {
+        return Err(format!("the tilt angle count {n} is not a count"));
+    }
+    let n = n as usize;
+    let angles: Vec<f32> = (0..n).map(|_| next("a tilt angle").map(|a| (a as f32).to_radians())).collect::<Result<_, _>>()?;
+    let factors: Vec<f32> = (0..n).map(|_| next("a tilt factor").map(|f| f as f32)).collect::<Result<_, _>>()?;
+    // A table of the wrong length shifts factors into the angles (or the photometric header
+    // into the factors): the angles stop increasing, or run past 180°.
+    if angles.windows(2).any(|w| !(w[1] > w[0])) || angles.iter().any(|a| !(0.0..=std::f32::consts::PI + 1e-4).contains(a)) {
+        return Err(format!("the {n} tilt angles do not increase within [0, 180] degrees (a table of the wrong length?)"));
+    }
+    if factors.iter().any(|f| !(*f >= 0.0)) {
+        return Err("a tilt factor is negative".into());
+    }
+    Ok(Tilt { geometry: geometry as u8, angles, factors })
+}
+
 /// The cell of increasing `xs` holding `x` (clamped to the ends) and the fraction across it.
 fn bracket(xs: &[f32], x: f32) -> (usize, f32) {
     if xs.len() < 2 || x <= xs[0] {
@@ -225,6 +382,86 @@ mod tests {
         assert_eq!(p.candela(2.0, 0.0), 0.0);
     }
 
+    /// Vertical 0, 30, 90 (symmetric about the horizontal plane); horizontal −90, 0, 90.
+    fn type_ab(kind: u8, tilt: &str) -> String {
+        format!("IESNA:LM-63-2002\nTILT={tilt}\n1 1000 2 3 3 {kind} 2 0 0 0\n1 1 100\n0 30 90\n-90 0 90\n1 2 3\n100 50 10\n4 5 6\n")
+    }
+
+    /// A unit direction at horizontal angle `h` and vertical angle `v` (degrees) of type B's
+    /// planes (about the light's X) or type A's (about its Y), the aim being −Z.
+    fn direction(kind: Photometry, h: f32, v: f32) -> Vec3A {
+        let (h, v) = (h.to_radians(), v.to_radians());
+        match kind {
+            Photometry::B => Vec3A::new(h.sin(), h.cos() * v.sin(), -h.cos() * v.cos()),
+            _ => Vec3A::new(v.cos() * h.sin(), v.sin(), -v.cos() * h.cos()),
+        }
+    }
+
+    #[test]
+    fn types_a_and_b_read_their_tables_in_their_own_planes() {
+        for (code, kind) in [(2u8, Photometry::B), (3, Photometry::A)] {
+            let p = IesProfile::parse(&type_ab(code, "NONE")).unwrap();
+            assert_eq!(p.kind, kind);
+            let at = |h: f32, v: f32| p.candela_local(direction(kind, h, v));
+            // Grid points (× the multiplier 2); the aim is H = V = 0.
+            assert!((at(0.0, 0.0) - 200.0).abs() < 1e-3, "{}", at(0.0, 0.0));
+            assert!((at(0.0, 30.0) - 100.0).abs() < 1e-3);
+            // H = −60 is a third of the way from the −90 row (2 at V = 30) to the 0 row (50).
+            assert!((at(-60.0, 30.0) - 2.0 * 18.0).abs() < 1e-2, "{}", at(-60.0, 30.0));
+            // The file starts at V = 0: below reads above.
+            assert!((at(0.0, -30.0) - 100.0).abs() < 1e-3);
+            // Between grid points: bilinear in (H, V).
+            let c = at(45.0, 30.0);
+            assert!((c - 2.0 * (50.0 + 5.0) / 2.0).abs() < 1e-2, "{kind:?} {c}");
+            let c = at(-45.0, 15.0);
+            assert!((c - 2.0 * (1.5 + 75.0) / 2.0).abs() < 1e-2, "{kind:?} {c}");
+            // Behind the luminaire: nothing.
+            assert_eq!(p.candela_local(Vec3A::Z), 0.0);
+        }
+        // The two types' planes differ: one direction reads different table cells.
+        let (a, b) = (IesProfile::parse(&type_ab(3, "NONE")).unwrap(), IesProfile::parse(&type_ab(2, "NONE")).unwrap());
+        let d = direction(Photometry::B, 45.0, 30.0);
+        assert!((a.candela_local(d) - b.candela_local(d)).abs() > 5.0);
+        // A constant profile over the front hemisphere has that constant as its mean.
+        let flat = "TILT=NONE\n1 -1 1 2 2 2 2 0 0 0 1 1 10\n-90 90\n-90 90\n7 7\n7 7\n";
+        let m = IesProfile::parse(flat).unwrap().mean();
+        assert!((m - 7.0).abs() < 1e-2, "{m}");
+    }
+
+    #[test]
+    fn a_tilt_table_scales_the_candela_at_the_lights_tilt() {
+        let table = "1\n3\n0 45 90\n1 0.8 0.5";
+        let inline = IesProfile::parse(&type_ab(2, &format!("INCLUDE\n{table}"))).unwrap();
+        let t = inline.tilt.as_ref().unwrap();
+        assert_eq!((t.geometry, t.angles.len()), (1, 3));
+        assert!((t.factor(22.5f32.to_radians()) - 0.9).abs() < 1e-5);
+        assert!((t.factor(120f32.to_radians()) - 0.5).abs() < 1e-6);
+        // TILT=<file>: the same table from the file it names.
+        let from_file = IesProfile::parse_with(&type_ab(2, "lamp.tilt"), &|name| {
+            assert_eq!(name, "lamp.tilt");
+            Ok(table.to_string())
+        })
+        .unwrap();
+        assert_eq!(from_file.tilt, inline.tilt);
+        // On a light tilted 67.5° from down, the aim's candela × the factor there (0.65).
+        let shaping = crate::light::IesShaping {
+            profile: inline,
+            file: "t.ies".into(),
+            angle_scale: 0.0,
+            normalize: false,
+            x: Vec3A::X,
+            y: Vec3A::Y,
+            tilt: 67.5f32.to_radians(),
+        };
+        let f = shaping.factor(Vec3A::NEG_Z, Vec3A::NEG_Z);
+        assert!((f - 200.0 * 0.65).abs() < 1e-3, "{f}");
+        // A table one angle longer than its values: refused, naming the tilt data.
+        let e = IesProfile::parse(&type_ab(2, "INCLUDE\n1\n4\n0 45 90\n1 0.8 0.5")).unwrap_err();
+        assert!(e.contains("TILT=INCLUDE") && e.contains("wrong length"), "{e}");
+        let e = IesProfile::parse_with(&type_ab(2, "gone.tilt"), &|_| Err("no such file".into())).unwrap_err();
+        assert!(e.contains("gone.tilt") && e.contains("no such file"), "{e}");
+    }
+
     #[test]
     fn the_mean_is_the_integral_over_the_hemisphere() {
         // A constant profile's mean is its constant; a cosine one (c·cos θ) over the lower
@@ -242,9 +479,11 @@ mod tests {
     fn bad_files_are_refused_with_a_reason() {
         for (text, says) in [
             ("no tilt here\n1 2 3", "TILT"),
-            ("TILT=INCLUDE\n1 2 3", "TILT=INCLUDE"),
+            ("TILT=INCLUDE\n1 3 0 90 45 1 1 1\n", "TILT=INCLUDE"),
+            ("TILT=other.tilt\n1 2 3", "TILT=other.tilt"),
             ("TILT=NONE\n1 1000 1 3 2 1 2 0 0 0 1 1 100\n0 45\n", "ends before"),
-            ("TILT=NONE\n1 1000 1 2 1 2 2 0 0 0 1 1 100\n0 90\n0\n1 1\n", "type"),
+            ("TILT=NONE\n1 1000 1 2 1 4 2 0 0 0 1 1 100\n0 90\n0\n1 1\n", "type"),
+            ("TILT=NONE\n1 1000 1 2 1 2 2 0 0 0 1 1 100\n0 120\n0\n1 1\n", "[-90, 90]"),
             ("TILT=NONE\n1 1000 1 2 1 1 2 0 0 0 1 1 100\n0 x\n0\n1 1\n", "not a number"),
         ] {
             let e = IesProfile::parse(text).unwrap_err();

@@ -1,29 +1,39 @@
-//! An emissive mesh as an area light (UsdLux `MeshLightAPI`, `GeometryLight`): world-space
-//! triangles (the mesh as tessellated for lighting), sampled uniformly by area and met by rays
-//! through a BVH of their own, since lights are not geometry in the scene's BVH.
+//! An emissive mesh as an area light (UsdLux `MeshLightAPI`, `GeometryLight`): triangles (the
+//! mesh as tessellated for lighting), sampled uniformly by area and met by rays through a BVH
+//! of their own, since lights are not geometry in the scene's BVH. A moving mesh (transform
+//! motion blur) keeps its triangles in object space and is posed at each ray's shutter time.
 
 use std::sync::Arc;
 
-use glam::Vec3A;
+use glam::{Mat4, Vec3A};
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray as BvhRay, RayHit};
 
 use super::Distribution1D;
 use crate::bounds::Bounds3;
 use crate::intersect::WatertightRay;
+use crate::motion::MotionTransform;
 
-/// The triangles of an emissive mesh, render space.
+/// The triangles of an emissive mesh: render space, or object space under `motion`.
 pub struct TriangleLight {
-    /// Vertices a, b, c; the emitting side is the one (b − a) × (c − a) points to.
+    /// Vertices a, b, c; the emitting side is the one (b − a) × (c − a) points to (for a
+    /// moving mesh, the side that normal's pose under the transform points to).
     tris: Vec<[Vec3A; 3]>,
-    /// Chooses a triangle with probability ∝ its area.
+    /// Chooses a triangle with probability ∝ its area (in `tris`' space).
     by_area: Distribution1D,
-    /// Render units².
+    /// Area of `tris` in their own space, units².
+    own_area: f32,
+    /// Render units²: the area at the shutter's open.
     area: f32,
+    /// Render units²: the largest area at a motion key (an upper bound for importance).
+    max_area: f32,
+    /// Render space; a moving mesh's over the whole shutter.
     bounds: Bounds3,
     /// Emits from both sides (the mesh's `doubleSided`).
     pub two_sided: bool,
     bvh: Option<CwBvh>,
+    /// Object to render space over the shutter; `None`: `tris` are in render space.
+    motion: Option<MotionTransform>,
 }
 
 impl std::fmt::Debug for TriangleLight {
@@ -32,15 +42,31 @@ impl std::fmt::Debug for TriangleLight {
             .field("triangles", &self.tris.len())
             .field("area", &self.area)
             .field("two_sided", &self.two_sided)
+            .field("moving", &self.motion.is_some())
             .finish_non_exhaustive()
     }
 }
 
-/// Where a ray meets the mesh: distance, |cosine| between the ray and the triangle's normal.
+/// Where a ray meets the mesh: distance, |cosine| between the ray and the triangle's normal,
+/// and the area whose reciprocal is the density (per render unit²) with which
+/// [`TriangleLight::sample_at`] picks that point (the mesh's area, unless it moves and
+/// deforms triangles unevenly).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriangleHit {
     pub t: f32,
     pub cos: f32,
+    pub area: f32,
+}
+
+/// A point [`TriangleLight::sample_at`] chose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrianglePoint {
+    /// Render space.
+    pub p: Vec3A,
+    /// Unit normal of the emitting side there.
+    pub normal: Vec3A,
+    /// As [`TriangleHit::area`]: the point's density per render unit² is 1 / `area`.
+    pub area: f32,
 }
 
 impl TriangleLight {
@@ -48,6 +74,17 @@ impl TriangleLight {
     /// right-hand normal points to). Triangles with a non-finite vertex or no area are left
     /// out (they could never be sampled or hit); `None` when none is left.
     pub fn new(triangles: Vec<[Vec3A; 3]>, two_sided: bool) -> Option<Arc<TriangleLight>> {
+        Self::build(triangles, two_sided, None)
+    }
+
+    /// A mesh moving under `motion` (object to render space over the shutter): `triangles`
+    /// in object space, oriented as for [`TriangleLight::new`] in that space (a mirroring
+    /// pose keeps the emitting side the one the object-space normal's pose points to).
+    pub fn moving(triangles: Vec<[Vec3A; 3]>, two_sided: bool, motion: MotionTransform) -> Option<Arc<TriangleLight>> {
+        Self::build(triangles, two_sided, Some(motion))
+    }
+
+    fn build(triangles: Vec<[Vec3A; 3]>, two_sided: bool, motion: Option<MotionTransform>) -> Option<Arc<TriangleLight>> {
         let limit = crate::bounds::MAX_COORDINATE;
         let tris: Vec<[Vec3A; 3]> = triangles
             .into_iter()
@@ -57,16 +94,48 @@ impl TriangleLight {
             return None;
         }
         let areas: Vec<f32> = tris.iter().map(tri_area).collect();
-        let area = areas.iter().map(|&a| f64::from(a)).sum::<f64>() as f32;
+        let own_area = areas.iter().map(|&a| f64::from(a)).sum::<f64>() as f32;
         let boxes: Vec<Bounds3> = tris.iter().map(|t| Bounds3::from_points(t.iter().copied())).collect();
-        let bounds = boxes.iter().skip(1).fold(boxes[0], |a, b| a.union(b));
+        let own_bounds = boxes.iter().skip(1).fold(boxes[0], |a, b| a.union(b));
         let bvh = crate::bvh::build_bvh(&boxes);
-        Some(Arc::new(TriangleLight { by_area: Distribution1D::new(&areas), tris, area, bounds, two_sided, bvh }))
+        let (area, max_area, bounds) = match &motion {
+            None => (own_area, own_area, own_bounds),
+            Some(m) => {
+                let posed = |x: &Mat4| tris.iter().map(|t| f64::from(tri_area(&t.map(|p| x.transform_point3a(p))))).sum::<f64>() as f32;
+                let max_area = m.keys().iter().map(|k| posed(&k.render_from_object)).fold(0.0f32, f32::max);
+                (posed(&m.at(0.0)), max_area, m.swept_bounds(&own_bounds))
+            }
+        };
+        if !(area > 0.0 && area.is_finite()) {
+            return None;
+        }
+        Some(Arc::new(TriangleLight {
+            by_area: Distribution1D::new(&areas),
+            tris,
+            own_area,
+            area,
+            max_area,
+            bounds,
+            two_sided,
+            bvh,
+            motion,
+        }))
     }
 
-    /// Total area, render units².
+    /// Total area, render units² (a moving mesh's at the shutter's open: what `normalize`
+    /// divides by).
     pub fn area(&self) -> f32 {
         self.area
+    }
+
+    /// The largest area the mesh has at a motion key (its area when it does not move).
+    pub fn max_area(&self) -> f32 {
+        self.max_area
+    }
+
+    /// True when the mesh moves over the shutter.
+    pub fn is_moving(&self) -> bool {
+        self.motion.is_some()
     }
 
     /// Triangle count.
@@ -79,15 +148,22 @@ impl TriangleLight {
         self.tris.is_empty()
     }
 
-    /// Render-space bounds of the triangles.
+    /// Render-space bounds of the triangles (over the whole shutter when moving).
     pub fn bounds(&self) -> Bounds3 {
         self.bounds
     }
 
     /// A point uniformly distributed over the mesh's area from two uniform numbers: (point, unit
-    /// normal of its triangle's emitting side). `u1` chooses the triangle and, remapped within
-    /// its cell, the first barycentric coordinate, so stratified numbers stay stratified.
+    /// normal of its triangle's emitting side), at the shutter's open.
     pub fn sample(&self, u1: f32, u2: f32) -> (Vec3A, Vec3A) {
+        let s = self.sample_at(u1, u2, 0.0);
+        (s.p, s.normal)
+    }
+
+    /// A point on the mesh posed at shutter time `time` from two uniform numbers: uniform over
+    /// its area in its own space. `u1` chooses the triangle and, remapped within its cell, the
+    /// first barycentric coordinate, so stratified numbers stay stratified.
+    pub fn sample_at(&self, u1: f32, u2: f32, time: f32) -> TrianglePoint {
         let (x, _, i) = self.by_area.sample(u1);
         let n = self.tris.len() as f32;
         let v1 = (x * n - i as f32).clamp(0.0, 1.0);
@@ -96,29 +172,77 @@ impl TriangleLight {
         let s = v1.sqrt();
         let (b0, b1) = (1.0 - s, u2 * s);
         let p = a * b0 + b * b1 + c * (1.0 - b0 - b1);
-        (p, (b - a).cross(c - a).normalize())
+        match &self.motion {
+            None => TrianglePoint { p, normal: (b - a).cross(c - a).normalize(), area: self.area },
+            Some(m) => {
+                let x = m.at(time);
+                let (normal, area) = self.posed_normal(&x, i);
+                TrianglePoint { p: x.transform_point3a(p), normal, area }
+            }
+        }
     }
 
-    /// The nearest emitting side the ray from `o` along unit `d` meets in (0, `t_max`): a
-    /// one-sided mesh's back faces let the ray through, as they emit nothing toward it.
+    /// Triangle `i`'s unit emitting normal under pose `x`, and the area whose reciprocal is the
+    /// render-space density of a point sampled on it: the own-space total times the ratio by
+    /// which the pose scales this triangle (an affine map scales each triangle's area by one
+    /// factor).
+    fn posed_normal(&self, x: &Mat4, i: usize) -> (Vec3A, f32) {
+        let [a, b, c] = self.tris[i];
+        let own = (b - a).cross(c - a);
+        let posed = x.transform_vector3a(b - a).cross(x.transform_vector3a(c - a));
+        // (Ma) × (Mb) = det(M) M⁻ᵀ(a × b): a mirroring pose turns it against the covector's pose.
+        let sign = if x.determinant() < 0.0 { -1.0 } else { 1.0 };
+        (posed.normalize() * sign, self.own_area * posed.length() / own.length())
+    }
+
+    /// The nearest emitting side the ray from `o` along unit `d` meets in (0, `t_max`) at the
+    /// shutter's open: a one-sided mesh's back faces let the ray through, as they emit nothing
+    /// toward it.
     pub fn intersect(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<TriangleHit> {
-        let bvh = self.bvh.as_ref()?;
+        self.intersect_at(o, d, t_max, 0.0)
+    }
+
+    /// As [`TriangleLight::intersect`], the mesh posed at shutter time `time`.
+    pub fn intersect_at(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<TriangleHit> {
         if !(o.is_finite() && d.is_finite()) {
             return None;
         }
+        let Some(m) = &self.motion else {
+            let (t, i) = self.nearest(o, d, t_max)?;
+            let [a, b, c] = self.tris[i];
+            let cos = (b - a).cross(c - a).normalize().dot(d).abs();
+            return Some(TriangleHit { t, cos, area: self.area });
+        };
+        // In object space the ray is o' + t·d' with the same t (d' not unit), and which side
+        // it meets is the same: n_render · d = |det M| n_object · M⁻¹d.
+        let x = m.at(time);
+        let inv = x.inverse();
+        let (oo, od) = (inv.transform_point3a(o), inv.transform_vector3a(d));
+        if !(oo.is_finite() && od.is_finite()) {
+            return None;
+        }
+        let (t, i) = self.nearest(oo, od, t_max)?;
+        let (normal, area) = self.posed_normal(&x, i);
+        Some(TriangleHit { t, cos: normal.dot(d).abs(), area })
+    }
+
+    /// The nearest emitting triangle along o + t·d, t in (0, `t_max`), in `tris`' space: (t,
+    /// triangle index).
+    fn nearest(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<(f32, usize)> {
+        let bvh = self.bvh.as_ref()?;
         let wray = WatertightRay::new(o, d);
         let ray = BvhRay::new(o, crate::trace::positive_zeros(d), 0.0, t_max);
         let mut hit = RayHit::none();
-        let mut best: Option<TriangleHit> = None;
+        let mut best: Option<(f32, usize)> = None;
         bvh.ray_traverse(ray, &mut hit, |r, id| {
-            let [a, b, c] = self.tris[bvh.primitive_indices[id] as usize];
+            let i = bvh.primitive_indices[id] as usize;
+            let [a, b, c] = self.tris[i];
             let Some((t, ..)) = wray.hit_triangle(a, b, c, r.tmax) else { return f32::INFINITY };
-            let ng = (b - a).cross(c - a).normalize();
-            let cos = -ng.dot(d);
+            let cos = -(b - a).cross(c - a).dot(d);
             if !(t > 0.0) || !(cos > 0.0 || (self.two_sided && cos < 0.0)) {
                 return f32::INFINITY;
             }
-            best = Some(TriangleHit { t, cos: cos.abs() });
+            best = Some((t, i));
             t
         });
         best
