@@ -561,25 +561,17 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
             (1..stride).fold(base, |r, m| r.max(base + (vert(k * stride + m) - mid).abs().element_sum()))
         };
         // Cull the edge first, cheaply: every box lies within its chord's reach, and √3 times
-        // that bounds how far it reaches from its chord in any axis direction. The reaches are
-        // kept for the chords' own culls below (on the stack: a tier's grid has at most 16
-        // chords an edge).
+        // that bounds how far it reaches from its chord in any axis direction. At stride 1 every
+        // reach is the radius; merged, each chord's is computed again below where it is needed
+        // (one skipped vertex at stride 2: cheaper than keeping them in an array per edge).
         let mut edge_box = crate::bounds::Bounds3::EMPTY;
         let mut r_max: f32 = base;
-        let (mut on_stack, mut on_heap) = ([base; 16], Vec::new());
-        let reaches: &mut [f32] = if q <= on_stack.len() {
-            &mut on_stack[..q]
-        } else {
-            on_heap.resize(q, base);
-            &mut on_heap
-        };
         if stride > 1 || q > 2 {
-            for (k, r) in reaches.iter_mut().enumerate() {
+            for k in 0..q {
                 let (a, b) = (vert(k * stride), vert((k + 1) * stride));
                 if stride > 1 {
-                    *r = reach(k, a, b);
+                    r_max = r_max.max(reach(k, a, b));
                 }
-                r_max = r_max.max(*r);
                 edge_box.grow(a);
                 edge_box.grow(b);
             }
@@ -588,13 +580,14 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
         if q > 2 && ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
             continue;
         }
-        for (k, &r) in reaches.iter().enumerate() {
+        for k in 0..q {
             // Then each chord, before building its box: every point of the box lies within √3
             // times its reach of the chord (r beyond an end, and r across both ways), so a ray
             // that passes farther from the chord in (t_min, t_best) misses the box.
             // The axis-aligned test is the cheaper, the distance the tighter for chords running
             // diagonally to the axes: most rays fail the first, most of the rest the second.
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
+            let r = if stride > 1 { reach(k, a, b) } else { base };
             let chord = crate::bounds::Bounds3 { min: a.min(b), max: a.max(b) };
             if ray.hit_box(&chord.expanded(1.8 * r), t_min, t_best).is_none()
                 || !ray.may_pass_near_segment(a, b, SQRT_3_UP * r, t_min, t_best)
