@@ -9,14 +9,17 @@ mod common;
 
 use std::sync::Arc;
 
-use common::cube_sphere;
+use common::{beam_ray, cube_sphere, Rng};
 use glam::{Mat4, Vec3, Vec3A};
 use mipray::camera::Camera;
 use mipray::displacement::Displacement;
+use mipray::geometry_cache::CacheConfig;
 use mipray::light::LightShape;
 use mipray::material::{Material, PreviewSurface};
 use mipray::options::IntegratorKind;
 use mipray::prelude::*;
+use mipray::ray::{Ray, RayKind};
+use mipray::trace::{TraceCounters, Tracer};
 use mipray_bridge::OsdSurface;
 
 /// Radius of the shells, render units.
@@ -181,12 +184,57 @@ fn no_light_from_inside_a_closed_shell_gets_out() {
 // Not yet passing (issue 23, see docs/cracks.md, "Not yet closed: displaced shells"):
 // neighbouring displaced subpatches tested at different rates displace their shared edge by
 // displacement filtered at two grid spacings, and the seam boxes (sized on the undisplaced
-// edge curve) do not close the holes that leaves; 4 pixels of 10,080 leak. Run with
-// `--ignored` to see the figures.
+// edge curve) do not close the holes that leaves (the test below finds them with camera rays
+// alone); about 120 pixels of 10,080 leak. Run with `--ignored` to see the figures.
 #[test]
 #[ignore = "issue 23: light still leaks through cracks of displaced shells"]
 fn no_light_crosses_a_closed_displaced_shell() {
     let mut found = leaks(&[Shell::Displaced], lights_outside, &OUTSIDE_VIEWS, &INTEGRATORS);
     found.extend(leaks(&[Shell::Displaced], lights_inside, &INSIDE_VIEWS, &LIT_INTEGRATORS));
     assert!(found.is_empty(), "light crossed the shell:\n{}", found.join("\n"));
+}
+
+/// Rays through the wall of the closed displaced shell, each with its own beam spread (so
+/// neighbouring subpatches are tested at every mix of rates and split depths): from inside the
+/// cavity outward, and from outside inward. Returns (rays that got through, shadow rays that
+/// got through) of `rays` each way, and the rates used.
+fn displaced_crack_escapes(rays: usize, seed: u64) -> (usize, usize, TraceCounters) {
+    let scene = shell_scene(Shell::Displaced);
+    let tracer = Tracer::new(&scene, CacheConfig::unbounded(), 1.0);
+    let mut c = TraceCounters::default();
+    let mut rng = Rng(seed);
+    let (mut escapes, mut unoccluded) = (0, 0);
+    // The wall lies within 3 ± (8 % of 3 + the displacement bound) of the centre.
+    let (inner, outer) = (0.85 * (RADIUS * 0.92 - 0.27), 1.2 * (RADIUS * 1.08 + 0.27));
+    for k in 0..2 * rays {
+        // Spread from 1/256 to 2 radians per unit distance.
+        let spread = 2.0 * 2f32.powf(-9.0 * rng.f32());
+        let r = if k % 2 == 0 {
+            beam_ray(rng.unit() * (inner * rng.f32().sqrt()), rng.unit(), 0.0, spread, RayKind::Camera)
+        } else {
+            // From outside to a point of the cavity.
+            let o = rng.unit() * outer;
+            let to = rng.unit() * (inner * rng.f32().sqrt()) - o;
+            Ray { t_max: to.length(), ..beam_ray(o, to.normalize(), 0.0, spread, RayKind::Camera) }
+        };
+        escapes += usize::from(tracer.intersect(&r, &mut c).is_none());
+        unoccluded += usize::from(!tracer.occluded(&Ray { kind: RayKind::Shadow, ..r }, &mut c));
+    }
+    (escapes, unoccluded, c)
+}
+
+// Not yet passing (issue 23, docs/cracks.md "Not yet closed: displaced shells"): neighbours
+// tested at different rates displace their shared edge filtered at two spacings; about one ray
+// in 6,000 gets through. Run with `--ignored` to see the figures.
+#[test]
+#[ignore = "issue 23: cracks between displaced subpatches at different rates"]
+fn no_ray_gets_through_a_closed_displaced_shell_at_any_mix_of_rates() {
+    let rays: usize = std::env::var("MIPRAY_CRACK_RAYS").ok().and_then(|s| s.parse().ok()).unwrap_or(20_000);
+    let (escapes, unoccluded, c) = displaced_crack_escapes(rays, 11);
+    println!(
+        "displaced shell: {rays} rays each way: through {escapes} (shadow rays {unoccluded}); subpatch tests by rate 1/2/4/8/16 = {:?}, split = {}",
+        c.rate_tests, c.finer_than_fine
+    );
+    assert!(c.rate_tests.iter().all(|&n| n > 0) && c.finer_than_fine > 0, "every rate and splits were exercised");
+    assert_eq!((escapes, unoccluded), (0, 0), "rays got through the displaced shell's cracks");
 }
