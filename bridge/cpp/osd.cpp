@@ -1111,7 +1111,9 @@ rust::Vec<uint64_t> OsdMesh::memory_parts() const {
   rust::Vec<uint64_t> out;
   out.push_back(bytes(impl->control_points));
   out.push_back(bytes(t.GetPatchControlVerticesTable()));
-  out.push_back(bytes(t.GetPatchParamTable()));
+  // With single-crease patches, each patch's sharpness index (and the few distinct values).
+  out.push_back(bytes(t.GetPatchParamTable()) + bytes(t.GetSharpnessIndexTable()) +
+                bytes(t.GetSharpnessValues()));
   out.push_back(stencils);
   out.push_back(bytes(impl->arrays) + bytes(impl->ptex_to_base));
   out.push_back(primvars);

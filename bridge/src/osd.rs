@@ -221,9 +221,9 @@ impl OsdSurface {
         let names = [
             "control points (refined and end-cap)",
             "patch control-vertex indices",
-            "patch params (OpenSubdiv)",
+            "patch params and crease sharpness (OpenSubdiv)",
             "end-cap stencils",
-            "patch handles, types, ptex map",
+            "patch arrays, ptex map",
             "primvar values",
         ];
         let mut out: Vec<(&'static str, usize)> = names.iter().zip(parts).map(|(n, b)| (*n, b as usize)).collect();
