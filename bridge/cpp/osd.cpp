@@ -1098,6 +1098,23 @@ bool OsdMesh::patch_normal_cone(std::size_t patch, rust::Slice<float> out) const
   return true;
 }
 
+uint8_t OsdMesh::edge_knots(std::size_t patch, rust::Slice<float> out) const noexcept {
+  if (patch >= impl->num_patches || out.size() < 2) return 0;
+  const float sharpness = impl->crease_sharpness(patch);
+  if (!(sharpness > 0.0f)) return 0;
+  bool across_t, low;
+  impl->crease_edge(patch, across_t, low);
+  OsdMesh::Impl::CreasePiece pieces[3];
+  const int n = OsdMesh::Impl::crease_pieces(double(sharpness), pieces);
+  out[0] = out[1] = std::numeric_limits<float>::quiet_NaN();
+  // The pieces' inner ends, from the crease at x = 1 back to the patch's own parameter.
+  for (int k = 0; k + 1 < n && k < 2; ++k) {
+    const double x = pieces[k].to;
+    out[std::size_t(k)] = float(low ? 1.0 - x : x);
+  }
+  return across_t ? 2 : 1;
+}
+
 rust::Vec<uint64_t> OsdMesh::memory_parts() const {
   auto bytes = [](const auto& v) { return uint64_t(v.capacity() * sizeof(v[0])); };
   const Far::PatchTable& t = *impl->patch_table;

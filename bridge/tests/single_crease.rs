@@ -63,6 +63,31 @@ fn single_crease_patches_match_the_fully_isolated_limit() {
             let whole = (0..surface.patch_count()).filter(|&p| surface.patch_param(p).depth == 0).count();
             assert!(whole >= 2 * (n - 4), "sharpness {sharpness}: {whole} patches at depth 0, {} in all", surface.patch_count());
 
+            // Their rows across the crease change cubic at 1 − 2^−⌊S⌋ and 1 − 2^−⌈S⌉ from it, S
+            // the sharpness left at the patch's depth, clamped by OpenSubdiv to the isolation
+            // level (4): where seam boxes fit them piece by piece.
+            let expect = |depth: u8| -> Vec<f32> {
+                let s = f64::from(sharpness.min(4.0)) - f64::from(depth);
+                [s.floor(), s.ceil()].iter().map(|&k| 1.0 - (-k).exp2()).filter(|&x| x > 0.0).map(|x| x as f32).collect()
+            };
+            let mut with_knots = 0;
+            for p in 0..surface.patch_count() {
+                let k = surface.edge_knots(p);
+                let along = if along_x { k.v } else { k.u };
+                let other = if along_x { k.u } else { k.v };
+                if along.iter().all(|x| x.is_nan()) {
+                    continue;
+                }
+                with_knots += 1;
+                assert!(other.iter().all(|x| x.is_nan()), "sharpness {sharpness}: knots along the crease too: {k:?}");
+                let expect = expect(surface.patch_param(p).depth);
+                for x in along.iter().filter(|x| !x.is_nan()) {
+                    let ok = expect.iter().any(|e| (x - e).abs() < 1e-6 || (x - (1.0 - e)).abs() < 1e-6);
+                    assert!(ok, "sharpness {sharpness}: knot {x} is not one of {expect:?} (or from the other edge)");
+                }
+            }
+            assert!(with_knots >= 2 * (n - 4), "sharpness {sharpness}: {with_knots} patches with knots");
+
             let side = 7;
             let (mut ours, mut locations) = (Vec::new(), Vec::new());
             let mut out_of_bounds = 0.0f32;
