@@ -252,6 +252,10 @@ Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d, bool bili
   po.SetEndCapType(bilinear_caps ? Far::PatchTableFactory::Options::ENDCAP_BILINEAR_BASIS
                                  : Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
   po.useInfSharpPatch = true;
+  // A regular face along a straight semi-sharp crease is one patch, not ⌈sharpness⌉ levels of
+  // isolation (17 patches a face on sharpness-3 creased cubes, 3 with it; docs/memory-usd.md);
+  // Impl::crease_basis evaluates it. Catmull-Clark only (OpenSubdiv's test reads four corners).
+  po.useSingleCreasePatch = d.scheme == 0;
   // Vertex data and face-varying channels are evaluated; varying primvars are interpolated over
   // the base faces in the core, so no varying tables.
   po.generateVaryingTables = false;
@@ -266,9 +270,12 @@ Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d, bool bili
   return po;
 }
 
+// `single_crease` false isolates every semi-sharp crease fully, as OpenSubdiv's limit stencils
+// (the reference osd_limit_stencil_eval computes, with a patch table of their own) need.
 void refine_adaptive(Far::TopologyRefiner& refiner, const OsdMeshDesc& d,
-                     const FarCapture& capture) {
+                     const FarCapture& capture, bool single_crease = true) {
   Far::TopologyRefiner::AdaptiveOptions ao = patch_options_of(d).GetRefineAdaptiveOptions();
+  ao.useSingleCreasePatch = single_crease && ao.useSingleCreasePatch;
   ao.SetSecondaryLevel(std::min(d.secondary_level, d.isolation_level));
   refiner.RefineAdaptive(ao);
   capture.check("OpenSubdiv adaptive refinement");
@@ -380,14 +387,23 @@ constexpr int kMaxPatchPoints = 20;  // Gregory basis; every other type has fewe
 
 struct OsdMesh::Impl {
   std::unique_ptr<Far::PatchTable> patch_table;
-  std::unique_ptr<Far::PatchMap> patch_map;
+  // Made on the first find_patch (only limit_at and the compare tool ask): rays never need it,
+  // and it copies every patch's handle (12 bytes) plus a quadtree node per split.
+  mutable std::once_flag patch_map_once;
+  mutable std::unique_ptr<Far::PatchMap> patch_map;
   int num_base_points = 0;
   // Mesh points, then refined points of every level, then local (end-cap) points: the index
   // space of the patch table's control vertex indices. 3 floats each.
   std::vector<float> control_points;
-  // Per patch, in PatchTable order (a handle's patchIndex is its position here).
-  std::vector<Far::PatchTable::PatchHandle> handles;
-  std::vector<Far::PatchDescriptor::Type> types;
+  // Per patch array (a handful): its first patch, control points per patch and type. A patch's
+  // handle and type are found from these rather than kept per patch (16 bytes a patch).
+  struct Array {
+    std::size_t first;
+    int cvs;
+    Far::PatchDescriptor::Type type;
+  };
+  std::vector<Array> arrays;
+  std::size_t num_patches = 0;
   std::vector<int32_t> ptex_to_base;
   std::string warnings;
   // What was made cheaper than the exact limit surface to bound the work (empty: nothing).
@@ -410,6 +426,36 @@ struct OsdMesh::Impl {
     control_points = std::move(all);
   }
 
+  const Array& array_of(std::size_t patch) const {
+    std::size_t a = arrays.size() - 1;
+    while (a > 0 && arrays[a].first > patch) --a;
+    return arrays[a];
+  }
+  // The handle PatchMap would give: array, absolute patch index, first CV in the array.
+  Far::PatchTable::PatchHandle handle(std::size_t patch) const {
+    const std::size_t a = std::size_t(&array_of(patch) - arrays.data());
+    Far::PatchTable::PatchHandle h;
+    h.arrayIndex = int(a);
+    h.patchIndex = int(patch);
+    h.vertIndex = int(patch - arrays[a].first) * arrays[a].cvs;
+    return h;
+  }
+  Far::PatchDescriptor::Type type(std::size_t patch) const { return array_of(patch).type; }
+
+  // The sharpness of a single-crease patch (a regular patch whose one edge is a semi-sharp
+  // crease, OpenSubdiv's useSingleCreasePatch), 0 for any other patch.
+  // OpenSubdiv fills the sharpness of every patch but sets it only for regular ones (an
+  // irregular patch carries over the value of the patch before it), so the type decides first.
+  float crease_sharpness(std::size_t patch) const {
+    const std::vector<Far::Index>& index = patch_table->GetSharpnessIndexTable();
+    const std::vector<float>& values = patch_table->GetSharpnessValues();
+    if (patch >= index.size() || index[patch] < 0 || std::size_t(index[patch]) >= values.size() ||
+        type(patch) != Far::PatchDescriptor::REGULAR ||
+        patch_table->GetPatchVertices(handle(patch)).size() != 16)
+      return 0.0f;
+    return values[std::size_t(index[patch])];
+  }
+
   // A regular B-spline patch's limit surface factors into uniform cubic B-spline weights along
   // s times those along t (OpenSubdiv's EvalBasisBSpline builds its 16 weights as exactly that
   // product, and adjusts them on boundary and infinitely sharp edges one axis at a time). A grid
@@ -418,8 +464,9 @@ struct OsdMesh::Impl {
   // double like `eval`, so the two agree to the float rounding of the result (the bridge's
   // osd_shapes test holds every grid to `evaluate` within 1e-6 of the shape's size).
   bool is_regular(std::size_t patch) const {
-    return types[patch] == Far::PatchDescriptor::REGULAR &&
-           patch_table->GetPatchVertices(handles[patch]).size() == 16;
+    return type(patch) == Far::PatchDescriptor::REGULAR &&
+           patch_table->GetPatchVertices(handle(patch)).size() == 16 &&
+           crease_sharpness(patch) == 0.0f;
   }
 
   // The uniform cubic B-spline's weights and their derivatives at t, with the end conditions of
@@ -450,7 +497,7 @@ struct OsdMesh::Impl {
 
   // The regular patch's boundary mask as end conditions: (s low, s high, t low, t high).
   void regular_ends(std::size_t patch, bool ends[4]) const {
-    const int b = patch_table->GetPatchParam(handles[patch]).GetBoundary();
+    const int b = patch_table->GetPatchParam(handle(patch)).GetBoundary();
     ends[0] = b & 8;  // u = 0
     ends[1] = b & 2;  // u = 1
     ends[2] = b & 1;  // v = 0
@@ -460,7 +507,7 @@ struct OsdMesh::Impl {
   // Row j's control points contracted along t: r[a] = Σ_b w[b]·cv[4b + a] (and dr with dw).
   void contract_rows(std::size_t patch, const double tw[4], const double dtw[4], double r[4][3],
                      double dr[4][3]) const {
-    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handles[patch]);
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handle(patch));
     for (int a = 0; a < 4; ++a)
       for (int c = 0; c < 3; ++c) r[a][c] = dr[a][c] = 0.0;
     for (int b = 0; b < 4; ++b) {
@@ -483,7 +530,7 @@ struct OsdMesh::Impl {
   void eval_regular_points(std::size_t patch, const float* uv, std::size_t count, float* p) const {
     bool ends[4];
     regular_ends(patch, ends);
-    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handles[patch]);
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handle(patch));
     auto cv = [&](int b, int a) { return control_points.data() + 3 * std::size_t(cvs[4 * b + a]); };
     auto bits = [](float x) {
       std::uint32_t b;
@@ -581,7 +628,7 @@ struct OsdMesh::Impl {
 
   // A regular patch's Bézier control net, b[t row][s column][xyz] (see regular_bezier_bounds).
   void regular_bezier_net(std::size_t patch, double b[4][4][3]) const {
-    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handles[patch]);
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handle(patch));
     bool ends[4];
     regular_ends(patch, ends);
     double q[4][4][3];  // [t row][s column][xyz]
@@ -671,37 +718,222 @@ struct OsdMesh::Impl {
     return true;
   }
 
+  // A single-crease patch (crease_sharpness > 0): a regular patch one of whose edges is a
+  // semi-sharp crease running straight through its 4×4 control points (OpenSubdiv's
+  // useSingleCreasePatch, which stops isolating such faces). There Catmull-Clark's rules are the
+  // tensor product of the uniform cubic B-spline's along the crease and, across it, the curve's
+  // rules with the crease row held in place (interpolated) for as many levels as the sharpness
+  // lasts, so the limit is the B-spline along the crease times a piecewise cubic across it. With
+  // the crease at x = 1 and S = ⌊S⌋ + r its sharpness: on [0, 1 − 2^−⌊S⌋] the infinitely sharp
+  // (boundary) cubic, which the first ⌊S⌋ levels share with it; on [1 − 2^−⌈S⌉, 1] the smooth
+  // patch of level ⌈S⌉, whose rows are linear in r; between them the level-⌈S⌉ patch away from
+  // the crease, a blend of the two. OpenSubdiv's GPU patches (glslPatchCommon.glsl,
+  // OsdComputeMs) hold these cubics as Bézier points over the whole [0, 1]; Far's CPU
+  // EvaluateBasis ignores the sharpness, so the bridge evaluates them itself. The pieces match
+  // a level-by-level refinement to rounding (a crease sharper than the isolation level allows
+  // is clamped by OpenSubdiv to that level, as full isolation would treat it).
+  struct CreasePiece {
+    double from, to;   // the piece's span of x
+    double m[4][4];    // [Bézier point][B-spline control point, crease at index 2]
+  };
+
+  // The pieces of `sharpness` (> 0), in order of x; empty spans are left out.
+  static int crease_pieces(double sharpness, CreasePiece out[3]) {
+    // OsdComputeMs: the smooth level-S patch next to the crease after S sharp levels.
+    auto ms = [](double sh, double m[4][4]) {
+      const double s = std::exp2(sh), s2 = s * s, s3 = s2 * s, d = 6.0 * s;
+      const double r[4][4] = {{s, s + 1 + 3 * s2 - s3, 7 * s - 2 - 6 * s2 + 2 * s3, (1 - s) * (s - 1) * (s - 1)},
+                              {0, (1 + s) * (1 + s), 6 * s - 2 - 2 * s2, (s - 1) * (s - 1)},
+                              {0, 1 + s, 6 * s - 2, 1 - s},
+                              {0, 1, 6 * s - 2, 1}};
+      for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 4; ++k) m[i][k] = r[i][k] / d;
+    };
+    static const double mi[4][4] = {{1.0 / 6, 4.0 / 6, 1.0 / 6, 0},
+                                    {0, 4.0 / 6, 2.0 / 6, 0},
+                                    {0, 2.0 / 6, 4.0 / 6, 0},
+                                    {0, 0, 1, 0}};
+    const double sf = std::floor(sharpness), sc = std::ceil(sharpness), sr = sharpness - sf;
+    double mf[4][4], mc[4][4];
+    ms(sf, mf);
+    ms(sc, mc);
+    const double s0 = 1.0 - std::exp2(-sf), s1 = 1.0 - std::exp2(-sc);
+    int n = 0;
+    if (s0 > 0.0) {
+      out[n] = CreasePiece{0.0, s0, {}};
+      std::memcpy(out[n].m, mi, sizeof mi);
+      ++n;
+    }
+    if (s1 > s0) {
+      out[n] = CreasePiece{s0, s1, {}};
+      for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 4; ++k) out[n].m[i][k] = (1.0 - sr) * mf[i][k] + sr * mi[i][k];
+      ++n;
+    }
+    out[n] = CreasePiece{s1, 1.0, {}};
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 4; ++k) out[n].m[i][k] = (1.0 - sr) * mf[i][k] + sr * mc[i][k];
+    return n + 1;
+  }
+
+  // The crease's edge: whether it crosses t (lies on t = 0 or 1) and whether it is on the low
+  // edge (u = 0 or v = 0). OpenSubdiv marks it in the param's boundary bits.
+  void crease_edge(std::size_t patch, bool& across_t, bool& low) const {
+    const int b = patch_table->GetPatchParam(handle(patch)).GetBoundary();
+    across_t = (b & 5) != 0;  // 1: v = 0, 4: v = 1
+    low = (b & 9) != 0;       // 1: v = 0, 8: u = 0
+  }
+
+  // The 16 weights of a single-crease patch at local (s, t), and their derivatives with
+  // respect to s and t (all six sets; the caller ignores what it did not ask for).
+  void crease_basis(std::size_t patch, double sharpness, double s, double t, double w[16],
+                    double wu[16], double wv[16], double wuu[16], double wuv[16],
+                    double wvv[16]) const {
+    bool across_t, low;
+    crease_edge(patch, across_t, low);
+    CreasePiece pieces[3];
+    const int n = crease_pieces(sharpness, pieces);
+    const double x = low ? 1.0 - (across_t ? t : s) : (across_t ? t : s);
+    int k = 0;
+    while (k + 1 < n && x > pieces[k].to) ++k;
+    const double y = 1.0 - x;
+    const double bern[3][4] = {{y * y * y, 3 * x * y * y, 3 * x * x * y, x * x * x},
+                               {-3 * y * y, 3 * y * y - 6 * x * y, 6 * x * y - 3 * x * x, 3 * x * x},
+                               {6 * y, 18 * x - 12, 6 - 18 * x, 6 * x}};
+    double c[3][4] = {};  // across the crease: weight, d/dx, d²/dx², crease at index 2
+    for (int d = 0; d < 3; ++d)
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) c[d][j] += bern[d][i] * pieces[k].m[i][j];
+    double across[3][4];
+    for (int j = 0; j < 4; ++j)
+      for (int d = 0; d < 3; ++d)
+        across[d][j] = low ? (d == 1 ? -c[d][3 - j] : c[d][3 - j]) : c[d][j];
+    double along[3][4];
+    const double a = across_t ? s : t;
+    bspline(a, false, false, along[0], along[1]);
+    along[2][0] = 1.0 - a;
+    along[2][1] = 3.0 * a - 2.0;
+    along[2][2] = 1.0 - 3.0 * a;
+    along[2][3] = a;
+    const double(*su)[4] = across_t ? along : across;  // along s: weights, d, d²
+    const double(*sv)[4] = across_t ? across : along;  // along t
+    for (int b = 0; b < 4; ++b)
+      for (int i = 0; i < 4; ++i) {
+        const int q = 4 * b + i;
+        w[q] = su[0][i] * sv[0][b];
+        wu[q] = su[1][i] * sv[0][b];
+        wv[q] = su[0][i] * sv[1][b];
+        wuu[q] = su[2][i] * sv[0][b];
+        wuv[q] = su[1][i] * sv[1][b];
+        wvv[q] = su[0][i] * sv[2][b];
+      }
+  }
+
+  // Bounds of a single-crease patch: each piece's cubic across the crease cut to its span (the
+  // blossoms at its ends) and turned into Bézier form along the crease; the union of the
+  // pieces' Bézier hulls, padded as regular_bezier_bounds pads.
+  void crease_bounds(std::size_t patch, double sharpness, float lo[3], float hi[3]) const {
+    bool across_t, low;
+    crease_edge(patch, across_t, low);
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handle(patch));
+    // g[k][i]: the control point k across the crease (crease at k = 2) and i along it.
+    double g[4][4][3];
+    for (int k = 0; k < 4; ++k)
+      for (int i = 0; i < 4; ++i) {
+        const int j = low ? 3 - k : k;
+        const int q = across_t ? 4 * j + i : 4 * i + j;
+        for (int c = 0; c < 3; ++c) g[k][i][c] = control_points[3 * std::size_t(cvs[q]) + std::size_t(c)];
+      }
+    CreasePiece pieces[3];
+    const int n = crease_pieces(sharpness, pieces);
+    auto to_bezier = [](const double p[4], double out[4]) {
+      out[0] = (p[0] + 4.0 * p[1] + p[2]) / 6.0;
+      out[1] = (2.0 * p[1] + p[2]) / 3.0;
+      out[2] = (p[1] + 2.0 * p[2]) / 3.0;
+      out[3] = (p[1] + 4.0 * p[2] + p[3]) / 6.0;
+    };
+    double mx = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      double l = std::numeric_limits<double>::infinity(), h = -l;
+      for (int p = 0; p < n; ++p) {
+        const CreasePiece& piece = pieces[p];
+        double sub[4][4];  // [Bézier point across, over the piece's span][control point along]
+        for (int i = 0; i < 4; ++i) {
+          double bz[4];  // Bézier points across the crease over the whole [0, 1]
+          for (int r = 0; r < 4; ++r) {
+            bz[r] = 0.0;
+            for (int k = 0; k < 4; ++k) bz[r] += piece.m[r][k] * g[k][i][c];
+          }
+          // Over [a, b] the cubic's Bézier points are its blossoms f(a,a,a), f(a,a,b), f(a,b,b),
+          // f(b,b,b): de Casteljau with a different parameter at each level.
+          auto blossom = [&bz](double x1, double x2, double x3) {
+            double q[4] = {bz[0], bz[1], bz[2], bz[3]};
+            const double xs[3] = {x1, x2, x3};
+            for (int level = 0; level < 3; ++level)
+              for (int m = 0; m < 3 - level; ++m) q[m] = (1.0 - xs[level]) * q[m] + xs[level] * q[m + 1];
+            return q[0];
+          };
+          const double a = piece.from, b = piece.to;
+          sub[0][i] = blossom(a, a, a);
+          sub[1][i] = blossom(a, a, b);
+          sub[2][i] = blossom(a, b, b);
+          sub[3][i] = blossom(b, b, b);
+        }
+        for (int r = 0; r < 4; ++r) {
+          double bez[4];
+          to_bezier(sub[r], bez);
+          for (double x : bez) {
+            l = std::min(l, x);
+            h = std::max(h, x);
+          }
+        }
+      }
+      lo[c] = float(l);
+      hi[c] = float(h);
+      mx = std::max({mx, std::fabs(l), std::fabs(h)});
+    }
+    const float pad = float(8.0 * std::numeric_limits<float>::epsilon() * mx);
+    for (int c = 0; c < 3; ++c) {
+      lo[c] -= pad;
+      hi[c] += pad;
+    }
+  }
+
   // Evaluates at the patch's local (s, t). Derivative outputs may be null (then not computed);
   // second derivatives are computed only when all three are given.
   void eval(std::size_t patch, float s, float t, float* p, float* du, float* dv, float* duu,
             float* duv, float* dvv) const noexcept {
-    const Far::PatchTable::PatchHandle& h = handles[patch];
+    const Far::PatchTable::PatchHandle h = handle(patch);
     const Far::PatchParam param = patch_table->GetPatchParam(h);
-    const bool tri = is_triangle_type(types[patch]);
+    const bool tri = is_triangle_type(type(patch));
     const bool rotated = tri && param.IsTriangleRotated();
     // EvaluateBasis takes (u, v) in the ptex face's parameterization and normalizes them with
     // the PatchParam; map the local (s, t) out the same way so it lands back on (s, t). Double
     // keeps the round trip from eating low bits at deep levels.
-    double fu = s, fv = t;
-    if (tri)
-      param.UnnormalizeTriangle(fu, fv);
-    else
-      param.Unnormalize(fu, fv);
-
     double w[kMaxPatchPoints], wu[kMaxPatchPoints], wv[kMaxPatchPoints];
     double wuu[kMaxPatchPoints], wuv[kMaxPatchPoints], wvv[kMaxPatchPoints];
     const bool d1 = du && dv;
     const bool d2 = d1 && duu && duv && dvv;
-    patch_table->EvaluateBasis(h, fu, fv, w, d1 ? wu : nullptr, d1 ? wv : nullptr,
-                               d2 ? wuu : nullptr, d2 ? wuv : nullptr, d2 ? wvv : nullptr);
-
     // OpenSubdiv scales the normalized basis derivatives by 2^depth (negated for rotated
     // triangles) and the second derivatives by sign × (sign × 2^depth)² (Far's
     // internal::EvaluatePatchBasis). Dividing by exactly those factors gives derivatives with
     // respect to the patch's local (s, t), which is what mipray's LimitSurface promises.
-    const double sign = rotated ? -1.0 : 1.0;
-    const double s1 = sign * double(1 << param.GetDepth());
-    const double s2 = sign * s1 * s1;
+    double s1 = 1.0, s2 = 1.0;
+    const float sharpness = crease_sharpness(patch);
+    if (sharpness > 0.0f) {
+      crease_basis(patch, double(sharpness), double(s), double(t), w, wu, wv, wuu, wuv, wvv);
+    } else {
+      double fu = s, fv = t;
+      if (tri)
+        param.UnnormalizeTriangle(fu, fv);
+      else
+        param.Unnormalize(fu, fv);
+      patch_table->EvaluateBasis(h, fu, fv, w, d1 ? wu : nullptr, d1 ? wv : nullptr,
+                                 d2 ? wuu : nullptr, d2 ? wuv : nullptr, d2 ? wvv : nullptr);
+      const double sign = rotated ? -1.0 : 1.0;
+      s1 = sign * double(1 << param.GetDepth());
+      s2 = sign * s1 * s1;
+    }
 
     Far::ConstIndexArray cvs = patch_table->GetPatchVertices(h);
     // One pass per set of weights asked for (each accumulator sums in control point order, as
@@ -737,9 +969,9 @@ static bool eval_primvar(const OsdMesh::Impl& m, bool vertex, std::size_t channe
                   float s, float t, float* out) noexcept {
   const std::vector<float>& values =
       vertex ? m.vertex_primvars[channel] : m.fvar_values[channel];
-  const Far::PatchTable::PatchHandle& h = m.handles[patch];
+  const Far::PatchTable::PatchHandle h = m.handle(patch);
   const Far::PatchParam param = m.patch_table->GetPatchParam(h);
-  const bool tri = is_triangle_type(m.types[patch]);
+  const bool tri = is_triangle_type(m.type(patch));
   // As in eval: out to the ptex face through the vertex patch's parameterization (the
   // face-varying patch covers the same part of the face), and derivatives back by its factor.
   double fu = s, fv = t;
@@ -748,8 +980,14 @@ static bool eval_primvar(const OsdMesh::Impl& m, bool vertex, std::size_t channe
   else
     param.Unnormalize(fu, fv);
   double w[kMaxPatchPoints], wu[kMaxPatchPoints], wv[kMaxPatchPoints];
+  double wuu[kMaxPatchPoints], wuv[kMaxPatchPoints], wvv[kMaxPatchPoints];
   Far::ConstIndexArray cvs;
-  if (vertex) {
+  const float sharpness = vertex ? m.crease_sharpness(patch) : 0.0f;
+  if (sharpness > 0.0f) {
+    // Vertex primvars follow the points' patches; the basis is already in local (s, t).
+    m.crease_basis(patch, double(sharpness), double(s), double(t), w, wu, wv, wuu, wuv, wvv);
+    cvs = m.patch_table->GetPatchVertices(h);
+  } else if (vertex) {
     m.patch_table->EvaluateBasis(h, fu, fv, w, wu, wv);
     cvs = m.patch_table->GetPatchVertices(h);
   } else {
@@ -759,7 +997,7 @@ static bool eval_primvar(const OsdMesh::Impl& m, bool vertex, std::size_t channe
   }
   if (cvs.size() > kMaxPatchPoints) return false;
   const double sign = (tri && param.IsTriangleRotated()) ? -1.0 : 1.0;
-  const double s1 = sign * double(1 << param.GetDepth());
+  const double s1 = sharpness > 0.0f ? 1.0 : sign * double(1 << param.GetDepth());
   double acc[3][2] = {};
   for (int k = 0; k < cvs.size(); ++k) {
     const std::size_t i = 2 * std::size_t(cvs[k]);
@@ -790,10 +1028,11 @@ std::size_t OsdMesh::ptex_face_count() const {
 
 rust::Vec<OsdPatchInfo> OsdMesh::patch_infos() const {
   rust::Vec<OsdPatchInfo> out;
-  out.reserve(impl->handles.size());
-  for (std::size_t i = 0; i < impl->handles.size(); ++i) {
-    const Far::PatchParam param = impl->patch_table->GetPatchParam(impl->handles[i]);
-    const bool tri = is_triangle_type(impl->types[i]);
+  out.reserve(impl->num_patches);
+  for (std::size_t i = 0; i < impl->num_patches; ++i) {
+    const Far::PatchParam param = impl->patch_table->GetPatchParam(impl->handle(i));
+    const Far::PatchDescriptor::Type type = impl->type(i);
+    const bool tri = is_triangle_type(type);
     const float frac = param.GetParamFraction();
     OsdPatchInfo info{};
     info.ptex_face = param.GetFaceId();
@@ -815,23 +1054,27 @@ rust::Vec<OsdPatchInfo> OsdMesh::patch_infos() const {
       info.size = frac;
     }
     info.depth = uint8_t(param.GetDepth());
-    info.boundary = uint8_t(param.GetBoundary());
+    // A single-crease patch's param marks its crease edge in the boundary bits; it is interior.
+    info.boundary = impl->crease_sharpness(i) > 0.0f ? 0 : uint8_t(param.GetBoundary());
     info.transition = uint8_t(param.GetTransition());
-    info.kind = kind_code(impl->types[i]);
+    info.kind = kind_code(type);
     out.push_back(info);
   }
   return out;
 }
 
 bool OsdMesh::patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept {
-  if (patch >= impl->handles.size() || out.size() < 6) return false;
+  if (patch >= impl->num_patches || out.size() < 6) return false;
   float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
                  std::numeric_limits<float>::infinity()};
   float hi[3] = {-lo[0], -lo[1], -lo[2]};
+  const float sharpness = impl->crease_sharpness(patch);
   if (impl->is_regular(patch)) {
     impl->regular_bezier_bounds(patch, lo, hi);
+  } else if (sharpness > 0.0f) {
+    impl->crease_bounds(patch, double(sharpness), lo, hi);
   } else {
-    Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(impl->handles[patch]);
+    Far::ConstIndexArray cvs = impl->patch_table->GetPatchVertices(impl->handle(patch));
     for (int k = 0; k < cvs.size(); ++k) {
       const float* c = impl->control_points.data() + 3 * std::size_t(cvs[k]);
       for (int a = 0; a < 3; ++a) {
@@ -848,11 +1091,28 @@ bool OsdMesh::patch_bound(std::size_t patch, rust::Slice<float> out) const noexc
 }
 
 bool OsdMesh::patch_normal_cone(std::size_t patch, rust::Slice<float> out) const noexcept {
-  if (patch >= impl->handles.size() || out.size() < 4 || !impl->is_regular(patch)) return false;
+  if (patch >= impl->num_patches || out.size() < 4 || !impl->is_regular(patch)) return false;
   double c[4];
   if (!impl->regular_normal_cone(patch, c)) return false;
   for (int k = 0; k < 4; ++k) out[std::size_t(k)] = float(c[k]);
   return true;
+}
+
+uint8_t OsdMesh::edge_knots(std::size_t patch, rust::Slice<float> out) const noexcept {
+  if (patch >= impl->num_patches || out.size() < 2) return 0;
+  const float sharpness = impl->crease_sharpness(patch);
+  if (!(sharpness > 0.0f)) return 0;
+  bool across_t, low;
+  impl->crease_edge(patch, across_t, low);
+  OsdMesh::Impl::CreasePiece pieces[3];
+  const int n = OsdMesh::Impl::crease_pieces(double(sharpness), pieces);
+  out[0] = out[1] = std::numeric_limits<float>::quiet_NaN();
+  // The pieces' inner ends, from the crease at x = 1 back to the patch's own parameter.
+  for (int k = 0; k + 1 < n && k < 2; ++k) {
+    const double x = pieces[k].to;
+    out[std::size_t(k)] = float(low ? 1.0 - x : x);
+  }
+  return across_t ? 2 : 1;
 }
 
 rust::Vec<uint64_t> OsdMesh::memory_parts() const {
@@ -868,9 +1128,11 @@ rust::Vec<uint64_t> OsdMesh::memory_parts() const {
   rust::Vec<uint64_t> out;
   out.push_back(bytes(impl->control_points));
   out.push_back(bytes(t.GetPatchControlVerticesTable()));
-  out.push_back(bytes(t.GetPatchParamTable()));
+  // With single-crease patches, each patch's sharpness index (and the few distinct values).
+  out.push_back(bytes(t.GetPatchParamTable()) + bytes(t.GetSharpnessIndexTable()) +
+                bytes(t.GetSharpnessValues()));
   out.push_back(stencils);
-  out.push_back(bytes(impl->handles) + bytes(impl->types) + bytes(impl->ptex_to_base));
+  out.push_back(bytes(impl->arrays) + bytes(impl->ptex_to_base));
   out.push_back(primvars);
   return out;
 }
@@ -900,7 +1162,7 @@ void OsdMesh::update_points(const OsdMeshDesc& desc, rust::Slice<const float> po
 }
 
 bool OsdMesh::evaluate(std::size_t patch, float u, float v, rust::Slice<float> out) const noexcept {
-  if (patch >= impl->handles.size() || out.size() < 18) return false;
+  if (patch >= impl->num_patches || out.size() < 18) return false;
   float* o = out.data();
   impl->eval(patch, u, v, o, o + 3, o + 6, o + 9, o + 12, o + 15);
   return true;
@@ -910,7 +1172,7 @@ bool OsdMesh::evaluate_grid(std::size_t patch, float u0, float v0, float u1, flo
                             std::size_t n, rust::Slice<float> p, rust::Slice<float> du,
                             rust::Slice<float> dv) const noexcept {
   const bool derivs = !du.empty();
-  if (patch >= impl->handles.size() || n == 0 || p.size() != 3 * n * n) return false;
+  if (patch >= impl->num_patches || n == 0 || p.size() != 3 * n * n) return false;
   if (derivs && (du.size() != p.size() || dv.size() != p.size())) return false;
   if (impl->is_regular(patch)) {
     try {
@@ -938,7 +1200,7 @@ bool OsdMesh::evaluate_grid(std::size_t patch, float u0, float v0, float u1, flo
 
 bool OsdMesh::evaluate_points(std::size_t patch, rust::Slice<const float> uv,
                               rust::Slice<float> p) const noexcept {
-  if (patch >= impl->handles.size() || uv.size() % 2 != 0 || p.size() != uv.size() / 2 * 3)
+  if (patch >= impl->num_patches || uv.size() % 2 != 0 || p.size() != uv.size() / 2 * 3)
     return false;
   if (impl->is_regular(patch)) {
     impl->eval_regular_points(patch, uv.data(), uv.size() / 2, p.data());
@@ -954,13 +1216,19 @@ int64_t OsdMesh::find_patch(int32_t ptex_face, float u, float v,
                             rust::Slice<float> local_uv) const noexcept {
   if (local_uv.size() < 2 || ptex_face < 0 || ptex_face >= impl->patch_table->GetNumPtexFaces())
     return -1;
+  try {
+    std::call_once(impl->patch_map_once,
+                   [&] { impl->patch_map = std::make_unique<Far::PatchMap>(*impl->patch_table); });
+  } catch (...) {
+    return -1;  // std::bad_alloc: nothing may cross into Rust (call_once tries again next time)
+  }
   const Far::PatchMap::Handle* h = impl->patch_map->FindPatch(ptex_face, double(u), double(v));
   if (!h) return -1;
   const std::size_t patch = std::size_t(h->patchIndex);
-  if (patch >= impl->handles.size()) return -1;
+  if (patch >= impl->num_patches) return -1;
   const Far::PatchParam param = impl->patch_table->GetPatchParam(*h);
   double s = u, t = v;
-  if (is_triangle_type(impl->types[patch]))
+  if (is_triangle_type(impl->type(patch)))
     param.NormalizeTriangle(s, t);
   else
     param.Normalize(s, t);
@@ -976,7 +1244,7 @@ std::size_t OsdMesh::vertex_primvar_count() const noexcept { return impl->vertex
 bool OsdMesh::evaluate_primvar(bool vertex, std::size_t channel, std::size_t patch, float u,
                                float v, rust::Slice<float> out) const noexcept {
   const std::size_t channels = vertex ? impl->vertex_primvars.size() : impl->fvar_values.size();
-  if (channel >= channels || patch >= impl->handles.size() || out.size() < 6) return false;
+  if (channel >= channels || patch >= impl->num_patches || out.size() < 6) return false;
   return eval_primvar(*impl, vertex, channel, patch, u, v, out.data());
 }
 
@@ -1068,25 +1336,14 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
       capture.check("OpenSubdiv face-varying refinement");
     }
 
-    // Sized once: grown by push_back they would hold up to twice their patches.
-    m.handles.reserve(std::size_t(m.patch_table->GetNumPatchesTotal()));
-    m.types.reserve(std::size_t(m.patch_table->GetNumPatchesTotal()));
-    for (int a = 0, current = 0; a < m.patch_table->GetNumPatchArrays(); ++a) {
+    for (int a = 0; a < m.patch_table->GetNumPatchArrays(); ++a) {
       const Far::PatchDescriptor pd = m.patch_table->GetPatchArrayDescriptor(a);
-      const int n = m.patch_table->GetNumPatches(a);
-      for (int i = 0; i < n; ++i, ++current) {
-        // The handle PatchMap would give: array, absolute patch index, first CV in the array.
-        Far::PatchTable::PatchHandle h;
-        h.arrayIndex = a;
-        h.patchIndex = current;
-        h.vertIndex = i * pd.GetNumControlVertices();
-        m.handles.push_back(h);
-        m.types.push_back(pd.GetType());
-        if (pd.GetNumControlVertices() > kMaxPatchPoints)
-          throw std::runtime_error("patch type with more control points than supported");
-      }
+      if (pd.GetNumControlVertices() > kMaxPatchPoints)
+        throw std::runtime_error("patch type with more control points than supported");
+      m.arrays.push_back({m.num_patches, pd.GetNumControlVertices(), pd.GetType()});
+      m.num_patches += std::size_t(m.patch_table->GetNumPatches(a));
     }
-    m.patch_map = std::make_unique<Far::PatchMap>(*m.patch_table);
+    if (m.arrays.empty()) m.arrays.push_back({0, 0, Far::PatchDescriptor::NON_PATCH});
     // Every local point and value is computed: their stencils are not needed again.
     release_local_stencils(*m.patch_table);
 
@@ -1137,7 +1394,7 @@ OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<cons
       throw std::runtime_error("location arrays differ in length");
     FarCapture capture;
     RefinerPtr refiner = create_refiner(desc, capture);
-    refine_adaptive(*refiner, desc, capture);
+    refine_adaptive(*refiner, desc, capture, false);
 
     Far::LimitStencilTableFactory::LocationArrayVec arrays = location_arrays(ptex_faces, u, v);
     Far::LimitStencilTableFactory::Options lo;
@@ -1201,7 +1458,7 @@ OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t
       throw std::runtime_error("location arrays differ in length");
     FarCapture capture;
     RefinerPtr refiner = create_refiner(desc, capture);
-    refine_adaptive(*refiner, desc, capture);
+    refine_adaptive(*refiner, desc, capture, false);
 
     Far::LimitStencilTableFactory::LocationArrayVec arrays = location_arrays(ptex_faces, u, v);
     // OpenSubdiv's own face-varying path: stencils of the channel's refined values (from

@@ -35,6 +35,7 @@ class OsdMesh {
   rust::Vec<OsdPatchInfo> patch_infos() const;
   bool patch_bound(std::size_t patch, rust::Slice<float> out) const noexcept;
   bool patch_normal_cone(std::size_t patch, rust::Slice<float> out) const noexcept;
+  uint8_t edge_knots(std::size_t patch, rust::Slice<float> out) const noexcept;
   rust::Vec<uint64_t> memory_parts() const;
   bool base_points(rust::Slice<float> out) const noexcept;
   void update_points(const OsdMeshDesc& desc, rust::Slice<const float> points);

@@ -168,6 +168,10 @@ pub(crate) mod bridge {
         /// half-angle into `out[3]`. False for an irregular patch (end caps), a bad index, a
         /// short `out`, or a patch whose normals no cone narrower than a half-space holds.
         fn patch_normal_cone(self: &OsdMesh, patch: usize, out: &mut [f32]) -> bool;
+        /// A single-crease patch's knots across its crease (see `LimitSurface::edge_knots`):
+        /// 1 when they run along u, 2 along v, 0 for any other patch; `out[0..2]` the knots,
+        /// NaN where fewer.
+        fn edge_knots(self: &OsdMesh, patch: usize, out: &mut [f32]) -> u8;
         /// Bytes held, by part: control points, patch vertex indices, patch params, end-cap
         /// (local point) stencils, per-patch handles and types with the ptex-to-face map,
         /// primvar values. Not counted: the patch map's quadtree and OpenSubdiv's small members.

@@ -33,7 +33,7 @@
 use glam::Vec3A;
 use mipray::bounds::Bounds3;
 use mipray::error::MeshError;
-use mipray::patch::{GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
+use mipray::patch::{EdgeKnots, GridSamples, LimitSurface, PatchKind, PatchParam, SurfacePoint, UvRect};
 use mipray::texture::{BaseFacePrimvar, Interpolation, Primvar2, Value2};
 use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopology, Scheme, TriangleSubdivision};
 
@@ -221,9 +221,9 @@ impl OsdSurface {
         let names = [
             "control points (refined and end-cap)",
             "patch control-vertex indices",
-            "patch params (OpenSubdiv)",
+            "patch params and crease sharpness (OpenSubdiv)",
             "end-cap stencils",
-            "patch handles, types, ptex map",
+            "patch arrays, ptex map",
             "primvar values",
         ];
         let mut out: Vec<(&'static str, usize)> = names.iter().zip(parts).map(|(n, b)| (*n, b as usize)).collect();
@@ -429,6 +429,15 @@ impl LimitSurface for OsdSurface {
     /// If `patch >= patch_count()`.
     /// Computed on each call (a Bézier conversion of 16 points, or a hull of 20) rather than kept:
     /// the tracer asks once per patch and render, and keeps them in its root subpatches.
+    fn edge_knots(&self, patch: usize) -> EdgeKnots {
+        let mut k = [f32::NAN; 2];
+        match self.mesh.edge_knots(patch, &mut k) {
+            1 => EdgeKnots { u: k, v: [f32::NAN; 2] },
+            2 => EdgeKnots { u: [f32::NAN; 2], v: k },
+            _ => EdgeKnots::NONE,
+        }
+    }
+
     fn patch_bounds(&self, patch: usize) -> Bounds3 {
         let mut b = [0.0f32; 6];
         if !self.mesh.patch_bound(patch, &mut b) {

@@ -274,6 +274,40 @@ impl BilinearGround {
     }
 }
 
+/// The crease edges of a cube blob from [`blob_mesh`] (`face_res` faces a side): its twelve cube
+/// edges, the edges between faces of different cube sides (faces come side by side, n² each), as
+/// (lower, higher) point index pairs. `write_usda` with `creased` gives them sharpness 3.
+pub fn cube_blob_creases(face_res: usize, topo: &MeshTopology) -> Vec<(i32, i32)> {
+    let per_side = face_res * face_res;
+    let mut sides: std::collections::HashMap<(i32, i32), usize> = std::collections::HashMap::new();
+    let mut creases = Vec::new();
+    for (face, q) in topo.face_vertex_indices.chunks(4).enumerate() {
+        for e in 0..4 {
+            let (a, b) = (q[e], q[(e + 1) % 4]);
+            let key = (a.min(b), a.max(b));
+            match sides.get(&key) {
+                Some(&side) if side != face / per_side => creases.push(key),
+                Some(_) => {}
+                None => {
+                    sides.insert(key, face / per_side);
+                }
+            }
+        }
+    }
+    creases
+}
+
+/// A cube blob from [`blob_mesh`] with its twelve cube edges semi-sharp creases of `sharpness`
+/// (the creased scene of docs/memory-usd.md, as `write_usda` with `creased` writes it).
+pub fn creased_blob_mesh(face_res: usize, seed: u64, sharpness: f32) -> (MeshTopology, Vec<[f32; 3]>) {
+    let (mut topo, pts) = blob_mesh(face_res, seed);
+    let creases = cube_blob_creases(face_res, &topo);
+    topo.crease_indices = creases.iter().flat_map(|&(a, b)| [a, b]).collect();
+    topo.crease_lengths = vec![2; creases.len()];
+    topo.crease_sharpnesses = vec![sharpness; creases.len()];
+    (topo, pts)
+}
+
 /// Writes the scene of `spec` as a USD stage (text, `.usda`), for measuring it as a user renders
 /// a stage: through usd-core, the Python scene delegate and `mipray-record`. The same objects,
 /// placements, materials (UsdPreviewSurface: chrome as metallic at roughness 0, matte as
@@ -329,23 +363,7 @@ pub fn write_usda(spec: &BenchSceneSpec, creased: bool, path: &std::path::Path) 
             let _ =
                 writeln!(body, "        point3f[] points = [{}]", join(&mut pts.iter().map(|p| format!("({}, {}, {})", p[0], p[1], p[2]))));
             if creased && !latlong {
-                // Edges between faces of different cube sides (faces come side by side, n² each).
-                let per_side = spec.face_res * spec.face_res;
-                let mut sides: std::collections::HashMap<(i32, i32), usize> = std::collections::HashMap::new();
-                let mut creases = Vec::new();
-                for (face, q) in topo.face_vertex_indices.chunks(4).enumerate() {
-                    for e in 0..4 {
-                        let (a, b) = (q[e], q[(e + 1) % 4]);
-                        let key = (a.min(b), a.max(b));
-                        match sides.get(&key) {
-                            Some(&side) if side != face / per_side => creases.push(key),
-                            Some(_) => {}
-                            None => {
-                                sides.insert(key, face / per_side);
-                            }
-                        }
-                    }
-                }
+                let creases = cube_blob_creases(spec.face_res, &topo);
                 let _ = writeln!(body, "        int[] creaseIndices = [{}]", join(&mut creases.iter().map(|(a, b)| format!("{a}, {b}"))));
                 let _ = writeln!(body, "        int[] creaseLengths = [{}]", join(&mut creases.iter().map(|_| "2".to_string())));
                 let _ = writeln!(body, "        float[] creaseSharpnesses = [{}]", join(&mut creases.iter().map(|_| "3".to_string())));

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicPtr, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use crate::bounds::Bounds3;
-use crate::patch::{GridSamples, LimitSurface, PatchParam, SurfacePoint, UvRect};
+use crate::patch::{EdgeKnots, GridSamples, LimitSurface, PatchParam, SurfacePoint, UvRect};
 
 /// Builds a surface; `Err` is one line saying why it cannot be built (without the prim's name).
 pub type SurfaceBuilder<S = dyn LimitSurface> = Box<dyn Fn() -> Result<Arc<S>, String> + Send + Sync>;
@@ -202,6 +202,10 @@ impl<S: ?Sized + LimitSurface + 'static> LimitSurface for LazySurface<S> {
 
     fn patch_normal_cone(&self, patch: usize) -> Option<crate::patch::NormalCone> {
         self.inner().and_then(|s| s.patch_normal_cone(patch))
+    }
+
+    fn edge_knots(&self, patch: usize) -> EdgeKnots {
+        self.inner().map_or(EdgeKnots::NONE, |s| s.edge_knots(patch))
     }
 
     fn face_varying(&self, channel: usize, patch: usize, u: f32, v: f32) -> Option<([f32; 2], [f32; 2], [f32; 2])> {

@@ -146,6 +146,23 @@ pub struct GridSamples {
     pub dpdv: Vec<[f32; 3]>,
 }
 
+/// Knots of a patch's edge curves: parameter values strictly inside (0, 1), in the patch's own
+/// (u, v), at which the curves of its edges running along u (`u`) or along v (`v`) pass from one
+/// polynomial piece to the next. A single-crease patch (OpenSubdiv's `useSingleCreasePatch`) is
+/// a B-spline along its crease times a C² piecewise cubic across it, with knots at 1 − 2^−⌊S⌋
+/// and 1 − 2^−⌈S⌉ from the crease (S its sharpness); [`crate::seam`] fits each piece of a chord
+/// on its own, since its fit is exact only for one polynomial. Unused entries are NaN.
+#[derive(Clone, Copy, Debug)]
+pub struct EdgeKnots {
+    pub u: [f32; 2],
+    pub v: [f32; 2],
+}
+
+impl EdgeKnots {
+    /// No knots: every edge curve one polynomial.
+    pub const NONE: EdgeKnots = EdgeKnots { u: [f32::NAN; 2], v: [f32::NAN; 2] };
+}
+
 /// A set of patches whose union is a mesh's limit surface. Implementations must be cheap to
 /// share between render threads (`Send + Sync`) and must never panic on valid indices.
 pub trait LimitSurface: Send + Sync {
@@ -201,6 +218,13 @@ pub trait LimitSurface: Send + Sync {
 
     /// Number of control (base) faces of the mesh.
     fn control_face_count(&self) -> usize;
+
+    /// Where the patch's edge curves stop being one polynomial, in its own (u, v): see
+    /// [`EdgeKnots`]. [`EdgeKnots::NONE`] (the default) for polynomial patches, which every
+    /// OpenSubdiv patch is but a single-crease one.
+    fn edge_knots(&self, _patch: usize) -> EdgeKnots {
+        EdgeKnots::NONE
+    }
 
     /// True when the patch is an affine image of the unit square (a flat parallelogram with
     /// its parameterization linear): one quad represents it exactly, so the tracer tests it at

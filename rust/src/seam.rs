@@ -27,7 +27,7 @@
 use glam::{Vec3A, Vec4};
 
 use crate::intersect::{intersect_tessellation, GridHit, WatertightRay};
-use crate::patch::{LimitSurface, UvRect};
+use crate::patch::{EdgeKnots, LimitSurface, UvRect};
 use crate::tessellate::{GridDomain, Tessellation};
 
 /// Probes per boundary chord, at t = ¼, ½, ¾ of it: three catch S-shaped chords (an edge curve
@@ -313,54 +313,29 @@ pub fn seam_extent_with(
         .collect();
     let mut probes = Vec::with_capacity(uv.len());
     surface.evaluate_points(patch, &uv, &mut probes);
+    let knots = surface.edge_knots(patch);
+    let to_patch = |lu: f32, lv: f32| [rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv];
     for ((e, k), curve) in chords().zip(probes.chunks_exact(SEAM_PROBES)) {
         let frame = if normals { chord_frame(at, e, k, n, 1, triangle) } else { None };
         let (ia, ja) = edge_vertex(e, k, n);
         let (ib, jb) = edge_vertex(e, k + 1, n);
-        // The edge curve's deviation from the chord, D(τ) = c(τ) − (a + (b − a)τ) over the
-        // chord's own parameter τ ∈ [0, 1], vanishes at both ends: D = τ(1 − τ)·G(τ). For a
-        // polynomial edge of degree ≤ 4 G is a quadratic, which the three probes determine;
-        // its extremes bound the curve's, including where the probes miss (a maximum between
-        // them, a dip near an end).
         let (a, b) = (at(ia, ja), at(ib, jb));
-        let mut g = [Vec3A::ZERO; SEAM_PROBES];
-        let mut ok = true;
-        for (p, (gp, c)) in g.iter_mut().zip(curve).enumerate() {
-            let tau = tau(p);
-            let d = Vec3A::from(*c) - (a + (b - a) * tau);
-            ok &= d.is_finite();
-            *gp = d / (tau * (1.0 - tau));
-        }
-        if !ok {
-            continue;
-        }
-        // The fitted deviation at every sample, four samples a lane (x, y, z apart): a grid's
-        // seam extent was measured one sample at a time, and at 31 samples per chord that was
-        // most of what making a coarse grid cost.
         let side = frame.map(|f| f.e1);
-        let (mut chord_sq, mut low, mut high) = (Vec4::ZERO, Vec4::ZERO, Vec4::ZERO);
-        let [p0, p1, p2] = &FIT_WEIGHTS;
-        for ((w0, w1), w2) in p0.iter().zip(p1).zip(p2) {
-            let (w0, w1, w2) = (Vec4::from_array(*w0), Vec4::from_array(*w1), Vec4::from_array(*w2));
-            let dx = w0 * g[0].x + w1 * g[1].x + w2 * g[2].x;
-            let dy = w0 * g[0].y + w1 * g[1].y + w2 * g[2].y;
-            let dz = w0 * g[0].z + w1 * g[1].z + w2 * g[2].z;
-            chord_sq = chord_sq.max(dx * dx + dy * dy + dz * dz);
-            // Along the normal, from the chord's line: a box spans the chord's length (and `r`
-            // beyond its ends) whatever the curve's position along it.
-            if let Some(e1) = side {
-                let h = dx * e1.x + dy * e1.y + dz * e1.z;
-                low = low.min(h);
-                high = high.max(h);
-            }
-        }
-        let chord_sq = chord_sq.max_element();
+        // A chord across a knot of a piecewise polynomial edge (a single-crease patch's) is
+        // fitted piece by piece; every other chord at once.
+        let (ua, ub) = (edge_uv(e, k as f32 / q), edge_uv(e, (k + 1) as f32 / q));
+        let (pa, pb) = (to_patch(ua.0, ua.1), to_patch(ub.0, ub.1));
+        let fitted = match chord_knots(&knots, pa, pb) {
+            Some(cuts) => piecewise_chord(surface, patch, a, b, pa, pb, &cuts, side),
+            None => fit_chord(a, b, curve, side),
+        };
+        let Some((chord_sq, low, high)) = fitted else { continue };
         dev_sq = dev_sq.max(chord_sq);
         if !normals {
             continue;
         }
         match side {
-            Some(_) => (below, above) = (below.max(-low.min_element()), above.max(high.max_element())),
+            Some(_) => (below, above) = (below.max(-low), above.max(high)),
             None => (below, above) = (below.max(chord_sq.sqrt()), above.max(chord_sq.sqrt())),
         }
     }
@@ -374,6 +349,124 @@ pub fn seam_extent_with(
     // end, beyond the outer probes); each side gets at least a fraction of the other's.
     let floor = SEAM_NORMAL_FLOOR * below.max(above);
     (r, SeamNormal::encode(SEAM_SAFETY * below.max(floor) + margin, SEAM_SAFETY * above.max(floor) + margin, r))
+}
+
+/// The deviation of an edge curve from its chord a → b, from the curve at the chord's
+/// [`SEAM_PROBES`] probes: (the largest |D|², the lowest and highest D along `side`, each 0 at
+/// worst), `None` when not finite. D(τ) = c(τ) − (a + (b − a)τ) over the chord's own parameter
+/// τ ∈ [0, 1] vanishes at both ends: D = τ(1 − τ)·G(τ). For a polynomial edge of degree ≤ 4 G
+/// is a quadratic, which the three probes determine; its extremes bound the curve's, including
+/// where the probes miss (a maximum between them, a dip near an end).
+fn fit_chord(a: Vec3A, b: Vec3A, curve: &[[f32; 3]], side: Option<Vec3A>) -> Option<(f32, f32, f32)> {
+    let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
+    let mut g = [Vec3A::ZERO; SEAM_PROBES];
+    for (p, (gp, c)) in g.iter_mut().zip(curve).enumerate() {
+        let tau = tau(p);
+        let d = Vec3A::from(*c) - (a + (b - a) * tau);
+        if !d.is_finite() {
+            return None;
+        }
+        *gp = d / (tau * (1.0 - tau));
+    }
+    // The fitted deviation at every sample, four samples a lane (x, y, z apart): a grid's
+    // seam extent was measured one sample at a time, and at 31 samples per chord that was
+    // most of what making a coarse grid cost.
+    let (mut chord_sq, mut low, mut high) = (Vec4::ZERO, Vec4::ZERO, Vec4::ZERO);
+    let [p0, p1, p2] = &FIT_WEIGHTS;
+    for ((w0, w1), w2) in p0.iter().zip(p1).zip(p2) {
+        let (w0, w1, w2) = (Vec4::from_array(*w0), Vec4::from_array(*w1), Vec4::from_array(*w2));
+        let dx = w0 * g[0].x + w1 * g[1].x + w2 * g[2].x;
+        let dy = w0 * g[0].y + w1 * g[1].y + w2 * g[2].y;
+        let dz = w0 * g[0].z + w1 * g[1].z + w2 * g[2].z;
+        chord_sq = chord_sq.max(dx * dx + dy * dy + dz * dz);
+        // Along the normal, from the chord's line: a box spans the chord's length (and `r`
+        // beyond its ends) whatever the curve's position along it.
+        if let Some(e1) = side {
+            let h = dx * e1.x + dy * e1.y + dz * e1.z;
+            low = low.min(h);
+            high = high.max(h);
+        }
+    }
+    Some((chord_sq.max_element(), low.min_element(), high.max_element()))
+}
+
+/// Where the knots of `knots` cut the chord from patch (u, v) `pa` to `pb` (an edge runs along
+/// u or along v): the fractions of the chord, in order, strictly inside (0, 1); `None` when no
+/// knot falls inside.
+fn chord_knots(knots: &EdgeKnots, pa: [f32; 2], pb: [f32; 2]) -> Option<[f32; 2]> {
+    let (axis, along) = if pa[0] != pb[0] { (0, &knots.u) } else { (1, &knots.v) };
+    let (x0, x1) = (pa[axis], pb[axis]);
+    let mut cuts = [f32::NAN; 2];
+    let mut n = 0;
+    for &x in along {
+        let f = (x - x0) / (x1 - x0);
+        if f > 0.0 && f < 1.0 {
+            cuts[n] = f;
+            n += 1;
+        }
+    }
+    if n == 2 && cuts[1] < cuts[0] {
+        cuts.swap(0, 1);
+    }
+    (n > 0).then_some(cuts)
+}
+
+/// [`fit_chord`] for a chord a → b (patch (u, v) `pa` → `pb`) whose edge curve changes
+/// polynomial at the fractions `cuts` of it (NaN: none): each piece fitted against its own
+/// chord between the curve's points at the cuts, plus how far that piece's chord strays from
+/// the whole chord (linear along it, so at most at its ends). Exact up to that triangle
+/// inequality, which only errs large.
+#[allow(clippy::too_many_arguments)]
+fn piecewise_chord(
+    surface: &dyn LimitSurface,
+    patch: usize,
+    a: Vec3A,
+    b: Vec3A,
+    pa: [f32; 2],
+    pb: [f32; 2],
+    cuts: &[f32; 2],
+    side: Option<Vec3A>,
+) -> Option<(f32, f32, f32)> {
+    let mut ends = vec![0.0f32];
+    ends.extend(cuts.iter().copied().filter(|f| f.is_finite()));
+    ends.push(1.0);
+    let at = |f: f32| [pa[0] + (pb[0] - pa[0]) * f, pa[1] + (pb[1] - pa[1]) * f];
+    let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
+    // The curve at the inner cuts, then each piece's probes.
+    let mut uv: Vec<[f32; 2]> = ends[1..ends.len() - 1].iter().map(|&f| at(f)).collect();
+    for w in ends.windows(2) {
+        uv.extend((0..SEAM_PROBES).map(|p| at(w[0] + (w[1] - w[0]) * tau(p))));
+    }
+    let mut points = Vec::with_capacity(uv.len());
+    surface.evaluate_points(patch, &uv, &mut points);
+    let inner = ends.len() - 2;
+    let point = |i: usize| {
+        if i == 0 {
+            a
+        } else if i == ends.len() - 1 {
+            b
+        } else {
+            Vec3A::from(points[i - 1])
+        }
+    };
+    let (mut dev, mut low, mut high) = (0.0f32, 0.0f32, 0.0f32);
+    for (piece, w) in ends.windows(2).enumerate() {
+        let (pa, pb) = (point(piece), point(piece + 1));
+        let probes = &points[inner + piece * SEAM_PROBES..inner + (piece + 1) * SEAM_PROBES];
+        let (sq, lo, hi) = fit_chord(pa, pb, probes, side)?;
+        // The piece's chord against the whole chord's at the same parameter, at its two ends.
+        let (da, db) = (pa - (a + (b - a) * w[0]), pb - (a + (b - a) * w[1]));
+        if !(da.is_finite() && db.is_finite()) {
+            return None;
+        }
+        dev = dev.max(sq.sqrt() + da.length().max(db.length()));
+        if let Some(e1) = side {
+            let (ha, hb) = (da.dot(e1), db.dot(e1));
+            low = low.min(lo + ha.min(hb));
+            high = high.max(hi + ha.max(hb));
+        }
+    }
+    Some((dev * dev, low, high))
 }
 
 /// Points at which the fitted deviation is sampled for its extremes. A quadratic times τ(1 − τ)
@@ -877,12 +970,41 @@ mod tests {
         }
     }
 
+    /// [`FnSurface`] whose edges along u change polynomial at `knots` ([`LimitSurface::edge_knots`]).
+    struct KnotSurface(FnSurface, [f32; 2]);
+
+    impl LimitSurface for KnotSurface {
+        fn patch_count(&self) -> usize {
+            1
+        }
+        fn patch_param(&self, patch: usize) -> crate::patch::PatchParam {
+            self.0.patch_param(patch)
+        }
+        fn patch_bounds(&self, patch: usize) -> crate::bounds::Bounds3 {
+            self.0.patch_bounds(patch)
+        }
+        fn evaluate(&self, patch: usize, u: f32, v: f32) -> crate::patch::SurfacePoint {
+            self.0.evaluate(patch, u, v)
+        }
+        fn control_face_count(&self) -> usize {
+            1
+        }
+        fn edge_knots(&self, _patch: usize) -> EdgeKnots {
+            EdgeKnots { u: self.1, v: [f32::NAN; 2] }
+        }
+    }
+
     /// The n×n grid of `surface` over the unit square, with its measured seam, as the
     /// tessellator makes it.
     fn measured(surface: &FnSurface, n: usize) -> Tessellation {
+        measured_with(surface, surface.0, n)
+    }
+
+    /// [`measured`] of any surface whose points are `f`.
+    fn measured_with(surface: &dyn LimitSurface, f: fn(f32, f32) -> Vec3A, n: usize) -> Tessellation {
         let verts: Vec<[f32; 3]> = (0..n)
             .flat_map(|j| (0..n).map(move |i| (i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32)))
-            .map(|(u, v)| (surface.0)(u, v).into())
+            .map(|(u, v)| f(u, v).into())
             .collect();
         let (seam_radius, seam_normal) = seam_extent(surface, 0, UvRect::UNIT, &verts, n);
         Tessellation {
@@ -981,5 +1103,35 @@ mod tests {
             let c = curve(i as f32 / 100.0);
             assert!(sb.contains(c, 0.0), "the edge curve at u = {} ({c}) is outside its box {sb:?}", i as f32 / 100.0);
         }
+    }
+
+    #[test]
+    fn a_piecewise_edge_stays_inside_its_box_when_its_knots_are_known() {
+        // A single-crease patch's edges across the crease (sharpness 4): flat up to u = 15/16,
+        // then the crease's fillet, z = 200·(u − 15/16)³, C² at the knot. The probes at ¼, ½,
+        // ¾ of the one coarse chord see only the flat piece's deviation from it, and the
+        // quadratic they determine falls short near the end; fitted piece by piece at the
+        // knot, the box holds the whole curve.
+        fn kinked(u: f32, v: f32) -> Vec3A {
+            let d = (u - 15.0 / 16.0).max(0.0);
+            Vec3A::new(u, v, 200.0 * d * d * d)
+        }
+        let curve = |u: f32| kinked(u, 0.0);
+        let outside = |t: &Tessellation| {
+            let (sb, _) = seam_box(t, 0, 0, 1).unwrap();
+            (0..=1000).map(|i| i as f32 / 1000.0).filter(|&u| !sb.contains(curve(u), 0.0)).count()
+        };
+        let blind = measured(&FnSurface(kinked), 2);
+        assert!(outside(&blind) > 0, "without the knot the box should miss part of the fillet (radius {})", blind.seam_radius);
+        for knots in [[15.0 / 16.0, f32::NAN], [f32::NAN, 15.0 / 16.0], [0.5, 15.0 / 16.0]] {
+            let t = measured_with(&KnotSurface(FnSurface(kinked), knots), kinked, 2);
+            assert_eq!(outside(&t), 0, "knots {knots:?}: part of the edge curve is outside its box (radius {})", t.seam_radius);
+            // Not wildly larger than the curve's largest distance from the chord (~0.046).
+            assert!(t.seam_radius < 0.1, "knots {knots:?}: radius {}", t.seam_radius);
+        }
+        // A knot on a chord's end (a finer grid's vertex) changes nothing.
+        let fine = measured_with(&KnotSurface(FnSurface(kinked), [15.0 / 16.0, f32::NAN]), kinked, 17);
+        let plain = measured(&FnSurface(kinked), 17);
+        assert_eq!(fine.seam_radius.to_bits(), plain.seam_radius.to_bits());
     }
 }

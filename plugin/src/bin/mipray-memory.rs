@@ -5,7 +5,7 @@
 //! cargo run --release -p hd-mipray --bin mipray-memory -- --out docs/memory.md
 //! ```
 //! Each part is measured, not estimated: OpenSubdiv's tables from their vectors' capacities, what
-//! those miss (the patch map's quadtree, allocator headers) from glibc's count of bytes in use
+//! those miss (allocator headers and rounding) from glibc's count of bytes in use
 //! around each surface's construction, the tracer's root subpatches and BVHs from their own
 //! sizes and the same count, and the cache from its statistics; peak RSS from the kernel.
 
@@ -56,7 +56,7 @@ fn status_kb(field: &str) -> u64 {
 }
 
 fn usage() -> ! {
-    eprintln!("usage: mipray-memory [--scene latlong|cubes] [--grid X,Y] [--face-res N] [--focal MM] [--out FILE.md] [--no-sync-table] [--usda FILE [--creased]]");
+    eprintln!("usage: mipray-memory [--scene latlong|cubes] [--grid X,Y] [--face-res N] [--focal MM] [--out FILE.md] [--no-sync-table] [--usda FILE [--creased]] [--creased]");
     std::process::exit(2)
 }
 
@@ -96,6 +96,10 @@ fn main() {
             eprintln!("mipray-memory: {path}: {e}");
             std::process::exit(1);
         }
+        return;
+    }
+    if creased {
+        creased_parts(&spec);
         return;
     }
     let (width, height, spp, ao) = if spec.kind == BenchKind::LatLong { (240, 160, 4, 0) } else { (200, 134, 1, 16) };
@@ -157,10 +161,7 @@ fn main() {
 
     let f = faces as f64;
     let mut rows: Vec<(String, f64)> = parts.iter().map(|(n, b)| (format!("OpenSubdiv surface: {n}"), *b as f64)).collect();
-    rows.push((
-        "OpenSubdiv surface: the rest (patch map quadtree, allocator headers and rounding)".into(),
-        held.saturating_sub(counted) as f64,
-    ));
+    rows.push(("OpenSubdiv surface: the rest (allocator headers and rounding)".into(), held.saturating_sub(counted) as f64));
     rows.push((
         format!("root subpatches ({} bytes each; the tracer's, per render)", std::mem::size_of::<mipray::subpatch::RootSubpatch>()),
         subpatch_bytes as f64,
@@ -196,16 +197,16 @@ fn main() {
     );
     // The floor: what evaluating and tracing a patch needs (its control points, control-vertex
     // indices, OpenSubdiv's handle and parameterization, one root record, the BVHs); the rest
-    // could go (the patch map, the descriptor kept to refine again, mipray's own patch params).
+    // could go (the descriptor kept to refine again, mipray's own patch params).
     let part = |n: &str| parts.get(n).copied().unwrap_or(0) as f64;
     let floor = part("control points (refined and end-cap)")
         + part("patch control-vertex indices")
-        + part("patch handles, types, ptex map")
-        + part("patch params (OpenSubdiv)")
+        + part("patch arrays, ptex map")
+        + part("patch params and crease sharpness (OpenSubdiv)")
         + subpatch_bytes as f64
         + bvh_bytes as f64;
     md += &format!(
-        "\nThe floor outside the cache: what evaluating and tracing a patch needs — its control points, control-vertex indices, OpenSubdiv's handle and parameterization, a root subpatch and the BVHs — is {:.0} bytes per control face here ({:.2} patches a face); the rest of the table above the cache ({:.0} bytes a face: the patch map, the descriptor kept to refine animated points again, mipray's own copy of the patch params, allocator overhead) could go.\n",
+        "\nThe floor outside the cache: what evaluating and tracing a patch needs — its control points, control-vertex indices, OpenSubdiv's patch arrays and parameterization, a root subpatch and the BVHs — is {:.0} bytes per control face here ({:.2} patches a face); the rest of the table above the cache ({:.0} bytes a face: the descriptor kept to refine animated points again, mipray's own copy of the patch params, allocator overhead) could go.\n",
         floor / f,
         patches as f64 / f,
         (total - cache_peak - floor) / f,
@@ -280,4 +281,41 @@ fn sync_table_md() -> String {
     md += "\nPeak memory of whole stages rendered through usd-core and Python (the issue's 365k-face and million-face targets): docs/memory-usd.md.\n";
     md += "\nSync is the scene's construction: eager makes every mesh's OpenSubdiv tables (in series here; the delegate syncs in parallel), lazy only the control hulls, and the tables are made during the render by the first ray to reach each mesh, on the render's threads. Peak RSS falls by the tables of the meshes no ray reaches.\n";
     md
+}
+
+/// `--creased` alone: the OpenSubdiv surfaces of the creased cube blobs (docs/memory-usd.md's
+/// creased384k: `--scene cubes --grid 64,40 --face-res 5`, sharpness-3 cube edges), built one at
+/// a time, by component: a Markdown table of bytes per control face and per patch.
+fn creased_parts(spec: &BenchSceneSpec) {
+    let mut parts: BTreeMap<&'static str, usize> = BTreeMap::new();
+    let (mut counted, mut held, mut faces, mut patches) = (0usize, 0usize, 0usize, 0usize);
+    let t0 = Instant::now();
+    for k in 0..spec.grid.0 * spec.grid.1 {
+        let seed = hd_mipray::bench_scene::object_seed(spec.seed, k as u64);
+        let (topo, pts) = hd_mipray::bench_scene::creased_blob_mesh(spec.face_res, seed, 3.0);
+        faces += topo.face_vertex_counts.len();
+        let before = in_use();
+        let s = OsdSurface::new("/blob", &topo, &pts).unwrap_or_else(|e| panic!("{e}"));
+        held += in_use().saturating_sub(before);
+        patches += mipray::patch::LimitSurface::patch_count(&s);
+        for (name, b) in s.memory().unwrap_or_else(|e| panic!("{e}")) {
+            *parts.entry(name).or_default() += b;
+            counted += b;
+        }
+    }
+    let build_s = t0.elapsed().as_secs_f64();
+    let (f, p) = (faces as f64, patches as f64);
+    println!(
+        "{} creased cube blobs, {faces} control faces, {patches} patches ({:.2} a face), built in {build_s:.2} s on one thread\n",
+        spec.grid.0 * spec.grid.1,
+        p / f
+    );
+    println!("| component | MB | bytes per control face | bytes per patch |\n|---|---|---|---|");
+    let mut rows: Vec<(String, f64)> = parts.iter().map(|(n, b)| ((*n).to_string(), *b as f64)).collect();
+    rows.push(("the rest (allocator headers and rounding)".into(), held.saturating_sub(counted) as f64));
+    for (name, b) in &rows {
+        println!("| {name} | {:.1} | {:.0} | {:.1} |", b / 1e6, b / f, b / p);
+    }
+    let total: f64 = rows.iter().map(|r| r.1).sum();
+    println!("| **sum** | **{:.1}** | **{:.0}** | **{:.1}** |", total / 1e6, total / f, total / p);
 }

@@ -35,6 +35,11 @@ const EDGE_SAMPLES: usize = 17;
 /// Points probed inside each chord.
 const CHORD_PROBES: usize = 7;
 
+/// Probes of a chord across a knot of a piecewise polynomial edge (a single-crease patch's,
+/// [`LimitSurface::edge_knots`]): the crease's fillet can be as narrow as 2^−isolation level of
+/// the patch, which seven probes would step over.
+const KNOT_CHORD_PROBES: usize = 63;
+
 /// See the module doc. Distances relative to the bounding-box diagonal.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct WatertightReport {
@@ -175,6 +180,7 @@ fn chords(
     let max_abs = tess.verts.iter().fold(0.0f32, |m, v| m.max(v[0].abs()).max(v[1].abs()).max(v[2].abs()));
     let margin = f64::from(seam_margin(max_abs));
     let edges = edges.within(tess.domain);
+    let knots = surface.edge_knots(patch);
     for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
         let vert = |k: usize| {
             let (i, j) = edge_vertex(e, k, n);
@@ -184,9 +190,17 @@ fn chords(
             let (a, b) = (vert(k * stride), vert((k + 1) * stride));
             let seam = seam_box(tess, e, k, stride).map(|(sb, _)| sb);
             let mut dist = 0.0f32;
-            let mut probes = Vec::with_capacity(CHORD_PROBES);
-            for p in 1..=CHORD_PROBES {
-                let t = (k as f32 + p as f32 / (CHORD_PROBES + 1) as f32) / q as f32;
+            let at = |t: f32| {
+                let (lu, lv) = edge_uv(e, t);
+                (rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv)
+            };
+            let ((ua, va), (ub, vb)) = (at(k as f32 / q as f32), at((k + 1) as f32 / q as f32));
+            let inside = |ks: &[f32; 2], x0: f32, x1: f32| ks.iter().any(|&x| x > x0.min(x1) && x < x0.max(x1));
+            let across_knot = (ua != ub && inside(&knots.u, ua, ub)) || (va != vb && inside(&knots.v, va, vb));
+            let count = if across_knot { KNOT_CHORD_PROBES } else { CHORD_PROBES };
+            let mut probes = Vec::with_capacity(count);
+            for p in 1..=count {
+                let t = (k as f32 + p as f32 / (count + 1) as f32) / q as f32;
                 let (lu, lv) = edge_uv(e, t);
                 let u = rect.u0 + (rect.u1 - rect.u0) * lu;
                 let v = rect.v0 + (rect.v1 - rect.v0) * lv;
