@@ -598,6 +598,16 @@ struct OsdMesh::Impl {
     }
   }
 
+  // Pads bounds rounded to floats from doubles by a few ulps of their largest coordinate `mx`,
+  // for the rounding of the conversion and of evaluation in floats.
+  static void pad_bounds(double mx, float lo[3], float hi[3]) {
+    const float pad = float(8.0 * std::numeric_limits<float>::epsilon() * mx);
+    for (int c = 0; c < 3; ++c) {
+      lo[c] -= pad;
+      hi[c] += pad;
+    }
+  }
+
   // Bounds of a regular patch from its Bézier control points: the B-spline control points
   // (with a boundary edge's phantom row or column, 2·P1 − P2, as its end weights imply) turned
   // into Bézier form along s and t, whose convex hull holds the patch. The B-spline hull reaches
@@ -619,11 +629,7 @@ struct OsdMesh::Impl {
       hi[c] = float(h);
       mx = std::max({mx, std::fabs(l), std::fabs(h)});
     }
-    const float pad = float(8.0 * std::numeric_limits<float>::epsilon() * mx);
-    for (int c = 0; c < 3; ++c) {
-      lo[c] -= pad;
-      hi[c] += pad;
-    }
+    pad_bounds(mx, lo, hi);
   }
 
   // A regular patch's Bézier control net, b[t row][s column][xyz] (see regular_bezier_bounds).
@@ -892,11 +898,7 @@ struct OsdMesh::Impl {
       hi[c] = float(h);
       mx = std::max({mx, std::fabs(l), std::fabs(h)});
     }
-    const float pad = float(8.0 * std::numeric_limits<float>::epsilon() * mx);
-    for (int c = 0; c < 3; ++c) {
-      lo[c] -= pad;
-      hi[c] += pad;
-    }
+    pad_bounds(mx, lo, hi);
   }
 
   // Evaluates at the patch's local (s, t). Derivative outputs may be null (then not computed);

@@ -18,6 +18,7 @@ use mipray::geometry_cache::CacheConfig;
 use mipray::options::RenderOptions;
 use mipray::progress::NoProgress;
 use mipray::render::render;
+use mipray::topology::MeshTopology;
 use mipray::trace::Tracer;
 use mipray_bridge::OsdSurface;
 
@@ -125,25 +126,14 @@ fn main() {
     let base_rss = status_kb("VmRSS:") * 1024;
 
     // OpenSubdiv's surfaces, one at a time: their parts, and what the allocator says they hold.
-    let mut parts: BTreeMap<&'static str, usize> = BTreeMap::new();
-    let (mut counted, mut held, mut input, mut faces, mut patches) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let t0 = Instant::now();
-    for k in 0..spec.grid.0 * spec.grid.1 {
-        let seed = hd_mipray::bench_scene::object_seed(spec.seed, k as u64);
-        let (topo, pts) =
-            if spec.kind == BenchKind::LatLong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
-        // What a scene delegate keeps of the prim to rebuild it: its topology and points.
-        input += topo.face_vertex_counts.len() * 4 + topo.face_vertex_indices.len() * 4 + pts.len() * 12;
-        faces += topo.face_vertex_counts.len();
-        let before = in_use();
-        let s = OsdSurface::new("/blob", &topo, &pts).unwrap_or_else(|e| panic!("{e}"));
-        held += in_use().saturating_sub(before);
-        patches += mipray::patch::LimitSurface::patch_count(&s);
-        for (name, b) in s.memory().unwrap_or_else(|e| panic!("{e}")) {
-            *parts.entry(name).or_default() += b;
-            counted += b;
+    let Surfaces { parts, counted, held, input, faces, patches } = surfaces(&spec, |seed| {
+        if spec.kind == BenchKind::LatLong {
+            latlong_blob_mesh(spec.face_res, seed)
+        } else {
+            blob_mesh(spec.face_res, seed)
         }
-    }
+    });
     let build_s = t0.elapsed().as_secs_f64();
 
     // The scene itself, then the tracer's roots and BVHs, then a render with the default cache.
@@ -283,26 +273,45 @@ fn sync_table_md() -> String {
     md
 }
 
+/// What the OpenSubdiv surfaces of a scene's meshes hold, built one at a time.
+struct Surfaces {
+    /// Bytes by component, as the surfaces report them, and their sum.
+    parts: BTreeMap<&'static str, usize>,
+    counted: usize,
+    /// What the allocator says the surfaces hold.
+    held: usize,
+    /// What a scene delegate keeps of the prims to rebuild them: their topology and points.
+    input: usize,
+    faces: usize,
+    patches: usize,
+}
+
+/// Builds the surface of every object of `spec`, one at a time, from `mesh(seed)`.
+fn surfaces(spec: &BenchSceneSpec, mesh: impl Fn(u64) -> (MeshTopology, Vec<[f32; 3]>)) -> Surfaces {
+    let mut out = Surfaces { parts: BTreeMap::new(), counted: 0, held: 0, input: 0, faces: 0, patches: 0 };
+    for k in 0..spec.grid.0 * spec.grid.1 {
+        let (topo, pts) = mesh(hd_mipray::bench_scene::object_seed(spec.seed, k as u64));
+        out.input += topo.face_vertex_counts.len() * 4 + topo.face_vertex_indices.len() * 4 + pts.len() * 12;
+        out.faces += topo.face_vertex_counts.len();
+        let before = in_use();
+        let s = OsdSurface::new("/blob", &topo, &pts).unwrap_or_else(|e| panic!("{e}"));
+        out.held += in_use().saturating_sub(before);
+        out.patches += mipray::patch::LimitSurface::patch_count(&s);
+        for (name, b) in s.memory().unwrap_or_else(|e| panic!("{e}")) {
+            *out.parts.entry(name).or_default() += b;
+            out.counted += b;
+        }
+    }
+    out
+}
+
 /// `--creased` alone: the OpenSubdiv surfaces of the creased cube blobs (docs/memory-usd.md's
 /// creased384k: `--scene cubes --grid 64,40 --face-res 5`, sharpness-3 cube edges), built one at
 /// a time, by component: a Markdown table of bytes per control face and per patch.
 fn creased_parts(spec: &BenchSceneSpec) {
-    let mut parts: BTreeMap<&'static str, usize> = BTreeMap::new();
-    let (mut counted, mut held, mut faces, mut patches) = (0usize, 0usize, 0usize, 0usize);
     let t0 = Instant::now();
-    for k in 0..spec.grid.0 * spec.grid.1 {
-        let seed = hd_mipray::bench_scene::object_seed(spec.seed, k as u64);
-        let (topo, pts) = hd_mipray::bench_scene::creased_blob_mesh(spec.face_res, seed, 3.0);
-        faces += topo.face_vertex_counts.len();
-        let before = in_use();
-        let s = OsdSurface::new("/blob", &topo, &pts).unwrap_or_else(|e| panic!("{e}"));
-        held += in_use().saturating_sub(before);
-        patches += mipray::patch::LimitSurface::patch_count(&s);
-        for (name, b) in s.memory().unwrap_or_else(|e| panic!("{e}")) {
-            *parts.entry(name).or_default() += b;
-            counted += b;
-        }
-    }
+    let Surfaces { parts, counted, held, faces, patches, .. } =
+        surfaces(spec, |seed| hd_mipray::bench_scene::creased_blob_mesh(spec.face_res, seed, 3.0));
     let build_s = t0.elapsed().as_secs_f64();
     let (f, p) = (faces as f64, patches as f64);
     println!(
