@@ -245,3 +245,26 @@ def test_warns_about_unsupported_pixel_aspect(caplog) -> None:
     with caplog.at_level(logging.WARNING, logger="mipray"):
         read_render_settings(stage, "/Render/Settings")
     assert any("pixelAspectRatio 2.0 is not supported" in r.getMessage() for r in caplog.records)
+
+
+def test_a_dropped_scene_delegate_frees_its_stage_at_once(fake) -> None:
+    """No reference cycle keeps a synced delegate (and so its stage and layers) alive until
+    the collector runs: usd-core would hand the next ``Usd.Stage.Open`` of the file the stale
+    layer, and a re-render of an edited file would render the old stage."""
+    import gc
+    import weakref
+
+    from mipray.usd import UsdSceneDelegate
+
+    stage = new_stage()
+    add_cube(stage, "/World/Cube")
+    add_distant_light(stage, "/World/Sun")
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    dropped = weakref.ref(scene)
+    gc.disable()
+    try:
+        del scene
+        assert dropped() is None, "something still refers to the delegate"
+    finally:
+        gc.enable()

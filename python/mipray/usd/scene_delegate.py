@@ -31,6 +31,7 @@ calls, and later edits re-sync only what they touched.
 from __future__ import annotations
 
 import logging
+import weakref
 from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -233,8 +234,15 @@ class UsdSceneDelegate:
         self._xform_only: set[str] = set()  # records whose transform alone changed in time
         self._instancer_full: set[str] = set()  # PointInstancers whose prototypes changed
         self._prototype_edits: set[str] = set()  # native prototypes edited inside
+        # A weak reference: a bound method would make a cycle (self -> instancing -> self) that
+        # keeps this delegate, its stage and the stage's layers alive until the collector runs,
+        # so usd-core would hand the next Usd.Stage.Open of the same file the stale layer.
+        gprim_paths = weakref.WeakMethod(self._gprim_paths)
         self._instancing = Instancing(
-            delegate, self.purposes, self.sync_counts, mesh_paths=self._gprim_paths
+            delegate,
+            self.purposes,
+            self.sync_counts,
+            mesh_paths=lambda: (gprim_paths() or list)(),
         )
         self._poser = SkelPoser()
         # Before anything is read: .mtlx references usd-core cannot compose.
