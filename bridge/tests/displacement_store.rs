@@ -19,18 +19,22 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use mipray::bilinear::BilinearSurface;
 use mipray::displacement::TextureDisplacement;
 use mipray::displacement_texture::DisplacementTextures;
 use mipray::image_io::ChannelFormat;
 use mipray::patch::UvRect;
-use mipray::texture::{Interpolation, LevelTexels, Lookup, Primvar2, SourceColorSpace, TextureSampler, Wrap};
-use mipray::topology::{MeshTopology, Scheme};
+use mipray::texture::{LevelTexels, Lookup, SourceColorSpace, TextureSampler, Wrap};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
 mod common;
 
 use common::{maketx, require, write};
+
+/// The core's tests' quad (a file of theirs: no crate depends on the other's tests).
+#[path = "../../rust/tests/common/st_quad.rs"]
+mod st_quad;
+
+use st_quad::st_quad as quad;
 
 fn scratch_dir(test: &str) -> PathBuf {
     common::scratch_dir("dispstore", test)
@@ -97,20 +101,6 @@ fn kept_levels_are_the_levels_openimageio_filters() {
     assert_eq!(stats["bytes"], bytes);
     assert_eq!(stats["files"][0]["format"], "uint8");
     assert_eq!(stats["files"][0]["levels"], 7);
-}
-
-/// A 2×2 quad in z = 0 with face-varying `st` covering [0, 1]² once, as the core's tests make it.
-fn quad() -> BilinearSurface {
-    let topo =
-        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
-    let pts = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]];
-    let st = Primvar2 {
-        name: "st".into(),
-        interpolation: Interpolation::FaceVarying,
-        values: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
-        indices: vec![0, 1, 2, 3],
-    };
-    BilinearSurface::new(&topo, &pts).unwrap().with_primvars(&topo, 4, &[st]).unwrap()
 }
 
 #[test]
