@@ -285,14 +285,21 @@ fn a_million_hair_segments_stay_within_the_cache_budget() {
     assert_eq!(tracer.subpatch_count(), 1_000_000);
 }
 
-#[test]
-fn instanced_and_moving_curves_render_where_placed() {
-    let pts = [[0.0_f32, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// A scene of one straight linear curve along y from −`half_length` to `half_length`,
+/// `width` wide, as mesh "/c" (not yet instanced), and that mesh.
+fn vertical_curve(half_length: f32, width: f32) -> (Scene, usize) {
+    let pts = [[0.0_f32, -half_length, 0.0], [0.0, half_length, 0.0]];
     let counts = [2];
-    let widths = [0.2_f32];
+    let widths = [width];
     let mut scene = Scene::default();
     let m = scene
         .add_mesh(Mesh::new("/c", Arc::new(CurvesSurface::new(&desc(&pts, &counts, CurveType::Linear, Basis::Bezier, &widths)).unwrap())));
+    (scene, m)
+}
+
+#[test]
+fn instanced_and_moving_curves_render_where_placed() {
+    let (mut scene, m) = vertical_curve(1.0, 0.2);
     scene.add_instance(m, Mat4::from_translation(Vec3::new(-1.0, 0.0, 0.0)));
     scene.add_instance(m, Mat4::from_translation(Vec3::new(1.0, 0.0, 0.0)));
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, 40.0);
@@ -344,12 +351,7 @@ fn a_moving_curve_covers_each_pixel_for_its_share_of_the_shutter() {
     use mipray::motion::{MotionKey, MotionTransform};
     // A vertical tube 0.2 wide slides from x = −0.5 to 0.5 over the shutter: a pixel at x is
     // covered while |x − centre| < 0.1, a fifth of the shutter for |x| < 0.4.
-    let pts = [[0.0_f32, -2.0, 0.0], [0.0, 2.0, 0.0]];
-    let counts = [2];
-    let widths = [0.2_f32];
-    let mut scene = Scene::default();
-    let m = scene
-        .add_mesh(Mesh::new("/c", Arc::new(CurvesSurface::new(&desc(&pts, &counts, CurveType::Linear, Basis::Bezier, &widths)).unwrap())));
+    let (mut scene, m) = vertical_curve(2.0, 0.2);
     let slide = MotionTransform::new(vec![
         MotionKey { time: 0.0, render_from_object: Mat4::from_translation(Vec3::new(-0.5, 0.0, 0.0)) },
         MotionKey { time: 1.0, render_from_object: Mat4::from_translation(Vec3::new(0.5, 0.0, 0.0)) },
