@@ -27,7 +27,6 @@ Bad input gets one line naming the prim and the attribute:
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
@@ -36,20 +35,14 @@ from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
 from .attributes import check_vertex_counts, read_array
+from .warn import warn_once
 
 __all__ = ["CURVE_STYLE", "CURVE_TYPES", "curves_arguments", "segment_end_count"]
 
-_log = logging.getLogger(__name__)
-_warned: set[str] = set()
+_warn_once = warn_once(__name__)
 
 #: The curve schemas that render.
 CURVE_TYPES: tuple[type, ...] = (UsdGeom.BasisCurves, UsdGeom.NurbsCurves)
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
 
 
 def segment_end_count(n: int, curve_type: str, basis: str, wrap: str) -> int:
@@ -71,7 +64,8 @@ def _expected(interpolation: str, counts: NDArray[np.int32], kind: tuple[str, st
     return int(counts.sum())
 
 
-def _primvar_checked(
+def _put_checked(
+    gprim: dict[str, Any],
     path: str,
     name: str,
     values: NDArray[Any],
@@ -80,9 +74,14 @@ def _primvar_checked(
     kind: tuple[str, str, str],
     fallback: str,
 ) -> bool:
-    """Whether ``values`` fit ``interpolation``; warns (naming the fallback) when not."""
+    """Puts ``values`` in ``gprim`` (``name`` and ``name_interpolation``) if they fit.
+
+    When they do not, warns (naming the fallback) and returns False.
+    """
     want = _expected(interpolation, counts, kind)
     if len(values) == want:
+        gprim[name] = values.tolist()
+        gprim[f"{name}_interpolation"] = interpolation
         return True
     _warn_once(
         f"{path}: {name} has {len(values)} values but {interpolation} interpolation wants "
@@ -111,20 +110,14 @@ def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
     widths = read_array(curves.GetWidthsAttr(), time, np.float32)
     if len(widths):
         interpolation = str(curves.GetWidthsInterpolation())
-        if _primvar_checked(
-            path, "widths", widths, interpolation, counts, kind, "using the fallback width 1"
-        ):
-            gprim["widths"] = widths.tolist()
-            gprim["widths_interpolation"] = interpolation
+        fallback = "using the fallback width 1"
+        _put_checked(gprim, path, "widths", widths, interpolation, counts, kind, fallback)
     normals = read_array(curves.GetNormalsAttr(), time, np.float32, 3)
     style = _curve_style(prim, time)
     if len(normals):
         interpolation = str(curves.GetNormalsInterpolation())
-        if _primvar_checked(
-            path, "normals", normals, interpolation, counts, kind, "rendering tubes instead"
-        ):
-            gprim["normals"] = normals.tolist()
-            gprim["normals_interpolation"] = interpolation
+        fallback = "rendering tubes instead"
+        if _put_checked(gprim, path, "normals", normals, interpolation, counts, kind, fallback):
             style = "ribbon"
     gprim["style"] = style
     return points, gprim

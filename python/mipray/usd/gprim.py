@@ -16,7 +16,6 @@ delegate with one line naming the prim and attribute.
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any
 
@@ -28,17 +27,11 @@ from ..errors import PrimError
 from .attributes import read_array
 from .curves import CURVE_TYPES, curves_arguments
 from .material import lambertian
+from .warn import warn_once
 
 __all__ = ["GPRIM_TYPES", "curve_colors", "gprim_arguments", "is_renderable_gprim", "point_colors"]
 
-_log = logging.getLogger(__name__)
-_warned: set[str] = set()
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
+_warn_once = warn_once(__name__)
 
 
 #: The gprims besides ``Mesh`` that render, by schema class.
