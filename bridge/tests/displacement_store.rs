@@ -16,48 +16,28 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::PathBuf;
 use std::sync::Arc;
 
-use mipray::bilinear::BilinearSurface;
 use mipray::displacement::TextureDisplacement;
 use mipray::displacement_texture::DisplacementTextures;
-use mipray::image_io::{ChannelFormat, ImageBuf, ImageIo};
+use mipray::image_io::ChannelFormat;
 use mipray::patch::UvRect;
-use mipray::texture::{Interpolation, LevelTexels, Lookup, Primvar2, SourceColorSpace, TextureSampler, Wrap};
-use mipray::topology::{MeshTopology, Scheme};
-use mipray_bridge::{OiioImageIo, OiioTextureOptions, OiioTextureSystem};
+use mipray::texture::{LevelTexels, Lookup, SourceColorSpace, TextureSampler, Wrap};
+use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
+
+mod common;
+
+use common::{maketx, require, write};
+
+/// The core's tests' quad (a file of theirs: no crate depends on the other's tests).
+#[path = "../../rust/tests/common/st_quad.rs"]
+mod st_quad;
+
+use st_quad::st_quad as quad;
 
 fn scratch_dir(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mipray-dispstore-{test}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn require(tool: &str) {
-    let ok = Command::new(tool).arg("--help").output().is_ok_and(|o| o.status.success() || !o.stdout.is_empty());
-    assert!(ok, "`{tool}` (Debian's openimageio-tools) is not on the PATH: run scripts/setup.sh, which installs it");
-}
-
-fn run(cmd: &mut Command) {
-    let out = cmd.output().unwrap();
-    assert!(out.status.success(), "{cmd:?} failed: {}", String::from_utf8_lossy(&out.stderr));
-}
-
-/// A one-channel `res`² image, texel (x, row from the top) = `f(x, row)`, written as `name`.
-fn write(dir: &Path, name: &str, res: usize, format: ChannelFormat, f: impl Fn(usize, usize) -> f32) -> PathBuf {
-    let pixels = (0..res * res).map(|k| f(k % res, k / res)).collect();
-    let path = dir.join(name);
-    OiioImageIo
-        .write(&path, &ImageBuf { width: res, height: res, channels: vec!["Y".into()], pixels, metadata: vec![] }, &[format], &[])
-        .unwrap();
-    path
-}
-
-fn maketx(src: &Path, dst: &Path, args: &[&str]) -> PathBuf {
-    run(Command::new("maketx").arg(src).arg("-o").arg(dst).args(["--filter", "box"]).args(args));
-    dst.to_path_buf()
+    common::scratch_dir("dispstore", test)
 }
 
 fn system() -> Arc<OiioTextureSystem> {
@@ -121,20 +101,6 @@ fn kept_levels_are_the_levels_openimageio_filters() {
     assert_eq!(stats["bytes"], bytes);
     assert_eq!(stats["files"][0]["format"], "uint8");
     assert_eq!(stats["files"][0]["levels"], 7);
-}
-
-/// A 2×2 quad in z = 0 with face-varying `st` covering [0, 1]² once, as the core's tests make it.
-fn quad() -> BilinearSurface {
-    let topo =
-        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
-    let pts = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]];
-    let st = Primvar2 {
-        name: "st".into(),
-        interpolation: Interpolation::FaceVarying,
-        values: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
-        indices: vec![0, 1, 2, 3],
-    };
-    BilinearSurface::new(&topo, &pts).unwrap().with_primvars(&topo, 4, &[st]).unwrap()
 }
 
 #[test]

@@ -21,41 +21,21 @@ use mipray::texture::serde_json::Value;
 use mipray::texture::{CheckerSampler, FilterMode, Lookup, TextureSampler, Wrap};
 use mipray_bridge::{OiioImageIo, OiioTextureOptions, OiioTextureSystem};
 
+mod common;
+
+use common::{maketx, require, run, write};
+
 fn scratch_dir(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mipray-texture-{test}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Panics, naming the tool and what installs it, unless `tool` runs.
-fn require(tool: &str) {
-    let ok = Command::new(tool).arg("--help").output().is_ok_and(|o| o.status.success() || !o.stdout.is_empty());
-    assert!(ok, "`{tool}` (Debian's openimageio-tools) is not on the PATH: run scripts/setup.sh, which installs it");
-}
-
-fn run(cmd: &mut Command) {
-    let out = cmd.output().unwrap();
-    assert!(out.status.success(), "{cmd:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    common::scratch_dir("texture", test)
 }
 
 /// A `res`² one-channel float checker of `squares`² squares, t up: the bottom-left square is 0,
 /// as [`CheckerSampler`]'s. Written with OpenImageIO (scanline EXR), then `maketx`ed.
 fn write_checker(dir: &Path, res: usize, squares: usize) -> PathBuf {
     let side = res / squares;
-    let mut pixels = Vec::with_capacity(res * res);
-    for row in 0..res {
-        // Image rows run down from the top; t runs up.
-        let ty = (res - 1 - row) / side;
-        for x in 0..res {
-            pixels.push(((x / side + ty) % 2) as f32);
-        }
-    }
-    let image = ImageBuf { width: res, height: res, channels: vec!["Y".into()], pixels, metadata: vec![] };
-    let exr = dir.join("checker.exr");
-    OiioImageIo.write(&exr, &image, &[ChannelFormat::Float], &[]).unwrap();
-    let tx = dir.join("checker.tx");
-    run(Command::new("maketx").arg(&exr).arg("-o").arg(&tx).args(["--filter", "box"]));
-    tx
+    // Image rows run down from the top; t runs up.
+    let exr = write(dir, "checker.exr", res, ChannelFormat::Float, |x, row| ((x / side + (res - 1 - row) / side) % 2) as f32);
+    maketx(&exr, &dir.join("checker.tx"), &[])
 }
 
 fn system(filter: FilterMode) -> OiioTextureSystem {

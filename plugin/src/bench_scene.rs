@@ -190,6 +190,54 @@ fn lumped_radius(lumps: &[(Vec3, f32)], s: Vec3) -> f32 {
     1.0 + lumps.iter().map(|(d, a)| a * (-(1.0 - s.dot(*d)) * 4.0).exp()).sum::<f32>()
 }
 
+/// Distance between neighbouring objects' centres on the ground, scene units.
+const SPACING: f32 = 2.6;
+/// Half the ground quad's side, scene units.
+const GROUND_HALF: f32 = 200.0;
+/// The direction the sun shines along (render space, not normalized).
+const SUN_DIRECTION: Vec3 = Vec3::new(0.4, 0.6, -0.7);
+
+/// One object of the grid, as both [`build`] and [`write_usda`] place it.
+struct Blob {
+    /// Column and row in the grid.
+    i: usize,
+    j: usize,
+    /// Index in the grid, row by row.
+    k: u64,
+    latlong: bool,
+    topo: MeshTopology,
+    pts: Vec<[f32; 3]>,
+    /// Render from object.
+    transform: Mat4,
+    chrome: bool,
+}
+
+/// The objects of `spec`'s grid, row by row.
+fn blobs(spec: &BenchSceneSpec) -> impl Iterator<Item = Blob> + '_ {
+    let (gx, gy) = spec.grid;
+    (0..gy).flat_map(move |j| (0..gx).map(move |i| (i, j))).map(move |(i, j)| {
+        let k = (j * gx + i) as u64;
+        let seed = object_seed(spec.seed, k);
+        let latlong = spec.kind == BenchKind::LatLong;
+        let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
+        let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * SPACING;
+        let y = j as f32 * SPACING;
+        let s = 0.8 + 0.4 * rand01(seed, 7);
+        let transform = Mat4::from_translation(Vec3::new(x, y, s))
+            * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU)
+            // Lat-long blobs lean their poles every way, toward the camera too.
+            * Mat4::from_rotation_x(if latlong { rand01(seed, 9) * std::f32::consts::PI } else { 0.0 })
+            * Mat4::from_scale(Vec3::splat(s));
+        Blob { i, j, k, latlong, topo, pts, transform, chrome: (i + j) % 2 == 0 }
+    })
+}
+
+/// The camera's render from camera: above and behind the first row, looking into the grid.
+fn camera_transform(spec: &BenchSceneSpec) -> Mat4 {
+    let eye = Vec3::new(0.0, -9.0, 6.0);
+    Camera::look_at(eye, Vec3::new(0.0, spec.grid.1 as f32 * SPACING * 0.45, 0.0), Vec3::Z)
+}
+
 /// Builds the scene (OpenSubdiv patch tables for every object). Returns the scene and the
 /// number of control faces.
 ///
@@ -200,59 +248,39 @@ pub fn build(spec: &BenchSceneSpec) -> Result<Scene, mipray::error::MeshError> {
     let chrome = scene.add_material(Material::mirror("/materials/chrome", Vec3A::splat(0.05), Vec3A::splat(0.9)));
     let matte = scene.add_material(Material::lambertian("/materials/matte", Vec3A::new(0.6, 0.55, 0.5)).0);
     let ground_mat = scene.add_material(Material::lambertian("/materials/ground", Vec3A::splat(0.4)).0);
-    let (gx, gy) = spec.grid;
-    let spacing = 2.6;
-    for j in 0..gy {
-        for i in 0..gx {
-            let k = (j * gx + i) as u64;
-            let seed = object_seed(spec.seed, k);
-            let latlong = spec.kind == BenchKind::LatLong;
-            let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
-            let name = format!("/objects/blob_{i}_{j}");
-            let surface: Arc<dyn mipray::patch::LimitSurface> = if spec.lazy {
-                let hull = mipray::bounds::Bounds3::from_points(pts.iter().map(|&p| p.into()));
-                let faces = topo.face_count();
-                let n = name.clone();
-                Arc::new(mipray::lazy_surface::LazySurface::new(
-                    hull,
-                    faces,
-                    Box::new(move || {
-                        OsdSurface::new(&n, &topo, &pts)
-                            .map(|s| Arc::new(s) as Arc<dyn mipray::patch::LimitSurface>)
-                            .map_err(|e| e.to_string())
-                    }),
-                ))
-            } else {
-                Arc::new(OsdSurface::new(&name, &topo, &pts)?)
-            };
-            let mut mesh = Mesh::new(&name, surface);
-            mesh.material = if (i + j) % 2 == 0 { chrome } else { matte };
-            if k % 3 == 0 && !latlong {
-                mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 }.into());
-                mesh.displacement_bound = 0.06;
-            }
-            let m = scene.add_mesh(mesh);
-            let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * spacing;
-            let y = j as f32 * spacing;
-            let s = 0.8 + 0.4 * rand01(seed, 7);
-            let xf = Mat4::from_translation(Vec3::new(x, y, s))
-                * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU)
-                // Lat-long blobs lean their poles every way, toward the camera too.
-                * Mat4::from_rotation_x(if latlong { rand01(seed, 9) * std::f32::consts::PI } else { 0.0 })
-                * Mat4::from_scale(Vec3::splat(s));
-            scene.add_instance(m, xf);
+    for Blob { i, j, k, latlong, topo, pts, transform, chrome: is_chrome } in blobs(spec) {
+        let name = format!("/objects/blob_{i}_{j}");
+        let surface: Arc<dyn mipray::patch::LimitSurface> = if spec.lazy {
+            let hull = mipray::bounds::Bounds3::from_points(pts.iter().map(|&p| p.into()));
+            let faces = topo.face_count();
+            let n = name.clone();
+            Arc::new(mipray::lazy_surface::LazySurface::new(
+                hull,
+                faces,
+                Box::new(move || {
+                    OsdSurface::new(&n, &topo, &pts).map(|s| Arc::new(s) as Arc<dyn mipray::patch::LimitSurface>).map_err(|e| e.to_string())
+                }),
+            ))
+        } else {
+            Arc::new(OsdSurface::new(&name, &topo, &pts)?)
+        };
+        let mut mesh = Mesh::new(&name, surface);
+        mesh.material = if is_chrome { chrome } else { matte };
+        if k % 3 == 0 && !latlong {
+            mesh.displacement = Some(Displacement { amplitude: 0.03, frequency: 3.0, octaves: 4, gain: 0.5 }.into());
+            mesh.displacement_bound = 0.06;
         }
+        let m = scene.add_mesh(mesh);
+        scene.add_instance(m, transform);
     }
-    let half = 200.0;
-    let ground = BilinearGround::new(half)?;
+    let ground = BilinearGround::new(GROUND_HALF)?;
     let mut gm = Mesh::new("/ground", Arc::new(ground));
     gm.material = ground_mat;
     let g = scene.add_mesh(gm);
     scene.add_instance(g, Mat4::IDENTITY);
-    scene.lights.push(Light::distant("/sun", Vec3A::new(0.4, 0.6, -0.7), Vec3A::splat(2.5)));
-    let eye = Vec3::new(0.0, -9.0, 6.0);
+    scene.lights.push(Light::distant("/sun", SUN_DIRECTION.into(), Vec3A::splat(2.5)));
     scene.camera = Camera {
-        render_from_camera: Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z),
+        render_from_camera: camera_transform(spec),
         focal_length: spec.focal_length,
         horizontal_aperture: 36.0,
         vertical_aperture: 24.0,
@@ -339,57 +367,38 @@ pub fn write_usda(spec: &BenchSceneSpec, creased: bool, path: &std::path::Path) 
         )?;
     }
     writeln!(f, "    }}")?;
-    let (gx, gy) = spec.grid;
-    let spacing = 2.6;
-    for j in 0..gy {
-        for i in 0..gx {
-            let k = (j * gx + i) as u64;
-            let seed = object_seed(spec.seed, k);
-            let latlong = spec.kind == BenchKind::LatLong;
-            let (topo, pts) = if latlong { latlong_blob_mesh(spec.face_res, seed) } else { blob_mesh(spec.face_res, seed) };
-            let s = 0.8 + 0.4 * rand01(seed, 7);
-            let x = (i as f32 - (gx as f32 - 1.0) / 2.0) * spacing;
-            let y = j as f32 * spacing;
-            let xf = Mat4::from_translation(Vec3::new(x, y, s))
-                * Mat4::from_rotation_z(rand01(seed, 8) * std::f32::consts::TAU)
-                * Mat4::from_rotation_x(if latlong { rand01(seed, 9) * std::f32::consts::PI } else { 0.0 })
-                * Mat4::from_scale(Vec3::splat(s));
-            let mut body = String::new();
-            let _ = writeln!(body, "        uniform token subdivisionScheme = \"catmullClark\"");
-            let _ =
-                writeln!(body, "        int[] faceVertexCounts = [{}]", join(&mut topo.face_vertex_counts.iter().map(|c| c.to_string())));
-            let _ =
-                writeln!(body, "        int[] faceVertexIndices = [{}]", join(&mut topo.face_vertex_indices.iter().map(|c| c.to_string())));
-            let _ =
-                writeln!(body, "        point3f[] points = [{}]", join(&mut pts.iter().map(|p| format!("({}, {}, {})", p[0], p[1], p[2]))));
-            if creased && !latlong {
-                let creases = cube_blob_creases(spec.face_res, &topo);
-                let _ = writeln!(body, "        int[] creaseIndices = [{}]", join(&mut creases.iter().map(|(a, b)| format!("{a}, {b}"))));
-                let _ = writeln!(body, "        int[] creaseLengths = [{}]", join(&mut creases.iter().map(|_| "2".to_string())));
-                let _ = writeln!(body, "        float[] creaseSharpnesses = [{}]", join(&mut creases.iter().map(|_| "3".to_string())));
-            }
-            let material = if (i + j) % 2 == 0 { "chrome" } else { "matte" };
-            writeln!(
-                f,
-                "    def Mesh \"blob_{i}_{j}\" (\n        prepend apiSchemas = [\"MaterialBindingAPI\"]\n    )\n    {{\n{body}        rel material:binding = </World/Looks/{material}>\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}",
-                matrix(xf)
-            )?;
+    for Blob { i, j, latlong, topo, pts, transform: xf, chrome, .. } in blobs(spec) {
+        let mut body = String::new();
+        let _ = writeln!(body, "        uniform token subdivisionScheme = \"catmullClark\"");
+        let _ = writeln!(body, "        int[] faceVertexCounts = [{}]", join(&mut topo.face_vertex_counts.iter().map(|c| c.to_string())));
+        let _ = writeln!(body, "        int[] faceVertexIndices = [{}]", join(&mut topo.face_vertex_indices.iter().map(|c| c.to_string())));
+        let _ = writeln!(body, "        point3f[] points = [{}]", join(&mut pts.iter().map(|p| format!("({}, {}, {})", p[0], p[1], p[2]))));
+        if creased && !latlong {
+            let creases = cube_blob_creases(spec.face_res, &topo);
+            let _ = writeln!(body, "        int[] creaseIndices = [{}]", join(&mut creases.iter().map(|(a, b)| format!("{a}, {b}"))));
+            let _ = writeln!(body, "        int[] creaseLengths = [{}]", join(&mut creases.iter().map(|_| "2".to_string())));
+            let _ = writeln!(body, "        float[] creaseSharpnesses = [{}]", join(&mut creases.iter().map(|_| "3".to_string())));
         }
+        let material = if chrome { "chrome" } else { "matte" };
+        writeln!(
+            f,
+            "    def Mesh \"blob_{i}_{j}\" (\n        prepend apiSchemas = [\"MaterialBindingAPI\"]\n    )\n    {{\n{body}        rel material:binding = </World/Looks/{material}>\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}",
+            matrix(xf)
+        )?;
     }
-    let half = 200.0;
+    let half = GROUND_HALF;
     writeln!(
         f,
         "    def Mesh \"ground\" (\n        prepend apiSchemas = [\"MaterialBindingAPI\"]\n    )\n    {{\n        uniform token subdivisionScheme = \"none\"\n        int[] faceVertexCounts = [4]\n        int[] faceVertexIndices = [0, 1, 2, 3]\n        point3f[] points = [(-{half}, -{half}, 0), ({half}, -{half}, 0), ({half}, {half}, 0), (-{half}, {half}, 0)]\n        rel material:binding = </World/Looks/ground>\n    }}"
     )?;
-    // The sun shines along (0.4, 0.6, −0.7); a distant light shines down its own −Z.
-    let sun = Camera::look_at(Vec3::ZERO, Vec3::new(0.4, 0.6, -0.7), Vec3::Z);
+    // A distant light shines down its own −Z: aimed along SUN_DIRECTION.
+    let sun = Camera::look_at(Vec3::ZERO, SUN_DIRECTION, Vec3::Z);
     writeln!(
         f,
         "    def DistantLight \"sun\"\n    {{\n        float inputs:intensity = 2.5\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}",
         matrix(sun)
     )?;
-    let eye = Vec3::new(0.0, -9.0, 6.0);
-    let cam = Camera::look_at(eye, Vec3::new(0.0, gy as f32 * spacing * 0.45, 0.0), Vec3::Z);
+    let cam = camera_transform(spec);
     writeln!(
         f,
         "    def Camera \"camera\"\n    {{\n        float focalLength = {}\n        float horizontalAperture = 36\n        float verticalAperture = 24\n        float2 clippingRange = (0.1, 100000)\n        matrix4d xformOp:transform = {}\n        uniform token[] xformOpOrder = [\"xformOp:transform\"]\n    }}\n}}",

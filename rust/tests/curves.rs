@@ -10,13 +10,12 @@ use glam::{DVec3, Mat4, Vec3, Vec3A};
 use mipray::aov::Aov;
 use mipray::curves::{Basis, CurveType, CurvesDesc, CurvesSurface, Interpolation, Style, Wrap};
 use mipray::geometry_cache::{CacheConfig, CacheMode, Tier};
-use mipray::material::Material;
 use mipray::prelude::*;
 use mipray::trace::{TraceCounters, Tracer};
 
-fn d(v: Vec3A) -> DVec3 {
-    DVec3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
-}
+mod common;
+
+use common::{assert_cache_modes_give_bit_identical_images, assert_every_integrator_lights_it_exactly, d, grey_under_the_sun};
 
 fn desc<'a>(points: &'a [[f32; 3]], counts: &'a [i32], curve_type: CurveType, basis: Basis, widths: &'a [f32]) -> CurvesDesc<'a> {
     CurvesDesc {
@@ -34,12 +33,7 @@ fn desc<'a>(points: &'a [[f32; 3]], counts: &'a [i32], curve_type: CurveType, ba
 }
 
 fn scene_of(surface: CurvesSurface, camera: Camera) -> Scene {
-    let mut scene = Scene::default();
-    let m = scene.add_mesh(Mesh::new("/curves", Arc::new(surface)));
-    scene.add_instance(m, Mat4::IDENTITY);
-    scene.lights.push(Light::distant("/sun", Vec3A::new(-0.3, -0.5, -1.0), Vec3A::splat(3.0)));
-    scene.camera = camera;
-    scene
+    common::scene_of("/curves", Arc::new(surface), Mat4::IDENTITY, camera)
 }
 
 /// The pixel x (continuous) in row `y` where the hit/miss answer changes between `lo` (hit
@@ -99,10 +93,10 @@ fn bezier(c: &[DVec3; 4], t: f64) -> DVec3 {
     c[0] * (s * s * s) + c[1] * (3.0 * s * s * t) + c[2] * (3.0 * s * t * t) + c[3] * (t * t * t)
 }
 
-/// Distance from `p` to the curve (dense samples refined by golden-section search).
-fn distance_to_curve(c: &[DVec3; 4], p: DVec3) -> f64 {
+/// The minimum of `f` over the curve's t in [0, 1]: dense samples refined by golden-section
+/// search.
+fn minimum_over_curve(f: impl Fn(f64) -> f64) -> f64 {
     let n = 400;
-    let f = |t: f64| (bezier(c, t) - p).length();
     let i = (0..=n).min_by(|&a, &b| f(a as f64 / n as f64).total_cmp(&f(b as f64 / n as f64))).unwrap();
     let (mut lo, mut hi) = (((i as f64) - 1.0).max(0.0) / n as f64, ((i as f64) + 1.0).min(n as f64) / n as f64);
     for _ in 0..60 {
@@ -116,25 +110,18 @@ fn distance_to_curve(c: &[DVec3; 4], p: DVec3) -> f64 {
     f(0.5 * (lo + hi))
 }
 
-/// Distance from the ray's line to the curve (dense samples, refined).
+/// Distance from `p` to the curve.
+fn distance_to_curve(c: &[DVec3; 4], p: DVec3) -> f64 {
+    minimum_over_curve(|t| (bezier(c, t) - p).length())
+}
+
+/// Distance from the ray's line to the curve.
 fn ray_distance_to_curve(c: &[DVec3; 4], o: DVec3, dir: DVec3) -> f64 {
     let dir = dir.normalize();
-    let f = |t: f64| {
+    minimum_over_curve(|t| {
         let q = bezier(c, t) - o;
         (q - dir * q.dot(dir)).length()
-    };
-    let n = 400;
-    let i = (0..=n).min_by(|&a, &b| f(a as f64 / n as f64).total_cmp(&f(b as f64 / n as f64))).unwrap();
-    let (mut lo, mut hi) = (((i as f64) - 1.0).max(0.0) / n as f64, ((i as f64) + 1.0).min(n as f64) / n as f64);
-    for _ in 0..60 {
-        let (m1, m2) = (lo + (hi - lo) * 0.382, lo + (hi - lo) * 0.618);
-        if f(m1) < f(m2) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    f(0.5 * (lo + hi))
+    })
 }
 
 #[test]
@@ -266,28 +253,7 @@ fn cache_modes_give_bit_identical_curve_images() {
     let surface = CurvesSurface::new(&dsc).unwrap();
     let camera = Camera::perspective(Camera::look_at(Vec3::new(0.0, 0.5, 6.0), Vec3::ZERO, Vec3::Y), 35.0);
     let scene = scene_of(surface, camera);
-    let mut images = Vec::new();
-    for mode in [CacheMode::Multires, CacheMode::Unbounded, CacheMode::None] {
-        let cache = CacheConfig { mode, budget_bytes: [4096, 4096, 8192], ..Default::default() };
-        let opts = RenderOptions {
-            width: 64,
-            height: 48,
-            samples: 2,
-            cache,
-            aovs: vec![Aov::Color, Aov::Depth, Aov::Normal],
-            ..Default::default()
-        };
-        let out = render(&scene, &opts, &NoProgress).unwrap();
-        let buf: Vec<u32> = ["color", "depth", "normal"]
-            .iter()
-            .flat_map(|a| (0..48).flat_map(move |y| (0..64).map(move |x| (a, x, y))))
-            .flat_map(|(a, x, y)| out.film.pixel(a, x, y).iter().map(|v| v.to_bits()).collect::<Vec<_>>())
-            .collect();
-        assert!(buf.iter().any(|&b| f32::from_bits(b) > 0.0), "{mode:?}: empty image");
-        images.push(buf);
-    }
-    assert!(images[0] == images[1], "multires differs from unbounded");
-    assert!(images[0] == images[2], "multires differs from none");
+    assert_cache_modes_give_bit_identical_images(&scene);
 }
 
 #[test]
@@ -319,14 +285,21 @@ fn a_million_hair_segments_stay_within_the_cache_budget() {
     assert_eq!(tracer.subpatch_count(), 1_000_000);
 }
 
-#[test]
-fn instanced_and_moving_curves_render_where_placed() {
-    let pts = [[0.0_f32, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// A scene of one straight linear curve along y from −`half_length` to `half_length`,
+/// `width` wide, as mesh "/c" (not yet instanced), and that mesh.
+fn vertical_curve(half_length: f32, width: f32) -> (Scene, usize) {
+    let pts = [[0.0_f32, -half_length, 0.0], [0.0, half_length, 0.0]];
     let counts = [2];
-    let widths = [0.2_f32];
+    let widths = [width];
     let mut scene = Scene::default();
     let m = scene
         .add_mesh(Mesh::new("/c", Arc::new(CurvesSurface::new(&desc(&pts, &counts, CurveType::Linear, Basis::Bezier, &widths)).unwrap())));
+    (scene, m)
+}
+
+#[test]
+fn instanced_and_moving_curves_render_where_placed() {
+    let (mut scene, m) = vertical_curve(1.0, 0.2);
     scene.add_instance(m, Mat4::from_translation(Vec3::new(-1.0, 0.0, 0.0)));
     scene.add_instance(m, Mat4::from_translation(Vec3::new(1.0, 0.0, 0.0)));
     scene.camera = Camera::orthographic(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, 40.0);
@@ -349,7 +322,6 @@ fn every_integrator_sees_straight_tubes_and_ribbons_unoccluded_and_lit_exactly()
     // occlude or light anything else on them,
     // so AO is 1 (colour = albedo) and every integrator's colour under an angle-0 sun is
     // ρ/π · E · max(0, n·l). A self-hit (acne) or a leak shows as a pixel below that.
-    use mipray::options::IntegratorKind;
     let light = Vec3A::new(-0.3, -0.5, -1.0).normalize();
     let tube_pts = [[-1.5_f32, -0.8, 0.0], [-0.5, -0.3, 0.2], [0.5, 0.2, 0.4], [1.5, 0.7, 0.6]];
     let widths = [0.8_f32];
@@ -368,46 +340,9 @@ fn every_integrator_sees_straight_tubes_and_ribbons_unoccluded_and_lit_exactly()
     facing.style = Style::Ribbon;
     let facing = CurvesSurface::new(&facing).unwrap();
     for (name, surface) in [("tube", tube), ("ribbon", ribbon), ("facing ribbon", facing)] {
-        let mut scene = Scene::default();
-        let mat = scene.add_material(Material::lambertian("/half", Vec3A::splat(0.5)).0);
-        let mut mesh = Mesh::new(name, Arc::new(surface));
-        mesh.material = mat;
-        let m = scene.add_mesh(mesh);
-        scene.add_instance(m, Mat4::IDENTITY);
-        scene.lights.push(Light::distant("/sun", light, Vec3A::splat(2.0)));
-        scene.camera = Camera::perspective(Camera::look_at(Vec3::new(0.5, 1.0, 6.0), Vec3::ZERO, Vec3::Y), 50.0);
-        let (w, h) = (48, 48);
-        for integrator in [IntegratorKind::Ao, IntegratorKind::Direct, IntegratorKind::ColorBleeding, IntegratorKind::Path] {
-            let opts = RenderOptions {
-                width: w,
-                height: h,
-                samples: 1,
-                integrator,
-                ao_samples: 16,
-                indirect_samples: 8,
-                max_depth: 4,
-                aovs: vec![Aov::Color, Aov::Normal, Aov::Alpha],
-                ..Default::default()
-            };
-            let out = render(&scene, &opts, &NoProgress).unwrap();
-            let mut hits = 0;
-            for y in 0..h {
-                for x in 0..w {
-                    if out.film.pixel("alpha", x, y)[0] == 0.0 {
-                        continue;
-                    }
-                    hits += 1;
-                    let n = Vec3A::from_slice(out.film.pixel("normal", x, y));
-                    let got = out.film.pixel("color", x, y)[0];
-                    let want = match integrator {
-                        IntegratorKind::Ao => 0.5,
-                        _ => 0.5 / std::f32::consts::PI * 2.0 * n.dot(-light).max(0.0),
-                    };
-                    assert!((got - want).abs() < 2e-3, "{name} {integrator:?} ({x}, {y}): {got} vs {want}");
-                }
-            }
-            assert!(hits > 50, "{name}: {hits}");
-        }
+        let camera = Camera::perspective(Camera::look_at(Vec3::new(0.5, 1.0, 6.0), Vec3::ZERO, Vec3::Y), 50.0);
+        let scene = grey_under_the_sun(name, Arc::new(surface), Mat4::IDENTITY, light, camera);
+        assert_every_integrator_lights_it_exactly(&scene, light, (48, 48), name, 50);
     }
 }
 
@@ -416,12 +351,7 @@ fn a_moving_curve_covers_each_pixel_for_its_share_of_the_shutter() {
     use mipray::motion::{MotionKey, MotionTransform};
     // A vertical tube 0.2 wide slides from x = −0.5 to 0.5 over the shutter: a pixel at x is
     // covered while |x − centre| < 0.1, a fifth of the shutter for |x| < 0.4.
-    let pts = [[0.0_f32, -2.0, 0.0], [0.0, 2.0, 0.0]];
-    let counts = [2];
-    let widths = [0.2_f32];
-    let mut scene = Scene::default();
-    let m = scene
-        .add_mesh(Mesh::new("/c", Arc::new(CurvesSurface::new(&desc(&pts, &counts, CurveType::Linear, Basis::Bezier, &widths)).unwrap())));
+    let (mut scene, m) = vertical_curve(2.0, 0.2);
     let slide = MotionTransform::new(vec![
         MotionKey { time: 0.0, render_from_object: Mat4::from_translation(Vec3::new(-0.5, 0.0, 0.0)) },
         MotionKey { time: 1.0, render_from_object: Mat4::from_translation(Vec3::new(0.5, 0.0, 0.0)) },

@@ -16,18 +16,12 @@ use mipray::motion::{MotionKey, MotionTransform};
 use mipray::prelude::*;
 use mipray::trace::{TraceCounters, Tracer};
 
-fn d(v: Vec3A) -> DVec3 {
-    DVec3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
-}
+mod common;
+
+use common::{assert_every_integrator_lights_it_exactly, d, grey_under_the_sun, lit};
 
 fn implicit(scene: &mut Scene, name: &str, shape: Shape) -> usize {
     scene.add_mesh(Mesh::new(name, Arc::new(ImplicitSurface::new(shape).unwrap())))
-}
-
-fn lit(mut scene: Scene, camera: Camera) -> Scene {
-    scene.lights.push(Light::distant("/sun", Vec3A::new(-0.3, -0.5, -1.0), Vec3A::splat(3.0)));
-    scene.camera = camera;
-    scene
 }
 
 /// The nearest root t > 0 of |o + t d − c|² = r² in f64, or `None`.
@@ -473,7 +467,6 @@ fn every_integrator_sees_an_isolated_convex_shape_unoccluded_and_lit_exactly() {
     // AO is 1 everywhere (colour = albedo), and every integrator's colour under an angle-0 sun
     // is ρ/π · E · max(0, n·l). Any self-intersection (acne) or light leak shows as a pixel
     // below that. One sample per pixel: the pixel-centre ray the normal AOV also reads.
-    use mipray::options::IntegratorKind;
     let light = Vec3A::new(-0.3, -0.5, -1.0).normalize();
     let shapes: [(&str, Arc<dyn LimitSurface>, Mat4); 4] = [
         ("sphere", Arc::new(ImplicitSurface::new(Shape::Sphere { radius: 1.2 }).unwrap()), Mat4::IDENTITY),
@@ -490,46 +483,8 @@ fn every_integrator_sees_an_isolated_convex_shape_unoccluded_and_lit_exactly() {
         ),
     ];
     for (name, surface, pose) in shapes {
-        let mut scene = Scene::default();
-        let mat = scene.add_material(Material::lambertian("/half", Vec3A::splat(0.5)).0);
-        let mut mesh = Mesh::new(name, surface);
-        mesh.material = mat;
-        let m = scene.add_mesh(mesh);
-        scene.add_instance(m, pose);
-        scene.lights.push(Light::distant("/sun", light, Vec3A::splat(2.0)));
-        scene.camera = Camera::perspective(Camera::look_at(Vec3::new(1.0, 1.5, 6.0), Vec3::ZERO, Vec3::Y), 50.0);
-        let (w, h) = (40, 40);
-        for integrator in [IntegratorKind::Ao, IntegratorKind::Direct, IntegratorKind::ColorBleeding, IntegratorKind::Path] {
-            let opts = RenderOptions {
-                width: w,
-                height: h,
-                samples: 1,
-                integrator,
-                ao_samples: 16,
-                indirect_samples: 8,
-                max_depth: 4,
-                aovs: vec![Aov::Color, Aov::Normal, Aov::Alpha],
-                ..Default::default()
-            };
-            let out = render(&scene, &opts, &NoProgress).unwrap();
-            let mut hits = 0;
-            for y in 0..h {
-                for x in 0..w {
-                    if out.film.pixel("alpha", x, y)[0] == 0.0 {
-                        continue;
-                    }
-                    hits += 1;
-                    let n = Vec3A::from_slice(out.film.pixel("normal", x, y));
-                    let got = out.film.pixel("color", x, y)[0];
-                    let want = match integrator {
-                        IntegratorKind::Ao => 0.5,
-                        _ => 0.5 / std::f32::consts::PI * 2.0 * n.dot(-light).max(0.0),
-                    };
-                    // The normal AOV is half-float: its rounding bounds the lambert term's.
-                    assert!((got - want).abs() < 2e-3, "{name} {integrator:?} ({x}, {y}): {got} vs {want}");
-                }
-            }
-            assert!(hits > 100, "{name}: {hits}");
-        }
+        let camera = Camera::perspective(Camera::look_at(Vec3::new(1.0, 1.5, 6.0), Vec3::ZERO, Vec3::Y), 50.0);
+        let scene = grey_under_the_sun(name, surface, pose, light, camera);
+        assert_every_integrator_lights_it_exactly(&scene, light, (40, 40), name, 100);
     }
 }

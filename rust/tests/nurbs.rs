@@ -7,15 +7,15 @@ use std::sync::Arc;
 
 use glam::{DVec3, Mat4, Vec3, Vec3A};
 use mipray::aov::Aov;
-use mipray::geometry_cache::{CacheConfig, CacheMode};
+use mipray::geometry_cache::CacheConfig;
 use mipray::nurbs::{NurbsDesc, NurbsSurface};
 use mipray::patch::LimitSurface;
 use mipray::prelude::*;
 use mipray::trace::{TraceCounters, Tracer};
 
-fn d(v: Vec3A) -> DVec3 {
-    DVec3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
-}
+mod common;
+
+use common::{assert_cache_modes_give_bit_identical_images, d};
 
 /// The unit sphere as a rational biquadratic NURBS: the nine-point circle in u (weights 1 and
 /// √½ alternating) swept along the five-point semicircle from pole to pole in v.
@@ -59,12 +59,7 @@ impl Sphere {
 }
 
 fn scene_of(surface: NurbsSurface, transform: Mat4, camera: Camera) -> Scene {
-    let mut scene = Scene::default();
-    let m = scene.add_mesh(Mesh::new("/nurbs", Arc::new(surface)));
-    scene.add_instance(m, transform);
-    scene.lights.push(Light::distant("/sun", Vec3A::new(-0.3, -0.5, -1.0), Vec3A::splat(3.0)));
-    scene.camera = camera;
-    scene
+    common::scene_of("/nurbs", Arc::new(surface), transform, camera)
 }
 
 /// The nearest t > 0 where the ray meets the sphere of radius `r` about `c`.
@@ -221,28 +216,7 @@ fn cache_modes_give_bit_identical_nurbs_images() {
     let s = sphere();
     let camera = Camera::perspective(Camera::look_at(Vec3::new(0.5, 3.0, 2.0), Vec3::ZERO, Vec3::Z), 40.0);
     let scene = scene_of(NurbsSurface::new(&s.desc()).unwrap(), Mat4::IDENTITY, camera);
-    let mut images = Vec::new();
-    for mode in [CacheMode::Multires, CacheMode::Unbounded, CacheMode::None] {
-        let cache = CacheConfig { mode, budget_bytes: [4096, 4096, 8192], ..Default::default() };
-        let opts = RenderOptions {
-            width: 64,
-            height: 48,
-            samples: 2,
-            cache,
-            aovs: vec![Aov::Color, Aov::Depth, Aov::Normal],
-            ..Default::default()
-        };
-        let out = render(&scene, &opts, &NoProgress).unwrap();
-        let buf: Vec<u32> = ["color", "depth", "normal"]
-            .iter()
-            .flat_map(|a| (0..48).flat_map(move |y| (0..64).map(move |x| (a, x, y))))
-            .flat_map(|(a, x, y)| out.film.pixel(a, x, y).iter().map(|v| v.to_bits()).collect::<Vec<_>>())
-            .collect();
-        assert!(buf.iter().any(|&b| f32::from_bits(b) > 0.0), "{mode:?}: empty image");
-        images.push(buf);
-    }
-    assert!(images[0] == images[1], "multires differs from unbounded");
-    assert!(images[0] == images[2], "multires differs from none");
+    assert_cache_modes_give_bit_identical_images(&scene);
 }
 
 #[test]

@@ -14,28 +14,16 @@
 use std::sync::Arc;
 
 use glam::Vec3A;
-use mipray::bilinear::BilinearSurface;
 use mipray::displacement::{grid_spacing, Displacement, DisplacementShader, TextureDisplacement};
 use mipray::geometry_cache::Tier;
 use mipray::patch::{GridSamples, LimitSurface, UvRect};
-use mipray::texture::{CheckerSampler, FilterMode, Interpolation, Primvar2, TextureSampler};
-use mipray::topology::{MeshTopology, Scheme};
+use mipray::texture::{CheckerSampler, FilterMode, TextureSampler};
 
 const RES: u32 = 1024;
 
-/// A 2×2 quad in z = 0 with faceVarying, indexed `st` covering the texture once.
-fn quad() -> BilinearSurface {
-    let topo =
-        MeshTopology { scheme: Scheme::None, face_vertex_counts: vec![4], face_vertex_indices: vec![0, 1, 2, 3], ..Default::default() };
-    let pts = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]];
-    let st = Primvar2 {
-        name: "st".into(),
-        interpolation: Interpolation::FaceVarying,
-        values: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
-        indices: vec![0, 1, 2, 3],
-    };
-    BilinearSurface::new(&topo, &pts).unwrap().with_primvars(&topo, 4, &[st]).unwrap()
-}
+mod common;
+
+use common::st_quad::st_quad as quad;
 
 fn displacement(filter: FilterMode) -> (Arc<CheckerSampler>, TextureDisplacement) {
     let checker = Arc::new(CheckerSampler::new("disp.tx", RES, 8, filter));

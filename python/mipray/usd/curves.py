@@ -27,7 +27,6 @@ Bad input gets one line naming the prim and the attribute:
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
@@ -35,20 +34,15 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
+from .attributes import check_vertex_counts, read_array
+from .warn import warn_once
 
 __all__ = ["CURVE_STYLE", "CURVE_TYPES", "curves_arguments", "segment_end_count"]
 
-_log = logging.getLogger(__name__)
-_warned: set[str] = set()
+_warn_once = warn_once(__name__)
 
 #: The curve schemas that render.
 CURVE_TYPES: tuple[type, ...] = (UsdGeom.BasisCurves, UsdGeom.NurbsCurves)
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
 
 
 def segment_end_count(n: int, curve_type: str, basis: str, wrap: str) -> int:
@@ -70,7 +64,8 @@ def _expected(interpolation: str, counts: NDArray[np.int32], kind: tuple[str, st
     return int(counts.sum())
 
 
-def _primvar_checked(
+def _put_checked(
+    gprim: dict[str, Any],
     path: str,
     name: str,
     values: NDArray[Any],
@@ -79,9 +74,14 @@ def _primvar_checked(
     kind: tuple[str, str, str],
     fallback: str,
 ) -> bool:
-    """Whether ``values`` fit ``interpolation``; warns (naming the fallback) when not."""
+    """Puts ``values`` in ``gprim`` (``name`` and ``name_interpolation``) if they fit.
+
+    When they do not, warns (naming the fallback) and returns False.
+    """
     want = _expected(interpolation, counts, kind)
     if len(values) == want:
+        gprim[name] = values.tolist()
+        gprim[f"{name}_interpolation"] = interpolation
         return True
     _warn_once(
         f"{path}: {name} has {len(values)} values but {interpolation} interpolation wants "
@@ -93,8 +93,8 @@ def _primvar_checked(
 def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
     curves = UsdGeom.BasisCurves(prim)
     path = str(prim.GetPath())
-    points = np.asarray(curves.GetPointsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
-    counts = np.asarray(curves.GetCurveVertexCountsAttr().Get(time) or [], dtype=np.int32)
+    points = read_array(curves.GetPointsAttr(), time, np.float32, 3)
+    counts = read_array(curves.GetCurveVertexCountsAttr(), time, np.int32)
     curve_type = str(curves.GetTypeAttr().Get(time) or "cubic")
     basis = str(curves.GetBasisAttr().Get(time) or "bezier")
     wrap = str(curves.GetWrapAttr().Get(time) or "nonperiodic")
@@ -106,30 +106,18 @@ def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
         "basis": basis,
         "wrap": wrap,
     }
-    if int(counts.sum()) != len(points):
-        # The delegate would refuse it too; said here with the attribute's USD name.
-        raise PrimError(
-            path,
-            f"curveVertexCounts add up to {int(counts.sum())} vertices but points has "
-            f"{len(points)}",
-        )
-    widths = np.asarray(curves.GetWidthsAttr().Get(time) or [], dtype=np.float32).reshape(-1)
+    check_vertex_counts(path, counts, len(points))
+    widths = read_array(curves.GetWidthsAttr(), time, np.float32)
     if len(widths):
         interpolation = str(curves.GetWidthsInterpolation())
-        if _primvar_checked(
-            path, "widths", widths, interpolation, counts, kind, "using the fallback width 1"
-        ):
-            gprim["widths"] = widths.tolist()
-            gprim["widths_interpolation"] = interpolation
-    normals = np.asarray(curves.GetNormalsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
+        fallback = "using the fallback width 1"
+        _put_checked(gprim, path, "widths", widths, interpolation, counts, kind, fallback)
+    normals = read_array(curves.GetNormalsAttr(), time, np.float32, 3)
     style = _curve_style(prim, time)
     if len(normals):
         interpolation = str(curves.GetNormalsInterpolation())
-        if _primvar_checked(
-            path, "normals", normals, interpolation, counts, kind, "rendering tubes instead"
-        ):
-            gprim["normals"] = normals.tolist()
-            gprim["normals_interpolation"] = interpolation
+        fallback = "rendering tubes instead"
+        if _put_checked(gprim, path, "normals", normals, interpolation, counts, kind, fallback):
             style = "ribbon"
     gprim["style"] = style
     return points, gprim
@@ -227,22 +215,17 @@ def _nurbs_to_bezier(
 def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
     curves = UsdGeom.NurbsCurves(prim)
     path = str(prim.GetPath())
-    points = np.asarray(curves.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
-    counts = np.asarray(curves.GetCurveVertexCountsAttr().Get(time) or [], dtype=np.int64)
-    orders = np.asarray(curves.GetOrderAttr().Get(time) or [], dtype=np.int64)
-    knots = np.asarray(curves.GetKnotsAttr().Get(time) or [], dtype=np.float64)
-    if int(counts.sum()) != len(points):
-        raise PrimError(
-            path,
-            f"curveVertexCounts add up to {int(counts.sum())} vertices but points has "
-            f"{len(points)}",
-        )
+    points = read_array(curves.GetPointsAttr(), time, np.float64, 3)
+    counts = read_array(curves.GetCurveVertexCountsAttr(), time, np.int64)
+    orders = read_array(curves.GetOrderAttr(), time, np.int64)
+    knots = read_array(curves.GetKnotsAttr(), time, np.float64)
+    check_vertex_counts(path, counts, len(points))
     if len(orders) != len(counts):
         raise PrimError(path, f"order has {len(orders)} values for {len(counts)} curves")
     weights = curves.GetPointWeightsAttr().Get(time)
     if weights is not None and len(weights) and not np.allclose(np.asarray(weights), 1.0):
         _warn_once(f"{path}: pointWeights (a rational curve) are not applied")
-    widths = np.asarray(curves.GetWidthsAttr().Get(time) or [], dtype=np.float64).reshape(-1)
+    widths = read_array(curves.GetWidthsAttr(), time, np.float64)
     w_interp = str(curves.GetWidthsInterpolation()) if len(widths) else "constant"
     if len(widths) and not (
         (w_interp == "constant" and len(widths) == 1)

@@ -16,7 +16,6 @@ delegate with one line naming the prim and attribute.
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any
 
@@ -25,19 +24,14 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
+from .attributes import read_array
 from .curves import CURVE_TYPES, curves_arguments
 from .material import lambertian
+from .warn import warn_once
 
 __all__ = ["GPRIM_TYPES", "curve_colors", "gprim_arguments", "is_renderable_gprim", "point_colors"]
 
-_log = logging.getLogger(__name__)
-_warned: set[str] = set()
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
+_warn_once = warn_once(__name__)
 
 
 #: The gprims besides ``Mesh`` that render, by schema class.
@@ -123,8 +117,8 @@ def _shape(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
 def _points(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """A Points prim's positions and its ``gprim`` argument (widths checked by the delegate)."""
     points = UsdGeom.Points(prim)
-    positions = np.asarray(points.GetPointsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
-    widths = np.asarray(points.GetWidthsAttr().Get(time) or [], dtype=np.float32).reshape(-1)
+    positions = read_array(points.GetPointsAttr(), time, np.float32, 3)
+    widths = read_array(points.GetWidthsAttr(), time, np.float32)
     return positions, {"type": "Points", "widths": widths}
 
 
@@ -139,7 +133,7 @@ def _nurbs_patch(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32
     """A NurbsPatch's control points and its ``gprim`` argument (checked by the delegate)."""
     patch = UsdGeom.NurbsPatch(prim)
     path = str(prim.GetPath())
-    positions = np.asarray(patch.GetPointsAttr().Get(time) or [], dtype=np.float32).reshape(-1, 3)
+    positions = read_array(patch.GetPointsAttr(), time, np.float32, 3)
     gprim: dict[str, Any] = {
         "type": "Nurbs",
         "u_vertex_count": _count(prim, "uVertexCount", time),
@@ -225,23 +219,7 @@ def point_colors(
     interpolation = primvar.GetInterpolation()
     if interpolation in (UsdGeom.Tokens.constant, UsdGeom.Tokens.uniform):
         return {}
-    values = np.asarray(primvar.ComputeFlattened(time) or [], dtype=np.float64).reshape(-1, 3)
-    if len(values) <= 1:
-        return {}
-    if len(values) != n_points:
-        raise PrimError(
-            str(prim.GetPath()),
-            f"primvars:displayColor ({interpolation}) has {len(values)} values "
-            f"for {n_points} points",
-        )
-    unique, inverse = np.unique(np.clip(values, 0.0, 1.0), axis=0, return_inverse=True)
-    path = str(prim.GetPath())
-    # Rounded to float32 as the colours were when they crossed as an array.
-    colours = np.ascontiguousarray(unique, dtype=np.float32)
-    return {
-        "face_materials": [lambertian(f"{path}[{k}]", c, opacity) for k, c in enumerate(colours)],
-        "face_material_indices": np.ascontiguousarray(inverse.reshape(-1), dtype=np.int32),
-    }
+    return _color_table(prim, primvar, time, n_points, "points", opacity)
 
 
 def curve_colors(
@@ -258,16 +236,37 @@ def curve_colors(
         return {}
     if primvar.GetInterpolation() != UsdGeom.Tokens.uniform:
         return {}
+    return _color_table(prim, primvar, time, n_curves, "curves", opacity)
+
+
+def _color_table(
+    prim: Usd.Prim,
+    primvar: UsdGeom.Primvar,
+    time: Usd.TimeCode,
+    count: int,
+    what: str,
+    opacity: float,
+) -> dict[str, Any]:
+    """``set_mesh``'s face material table of ``primvar``'s colours, one per "face".
+
+    The faces are the prim's ``count`` ``what`` (points or curves); ``{}`` for a single colour.
+
+    Raises:
+        PrimError: the colours are not ``count``.
+
+    """
     values = np.asarray(primvar.ComputeFlattened(time) or [], dtype=np.float64).reshape(-1, 3)
     if len(values) <= 1:
         return {}
-    if len(values) != n_curves:
+    if len(values) != count:
         raise PrimError(
             str(prim.GetPath()),
-            f"primvars:displayColor (uniform) has {len(values)} values for {n_curves} curves",
+            f"primvars:displayColor ({primvar.GetInterpolation()}) has {len(values)} values "
+            f"for {count} {what}",
         )
     unique, inverse = np.unique(np.clip(values, 0.0, 1.0), axis=0, return_inverse=True)
     path = str(prim.GetPath())
+    # Rounded to float32 as the colours were when they crossed as an array.
     colours = np.ascontiguousarray(unique, dtype=np.float32)
     return {
         "face_materials": [lambertian(f"{path}[{k}]", c, opacity) for k, c in enumerate(colours)],

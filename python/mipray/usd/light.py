@@ -53,6 +53,7 @@ from numpy.typing import NDArray
 from pxr import Sdf, Usd, UsdGeom, UsdLux
 
 from ..errors import PrimError
+from .warn import warn_once
 
 __all__ = [
     "AREA_LIGHT_TYPES",
@@ -81,7 +82,7 @@ AREA_LIGHT_TYPES: tuple[tuple[type, str], ...] = (
     (UsdLux.CylinderLight, "cylinder"),
     (UsdLux.DomeLight, "dome"),
 )
-_warned: set[str] = set()
+_warn_once = warn_once(__name__)
 
 #: The light kinds ``ShapingAPI`` shapes (as Hydra's hdEmbree: area lights with a position).
 SHAPED_KINDS = frozenset({"sphere", "rect", "disk", "cylinder"})
@@ -452,14 +453,6 @@ def material_tint(
         )
         return False
     return True
-
-
-def _warn_once(message: str) -> None:
-    import logging
-
-    if message not in _warned:
-        _warned.add(message)
-        logging.getLogger(__name__).warning("mipray: %s", message)
 
 
 def authored_properties(prim: Usd.Prim, names: Iterable[str]) -> list[str]:

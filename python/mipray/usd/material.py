@@ -29,17 +29,12 @@ from typing import Any
 from pxr import Usd, UsdGeom, UsdShade
 
 from .shading import bound_material
+from .warn import warn_once
 
 __all__ = ["DEFAULT_ALBEDO", "Albedo", "compute_albedo", "display_opacity", "lambertian"]
 
 _log = logging.getLogger(__name__)
-_warned: set[str] = set()
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
+_warn_once = warn_once(__name__)
 
 
 #: Albedo of a prim with neither a usable material nor a display color.

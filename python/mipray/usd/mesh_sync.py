@@ -10,7 +10,6 @@ Both the scene delegate (meshes rendered in place) and the instancing code
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,17 +26,11 @@ from .mesh import mesh_arguments
 from .primvars import primvar_argument, read_normals
 from .shading import material_might_vary, shading_arguments
 from .skel import Posed, SkelPoser, is_skinned
+from .warn import warn_once
 
 __all__ = ["MeshRead", "read_mesh"]
 
-_log = logging.getLogger(__name__)
-_warned: set[str] = set()
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
+_warn_once = warn_once(__name__)
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,6 @@ mesh renders its display color (one warning naming the material).
 
 from __future__ import annotations
 
-import logging
 import math
 import os
 from dataclasses import dataclass
@@ -62,6 +61,7 @@ from ..errors import PrimError
 from .assets import UDIM_TOKEN, local_file, udim_tiles
 from .materialx import mtlx_surface, read_mtlx_surface
 from .primvars import primvar_argument, read_display_primvar
+from .warn import warn_once
 
 __all__ = [
     "COLOR_INPUTS",
@@ -72,8 +72,7 @@ __all__ = [
     "shading_arguments",
 ]
 
-_log = logging.getLogger(__name__)
-_warned: set[str] = set()
+_warn_once = warn_once(__name__)
 
 _CHANNELS = {"rgb": 0, "r": 0, "g": 1, "b": 2, "a": 3}
 #: UsdUVTexture ``sourceColorSpace`` tokens. ``auto`` (the fallback) reads 8-bit files of 3 or 4
@@ -121,12 +120,6 @@ FALLBACKS: dict[str, Any] = {
     "ior": 1.5,
     "normal": (0.0, 0.0, 1.0),
 }
-
-
-def _warn_once(message: str) -> None:
-    if message not in _warned:
-        _warned.add(message)
-        _log.warning("mipray: %s", message)
 
 
 def _const(shader: UsdShade.Shader, name: str, time: Usd.TimeCode) -> Any:
