@@ -571,17 +571,83 @@ struct OsdMesh::Impl {
                          float* p, float* du, float* dv) const {
     bool ends[4];
     regular_ends(patch, ends);
+    eval_tensor_grid(
+        patch, u0, v0, u1, v1, n, p, du, dv,
+        [&](double u, double w[4], double dw[4]) { bspline(u, ends[0], ends[1], w, dw); },
+        [&](double v, double w[4], double dw[4]) { bspline(v, ends[2], ends[3], w, dw); });
+  }
+
+  // A single-crease patch's grid (crease_sharpness > 0): its basis is a tensor product too (a
+  // B-spline along the crease, the pieces' cubic across it), so rows are contracted once as on
+  // a regular patch instead of evaluating all 16 weights and their second derivatives at every
+  // vertex. du, dv may be null.
+  void eval_crease_grid(std::size_t patch, double sharpness, float u0, float v0, float u1, float v1,
+                        std::size_t n, float* p, float* du, float* dv) const {
+    bool across_t, low;
+    crease_edge(patch, across_t, low);
+    CreasePiece pieces[3];
+    const int np = crease_pieces(sharpness, pieces);
+    auto along = [](double a, double w[4], double dw[4]) { bspline(a, false, false, w, dw); };
+    auto across = [&](double x, double w[4], double dw[4]) {
+      double c[3][4];
+      crease_across(pieces, np, low, x, c);
+      for (int j = 0; j < 4; ++j) {
+        w[j] = c[0][j];
+        dw[j] = c[1][j];
+      }
+    };
+    if (across_t)
+      eval_tensor_grid(patch, u0, v0, u1, v1, n, p, du, dv, along, across);
+    else
+      eval_tensor_grid(patch, u0, v0, u1, v1, n, p, du, dv, across, along);
+  }
+
+  // Positions of a single-crease patch at `count` points (u, v interleaved in `uv`): its
+  // pieces and crease edge found once, each point's weights as a product of the cubic across
+  // the crease and the B-spline along it (no derivatives: the seam and chord-error probes ask
+  // for positions only).
+  void eval_crease_points(std::size_t patch, double sharpness, const float* uv, std::size_t count,
+                          float* p) const {
+    bool across_t, low;
+    crease_edge(patch, across_t, low);
+    CreasePiece pieces[3];
+    const int np = crease_pieces(sharpness, pieces);
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handle(patch));
+    for (std::size_t k = 0; k < count; ++k) {
+      const double s = uv[2 * k], t = uv[2 * k + 1];
+      double across[3][4], along[4], dalong[4];
+      crease_across(pieces, np, low, across_t ? t : s, across);
+      bspline(across_t ? s : t, false, false, along, dalong);
+      const double* su = across_t ? along : across[0];
+      const double* sv = across_t ? across[0] : along;
+      double acc[3] = {0.0, 0.0, 0.0};
+      for (int b = 0; b < 4; ++b)
+        for (int i = 0; i < 4; ++i) {
+          const double w = su[i] * sv[b];
+          const float* c = control_points.data() + 3 * std::size_t(cvs[4 * b + i]);
+          for (int a = 0; a < 3; ++a) acc[a] += w * c[a];
+        }
+      for (int a = 0; a < 3; ++a) p[3 * k + std::size_t(a)] = float(acc[a]);
+    }
+  }
+
+  // A grid of a patch whose 16 weights are a tensor product: `s_weights(u, w, dw)` along s (the
+  // control points' fastest index), `t_weights(v, w, dw)` along t, derivatives with respect to
+  // the patch's local (s, t). du, dv may be null.
+  template <class S, class T>
+  void eval_tensor_grid(std::size_t patch, float u0, float v0, float u1, float v1, std::size_t n,
+                        float* p, float* du, float* dv, S s_weights, T t_weights) const {
     // The same (u, v) as the general path (and UvRect::grid_uv) computes, in f32.
     const float d = float((n < 2 ? 2 : n) - 1);
     std::vector<double> sw(4 * n), dsw(4 * n);
     for (std::size_t i = 0; i < n; ++i) {
       const float u = u0 + (u1 - u0) * (float(i) / d);
-      bspline(double(u), ends[0], ends[1], &sw[4 * i], &dsw[4 * i]);
+      s_weights(double(u), &sw[4 * i], &dsw[4 * i]);
     }
     for (std::size_t j = 0; j < n; ++j) {
       const float v = v0 + (v1 - v0) * (float(j) / d);
       double tw[4], dtw[4], r[4][3], dr[4][3];
-      bspline(double(v), ends[2], ends[3], tw, dtw);
+      t_weights(double(v), tw, dtw);
       contract_rows(patch, tw, dtw, r, dr);
       for (std::size_t i = 0; i < n; ++i) {
         const double* w = &sw[4 * i];
@@ -790,16 +856,11 @@ struct OsdMesh::Impl {
     low = (b & 9) != 0;       // 1: v = 0, 8: u = 0
   }
 
-  // The 16 weights of a single-crease patch at local (s, t), and their derivatives with
-  // respect to s and t (all six sets; the caller ignores what it did not ask for).
-  void crease_basis(std::size_t patch, double sharpness, double s, double t, double w[16],
-                    double wu[16], double wv[16], double wuu[16], double wuv[16],
-                    double wvv[16]) const {
-    bool across_t, low;
-    crease_edge(patch, across_t, low);
-    CreasePiece pieces[3];
-    const int n = crease_pieces(sharpness, pieces);
-    const double x = low ? 1.0 - (across_t ? t : s) : (across_t ? t : s);
+  // The cubic across a single-crease patch's crease at the patch's parameter `param` across
+  // it: its 4 weights (out[0]) and their first and second derivatives with respect to `param`
+  // (out[1], out[2]), for the control points in the patch's own order across the crease.
+  static void crease_across(const CreasePiece pieces[3], int n, bool low, double param, double out[3][4]) {
+    const double x = low ? 1.0 - param : param;
     int k = 0;
     while (k + 1 < n && x > pieces[k].to) ++k;
     const double y = 1.0 - x;
@@ -810,10 +871,21 @@ struct OsdMesh::Impl {
     for (int d = 0; d < 3; ++d)
       for (int i = 0; i < 4; ++i)
         for (int j = 0; j < 4; ++j) c[d][j] += bern[d][i] * pieces[k].m[i][j];
-    double across[3][4];
     for (int j = 0; j < 4; ++j)
-      for (int d = 0; d < 3; ++d)
-        across[d][j] = low ? (d == 1 ? -c[d][3 - j] : c[d][3 - j]) : c[d][j];
+      for (int d = 0; d < 3; ++d) out[d][j] = low ? (d == 1 ? -c[d][3 - j] : c[d][3 - j]) : c[d][j];
+  }
+
+  // The 16 weights of a single-crease patch at local (s, t), and their derivatives with
+  // respect to s and t (all six sets; the caller ignores what it did not ask for).
+  void crease_basis(std::size_t patch, double sharpness, double s, double t, double w[16],
+                    double wu[16], double wv[16], double wuu[16], double wuv[16],
+                    double wvv[16]) const {
+    bool across_t, low;
+    crease_edge(patch, across_t, low);
+    CreasePiece pieces[3];
+    const int n = crease_pieces(sharpness, pieces);
+    double across[3][4];
+    crease_across(pieces, n, low, across_t ? t : s, across);
     double along[3][4];
     const double a = across_t ? s : t;
     bspline(a, false, false, along[0], along[1]);
@@ -1185,6 +1257,15 @@ bool OsdMesh::evaluate_grid(std::size_t patch, float u0, float v0, float u1, flo
       return false;  // std::bad_alloc of the weight rows: nothing may cross into Rust
     }
   }
+  if (const float sharpness = impl->crease_sharpness(patch); sharpness > 0.0f) {
+    try {
+      impl->eval_crease_grid(patch, double(sharpness), u0, v0, u1, v1, n, p.data(),
+                             derivs ? du.data() : nullptr, derivs ? dv.data() : nullptr);
+      return true;
+    } catch (...) {
+      return false;
+    }
+  }
   // The same (u, v) as UvRect::grid_uv computes in Rust, in the same f32 arithmetic, so a grid
   // vertex equals the single evaluation at that vertex.
   const float d = float((n < 2 ? 2 : n) - 1);
@@ -1206,6 +1287,10 @@ bool OsdMesh::evaluate_points(std::size_t patch, rust::Slice<const float> uv,
     return false;
   if (impl->is_regular(patch)) {
     impl->eval_regular_points(patch, uv.data(), uv.size() / 2, p.data());
+    return true;
+  }
+  if (const float sharpness = impl->crease_sharpness(patch); sharpness > 0.0f) {
+    impl->eval_crease_points(patch, double(sharpness), uv.data(), uv.size() / 2, p.data());
     return true;
   }
   for (std::size_t k = 0; 2 * k < uv.size(); ++k)

@@ -12,7 +12,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use glam::Vec3A;
-use mipray::patch::LimitSurface;
+use mipray::patch::{GridSamples, LimitSurface, UvRect};
 use mipray::topology::{BoundaryInterpolation, MeshTopology, Scheme};
 use mipray_bridge::{limit_stencil_reference, OsdOptions, OsdSurface};
 
@@ -119,6 +119,40 @@ fn single_crease_patches_match_the_fully_isolated_limit() {
             assert!(pos <= 1e-6 * diag, "{what}: position {pos:e} off the limit stencils (diagonal {diag})");
             assert!(du <= 1e-5 * (diag + max_deriv), "{what}: derivative {du:e} off the limit stencils");
             assert!(out_of_bounds <= 1e-6 * diag, "{what}: a point {out_of_bounds:e} outside its patch's bounds");
+
+            // A grid (the bridge contracts a crease patch's rows once, as a regular patch's)
+            // gives each vertex and its first derivatives as the point's own evaluation does.
+            let mut grid = GridSamples::default();
+            let (mut grid_pos, mut grid_du) = (0.0f32, 0.0f32);
+            for patch in 0..surface.patch_count() {
+                let rect = UvRect { u0: 0.125, v0: 0.0, u1: 0.875, v1: 1.0 };
+                surface.evaluate_grid(patch, rect, side, true, &mut grid);
+                for j in 0..side {
+                    for i in 0..side {
+                        let (u, v) = rect.grid_uv(i, j, side);
+                        let sp = surface.evaluate(patch, u, v);
+                        let k = j * side + i;
+                        grid_pos = grid_pos.max((Vec3A::from(grid.p[k]) - sp.p).abs().max_element());
+                        grid_du = grid_du
+                            .max((Vec3A::from(grid.dpdu[k]) - sp.dpdu).abs().max_element())
+                            .max((Vec3A::from(grid.dpdv[k]) - sp.dpdv).abs().max_element());
+                    }
+                }
+            }
+            // And positions asked for in one call (the seam and chord-error probes) as well.
+            let mut pts_pos = 0.0f32;
+            let mut points_out = Vec::new();
+            for patch in 0..surface.patch_count() {
+                let uv: Vec<[f32; 2]> =
+                    (0..side * side).map(|k| [0.05 + 0.9 * (k % side) as f32 / 6.0, 0.9 * (k / side) as f32 / 6.0]).collect();
+                surface.evaluate_points(patch, &uv, &mut points_out);
+                for (q, &[u, v]) in points_out.iter().zip(&uv) {
+                    pts_pos = pts_pos.max((Vec3A::from(*q) - surface.evaluate(patch, u, v).p).abs().max_element());
+                }
+            }
+            assert!(pts_pos <= 1e-6 * diag, "{what}: points {pts_pos:e} off their own evaluation");
+            assert!(grid_pos <= 1e-6 * diag, "{what}: grid vertices {grid_pos:e} off the points' own evaluation");
+            assert!(grid_du <= 1e-5 * (diag + max_deriv), "{what}: grid derivatives {grid_du:e} off the points' own");
         }
     }
 }
