@@ -80,15 +80,17 @@ pub struct RayDifferential {
 /// A vector with a NaN becomes zero; an infinite or too long one keeps its direction at
 /// [`MAX_DIFFERENTIAL`]. Returns whether it changed.
 fn sanitize(v: Vec3A) -> (Vec3A, bool) {
+    // The common case first, in one comparison: a NaN or an infinite (or overflowing) length
+    // compares false and goes on to the checks below.
+    if v.length_squared() <= MAX_DIFFERENTIAL * MAX_DIFFERENTIAL {
+        return (v, false);
+    }
     if v.is_nan() {
         return (Vec3A::ZERO, true);
     }
     if !v.is_finite() {
         let dir = Vec3A::select(v.is_finite_mask(), Vec3A::ZERO, v.signum());
         return (dir.normalize() * MAX_DIFFERENTIAL, true);
-    }
-    if v.length_squared() <= MAX_DIFFERENTIAL * MAX_DIFFERENTIAL {
-        return (v, false);
     }
     // Divide by the largest component first: the squared length of a finite vector may overflow.
     let unit = (v / v.abs().max_element()).normalize();
