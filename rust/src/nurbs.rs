@@ -47,6 +47,22 @@ pub struct NurbsDesc<'a> {
     pub v_range: Option<[f64; 2]>,
 }
 
+impl<'a> NurbsDesc<'a> {
+    /// A patch rendered over its whole domain (no `uRange`/`vRange`): `counts` and `orders` are
+    /// (u, v).
+    pub fn whole(
+        points: &'a [[f32; 3]],
+        weights: &'a [f64],
+        counts: (usize, usize),
+        orders: (usize, usize),
+        u_knots: &'a [f64],
+        v_knots: &'a [f64],
+    ) -> Self {
+        let ((u_count, v_count), (u_order, v_order)) = (counts, orders);
+        NurbsDesc { points, weights, u_count, v_count, u_order, v_order, u_knots, v_knots, u_range: None, v_range: None }
+    }
+}
+
 /// A NurbsPatch's Bézier patches. Object space.
 #[derive(Clone, Debug)]
 pub struct NurbsSurface {
@@ -493,18 +509,7 @@ mod tests {
         // with a triple (C⁻¹... here C⁰ at degree 2: multiplicity 2) knot.
         let uk = [0.0, 0.5, 1.0, 2.0, 3.0, 3.0, 4.5, 5.0, 6.0, 6.5, 7.0];
         let vk = [0.0, 0.0, 0.0, 1.0, 2.0, 2.0, 3.0, 3.0, 3.0];
-        let mut d = NurbsDesc {
-            points: &pts,
-            weights: &ws,
-            u_count: 7,
-            v_count: 6,
-            u_order: 4,
-            v_order: 3,
-            u_knots: &uk,
-            v_knots: &vk,
-            u_range: None,
-            v_range: None,
-        };
+        let mut d = NurbsDesc::whole(&pts, &ws, (7, 6), (4, 3), &uk, &vk);
         check_against_brute(&d);
         let surface = NurbsSurface::new(&d).unwrap();
         // u spans [2, 3], [3, 4.5], [4.5, 5] of the domain [2, 5]; v spans [0, 1], [1, 2], [2, 3].
@@ -528,18 +533,7 @@ mod tests {
         let mut uk = uk;
         uk.sort_by(f64::total_cmp);
         let vk: Vec<f64> = (0_i32..33).map(|i| f64::from((i - 2).clamp(0, 28) / 3)).collect();
-        let big = NurbsDesc {
-            points: &pts,
-            weights: &ws,
-            u_count: 40,
-            v_count: 30,
-            u_order: 4,
-            v_order: 3,
-            u_knots: &uk,
-            v_knots: &vk,
-            u_range: None,
-            v_range: None,
-        };
+        let big = NurbsDesc::whole(&pts, &ws, (40, 30), (4, 3), &uk, &vk);
         check_against_brute(&big);
     }
 
@@ -548,18 +542,7 @@ mod tests {
         let (pts, ws) = net(5, 5);
         let uk = [0.0, 0.0, 0.0, 0.0, 0.4, 1.0, 1.0, 1.0, 1.0];
         let vk = [0.0, 0.0, 0.0, 0.3, 0.7, 1.0, 1.0, 1.0];
-        let d = NurbsDesc {
-            points: &pts,
-            weights: &ws,
-            u_count: 5,
-            v_count: 5,
-            u_order: 4,
-            v_order: 3,
-            u_knots: &uk,
-            v_knots: &vk,
-            u_range: None,
-            v_range: None,
-        };
+        let d = NurbsDesc::whole(&pts, &ws, (5, 5), (4, 3), &uk, &vk);
         let s = NurbsSurface::new(&d).unwrap();
         let h = 1e-5;
         for k in 0..s.patch_count() {
@@ -591,18 +574,7 @@ mod tests {
     fn a_rational_quarter_cylinder_is_exact() {
         let (pts, ws) = quarter_cylinder();
         let (uk, vk) = ([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
-        let d = NurbsDesc {
-            points: &pts,
-            weights: &ws,
-            u_count: 3,
-            v_count: 2,
-            u_order: 3,
-            v_order: 2,
-            u_knots: &uk,
-            v_knots: &vk,
-            u_range: None,
-            v_range: None,
-        };
+        let d = NurbsDesc::whole(&pts, &ws, (3, 2), (3, 2), &uk, &vk);
         let s = NurbsSurface::new(&d).unwrap();
         assert_eq!(s.patch_count(), 1);
         assert!(!s.patch_is_affine(0));
@@ -630,18 +602,7 @@ mod tests {
             }
         }
         let k = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0];
-        let d = NurbsDesc {
-            points: &pts,
-            weights: &[],
-            u_count: 4,
-            v_count: 4,
-            u_order: 4,
-            v_order: 4,
-            u_knots: &k,
-            v_knots: &k,
-            u_range: None,
-            v_range: None,
-        };
+        let d = NurbsDesc::whole(&pts, &[], (4, 4), (4, 4), &k, &k);
         assert!(NurbsSurface::new(&d).unwrap().patch_is_affine(0));
         let mut bent = pts.clone();
         bent[5][2] = 0.1;
@@ -653,18 +614,7 @@ mod tests {
     fn bad_input_is_refused_naming_the_attribute() {
         let (pts, ws) = net(4, 4);
         let k = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0];
-        let good = NurbsDesc {
-            points: &pts,
-            weights: &ws,
-            u_count: 4,
-            v_count: 4,
-            u_order: 4,
-            v_order: 4,
-            u_knots: &k,
-            v_knots: &k,
-            u_range: None,
-            v_range: None,
-        };
+        let good = NurbsDesc::whole(&pts, &ws, (4, 4), (4, 4), &k, &k);
         NurbsSurface::new(&good).unwrap();
         let err = |d: NurbsDesc<'_>| NurbsSurface::new(&d).unwrap_err();
         assert!(

@@ -43,18 +43,7 @@ fn sphere() -> Sphere {
 
 impl Sphere {
     fn desc(&self) -> NurbsDesc<'_> {
-        NurbsDesc {
-            points: &self.points,
-            weights: &self.weights,
-            u_count: 9,
-            v_count: 5,
-            u_order: 3,
-            v_order: 3,
-            u_knots: &CIRCLE_KNOTS,
-            v_knots: &HALF_KNOTS,
-            u_range: None,
-            v_range: None,
-        }
+        NurbsDesc::whole(&self.points, &self.weights, (9, 5), (3, 3), &CIRCLE_KNOTS, &HALF_KNOTS)
     }
 }
 
@@ -133,18 +122,7 @@ fn a_rational_quarter_cylinder_is_hit_on_the_analytic_cylinder() {
     let points = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 2.0], [1.0, 1.0, 2.0], [0.0, 1.0, 2.0]];
     let weights = [1.0, w, 1.0, 1.0, w, 1.0];
     let (uk, vk) = ([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
-    let desc = NurbsDesc {
-        points: &points,
-        weights: &weights,
-        u_count: 3,
-        v_count: 2,
-        u_order: 3,
-        v_order: 2,
-        u_knots: &uk,
-        v_knots: &vk,
-        u_range: None,
-        v_range: None,
-    };
+    let desc = NurbsDesc::whole(&points, &weights, (3, 2), (3, 2), &uk, &vk);
     let surface = NurbsSurface::new(&desc).unwrap();
     let camera = Camera::perspective(Camera::look_at(Vec3::new(3.0, 3.0, 1.0), Vec3::new(0.5, 0.5, 1.0), Vec3::Z), 45.0);
     let scene = scene_of(surface, Mat4::IDENTITY, camera);
@@ -168,18 +146,7 @@ fn a_bicubic_plane_is_hit_exactly_at_one_quad() {
     }
     // Uniform, unclamped cubic knots: two spans each way, every patch a flat square.
     let k = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0];
-    let desc = NurbsDesc {
-        points: &points,
-        weights: &[],
-        u_count: 5,
-        v_count: 5,
-        u_order: 4,
-        v_order: 4,
-        u_knots: &k,
-        v_knots: &k,
-        u_range: None,
-        v_range: None,
-    };
+    let desc = NurbsDesc::whole(&points, &[], (5, 5), (4, 4), &k, &k);
     let surface = NurbsSurface::new(&desc).unwrap();
     assert_eq!(surface.patch_count(), 4);
     assert!((0..4).all(|p| surface.patch_is_affine(p)));
