@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 #: A unit cube: 8 points, 6 quads, outward-facing with right-handed winding.
@@ -60,6 +61,20 @@ def add_camera(
     camera = UsdGeom.Camera.Define(stage, path)
     camera.AddTranslateOp().Set(Gf.Vec3d(*eye))
     return camera
+
+
+#: The tangent of half the default camera's field of view: a 20 mm film back at 50 mm.
+HALF_TAN = 10.0 / 50.0
+
+
+def pinhole_directions(width: int) -> np.ndarray:
+    """Unit directions through the pixel centres of a square ``width``-pixel render from a
+    camera of the default lens (50 mm focal length, 20 mm square film back) looking down -Z,
+    rows from the top: shape (width, width, 3)."""
+    xs = (np.arange(width) + 0.5) / width * 2 * HALF_TAN - HALF_TAN
+    dx, dy = np.meshgrid(xs, -xs)
+    d = np.stack([dx, dy, -np.ones_like(dx)], -1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
 def add_distant_light(stage: Usd.Stage, path: str, intensity: float = 2.0) -> UsdLux.DistantLight:

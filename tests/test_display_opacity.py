@@ -13,7 +13,7 @@ from pxr import Gf, Sdf, UsdGeom, UsdShade
 import mipray
 from mipray.usd import UsdSceneDelegate
 
-from stages import add_camera, add_distant_light, add_preview_material, bind, new_stage
+from stages import HALF_TAN, add_camera, add_distant_light, add_preview_material, bind, new_stage
 
 #: The emissive backdrop's radiance and the front quad's colour and light.
 EMIT = 0.6
@@ -96,8 +96,7 @@ def test_vertex_display_opacity_is_interpolated_across_the_quad(native) -> None:
     # Opacity 0 on the left edge, 1 on the right: linear in x over the quad.
     width = 48
     img = _render(_stage([0.0, 1.0, 1.0, 0.0], "vertex"), width)
-    half = 10.0 / 50.0
-    xs = (np.arange(width) + 0.5) / width * 2 * half - half
+    xs = (np.arange(width) + 0.5) / width * 2 * HALF_TAN - HALF_TAN
     x_on_quad = xs * 6.0  # the quad lies 6 from the eye
     row = width // 2
     inside = np.abs(x_on_quad) < 0.95

@@ -15,7 +15,7 @@ import mipray
 from mipray import record
 from mipray.usd import UsdSceneDelegate
 
-from stages import add_camera, add_cube, add_distant_light, new_stage
+from stages import add_camera, add_cube, add_distant_light, new_stage, pinhole_directions
 
 
 def test_every_schema_attribute_crosses_to_the_delegate(fake) -> None:
@@ -146,11 +146,7 @@ def test_a_sphere_renders_its_closed_form_silhouette_and_depth(native) -> None:
     r = _render(stage, width, ["color", "depth", "alpha"])
     # The default-style camera: 50 mm lens, a 20 mm square film back at (0, 0, 8) looking
     # down -z; pixel centres at half-integers.
-    half = 10.0 / 50.0
-    xs = (np.arange(width) + 0.5) / width * 2 * half - half
-    dx, dy = np.meshgrid(xs, -xs)
-    d = np.stack([dx, dy, -np.ones_like(dx)], -1)
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    d = pinhole_directions(width)
     o = np.array([0.0, 0.0, 8.0]) - np.array([0.4, -0.3, 0.0])
     b = d @ o
     disc = b * b - (o @ o - 1.5**2)

@@ -14,7 +14,7 @@ from pxr import Gf, UsdGeom
 import mipray
 from mipray.usd import UsdSceneDelegate
 
-from stages import add_camera, add_distant_light, new_stage
+from stages import HALF_TAN, add_camera, add_distant_light, new_stage, pinhole_directions
 
 _H = math.sqrt(0.5)
 _CIRCLE = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0)]
@@ -121,17 +121,13 @@ def test_a_nurbs_sphere_renders_the_spheres_silhouette_and_depth(native) -> None
         )
     alpha, depth = r.aovs["alpha"][..., 0], r.aovs["depth"][..., 0]
     # 50 mm lens, 20 mm film back at (0, 0, 8) looking down -z; pixel centres at half-integers.
-    half = 10.0 / 50.0
-    xs = (np.arange(width) + 0.5) / width * 2 * half - half
-    dx, dy = np.meshgrid(xs, -xs)
-    d = np.stack([dx, dy, -np.ones_like(dx)], -1)
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    d = pinhole_directions(width)
     o = np.array([0.0, 0.0, 8.0]) - np.array([0.4, -0.3, 0.0])
     b = d @ o
     closest = np.sqrt(np.maximum(o @ o - b * b, 0.0))
     # A pixel's footprint at the sphere: the beam width the tessellation's chord error stays
     # within; pixels whose centre ray passes nearer the silhouette than that are left out.
-    footprint = 8.0 * 2 * half / width
+    footprint = 8.0 * 2 * HALF_TAN / width
     clear = np.abs(closest - 1.5) > footprint
     hit = closest < 1.5
     assert (hit & clear).sum() > 200
