@@ -745,24 +745,25 @@ struct OsdMesh::Impl {
   bool regular_normal_cone(std::size_t patch, double out[4]) const {
     double b[4][4][3];
     regular_bezier_net(patch, b);
-    auto cone = [](const double (*d)[3], int n, double axis[3], double& sin_half) -> bool {
-      double sum[3] = {0, 0, 0};
-      double mx = 0.0;
-      for (int k = 0; k < n; ++k) mx = std::max(mx, std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]));
+    // The 12 differences' cone: axis the sum of their directions, half-angle to the farthest.
+    auto cone = [](const double (*d)[3], double axis[3], double& sin_half) -> bool {
+      double len[12], mx = 0.0;
+      for (int k = 0; k < 12; ++k) {
+        len[k] = std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]);
+        mx = std::max(mx, len[k]);
+      }
       if (!(mx > 0.0) || !std::isfinite(mx)) return false;
-      for (int k = 0; k < n; ++k) {
-        const double l = std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]);
-        if (!(l > 1e-9 * mx)) return false;
-        for (int c = 0; c < 3; ++c) sum[c] += d[k][c] / l;
+      double sum[3] = {0, 0, 0};
+      for (int k = 0; k < 12; ++k) {
+        if (!(len[k] > 1e-9 * mx)) return false;
+        for (int c = 0; c < 3; ++c) sum[c] += d[k][c] / len[k];
       }
       const double ls = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
       if (!(ls > 0.0)) return false;
       for (int c = 0; c < 3; ++c) axis[c] = sum[c] / ls;
       double min_cos = 1.0;
-      for (int k = 0; k < n; ++k) {
-        const double l = std::sqrt(d[k][0] * d[k][0] + d[k][1] * d[k][1] + d[k][2] * d[k][2]);
-        min_cos = std::min(min_cos, (d[k][0] * axis[0] + d[k][1] * axis[1] + d[k][2] * axis[2]) / l);
-      }
+      for (int k = 0; k < 12; ++k)
+        min_cos = std::min(min_cos, (d[k][0] * axis[0] + d[k][1] * axis[1] + d[k][2] * axis[2]) / len[k]);
       if (!(min_cos > 0.0)) return false;
       // sin(α/2) = sqrt((1 − cos α) / 2)
       sin_half = std::sqrt(std::max(0.0, (1.0 - min_cos) * 0.5));
@@ -778,7 +779,7 @@ struct OsdMesh::Impl {
       for (int a = 0; a < 4; ++a, ++k)
         for (int c = 0; c < 3; ++c) dv[k][c] = b[r + 1][a][c] - b[r][a][c];
     double a[3], bb[3], sa = 0.0, sb = 0.0;
-    if (!cone(du, 12, a, sa) || !cone(dv, 12, bb, sb)) return false;
+    if (!cone(du, a, sa) || !cone(dv, bb, sb)) return false;
     const double n[3] = {a[1] * bb[2] - a[2] * bb[1], a[2] * bb[0] - a[0] * bb[2], a[0] * bb[1] - a[1] * bb[0]};
     const double ln = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     const double delta = 2.0 * sa + 2.0 * sb;
