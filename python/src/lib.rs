@@ -1137,8 +1137,8 @@ fn version() -> &'static str {
     env!("CARGO_PKG_VERSION")
 }
 
-/// Compares a mesh's subdivision surface with OpenSubdiv's (limit evaluation against its
-/// LimitStencilTable, tessellations per tier, rate and split, seams, uniform refinement): the
+/// Compares a mesh's subdivision surface with OpenSubdiv's (limit evaluation against its own
+/// patch table's, tessellations per tier, rate and split, seams, uniform refinement): the
 /// report as one JSON object, or as a readable table with `table=True`. The mesh is an OBJ in
 /// OpenSubdiv's regression-shape format (`obj_text`) or USD's mesh attributes (as `set_mesh`
 /// takes them). `heatmap` writes a picture of the tessellation error at `heatmap_rate` quads a
