@@ -148,6 +148,16 @@ impl WatertightRay {
         Sheared { x: (p[self.kx] - o[self.kx]) - self.sx * az, y: (p[self.ky] - o[self.ky]) - self.sy * az, z: self.sz * az }
     }
 
+    /// [`Self::shear`] of four points, one a lane: the same operations in each lane, so the
+    /// same bits. Returns the sheared x, y and z.
+    #[inline(always)]
+    fn shear4(&self, p: [&[f32; 3]; 4]) -> (Vec4, Vec4, Vec4) {
+        let o: &[f32; 3] = self.o.as_ref();
+        let axis = |k: usize| Vec4::new(p[0][k], p[1][k], p[2][k], p[3][k]) - Vec4::splat(o[k]);
+        let az = axis(self.kz);
+        (axis(self.kx) - Vec4::splat(self.sx) * az, axis(self.ky) - Vec4::splat(self.sy) * az, Vec4::splat(self.sz) * az)
+    }
+
     /// The rest of the watertight test for sheared `a`, `b`, `c` whose edge functions
     /// `u = edge(c, b)`, `v = edge(a, c)`, `w = edge(b, a)` the caller computed (a grid computes
     /// each of its edges' once and shares it, negated, with the neighbouring triangle: the same
@@ -237,9 +247,9 @@ fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     // one or two quads are tested two rows at a time, so that a 2×2 fills the four lanes.
     match i1 - i0 + 1 {
         0..=3 => hit_quad_pairs(ray, tess, stride, range, t_min, best, t_max, accept),
-        4..=5 => hit_quads_rows::<5, A>(ray, tess, stride, range, t_min, best, t_max, accept),
-        6..=9 => hit_quads_rows::<9, A>(ray, tess, stride, range, t_min, best, t_max, accept),
-        10..=MAX_ROW => hit_quads_rows::<MAX_ROW, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        4..=5 => hit_quads_rows::<5, 8, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        6..=9 => hit_quads_rows::<9, 12, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        10..=MAX_ROW => hit_quads_rows::<MAX_ROW, 20, A>(ray, tess, stride, range, t_min, best, t_max, accept),
         _ => {
             // Wider than any tier's grid: test it in column strips.
             let mid = i0 + (MAX_ROW - 1);
@@ -261,13 +271,19 @@ struct ShearedRow<const P: usize> {
 impl<const P: usize> ShearedRow<P> {
     const ZERO: Self = ShearedRow { x: [0.0; P], y: [0.0; P], z: [0.0; P] };
 
-    /// Vertices `i0, i0 + 1, …` (`width` of them, stride units) of grid row `j`.
+    /// Vertices `i0, i0 + 1, …` (`width` of them, stride units) of grid row `j`, four at a time
+    /// (lanes past the row repeat its last vertex; `P` is a multiple of 4).
     #[inline(always)]
     fn fill(&mut self, ray: &WatertightRay, tess: &Tessellation, stride: usize, i0: usize, j: usize, width: usize) {
         let base = j * stride * tess.n + i0 * stride;
-        for k in 0..width {
-            let s = ray.shear(&tess.verts[base + k * stride]);
-            (self.x[k], self.y[k], self.z[k]) = (s.x, s.y, s.z);
+        let verts: &[[f32; 3]] = &tess.verts;
+        let last = width - 1;
+        for k in (0..width).step_by(4) {
+            let at = |l: usize| &verts[base + (k + l).min(last) * stride];
+            let (x, y, z) = ray.shear4([at(0), at(1), at(2), at(3)]);
+            x.write_to_slice(&mut self.x[k..k + 4]);
+            y.write_to_slice(&mut self.y[k..k + 4]);
+            z.write_to_slice(&mut self.z[k..k + 4]);
         }
     }
 
@@ -443,10 +459,10 @@ fn row_masks(triangle: bool, q: usize, i: usize, j: usize, count: usize) -> (u32
 }
 
 /// [`hit_quads`] for rows of at most `W` vertices (`4 ≤ i1 − i0 + 1 ≤ W`, checked by the
-/// caller): four quads of a row at a time.
+/// caller), held in `P` floats (`W` rounded up to a multiple of 4): four quads of a row at a time.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn hit_quads_rows<const W: usize, A: Fn(f32, Vec3A) -> bool>(
+fn hit_quads_rows<const W: usize, const P: usize, A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -461,10 +477,10 @@ fn hit_quads_rows<const W: usize, A: Fn(f32, Vec3A) -> bool>(
     let triangle = tess.domain == GridDomain::LowerTriangle;
     let width = i1 - i0 + 1;
     // A lane group starts at a multiple of 4 below the last quad (≤ W − 2) and reads 5
-    // vertices, so W (5, 9 or 17) holds them.
-    debug_assert!((4..=W).contains(&width) && W % 4 == 1);
-    let mut lo = ShearedRow::<W>::ZERO;
-    let mut hi = ShearedRow::<W>::ZERO;
+    // vertices, so W (5, 9 or 17) holds them; rows are filled four vertices at a time.
+    debug_assert!((4..=W).contains(&width) && W % 4 == 1 && P % 4 == 0 && P >= W);
+    let mut lo = ShearedRow::<P>::ZERO;
+    let mut hi = ShearedRow::<P>::ZERO;
     lo.fill(ray, tess, stride, i0, j0, width);
     for j in j0..j1 {
         hi.fill(ray, tess, stride, i0, j + 1, width);
