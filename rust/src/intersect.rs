@@ -6,7 +6,7 @@
 //! that share it, so rays never slip between quads of one grid. All of it runs in object space:
 //! the ray is not renormalised, so t means the same thing as in render space.
 
-use glam::{Vec3A, Vec4};
+use glam::{Vec3A, Vec4, Vec4Swizzles};
 
 use crate::bounds::Bounds3;
 use crate::tessellate::{GridDomain, Tessellation};
@@ -244,7 +244,11 @@ fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     // Row buffers sized to the rows tested: most calls test a 1-quad coarse grid, a 2×2 (a
     // medium grid at stride 2) or a 4×4 sub-box, and filling two 17-vertex buffers for them was
     // over a third of the call's instructions (callgrind: docs/throughput-callgrind.md). Rows of
-    // one or two quads are tested two rows at a time, so that a 2×2 fills the four lanes.
+    // one or two quads are tested two rows at a time, so that a 2×2 fills the four lanes; a
+    // lone quad has its own lane layout.
+    if i1 - i0 == 1 && j1 - j0 == 1 {
+        return hit_one_quad(ray, tess, stride, i0, j0, t_min, best, t_max, accept);
+    }
     match i1 - i0 + 1 {
         0..=3 => hit_quad_pairs(ray, tess, stride, range, t_min, best, t_max, accept),
         4..=5 => hit_quads_rows::<5, 8, A>(ray, tess, stride, range, t_min, best, t_max, accept),
@@ -479,18 +483,63 @@ fn hit_quads_rows<const W: usize, const P: usize, A: Fn(f32, Vec3A) -> bool>(
     // A lane group starts at a multiple of 4 below the last quad (≤ W − 2) and reads 5
     // vertices, so W (5, 9 or 17) holds them; rows are filled four vertices at a time.
     debug_assert!((4..=W).contains(&width) && W % 4 == 1 && P % 4 == 0 && P >= W);
-    let mut lo = ShearedRow::<P>::ZERO;
-    let mut hi = ShearedRow::<P>::ZERO;
-    lo.fill(ray, tess, stride, i0, j0, width);
+    // Rows j and j + 1 alternate between the two buffers (swapping them copied both).
+    let mut rows = [ShearedRow::<P>::ZERO; 2];
+    rows[0].fill(ray, tess, stride, i0, j0, width);
     for j in j0..j1 {
-        hi.fill(ray, tess, stride, i0, j + 1, width);
+        let next = (j + 1 - j0) & 1;
+        rows[next].fill(ray, tess, stride, i0, j + 1, width);
+        let (lo, hi) = (&rows[next ^ 1], &rows[next]);
         for k in (0..width - 1).step_by(4) {
             let masks = row_masks(triangle, q, i0 + k, j, width - 1 - k);
             let lanes = (lo.lanes(k), lo.lanes(k + 1), hi.lanes(k), hi.lanes(k + 1));
             let corners = |l: usize| (i0 + k + l, j, [lo.get(k + l), lo.get(k + l + 1), hi.get(k + l), hi.get(k + l + 1)]);
             finish_lanes(ray, tess, stride, masks, lanes, corners, t_min, best, t_max, accept);
         }
-        std::mem::swap(&mut lo, &mut hi);
+    }
+}
+
+/// [`hit_quads`] for the one quad (i, j) (a coarse grid's: most calls): its corners sheared as
+/// the four lanes of one vector, its four sides' edge functions as those of another.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn hit_one_quad<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    i: usize,
+    j: usize,
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let q = (tess.n - 1) / stride;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    if triangle && i + j + 1 > q {
+        // Beyond a triangle patch's diagonal its basis only extrapolates.
+        return;
+    }
+    let verts: &[[f32; 3]] = &tess.verts;
+    let (row, base) = (stride * tess.n, (j * tess.n + i) * stride);
+    let (x, y, z) = ray.shear4([&verts[base], &verts[base + stride], &verts[base + row], &verts[base + row + stride]]);
+    let (xs, ys, zs) = (x.to_array(), y.to_array(), z.to_array());
+    let corners = [0, 1, 2, 3].map(|k| Sheared { x: xs[k], y: ys[k], z: zs[k] });
+    if triangle && i + j + 1 == q {
+        // The diagonal half alone: rare (coarse grids of triangle patches), tested scalar.
+        return finish_quad(ray, tess, stride, i, j, corners, (false, false, true), t_min, best, t_max, accept);
+    }
+    // Lanes (s11, s10, s01, s00) against (s10, s00, s11, s01): the sides edge(s11, s10),
+    // edge(s10, s00), edge(s01, s11) and edge(s00, s01), each as `edge` computes it.
+    let sides = edge4(Lanes { x: x.wyzx(), y: y.wyzx() }, Lanes { x: x.yxwz(), y: y.yxwz() });
+    let (negative, zero) = (sides.is_negative_bitmask(), sides.cmpeq(Vec4::ZERO).bitmask());
+    let diagonal = edge(corners[0], corners[3]);
+    let (d_negative, d_zero) = (u32::from(diagonal.is_sign_negative()), diagonal == 0.0);
+    // As `sign_passes`: (right, diagonal, bottom) and (top, left, −diagonal).
+    let a = d_zero || zero & 0b0011 != 0 || (negative & 1 == d_negative && negative >> 1 & 1 == d_negative);
+    let b = d_zero || zero & 0b1100 != 0 || (negative >> 2 & 1 != d_negative && negative >> 3 & 1 != d_negative);
+    if a || b {
+        finish_quad(ray, tess, stride, i, j, corners, (a, b, false), t_min, best, t_max, accept);
     }
 }
 
