@@ -543,9 +543,8 @@ fn hit_one_quad<A: Fn(f32, Vec3A) -> bool>(
     }
 }
 
-/// [`hit_quads`] for rows of one or two quads (a coarse grid, a medium grid at stride 2, a fine
-/// grid's sub-box at stride 2): two rows at a time, lanes (i0, j), (i0 + 1, j), (i0, j + 1),
-/// (i0 + 1, j + 1).
+/// [`hit_quads`] for rows of one or two quads (a medium grid or a fine grid's sub-box at stride
+/// 2): two rows at a time, lanes (i0, j), (i0 + 1, j), (i0, j + 1), (i0 + 1, j + 1).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn hit_quad_pairs<A: Fn(f32, Vec3A) -> bool>(
