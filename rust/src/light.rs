@@ -41,7 +41,7 @@ pub use ies::{IesProfile, Photometry, Tilt};
 pub use portal::{Portal, PORTAL_FRACTION};
 
 pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
-pub use mesh::{TriangleHit, TriangleLight, TrianglePoint};
+pub use mesh::{Emitter, MeshEmission, TriangleHit, TriangleLight, TrianglePoint};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightShape {
@@ -556,7 +556,7 @@ impl Light {
                 LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
             shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. } | LightShape::Mesh(_)) => {
-                let (y, ny, area) = sample_planar(shape, u1, u2, time)?;
+                let (y, ny, area, emission) = sample_planar(shape, u1, u2, time)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
                 if !(dist2 > 0.0 && dist2.is_finite()) {
@@ -579,7 +579,7 @@ impl Light {
                         return None;
                     }
                 }
-                let mut radiance = self.radiance_scale;
+                let mut radiance = self.radiance_scale * emission;
                 if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, shape) {
                     radiance *= tex.radiance([u1, u2]);
                 }
@@ -733,7 +733,7 @@ impl Light {
     fn intersect_mesh(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<LightHit> {
         let LightShape::Mesh(m) = &self.shape else { return None };
         let h = m.intersect_at(o, d, t_max, time)?;
-        Some(LightHit { t: h.t, radiance: self.radiance_scale, pdf: h.t * h.t / (h.cos * h.area) })
+        Some(LightHit { t: h.t, radiance: self.radiance_scale * h.emission, pdf: h.t * h.t / (h.cos * h.area) })
     }
 
     fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
@@ -859,8 +859,10 @@ impl Light {
             out["area"] = serde_json::json!(m.area());
             out["two_sided"] = serde_json::json!(m.two_sided);
             out["moving"] = serde_json::json!(m.is_moving());
-            // What it emits, a bound material's tint included.
-            out["radiance"] = serde_json::json!([self.radiance_scale.x, self.radiance_scale.y, self.radiance_scale.z]);
+            // What it emits, a bound material's tint included (per face: its mean over the mesh).
+            let r = self.radiance_scale * m.mean_emission();
+            out["radiance"] = serde_json::json!([r.x, r.y, r.z]);
+            out["per_face_emission"] = serde_json::json!(m.has_emission());
         }
         if let Some(s) = &self.shaping {
             out["shaping"] = serde_json::json!({
@@ -934,28 +936,31 @@ pub fn shape_area(shape: &LightShape) -> f32 {
 }
 
 /// A uniformly distributed point on a rect, disk, cylinder or mesh light (a moving mesh posed at
-/// shutter time `time`): (point, emitting normal, area whose reciprocal is the point's density
-/// per unit area).
-fn sample_planar(shape: &LightShape, u1: f32, u2: f32, time: f32) -> Option<(Vec3A, Vec3A, f32)> {
+/// shutter time `time`; a mesh whose triangles emit their own colours chooses them by power):
+/// (point, emitting normal, area whose reciprocal is the point's density per unit area, what
+/// the point emits as a factor of the light's radiance).
+fn sample_planar(shape: &LightShape, u1: f32, u2: f32, time: f32) -> Option<(Vec3A, Vec3A, f32, Vec3A)> {
     let area = shape_area(shape);
     if !(area > 0.0) {
         return None;
     }
     match shape {
-        LightShape::Rect { center, u, v, normal } => Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area)),
+        LightShape::Rect { center, u, v, normal } => {
+            Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area, Vec3A::ONE))
+        }
         LightShape::Cylinder { center, axis, radius, e1, e2 } => {
             let phi = 2.0 * PI * u2;
             let n = *e1 * phi.cos() + *e2 * phi.sin();
-            Some((*center + *axis * (2.0 * u1 - 1.0) + n * *radius, n, area))
+            Some((*center + *axis * (2.0 * u1 - 1.0) + n * *radius, n, area, Vec3A::ONE))
         }
         LightShape::Disk { center, u, v, normal } => {
             let r = u1.sqrt();
             let phi = 2.0 * PI * u2;
-            Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area))
+            Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area, Vec3A::ONE))
         }
         LightShape::Mesh(m) => {
             let s = m.sample_at(u1, u2, time);
-            Some((s.p, s.normal, s.area))
+            Some((s.p, s.normal, s.area, s.emission))
         }
         _ => None,
     }
@@ -1121,6 +1126,161 @@ mod tests {
         assert_eq!(irradiance(&light, Vec3A::new(0.0, 0.0, 6.0), Vec3A::NEG_Z, 1000), 0.0);
         let normalized = Light::usd_area("/m", LightShape::Mesh(mesh), 1.0, 0.0, Vec3A::ONE, true);
         assert!((normalized.radiance_scale.x - 1.0 / 3.0).abs() < 1e-6);
+    }
+
+    /// Monte Carlo RGB irradiance at `p` (normal `n`) from `light`, no occlusion; also checks
+    /// that every sample's direction is met by BSDF rays with the same density and radiance.
+    fn irradiance_rgb(light: &Light, p: Vec3A, n: Vec3A, samples: u32, time: f32) -> Vec3A {
+        let mut s = Sampler::new(11, 2, 9);
+        let mut e = [0.0f64; 3];
+        for k in 0..samples {
+            if let Some(ls) = light.sample_at(p, n, s.next_f32(), s.next_f32(), time) {
+                let w = ls.weight() * ls.wi.dot(n).max(0.0);
+                for c in 0..3 {
+                    e[c] += f64::from(w[c]);
+                }
+                if k % 64 == 0 {
+                    let pdf = light.pdf_at(p, n, ls.wi, time);
+                    assert!((pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "{pdf} vs {}", ls.pdf);
+                    let hit = light.intersect_at(p, ls.wi, f32::INFINITY, time).unwrap();
+                    assert!((hit.radiance - ls.radiance).abs().max_element() <= 1e-5 * ls.radiance.max_element().max(1.0));
+                }
+            }
+        }
+        Vec3A::from(e.map(|x| (x / f64::from(samples)) as f32))
+    }
+
+    /// The square [−1, 1]² at height 2 facing down, as two triangles per half (x < 0, x > 0),
+    /// and its halves' outlines (for Lambert's formula).
+    fn halved_square() -> (Vec<[Vec3A; 3]>, [[Vec3A; 4]; 2]) {
+        let p = |x: f32, y: f32| Vec3A::new(x, y, 2.0);
+        let half = |x0: f32, x1: f32| [p(x0, -1.0), p(x1, -1.0), p(x1, 1.0), p(x0, 1.0)];
+        let (l, r) = (half(-1.0, 0.0), half(0.0, 1.0));
+        // Clockwise seen from +Z: the right-hand normal is −Z, toward the floor.
+        let tris = [l, r].iter().flat_map(|q| [[q[0], q[2], q[1]], [q[0], q[3], q[2]]]).collect();
+        (tris, [l, r])
+    }
+
+    #[test]
+    fn a_mesh_lights_faces_emit_their_own_materials_colours() {
+        // GeomSubsets: the left half emits (1, 0.2, 0), the right (0, 0.5, 2); the estimate at
+        // points mostly under one half is the exact sum of each half's Lambert irradiance times
+        // its colour, channel by channel.
+        let (tris, halves) = halved_square();
+        let (cl, cr) = (Vec3A::new(1.0, 0.2, 0.0), Vec3A::new(0.0, 0.5, 2.0));
+        let emission =
+            MeshEmission { emitters: vec![Emitter::Color(cl), Emitter::Color(cr)], per_triangle: vec![0, 0, 1, 1], st: Vec::new() };
+        let mesh = TriangleLight::with_emission(tris.clone(), false, None, emission.clone()).unwrap();
+        assert!((mesh.mean_emission() - 0.5 * (cl + cr)).length() < 1e-6);
+        let light = Light::usd_area("/m", LightShape::Mesh(mesh.clone()), 1.5, 0.0, Vec3A::ONE, false);
+        for p in [Vec3A::new(-0.7, 0.2, 0.0), Vec3A::new(0.8, -0.3, 0.0)] {
+            let exact = (cl * lambert_polygon(&halves[0], p, Vec3A::Z) + cr * lambert_polygon(&halves[1], p, Vec3A::Z)) * 1.5;
+            let e = irradiance_rgb(&light, p, Vec3A::Z, 400_000, 0.0);
+            for c in 0..3 {
+                assert!((e[c] - exact[c]).abs() <= 0.01 * exact.max_element(), "channel {c}: {e} vs {exact} at {p}");
+            }
+            // Not the mesh's one colour (their mean) everywhere: the test can tell.
+            let mean = 0.5 * (cl + cr) * (lambert_polygon(&halves[0], p, Vec3A::Z) + lambert_polygon(&halves[1], p, Vec3A::Z)) * 1.5;
+            assert!((mean - exact).abs().max_element() > 0.1 * exact.max_element());
+        }
+        // Chosen by power: the right half (channel mean 5/6 against 2/5) gets 25/37 of samples;
+        // a face that emits nothing gets none.
+        let right = (0..10_000).filter(|k| mesh.sample(((*k as f32) + 0.5) / 1e4, 0.5).0.x > 0.0).count();
+        assert!((right as f32 / 1e4 - 25.0 / 37.0).abs() < 2e-3, "{right}");
+        let dark = MeshEmission { emitters: vec![Emitter::Color(cl), Emitter::Color(Vec3A::ZERO)], ..emission.clone() };
+        let dark = TriangleLight::with_emission(tris.clone(), false, None, dark).unwrap();
+        assert!((0..1000).all(|k| dark.sample((k as f32 + 0.5) / 1e3, 0.3).0.x < 0.0));
+        // Moving: the same per-face densities, posed.
+        use crate::motion::{MotionKey, MotionTransform};
+        let key = |t: f32, x: f32| MotionKey { time: t, render_from_object: Mat4::from_translation(glam::Vec3::new(x, 0.0, 0.0)) };
+        let motion = MotionTransform::new(vec![key(0.0, 0.0), key(1.0, 1.0)]).unwrap();
+        let moving = TriangleLight::with_emission(tris, false, Some(motion), emission).unwrap();
+        let light = Light::usd_area("/m", LightShape::Mesh(moving), 1.5, 0.0, Vec3A::ONE, false);
+        let p = Vec3A::new(0.3, 0.2, 0.0);
+        let shifted = halves.map(|q| q.map(|v| v + Vec3A::new(0.5, 0.0, 0.0)));
+        let exact = (cl * lambert_polygon(&shifted[0], p, Vec3A::Z) + cr * lambert_polygon(&shifted[1], p, Vec3A::Z)) * 1.5;
+        let e = irradiance_rgb(&light, p, Vec3A::Z, 200_000, 0.5);
+        assert!((e - exact).abs().max_element() <= 0.01 * exact.max_element(), "{e} vs {exact}");
+    }
+
+    /// A texture whose texels are `left` where s < 0.5 and `right` elsewhere; a footprint of
+    /// the whole image reads their mean.
+    struct Split {
+        left: [f32; 3],
+        right: [f32; 3],
+    }
+
+    impl crate::texture::TextureSampler for Split {
+        fn handle(&self, _path: &str) -> Result<crate::texture::TextureHandle, crate::texture::TextureError> {
+            Ok(crate::texture::TextureHandle::new(0))
+        }
+        fn sample(
+            &self,
+            _h: crate::texture::TextureHandle,
+            st: [f32; 2],
+            dx: [f32; 2],
+            _dy: [f32; 2],
+            _lookup: &crate::texture::Lookup,
+            out: &mut [f32],
+        ) -> bool {
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = if dx[0] >= 1.0 {
+                    0.5 * (self.left[c] + self.right[c])
+                } else if st[0] < 0.5 {
+                    self.left[c]
+                } else {
+                    self.right[c]
+                };
+            }
+            true
+        }
+        fn resolution(&self, _h: crate::texture::TextureHandle) -> Option<[u32; 2]> {
+            Some([64, 64])
+        }
+        fn filter_mode(&self) -> crate::texture::FilterMode {
+            crate::texture::FilterMode::Differentials
+        }
+        fn stats(&self) -> serde_json::Value {
+            serde_json::json!({})
+        }
+    }
+
+    #[test]
+    fn a_textured_mesh_light_emits_its_texture_at_each_points_st() {
+        // One emissiveColor texture over the whole square (s = (x + 1)/2): (1, 0.2, 0) where
+        // x < 0, (0, 0.3, 1) where x > 0, times scale 2 plus bias 0.1. The texture's edge
+        // crosses no triangle here, so also try a mesh whose two triangles it cuts diagonally.
+        let (left, right) = ([1.0, 0.2, 0.0], [0.0, 0.3, 1.0]);
+        let tex = crate::material::TexturedColor {
+            sampler: std::sync::Arc::new(Split { left, right }),
+            texture: crate::texture::TextureHandle::new(0),
+            path: "split.png".into(),
+            lookup: crate::texture::Lookup::DEFAULT,
+            scale: Vec3A::splat(2.0),
+            bias: Vec3A::splat(0.1),
+            fallback: Vec3A::ZERO,
+            st_channel: 0,
+        };
+        let (cl, cr) = (Vec3A::from(left) * 2.0 + 0.1, Vec3A::from(right) * 2.0 + 0.1);
+        let (halved, halves) = halved_square();
+        let p = |x: f32, y: f32| Vec3A::new(x, y, 2.0);
+        let whole = vec![[p(-1.0, -1.0), p(1.0, 1.0), p(1.0, -1.0)], [p(-1.0, -1.0), p(-1.0, 1.0), p(1.0, 1.0)]];
+        let st_of = |t: &[Vec3A; 3]| t.map(|v| [0.5 * (v.x + 1.0), 0.5 * (v.y + 1.0)]);
+        for tris in [halved, whole] {
+            let emission = MeshEmission {
+                emitters: vec![Emitter::Texture(tex.clone())],
+                per_triangle: vec![0; tris.len()],
+                st: tris.iter().map(st_of).collect(),
+            };
+            let mesh = TriangleLight::with_emission(tris, false, None, emission).unwrap();
+            assert!((mesh.mean_emission() - 0.5 * (cl + cr)).length() < 1e-5);
+            let light = Light::usd_area("/t", LightShape::Mesh(mesh), 1.0, 0.0, Vec3A::ONE, false);
+            for q in [Vec3A::new(-0.6, 0.1, 0.0), Vec3A::new(0.7, -0.4, 0.0)] {
+                let exact = cl * lambert_polygon(&halves[0], q, Vec3A::Z) + cr * lambert_polygon(&halves[1], q, Vec3A::Z);
+                let e = irradiance_rgb(&light, q, Vec3A::Z, 400_000, 0.0);
+                assert!((e - exact).abs().max_element() <= 0.01 * exact.max_element(), "{e} vs {exact} at {q}");
+            }
+        }
     }
 
     /// A uniform dome guided by a portal over a window in the ceiling of a closed room: (mean,
