@@ -214,8 +214,8 @@ pub struct IesShaping {
     /// The light's local +X and +Y in render space (unit): the azimuth's frame.
     pub x: Vec3A,
     pub y: Vec3A,
-    /// The light's tilt, radians: the angle between its aim (−Z) and the stage's down, at
-    /// which a tilt table is read (0 without one).
+    /// The luminaire's tilt, radians, at which a tilt table is read ([`Tilt::tilt_angle`]: by
+    /// the table's lamp-to-luminaire geometry; 0 without one).
     pub tilt: f32,
 }
 
