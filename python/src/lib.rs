@@ -668,8 +668,9 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 /// shape's sizes (`radius`, `size`, `radius_bottom`, `radius_top`, `height`, `width`,
 /// `length`, `axis`; `widths` for Points). Sizes are checked here, so a bad one names the prim.
 /// `set_mesh`'s ``light``: ``{"intensity", "exposure", "color", "normalize", "shadow_enable",
-/// "unlit", "no_shadow", "tint"}``, every key optional (UsdLux's fallbacks; no links; `tint`:
-/// the bound material's emission tints the light, default false).
+/// "unlit", "no_shadow", "tint", "tint_materials"}``, every key optional (UsdLux's fallbacks;
+/// no links; `tint`: the bound material's emission tints the light, default false;
+/// `tint_materials`: the GeomSubsets' materials, by name, whose emission tints their faces).
 fn read_mesh_light(path: &str, d: &Bound<'_, PyDict>) -> PyResult<MeshLightData> {
     fn get<'py, T: for<'a> FromPyObject<'a, 'py>>(path: &str, d: &Bound<'py, PyDict>, key: &str, default: T) -> PyResult<T> {
         match d.get_item(key)? {
@@ -686,6 +687,7 @@ fn read_mesh_light(path: &str, d: &Bound<'_, PyDict>) -> PyResult<MeshLightData>
         shadow_enable: get(path, d, "shadow_enable", true)?,
         links: LinkData { unlit: get(path, d, "unlit", Vec::new())?, no_shadow: get(path, d, "no_shadow", Vec::new())? },
         tint: get(path, d, "tint", false)?,
+        tint_materials: get(path, d, "tint_materials", Vec::new())?,
     };
     if ![l.intensity, l.exposure, l.color[0], l.color[1], l.color[2]].iter().all(|v| v.is_finite()) {
         return Err(value_error(path, "light inputs must be finite"));

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Sdf, Usd, UsdGeom, UsdLux
+from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 from ..errors import PrimError
 from .warn import warn_once
@@ -70,6 +70,7 @@ __all__ = [
     "link_arguments",
     "linking_authored",
     "material_tint",
+    "material_tints",
     "mesh_light_arguments",
     "portal_arguments",
 ]
@@ -433,8 +434,9 @@ def material_tint(
     ``noMaterialResponse``, or no bound material ("as if there is no Material bound"), the
     light's own inputs alone. ``material`` is the ``set_mesh`` ``material`` argument read for
     the mesh: a bound material mipray does not read (no UsdPreviewSurface) cannot tint, with
-    one warning naming both. The mesh's own material tints every face (GeomSubsets' materials
-    do not), and a textured ``emissiveColor`` tints by its texture's mean (the core warns).
+    one warning naming both. The mesh's own material tints the faces no GeomSubset binds
+    (:func:`material_tints` for the subsets'); a textured ``emissiveColor`` tints each point
+    by its texture at the point's ``st``.
     """
     attr = UsdLux.LightAPI(light_prim).GetMaterialSyncModeAttr()
     mode = attr.Get(time) if attr else None
@@ -453,6 +455,46 @@ def material_tint(
         )
         return False
     return True
+
+
+def material_tints(
+    prim: Usd.Prim, light_prim: Usd.Prim, args: dict[str, Any], time: Usd.TimeCode
+) -> dict[str, Any]:
+    """``set_mesh``'s ``light`` keys ``tint`` and ``tint_materials`` for mesh light ``prim``.
+
+    ``tint`` is :func:`material_tint`'s (the mesh's own material tints the faces no
+    GeomSubset binds). Under ``materialGlowTintsLight`` each materialBind GeomSubset's
+    material tints its own faces by its ``emissiveColor`` (constant or textured, read per
+    point): ``tint_materials`` names those among ``args["face_materials"]`` (the subsets'
+    networks mipray reads). A subset's material mipray cannot read does not tint its faces,
+    with one warning naming both. ``args`` is the ``set_mesh`` keyword arguments read for
+    the mesh.
+    """
+    out: dict[str, Any] = {"tint": material_tint(prim, light_prim, args.get("material"), time)}
+    attr = UsdLux.LightAPI(light_prim).GetMaterialSyncModeAttr()
+    mode = attr.Get(time) if attr else None
+    if str(mode) != "materialGlowTintsLight":
+        return out
+    from .shading import bound_material
+
+    read = {m.get("name") for m in args.get("face_materials") or []}
+    names: list[str] = []
+    for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
+        material = bound_material(subset.GetPrim())
+        if material is None:
+            continue
+        key = str(material.GetPath())
+        if key in read:
+            if key not in names:
+                names.append(key)
+        else:
+            _warn_once(
+                f"{prim.GetPath()}: GeomSubset {subset.GetPath()}'s material {key} has no "
+                "surface mipray reads; its emission does not tint the mesh light's faces"
+            )
+    if names:
+        out["tint_materials"] = names
+    return out
 
 
 def authored_properties(prim: Usd.Prim, names: Iterable[str]) -> list[str]:
