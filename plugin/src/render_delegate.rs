@@ -497,7 +497,7 @@ impl RenderDelegate {
             self.warn_once(
                 format!("{path} black tint {}", inputs.name),
                 format!(
-                    "{path}: light:materialSyncMode is materialGlowTintsLight and material {}'s emissiveColor is black, so the mesh light's faces bound to it emit nothing (author emissiveColor, or materialSyncMode independent)",
+                    "{path}: light:materialSyncMode is materialGlowTintsLight and material {}'s emissiveColor is black, so the mesh light emits nothing from the faces bound to it (author emissiveColor, or materialSyncMode independent)",
                     inputs.name
                 ),
             );
