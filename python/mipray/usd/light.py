@@ -38,7 +38,8 @@ A Mesh with ``MeshLightAPI``, or named by a ``GeometryLight``'s ``geometry``, is
 light: ``RenderDelegate.set_mesh`` gets ``light`` (:func:`mesh_light_arguments`,
 :func:`emitter_arguments`) and the core samples its tessellated limit surface by area. Under
 ``light:materialSyncMode = materialGlowTintsLight`` (``MeshLightAPI``'s fallback) the bound
-material's emission tints the light (:func:`material_tint`); a mesh light inside a prototype
+material's emission tints the light, each GeomSubset's on its own faces
+(:func:`material_tints`); a mesh light inside a prototype
 (PointInstancer or native instance) emits from every instance.
 """
 
