@@ -325,6 +325,27 @@ impl IesProfile {
         p
     }
 
+    /// An upper bound of [`IesProfile::candela`] over vertical angles [`lo`, `hi`] (radians)
+    /// and every azimuth: the largest of the per-vertical-angle maxima over azimuth (bilinear
+    /// interpolation never exceeds its corners) at the table's angles inside the interval and,
+    /// interpolated, at its ends. 0 when the interval misses the vertical range.
+    pub fn max_between(&self, lo: f32, hi: f32) -> f32 {
+        let (v0, v1) = (self.v[0], self.v[self.v.len() - 1]);
+        let (lo, hi) = (lo.max(v0), hi.min(v1));
+        if !(lo <= hi + 1e-6) {
+            return 0.0;
+        }
+        let envelope = |vi: usize| (0..self.h.len()).map(|hi| self.at(hi, vi)).fold(0.0f32, f32::max);
+        let at = |theta: f32| {
+            let (vi, tv) = bracket(&self.v, theta);
+            let vj = (vi + 1).min(self.v.len() - 1);
+            lerp(envelope(vi), envelope(vj), tv)
+        };
+        let start = self.v.partition_point(|&v| v <= lo);
+        let inside = self.v[start..].iter().take_while(|&&v| v < hi).count();
+        (start..start + inside).map(envelope).fold(at(lo).max(at(hi)), f32::max)
+    }
+
     /// Candela at vertical angle `theta` and azimuth `phi` (radians), bilinear; 0 outside the
     /// vertical range.
     pub fn candela(&self, theta: f32, phi: f32) -> f32 {
