@@ -247,17 +247,16 @@ impl IesShaping {
         }
     }
 
-    /// An upper bound of [`IesShaping::factor`] over the directions within `delta` radians of
-    /// unit `w`: type C's largest candela over the vertical angles they span (every azimuth);
-    /// types A and B their peak.
-    pub fn bound_within(&self, axis: Vec3A, w: Vec3A, delta: f32) -> f32 {
+    /// An upper bound of [`IesShaping::factor`] over the directions whose angle off the axis
+    /// lies in [`lo`, `hi`] (radians): type C's largest candela over those vertical angles
+    /// (every azimuth); types A and B their peak.
+    pub fn bound_between(&self, lo: f32, hi: f32) -> f32 {
         let c = match self.profile.kind {
             ies::Photometry::C => {
-                let theta = axis.dot(w).clamp(-1.0, 1.0).acos();
                 let scale = 1.0 + self.angle_scale;
                 // The angle scale's map is increasing: the interval's ends bound it.
                 let map = |t: f32| if scale > 0.0 { ((t - PI) / scale + PI).clamp(0.0, PI) } else { t };
-                self.profile.max_between(map((theta - delta).max(0.0)), map((theta + delta).min(PI)))
+                self.profile.max_between(map(lo), map(hi))
             }
             _ => self.profile.peak(),
         } * self.tilt_factor();
@@ -343,12 +342,10 @@ impl Shaping {
         f
     }
 
-    /// An upper bound of [`Shaping::factor`]'s largest channel over the directions within
-    /// `delta` radians of unit `w` (away from the light): focus and cone at the angle off the
-    /// axis nearest their peak, the profile by [`IesShaping::bound_within`].
-    pub fn bound_within(&self, w: Vec3A, delta: f32) -> f32 {
-        let theta = self.axis.dot(w).clamp(-1.0, 1.0).acos();
-        let (lo, hi) = ((theta - delta).max(0.0), (theta + delta).min(PI));
+    /// An upper bound of [`Shaping::factor`]'s largest channel over the directions whose angle
+    /// off the axis lies in [`lo`, `hi`] (radians, within [0, π]): focus and cone at the angle
+    /// nearest their peak, the profile by [`IesShaping::bound_between`].
+    pub fn bound_between(&self, lo: f32, hi: f32) -> f32 {
         let mut f = 1.0;
         if self.focus > 0.0 {
             // |cos| is largest at an end of the interval.
@@ -356,7 +353,7 @@ impl Shaping {
             f = (self.focus_tint + (Vec3A::ONE - self.focus_tint) * ff).max_element();
         }
         if let Some(ies) = &self.ies {
-            f *= ies.bound_within(self.axis, w, delta);
+            f *= ies.bound_between(lo, hi);
         }
         if self.cone < PI {
             let soft = self.cone * (1.0 - self.softness);
@@ -745,6 +742,31 @@ impl Light {
     /// toward `p`: `None` without a profile, for a shape it does not apply to, or where the
     /// light looks too small from `p` for the profile to vary across it.
     fn profile_guide(&self, p: Vec3A) -> Option<ProfileGuide> {
+        let ies = self.shaping.as_ref().and_then(|s| s.ies.as_ref())?;
+        // One shading point asks for the same light's guide for its light sample, its BSDF
+        // sample's density and the ray meeting the light: the last one is kept per thread.
+        let centre = match &self.shape {
+            LightShape::Sphere { center, .. }
+            | LightShape::Rect { center, .. }
+            | LightShape::Disk { center, .. }
+            | LightShape::Cylinder { center, .. } => *center,
+            _ => return None,
+        };
+        let key = (std::sync::Arc::as_ptr(ies) as usize, p.to_array().map(f32::to_bits), centre.to_array().map(f32::to_bits));
+        GUIDE_CACHE.with(|c| {
+            let mut c = c.borrow_mut();
+            if let Some((k, g)) = c.as_ref() {
+                if *k == key {
+                    return g.clone();
+                }
+            }
+            let g = self.build_profile_guide(p);
+            *c = Some((key, g.clone()));
+            g
+        })
+    }
+
+    fn build_profile_guide(&self, p: Vec3A) -> Option<ProfileGuide> {
         let shaping = self.shaping.as_ref().filter(|s| s.ies.is_some())?;
         let (center, reach) = match &self.shape {
             LightShape::Sphere { center, radius } => (*center, *radius),
@@ -777,27 +799,30 @@ impl Light {
                 }
             })
         };
-        // Emission directions on a grid of half cells: each cell's centre, corners and edge
-        // midpoints. A cell weighs the most the shaping can send within the cone about its
-        // centre's direction that holds those eight (widened by a quarter: the cell's edges
-        // bulge between them), so a beam narrower than a cell is not missed.
+        // Emission directions at the cells' corners and centres. A cell weighs the most the
+        // shaping can send within the cone about its centre's direction that holds its corners'
+        // (widened by half: its edges may bulge beyond its corners' cone), so a beam narrower
+        // than a cell is not missed.
         const G: usize = GUIDE_CELLS;
-        const N: usize = 2 * G + 1;
-        let mut dirs = [Vec3A::ZERO; N * N];
-        for (k, d) in dirs.iter_mut().enumerate() {
-            let u = |x: usize| (x as f32 / (2 * G) as f32).min(1.0 - f32::EPSILON);
+        const N: usize = G + 1;
+        let g = G as f32;
+        let mut corners = [Vec3A::ZERO; N * N];
+        for (k, d) in corners.iter_mut().enumerate() {
+            let u = |x: usize| (x as f32 / g).min(1.0 - f32::EPSILON);
             *d = toward_p([u(k % N), u(k / N)])?;
         }
-        let angle = |a: Vec3A, b: Vec3A| 2.0 * (0.5 * (a - b).length()).min(1.0).asin();
         let mut w = [0.0f32; G * G];
         for (k, w) in w.iter_mut().enumerate() {
-            let (ci, cj) = (2 * (k % G) + 1, 2 * (k / G) + 1);
-            let centre = dirs[ci + N * cj];
-            let mut delta = 0.0f32;
-            for (di, dj) in [(0, 0), (1, 0), (2, 0), (0, 1), (2, 1), (0, 2), (1, 2), (2, 2)] {
-                delta = delta.max(angle(centre, dirs[(ci + di - 1) + N * (cj + dj - 1)]));
-            }
-            *w = shaping.bound_within(centre, 1.25 * delta);
+            let (i, j) = (k % G, k / G);
+            let centre = toward_p([(i as f32 + 0.5) / g, (j as f32 + 0.5) / g])?;
+            // Two arc cosines a cell: the angle off the axis, and the cone's.
+            let cos_delta = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .iter()
+                .map(|&(di, dj)| centre.dot(corners[(i + di) + N * (j + dj)]))
+                .fold(1.0f32, f32::min);
+            let delta = 1.5 * cos_delta.clamp(-1.0, 1.0).acos();
+            let theta = shaping.axis.dot(centre).clamp(-1.0, 1.0).acos();
+            *w = shaping.bound_between((theta - delta).max(0.0), (theta + delta).min(PI));
         }
         ProfileGuide::new(w)
     }
@@ -1090,6 +1115,14 @@ impl Light {
             _ => self.environment(wi),
         }
     }
+}
+
+/// A guide's key: the light's profile (its address), the shaded point and the light's centre.
+type GuideKey = (usize, [u32; 3], [u32; 3]);
+
+thread_local! {
+    /// The last [`ProfileGuide`] built on this thread, by its key.
+    static GUIDE_CACHE: std::cell::RefCell<Option<(GuideKey, Option<ProfileGuide>)>> = const { std::cell::RefCell::new(None) };
 }
 
 /// Cells per side of a [`ProfileGuide`]'s grid.

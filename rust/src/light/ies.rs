@@ -126,6 +126,8 @@ pub struct IesProfile {
     cd: Vec<f32>,
     /// Mean candela over the sphere or hemisphere the profile covers ([`IesProfile::mean`]).
     mean: f32,
+    /// Per vertical angle, the largest candela over the horizontal angles.
+    envelope: Vec<f32>,
     peak: f32,
 }
 
@@ -225,8 +227,9 @@ impl IesProfile {
             }
             _ => {}
         }
-        let mut p = IesProfile { kind, tilt, v, h, cd, mean: 0.0, peak: 0.0 };
+        let mut p = IesProfile { kind, tilt, v, h, cd, mean: 0.0, peak: 0.0, envelope: Vec::new() };
         p.peak = p.cd.iter().copied().fold(0.0, f32::max);
+        p.envelope = (0..p.v.len()).map(|vi| (0..p.h.len()).map(|hi| p.at(hi, vi)).fold(0.0f32, f32::max)).collect();
         p.mean = p.mean_candela();
         Ok(p)
     }
@@ -335,7 +338,7 @@ impl IesProfile {
         if !(lo <= hi + 1e-6) {
             return 0.0;
         }
-        let envelope = |vi: usize| (0..self.h.len()).map(|hi| self.at(hi, vi)).fold(0.0f32, f32::max);
+        let envelope = |vi: usize| self.envelope[vi];
         let at = |theta: f32| {
             let (vi, tv) = bracket(&self.v, theta);
             let vj = (vi + 1).min(self.v.len() - 1);
