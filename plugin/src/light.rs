@@ -77,6 +77,9 @@ pub struct IesData {
     /// Render space's down (unit; the stage's up axis negated): a tilt table is read at the
     /// angle between the light's aim and it.
     pub down: [f32; 3],
+    /// `mipray:iesProfileSampling`: directions drawn by the profile
+    /// ([`mipray::light::Light::profile_sampling`]).
+    pub profile_sampling: bool,
 }
 
 impl IesData {
@@ -90,7 +93,7 @@ impl IesData {
         let profile = std::fs::read(file)
             .map_err(|e| e.to_string())
             .and_then(|bytes| mipray::light::IesProfile::parse_with(&String::from_utf8_lossy(&bytes), &tilt_file));
-        IesData { file: file.to_string(), profile, angle_scale, normalize, down }
+        IesData { file: file.to_string(), profile, angle_scale, normalize, down, profile_sampling: false }
     }
 }
 
@@ -231,6 +234,7 @@ impl LightPrim {
                         tilt,
                     };
                     l.shaping = Some(mipray::light::Shaping::with_ies(l.shaping.take(), axis, shaping));
+                    l.profile_sampling = ies.profile_sampling;
                 }
                 Some((ies, Err(e))) => {
                     let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());

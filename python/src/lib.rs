@@ -458,8 +458,9 @@ impl RenderDelegate {
     /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
     /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
     /// ``ies_file``, ``ies_angle_scale``, ``ies_normalize``: its IES profile; ``ies_down``: the
-    /// stage's down in render space, at whose angle from the light's aim a tilt table is read.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false, ies_down=(0.0, -1.0, 0.0), portals=None))]
+    /// stage's down in render space, from which a tilt table's tilt is taken (by its
+    /// lamp-to-luminaire geometry); ``ies_profile_sampling``: directions drawn by the profile.
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false, ies_down=(0.0, -1.0, 0.0), ies_profile_sampling=false, portals=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -487,6 +488,7 @@ impl RenderDelegate {
         ies_angle_scale: f32,
         ies_normalize: bool,
         ies_down: (f32, f32, f32),
+        ies_profile_sampling: bool,
         portals: Option<Vec<String>>,
     ) -> PyResult<()> {
         let vals = [
@@ -543,7 +545,10 @@ impl RenderDelegate {
             cone_softness,
             focus,
             focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2],
-            ies: ies_file.map(|file| IesData::read(&file, ies_angle_scale, ies_normalize, [ies_down.0, ies_down.1, ies_down.2])),
+            ies: ies_file.map(|file| IesData {
+                profile_sampling: ies_profile_sampling,
+                ..IesData::read(&file, ies_angle_scale, ies_normalize, [ies_down.0, ies_down.1, ies_down.2])
+            }),
         });
         self.inner.set_light(LightPrim { path: path.to_string(), data, area: Some(area), shaping, links });
         Ok(())

@@ -279,6 +279,10 @@ def area_light_arguments(
             # A tilt table is read at the light's aim's angle from the stage's down.
             z_up = UsdGeom.GetStageUpAxis(prim.GetStage()) == UsdGeom.Tokens.z
             args["ies_down"] = (0.0, 0.0, -1.0) if z_up else (0.0, -1.0, 0.0)
+            # Opt-in: directions drawn by the profile (less noise a sample, more time).
+            sampling = prim.GetAttribute("mipray:iesProfileSampling")
+            if sampling and sampling.HasAuthoredValue() and sampling.Get(time):
+                args["ies_profile_sampling"] = True
             if not math.isfinite(args["ies_angle_scale"]):
                 raise PrimError(path, "inputs:shaping:ies:angleScale is not finite")
         if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
