@@ -9,6 +9,7 @@ colours is the sum of each half's Lambert irradiance times its colour, channel b
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -158,3 +159,30 @@ def test_a_textured_emissive_colour_tints_each_point_by_its_texel(native, tmp_pa
     scaled = (tuple(2 * c for c in LEFT), tuple(2 * c for c in RIGHT))
     check_halves(image, stage, intensity, *scaled)
     assert stats["scene"]["lights"][0]["per_face_emission"] is True
+
+
+def test_a_subset_on_the_meshs_own_material_tints_as_the_mesh_without_a_warning(
+    native, caplog
+) -> None:
+    intensity = 3.0
+    stage = stage_with_camera()
+    prim = halved_light(stage, intensity)
+    bind_emissive(stage, prim, RIGHT, "Base")
+    subset = UsdGeom.Subset.CreateGeomSubset(
+        UsdGeom.Mesh(prim), "Left", UsdGeom.Tokens.face, [0], "materialBind"
+    )
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(
+        UsdShade.Material(stage.GetPrimAtPath("/Looks/Base"))
+    )
+    with caplog.at_level(logging.WARNING):
+        image, stats = render_with_stats(stage)
+    assert not [r for r in caplog.records if "GeomSubset" in r.message]
+    x, y = floor_xy(image, stage)
+    truth = intensity * (lambert_rect(x, y, -HALF, 0.0) + lambert_rect(x, y, 0.0, HALF))
+    for c in range(3):
+        if RIGHT[c] == 0.0:
+            assert float(np.abs(image[..., c]).max()) == 0.0
+            continue
+        mean, worst = relative_error(image[..., c], RIGHT[c] * truth * ALBEDO / math.pi)
+        assert abs(mean) < 0.01 and worst < 0.08, (c, mean, worst)
+    assert stats["scene"]["lights"][0]["per_face_emission"] is False

@@ -483,12 +483,15 @@ def material_tints(
     from .shading import bound_material
 
     read = {m.get("name") for m in args.get("face_materials") or []}
+    own = (args.get("material") or {}).get("name")
     names: list[str] = []
     for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
         material = bound_material(subset.GetPrim())
         if material is None:
             continue
         key = str(material.GetPath())
+        if key == own:
+            continue  # the mesh's own material: its faces take it (``tint``)
         if key in read:
             if key not in names:
                 names.append(key)
