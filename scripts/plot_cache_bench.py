@@ -25,10 +25,7 @@ def main(argv: list[str]) -> int:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        print(
-            "plot_cache_bench: matplotlib is not installed (pip install matplotlib)",
-            file=sys.stderr,
-        )
+        print("plot_cache_bench: matplotlib is not installed (pip install matplotlib)", file=sys.stderr)
         return 1
     doc = json.loads(Path(argv[0]).read_text())
     rows = doc["rows"]
@@ -38,9 +35,7 @@ def main(argv: list[str]) -> int:
         mb = [r["budget_mb"] for r in sel]
         cost = [max(r["stats"]["geometry_cache"]["recomputed_vertices"], 1) for r in sel]
         wall = [r["wall_s_median"] for r in sel]
-        ax0.plot(
-            mb, cost, "o-", color=colour, label=f"{mode}-resolution" if mode == "single" else mode
-        )
+        ax0.plot(mb, cost, "o-", color=colour, label=f"{mode}-resolution" if mode == "single" else mode)
         ax1.plot(mb, wall, "o-", color=colour, label=mode)
     unbounded = [r for r in rows if r["mode"] == "unbounded"]
     if unbounded:
