@@ -97,6 +97,8 @@ struct Origin {
     inv_cos: f32,
     /// The ray leaves along the side the hit triangle's winding normal points to.
     along_ng: bool,
+    /// The origin hit's [`Hit::quads`]: the grid the origin lies on.
+    quads: u32,
 }
 
 impl Origin {
@@ -109,6 +111,17 @@ impl Origin {
             chord_error: hit.chord_error,
             inv_cos: 1.0 / cos.abs().max(0.05),
             along_ng: cos > 0.0,
+            quads: hit.quads,
+        }
+    }
+
+    /// The split depth (0: none) and rate of the grid the origin lies on, as
+    /// [`Tracer::rate_for`] gives them; `None` on an exactly intersected surface.
+    fn depth_rate(&self) -> Option<(u32, Rate)> {
+        match self.quads {
+            0 => None,
+            q if q > 16 => Some(((q / 16).trailing_zeros(), Rate::R16)),
+            q => Rate::ALL.into_iter().find(|r| r.quads() as u32 >= q).map(|r| (0, r)),
         }
     }
 
@@ -976,6 +989,11 @@ impl<'s> Tracer<'s> {
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
         let first_si = first.as_ref().map(|(org, ..)| org.subpatch as usize);
+        // A ray leaving a displaced mesh tests the subpatch it starts on, and every subpatch
+        // whose box holds its origin, at the rate of the grid its origin lies on: the same
+        // triangles (the same displacement filtering) wherever the surface can be near the
+        // origin, so the origin is on its side of what it tests without a lift (issue 23).
+        let origin_grid = own.filter(|_| displacement_pad > 0.0).and_then(|org| Some((org.subpatch, org.depth_rate()?)));
         if let Some((org, depth, rate, tess)) = first {
             let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
             if let Some(h) = test(counters, wray, org.subpatch as usize, depth, rate, tess, t_best) {
@@ -991,7 +1009,10 @@ impl<'s> Tracer<'s> {
                 let sp = &geom.subpatches[si];
                 let sp_bounds = sp.bounds();
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
-                let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+                let (depth, rate) = match origin_grid {
+                    Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter),
+                };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
                 let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
@@ -1354,7 +1375,7 @@ mod tests {
             let d = Vec3A::new(next(), next(), next()).normalize_or(Vec3A::Z);
             for along_ng in [true, false] {
                 for handed in [1.0, -1.0] {
-                    let origin = Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng };
+                    let origin = Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng, quads: 1 };
                     if !origin.passes_own_quad(&tess, d, handed) {
                         refused += 1;
                         continue;
