@@ -883,7 +883,7 @@ impl<'s> Tracer<'s> {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
             let sp_bounds = sp.bounds();
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, geom.rate_floor, inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
             Some((org, depth, rate, tess))
@@ -1011,7 +1011,7 @@ impl<'s> Tracer<'s> {
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
                 let (depth, rate) = match origin_grid {
                     Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
-                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter),
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, geom.rate_floor, inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
@@ -1025,13 +1025,26 @@ impl<'s> Tracer<'s> {
 
     /// The split depth (0: none) and, unsplit, the rate at which `ray` tests root subpatch `sp`
     /// (bounds `sp_bounds`, object space; its instance's largest stretch `scale`) when it
-    /// reaches its box at `t_enter`.
-    fn rate_for(&self, sp: &RootSubpatch, sp_bounds: &Bounds3, displacement_pad: f32, scale: f32, ray: &Ray, t_enter: f32) -> (u32, Rate) {
+    /// reaches its box at `t_enter`, never coarser than `rate_floor` quads a side.
+    #[allow(clippy::too_many_arguments)]
+    fn rate_for(
+        &self,
+        sp: &RootSubpatch,
+        sp_bounds: &Bounds3,
+        displacement_pad: f32,
+        rate_floor: f32,
+        scale: f32,
+        ray: &Ray,
+        t_enter: f32,
+    ) -> (u32, Rate) {
         // The rate is sized by the patch itself: its box less the displacement bound it was
         // grown by (displacement finer than the grid is filtered to its spacing, so the bound is
         // no reason to tessellate finer).
-        let size = sp.hull_size(sp_bounds, displacement_pad) * scale;
-        let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+        let hull = sp.hull_size(sp_bounds, displacement_pad);
+        let needed = needed_quads(hull * scale, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+        // But never coarser than the mesh's floor (a displaced mesh: the rate at which its
+        // patches keep every detail of the displacement, `MeshGeometry::rate_floor`).
+        let needed = needed.max(rate_floor);
         let depth = if sp.affine { 0 } else { split_depth(needed) };
         let rate = if self.single {
             Rate::R16
@@ -1401,5 +1414,21 @@ mod tests {
             }
         }
         assert!(passed > 1000 && refused > 1000, "passed {passed}, refused {refused}");
+    }
+
+    /// A ray leaving a displaced mesh reads its own neighbourhood at the grid its origin is on:
+    /// the (depth, rate) recovered from the quads a hit records (`LocalHit::quads`: the rate's
+    /// quads unsplit, 16 · 2^depth split) must be the one that grid was read at.
+    #[test]
+    fn the_origins_grid_is_recovered_from_its_hits_quads() {
+        let origin = |quads| Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng: true, quads };
+        for rate in Rate::ALL {
+            assert_eq!(origin(rate.quads() as u32).depth_rate(), Some((0, rate)));
+        }
+        for depth in 1..6 {
+            assert_eq!(origin(16 << depth).depth_rate(), Some((depth, Rate::R16)));
+        }
+        // An exactly intersected surface has no grid.
+        assert_eq!(origin(0).depth_rate(), None);
     }
 }
