@@ -378,6 +378,17 @@ impl DisplacementShader {
         }
     }
 
+    /// Re-filters the boundary offsets `out` of [`DisplacementShader::grid_offsets`] so that
+    /// neighbours read at one rate displace their shared edge alike (the procedural shader; see
+    /// [`filter_edges_alike`]): what the tessellation stores there is then not
+    /// [`DisplacementShader::offset_at`] at the grid's spacing, which the interior still is.
+    /// A texture is left as it is.
+    pub fn filter_edges(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize, out: &mut [f32]) {
+        if let DisplacementShader::Procedural(d) = self {
+            filter_edges_alike(d, surface, patch, rect, verts, n, out);
+        }
+    }
+
     /// The shortest wavelength of the detail (object units), where the shader knows it (the
     /// procedural fBm's finest octave); `None` for a texture (not yet: its texel size over a
     /// patch's `st` would give it).
@@ -399,7 +410,6 @@ impl DisplacementShader {
                 out.clear();
                 let spacing = grid_spacing(verts, n);
                 out.extend(verts.iter().map(|v| d.offset(Vec3A::from(*v), spacing)));
-                filter_edges_alike(d, surface, patch, rect, verts, n, out);
             }
             DisplacementShader::Texture(t) => t.grid_offsets(surface, patch, rect, n, out),
         }
