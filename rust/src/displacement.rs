@@ -26,6 +26,10 @@ use crate::displacement_texture::{DisplacementTextures, TexturePyramid};
 use crate::patch::{LimitSurface, UvRect};
 use crate::texture::{Lookup, SourceColorSpace, TextureError, TextureHandle, TextureSampler};
 
+/// Grid spacings per wavelength from which the procedural displacement keeps a detail at full
+/// weight ([`Displacement::offset`]).
+pub const FULL_WEIGHT_SPACINGS: f32 = 4.0;
+
 /// fBm displacement: `amplitude · Σ gainⁱ · noise(2ⁱ · frequency · p)`, i < octaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Displacement {
@@ -65,16 +69,21 @@ impl Displacement {
         self.amplitude.abs() * (0..self.octaves).map(|i| self.gain.powi(i as i32)).sum::<f32>()
     }
 
+    /// The wavelength of the finest octave (object units).
+    pub fn shortest_wavelength(&self) -> f32 {
+        1.0 / (self.frequency * 2f32.powi(self.octaves.max(1) as i32 - 1))
+    }
+
     /// Displacement at object-space `p`, band-limited for a grid of `spacing` object units
-    /// (0 = unfiltered): octave i is weighted by a smooth step from 1 (wavelength ≥ 4 spacings)
-    /// to 0 (wavelength ≤ 2 spacings).
+    /// (0 = unfiltered): octave i is weighted by a smooth step from 1 (wavelength ≥
+    /// [`FULL_WEIGHT_SPACINGS`] spacings) to 0 (wavelength ≤ 2 spacings).
     pub fn offset(&self, p: Vec3A, spacing: f32) -> f32 {
         let mut sum = 0.0;
         let mut f = self.frequency;
         let mut a = self.amplitude;
         for _ in 0..self.octaves {
             let wavelength = 1.0 / f;
-            let w = if spacing > 0.0 { smoothstep(2.0 * spacing, 4.0 * spacing, wavelength) } else { 1.0 };
+            let w = if spacing > 0.0 { smoothstep(2.0 * spacing, FULL_WEIGHT_SPACINGS * spacing, wavelength) } else { 1.0 };
             if w <= 0.0 {
                 break;
             }
@@ -369,6 +378,27 @@ impl DisplacementShader {
         }
     }
 
+    /// Re-filters the boundary offsets `out` of [`DisplacementShader::grid_offsets`] so that
+    /// neighbours read at one rate displace their shared edge alike (the procedural shader; see
+    /// [`filter_edges_alike`]): what the tessellation stores there is then not
+    /// [`DisplacementShader::offset_at`] at the grid's spacing, which the interior still is.
+    /// A texture is left as it is.
+    pub fn filter_edges(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize, out: &mut [f32]) {
+        if let DisplacementShader::Procedural(d) = self {
+            filter_edges_alike(d, surface, patch, rect, verts, n, out);
+        }
+    }
+
+    /// The shortest wavelength of the detail (object units), where the shader knows it (the
+    /// procedural fBm's finest octave); `None` for a texture (not yet: its texel size over a
+    /// patch's `st` would give it).
+    pub fn shortest_wavelength(&self) -> Option<f32> {
+        match self {
+            DisplacementShader::Procedural(d) => Some(d.shortest_wavelength()),
+            DisplacementShader::Texture(_) => None,
+        }
+    }
+
     /// Displacements (object units, along the limit normal) of the n×n grid `verts` (object
     /// space, undisplaced, u fastest) over `rect` of `patch`, filtered at the grid's own spacing,
     /// into `out` (cleared first; `verts.len()` values). The procedural shader filters at
@@ -382,6 +412,40 @@ impl DisplacementShader {
                 out.extend(verts.iter().map(|v| d.offset(Vec3A::from(*v), spacing)));
             }
             DisplacementShader::Texture(t) => t.grid_offsets(surface, patch, rect, n, out),
+        }
+    }
+}
+
+/// Re-displaces the boundary vertices of the n×n grid `verts` (undisplaced, object space) so
+/// that a neighbour read at the same rate displaces the points of their shared edge as this
+/// grid does: each edge's inner vertices filtered at that edge's own mean chord length (the
+/// same chords on both sides), its corners unfiltered (a corner is shared by every patch around
+/// the vertex, whose edges differ). Filtered at each grid's own spacing, neighbours of
+/// different shapes read the same edge through different band limits and left cracks between
+/// them even at one rate (issue 23).
+fn filter_edges_alike(
+    d: &Displacement,
+    surface: &dyn LimitSurface,
+    patch: usize,
+    rect: UvRect,
+    verts: &[[f32; 3]],
+    n: usize,
+    out: &mut [f32],
+) {
+    use crate::seam::{edge_vertex, SeamEdges, DIAGONAL};
+    if n < 2 || verts.len() < n * n || out.len() < n * n {
+        return;
+    }
+    let at = |(i, j): (usize, usize)| Vec3A::from(verts[j * n + i]);
+    let domain = crate::tessellate::GridDomain::of(surface.patch_param(patch).kind, &rect);
+    let edges = SeamEdges::ALL.within(domain);
+    for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
+        let len: f32 = (0..n - 1).map(|k| (at(edge_vertex(e, k + 1, n)) - at(edge_vertex(e, k, n))).length()).sum();
+        let spacing = len / (n - 1) as f32;
+        for k in 0..n {
+            let (i, j) = edge_vertex(e, k, n);
+            let corner = k == 0 || k == n - 1;
+            out[j * n + i] = d.offset(at((i, j)), if corner { 0.0 } else { spacing });
         }
     }
 }

@@ -186,6 +186,11 @@ pub struct MeshGeometry {
     pub bounds: Bounds3,
     /// Ids of split children, given as rays ask for them.
     pub child_ids: ChildIds,
+    /// The fewest quads a side any root subpatch is read at (0: no floor): for a displacement
+    /// whose detail is known ([`crate::displacement::DisplacementShader::shortest_wavelength`]),
+    /// the rate at which the mesh's largest patch keeps that detail at full weight, at most the
+    /// fine tier's 16 (see [`MeshGeometry::displaced_rate_floor`]).
+    pub rate_floor: f32,
 }
 
 impl MeshGeometry {
@@ -226,12 +231,41 @@ impl MeshGeometry {
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |b, sb| b.union(sb));
         let bvh = build_bvh(&boxes);
         let child_ids = ChildIds::new(split_ids(subpatches.len() as u32));
-        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids })
+        let rate_floor = mesh.displacement.as_ref().and_then(|d| d.shortest_wavelength()).map_or(0.0, |wavelength| {
+            let largest = subpatches.iter().map(|sp| sp.hull_size(&sp.bounds(), 2.0 * grow)).fold(0.0, f32::max);
+            Self::displaced_rate_floor(largest, wavelength)
+        });
+        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor })
+    }
+
+    /// The rate floor (quads a side, at most 16) of a displaced mesh whose largest patch spans
+    /// `largest` object units (its box's largest side, as rates are sized) and whose
+    /// displacement's shortest wavelength is `wavelength` object units: grids no coarser keep
+    /// every detail at full weight ([`crate::displacement::FULL_WEIGHT_SPACINGS`] spacings a
+    /// wavelength; a patch's rows run across its box, up to √3 times its largest side).
+    ///
+    /// Filtered at two spacings, a displaced patch is two surfaces up to the whole displacement
+    /// bound apart: neighbours read at different rates leave cracks between them, and a ray
+    /// leaving one rate's grid can start beyond another's (issue 23, docs/cracks.md). One floor
+    /// for the whole mesh, so neighbours of different sizes are read alike by wide rays.
+    pub fn displaced_rate_floor(largest: f32, wavelength: f32) -> f32 {
+        let quads = crate::displacement::FULL_WEIGHT_SPACINGS * 3f32.sqrt() * largest / wavelength;
+        if quads.is_finite() {
+            quads.clamp(0.0, 16.0)
+        } else {
+            16.0
+        }
     }
 
     /// A mesh left out of the render: nothing to hit.
     pub fn empty() -> Self {
-        MeshGeometry { subpatches: Vec::new(), bvh: None, bounds: Bounds3::EMPTY, child_ids: ChildIds::new(Arc::new(SplitIds::new(0))) }
+        MeshGeometry {
+            subpatches: Vec::new(),
+            bvh: None,
+            bounds: Bounds3::EMPTY,
+            child_ids: ChildIds::new(Arc::new(SplitIds::new(0))),
+            rate_floor: 0.0,
+        }
     }
 }
 

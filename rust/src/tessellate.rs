@@ -423,7 +423,8 @@ pub struct DisplaceParams {
 }
 
 /// Tessellates `sub` of `surface` on `tier`'s grid: one grid evaluation, displacement along the
-/// limit normal filtered at the grid's own spacing, then (for the fine tier) the 4×4 sub-boxes.
+/// limit normal filtered at the grid's own spacing (its boundary as neighbours read it,
+/// [`DisplacementShader::filter_edges`]), then (for the fine tier) the 4×4 sub-boxes.
 /// Returns the tessellation and how many displaced vertices left `sub.bounds` (counted, never
 /// clipped). `scratch` is reused between calls to avoid allocation.
 pub fn tessellate(
@@ -460,6 +461,7 @@ pub fn tessellate_reusing(
     if let Some(d) = displace {
         let mut offsets = Vec::with_capacity(n * n);
         d.displacement.grid_offsets(surface, sub.patch as usize, sub.rect, &scratch.p, n, &mut offsets);
+        d.displacement.filter_edges(surface, sub.patch as usize, sub.rect, &scratch.p, n, &mut offsets);
         for (k, v) in scratch.p.iter_mut().enumerate() {
             let p = Vec3A::from(*v);
             let nrm = (Vec3A::from(scratch.dpdu[k]).cross(Vec3A::from(scratch.dpdv[k]))).normalize_or_zero() * d.normal_sign;

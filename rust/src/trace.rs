@@ -97,6 +97,8 @@ struct Origin {
     inv_cos: f32,
     /// The ray leaves along the side the hit triangle's winding normal points to.
     along_ng: bool,
+    /// The origin hit's [`Hit::quads`]: the grid the origin lies on.
+    quads: u32,
 }
 
 impl Origin {
@@ -109,6 +111,17 @@ impl Origin {
             chord_error: hit.chord_error,
             inv_cos: 1.0 / cos.abs().max(0.05),
             along_ng: cos > 0.0,
+            quads: hit.quads,
+        }
+    }
+
+    /// The split depth (0: none) and rate of the grid the origin lies on, as
+    /// [`Tracer::rate_for`] gives them; `None` on an exactly intersected surface.
+    fn depth_rate(&self) -> Option<(u32, Rate)> {
+        match self.quads {
+            0 => None,
+            q if q > 16 => Some(((q / 16).trailing_zeros(), Rate::R16)),
+            q => Rate::ALL.into_iter().find(|r| r.quads() as u32 >= q).map(|r| (0, r)),
         }
     }
 
@@ -870,7 +883,7 @@ impl<'s> Tracer<'s> {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
             let sp_bounds = sp.bounds();
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, geom.rate_floor, inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
             Some((org, depth, rate, tess))
@@ -976,6 +989,11 @@ impl<'s> Tracer<'s> {
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
         let first_si = first.as_ref().map(|(org, ..)| org.subpatch as usize);
+        // A ray leaving a displaced mesh tests the subpatch it starts on, and every subpatch
+        // whose box holds its origin, at the rate of the grid its origin lies on: the same
+        // triangles (the same displacement filtering) wherever the surface can be near the
+        // origin, so the origin is on its side of what it tests without a lift (issue 23).
+        let origin_grid = own.filter(|_| displacement_pad > 0.0).and_then(|org| Some((org.subpatch, org.depth_rate()?)));
         if let Some((org, depth, rate, tess)) = first {
             let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
             if let Some(h) = test(counters, wray, org.subpatch as usize, depth, rate, tess, t_best) {
@@ -991,7 +1009,10 @@ impl<'s> Tracer<'s> {
                 let sp = &geom.subpatches[si];
                 let sp_bounds = sp.bounds();
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
-                let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, inst.scale, ray, t_enter);
+                let (depth, rate) = match origin_grid {
+                    Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, geom.rate_floor, inst.scale, ray, t_enter),
+                };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
                 let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
@@ -1004,13 +1025,26 @@ impl<'s> Tracer<'s> {
 
     /// The split depth (0: none) and, unsplit, the rate at which `ray` tests root subpatch `sp`
     /// (bounds `sp_bounds`, object space; its instance's largest stretch `scale`) when it
-    /// reaches its box at `t_enter`.
-    fn rate_for(&self, sp: &RootSubpatch, sp_bounds: &Bounds3, displacement_pad: f32, scale: f32, ray: &Ray, t_enter: f32) -> (u32, Rate) {
+    /// reaches its box at `t_enter`, never coarser than `rate_floor` quads a side.
+    #[allow(clippy::too_many_arguments)]
+    fn rate_for(
+        &self,
+        sp: &RootSubpatch,
+        sp_bounds: &Bounds3,
+        displacement_pad: f32,
+        rate_floor: f32,
+        scale: f32,
+        ray: &Ray,
+        t_enter: f32,
+    ) -> (u32, Rate) {
         // The rate is sized by the patch itself: its box less the displacement bound it was
         // grown by (displacement finer than the grid is filtered to its spacing, so the bound is
         // no reason to tessellate finer).
-        let size = sp.hull_size(sp_bounds, displacement_pad) * scale;
-        let needed = needed_quads(size, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+        let hull = sp.hull_size(sp_bounds, displacement_pad);
+        let needed = needed_quads(hull * scale, ray.beam_width(t_enter), self.tess_factor * self.kind_factor[Self::kind_index(ray.kind)]);
+        // But never coarser than the mesh's floor (a displaced mesh: the rate at which its
+        // patches keep every detail of the displacement, `MeshGeometry::rate_floor`).
+        let needed = needed.max(rate_floor);
         let depth = if sp.affine { 0 } else { split_depth(needed) };
         let rate = if self.single {
             Rate::R16
@@ -1354,7 +1388,7 @@ mod tests {
             let d = Vec3A::new(next(), next(), next()).normalize_or(Vec3A::Z);
             for along_ng in [true, false] {
                 for handed in [1.0, -1.0] {
-                    let origin = Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng };
+                    let origin = Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng, quads: 1 };
                     if !origin.passes_own_quad(&tess, d, handed) {
                         refused += 1;
                         continue;
@@ -1380,5 +1414,21 @@ mod tests {
             }
         }
         assert!(passed > 1000 && refused > 1000, "passed {passed}, refused {refused}");
+    }
+
+    /// A ray leaving a displaced mesh reads its own neighbourhood at the grid its origin is on:
+    /// the (depth, rate) recovered from the quads a hit records (`LocalHit::quads`: the rate's
+    /// quads unsplit, 16 · 2^depth split) must be the one that grid was read at.
+    #[test]
+    fn the_origins_grid_is_recovered_from_its_hits_quads() {
+        let origin = |quads| Origin { instance: 0, subpatch: 0, side: Vec3A::Z, chord_error: 0.0, inv_cos: 1.0, along_ng: true, quads };
+        for rate in Rate::ALL {
+            assert_eq!(origin(rate.quads() as u32).depth_rate(), Some((0, rate)));
+        }
+        for depth in 1..6 {
+            assert_eq!(origin(16 << depth).depth_rate(), Some((depth, Rate::R16)));
+        }
+        // An exactly intersected surface has no grid.
+        assert_eq!(origin(0).depth_rate(), None);
     }
 }

@@ -131,3 +131,49 @@ fn a_bound_too_small_is_counted_not_clipped() {
     // Each tessellation was built once, so the count is exactly the stored vertices outside.
     assert_eq!(outside, counted, "of {vertices} stored vertices");
 }
+
+/// Two neighbours of different shapes read at one rate displace the points of their shared edge
+/// alike (issue 23): each edge is filtered at its own chord length and corners unfiltered, not
+/// at each grid's own spacing, which differs with the patch's shape.
+#[test]
+fn neighbours_of_different_shapes_displace_their_shared_edge_alike() {
+    use mipray::patch::{GridSamples, UvRect};
+    use mipray::subpatch::Subpatch;
+    use mipray::tessellate::{tessellate, DisplaceParams};
+    // A unit square and a 2.5-wide rectangle sharing the edge x = 1.13 (off the noise's
+    // lattice, where every octave is 0).
+    let (x, y) = (0.13, 0.29);
+    let pts = vec![[x, y, 0.0], [x + 1.0, y, 0.0], [x + 3.5, y, 0.0], [x, y + 1.0, 0.0], [x + 1.0, y + 1.0, 0.0], [x + 3.5, y + 1.0, 0.0]];
+    let topo = MeshTopology {
+        scheme: Scheme::None,
+        face_vertex_counts: vec![4, 4],
+        face_vertex_indices: vec![0, 1, 4, 3, 1, 2, 5, 4],
+        ..Default::default()
+    };
+    let surface = BilinearSurface::new(&topo, &pts).unwrap();
+    // Octaves from 1/3 down to 1/24 unit: the two grids' spacings filter them differently.
+    let d = Displacement { amplitude: 0.1, frequency: 3.0, octaves: 4, gain: 0.7 };
+    let params = DisplaceParams { displacement: d.into(), normal_sign: 1.0, bound: d.bound() };
+    let bounds = mipray::bounds::Bounds3 { min: Vec3A::new(-1.0, -1.0, -1.0), max: Vec3A::new(4.0, 2.0, 1.0) };
+    let mut scratch = GridSamples::default();
+    for tier in [Tier::Coarse, Tier::Medium, Tier::Fine] {
+        let mut grid = |patch| {
+            let sub = Subpatch { patch, rect: UvRect::UNIT, bounds, affine: false };
+            tessellate(&surface, &sub, tier, Some(&params), &mut scratch).0
+        };
+        let (a, b) = (grid(0), grid(1));
+        // The plane's normal is z: displaced points keep their (x, y).
+        let edge = |t: &mipray::tessellate::Tessellation| {
+            let mut e: Vec<[f32; 3]> = t.verts.iter().copied().filter(|p| (p[0] - (x + 1.0)).abs() < 1e-5).collect();
+            e.sort_by(|p, q| p[1].total_cmp(&q[1]));
+            e
+        };
+        let (ea, eb) = (edge(&a), edge(&b));
+        assert_eq!(ea.len(), tier.verts_per_side() as usize, "{tier:?}: the shared edge's vertices");
+        assert_eq!(ea.len(), eb.len());
+        for (p, q) in ea.iter().zip(&eb) {
+            assert!((p[1] - q[1]).abs() < 1e-6 && (p[2] - q[2]).abs() < 1e-6, "{tier:?}: {p:?} against {q:?}");
+        }
+        assert!(ea.iter().any(|p| p[2].abs() > 1e-3), "{tier:?}: the edge is displaced");
+    }
+}
