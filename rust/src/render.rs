@@ -136,6 +136,7 @@ pub fn render_with_cache(
         let mut tracer = Tracer::with_budget(scene, cache, single, options.tess_factor, budget).map_err(RenderError::Settings)?;
         tracer.set_incoherent_tess_factor(options.tess_factor_incoherent);
         tracer.set_seams(options.seams);
+        tracer.set_displacement_rate_floor(options.displacement_rate_floor);
         let cache_before = tracer.cache.stats();
         // The BVH over a large scene takes a while: a cancel during it is seen here.
         if progress.cancelled() {

@@ -337,6 +337,9 @@ pub struct Tracer<'s> {
     /// Seam boxes close cracks between subpatches tested at different rates (see
     /// [`crate::seam`]); on unless [`Tracer::set_seams`] turned them off (to measure cracks).
     seams: bool,
+    /// Whether procedurally displaced meshes are read no coarser than their rate floor
+    /// ([`Tracer::set_displacement_rate_floor`]).
+    displacement_rate_floor: bool,
     pub bounds: Bounds3,
     /// Displaced vertices found outside their subpatch's bounds (warned about once).
     pub displaced_outside: AtomicU64,
@@ -462,6 +465,7 @@ impl<'s> Tracer<'s> {
             kind_factor: [1.0; 7],
             single,
             seams: true,
+            displacement_rate_floor: false,
             bounds,
             displaced_outside: AtomicU64::new(0),
             dropped,
@@ -699,6 +703,23 @@ impl<'s> Tracer<'s> {
         self.seams = on;
     }
 
+    /// Reads procedurally displaced meshes no coarser than their rate floor
+    /// ([`MeshGeometry::rate_floor`]; the `displacementRateFloor` setting), or (the default)
+    /// at the rates the beams ask for alone.
+    pub fn set_displacement_rate_floor(&mut self, on: bool) {
+        self.displacement_rate_floor = on;
+    }
+
+    /// The rate floor `geom`'s subpatches are read with (0: none).
+    #[inline]
+    fn rate_floor(&self, geom: &MeshGeometry) -> f32 {
+        if self.displacement_rate_floor {
+            geom.rate_floor
+        } else {
+            0.0
+        }
+    }
+
     /// The root-boundary edges of a (split) subpatch that get seam boxes.
     fn seam_edges(&self, cell: ChildCell) -> SeamEdges {
         if self.seams {
@@ -883,7 +904,7 @@ impl<'s> Tracer<'s> {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
             let sp_bounds = sp.bounds();
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, geom.rate_floor, inst.scale, ray, t_enter);
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
             Some((org, depth, rate, tess))
@@ -1011,7 +1032,7 @@ impl<'s> Tracer<'s> {
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
                 let (depth, rate) = match origin_grid {
                     Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
-                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, geom.rate_floor, inst.scale, ray, t_enter),
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
