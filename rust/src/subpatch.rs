@@ -186,6 +186,9 @@ pub struct MeshGeometry {
     pub bounds: Bounds3,
     /// Ids of split children, given as rays ask for them.
     pub child_ids: ChildIds,
+    /// The surface deforms within the shutter ([`crate::deform`]): its grids are blended at
+    /// each ray's time.
+    pub deforms: bool,
 }
 
 impl MeshGeometry {
@@ -226,12 +229,18 @@ impl MeshGeometry {
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |b, sb| b.union(sb));
         let bvh = build_bvh(&boxes);
         let child_ids = ChildIds::new(split_ids(subpatches.len() as u32));
-        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids })
+        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, deforms: s.deformation().is_some() })
     }
 
     /// A mesh left out of the render: nothing to hit.
     pub fn empty() -> Self {
-        MeshGeometry { subpatches: Vec::new(), bvh: None, bounds: Bounds3::EMPTY, child_ids: ChildIds::new(Arc::new(SplitIds::new(0))) }
+        MeshGeometry {
+            subpatches: Vec::new(),
+            bvh: None,
+            bounds: Bounds3::EMPTY,
+            child_ids: ChildIds::new(Arc::new(SplitIds::new(0))),
+            deforms: false,
+        }
     }
 }
 
