@@ -19,7 +19,7 @@ from mipray.errors import PrimDataError
 from mipray.usd import UsdSceneDelegate
 from mipray.usd.skel import SkelPoser
 
-from stages import add_camera, add_cube, new_stage
+from stages import CUBE_POINTS, add_camera, add_cube, add_distant_light, new_stage
 
 
 def deforming_stage(shutter: tuple[float, float] | None, *, still: bool = False) -> Usd.Stage:
@@ -225,3 +225,44 @@ def test_the_delegate_refuses_bad_deformation_samples_in_one_line(native) -> Non
     with pytest.raises(PrimDataError, match="no mesh at this path"):
         delegate.set_deformation("/World/None", np.zeros(2, np.float32), np.stack([quad, quad]))
     delegate.set_deformation("/World/Q", np.array([0.0, 1.0], np.float32), np.stack([quad, quad]))
+
+
+def _sliding_blob(by_points: bool) -> Usd.Stage:
+    """A Catmull-Clark cube sliding from x = −0.5 at frame 1 to 0.5 at frame 2, by its points or
+    by its transform, under a sun, seen by a camera whose shutter spans the two frames."""
+    stage = new_stage()
+    cube = add_cube(stage, "/World/Blob", scheme="catmullClark")
+    rest = np.array(CUBE_POINTS, dtype=np.float32)
+    for frame, dx in ((1.0, -0.5), (2.0, 0.5)):
+        if by_points:
+            moved = rest + np.array([dx, 0.0, 0.0], dtype=np.float32)
+            cube.GetPointsAttr().Set([Gf.Vec3f(*map(float, p)) for p in moved], frame)
+        else:
+            if frame == 1.0:
+                op = cube.AddTranslateOp()
+            op.Set(Gf.Vec3d(dx, 0.0, 0.0), frame)
+    cam = add_camera(stage, "/World/Camera")
+    cam.CreateShutterOpenAttr(0.0)
+    cam.CreateShutterCloseAttr(1.0)
+    add_distant_light(stage, "/World/Sun")
+    return stage
+
+
+@pytest.mark.usefixtures("native")
+def test_a_subdivision_surface_slid_by_its_points_renders_as_one_slid_by_its_transform() -> None:
+    # The OpenSubdiv path: one surface per sample, built on first use.
+    settings = {"samples": 64}
+    deformed = mipray.render(_sliding_blob(True), "/World/Camera", 48, settings=settings, time=1.0)
+    moved = mipray.render(_sliding_blob(False), "/World/Camera", 48, settings=settings, time=1.0)
+    assert (
+        "/World/Blob"
+        in {e["name"]: e["why"] for e in deformed.stats["effects"]["enabled"]}["motion_blur"]
+    )
+    a, b = deformed.aovs["color"][..., :3], moved.aovs["color"][..., :3]
+    assert a.max() > 0.01
+    # Blurred: some pixels neither background nor fully lit.
+    assert np.count_nonzero((a[..., 0] > 0.02 * a.max()) & (a[..., 0] < 0.5 * a.max())) > 20
+    # Both see the same camera samples at the same times; they differ by the rates each
+    # tessellates at (the deforming mesh's swept boxes ask for finer ones): measured 2.5e-4 of
+    # the brightest pixel, against 1.3 for the sharp frame-time render.
+    assert np.abs(a - b).max() < 0.005 * a.max(), np.abs(a - b).max()
