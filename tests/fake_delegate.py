@@ -236,6 +236,7 @@ class FakeRenderDelegate:
         ies_angle_scale: float = 0.0,
         ies_normalize: bool = False,
         ies_down: tuple[float, float, float] = (0.0, -1.0, 0.0),
+        ies_profile_sampling: bool = False,
         portals: list[str] | None = None,
     ) -> None:
         self._set("set_light", path, dict(locals_without_self(locals())))

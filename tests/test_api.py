@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -78,3 +79,25 @@ def test_progress_callback_reaches_the_renderer(fake_native) -> None:
     with mipray.RenderSession(scene()) as session:
         session.render(width=8, progress=lambda done, total: seen.append((done, total)))
     assert seen and seen[-1][0] == seen[-1][1]
+
+
+def test_a_stage_with_nothing_to_render_says_so_once_a_session(native, caplog) -> None:
+    stage = new_stage()
+    add_camera(stage, "/World/Cam")
+    add_distant_light(stage, "/World/Sun")
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        with mipray.RenderSession(stage) as session:
+            first = session.render(width=16)
+            session.render(width=16)
+    said = [r.getMessage() for r in caplog.records if "nothing to render" in r.getMessage()]
+    assert said == [
+        "mipray: nothing to render: no gprim of the included purposes (default, render) on the "
+        "stage; the image holds only what its lights show"
+    ]
+    assert first.stats["scene"]["instances"] == 0
+    caplog.clear()
+    add_cube(stage, "/World/Cube")
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        with mipray.RenderSession(stage) as session:
+            assert session.render(width=16).stats["scene"]["instances"] == 1
+    assert not [r for r in caplog.records if "nothing to render" in r.getMessage()]

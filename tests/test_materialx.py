@@ -272,6 +272,25 @@ def test_a_whole_mtlx_document_composes_under_materials_as_usd_mtlx_lays_it_out(
     assert scene.unsupported == []
 
 
+def test_a_documents_materials_compose_as_the_referencing_prims_children(fake, tmp_path) -> None:
+    """``references = @looks.mtlx@</MaterialX/Materials>`` (usd-wg's OpenChessSet): the
+    materials at <prim>/<name>."""
+    _mtlx_file(tmp_path / "looks.mtlx", with_graph=True)
+    stage = Usd.Stage.CreateNew(str(tmp_path / "scene.usda"))
+    scope = stage.DefinePrim("/Asset/Materials", "Scope")
+    scope.GetReferences().AddReference("./looks.mtlx", "/MaterialX/Materials")
+    UsdShade.MaterialBindingAPI.Apply(quad(stage).GetPrim()).GetDirectBindingRel().SetTargets(
+        ["/Asset/Materials/Paint"]
+    )
+    stage.Save()
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    m = fake.meshes()["/World/Quad"]["material"]
+    assert m["name"] == "/Asset/Materials/Paint"
+    assert m["diffuseColor"] == pytest.approx((0.2, 0.5, 0.7))
+    assert scene.unsupported == []
+
+
 def test_an_unreadable_mtlx_file_is_named_and_the_frame_renders(native, tmp_path, caplog) -> None:
     pytest.importorskip("MaterialX")
     (tmp_path / "broken.mtlx").write_text("<materialx><not closed")

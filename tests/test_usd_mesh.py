@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
 from pxr import Gf, Sdf, UsdGeom, UsdShade
@@ -104,6 +106,19 @@ def test_scheme_is_passed_through(fake, scheme: str) -> None:
         add_cube(stage, "/M", scheme=scheme)
     sync(stage, fake)
     assert fake.meshes()["/M"]["scheme"] == scheme
+
+
+def test_a_loop_mesh_with_quads_renders_unsubdivided_with_a_warning(fake, caplog) -> None:
+    # usd-wg's subdiv_loop_quads: OpenSubdiv's Loop takes triangles only; usdrecord (Storm)
+    # draws the cube unrefined, and so does mipray, saying so.
+    stage = new_stage()
+    add_cube(stage, "/LoopCube", scheme="loop")
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = sync(stage, fake)
+    assert scene.delegate_errors == []
+    assert fake.meshes()["/LoopCube"]["scheme"] == "none"
+    said = [r.getMessage() for r in caplog.records if "/LoopCube" in r.getMessage()]
+    assert len(said) == 1 and "loop needs triangles" in said[0] and "unsubdivided" in said[0]
 
 
 def test_per_edge_crease_sharpness_is_accepted(fake) -> None:

@@ -270,8 +270,8 @@ Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d, bool bili
   return po;
 }
 
-// `single_crease` false isolates every semi-sharp crease fully, as OpenSubdiv's limit stencils
-// (the reference osd_limit_stencil_eval computes, with a patch table of their own) need.
+// `single_crease` false isolates every semi-sharp crease fully, as the references want it
+// (osd_limit_reference_eval, and OpenSubdiv's limit stencils in osd_limit_stencil_fvar_eval).
 void refine_adaptive(Far::TopologyRefiner& refiner, const OsdMeshDesc& d,
                      const FarCapture& capture, bool single_crease = true) {
   Far::TopologyRefiner::AdaptiveOptions ao = patch_options_of(d).GetRefineAdaptiveOptions();
@@ -1473,9 +1473,19 @@ static Far::LimitStencilTableFactory::LocationArrayVec location_arrays(rust::Sli
   return arrays;
 }
 
-OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
-                                       rust::Slice<const int32_t> ptex_faces,
-                                       rust::Slice<const float> u, rust::Slice<const float> v) {
+// A point of the reference's own refinement, in double: masks around high-valence vertices have
+// many small weights.
+struct RefPoint {
+  double x[3];
+  void Clear(void* = nullptr) { x[0] = x[1] = x[2] = 0.0; }
+  void AddWithWeight(const RefPoint& src, float weight) {
+    for (int i = 0; i < 3; ++i) x[i] += double(weight) * src.x[i];
+  }
+};
+
+OsdLimitSamples osd_limit_reference_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
+                                         rust::Slice<const int32_t> ptex_faces,
+                                         rust::Slice<const float> u, rust::Slice<const float> v) {
   try {
     check_desc(desc, points.size());
     if (ptex_faces.size() != u.size() || u.size() != v.size())
@@ -1484,40 +1494,65 @@ OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<cons
     RefinerPtr refiner = create_refiner(desc, capture);
     refine_adaptive(*refiner, desc, capture, false);
 
-    Far::LimitStencilTableFactory::LocationArrayVec arrays = location_arrays(ptex_faces, u, v);
-    Far::LimitStencilTableFactory::Options lo;
-    lo.generate1stDerivatives = true;
-    lo.generate2ndDerivatives = false;
-    // No stencil or patch table passed in: the factory builds its own from the refiner, so this
-    // path shares nothing with OsdMesh but the refiner's construction.
-    std::unique_ptr<const Far::LimitStencilTable> lst(
-        Far::LimitStencilTableFactory::Create(*refiner, arrays, nullptr, nullptr, lo));
-    if (!lst) capture.fail("OpenSubdiv could not build the limit stencil table");
-    capture.check("OpenSubdiv limit stencils");
-    const std::size_t n = ptex_faces.size();
-    if (std::size_t(lst->GetNumStencils()) != n)
-      throw std::runtime_error("limit stencil table has " + std::to_string(lst->GetNumStencils()) +
-                               " stencils for " + std::to_string(n) +
-                               " locations (a location fell in a hole or outside its face)");
+    // The patch table Far::LimitStencilTableFactory builds for itself when given none (its
+    // options in OpenSubdiv 3.5): Gregory end caps at every valence, no single-crease patches,
+    // infinitely sharp patches as the refiner isolated them. Not patch_options_of: the reference
+    // shares nothing with OsdMesh but the refiner's construction.
+    Far::PatchTableFactory::Options po;
+    po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+    po.useInfSharpPatch = refiner->GetAdaptiveOptions().useInfSharpPatch;
+    po.generateVaryingTables = false;
+    std::unique_ptr<const Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, po));
+    if (!table) capture.fail("OpenSubdiv could not build the reference patch table");
+    capture.check("OpenSubdiv reference patch table");
 
-    const std::vector<int>& sizes = lst->GetSizes();
-    const std::vector<Far::Index>& idx = lst->GetControlIndices();
-    const std::vector<float>& w = lst->GetWeights();
-    const std::vector<float>& wu = lst->GetDuWeights();
-    const std::vector<float>& wv = lst->GetDvWeights();
+    // The patches' control points as OpenSubdiv's far tutorials make them: every level refined
+    // from the one before (Far::PrimvarRefiner), then the end caps' local points from their
+    // stencils over the refined points. The factory's limit stencils factorize every point down
+    // to the mesh's own instead, merging weights by linear search: O(n^2) per point near a
+    // vertex of valence n, 2 min 43 s and 4.9 GB at valence 360 (docs/subdivision-compare.md).
+    const std::size_t refined = std::size_t(refiner->GetNumVerticesTotal());
+    const std::size_t local = std::size_t(std::max(table->GetNumLocalPoints(), 0));
+    const std::size_t nbase = std::size_t(desc.num_vertices);
+    std::vector<RefPoint> cv(refined + local);
+    for (std::size_t i = 0; i < nbase; ++i)
+      for (int a = 0; a < 3; ++a) cv[i].x[a] = points[3 * i + std::size_t(a)];
+    Far::PrimvarRefiner primvar(*refiner);
+    RefPoint* src = cv.data();
+    for (int level = 1; level <= refiner->GetMaxLevel(); ++level) {
+      RefPoint* dst = src + refiner->GetLevel(level - 1).GetNumVertices();
+      primvar.Interpolate(level, src, dst);
+      src = dst;
+    }
+    if (local > 0) table->ComputeLocalPointValues(cv.data(), cv.data() + refined);
+    capture.check("OpenSubdiv reference refinement");
+
+    // Each location's patch by OpenSubdiv's PatchMap and its basis by PatchTable::EvaluateBasis
+    // at the ptex face's (u, v): derivatives are per unit of the ptex face's parameters, as the
+    // limit stencils' are.
+    const Far::PatchMap map(*table);
+    const std::size_t n = ptex_faces.size();
     OsdLimitSamples out;
     out.p.reserve(3 * n);
     out.dpdu.reserve(3 * n);
     out.dpdv.reserve(3 * n);
-    std::size_t ofs = 0;
+    double w[20], wu[20], wv[20];
     for (std::size_t s = 0; s < n; ++s) {
+      const Far::PatchTable::PatchHandle* h = map.FindPatch(ptex_faces[s], u[s], v[s]);
+      if (!h)
+        throw std::runtime_error("no reference patch at ptex face " + std::to_string(ptex_faces[s]) +
+                                 " (" + std::to_string(u[s]) + ", " + std::to_string(v[s]) +
+                                 "): a location fell in a hole or outside its face");
+      const Far::ConstIndexArray cvs = table->GetPatchVertices(*h);
+      if (cvs.size() > 20) throw std::runtime_error("reference patch with more than 20 points");
+      table->EvaluateBasis(*h, double(u[s]), double(v[s]), w, wu, wv);
       double acc[3][3] = {};
-      for (int k = 0; k < sizes[s]; ++k, ++ofs) {
-        const float* c = points.data() + 3 * std::size_t(idx[ofs]);
+      for (int k = 0; k < cvs.size(); ++k) {
+        const double* c = cv[std::size_t(cvs[k])].x;
         for (int a = 0; a < 3; ++a) {
-          acc[0][a] += double(w[ofs]) * c[a];
-          acc[1][a] += double(wu[ofs]) * c[a];
-          acc[2][a] += double(wv[ofs]) * c[a];
+          acc[0][a] += w[k] * c[a];
+          acc[1][a] += wu[k] * c[a];
+          acc[2][a] += wv[k] * c[a];
         }
       }
       for (int a = 0; a < 3; ++a) {
@@ -1530,7 +1565,7 @@ OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<cons
   } catch (const std::exception&) {
     throw;
   } catch (...) {
-    throw std::runtime_error("unknown C++ exception in the limit stencil evaluation");
+    throw std::runtime_error("unknown C++ exception in the reference limit evaluation");
   }
 }
 

@@ -57,9 +57,9 @@ class OsdMesh {
 
 std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const float> points);
 
-OsdLimitSamples osd_limit_stencil_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
-                                       rust::Slice<const int32_t> ptex_faces,
-                                       rust::Slice<const float> u, rust::Slice<const float> v);
+OsdLimitSamples osd_limit_reference_eval(const OsdMeshDesc& desc, rust::Slice<const float> points,
+                                         rust::Slice<const int32_t> ptex_faces,
+                                         rust::Slice<const float> u, rust::Slice<const float> v);
 
 OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
                                             rust::Slice<const int32_t> ptex_faces,

@@ -69,7 +69,7 @@ pub(crate) mod bridge {
         face_vertex_indices: Vec<i32>,
     }
 
-    /// Limit positions and first derivatives from `Far::LimitStencilTable`, 3 floats each.
+    /// Limit positions and first derivatives from the reference paths, 3 floats each.
     #[derive(Clone, Debug, Default)]
     struct OsdLimitSamples {
         p: Vec<f32>,
@@ -215,9 +215,16 @@ pub(crate) mod bridge {
         /// short `out`.
         fn evaluate_primvar(self: &OsdMesh, vertex: bool, channel: usize, patch: usize, u: f32, v: f32, out: &mut [f32]) -> bool;
 
-        /// Reference path: a fresh refiner and `Far::LimitStencilTableFactory` at the given
-        /// (ptex face, u, v) locations.
-        fn osd_limit_stencil_eval(desc: &OsdMeshDesc, points: &[f32], ptex_faces: &[i32], u: &[f32], v: &[f32]) -> Result<OsdLimitSamples>;
+        /// Reference path: a fresh refiner and patch table with `Far::LimitStencilTableFactory`'s
+        /// options, points refined level by level, `Far::PatchMap` and `PatchTable::EvaluateBasis`
+        /// at the given (ptex face, u, v) locations.
+        fn osd_limit_reference_eval(
+            desc: &OsdMeshDesc,
+            points: &[f32],
+            ptex_faces: &[i32],
+            u: &[f32],
+            v: &[f32],
+        ) -> Result<OsdLimitSamples>;
         /// Reference path for face-varying channel `channel`: a fresh refiner and
         /// `Far::LimitStencilTableFactory` in face-varying mode at (ptex face, u, v) locations.
         /// Values and derivatives come back as 3 floats each, the third 0.

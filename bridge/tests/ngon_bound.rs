@@ -2,7 +2,7 @@
 //! bilinear end caps instead of Gregory ones (whose stencils cost the square of the valence), and
 //! says so; away from the n-gon the surface is still OpenSubdiv's exact limit.
 //!
-//! Truth: `Far::LimitStencilTable` of the same grid without the n-gon. A Catmull-Clark limit
+//! Truth: OpenSubdiv's own evaluation (`limit_reference`) of the same grid without the n-gon. A Catmull-Clark limit
 //! point depends only on the control points within two rings of its face, so faces three rows
 //! or more from the n-gon have the same limit with or without it. Tolerance 1e-5 · the grid's
 //! size (float rounding of two evaluation paths).
@@ -12,7 +12,7 @@
 
 use mipray::patch::LimitSurface;
 use mipray::topology::{BoundaryInterpolation, MeshTopology, Scheme};
-use mipray_bridge::{limit_stencil_reference, OsdOptions, OsdSurface};
+use mipray_bridge::{limit_reference, OsdOptions, OsdSurface};
 
 const N: usize = 10;
 
@@ -71,7 +71,7 @@ fn a_1024_gon_gets_bilinear_end_caps_and_stays_exact_away_from_it() {
         }
     }
 
-    // Rows 3.. of the grid against OpenSubdiv's limit stencils of the grid alone.
+    // Rows 3.. of the grid against OpenSubdiv's evaluation of the grid alone.
     let (grid, grid_points) = grid_with_ngon(None);
     let mut locations = Vec::new();
     for j in 3..N {
@@ -81,7 +81,7 @@ fn a_1024_gon_gets_bilinear_end_caps_and_stays_exact_away_from_it() {
             }
         }
     }
-    let truth = limit_stencil_reference("grid", &grid, &grid_points, &OsdOptions::default(), &locations).unwrap();
+    let truth = limit_reference("grid", &grid, &grid_points, &OsdOptions::default(), &locations).unwrap();
     let mut worst = 0.0f32;
     for (&(face, u, v), t) in locations.iter().zip(&truth) {
         let got = surface.limit_at(face, u, v).expect("a grid face has a patch").p;

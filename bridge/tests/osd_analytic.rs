@@ -11,7 +11,7 @@ use glam::Vec3A;
 use mipray::error::MeshError;
 use mipray::patch::{GridSamples, LimitSurface, PatchKind, UvRect};
 use mipray::topology::{BoundaryInterpolation, MeshTopology, Scheme};
-use mipray_bridge::{OsdOptions, OsdSurface};
+use mipray_bridge::{limit_reference, OsdOptions, OsdSurface};
 
 /// An n×n grid of quads (or of triangle pairs) on the plane z = 0.3x − 0.2y + 1.
 fn plane_grid(n: usize, scheme: Scheme) -> (MeshTopology, Vec<[f32; 3]>) {
@@ -307,6 +307,30 @@ fn quad_pole(n: usize) -> (MeshTopology, Vec<[f32; 3]>) {
     let q = |i: usize| (2 + 2 * (i % n)) as i32;
     let idx: Vec<i32> = (0..n).flat_map(|i| [0, r(i), q(i), r(i + 1)]).collect();
     (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; n], face_vertex_indices: idx, ..Default::default() }, pts)
+}
+
+/// Issue 15: OpenSubdiv's own evaluation (`limit_reference`, the truth of the subdivision
+/// comparisons) at a pole of valence 360, where the limit stencils it replaced took minutes. At
+/// the pole every face's corner is the pole's limit point, which Catmull-Clark's limit mask gives
+/// in closed form: (n²·c + 4·Σ ring + Σ diagonals) / (n(n + 5)) for an interior vertex c of
+/// valence n. The disk is symmetric about the z axis, so the normal there is ±z.
+#[test]
+fn the_reference_at_a_pole_of_valence_360_is_the_limit_mask_s_point() {
+    let n = 360;
+    let (t, p) = quad_pole(n);
+    let c = |i: usize| glam::DVec3::from(p[i].map(f64::from));
+    let ring: glam::DVec3 = (0..n).map(|i| c(1 + 2 * i)).sum();
+    let diagonals: glam::DVec3 = (0..n).map(|i| c(2 + 2 * i)).sum();
+    let nf = n as f64;
+    let limit = (nf * nf * c(0) + 4.0 * ring + diagonals) / (nf * (nf + 5.0));
+    let corners: Vec<(u32, f32, f32)> = (0..n as u32).map(|f| (f, 0.0, 0.0)).collect();
+    let reference = limit_reference("/pole", &t, &p, &OsdOptions::DEFAULT, &corners).unwrap();
+    for (f, r) in reference.iter().enumerate() {
+        let off = (r.p.as_dvec3() - limit).length();
+        assert!(off < 1e-6, "face {f}: {} is {off:e} from the limit point {limit}", r.p);
+        let normal = r.dpdu.cross(r.dpdv).normalize();
+        assert!(normal.z.abs() > 1.0 - 1e-6, "face {f}: normal {normal} at the pole");
+    }
 }
 
 /// Issue 15: a vertex of high valence costs memory in proportion to its patches. OpenSubdiv's

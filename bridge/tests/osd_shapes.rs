@@ -1,15 +1,15 @@
 //! OpenSubdiv's regression shapes, table-driven, one summary line per shape.
 //!
 //! For every shape in `shared/osd-shapes`, our patches ([`OsdSurface::evaluate`] at a grid of each
-//! patch's own (u, v)) are compared with OpenSubdiv's `Far::LimitStencilTable` evaluated at the
+//! patch's own (u, v)) are compared with OpenSubdiv's own evaluation ([`limit_reference`]) at the
 //! same (ptex face, u, v) through [`PatchParam::to_face_uv`] — an independent path (its own
-//! refiner, patch table, stencils and `PatchMap`). Tolerances, relative to the control mesh's
-//! bounding-box diagonal `diag`:
+//! refiner, patch table with the limit stencils' options, `PatchMap` and `EvaluateBasis`).
+//! Tolerances, relative to the control mesh's bounding-box diagonal `diag`:
 //!
 //! | check | tolerance |
 //! |---|---|
-//! | position vs limit stencils | 1e-5 · diag |
-//! | first derivatives vs limit stencils (mapped to the ptex face) | 1e-4 · (diag + max abs derivative) |
+//! | position vs OpenSubdiv's evaluation | 1e-5 · diag |
+//! | first derivatives vs OpenSubdiv's (mapped to the ptex face) | 1e-4 · (diag + max abs derivative) |
 //! | `evaluate_grid` and `evaluate_points` vs `evaluate` | 1e-6 · diag |
 //! | first derivatives vs central differences (h = 1e-2) | 2e-3 · (local derivative scale) + rounding floor |
 //! | second derivatives vs differences of first (h = 1e-2) | 2e-2 · (local second + first derivative scale) + rounding floor |
@@ -29,7 +29,7 @@ use glam::Vec3A;
 use mipray::obj_shape::{corpus_dir, corpus_paths, parse_obj_shape, CreaseMethod, ObjShape};
 use mipray::patch::{GridSamples, LimitSurface, PatchKind, UvRect};
 use mipray::topology::Scheme;
-use mipray_bridge::{limit_stencil_reference, OsdOptions, OsdSurface};
+use mipray_bridge::{limit_reference, OsdOptions, OsdSurface};
 
 /// Shapes that must be present and pass.
 const REQUIRED: &[&str] = &[
@@ -194,8 +194,7 @@ fn check_shape(shape: &ObjShape) -> Result<(Stats, Ratios), String> {
         }
     }
 
-    let reference =
-        limit_stencil_reference(name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, &locations).map_err(|e| e.to_string())?;
+    let reference = limit_reference(name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, &locations).map_err(|e| e.to_string())?;
     let mut max_deriv = 0.0f32;
     for r in &reference {
         max_deriv = max_deriv.max(max_abs(r.dpdu)).max(max_abs(r.dpdv));

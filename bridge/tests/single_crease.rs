@@ -1,7 +1,7 @@
 //! Single-crease patches (`Impl::crease_basis` in cpp/osd.cpp): a regular face along a straight
 //! semi-sharp crease is one patch, which the bridge evaluates itself (OpenSubdiv's CPU basis
-//! ignores the sharpness). Checked against OpenSubdiv's limit stencils of the fully isolated
-//! mesh (`limit_stencil_reference`), on a bumpy grid with a crease across it, for integer and
+//! ignores the sharpness). Checked against OpenSubdiv's own evaluation of the fully isolated
+//! mesh (`limit_reference`), on a bumpy grid with a crease across it, for integer and
 //! fractional sharpness, on each of the four edges a crease can take in a patch.
 //!
 //! Tolerances: positions 1e-6 · the control mesh's diagonal (rounding is ~1e-7); first
@@ -14,7 +14,7 @@
 use glam::Vec3A;
 use mipray::patch::{GridSamples, LimitSurface, UvRect};
 use mipray::topology::{BoundaryInterpolation, MeshTopology, Scheme};
-use mipray_bridge::{limit_stencil_reference, OsdOptions, OsdSurface};
+use mipray_bridge::{limit_reference, OsdOptions, OsdSurface};
 
 /// An n×n grid of quads with a bumpy height, and a crease along the grid line x = `line` (or
 /// y = `line` when `along_x`) from one boundary to the other.
@@ -106,7 +106,7 @@ fn single_crease_patches_match_the_fully_isolated_limit() {
                     }
                 }
             }
-            let reference = limit_stencil_reference("creased", &topology, &points, &OsdOptions::DEFAULT, &locations).unwrap();
+            let reference = limit_reference("creased", &topology, &points, &OsdOptions::DEFAULT, &locations).unwrap();
             let max_deriv = reference.iter().fold(0.0f32, |m, r| m.max(r.dpdu.abs().max_element()).max(r.dpdv.abs().max_element()));
             let (mut pos, mut du) = (0.0f32, 0.0f32);
             for ((sp, size, interior), r) in ours.iter().zip(&reference) {
@@ -116,8 +116,8 @@ fn single_crease_patches_match_the_fully_isolated_limit() {
                 }
             }
             let what = format!("sharpness {sharpness}, crease along {}", if along_x { "x" } else { "y" });
-            assert!(pos <= 1e-6 * diag, "{what}: position {pos:e} off the limit stencils (diagonal {diag})");
-            assert!(du <= 1e-5 * (diag + max_deriv), "{what}: derivative {du:e} off the limit stencils");
+            assert!(pos <= 1e-6 * diag, "{what}: position {pos:e} off OpenSubdiv's evaluation (diagonal {diag})");
+            assert!(du <= 1e-5 * (diag + max_deriv), "{what}: derivative {du:e} off OpenSubdiv's evaluation");
             assert!(out_of_bounds <= 1e-6 * diag, "{what}: a point {out_of_bounds:e} outside its patch's bounds");
 
             // A grid (the bridge contracts a crease patch's rows once, as a regular patch's)

@@ -77,6 +77,9 @@ pub struct IesData {
     /// Render space's down (unit; the stage's up axis negated): a tilt table is read at the
     /// angle between the light's aim and it.
     pub down: [f32; 3],
+    /// `mipray:iesProfileSampling`: directions drawn by the profile
+    /// ([`mipray::light::Light::profile_sampling`]).
+    pub profile_sampling: bool,
 }
 
 impl IesData {
@@ -90,7 +93,7 @@ impl IesData {
         let profile = std::fs::read(file)
             .map_err(|e| e.to_string())
             .and_then(|bytes| mipray::light::IesProfile::parse_with(&String::from_utf8_lossy(&bytes), &tilt_file));
-        IesData { file: file.to_string(), profile, angle_scale, normalize, down }
+        IesData { file: file.to_string(), profile, angle_scale, normalize, down, profile_sampling: false }
     }
 }
 
@@ -216,17 +219,22 @@ impl LightPrim {
                         }
                     }
                     let down = Vec3A::from(ies.down).normalize_or(Vec3A::NEG_Y);
+                    let aim = axis.normalize_or(Vec3A::NEG_Z);
+                    let x = m.transform_vector3a(Vec3A::X).normalize_or(Vec3A::X);
+                    // LM-63's lamp-to-luminaire geometry says which tilt the table is read at.
+                    let tilt = profile.tilt.as_ref().map_or(0.0, |t| t.tilt_angle(aim, x, down));
                     let shaping = mipray::light::IesShaping {
                         profile: profile.clone(),
                         file: ies.file.clone(),
                         // UsdLux: the scale must stay above −1 (1 + s divides θ).
                         angle_scale: if ies.angle_scale.is_finite() { ies.angle_scale.max(-0.99) } else { 0.0 },
                         normalize: ies.normalize,
-                        x: m.transform_vector3a(Vec3A::X).normalize_or(Vec3A::X),
+                        x,
                         y: m.transform_vector3a(Vec3A::Y).normalize_or(Vec3A::Y),
-                        tilt: axis.normalize_or(Vec3A::NEG_Z).dot(down).clamp(-1.0, 1.0).acos(),
+                        tilt,
                     };
                     l.shaping = Some(mipray::light::Shaping::with_ies(l.shaping.take(), axis, shaping));
+                    l.profile_sampling = ies.profile_sampling;
                 }
                 Some((ies, Err(e))) => {
                     let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());
@@ -356,8 +364,23 @@ pub struct MeshLightData {
     pub shadow_enable: bool,
     pub links: LinkData,
     /// UsdLux `materialGlowTintsLight` with a bound material mipray reads: the material's
-    /// `emissiveColor` multiplies `color` (the USD front end decides, `material_tint`).
+    /// `emissiveColor` multiplies `color` (the USD front end decides, `material_tint`) on the
+    /// faces no GeomSubset in `tint_materials` binds.
     pub tint: bool,
+    /// Under `materialGlowTintsLight`, the GeomSubsets' materials (among the mesh's face
+    /// materials, by name) whose `emissiveColor` tints their own faces.
+    pub tint_materials: Vec<String>,
+}
+
+/// What an emissive mesh's faces emit, as a factor of its light's colour (UsdLux
+/// `materialGlowTintsLight`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum MeshEmitters {
+    /// Every face the same (1 without a tinting material).
+    Uniform(Vec3A),
+    /// Per control face (USD face order), an index into `emitters`; textures read the
+    /// surface's 2-float primvar channel `st_channel` (`None`: the mesh has no `st`).
+    PerFace { emitters: Vec<mipray::light::Emitter>, per_face: Vec<u32>, st_channel: Option<usize> },
 }
 
 /// Vertices per side of the grid each patch of an emissive subdivision surface (or gprim) is
@@ -369,39 +392,69 @@ pub const MESH_LIGHT_GRID: usize = 5;
 /// vectors), oriented so their right-hand normals point out of the front face: USD's
 /// right-handed winding, flipped for `left_handed` and for a transform that mirrors.
 pub fn light_triangles(surface: &dyn mipray::patch::LimitSurface, transform: &Mat4, left_handed: bool, grid: usize) -> Vec<[Vec3A; 3]> {
+    tessellate_light(surface, transform, left_handed, grid, None).0
+}
+
+/// The triangles of [`light_triangles`] with, per triangle, its control face and (when
+/// `st_channel` is given and the surface has it) the 2-float primvar at its vertices.
+#[allow(clippy::type_complexity)]
+fn tessellate_light(
+    surface: &dyn mipray::patch::LimitSurface,
+    transform: &Mat4,
+    left_handed: bool,
+    grid: usize,
+    st_channel: Option<usize>,
+) -> (Vec<[Vec3A; 3]>, Vec<u32>, Vec<[[f32; 2]; 3]>) {
     let n = grid.max(2);
     let flip = left_handed != (transform.determinant() < 0.0);
     let mut out = Vec::with_capacity(surface.patch_count() * 2 * (n - 1) * (n - 1));
+    let mut faces = Vec::with_capacity(out.capacity());
+    let mut st = Vec::new();
     let mut g = mipray::patch::GridSamples::default();
+    let rect = mipray::patch::UvRect::UNIT;
     for patch in 0..surface.patch_count() {
-        surface.evaluate_grid(patch, mipray::patch::UvRect::UNIT, n, false, &mut g);
+        surface.evaluate_grid(patch, rect, n, false, &mut g);
+        let face = surface.patch_param(patch).base_face;
         let at = |i: usize, j: usize| transform.transform_point3a(Vec3A::from(g.p[j * n + i]));
+        let st_at = |i: usize, j: usize| {
+            let (u, v) = rect.grid_uv(i, j, n);
+            st_channel.and_then(|c| surface.face_varying(c, patch, u, v)).map(|(x, ..)| x)
+        };
         for j in 0..n - 1 {
             for i in 0..n - 1 {
                 let (p00, p10, p11, p01) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                let corners = [st_at(i, j), st_at(i + 1, j), st_at(i + 1, j + 1), st_at(i, j + 1)];
                 // u then v: dP/du × dP/dv is the patch's front normal.
-                for t in [[p00, p10, p11], [p00, p11, p01]] {
+                for (t, k) in [([p00, p10, p11], [0, 1, 2]), ([p00, p11, p01], [0, 2, 3])] {
+                    let k = if flip { [k[0], k[2], k[1]] } else { k };
                     out.push(if flip { [t[0], t[2], t[1]] } else { t });
+                    faces.push(face);
+                    if let [Some(a), Some(b), Some(c)] = k.map(|x| corners[x]) {
+                        st.push([a, b, c]);
+                    }
                 }
             }
         }
     }
-    out
+    if st.len() != out.len() {
+        st.clear();
+    }
+    (out, faces, st)
 }
 
 /// The core light an emissive mesh `name` makes: its surface's triangles ([`light_triangles`],
 /// polygonal meshes at their corners, others at [`MESH_LIGHT_GRID`]) emitting
-/// `tint · color · intensity · 2^exposure` as radiance from their front (both sides when
-/// `double_sided`), divided by their area with `normalize` (UsdLux; `tint` is the bound
-/// material's emission under `materialGlowTintsLight`, else 1). `transform` places it
-/// (object to render); with `motion` it moves instead ([`mipray::light::TriangleLight::moving`]: `transform`
-/// is then ignored and the emission follows each ray's time). `None` when the surface has no
-/// area.
+/// `emitters · color · intensity · 2^exposure` as radiance from their front (both sides when
+/// `double_sided`), divided by their area with `normalize` (UsdLux; `emitters` are the bound
+/// materials' emission under `materialGlowTintsLight`, per face, else 1). `transform` places
+/// it (object to render); with `motion` it moves instead
+/// ([`mipray::light::TriangleLight::moving`]: `transform` is then ignored and the emission
+/// follows each ray's time). `None` when the surface has no area.
 #[allow(clippy::too_many_arguments)]
 pub fn mesh_light(
     name: &str,
     light: &MeshLightData,
-    tint: Vec3A,
+    emitters: &MeshEmitters,
     surface: &dyn mipray::patch::LimitSurface,
     polygonal: bool,
     transform: &Mat4,
@@ -410,16 +463,25 @@ pub fn mesh_light(
     double_sided: bool,
 ) -> Option<Light> {
     let grid = if polygonal { 2 } else { MESH_LIGHT_GRID };
-    let tris = match motion {
-        Some(motion) => mipray::light::TriangleLight::moving(
-            light_triangles(surface, &Mat4::IDENTITY, left_handed, grid),
-            double_sided,
-            motion.clone(),
-        )?,
-        None => mipray::light::TriangleLight::new(light_triangles(surface, transform, left_handed, grid), double_sided)?,
-    };
     let f = |x: f32| if x.is_finite() { x } else { 0.0 };
-    let color = Vec3A::from(light.color.map(f)) * Vec3A::from(tint.to_array().map(|x| f(x).max(0.0)));
+    let place = if motion.is_some() { Mat4::IDENTITY } else { *transform };
+    let (tris, tint) = match emitters {
+        MeshEmitters::Uniform(tint) => {
+            let tris = light_triangles(surface, &place, left_handed, grid);
+            let tris = match motion {
+                Some(motion) => mipray::light::TriangleLight::moving(tris, double_sided, motion.clone())?,
+                None => mipray::light::TriangleLight::new(tris, double_sided)?,
+            };
+            (tris, Vec3A::from(tint.to_array().map(|x| f(x).max(0.0))))
+        }
+        MeshEmitters::PerFace { emitters, per_face, st_channel } => {
+            let (tris, faces, st) = tessellate_light(surface, &place, left_handed, grid, *st_channel);
+            let per_triangle = faces.iter().map(|&face| per_face.get(face as usize).copied().unwrap_or(u32::MAX)).collect();
+            let emission = mipray::light::MeshEmission { emitters: emitters.clone(), per_triangle, st };
+            (mipray::light::TriangleLight::with_emission(tris, double_sided, motion.cloned(), emission)?, Vec3A::ONE)
+        }
+    };
+    let color = Vec3A::from(light.color.map(f)) * tint;
     let mut l = Light::usd_area(name, LightShape::Mesh(tris), f(light.intensity), f(light.exposure), color, light.normalize);
     l.casts_shadows = light.shadow_enable;
     Some(l)

@@ -402,7 +402,7 @@ impl RenderDelegate {
             *count.entry(path).or_default() += 1;
         }
         let mut seen: HashMap<&str, usize> = HashMap::new();
-        let mut tints: HashMap<&str, Vec3A> = HashMap::new();
+        let mut tints: HashMap<&str, crate::light::MeshEmitters> = HashMap::new();
         for &(path, transform) in places {
             let Some(m) = self.meshes.get(path) else { continue };
             let k = seen.entry(path).or_default();
@@ -412,7 +412,7 @@ impl RenderDelegate {
             let polygonal = matches!(surface, crate::mesh::Surface::Bilinear(_));
             let limit = surface.as_limit_surface();
             let d = &m.data;
-            let tint = *tints.entry(path).or_insert_with(|| if data.tint { self.emission_tint(path, d) } else { Vec3A::ONE });
+            let tint = tints.entry(path).or_insert_with(|| self.mesh_emitters(path, d, data));
             // As for geometry: only a mesh placed on its own moves, and a prototype's sits in its
             // prototype's space (instance × mesh transform).
             let motion = m.motion.as_deref().filter(|_| transform == Mat4::IDENTITY);
@@ -442,32 +442,73 @@ impl RenderDelegate {
         out
     }
 
-    /// What mesh light `path`'s bound material multiplies its colour by (UsdLux
-    /// `materialGlowTintsLight`): its UsdPreviewSurface's `emissiveColor`, UsdPreviewSurface's
-    /// fallback black when unauthored (the light then emits nothing: one warning). A textured
-    /// `emissiveColor` tints the whole light by its texture's mean (its coarsest MIP level,
-    /// times scale plus bias; a `<UDIM>` set's first tile), with one warning, since the light's
-    /// emission does not vary over its surface; an unreadable one by its `fallback`.
-    fn emission_tint(&self, path: &str, data: &crate::mesh::MeshData) -> Vec3A {
-        let Some(inputs) = &data.material else { return Vec3A::ONE };
+    /// What mesh light `path`'s faces emit as a factor of its colour (UsdLux
+    /// `materialGlowTintsLight`): on faces a GeomSubset in `light.tint_materials` binds, that
+    /// material's emission; on the others the mesh's own material's when `light.tint`, else 1
+    /// ([`Delegate::emitter`]). Uniform when every face emits the same constant.
+    fn mesh_emitters(&self, path: &str, data: &crate::mesh::MeshData, light: &crate::light::MeshLightData) -> crate::light::MeshEmitters {
+        use crate::light::MeshEmitters;
+        use mipray::light::Emitter;
+        let st_channel = data.st.as_ref().map(|_| data.channels().st);
+        let own = match (&data.material, light.tint) {
+            (Some(inputs), true) => self.emitter(path, inputs, st_channel),
+            _ => Emitter::Color(Vec3A::ONE),
+        };
+        let subsets = data
+            .face_materials
+            .as_ref()
+            .filter(|fm| !light.tint_materials.is_empty() && fm.materials.iter().any(|m| light.tint_materials.contains(&m.name)));
+        let Some(fm) = subsets else {
+            return match own {
+                Emitter::Color(c) => MeshEmitters::Uniform(c),
+                texture => MeshEmitters::PerFace { emitters: vec![texture], per_face: vec![0; data.face_count()], st_channel },
+            };
+        };
+        // 0: the mesh's own; 1: faces whose material does not tint (the light's colour alone).
+        let own_name = data.material.as_ref().filter(|_| light.tint).map(|m| m.name.as_str());
+        let mut emitters = vec![own, Emitter::Color(Vec3A::ONE)];
+        let slots: Vec<u32> = fm
+            .materials
+            .iter()
+            .map(|m| {
+                if light.tint_materials.contains(&m.name) {
+                    emitters.push(self.emitter(path, m, st_channel));
+                    emitters.len() as u32 - 1
+                } else if Some(m.name.as_str()) == own_name {
+                    0
+                } else {
+                    1
+                }
+            })
+            .collect();
+        let per_face = fm.indices.iter().map(|&i| if i < 0 { 0 } else { slots[i as usize] }).collect();
+        MeshEmitters::PerFace { emitters, per_face, st_channel }
+    }
+
+    /// What material `inputs` makes mesh light `path`'s faces emit: its UsdPreviewSurface's
+    /// `emissiveColor`, UsdPreviewSurface's fallback black when unauthored (those faces then
+    /// emit nothing: one warning), or its texture read at each point's `st` (the texture's
+    /// `fallback` where it cannot be read, or where the mesh has no `st`: warned).
+    fn emitter(&self, path: &str, inputs: &SurfaceInputs, st_channel: Option<usize>) -> mipray::light::Emitter {
+        use mipray::light::Emitter;
         let tint = match inputs.textures.iter().find(|(i, _)| *i == Input::EmissiveColor) {
             Some((input, tex)) => match self.textured_color(path, *input, tex) {
-                Some(t) => {
-                    self.warn_once(
-                        format!("{path} textured tint"),
-                        format!(
-                            "{path}: the mesh light's emissiveColor texture {} tints it by the texture's mean (a mesh light's emission does not vary over it)",
-                            tex.file
-                        ),
-                    );
-                    let mut rgb = [0.0f32; 3];
-                    // Filter widths of the whole image: its coarsest level, the mean.
-                    if t.sampler.sample(t.texture, [0.5, 0.5], [1.0, 0.0], [0.0, 1.0], &t.lookup, &mut rgb) {
-                        Vec3A::from(rgb) * t.scale + t.bias
-                    } else {
+                Some(mut t) => match st_channel {
+                    Some(channel) => {
+                        t.st_channel = channel;
+                        return Emitter::Texture(t);
+                    }
+                    None => {
+                        self.warn_once(
+                            format!("{path} no st light"),
+                            format!(
+                                "{path}: the mesh light's emissiveColor texture {} has no st to read; it emits the texture's fallback",
+                                tex.file
+                            ),
+                        );
                         t.fallback
                     }
-                }
+                },
                 None => tex.affine(*input).2,
             },
             None => inputs.surface.emissive_color,
@@ -475,14 +516,14 @@ impl RenderDelegate {
         let tint = if tint.is_finite() { tint.max(Vec3A::ZERO) } else { Vec3A::ZERO };
         if tint.max_element() <= 0.0 {
             self.warn_once(
-                format!("{path} black tint"),
+                format!("{path} black tint {}", inputs.name),
                 format!(
-                    "{path}: light:materialSyncMode is materialGlowTintsLight and material {}'s emissiveColor is black, so the mesh light emits nothing (author emissiveColor, or materialSyncMode independent)",
+                    "{path}: light:materialSyncMode is materialGlowTintsLight and material {}'s emissiveColor is black, so the mesh light emits nothing from the faces bound to it (author emissiveColor, or materialSyncMode independent)",
                     inputs.name
                 ),
             );
         }
-        tint
+        Emitter::Color(tint)
     }
 
     /// The texture `tex` feeding UsdPreviewSurface input `input`, or `None` (warned once,

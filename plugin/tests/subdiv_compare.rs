@@ -3,7 +3,7 @@
 //!
 //! | check | tolerance |
 //! |---|---|
-//! | limit positions vs `Far::LimitStencilTable` | 1e-5 × bounding-box diagonal |
+//! | limit positions vs OpenSubdiv's own evaluation (`limit_reference`) | 1e-5 × bounding-box diagonal |
 //! | limit normals vs the stencils', inside patches | 0.05° beyond rounding (16 ulps of \|P\| over the shorter derivative) |
 //! | tessellation error shrinks with the rate (16 vs 1 quads a side) | strictly smaller, or both ≤ 1e-6 |
 //! | watertight (shared edges agree, seams cover every rate pair) | true |

@@ -330,6 +330,7 @@ class RenderDelegate:
         ies_angle_scale: float = 0.0,
         ies_normalize: bool = False,
         ies_down: tuple[float, float, float] = ...,  # (0, -1, 0)
+        ies_profile_sampling: bool = False,
         portals: list[str] | None = None,
     ) -> None:
         """Add or replace a UsdLux light of any kind (an Sprim).
@@ -351,8 +352,10 @@ class RenderDelegate:
         shape nothing); ``ies_file``, ``ies_angle_scale`` and ``ies_normalize``
         are its IES profile (LM-63, photometric types A, B and C, tilt tables
         read at the angle between the light's aim and ``ies_down``, the
-        stage's down: a file that cannot be read or parsed is named in one
-        warning and the light renders without it); ``unlit`` and
+        stage's down, as the table's lamp-to-luminaire geometry defines the
+        tilt: a file that cannot be read or parsed is named in one warning
+        and the light renders without it; ``ies_profile_sampling`` draws
+        directions by the profile, off by default); ``unlit`` and
         ``no_shadow`` name the mesh prims the light's light- and
         shadow-linking collections leave out.
 

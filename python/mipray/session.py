@@ -366,6 +366,8 @@ class RenderSession:
             purposes=chosen,
         )
         self.scene.watch()
+        # Said once a session: a stage with nothing to render (see `render`).
+        self._said_empty = False
 
     def close(self) -> None:
         """Stop following edits to the stage."""
@@ -498,6 +500,15 @@ class RenderSession:
         except json.JSONDecodeError:
             _log.warning("mipray: the renderer returned stats that are not JSON")
             stats = {}
+        if stats.get("scene", {}).get("instances") == 0 and not self._said_empty:
+            # A layer of cameras or looks alone, a mask or purposes that leave nothing: say so,
+            # rather than hand back an empty image as if it were the render.
+            self._said_empty = True
+            _log.warning(
+                "mipray: nothing to render: no gprim of the included purposes (%s) on the stage; "
+                "the image holds only what its lights show",
+                ", ".join(self.scene.purposes),
+            )
         # Everything authored that the image lacks (mipray.usd.unsupported), listed in the stats.
         stats["unsupported"] = [u.as_dict() for u in self.scene.unsupported]
         # Every prim left out, one line each: those the scene delegate could not send (bad

@@ -475,8 +475,9 @@ impl RenderDelegate {
     /// ShapingAPI on sphere, rect and disk lights (the defaults shape nothing); ``unlit`` and
     /// ``no_shadow`` the mesh prims its light- and shadow-linking collections leave out.
     /// ``ies_file``, ``ies_angle_scale``, ``ies_normalize``: its IES profile; ``ies_down``: the
-    /// stage's down in render space, at whose angle from the light's aim a tilt table is read.
-    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false, ies_down=(0.0, -1.0, 0.0), portals=None))]
+    /// stage's down in render space, from which a tilt table's tilt is taken (by its
+    /// lamp-to-luminaire geometry); ``ies_profile_sampling``: directions drawn by the profile.
+    #[pyo3(signature = (path, *, kind, transform, intensity=1.0, exposure=0.0, color=(1.0, 1.0, 1.0), normalize=false, shadow_enable=true, angle=0.53, radius=0.5, width=1.0, height=1.0, texture=None, length=1.0, cone_angle=180.0, cone_softness=0.0, focus=0.0, focus_tint=(0.0, 0.0, 0.0), unlit=Vec::new(), no_shadow=Vec::new(), ies_file=None, ies_angle_scale=0.0, ies_normalize=false, ies_down=(0.0, -1.0, 0.0), ies_profile_sampling=false, portals=None))]
     #[allow(clippy::too_many_arguments)]
     fn set_light(
         &mut self,
@@ -504,6 +505,7 @@ impl RenderDelegate {
         ies_angle_scale: f32,
         ies_normalize: bool,
         ies_down: (f32, f32, f32),
+        ies_profile_sampling: bool,
         portals: Option<Vec<String>>,
     ) -> PyResult<()> {
         let vals = [
@@ -560,7 +562,10 @@ impl RenderDelegate {
             cone_softness,
             focus,
             focus_tint: [focus_tint.0, focus_tint.1, focus_tint.2],
-            ies: ies_file.map(|file| IesData::read(&file, ies_angle_scale, ies_normalize, [ies_down.0, ies_down.1, ies_down.2])),
+            ies: ies_file.map(|file| IesData {
+                profile_sampling: ies_profile_sampling,
+                ..IesData::read(&file, ies_angle_scale, ies_normalize, [ies_down.0, ies_down.1, ies_down.2])
+            }),
         });
         self.inner.set_light(LightPrim { path: path.to_string(), data, area: Some(area), shaping, links });
         Ok(())
@@ -685,8 +690,9 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
 /// shape's sizes (`radius`, `size`, `radius_bottom`, `radius_top`, `height`, `width`,
 /// `length`, `axis`; `widths` for Points). Sizes are checked here, so a bad one names the prim.
 /// `set_mesh`'s ``light``: ``{"intensity", "exposure", "color", "normalize", "shadow_enable",
-/// "unlit", "no_shadow", "tint"}``, every key optional (UsdLux's fallbacks; no links; `tint`:
-/// the bound material's emission tints the light, default false).
+/// "unlit", "no_shadow", "tint", "tint_materials"}``, every key optional (UsdLux's fallbacks;
+/// no links; `tint`: the bound material's emission tints the light, default false;
+/// `tint_materials`: the GeomSubsets' materials, by name, whose emission tints their faces).
 fn read_mesh_light(path: &str, d: &Bound<'_, PyDict>) -> PyResult<MeshLightData> {
     fn get<'py, T: for<'a> FromPyObject<'a, 'py>>(path: &str, d: &Bound<'py, PyDict>, key: &str, default: T) -> PyResult<T> {
         match d.get_item(key)? {
@@ -703,6 +709,7 @@ fn read_mesh_light(path: &str, d: &Bound<'_, PyDict>) -> PyResult<MeshLightData>
         shadow_enable: get(path, d, "shadow_enable", true)?,
         links: LinkData { unlit: get(path, d, "unlit", Vec::new())?, no_shadow: get(path, d, "no_shadow", Vec::new())? },
         tint: get(path, d, "tint", false)?,
+        tint_materials: get(path, d, "tint_materials", Vec::new())?,
     };
     if ![l.intensity, l.exposure, l.color[0], l.color[1], l.color[2]].iter().all(|v| v.is_finite()) {
         return Err(value_error(path, "light inputs must be finite"));
@@ -1154,8 +1161,8 @@ fn version() -> &'static str {
     env!("CARGO_PKG_VERSION")
 }
 
-/// Compares a mesh's subdivision surface with OpenSubdiv's (limit evaluation against its
-/// LimitStencilTable, tessellations per tier, rate and split, seams, uniform refinement): the
+/// Compares a mesh's subdivision surface with OpenSubdiv's (limit evaluation against its own
+/// patch table's, tessellations per tier, rate and split, seams, uniform refinement): the
 /// report as one JSON object, or as a readable table with `table=True`. The mesh is an OBJ in
 /// OpenSubdiv's regression-shape format (`obj_text`) or USD's mesh attributes (as `set_mesh`
 /// takes them). `heatmap` writes a picture of the tessellation error at `heatmap_rate` quads a

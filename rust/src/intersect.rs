@@ -6,7 +6,7 @@
 //! that share it, so rays never slip between quads of one grid. All of it runs in object space:
 //! the ray is not renormalised, so t means the same thing as in render space.
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4, Vec4Swizzles};
 
 use crate::bounds::Bounds3;
 use crate::tessellate::{GridDomain, Tessellation};
@@ -148,6 +148,16 @@ impl WatertightRay {
         Sheared { x: (p[self.kx] - o[self.kx]) - self.sx * az, y: (p[self.ky] - o[self.ky]) - self.sy * az, z: self.sz * az }
     }
 
+    /// [`Self::shear`] of four points, one a lane: the same operations in each lane, so the
+    /// same bits. Returns the sheared x, y and z.
+    #[inline(always)]
+    fn shear4(&self, p: [&[f32; 3]; 4]) -> (Vec4, Vec4, Vec4) {
+        let o: &[f32; 3] = self.o.as_ref();
+        let axis = |k: usize| Vec4::new(p[0][k], p[1][k], p[2][k], p[3][k]) - Vec4::splat(o[k]);
+        let az = axis(self.kz);
+        (axis(self.kx) - Vec4::splat(self.sx) * az, axis(self.ky) - Vec4::splat(self.sy) * az, Vec4::splat(self.sz) * az)
+    }
+
     /// The rest of the watertight test for sheared `a`, `b`, `c` whose edge functions
     /// `u = edge(c, b)`, `v = edge(a, c)`, `w = edge(b, a)` the caller computed (a grid computes
     /// each of its edges' once and shares it, negated, with the neighbouring triangle: the same
@@ -214,6 +224,8 @@ const MAX_ROW: usize = 17;
 /// Each vertex is sheared into the ray's frame once per call (not once per triangle that uses
 /// it) and the diagonal's edge function is shared by a quad's two triangles: the arithmetic of
 /// every triangle is what [`WatertightRay::hit_triangle`] does, so the hits are the same bits.
+/// Four quads are tested at once ([`candidates`]) for the sign test that rejects nearly all of
+/// them; the few that pass go on, one at a time, to the rest of the scalar test.
 #[allow(clippy::too_many_arguments)]
 fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
@@ -229,16 +241,19 @@ fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     if i1 <= i0 || j1 <= j0 {
         return;
     }
-    // Row buffers sized to the rows tested: most calls test a 1-quad coarse grid or a 4×4
-    // sub-box, and filling two 17-vertex buffers for them was over a third of the call's
-    // instructions (callgrind: docs/throughput-callgrind.md). The widths a tier's grid or
-    // sub-box makes: 2, 3, 5, 9, 17.
+    // Row buffers sized to the rows tested: most calls test a 1-quad coarse grid, a 2×2 (a
+    // medium grid at stride 2) or a 4×4 sub-box, and filling two 17-vertex buffers for them was
+    // over a third of the call's instructions (callgrind: docs/throughput-callgrind.md). Rows of
+    // one or two quads are tested two rows at a time, so that a 2×2 fills the four lanes; a
+    // lone quad has its own lane layout.
+    if i1 - i0 == 1 && j1 - j0 == 1 {
+        return hit_one_quad(ray, tess, stride, i0, j0, t_min, best, t_max, accept);
+    }
     match i1 - i0 + 1 {
-        0..=2 => hit_quads_rows::<2, A>(ray, tess, stride, range, t_min, best, t_max, accept),
-        3 => hit_quads_rows::<3, A>(ray, tess, stride, range, t_min, best, t_max, accept),
-        4..=5 => hit_quads_rows::<5, A>(ray, tess, stride, range, t_min, best, t_max, accept),
-        6..=9 => hit_quads_rows::<9, A>(ray, tess, stride, range, t_min, best, t_max, accept),
-        10..=MAX_ROW => hit_quads_rows::<MAX_ROW, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        0..=3 => hit_quad_pairs(ray, tess, stride, range, t_min, best, t_max, accept),
+        4..=5 => hit_quads_rows::<5, 8, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        6..=9 => hit_quads_rows::<9, 12, A>(ray, tess, stride, range, t_min, best, t_max, accept),
+        10..=MAX_ROW => hit_quads_rows::<MAX_ROW, 20, A>(ray, tess, stride, range, t_min, best, t_max, accept),
         _ => {
             // Wider than any tier's grid: test it in column strips.
             let mid = i0 + (MAX_ROW - 1);
@@ -248,10 +263,210 @@ fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     }
 }
 
-/// [`hit_quads`] for rows of at most `W` vertices (`i1 − i0 + 1 ≤ W`, checked by the caller).
+/// A row of vertices in a ray's sheared frame, coordinates apart (so four quads' corners load
+/// as the lanes of a [`Vec4`]); `P` holds the row and the lanes read past its last quad.
+#[derive(Clone, Copy)]
+struct ShearedRow<const P: usize> {
+    x: [f32; P],
+    y: [f32; P],
+    z: [f32; P],
+}
+
+impl<const P: usize> ShearedRow<P> {
+    const ZERO: Self = ShearedRow { x: [0.0; P], y: [0.0; P], z: [0.0; P] };
+
+    /// Vertices `i0, i0 + 1, …` (`width` of them, stride units) of grid row `j`, four at a time
+    /// (lanes past the row repeat its last vertex; `P` is a multiple of 4).
+    #[inline(always)]
+    fn fill(&mut self, ray: &WatertightRay, tess: &Tessellation, stride: usize, i0: usize, j: usize, width: usize) {
+        let base = j * stride * tess.n + i0 * stride;
+        let verts: &[[f32; 3]] = &tess.verts;
+        let last = width - 1;
+        for k in (0..width).step_by(4) {
+            let at = |l: usize| &verts[base + (k + l).min(last) * stride];
+            let (x, y, z) = ray.shear4([at(0), at(1), at(2), at(3)]);
+            x.write_to_slice(&mut self.x[k..k + 4]);
+            y.write_to_slice(&mut self.y[k..k + 4]);
+            z.write_to_slice(&mut self.z[k..k + 4]);
+        }
+    }
+
+    #[inline(always)]
+    fn get(&self, k: usize) -> Sheared {
+        Sheared { x: self.x[k], y: self.y[k], z: self.z[k] }
+    }
+
+    /// Vertices `k..k + 4` as lanes.
+    #[inline(always)]
+    fn lanes(&self, k: usize) -> Lanes {
+        let four = |a: &[f32; P]| Vec4::from_array(a[k..k + 4].try_into().unwrap());
+        Lanes { x: four(&self.x), y: four(&self.y) }
+    }
+
+    /// Vertices `k, k + 1` of this row and of `next` as lanes (two quads of two rows).
+    #[inline(always)]
+    fn lanes_with(&self, next: &Self, k: usize) -> Lanes {
+        let two = |a: &[f32; P], b: &[f32; P]| Vec4::new(a[k], a[k + 1], b[k], b[k + 1]);
+        Lanes { x: two(&self.x, &next.x), y: two(&self.y, &next.y) }
+    }
+}
+
+/// Four sheared vertices' x and y, one a lane.
+#[derive(Clone, Copy)]
+struct Lanes {
+    x: Vec4,
+    y: Vec4,
+}
+
+/// [`edge`] in each lane: the same IEEE operations in the same order, so the same bits.
+#[inline(always)]
+fn edge4(p: Lanes, q: Lanes) -> Vec4 {
+    p.x * q.y - p.y * q.x
+}
+
+/// The lanes (bits 0–3) where the triangle with edge functions `u`, `v`, `w` may be hit: those
+/// [`WatertightRay::finish_triangle`] does not reject by the signs alone. An edge function of
+/// exactly 0 (either sign) makes a lane a candidate, since the scalar test then recomputes all
+/// three in double precision; elsewhere the signs must agree. A NaN edge function can never
+/// make a hit (its t is NaN), so how its sign bit classifies it does not matter.
+#[inline(always)]
+fn sign_passes(u: Vec4, v: Vec4, w: Vec4) -> u32 {
+    let zero = (u.cmpeq(Vec4::ZERO) | v.cmpeq(Vec4::ZERO) | w.cmpeq(Vec4::ZERO)).bitmask();
+    let (nu, nv, nw) = (u.is_negative_bitmask(), v.is_negative_bitmask(), w.is_negative_bitmask());
+    zero | (!((nu ^ nv) | (nu ^ nw)) & 0xf)
+}
+
+/// Which of four quads (corners as lanes) may be hit: bit `l` of the first mask for the
+/// triangle (p00, p10, p11) of lane `l`, of the second for (p00, p11, p01), of the third for
+/// the diagonal half (p00, p10, p01) of a triangle patch (computed only when `half`).
+#[inline(always)]
+fn candidates(s00: Lanes, s10: Lanes, s01: Lanes, s11: Lanes, half: bool) -> (u32, u32, u32) {
+    let (bottom, left) = (edge4(s10, s00), edge4(s00, s01));
+    let diagonal = edge4(s00, s11);
+    let a = sign_passes(edge4(s11, s10), diagonal, bottom);
+    let b = sign_passes(edge4(s01, s11), left, -diagonal);
+    let d = if half { sign_passes(edge4(s01, s10), left, bottom) } else { 0 };
+    (a, b, d)
+}
+
+/// The quads of the lanes `full` (both triangles) and `half` (a triangle patch's diagonal
+/// half), masked to those [`candidates`] passes, through the scalar test in lane order, which
+/// is the order of the quads: `corners(l)` gives lane `l`'s quad (i, j) and its sheared corners
+/// s00, s10, s01, s11.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn finish_lanes<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    (full, half): (u32, u32),
+    (s00, s10, s01, s11): (Lanes, Lanes, Lanes, Lanes),
+    corners: impl Fn(usize) -> (usize, usize, [Sheared; 4]),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let (a, b, d) = candidates(s00, s10, s01, s11, half != 0);
+    let (a, b, d) = (a & full, b & full, d & half);
+    let mut lanes = a | b | d;
+    while lanes != 0 {
+        let l = lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
+        let (i, j, s) = corners(l);
+        finish_quad(ray, tess, stride, i, j, s, (a >> l & 1 != 0, b >> l & 1 != 0, d >> l & 1 != 0), t_min, best, t_max, accept);
+    }
+}
+
+/// The scalar test of quad (i, j)'s triangles that `tris` names: (p00, p10, p11),
+/// (p00, p11, p01), and the diagonal half (p00, p10, p01), with sheared corners
+/// `[s00, s10, s01, s11]`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn finish_quad<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    i: usize,
+    j: usize,
+    [s00, s10, s01, s11]: [Sheared; 4],
+    tris: (bool, bool, bool),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let q = (tess.n - 1) / stride;
+    let inv_q = 1.0 / q as f32;
+    let n = tess.n;
+    let verts: &[[f32; 3]] = &tess.verts;
+    let corner = |di: usize, dj: usize| Vec3A::from(verts[(j + dj) * stride * n + (i + di) * stride]);
+    if tris.2 {
+        // On the diagonal: the half (p00, p10, p01), corners (0,0), (1,0), (0,1).
+        if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s01, edge(s01, s10), edge(s00, s01), edge(s10, s00), *t_max) {
+            if t > t_min {
+                let (p00, p10, p01) = (corner(0, 0), corner(1, 0), corner(0, 1));
+                let ng = (p10 - p00).cross(p01 - p00);
+                if accept(t, ng) {
+                    *t_max = t;
+                    *best = Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng, seam: false });
+                }
+            }
+        }
+        return;
+    }
+    // Triangles (p00, p10, p11) and (p00, p11, p01): in (u, v) the corners are
+    // (0,0), (1,0), (1,1) and (0,0), (1,1), (0,1). They share the diagonal's edge.
+    let diagonal = edge(s00, s11);
+    if tris.0 {
+        if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s11, edge(s11, s10), diagonal, edge(s10, s00), *t_max) {
+            if t > t_min {
+                let (lu, lv) = (b1 + b2, b2);
+                let (p00, p10, p11) = (corner(0, 0), corner(1, 0), corner(1, 1));
+                let ng = (p10 - p00).cross(p11 - p00);
+                if accept(t, ng) {
+                    *t_max = t;
+                    *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
+                }
+            }
+        }
+    }
+    if tris.1 {
+        if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s11, s01, edge(s01, s11), edge(s00, s01), -diagonal, *t_max) {
+            if t > t_min {
+                let (lu, lv) = (b1, b1 + b2);
+                let (p00, p11, p01) = (corner(0, 0), corner(1, 1), corner(0, 1));
+                let ng = (p11 - p00).cross(p01 - p00);
+                if accept(t, ng) {
+                    *t_max = t;
+                    *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
+                }
+            }
+        }
+    }
+}
+
+/// Lane masks (bits 0–3) of quads `(i + l, j)`, `l < count`, on a grid of `q` quads a side:
+/// those wholly surface, and the one on a triangle patch's diagonal (beyond it the basis only
+/// extrapolates, and such quads are in neither mask).
+#[inline(always)]
+fn row_masks(triangle: bool, q: usize, i: usize, j: usize, count: usize) -> (u32, u32) {
+    let valid = (1u32 << count.min(4)) - 1;
+    if !triangle {
+        return (valid, 0);
+    }
+    // Quads with i + l + j + 1 < q are whole; the one with = q is the diagonal's.
+    let whole = (q as isize - (i + j + 1) as isize).clamp(0, 4) as u32;
+    let full = valid & ((1u32 << whole) - 1);
+    let half = if whole < 4 && i + whole as usize + j < q { valid & (1 << whole) } else { 0 };
+    (full, half)
+}
+
+/// [`hit_quads`] for rows of at most `W` vertices (`4 ≤ i1 − i0 + 1 ≤ W`, checked by the
+/// caller), held in `P` floats (`W` rounded up to a multiple of 4): four quads of a row at a time.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn hit_quads_rows<const W: usize, A: Fn(f32, Vec3A) -> bool>(
+fn hit_quads_rows<const W: usize, const P: usize, A: Fn(f32, Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -262,73 +477,114 @@ fn hit_quads_rows<const W: usize, A: Fn(f32, Vec3A) -> bool>(
     accept: &A,
 ) {
     let q = (tess.n - 1) / stride;
-    let inv_q = 1.0 / q as f32;
     let (i0, i1, j0, j1) = range;
-    let verts: &[[f32; 3]] = &tess.verts;
-    let n = tess.n;
     let triangle = tess.domain == GridDomain::LowerTriangle;
     let width = i1 - i0 + 1;
-    debug_assert!(width <= W);
-    let shear_row = |j: usize, row: &mut [Sheared; W]| {
-        let base = j * stride * n;
-        for (k, s) in row.iter_mut().take(width).enumerate() {
-            *s = ray.shear(&verts[base + (i0 + k) * stride]);
-        }
-    };
-    let mut lo = [Sheared::default(); W];
-    let mut hi = [Sheared::default(); W];
-    shear_row(j0, &mut lo);
+    // A lane group starts at a multiple of 4 below the last quad (≤ W − 2) and reads 5
+    // vertices, so W (5, 9 or 17) holds them; rows are filled four vertices at a time.
+    debug_assert!((4..=W).contains(&width) && W % 4 == 1 && P % 4 == 0 && P >= W);
+    // Rows j and j + 1 alternate between the two buffers (swapping them copied both).
+    let mut rows = [ShearedRow::<P>::ZERO; 2];
+    rows[0].fill(ray, tess, stride, i0, j0, width);
     for j in j0..j1 {
-        shear_row(j + 1, &mut hi);
-        for i in i0..i1 {
-            if triangle && i + j + 1 > q {
-                // Beyond a triangle patch's diagonal its basis only extrapolates.
-                continue;
-            }
-            let k = i - i0;
-            let (s00, s10, s01, s11) = (lo[k], lo[k + 1], hi[k], hi[k + 1]);
-            let corner = |di: usize, dj: usize| Vec3A::from(verts[(j + dj) * stride * n + (i + di) * stride]);
-            if triangle && i + j + 1 == q {
-                // On the diagonal: the half (p00, p10, p01), corners (0,0), (1,0), (0,1).
-                if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s01, edge(s01, s10), edge(s00, s01), edge(s10, s00), *t_max) {
-                    if t > t_min {
-                        let (p00, p10, p01) = (corner(0, 0), corner(1, 0), corner(0, 1));
-                        let ng = (p10 - p00).cross(p01 - p00);
-                        if accept(t, ng) {
-                            *t_max = t;
-                            *best = Some(GridHit { t, u: (i as f32 + b1) * inv_q, v: (j as f32 + b2) * inv_q, ng, seam: false });
-                        }
-                    }
-                }
-                continue;
-            }
-            // Triangles (p00, p10, p11) and (p00, p11, p01): in (u, v) the corners are
-            // (0,0), (1,0), (1,1) and (0,0), (1,1), (0,1). They share the diagonal's edge.
-            let diagonal = edge(s00, s11);
-            if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s10, s11, edge(s11, s10), diagonal, edge(s10, s00), *t_max) {
-                if t > t_min {
-                    let (lu, lv) = (b1 + b2, b2);
-                    let (p00, p10, p11) = (corner(0, 0), corner(1, 0), corner(1, 1));
-                    let ng = (p10 - p00).cross(p11 - p00);
-                    if accept(t, ng) {
-                        *t_max = t;
-                        *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
-                    }
-                }
-            }
-            if let Some((t, _b0, b1, b2)) = ray.finish_triangle(s00, s11, s01, edge(s01, s11), edge(s00, s01), -diagonal, *t_max) {
-                if t > t_min {
-                    let (lu, lv) = (b1, b1 + b2);
-                    let (p00, p11, p01) = (corner(0, 0), corner(1, 1), corner(0, 1));
-                    let ng = (p11 - p00).cross(p01 - p00);
-                    if accept(t, ng) {
-                        *t_max = t;
-                        *best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
-                    }
-                }
-            }
+        let next = (j + 1 - j0) & 1;
+        rows[next].fill(ray, tess, stride, i0, j + 1, width);
+        let (lo, hi) = (&rows[next ^ 1], &rows[next]);
+        for k in (0..width - 1).step_by(4) {
+            let masks = row_masks(triangle, q, i0 + k, j, width - 1 - k);
+            let lanes = (lo.lanes(k), lo.lanes(k + 1), hi.lanes(k), hi.lanes(k + 1));
+            let corners = |l: usize| (i0 + k + l, j, [lo.get(k + l), lo.get(k + l + 1), hi.get(k + l), hi.get(k + l + 1)]);
+            finish_lanes(ray, tess, stride, masks, lanes, corners, t_min, best, t_max, accept);
         }
-        std::mem::swap(&mut lo, &mut hi);
+    }
+}
+
+/// [`hit_quads`] for the one quad (i, j) (a coarse grid's: most calls): its corners sheared as
+/// the four lanes of one vector, its four sides' edge functions as those of another.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn hit_one_quad<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    i: usize,
+    j: usize,
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let q = (tess.n - 1) / stride;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    if triangle && i + j + 1 > q {
+        // Beyond a triangle patch's diagonal its basis only extrapolates.
+        return;
+    }
+    let verts: &[[f32; 3]] = &tess.verts;
+    let (row, base) = (stride * tess.n, (j * tess.n + i) * stride);
+    let (x, y, z) = ray.shear4([&verts[base], &verts[base + stride], &verts[base + row], &verts[base + row + stride]]);
+    let (xs, ys, zs) = (x.to_array(), y.to_array(), z.to_array());
+    let corners = [0, 1, 2, 3].map(|k| Sheared { x: xs[k], y: ys[k], z: zs[k] });
+    if triangle && i + j + 1 == q {
+        // The diagonal half alone: rare (coarse grids of triangle patches), tested scalar.
+        return finish_quad(ray, tess, stride, i, j, corners, (false, false, true), t_min, best, t_max, accept);
+    }
+    // Lanes (s11, s10, s01, s00) against (s10, s00, s11, s01): the sides edge(s11, s10),
+    // edge(s10, s00), edge(s01, s11) and edge(s00, s01), each as `edge` computes it.
+    let sides = edge4(Lanes { x: x.wyzx(), y: y.wyzx() }, Lanes { x: x.yxwz(), y: y.yxwz() });
+    let (negative, zero) = (sides.is_negative_bitmask(), sides.cmpeq(Vec4::ZERO).bitmask());
+    let diagonal = edge(corners[0], corners[3]);
+    let (d_negative, d_zero) = (u32::from(diagonal.is_sign_negative()), diagonal == 0.0);
+    // As `sign_passes`: (right, diagonal, bottom) and (top, left, −diagonal).
+    let a = d_zero || zero & 0b0011 != 0 || (negative & 1 == d_negative && negative >> 1 & 1 == d_negative);
+    let b = d_zero || zero & 0b1100 != 0 || (negative >> 2 & 1 != d_negative && negative >> 3 & 1 != d_negative);
+    if a || b {
+        finish_quad(ray, tess, stride, i, j, corners, (a, b, false), t_min, best, t_max, accept);
+    }
+}
+
+/// [`hit_quads`] for rows of one or two quads (a medium grid or a fine grid's sub-box at stride
+/// 2): two rows at a time, lanes (i0, j), (i0 + 1, j), (i0, j + 1), (i0 + 1, j + 1).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn hit_quad_pairs<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    stride: usize,
+    range: (usize, usize, usize, usize),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let q = (tess.n - 1) / stride;
+    let (i0, i1, j0, j1) = range;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    let width = i1 - i0 + 1;
+    debug_assert!((2..=3).contains(&width));
+    // Four floats a row: the lanes read vertices 0..=2, and a row loads as one vector.
+    let mut rows = [ShearedRow::<4>::ZERO; 3];
+    rows[0].fill(ray, tess, stride, i0, j0, width);
+    let mut j = j0;
+    while j < j1 {
+        let two = j + 1 < j1;
+        rows[1].fill(ray, tess, stride, i0, j + 1, width);
+        if two {
+            rows[2].fill(ray, tess, stride, i0, j + 2, width);
+        }
+        let (full0, half0) = row_masks(triangle, q, i0, j, width - 1);
+        let (full1, half1) = if two { row_masks(triangle, q, i0, j + 1, width - 1) } else { (0, 0) };
+        let masks = (full0 | full1 << 2, half0 | half1 << 2);
+        let [r0, r1, r2] = &rows;
+        let lanes = (r0.lanes_with(r1, 0), r0.lanes_with(r1, 1), r1.lanes_with(r2, 0), r1.lanes_with(r2, 1));
+        let corners = |l: usize| {
+            let (c, r) = (l & 1, l >> 1);
+            let (lo, hi) = (&rows[r], &rows[r + 1]);
+            (i0 + c, j + r, [lo.get(c), lo.get(c + 1), hi.get(c), hi.get(c + 1)])
+        };
+        finish_lanes(ray, tess, stride, masks, lanes, corners, t_min, best, t_max, accept);
+        rows[0] = rows[2];
+        j += 2;
     }
 }
 
@@ -578,6 +834,151 @@ mod tests {
             }
         }
         assert!(hits > compared / 3, "most rays should hit: {hits} of {compared}");
+    }
+
+    /// The closest accepted hit among quads `[i0, i1) × [j0, j1)` (stride units), triangle by
+    /// triangle through [`WatertightRay::hit_triangle`] in the grid test's order (row by row,
+    /// each quad's triangles in turn), each hit in (`t_min`, current best] offered to `accept`.
+    /// Also counts the triangles whose single-precision edge functions include an exact 0 (the
+    /// double-precision fallback).
+    #[allow(clippy::too_many_arguments)]
+    fn per_triangle_in(
+        ray: &WatertightRay,
+        tess: &Tessellation,
+        stride: usize,
+        (i0, i1, j0, j1): (usize, usize, usize, usize),
+        t_min: f32,
+        t_max: f32,
+        accept: &dyn Fn(f32, Vec3A) -> bool,
+        zero_edges: &mut usize,
+    ) -> Option<GridHit> {
+        let q = (tess.n - 1) / stride;
+        let inv_q = 1.0 / q as f32;
+        let (mut best, mut t_best) = (None, t_max);
+        let triangle = tess.domain == GridDomain::LowerTriangle;
+        for j in j0..j1 {
+            for i in i0..i1 {
+                if triangle && i + j + 1 > q {
+                    continue;
+                }
+                let v = |di: usize, dj: usize| tess.vert((i + di) * stride, (j + dj) * stride);
+                let (p00, p10, p11, p01) = (v(0, 0), v(1, 0), v(1, 1), v(0, 1));
+                let tris = if triangle && i + j + 1 == q { vec![(p00, p10, p01, 2)] } else { vec![(p00, p10, p11, 0), (p00, p11, p01, 1)] };
+                for (a, b, c, which) in tris {
+                    let (sa, sb, sc) = (ray.shear(a.as_ref()), ray.shear(b.as_ref()), ray.shear(c.as_ref()));
+                    if edge(sc, sb) == 0.0 || edge(sa, sc) == 0.0 || edge(sb, sa) == 0.0 {
+                        *zero_edges += 1;
+                    }
+                    if let Some((t, _, b1, b2)) = ray.hit_triangle(a, b, c, t_best) {
+                        let ng = (b - a).cross(c - a);
+                        if t > t_min && accept(t, ng) {
+                            t_best = t;
+                            let (lu, lv) = match which {
+                                0 => (b1 + b2, b2),
+                                1 => (b1, b1 + b2),
+                                _ => (b1, b2),
+                            };
+                            best = Some(GridHit { t, u: (i as f32 + lu) * inv_q, v: (j as f32 + lv) * inv_q, ng, seam: false });
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn quads_tested_four_at_once_give_the_same_bits_as_each_triangle_alone() {
+        // Grids of every width the lane layouts take (1 or 2 quads a row in pairs of rows, 3–16
+        // a row in fours), whole and in sub-ranges (a fine grid's sub-boxes), square and
+        // triangle domains, bumpy and exactly flat (there rays through vertices and edges make
+        // edge functions of exactly 0: the double-precision fallback), at scales where the
+        // products underflow or overflow; rays aimed at vertices and edge midpoints, grazing
+        // ones in the grid's plane, and accept filters that refuse hits by distance and facing,
+        // so that a farther hit is taken instead.
+        let mut seed = 0x853c_49e6_748f_ea9bu64;
+        let mut rand = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut compared, mut hits, mut refused, mut zero_edges) = (0, 0, 0, 0);
+        for case in 0..600 {
+            let n = [2usize, 3, 5, 9, 17][case % 5];
+            let mut t = flat_grid(n);
+            t.domain = if case / 5 % 2 == 0 { GridDomain::Square } else { GridDomain::LowerTriangle };
+            let flat = case / 10 % 3 == 0;
+            let scale = [1.0f32, 1.0, 1.0, 1.0, 1e-21, 3e18][case / 30 % 6];
+            let verts: Vec<[f32; 3]> = t
+                .verts
+                .iter()
+                .map(|p| {
+                    let z = if flat { 0.0 } else { 0.3 * (rand() - 0.5) };
+                    [p[0] * scale, p[1] * scale, z * scale]
+                })
+                .collect();
+            t.verts = verts.into();
+            for _ in 0..40 {
+                let halves = (n - 1) as f32 * 2.0;
+                let snap = |x: f32, on: bool| if on { (x * halves).round() / halves } else { x };
+                let (x, y, snap_x, snap_y) = (rand() * 1.2 - 0.1, rand() * 1.2 - 0.1, rand() < 0.6, rand() < 0.6);
+                let target = Vec3A::new(snap(x, snap_x), snap(y, snap_y), 0.0) * scale;
+                let kind = rand();
+                let o = if kind < 0.15 {
+                    // In the grid's plane: grazing, along or across its rows and columns.
+                    let (dx, dy) = ([1.0f32, 0.0, 1.0, 1.0, -0.5][(rand() * 5.0) as usize % 5], rand() - 0.5);
+                    target - Vec3A::new(dx, dy, 0.0) * 2.0 * scale
+                } else if kind < 0.5 {
+                    // Straight down through a vertex or edge: along the sheared frame's axis.
+                    target + Vec3A::new(0.0, 0.0, 1.0 + rand()) * scale
+                } else {
+                    Vec3A::new(rand() * 4.0 - 2.0, rand() * 4.0 - 2.0, (0.5 + rand() * 2.0) * if rand() < 0.3 { -1.0 } else { 1.0 }) * scale
+                };
+                let d = target - o;
+                let ray = WatertightRay::new(o, d);
+                let window = rand() * 1.5;
+                let facing = [1.0f32, -1.0, 0.0][(rand() * 3.0) as usize % 3];
+                let accept = |t: f32, ng: Vec3A| !(t < window && facing * d.dot(ng) >= 0.0);
+                let t_min = if rand() < 0.2 { rand() * 0.9 } else { 0.0 };
+                let t_max = if rand() < 0.2 { 0.5 + rand() } else { f32::INFINITY };
+                for stride in [1usize, 2].into_iter().filter(|s| (n - 1) % s == 0) {
+                    let q = (n - 1) / stride;
+                    // The whole grid, a random sub-range, and each 4×4 (stride units 4 / stride)
+                    // block a fine grid's sub-boxes give.
+                    let (a, b) = ((rand() * q as f32) as usize, (rand() * q as f32) as usize);
+                    let (c, e) = ((rand() * q as f32) as usize, (rand() * q as f32) as usize);
+                    let mut ranges = vec![(0, q, 0, q), (a.min(b), a.max(b) + 1, c.min(e), c.max(e) + 1)];
+                    if n == 17 {
+                        let per = 4 / stride;
+                        ranges.extend((0..16).map(|k| (k % 4 * per, k % 4 * per + per, k / 4 * per, k / 4 * per + per)));
+                    }
+                    for range in ranges {
+                        let mut got = None;
+                        let mut t_got = t_max;
+                        hit_quads(&ray, &t, stride, range, t_min, &mut got, &mut t_got, &accept);
+                        let refusing = std::cell::Cell::new(0);
+                        let counting = |t: f32, ng: Vec3A| {
+                            let ok = accept(t, ng);
+                            refusing.set(refusing.get() + usize::from(!ok));
+                            ok
+                        };
+                        let want = per_triangle_in(&ray, &t, stride, range, t_min, t_max, &counting, &mut zero_edges);
+                        let bits = |h: Option<GridHit>| {
+                            h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.ng.to_array().map(f32::to_bits)))
+                        };
+                        assert_eq!(bits(got), bits(want), "case {case} n {n} stride {stride} range {range:?} o {o} d {d}");
+                        assert_eq!(t_got.to_bits(), want.map_or(t_max, |h| h.t).to_bits());
+                        compared += 1;
+                        hits += usize::from(got.is_some());
+                        refused += refusing.get();
+                    }
+                }
+            }
+        }
+        // The cases the lanes must get right all occur, many times over.
+        assert!(hits > compared / 10, "{hits} hits of {compared}");
+        assert!(refused > 1000 && zero_edges > 1000, "{refused} refused hits, {zero_edges} triangles with a zero edge function");
     }
 
     #[test]

@@ -41,7 +41,7 @@ pub use ies::{IesProfile, Photometry, Tilt};
 pub use portal::{Portal, PORTAL_FRACTION};
 
 pub use env::{latlong_direction, latlong_st, luminance, Distribution1D, Distribution2D, EnvDistribution, EnvTexture, TABLE_MAX_WIDTH};
-pub use mesh::{TriangleHit, TriangleLight, TrianglePoint};
+pub use mesh::{Emitter, MeshEmission, TriangleHit, TriangleLight, TrianglePoint};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightShape {
@@ -94,6 +94,13 @@ pub struct Light {
     /// A dome's `PortalLight`s, which guide its light sampling (see [`Portal`]); empty for
     /// every other light.
     pub portals: std::sync::Arc<[Portal]>,
+    /// An IES-shaped sphere, rect, disk or cylinder light draws its directions by its profile
+    /// toward the shaded point (a guide over its shape's sampling numbers) rather than by its
+    /// shape alone (USD: `bool mipray:iesProfileSampling` on the light). Off by
+    /// default: on a 2 × 2 panel with a 20° beam 0.5 above a floor it lowers the mean squared
+    /// error per sample 1.5× but costs 2.3× the render time (release build,
+    /// `scripts/ies_profile_sampling_noise.py`), a net loss until the guide is cheaper.
+    pub profile_sampling: bool,
 }
 
 /// A set of the scene's meshes (indices into [`crate::scene::Scene::meshes`]) given by those it leaves out:
@@ -214,8 +221,8 @@ pub struct IesShaping {
     /// The light's local +X and +Y in render space (unit): the azimuth's frame.
     pub x: Vec3A,
     pub y: Vec3A,
-    /// The light's tilt, radians: the angle between its aim (−Z) and the stage's down, at
-    /// which a tilt table is read (0 without one).
+    /// The luminaire's tilt, radians, at which a tilt table is read ([`Tilt::tilt_angle`]: by
+    /// the table's lamp-to-luminaire geometry; 0 without one).
     pub tilt: f32,
 }
 
@@ -244,6 +251,26 @@ impl IesShaping {
             }
         } else {
             c
+        }
+    }
+
+    /// An upper bound of [`IesShaping::factor`] over the directions whose angle off the axis
+    /// lies in [`lo`, `hi`] (radians): type C's largest candela over those vertical angles
+    /// (every azimuth); types A and B their peak.
+    pub fn bound_between(&self, lo: f32, hi: f32) -> f32 {
+        let c = match self.profile.kind {
+            ies::Photometry::C => {
+                let scale = 1.0 + self.angle_scale;
+                // The angle scale's map is increasing: the interval's ends bound it.
+                let map = |t: f32| if scale > 0.0 { ((t - PI) / scale + PI).clamp(0.0, PI) } else { t };
+                self.profile.max_between(map(lo), map(hi))
+            }
+            _ => self.profile.peak(),
+        } * self.tilt_factor();
+        match (self.normalize, self.profile.mean() > 0.0) {
+            (true, true) => c / self.profile.mean(),
+            (true, false) => 0.0,
+            _ => c,
         }
     }
 
@@ -315,6 +342,34 @@ impl Shaping {
                 1.0
             } else {
                 let t = (theta - soft) / (self.cone - soft);
+                t * t * (3.0 - 2.0 * t)
+            };
+            f *= 1.0 - step;
+        }
+        f
+    }
+
+    /// An upper bound of [`Shaping::factor`]'s largest channel over the directions whose angle
+    /// off the axis lies in [`lo`, `hi`] (radians, within [0, π]): focus and cone at the angle
+    /// nearest their peak, the profile by [`IesShaping::bound_between`].
+    pub fn bound_between(&self, lo: f32, hi: f32) -> f32 {
+        let mut f = 1.0;
+        if self.focus > 0.0 {
+            // |cos| is largest at an end of the interval.
+            let ff = lo.cos().abs().max(hi.cos().abs()).powf(self.focus);
+            f = (self.focus_tint + (Vec3A::ONE - self.focus_tint) * ff).max_element();
+        }
+        if let Some(ies) = &self.ies {
+            f *= ies.bound_between(lo, hi);
+        }
+        if self.cone < PI {
+            let soft = self.cone * (1.0 - self.softness);
+            let step = if lo <= soft {
+                0.0
+            } else if lo >= self.cone {
+                1.0
+            } else {
+                let t = (lo - soft) / (self.cone - soft);
                 t * t * (3.0 - 2.0 * t)
             };
             f *= 1.0 - step;
@@ -403,6 +458,7 @@ impl Light {
             shadowed_by: MeshFilter::default(),
             texture: None,
             portals: Vec::new().into(),
+            profile_sampling: false,
         }
     }
 
@@ -448,6 +504,7 @@ impl Light {
             shadowed_by: MeshFilter::default(),
             texture: None,
             portals: Vec::new().into(),
+            profile_sampling: false,
         }
     }
 
@@ -522,6 +579,19 @@ impl Light {
     /// As [`Light::sample`], a moving light (a mesh light under transform motion blur) posed at
     /// shutter time `time` (the ray's [`crate::ray::Ray::time`]; other lights ignore it).
     pub fn sample_at(&self, p: Vec3A, n: Vec3A, u1: f32, u2: f32, time: f32) -> Option<LightSample> {
+        // An IES light seen wide enough for its profile to vary across it: the shape's own
+        // numbers drawn by the profile toward `p` ([`ProfileGuide`]), its density scaled.
+        let guide = self.profile_guide(p);
+        let (u1, u2, guided) = match &guide {
+            Some(g) => g.remap(u1, u2),
+            None => (u1, u2, 1.0),
+        };
+        let mut sample = self.sample_shape(p, n, u1, u2, time)?;
+        sample.pdf *= guided;
+        (sample.pdf.is_finite() && sample.pdf > 0.0).then_some(sample)
+    }
+
+    fn sample_shape(&self, p: Vec3A, n: Vec3A, u1: f32, u2: f32, time: f32) -> Option<LightSample> {
         let sample = match &self.shape {
             LightShape::Distant { direction, angle_deg } => {
                 let toward = -*direction;
@@ -556,7 +626,7 @@ impl Light {
                 LightSample { wi, distance, radiance: self.radiance_scale, pdf: 1.0 / (2.0 * PI * omc_max), delta: false }
             }
             shape @ (LightShape::Rect { .. } | LightShape::Disk { .. } | LightShape::Cylinder { .. } | LightShape::Mesh(_)) => {
-                let (y, ny, area) = sample_planar(shape, u1, u2, time)?;
+                let (y, ny, area, emission) = sample_planar(shape, u1, u2, time)?;
                 let d = y - p;
                 let dist2 = d.length_squared();
                 if !(dist2 > 0.0 && dist2.is_finite()) {
@@ -579,7 +649,7 @@ impl Light {
                         return None;
                     }
                 }
-                let mut radiance = self.radiance_scale;
+                let mut radiance = self.radiance_scale * emission;
                 if let (Some(tex), LightShape::Rect { .. }) = (&self.texture, shape) {
                     radiance *= tex.radiance([u1, u2]);
                 }
@@ -608,6 +678,14 @@ impl Light {
 
     /// As [`Light::pdf`] for [`Light::sample_at`] at shutter time `time`.
     pub fn pdf_at(&self, p: Vec3A, n: Vec3A, wi: Vec3A, time: f32) -> f32 {
+        let pdf = self.pdf_shape(p, n, wi, time);
+        match self.profile_guide(p) {
+            Some(g) if pdf > 0.0 => self.shape_numbers(p, wi).map_or(0.0, |u| pdf * g.density(u)),
+            _ => pdf,
+        }
+    }
+
+    fn pdf_shape(&self, p: Vec3A, n: Vec3A, wi: Vec3A, time: f32) -> f32 {
         match &self.shape {
             LightShape::Distant { direction, angle_deg } => {
                 if *angle_deg <= 0.0 {
@@ -663,7 +741,147 @@ impl Light {
         if let Some(shaping) = &self.shaping {
             hit.radiance *= shaping.factor(-d);
         }
+        if let Some(g) = self.profile_guide(o) {
+            hit.pdf *= self.shape_numbers(o, d).map_or(0.0, |u| g.density(u));
+        }
         Some(hit)
+    }
+
+    /// The guide drawing this light's shape numbers by its IES profile (and cone and focus)
+    /// toward `p`: `None` without a profile, for a shape it does not apply to, or where the
+    /// light looks too small from `p` for the profile to vary across it.
+    fn profile_guide(&self, p: Vec3A) -> Option<ProfileGuide> {
+        if !self.profile_sampling {
+            return None;
+        }
+        let ies = self.shaping.as_ref().and_then(|s| s.ies.as_ref())?;
+        // One shading point asks for the same light's guide for its light sample, its BSDF
+        // sample's density and the ray meeting the light: the last one is kept per thread.
+        let centre = match &self.shape {
+            LightShape::Sphere { center, .. }
+            | LightShape::Rect { center, .. }
+            | LightShape::Disk { center, .. }
+            | LightShape::Cylinder { center, .. } => *center,
+            _ => return None,
+        };
+        let key = (std::sync::Arc::as_ptr(ies) as usize, p.to_array().map(f32::to_bits), centre.to_array().map(f32::to_bits));
+        GUIDE_CACHE.with(|c| {
+            let mut c = c.borrow_mut();
+            if let Some((k, g)) = c.as_ref() {
+                if *k == key {
+                    return g.clone();
+                }
+            }
+            let g = self.build_profile_guide(p);
+            *c = Some((key, g.clone()));
+            g
+        })
+    }
+
+    fn build_profile_guide(&self, p: Vec3A) -> Option<ProfileGuide> {
+        let shaping = self.shaping.as_ref().filter(|s| s.ies.is_some())?;
+        let (center, reach) = match &self.shape {
+            LightShape::Sphere { center, radius } => (*center, *radius),
+            LightShape::Rect { center, u, v, .. } | LightShape::Disk { center, u, v, .. } => {
+                (*center, (*u + *v).length().max((*u - *v).length()))
+            }
+            LightShape::Cylinder { center, axis, radius, .. } => (*center, axis.length() + radius),
+            _ => return None,
+        };
+        let dist = (center - p).length();
+        if !(reach > GUIDE_MIN_SPREAD * dist) {
+            return None;
+        }
+        // The direction the light emits toward p from the point shape numbers `u` pick.
+        let toward_p = |u: [f32; 2]| -> Option<Vec3A> {
+            Some(match &self.shape {
+                LightShape::Sphere { center, radius } => {
+                    let to_c = *center - p;
+                    let dc2 = to_c.length_squared();
+                    if !(dc2 > radius * radius) {
+                        return None;
+                    }
+                    let sin2_max = radius * radius / dc2;
+                    let omc_max = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
+                    -cone_direction(to_c / dc2.sqrt(), omc_max, u[0], u[1])
+                }
+                shape => {
+                    let (y, ..) = sample_planar(shape, u[0], u[1], 0.0)?;
+                    (p - y).try_normalize()?
+                }
+            })
+        };
+        // Emission directions at the cells' corners and centres. A cell weighs the most the
+        // shaping can send within the cone about its centre's direction that holds its corners'
+        // (widened by half: its edges may bulge beyond its corners' cone), so a beam narrower
+        // than a cell is not missed.
+        const G: usize = GUIDE_CELLS;
+        const N: usize = G + 1;
+        let g = G as f32;
+        let mut corners = [Vec3A::ZERO; N * N];
+        for (k, d) in corners.iter_mut().enumerate() {
+            let u = |x: usize| (x as f32 / g).min(1.0 - f32::EPSILON);
+            *d = toward_p([u(k % N), u(k / N)])?;
+        }
+        let mut w = [0.0f32; G * G];
+        for (k, w) in w.iter_mut().enumerate() {
+            let (i, j) = (k % G, k / G);
+            let centre = toward_p([(i as f32 + 0.5) / g, (j as f32 + 0.5) / g])?;
+            // Two arc cosines a cell: the angle off the axis, and the cone's.
+            let cos_delta = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .iter()
+                .map(|&(di, dj)| centre.dot(corners[(i + di) + N * (j + dj)]))
+                .fold(1.0f32, f32::min);
+            let delta = 1.5 * cos_delta.clamp(-1.0, 1.0).acos();
+            let theta = shaping.axis.dot(centre).clamp(-1.0, 1.0).acos();
+            *w = shaping.bound_between((theta - delta).max(0.0), (theta + delta).min(PI));
+        }
+        ProfileGuide::new(w)
+    }
+
+    /// The shape numbers (u1, u2) with which [`Light::sample_shape`] from `p` picks direction
+    /// `wi` (the inverse of its map; `None` where it never does).
+    fn shape_numbers(&self, p: Vec3A, wi: Vec3A) -> Option<[f32; 2]> {
+        let turn = |x: f32, y: f32| (y.atan2(x) / (2.0 * PI)).rem_euclid(1.0);
+        match &self.shape {
+            LightShape::Sphere { center, radius } => {
+                let to_c = *center - p;
+                let dc2 = to_c.length_squared();
+                let sin2_max = radius * radius / dc2;
+                let omc_max = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
+                let axis = to_c / dc2.sqrt();
+                let (t, b) = frame(axis);
+                // 1 − cos θ without cancellation: |wi − axis|² / 2.
+                let omc = 0.5 * (wi - axis).length_squared();
+                Some([(omc / omc_max).clamp(0.0, 1.0), turn(wi.dot(t), wi.dot(b))])
+            }
+            LightShape::Rect { center, u, v, normal } | LightShape::Disk { center, u, v, normal } => {
+                let cos_l = -normal.dot(wi);
+                let t = normal.dot(p - *center) / cos_l;
+                if !(t > 0.0 && t.is_finite()) {
+                    return None;
+                }
+                let q = p + wi * t - *center;
+                let (uu, uv, vv) = (u.dot(*u), u.dot(*v), v.dot(*v));
+                let det = uu * vv - uv * uv;
+                let (qu, qv) = (q.dot(*u), q.dot(*v));
+                let a = (qu * vv - qv * uv) / det;
+                let b = (qv * uu - qu * uv) / det;
+                Some(match self.shape {
+                    LightShape::Rect { .. } => [(0.5 * (a + 1.0)).clamp(0.0, 1.0), (0.5 * (b + 1.0)).clamp(0.0, 1.0)],
+                    _ => [(a * a + b * b).clamp(0.0, 1.0), turn(a, b)],
+                })
+            }
+            LightShape::Cylinder { center, axis, e1, e2, .. } => {
+                let hit = self.intersect_cylinder(p, wi, f32::INFINITY)?;
+                let q = p + wi * hit.t - *center;
+                let half2 = axis.length_squared();
+                let along = q.dot(*axis) / half2;
+                let radial = q - *axis * along;
+                Some([(0.5 * (along + 1.0)).clamp(0.0, 1.0), turn(radial.dot(*e1), radial.dot(*e2))])
+            }
+            _ => None,
+        }
     }
 
     fn intersect_shape(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<LightHit> {
@@ -733,7 +951,7 @@ impl Light {
     fn intersect_mesh(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<LightHit> {
         let LightShape::Mesh(m) = &self.shape else { return None };
         let h = m.intersect_at(o, d, t_max, time)?;
-        Some(LightHit { t: h.t, radiance: self.radiance_scale, pdf: h.t * h.t / (h.cos * h.area) })
+        Some(LightHit { t: h.t, radiance: self.radiance_scale * h.emission, pdf: h.t * h.t / (h.cos * h.area) })
     }
 
     fn intersect_planar(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<LightHit> {
@@ -859,8 +1077,10 @@ impl Light {
             out["area"] = serde_json::json!(m.area());
             out["two_sided"] = serde_json::json!(m.two_sided);
             out["moving"] = serde_json::json!(m.is_moving());
-            // What it emits, a bound material's tint included.
-            out["radiance"] = serde_json::json!([self.radiance_scale.x, self.radiance_scale.y, self.radiance_scale.z]);
+            // What it emits, a bound material's tint included (per face: its mean over the mesh).
+            let r = self.radiance_scale * m.mean_emission();
+            out["radiance"] = serde_json::json!([r.x, r.y, r.z]);
+            out["per_face_emission"] = serde_json::json!(m.has_emission());
         }
         if let Some(s) = &self.shaping {
             out["shaping"] = serde_json::json!({
@@ -876,6 +1096,7 @@ impl Light {
                     "angle_scale": ies.angle_scale,
                     "normalize": ies.normalize,
                     "mean_candela": ies.profile.mean(),
+                    "profile_sampling": self.profile_sampling,
                     "peak_candela": ies.profile.peak(),
                 });
                 if let Some(t) = &ies.profile.tilt {
@@ -909,6 +1130,79 @@ impl Light {
     }
 }
 
+/// A guide's key: the light's profile (its address), the shaded point and the light's centre.
+type GuideKey = (usize, [u32; 3], [u32; 3]);
+
+thread_local! {
+    /// The last [`ProfileGuide`] built on this thread, by its key.
+    static GUIDE_CACHE: std::cell::RefCell<Option<(GuideKey, Option<ProfileGuide>)>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Cells per side of a [`ProfileGuide`]'s grid.
+const GUIDE_CELLS: usize = 4;
+
+/// A light whose bounding radius is under this fraction of its distance from the shaded point
+/// (about 1.7°) is sampled by shape alone: its profile hardly varies across it.
+const GUIDE_MIN_SPREAD: f32 = 0.03;
+
+/// The share of a [`ProfileGuide`]'s samples drawn uniformly (the shape's own density): a
+/// defensive mixture, so the profile's directions are never much noisier than the shape's
+/// (at most 1 / this times the variance) where the cells' weights misjudge a beam, and every
+/// point stays choosable (no bias).
+const GUIDE_UNIFORM: f32 = 0.2;
+
+/// A piecewise-constant density over a light's two shape numbers (the unit square its own
+/// sampling maps to points: area for rects, disks and cylinders, the subtended cone for
+/// spheres), by what its IES profile (with cone and focus) sends toward the shaded point from
+/// each cell's centre: the shape's numbers are drawn from it, and the shape's density is
+/// multiplied by its density there, so directions the profile favours get more samples.
+#[derive(Clone, Debug)]
+struct ProfileGuide {
+    /// Cumulative cell weights, row-major (i + GUIDE_CELLS · j), the last being the total.
+    cdf: [f32; GUIDE_CELLS * GUIDE_CELLS],
+    w: [f32; GUIDE_CELLS * GUIDE_CELLS],
+}
+
+impl ProfileGuide {
+    /// `None` when the profile sends nothing from any cell centre, or the same from all (the
+    /// shape's own density is then as good).
+    fn new(mut w: [f32; GUIDE_CELLS * GUIDE_CELLS]) -> Option<ProfileGuide> {
+        let n = w.len() as f32;
+        let mean = w.iter().sum::<f32>() / n;
+        let top = w.iter().copied().fold(0.0f32, f32::max);
+        if !(mean > 0.0 && mean.is_finite()) || top <= 1.05 * w.iter().copied().fold(f32::INFINITY, f32::min) {
+            return None;
+        }
+        for x in &mut w {
+            *x = (1.0 - GUIDE_UNIFORM) * *x / mean + GUIDE_UNIFORM;
+        }
+        let mut cdf = w;
+        for k in 1..cdf.len() {
+            cdf[k] += cdf[k - 1];
+        }
+        Some(ProfileGuide { cdf, w })
+    }
+
+    /// The shape numbers for uniform (u1, u2), and the guide's density there.
+    fn remap(&self, u1: f32, u2: f32) -> (f32, f32, f32) {
+        let total = self.cdf[self.cdf.len() - 1];
+        let x = u1 * total;
+        let k = self.cdf.partition_point(|&c| c <= x).min(self.cdf.len() - 1);
+        let before = if k == 0 { 0.0 } else { self.cdf[k - 1] };
+        let frac = ((x - before) / self.w[k]).clamp(0.0, 1.0 - f32::EPSILON);
+        let (i, j) = (k % GUIDE_CELLS, k / GUIDE_CELLS);
+        let g = GUIDE_CELLS as f32;
+        ((i as f32 + frac) / g, (j as f32 + u2) / g, self.w[k] * self.w.len() as f32 / total)
+    }
+
+    /// The density (relative to uniform) of shape numbers `u`.
+    fn density(&self, u: [f32; 2]) -> f32 {
+        let cell = |x: f32| ((x * GUIDE_CELLS as f32) as usize).min(GUIDE_CELLS - 1);
+        let total = self.cdf[self.cdf.len() - 1];
+        self.w[cell(u[0]) + GUIDE_CELLS * cell(u[1])] * self.w.len() as f32 / total
+    }
+}
+
 /// A direction uniformly distributed over the cone around unit `axis` with 1 − cos(half-angle)
 /// = `omc_max`, from two uniform numbers.
 fn cone_direction(axis: Vec3A, omc_max: f32, u1: f32, u2: f32) -> Vec3A {
@@ -934,28 +1228,31 @@ pub fn shape_area(shape: &LightShape) -> f32 {
 }
 
 /// A uniformly distributed point on a rect, disk, cylinder or mesh light (a moving mesh posed at
-/// shutter time `time`): (point, emitting normal, area whose reciprocal is the point's density
-/// per unit area).
-fn sample_planar(shape: &LightShape, u1: f32, u2: f32, time: f32) -> Option<(Vec3A, Vec3A, f32)> {
+/// shutter time `time`; a mesh whose triangles emit their own colours chooses them by power):
+/// (point, emitting normal, area whose reciprocal is the point's density per unit area, what
+/// the point emits as a factor of the light's radiance).
+fn sample_planar(shape: &LightShape, u1: f32, u2: f32, time: f32) -> Option<(Vec3A, Vec3A, f32, Vec3A)> {
     let area = shape_area(shape);
     if !(area > 0.0) {
         return None;
     }
     match shape {
-        LightShape::Rect { center, u, v, normal } => Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area)),
+        LightShape::Rect { center, u, v, normal } => {
+            Some((*center + *u * (2.0 * u1 - 1.0) + *v * (2.0 * u2 - 1.0), *normal, area, Vec3A::ONE))
+        }
         LightShape::Cylinder { center, axis, radius, e1, e2 } => {
             let phi = 2.0 * PI * u2;
             let n = *e1 * phi.cos() + *e2 * phi.sin();
-            Some((*center + *axis * (2.0 * u1 - 1.0) + n * *radius, n, area))
+            Some((*center + *axis * (2.0 * u1 - 1.0) + n * *radius, n, area, Vec3A::ONE))
         }
         LightShape::Disk { center, u, v, normal } => {
             let r = u1.sqrt();
             let phi = 2.0 * PI * u2;
-            Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area))
+            Some((*center + *u * (r * phi.cos()) + *v * (r * phi.sin()), *normal, area, Vec3A::ONE))
         }
         LightShape::Mesh(m) => {
             let s = m.sample_at(u1, u2, time);
-            Some((s.p, s.normal, s.area))
+            Some((s.p, s.normal, s.area, s.emission))
         }
         _ => None,
     }
@@ -1121,6 +1418,265 @@ mod tests {
         assert_eq!(irradiance(&light, Vec3A::new(0.0, 0.0, 6.0), Vec3A::NEG_Z, 1000), 0.0);
         let normalized = Light::usd_area("/m", LightShape::Mesh(mesh), 1.0, 0.0, Vec3A::ONE, true);
         assert!((normalized.radiance_scale.x - 1.0 / 3.0).abs() < 1e-6);
+    }
+
+    /// Monte Carlo RGB irradiance at `p` (normal `n`) from `light`, no occlusion; also checks
+    /// that every sample's direction is met by BSDF rays with the same density and radiance.
+    fn irradiance_rgb(light: &Light, p: Vec3A, n: Vec3A, samples: u32, time: f32) -> Vec3A {
+        let mut s = Sampler::new(11, 2, 9);
+        let mut e = [0.0f64; 3];
+        for k in 0..samples {
+            if let Some(ls) = light.sample_at(p, n, s.next_f32(), s.next_f32(), time) {
+                let w = ls.weight() * ls.wi.dot(n).max(0.0);
+                for c in 0..3 {
+                    e[c] += f64::from(w[c]);
+                }
+                if k % 64 == 0 {
+                    let pdf = light.pdf_at(p, n, ls.wi, time);
+                    assert!((pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "{pdf} vs {}", ls.pdf);
+                    let hit = light.intersect_at(p, ls.wi, f32::INFINITY, time).unwrap();
+                    assert!((hit.radiance - ls.radiance).abs().max_element() <= 1e-5 * ls.radiance.max_element().max(1.0));
+                }
+            }
+        }
+        Vec3A::from(e.map(|x| (x / f64::from(samples)) as f32))
+    }
+
+    /// The square [−1, 1]² at height 2 facing down, as two triangles per half (x < 0, x > 0),
+    /// and its halves' outlines (for Lambert's formula).
+    fn halved_square() -> (Vec<[Vec3A; 3]>, [[Vec3A; 4]; 2]) {
+        let p = |x: f32, y: f32| Vec3A::new(x, y, 2.0);
+        let half = |x0: f32, x1: f32| [p(x0, -1.0), p(x1, -1.0), p(x1, 1.0), p(x0, 1.0)];
+        let (l, r) = (half(-1.0, 0.0), half(0.0, 1.0));
+        // Clockwise seen from +Z: the right-hand normal is −Z, toward the floor.
+        let tris = [l, r].iter().flat_map(|q| [[q[0], q[2], q[1]], [q[0], q[3], q[2]]]).collect();
+        (tris, [l, r])
+    }
+
+    #[test]
+    fn a_mesh_lights_faces_emit_their_own_materials_colours() {
+        // GeomSubsets: the left half emits (1, 0.2, 0), the right (0, 0.5, 2); the estimate at
+        // points mostly under one half is the exact sum of each half's Lambert irradiance times
+        // its colour, channel by channel.
+        let (tris, halves) = halved_square();
+        let (cl, cr) = (Vec3A::new(1.0, 0.2, 0.0), Vec3A::new(0.0, 0.5, 2.0));
+        let emission =
+            MeshEmission { emitters: vec![Emitter::Color(cl), Emitter::Color(cr)], per_triangle: vec![0, 0, 1, 1], st: Vec::new() };
+        let mesh = TriangleLight::with_emission(tris.clone(), false, None, emission.clone()).unwrap();
+        assert!((mesh.mean_emission() - 0.5 * (cl + cr)).length() < 1e-6);
+        let light = Light::usd_area("/m", LightShape::Mesh(mesh.clone()), 1.5, 0.0, Vec3A::ONE, false);
+        for p in [Vec3A::new(-0.7, 0.2, 0.0), Vec3A::new(0.8, -0.3, 0.0)] {
+            let exact = (cl * lambert_polygon(&halves[0], p, Vec3A::Z) + cr * lambert_polygon(&halves[1], p, Vec3A::Z)) * 1.5;
+            let e = irradiance_rgb(&light, p, Vec3A::Z, 400_000, 0.0);
+            for c in 0..3 {
+                assert!((e[c] - exact[c]).abs() <= 0.01 * exact.max_element(), "channel {c}: {e} vs {exact} at {p}");
+            }
+            // Not the mesh's one colour (their mean) everywhere: the test can tell.
+            let mean = 0.5 * (cl + cr) * (lambert_polygon(&halves[0], p, Vec3A::Z) + lambert_polygon(&halves[1], p, Vec3A::Z)) * 1.5;
+            assert!((mean - exact).abs().max_element() > 0.1 * exact.max_element());
+        }
+        // Chosen by power: the right half (channel mean 5/6 against 2/5) gets 25/37 of samples;
+        // a face that emits nothing gets none.
+        let right = (0..10_000).filter(|k| mesh.sample(((*k as f32) + 0.5) / 1e4, 0.5).0.x > 0.0).count();
+        assert!((right as f32 / 1e4 - 25.0 / 37.0).abs() < 2e-3, "{right}");
+        let dark = MeshEmission { emitters: vec![Emitter::Color(cl), Emitter::Color(Vec3A::ZERO)], ..emission.clone() };
+        let dark = TriangleLight::with_emission(tris.clone(), false, None, dark).unwrap();
+        assert!((0..1000).all(|k| dark.sample((k as f32 + 0.5) / 1e3, 0.3).0.x < 0.0));
+        // Moving: the same per-face densities, posed.
+        use crate::motion::{MotionKey, MotionTransform};
+        let key = |t: f32, x: f32| MotionKey { time: t, render_from_object: Mat4::from_translation(glam::Vec3::new(x, 0.0, 0.0)) };
+        let motion = MotionTransform::new(vec![key(0.0, 0.0), key(1.0, 1.0)]).unwrap();
+        let moving = TriangleLight::with_emission(tris, false, Some(motion), emission).unwrap();
+        let light = Light::usd_area("/m", LightShape::Mesh(moving), 1.5, 0.0, Vec3A::ONE, false);
+        let p = Vec3A::new(0.3, 0.2, 0.0);
+        let shifted = halves.map(|q| q.map(|v| v + Vec3A::new(0.5, 0.0, 0.0)));
+        let exact = (cl * lambert_polygon(&shifted[0], p, Vec3A::Z) + cr * lambert_polygon(&shifted[1], p, Vec3A::Z)) * 1.5;
+        let e = irradiance_rgb(&light, p, Vec3A::Z, 200_000, 0.5);
+        assert!((e - exact).abs().max_element() <= 0.01 * exact.max_element(), "{e} vs {exact}");
+    }
+
+    /// A texture whose texels are `left` where s < 0.5 and `right` elsewhere; a footprint of
+    /// the whole image reads their mean.
+    struct Split {
+        left: [f32; 3],
+        right: [f32; 3],
+    }
+
+    impl crate::texture::TextureSampler for Split {
+        fn handle(&self, _path: &str) -> Result<crate::texture::TextureHandle, crate::texture::TextureError> {
+            Ok(crate::texture::TextureHandle::new(0))
+        }
+        fn sample(
+            &self,
+            _h: crate::texture::TextureHandle,
+            st: [f32; 2],
+            dx: [f32; 2],
+            _dy: [f32; 2],
+            _lookup: &crate::texture::Lookup,
+            out: &mut [f32],
+        ) -> bool {
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = if dx[0] >= 1.0 {
+                    0.5 * (self.left[c] + self.right[c])
+                } else if st[0] < 0.5 {
+                    self.left[c]
+                } else {
+                    self.right[c]
+                };
+            }
+            true
+        }
+        fn resolution(&self, _h: crate::texture::TextureHandle) -> Option<[u32; 2]> {
+            Some([64, 64])
+        }
+        fn filter_mode(&self) -> crate::texture::FilterMode {
+            crate::texture::FilterMode::Differentials
+        }
+        fn stats(&self) -> serde_json::Value {
+            serde_json::json!({})
+        }
+    }
+
+    #[test]
+    fn a_textured_mesh_light_emits_its_texture_at_each_points_st() {
+        // One emissiveColor texture over the whole square (s = (x + 1)/2): (1, 0.2, 0) where
+        // x < 0, (0, 0.3, 1) where x > 0, times scale 2 plus bias 0.1. The texture's edge
+        // crosses no triangle here, so also try a mesh whose two triangles it cuts diagonally.
+        let (left, right) = ([1.0, 0.2, 0.0], [0.0, 0.3, 1.0]);
+        let tex = crate::material::TexturedColor {
+            sampler: std::sync::Arc::new(Split { left, right }),
+            texture: crate::texture::TextureHandle::new(0),
+            path: "split.png".into(),
+            lookup: crate::texture::Lookup::DEFAULT,
+            scale: Vec3A::splat(2.0),
+            bias: Vec3A::splat(0.1),
+            fallback: Vec3A::ZERO,
+            st_channel: 0,
+        };
+        let (cl, cr) = (Vec3A::from(left) * 2.0 + 0.1, Vec3A::from(right) * 2.0 + 0.1);
+        let (halved, halves) = halved_square();
+        let p = |x: f32, y: f32| Vec3A::new(x, y, 2.0);
+        let whole = vec![[p(-1.0, -1.0), p(1.0, 1.0), p(1.0, -1.0)], [p(-1.0, -1.0), p(-1.0, 1.0), p(1.0, 1.0)]];
+        let st_of = |t: &[Vec3A; 3]| t.map(|v| [0.5 * (v.x + 1.0), 0.5 * (v.y + 1.0)]);
+        for tris in [halved, whole] {
+            let emission = MeshEmission {
+                emitters: vec![Emitter::Texture(tex.clone())],
+                per_triangle: vec![0; tris.len()],
+                st: tris.iter().map(st_of).collect(),
+            };
+            let mesh = TriangleLight::with_emission(tris, false, None, emission).unwrap();
+            assert!((mesh.mean_emission() - 0.5 * (cl + cr)).length() < 1e-5);
+            let light = Light::usd_area("/t", LightShape::Mesh(mesh), 1.0, 0.0, Vec3A::ONE, false);
+            for q in [Vec3A::new(-0.6, 0.1, 0.0), Vec3A::new(0.7, -0.4, 0.0)] {
+                let exact = cl * lambert_polygon(&halves[0], q, Vec3A::Z) + cr * lambert_polygon(&halves[1], q, Vec3A::Z);
+                let e = irradiance_rgb(&light, q, Vec3A::Z, 400_000, 0.0);
+                assert!((e - exact).abs().max_element() <= 0.01 * exact.max_element(), "{e} vs {exact} at {q}");
+            }
+        }
+    }
+
+    /// A type C beam about the light's −Z: 100 cd to 10° off the axis, falling linearly to 0
+    /// at 20°, nothing beyond.
+    fn beam_shaping(axis: Vec3A) -> Shaping {
+        let text = "TILT=NONE\n1 -1 1 10 1 1 2 0 0 0\n1 1 10\n0 10 20 30 40 50 60 70 80 90\n0\n100 100 0 0 0 0 0 0 0 0\n";
+        let profile = IesProfile::parse(text).unwrap();
+        let ies = IesShaping { profile, file: "beam.ies".into(), angle_scale: 0.0, normalize: false, x: Vec3A::X, y: Vec3A::Y, tilt: 0.0 };
+        Shaping::with_ies(None, axis, ies)
+    }
+
+    #[test]
+    fn an_ies_lights_directions_follow_its_profile_same_mean_less_noise() {
+        // A 2 × 2 rect 0.5 above the floor, facing down, with a 10–20° beam: from a floor point
+        // only the patch of rect within ~20° of straight up sends light, a small part of it.
+        let rect = LightShape::Rect { center: Vec3A::new(0.0, 0.0, 0.5), u: Vec3A::X, v: Vec3A::Y, normal: Vec3A::NEG_Z };
+        let mut light = Light::usd_area("/beam", rect, 1.0, 0.0, Vec3A::ONE, false);
+        light.shaping = Some(beam_shaping(Vec3A::NEG_Z));
+        light.profile_sampling = true;
+        let shaping = light.shaping.clone().unwrap();
+        for p in [Vec3A::new(0.3, 0.2, 0.0), Vec3A::new(-0.85, 0.6, 0.0)] {
+            let n = Vec3A::Z;
+            // Truth by quadrature over the rect: ∫ f(ω) cos θl cos θp / d² dA.
+            let m = 1000;
+            let mut truth = 0.0f64;
+            for i in 0..m {
+                for j in 0..m {
+                    let y = Vec3A::new(-1.0 + 2.0 * (i as f32 + 0.5) / m as f32, -1.0 + 2.0 * (j as f32 + 0.5) / m as f32, 0.5);
+                    let d = p - y;
+                    let d2 = d.length_squared();
+                    let w = d / d2.sqrt();
+                    truth += f64::from(shaping.factor(w).x * w.z * w.z / d2);
+                }
+            }
+            let truth = truth * 4.0 / f64::from(m * m);
+            // The estimate and its variance, by the profile's directions and by area alone.
+            let samples = 500_000;
+            let mut s = Sampler::new(4, 4, 2);
+            let (mut sum, mut sum2, mut area_sum, mut area_sum2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            for k in 0..samples {
+                let (u1, u2) = (s.next_f32(), s.next_f32());
+                if let Some(ls) = light.sample(p, n, u1, u2) {
+                    let e = f64::from(ls.weight().x * ls.wi.dot(n).max(0.0));
+                    sum += e;
+                    sum2 += e * e;
+                    if k % 97 == 0 {
+                        let pdf = light.pdf(p, n, ls.wi);
+                        assert!((pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "{pdf} vs {}", ls.pdf);
+                        let hit = light.intersect(p, ls.wi, f32::INFINITY).unwrap();
+                        assert!((hit.pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "{} vs {}", hit.pdf, ls.pdf);
+                    }
+                }
+                // What mipray did before: the rect by area.
+                let y = Vec3A::new(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, 0.5);
+                let d = p - y;
+                let d2 = d.length_squared();
+                let w = d / d2.sqrt();
+                let e = f64::from(shaping.factor(w).x * w.z * w.z / d2 * 4.0);
+                area_sum += e;
+                area_sum2 += e * e;
+            }
+            let n_s = f64::from(samples);
+            let (mean, var) = (sum / n_s, sum2 / n_s - (sum / n_s).powi(2));
+            let (area_mean, area_var) = (area_sum / n_s, area_sum2 / n_s - (area_sum / n_s).powi(2));
+            // Each within four standard errors (plus the quadrature's own 0.2%).
+            for (m, v) in [(mean, var), (area_mean, area_var)] {
+                let tol = 4.0 * (v / n_s).sqrt() + 0.002 * truth;
+                assert!(
+                    (m - truth).abs() < tol,
+                    "{m} vs quadrature {truth} at {p} (guided {mean} var {var}, area {area_mean} var {area_var})"
+                );
+            }
+            // Measured: 3.1× and 2.3× less variance at these two points.
+            assert!(var < 0.5 * area_var, "variance {var} by profile, {area_var} by area at {p}");
+        }
+        // Every guided shape: what sampling picks, pdf and BSDF rays give the same density.
+        let shapes = [
+            LightShape::Sphere { center: Vec3A::new(0.2, 0.0, 0.6), radius: 0.4 },
+            LightShape::Disk { center: Vec3A::new(0.0, 0.1, 0.5), u: Vec3A::X, v: Vec3A::Y * 0.7, normal: Vec3A::NEG_Z },
+            LightShape::Cylinder { center: Vec3A::new(0.0, 0.0, 0.6), axis: Vec3A::X, radius: 0.3, e1: Vec3A::Y, e2: Vec3A::Z },
+        ];
+        for shape in shapes {
+            let mut light = Light::usd_area("/g", shape.clone(), 1.0, 0.0, Vec3A::ONE, false);
+            light.shaping = Some(beam_shaping(Vec3A::NEG_Z));
+            light.profile_sampling = true;
+            // A point the profile's guide applies at (under the disk's centre every cell can
+            // send the beam's peak: no guide).
+            let p = [Vec3A::new(0.1, 0.05, 0.0), Vec3A::new(0.7, 0.3, 0.0), Vec3A::new(-0.5, -0.6, 0.0)]
+                .into_iter()
+                .find(|&p| light.profile_guide(p).is_some())
+                .unwrap_or_else(|| panic!("no guide for {shape:?}"));
+            let mut s = Sampler::new(8, 1, 1);
+            let mut met = 0;
+            for _ in 0..4000 {
+                let Some(ls) = light.sample(p, Vec3A::Z, s.next_f32(), s.next_f32()) else { continue };
+                let pdf = light.pdf(p, Vec3A::Z, ls.wi);
+                assert!((pdf - ls.pdf).abs() < 2e-3 * ls.pdf, "{pdf} vs {} for {shape:?}", ls.pdf);
+                if let Some(hit) = light.intersect(p, ls.wi, f32::INFINITY) {
+                    assert!((hit.pdf - ls.pdf).abs() < 2e-3 * ls.pdf, "{} vs {} for {shape:?}", hit.pdf, ls.pdf);
+                    met += 1;
+                }
+            }
+            assert!(met > 50, "{met} for {shape:?}");
+        }
     }
 
     /// A uniform dome guided by a portal over a window in the ceiling of a closed room: (mean,

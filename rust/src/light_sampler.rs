@@ -148,8 +148,9 @@ impl LightBounds {
             LightShape::Mesh(m) => LightBounds {
                 lo: m.bounds().min,
                 hi: m.bounds().max,
-                // Its whole area facing the point at best (an upper bound, as the others').
-                phi: lum * m.max_area(),
+                // Its whole area facing the point at best (an upper bound, as the others'), at
+                // its faces' mean emission.
+                phi: luminance(light.radiance_scale * m.mean_emission()) * m.max_area(),
                 normals: Cone { w: Vec3A::Z, cos_theta: -1.0 },
                 cos_theta_e: 0.0,
             },

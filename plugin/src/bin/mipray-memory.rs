@@ -269,6 +269,7 @@ fn sync_table_md() -> String {
         }
     }
     md += "\nPeak memory of whole stages rendered through usd-core and Python (the issue's 365k-face and million-face targets): docs/memory-usd.md.\n";
+    md += "\nThe allocator: the Python extension uses the system's (glibc). With a geometry budget the process peaks a steady ~50 MB above the stage's floor plus the budget, whether 300 or 2,400 meshes are dropped (build temporaries and allocator slack, not measured apart); `mimalloc` as the extension's global allocator peaked 39–63 MB higher at every budget for the same CPU time and was not kept (docs/memory-usd.md, \"Allocator\").\n";
     md += "\nSync is the scene's construction: eager makes every mesh's OpenSubdiv tables (in series here; the delegate syncs in parallel), lazy only the control hulls, and the tables are made during the render by the first ray to reach each mesh, on the render's threads. Peak RSS falls by the tables of the meshes no ray reaches.\n";
     md
 }

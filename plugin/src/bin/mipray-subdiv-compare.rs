@@ -28,7 +28,7 @@ const USAGE: &str = "usage: mipray-subdiv-compare [--json] [--heatmap FILE.png] 
                              [--split-patches N] [--quick] SHAPE.obj
 
 Compares mipray's limit evaluation, tessellations (each tier, each rate, split children) and
-seams with OpenSubdiv's LimitStencilTable and uniform refinement. Errors are relative to the
+seams with OpenSubdiv's own limit evaluation and uniform refinement. Errors are relative to the
 control mesh's bounding-box diagonal.
 
   --json              print one JSON object instead of a table

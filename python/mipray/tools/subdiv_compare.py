@@ -8,7 +8,7 @@ The input is an OBJ in OpenSubdiv's regression-shape format (``t`` tags for
 creases, corners, holes, boundary rules) or a ``UsdGeom.Mesh`` given as
 ``file.usda:/Prim/Path`` (read with :func:`mipray.usd.mesh.mesh_arguments`).
 The comparison itself runs in Rust (``mipray._mipray.subdiv_compare``): limit
-evaluation against OpenSubdiv's LimitStencilTable, each tier's, rate's and
+evaluation against OpenSubdiv's own (its patch table and basis), each tier's, rate's and
 split's tessellation against the limit surface, the seams between rates, and
 OpenSubdiv's uniform refinement. See docs/subdivision-compare.md.
 

@@ -40,7 +40,7 @@ from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
 from .gprim import is_renderable_gprim
-from .light import link_arguments, material_tint, mesh_light_arguments
+from .light import link_arguments, material_tints, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
@@ -352,9 +352,9 @@ class Instancing:
             # A mesh light in a prototype emits from every instance, linked as resolved now.
             light = mesh_light_arguments(prim, walk.time)
             if light is not None:
-                tint = material_tint(prim, prim, read.args.get("material"), walk.time)
+                tints = material_tints(prim, prim, read.args, walk.time)
                 links = link_arguments(prim, walk.time, self.mesh_paths or (lambda: []))
-                read.args["light"] = {**light, **links, "tint": tint}
+                read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)

@@ -38,7 +38,8 @@ A Mesh with ``MeshLightAPI``, or named by a ``GeometryLight``'s ``geometry``, is
 light: ``RenderDelegate.set_mesh`` gets ``light`` (:func:`mesh_light_arguments`,
 :func:`emitter_arguments`) and the core samples its tessellated limit surface by area. Under
 ``light:materialSyncMode = materialGlowTintsLight`` (``MeshLightAPI``'s fallback) the bound
-material's emission tints the light (:func:`material_tint`); a mesh light inside a prototype
+material's emission tints the light, each GeomSubset's on its own faces
+(:func:`material_tints`); a mesh light inside a prototype
 (PointInstancer or native instance) emits from every instance.
 """
 
@@ -50,7 +51,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pxr import Sdf, Usd, UsdGeom, UsdLux
+from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 from ..errors import PrimError
 from .warn import warn_once
@@ -70,6 +71,7 @@ __all__ = [
     "link_arguments",
     "linking_authored",
     "material_tint",
+    "material_tints",
     "mesh_light_arguments",
     "portal_arguments",
 ]
@@ -277,6 +279,10 @@ def area_light_arguments(
             # A tilt table is read at the light's aim's angle from the stage's down.
             z_up = UsdGeom.GetStageUpAxis(prim.GetStage()) == UsdGeom.Tokens.z
             args["ies_down"] = (0.0, 0.0, -1.0) if z_up else (0.0, -1.0, 0.0)
+            # Opt-in: directions drawn by the profile (less noise a sample, more time).
+            sampling = prim.GetAttribute("mipray:iesProfileSampling")
+            if sampling and sampling.HasAuthoredValue() and sampling.Get(time):
+                args["ies_profile_sampling"] = True
             if not math.isfinite(args["ies_angle_scale"]):
                 raise PrimError(path, "inputs:shaping:ies:angleScale is not finite")
         if not 0.0 <= args["cone_softness"] <= 1.0 or args["focus"] < 0.0:
@@ -433,8 +439,9 @@ def material_tint(
     ``noMaterialResponse``, or no bound material ("as if there is no Material bound"), the
     light's own inputs alone. ``material`` is the ``set_mesh`` ``material`` argument read for
     the mesh: a bound material mipray does not read (no UsdPreviewSurface) cannot tint, with
-    one warning naming both. The mesh's own material tints every face (GeomSubsets' materials
-    do not), and a textured ``emissiveColor`` tints by its texture's mean (the core warns).
+    one warning naming both. The mesh's own material tints the faces no GeomSubset binds
+    (:func:`material_tints` for the subsets'); a textured ``emissiveColor`` tints each point
+    by its texture at the point's ``st``.
     """
     attr = UsdLux.LightAPI(light_prim).GetMaterialSyncModeAttr()
     mode = attr.Get(time) if attr else None
@@ -453,6 +460,49 @@ def material_tint(
         )
         return False
     return True
+
+
+def material_tints(
+    prim: Usd.Prim, light_prim: Usd.Prim, args: dict[str, Any], time: Usd.TimeCode
+) -> dict[str, Any]:
+    """``set_mesh``'s ``light`` keys ``tint`` and ``tint_materials`` for mesh light ``prim``.
+
+    ``tint`` is :func:`material_tint`'s (the mesh's own material tints the faces no
+    GeomSubset binds). Under ``materialGlowTintsLight`` each materialBind GeomSubset's
+    material tints its own faces by its ``emissiveColor`` (constant or textured, read per
+    point): ``tint_materials`` names those among ``args["face_materials"]`` (the subsets'
+    networks mipray reads). A subset's material mipray cannot read does not tint its faces,
+    with one warning naming both. ``args`` is the ``set_mesh`` keyword arguments read for
+    the mesh.
+    """
+    out: dict[str, Any] = {"tint": material_tint(prim, light_prim, args.get("material"), time)}
+    attr = UsdLux.LightAPI(light_prim).GetMaterialSyncModeAttr()
+    mode = attr.Get(time) if attr else None
+    if str(mode) != "materialGlowTintsLight":
+        return out
+    from .shading import bound_material
+
+    read = {m.get("name") for m in args.get("face_materials") or []}
+    own = (args.get("material") or {}).get("name")
+    names: list[str] = []
+    for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
+        material = bound_material(subset.GetPrim())
+        if material is None:
+            continue
+        key = str(material.GetPath())
+        if key == own:
+            continue  # the mesh's own material: its faces take it (``tint``)
+        if key in read:
+            if key not in names:
+                names.append(key)
+        else:
+            _warn_once(
+                f"{prim.GetPath()}: GeomSubset {subset.GetPath()}'s material {key} has no "
+                "surface mipray reads; its emission does not tint the mesh light's faces"
+            )
+    if names:
+        out["tint_materials"] = names
+    return out
 
 
 def authored_properties(prim: Usd.Prim, names: Iterable[str]) -> list[str]:

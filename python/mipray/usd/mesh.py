@@ -16,7 +16,11 @@ import numpy as np
 from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 
+from .warn import warn_once
+
 __all__ = ["mesh_arguments"]
+
+_warn = warn_once(__name__)
 
 
 def _array(attr: Usd.Attribute, time: Usd.TimeCode, dtype: type) -> NDArray[Any]:
@@ -85,4 +89,14 @@ def mesh_arguments(
         "left_handed": _token(mesh.GetOrientationAttr(), time, "rightHanded") == "leftHanded",
         "double_sided": bool(mesh.GetDoubleSidedAttr().Get(time) or False),
     }
+    if args["scheme"] == "loop" and counts.size and (counts != 3).any():
+        # OpenSubdiv's Loop scheme takes triangles only. Storm (usdrecord) draws such a mesh
+        # unrefined, and so does this, rather than leave it out.
+        face = int(np.flatnonzero(counts != 3)[0])
+        _warn(
+            f"{mesh.GetPath()}: subdivisionScheme loop needs triangles, but face {face} has "
+            f"{int(counts[face])} vertices; rendered unsubdivided (as subdivisionScheme none), "
+            "as Storm draws it"
+        )
+        args["scheme"] = "none"
     return args

@@ -38,8 +38,11 @@ _TYPES = {
 }
 
 
-def _mtlx_references(prim: Usd.Prim) -> list[tuple[str, str, str]]:
-    """(document path, material name, the layer's directory) of ``prim``'s .mtlx references."""
+def _mtlx_references(prim: Usd.Prim) -> list[tuple[str, str, str, bool]]:
+    """The .mtlx references of ``prim``: (document, material name, its directory, nested).
+
+    ``nested``: the whole document composes under ``<prim>/Materials``.
+    """
     found = []
     for spec in prim.GetPrimStack():
         items = spec.referenceList.GetAddedOrExplicitItems()
@@ -49,11 +52,13 @@ def _mtlx_references(prim: Usd.Prim) -> list[tuple[str, str, str]]:
                 anchor = spec.layer.ComputeAbsolutePath(path) if spec.layer else path
                 if not os.path.isfile(anchor):
                     continue  # usd-core's composition error already names the missing file
-                # </MaterialX/Materials/Wood> names one material; </MaterialX> (or no path)
-                # the whole document, composed under <prim>/Materials as usdMtlx lays it out.
+                # </MaterialX/Materials/Wood> names one material; </MaterialX/Materials> the
+                # document's materials, composed as <prim>'s children; </MaterialX> (or no path)
+                # the whole document, its materials under <prim>/Materials: usdMtlx's layout.
                 target = ref.primPath
-                name = target.name if target.pathElementCount >= 3 else ""
-                found.append((anchor, name, os.path.dirname(anchor)))
+                depth = target.pathElementCount
+                name = target.name if depth >= 3 else ""
+                found.append((anchor, name, os.path.dirname(anchor), depth <= 1))
     return found
 
 
@@ -162,7 +167,7 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
     layer = Sdf.Layer.CreateAnonymous("mipray-mtlx.usda")
     docs: dict[str, Any] = {}
     for prim, refs in targets:
-        for file, name, folder in refs:
+        for file, name, folder, nested in refs:
             try:
                 if file not in docs:
                     doc = mx.createDocument()
@@ -176,9 +181,12 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
                 doc = docs[file]
                 if name:
                     _translate(mx, doc, name, folder, layer, prim.GetPath(), define=False)
-                else:
+                elif nested:
                     scope = Sdf.CreatePrimInLayer(layer, prim.GetPath().AppendChild("Materials"))
                     scope.specifier, scope.typeName = Sdf.SpecifierDef, "Scope"
+                else:
+                    scope = Sdf.CreatePrimInLayer(layer, prim.GetPath())
+                if not name:
                     for node in doc.getMaterialNodes():
                         at = scope.path.AppendChild(node.getName())
                         _translate(mx, doc, node.getName(), folder, layer, at, define=True)

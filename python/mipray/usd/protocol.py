@@ -139,6 +139,7 @@ class RenderDelegateLike(Protocol):
         ies_angle_scale: float = ...,
         ies_normalize: bool = ...,
         ies_down: tuple[float, float, float] = ...,
+        ies_profile_sampling: bool = ...,
         portals: list[str] | None = ...,
     ) -> None:
         """Add or replace a UsdLux light of any kind (``kind``), portals included."""

@@ -59,7 +59,7 @@ from .light import (
     emitter_arguments,
     geometry_light_targets,
     link_arguments,
-    material_tint,
+    material_tints,
     mesh_light_arguments,
     portal_arguments,
 )
@@ -710,8 +710,8 @@ class UsdSceneDelegate:
                     light = emitter_arguments(light_prim, time)
                 if light is not None:
                     links = link_arguments(light_prim, time, self._gprim_paths)
-                    tint = material_tint(prim, light_prim, read.args.get("material"), time)
-                    read.args["light"] = {**light, **links, "tint": tint}
+                    tints = material_tints(prim, light_prim, read.args, time)
+                    read.args["light"] = {**light, **links, **tints}
                     record.light = True
                     record.might_vary = might_vary or record.might_vary
                 self.delegate.set_mesh(path, **read.args)

@@ -41,11 +41,15 @@
 //! front hemisphere for types A and B), so the shaping keeps the light's power; without it the
 //! factor is the candela value itself.
 //!
-//! **Tilt.** A tilt table multiplies the candela by its factor at the lamp's tilt, interpolated
-//! linearly in the table's angles (clamped to its ends). A UsdLux light's tilt is the angle
-//! between its aim (−Z) and the stage's down (the front end gives it), the reading LM-63 gives
-//! lamp-to-luminaire geometry 1 (lamp vertical); geometries 2 and 3 (a horizontal lamp) are
-//! read the same way (documented in docs/materials.md).
+//! **Tilt.** A tilt table multiplies the candela by its factor at the luminaire's tilt,
+//! interpolated linearly in the table's angles (clamped to its ends). Which tilt the table
+//! means is LM-63's lamp-to-luminaire geometry ([`Tilt::tilt_angle`]), with the stage's down
+//! (the front end gives it) and the light's aim (−Z) and photometric 0°–180° axis (+X):
+//! geometry 1 (lamp vertical, base up or down, when aimed straight down) any tilt of the aim
+//! from down; geometry 2 (lamp horizontal, staying horizontal as the luminaire tilts) the
+//! tilt about the lamp's axis, which lies in the 0°–180° plane (the light's X); geometry 3
+//! (lamp horizontal, tilting with the luminaire in the 0°–180° plane) the lamp axis's angle
+//! from the horizontal.
 
 use glam::Vec3A;
 
@@ -72,6 +76,32 @@ pub struct Tilt {
 }
 
 impl Tilt {
+    /// The tilt (radians, in [0, π]) at which a light aimed along unit `aim` (its −Z), its
+    /// photometric 0° axis along unit `x` (its +X), in a world whose down is unit `down`,
+    /// reads the table, by LM-63's lamp-to-luminaire geometry:
+    ///
+    /// 1. the lamp is vertical (along the aim) when the luminaire aims straight down, so any
+    ///    tilt of the aim tilts it: ∠(aim, down);
+    /// 2. the lamp is horizontal along the 0°–180° plane (`x`) and stays horizontal as the
+    ///    luminaire tilts about it: the aim's angle from down about `x` (down projected onto the
+    ///    plane normal to `x`; a tilt in the 0°–180° plane is not this geometry's and reads 0);
+    /// 3. the lamp is horizontal when aimed down and tilts with the luminaire in the 0°–180°
+    ///    plane: the lamp axis's angle from the horizontal, asin |x · down|.
+    pub fn tilt_angle(&self, aim: Vec3A, x: Vec3A, down: Vec3A) -> f32 {
+        match self.geometry {
+            2 => {
+                let across = down - x * down.dot(x);
+                match across.try_normalize() {
+                    Some(d) => aim.dot(d).clamp(-1.0, 1.0).acos(),
+                    // The lamp stands vertical: the luminaire is tilted 90° (in the other plane).
+                    None => std::f32::consts::FRAC_PI_2,
+                }
+            }
+            3 => x.dot(down).abs().clamp(0.0, 1.0).asin(),
+            _ => aim.dot(down).clamp(-1.0, 1.0).acos(),
+        }
+    }
+
     /// The factor at tilt `angle` (radians): linear between the table's angles, its end values
     /// beyond them.
     pub fn factor(&self, angle: f32) -> f32 {
@@ -96,6 +126,8 @@ pub struct IesProfile {
     cd: Vec<f32>,
     /// Mean candela over the sphere or hemisphere the profile covers ([`IesProfile::mean`]).
     mean: f32,
+    /// Per vertical angle, the largest candela over the horizontal angles.
+    envelope: Vec<f32>,
     peak: f32,
 }
 
@@ -195,8 +227,9 @@ impl IesProfile {
             }
             _ => {}
         }
-        let mut p = IesProfile { kind, tilt, v, h, cd, mean: 0.0, peak: 0.0 };
+        let mut p = IesProfile { kind, tilt, v, h, cd, mean: 0.0, peak: 0.0, envelope: Vec::new() };
         p.peak = p.cd.iter().copied().fold(0.0, f32::max);
+        p.envelope = (0..p.v.len()).map(|vi| (0..p.h.len()).map(|hi| p.at(hi, vi)).fold(0.0f32, f32::max)).collect();
         p.mean = p.mean_candela();
         Ok(p)
     }
@@ -293,6 +326,27 @@ impl IesProfile {
             p = 2.0 * PI - p;
         }
         p
+    }
+
+    /// An upper bound of [`IesProfile::candela`] over vertical angles [`lo`, `hi`] (radians)
+    /// and every azimuth: the largest of the per-vertical-angle maxima over azimuth (bilinear
+    /// interpolation never exceeds its corners) at the table's angles inside the interval and,
+    /// interpolated, at its ends. 0 when the interval misses the vertical range.
+    pub fn max_between(&self, lo: f32, hi: f32) -> f32 {
+        let (v0, v1) = (self.v[0], self.v[self.v.len() - 1]);
+        let (lo, hi) = (lo.max(v0), hi.min(v1));
+        if !(lo <= hi + 1e-6) {
+            return 0.0;
+        }
+        let envelope = |vi: usize| self.envelope[vi];
+        let at = |theta: f32| {
+            let (vi, tv) = bracket(&self.v, theta);
+            let vj = (vi + 1).min(self.v.len() - 1);
+            lerp(envelope(vi), envelope(vj), tv)
+        };
+        let start = self.v.partition_point(|&v| v <= lo);
+        let inside = self.v[start..].iter().take_while(|&&v| v < hi).count();
+        (start..start + inside).map(envelope).fold(at(lo).max(at(hi)), f32::max)
     }
 
     /// Candela at vertical angle `theta` and azimuth `phi` (radians), bilinear; 0 outside the
@@ -426,6 +480,36 @@ mod tests {
         let flat = "TILT=NONE\n1 -1 1 2 2 2 2 0 0 0 1 1 10\n-90 90\n-90 90\n7 7\n7 7\n";
         let m = IesProfile::parse(flat).unwrap().mean();
         assert!((m - 7.0).abs() < 1e-2, "{m}");
+    }
+
+    #[test]
+    fn the_tilt_a_table_is_read_at_follows_the_lamp_to_luminaire_geometry() {
+        // A luminaire aimed straight down (−Z, down −Z), its 0°–180° plane along X, tilted 30°
+        // about X (in the 90°–270° plane) or about Y (in the 0°–180° plane). LM-63: geometry 1's
+        // vertical lamp tilts 30° either way; geometry 2's horizontal lamp (along X) stays
+        // horizontal as the luminaire tilts about it, which the table's 30° row is for, while a
+        // tilt in the 0°–180° plane is none of its; geometry 3's lamp tilts 30° with the
+        // luminaire in the 0°–180° plane and not at all about its own axis.
+        let down = Vec3A::NEG_Z;
+        let turn = |m: glam::Mat3A| (m * Vec3A::NEG_Z, m * Vec3A::X);
+        let about_x = turn(glam::Mat3A::from_rotation_x(30f32.to_radians()));
+        let about_y = turn(glam::Mat3A::from_rotation_y(30f32.to_radians()));
+        let tilt = |g: u8| Tilt { geometry: g, angles: vec![0.0, 1.0], factors: vec![1.0, 1.0] };
+        for (g, want_x, want_y) in [(1, 30.0, 30.0), (2, 30.0, 0.0), (3, 0.0, 30.0)] {
+            for ((aim, x), want) in [(about_x, want_x), (about_y, want_y)] {
+                let got = tilt(g).tilt_angle(aim, x, down).to_degrees();
+                assert!((got - want).abs() < 1e-3, "geometry {g}: {got}° vs {want}°");
+            }
+        }
+        // Both at once: turned 20° about its lamp's axis, then tilted 30° in the 0°–180° plane.
+        // Geometry 2 reads the 20° about the lamp's axis, geometry 3 the lamp's 30° from
+        // horizontal, geometry 1 the aim's whole angle from down, acos(cos 30° cos 20°).
+        let (aim, x) = turn(glam::Mat3A::from_rotation_y(30f32.to_radians()) * glam::Mat3A::from_rotation_x(20f32.to_radians()));
+        let whole = (30f32.to_radians().cos() * 20f32.to_radians().cos()).acos().to_degrees();
+        for (g, want) in [(1, whole), (2, 20.0), (3, 30.0)] {
+            let got = tilt(g).tilt_angle(aim, x, down).to_degrees();
+            assert!((got - want).abs() < 1e-3, "geometry {g}: {got}° vs {want}°");
+        }
     }
 
     #[test]

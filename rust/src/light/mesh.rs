@@ -2,6 +2,12 @@
 //! mesh as tessellated for lighting), sampled uniformly by area and met by rays through a BVH
 //! of their own, since lights are not geometry in the scene's BVH. A moving mesh (transform
 //! motion blur) keeps its triangles in object space and is posed at each ray's shutter time.
+//!
+//! Each triangle may emit its own colour ([`MeshEmission`]: UsdLux `materialGlowTintsLight` with
+//! the material bound to its face, a GeomSubset's or the mesh's), constant or read from an
+//! `emissiveColor` texture at the point's `st`. Triangles are then chosen by area × their
+//! emitter's mean colour (channel mean), so a bright subset gets most samples and a black one
+//! none (it emits nothing: no bias).
 
 use std::sync::Arc;
 
@@ -12,7 +18,71 @@ use obvhs::ray::{Ray as BvhRay, RayHit};
 use super::Distribution1D;
 use crate::bounds::Bounds3;
 use crate::intersect::WatertightRay;
+use crate::material::TexturedColor;
 use crate::motion::MotionTransform;
+
+/// What a mesh light's triangle emits, as a factor of the light's radiance (linear RGB).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Emitter {
+    /// The same colour everywhere on the triangle.
+    Color(Vec3A),
+    /// An `emissiveColor` texture (`texel · scale + bias`, negative and non-finite values read
+    /// as 0), looked up at the point's `st` over about one texel.
+    Texture(TexturedColor),
+}
+
+/// Per-triangle emission of a mesh light: for each triangle given to
+/// [`TriangleLight::with_emission`], which emitter it takes and, for textures, its `st` at its
+/// three vertices.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshEmission {
+    pub emitters: Vec<Emitter>,
+    /// Per triangle, an index into `emitters` (out of range: emits nothing).
+    pub per_triangle: Vec<u32>,
+    /// Per triangle, `st` at vertices a, b, c; empty when the mesh has no `st` (a texture then
+    /// reads its fallback).
+    pub st: Vec<[[f32; 2]; 3]>,
+}
+
+/// An emitter with what sampling needs of it.
+#[derive(Debug)]
+struct Source {
+    emitter: Emitter,
+    /// Its mean colour (a texture's over the whole image: its coarsest MIP level).
+    mean: Vec3A,
+    /// A texture's lookup width in `st` units: one texel of its finer axis.
+    texel: f32,
+}
+
+impl Source {
+    fn new(emitter: Emitter) -> Source {
+        let clean = |c: Vec3A| if c.is_finite() { c.max(Vec3A::ZERO) } else { Vec3A::ZERO };
+        match &emitter {
+            Emitter::Color(c) => Source { mean: clean(*c), texel: 0.0, emitter },
+            Emitter::Texture(t) => {
+                let [w, h] = t.sampler.resolution(t.texture).unwrap_or([1024, 1024]);
+                // A footprint of the whole image: its coarsest level, the mean.
+                let mean = clean(t.eval_raw(Some([0.5, 0.5]), [1.0, 0.0], [0.0, 1.0], 3));
+                Source { mean, texel: 1.0 / w.max(h).max(1) as f32, emitter }
+            }
+        }
+    }
+
+    /// The colour at `st` (`None`: the mesh has no `st`).
+    fn at(&self, st: Option<[f32; 2]>) -> Vec3A {
+        match &self.emitter {
+            Emitter::Color(_) => self.mean,
+            Emitter::Texture(t) => {
+                let c = t.eval_raw(st, [self.texel, 0.0], [0.0, self.texel], 3);
+                if c.is_finite() {
+                    c.max(Vec3A::ZERO)
+                } else {
+                    Vec3A::ZERO
+                }
+            }
+        }
+    }
+}
 
 /// The triangles of an emissive mesh: render space, or object space under `motion`.
 pub struct TriangleLight {
@@ -21,8 +91,6 @@ pub struct TriangleLight {
     tris: Vec<[Vec3A; 3]>,
     /// Chooses a triangle with probability ∝ its area (in `tris`' space).
     by_area: Distribution1D,
-    /// Area of `tris` in their own space, units².
-    own_area: f32,
     /// Render units²: the area at the shutter's open.
     area: f32,
     /// Render units²: the largest area at a motion key (an upper bound for importance).
@@ -34,6 +102,16 @@ pub struct TriangleLight {
     bvh: Option<CwBvh>,
     /// Object to render space over the shutter; `None`: `tris` are in render space.
     motion: Option<MotionTransform>,
+    /// Per triangle: its area in `tris`' space over the probability of choosing it (the
+    /// reciprocal of a point's density there, per unit² of `tris`' space).
+    density_area: Vec<f32>,
+    /// Per triangle, an index into `sources`; empty: every triangle emits 1.
+    source_of: Vec<u32>,
+    sources: Vec<Source>,
+    /// Per triangle, `st` at its vertices (empty: none).
+    st: Vec<[[f32; 2]; 3]>,
+    /// Area-weighted mean of what the triangles emit (RGB; 1 without [`MeshEmission`]).
+    mean_emission: Vec3A,
 }
 
 impl std::fmt::Debug for TriangleLight {
@@ -48,14 +126,16 @@ impl std::fmt::Debug for TriangleLight {
 }
 
 /// Where a ray meets the mesh: distance, |cosine| between the ray and the triangle's normal,
-/// and the area whose reciprocal is the density (per render unit²) with which
-/// [`TriangleLight::sample_at`] picks that point (the mesh's area, unless it moves and
-/// deforms triangles unevenly).
+/// the area whose reciprocal is the density (per render unit²) with which
+/// [`TriangleLight::sample_at`] picks that point (the mesh's area when its triangles are chosen
+/// by area and it does not deform them unevenly; infinite where it never picks it), and what
+/// the point emits as a factor of the light's radiance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriangleHit {
     pub t: f32,
     pub cos: f32,
     pub area: f32,
+    pub emission: Vec3A,
 }
 
 /// A point [`TriangleLight::sample_at`] chose.
@@ -67,6 +147,8 @@ pub struct TrianglePoint {
     pub normal: Vec3A,
     /// As [`TriangleHit::area`]: the point's density per render unit² is 1 / `area`.
     pub area: f32,
+    /// As [`TriangleHit::emission`].
+    pub emission: Vec3A,
 }
 
 impl TriangleLight {
@@ -74,27 +156,90 @@ impl TriangleLight {
     /// right-hand normal points to). Triangles with a non-finite vertex or no area are left
     /// out (they could never be sampled or hit); `None` when none is left.
     pub fn new(triangles: Vec<[Vec3A; 3]>, two_sided: bool) -> Option<Arc<TriangleLight>> {
-        Self::build(triangles, two_sided, None)
+        Self::build(triangles, two_sided, None, None)
+    }
+
+    /// As [`TriangleLight::new`] (render-space triangles) or [`TriangleLight::moving`] (object
+    /// space, with `motion`), each triangle emitting what `emission` gives it.
+    pub fn with_emission(
+        triangles: Vec<[Vec3A; 3]>,
+        two_sided: bool,
+        motion: Option<MotionTransform>,
+        emission: MeshEmission,
+    ) -> Option<Arc<TriangleLight>> {
+        Self::build(triangles, two_sided, motion, Some(emission))
     }
 
     /// A mesh moving under `motion` (object to render space over the shutter): `triangles`
     /// in object space, oriented as for [`TriangleLight::new`] in that space (a mirroring
     /// pose keeps the emitting side the one the object-space normal's pose points to).
     pub fn moving(triangles: Vec<[Vec3A; 3]>, two_sided: bool, motion: MotionTransform) -> Option<Arc<TriangleLight>> {
-        Self::build(triangles, two_sided, Some(motion))
+        Self::build(triangles, two_sided, Some(motion), None)
     }
 
-    fn build(triangles: Vec<[Vec3A; 3]>, two_sided: bool, motion: Option<MotionTransform>) -> Option<Arc<TriangleLight>> {
+    fn build(
+        triangles: Vec<[Vec3A; 3]>,
+        two_sided: bool,
+        motion: Option<MotionTransform>,
+        emission: Option<MeshEmission>,
+    ) -> Option<Arc<TriangleLight>> {
         let limit = crate::bounds::MAX_COORDINATE;
-        let tris: Vec<[Vec3A; 3]> = triangles
-            .into_iter()
-            .filter(|t| t.iter().all(|p| p.is_finite() && p.abs().max_element() < limit) && tri_area(t) > 0.0)
+        let keep: Vec<usize> = (0..triangles.len())
+            .filter(|&k| {
+                let t = &triangles[k];
+                t.iter().all(|p| p.is_finite() && p.abs().max_element() < limit) && tri_area(t) > 0.0
+            })
             .collect();
-        if tris.is_empty() {
+        if keep.is_empty() {
             return None;
         }
+        let tris: Vec<[Vec3A; 3]> = keep.iter().map(|&k| triangles[k]).collect();
         let areas: Vec<f32> = tris.iter().map(tri_area).collect();
         let own_area = areas.iter().map(|&a| f64::from(a)).sum::<f64>() as f32;
+        let (sources, source_of, st) = match emission {
+            None => (Vec::new(), Vec::new(), Vec::new()),
+            Some(e) => {
+                let n = e.emitters.len() as u32;
+                let source_of: Vec<u32> = keep.iter().map(|&k| e.per_triangle.get(k).copied().filter(|&s| s < n).unwrap_or(n)).collect();
+                let st = if e.st.len() == triangles.len() { keep.iter().map(|&k| e.st[k]).collect() } else { Vec::new() };
+                let mut sources: Vec<Source> = e.emitters.into_iter().map(Source::new).collect();
+                // Triangles naming no emitter emit nothing.
+                sources.push(Source::new(Emitter::Color(Vec3A::ZERO)));
+                (sources, source_of, st)
+            }
+        };
+        // Choice by area × the emitter's mean (channel mean). A texture's mean may be 0 where
+        // parts of it emit (a negative bias): it keeps a floor so every emitting point can be
+        // picked.
+        let strength = |c: Vec3A| (c.x + c.y + c.z) / 3.0;
+        let top = sources.iter().map(|s| strength(s.mean)).fold(0.0f32, f32::max);
+        let weight_of = |s: &Source| match s.emitter {
+            Emitter::Color(_) => strength(s.mean),
+            Emitter::Texture(_) => strength(s.mean).max(1e-3 * top).max(f32::MIN_POSITIVE),
+        };
+        let weights: Vec<f32> = if sources.is_empty() {
+            areas.clone()
+        } else {
+            let w: Vec<f32> = areas.iter().zip(&source_of).map(|(a, &s)| a * weight_of(&sources[s as usize])).collect();
+            // Nothing emits: chosen by area (every sample then carries 0).
+            if w.iter().any(|&x| x > 0.0) {
+                w
+            } else {
+                areas.clone()
+            }
+        };
+        let total = weights.iter().map(|&w| f64::from(w)).sum::<f64>();
+        let density_area: Vec<f32> = areas
+            .iter()
+            .zip(&weights)
+            .map(|(&a, &w)| if w > 0.0 { (f64::from(a) * total / f64::from(w)) as f32 } else { f32::INFINITY })
+            .collect();
+        let mean_emission = if sources.is_empty() {
+            Vec3A::ONE
+        } else {
+            let sum = areas.iter().zip(&source_of).fold(Vec3A::ZERO, |acc, (&a, &s)| acc + sources[s as usize].mean * a);
+            sum / own_area
+        };
         let boxes: Vec<Bounds3> = tris.iter().map(|t| Bounds3::from_points(t.iter().copied())).collect();
         let own_bounds = boxes.iter().skip(1).fold(boxes[0], |a, b| a.union(b));
         let bvh = crate::bvh::build_bvh(&boxes);
@@ -110,16 +255,42 @@ impl TriangleLight {
             return None;
         }
         Some(Arc::new(TriangleLight {
-            by_area: Distribution1D::new(&areas),
+            by_area: Distribution1D::new(&weights),
             tris,
-            own_area,
             area,
             max_area,
             bounds,
             two_sided,
             bvh,
             motion,
+            density_area,
+            source_of,
+            sources,
+            st,
+            mean_emission,
         }))
+    }
+
+    /// The area-weighted mean of what the triangles emit, as a factor of the light's radiance
+    /// (RGB; a texture counts as its mean): what the light's power is scaled by.
+    pub fn mean_emission(&self) -> Vec3A {
+        self.mean_emission
+    }
+
+    /// Whether the triangles emit their own colours ([`TriangleLight::with_emission`]).
+    pub fn has_emission(&self) -> bool {
+        !self.sources.is_empty()
+    }
+
+    /// What point (barycentrics `b` of a, b, c) of triangle `i` emits, as a factor of the
+    /// light's radiance.
+    fn emission(&self, i: usize, b: [f32; 3]) -> Vec3A {
+        let Some(&s) = self.source_of.get(i) else { return Vec3A::ONE };
+        let st = self.st.get(i).map(|t| {
+            let f = |c: usize| b[0] * t[0][c] + b[1] * t[1][c] + b[2] * t[2][c];
+            [f(0), f(1)]
+        });
+        self.sources[s as usize].at(st)
     }
 
     /// Total area, render units² (a moving mesh's at the shutter's open: what `normalize`
@@ -171,19 +342,21 @@ impl TriangleLight {
         // Uniform over the triangle (the square-root map).
         let s = v1.sqrt();
         let (b0, b1) = (1.0 - s, u2 * s);
-        let p = a * b0 + b * b1 + c * (1.0 - b0 - b1);
+        let b2 = 1.0 - b0 - b1;
+        let p = a * b0 + b * b1 + c * b2;
+        let emission = self.emission(i, [b0, b1, b2]);
         match &self.motion {
-            None => TrianglePoint { p, normal: (b - a).cross(c - a).normalize(), area: self.area },
+            None => TrianglePoint { p, normal: (b - a).cross(c - a).normalize(), area: self.density_area[i], emission },
             Some(m) => {
                 let x = m.at(time);
                 let (normal, area) = self.posed_normal(&x, i);
-                TrianglePoint { p: x.transform_point3a(p), normal, area }
+                TrianglePoint { p: x.transform_point3a(p), normal, area, emission }
             }
         }
     }
 
     /// Triangle `i`'s unit emitting normal under pose `x`, and the area whose reciprocal is the
-    /// render-space density of a point sampled on it: the own-space total times the ratio by
+    /// render-space density of a point sampled on it: its own-space one times the ratio by
     /// which the pose scales this triangle (an affine map scales each triangle's area by one
     /// factor).
     fn posed_normal(&self, x: &Mat4, i: usize) -> (Vec3A, f32) {
@@ -192,7 +365,7 @@ impl TriangleLight {
         let posed = x.transform_vector3a(b - a).cross(x.transform_vector3a(c - a));
         // (Ma) × (Mb) = det(M) M⁻ᵀ(a × b): a mirroring pose turns it against the covector's pose.
         let sign = if x.determinant() < 0.0 { -1.0 } else { 1.0 };
-        (posed.normalize() * sign, self.own_area * posed.length() / own.length())
+        (posed.normalize() * sign, self.density_area[i] * posed.length() / own.length())
     }
 
     /// The nearest emitting side the ray from `o` along unit `d` meets in (0, `t_max`) at the
@@ -208,10 +381,10 @@ impl TriangleLight {
             return None;
         }
         let Some(m) = &self.motion else {
-            let (t, i) = self.nearest(o, d, t_max)?;
+            let (t, i, bary) = self.nearest(o, d, t_max)?;
             let [a, b, c] = self.tris[i];
             let cos = (b - a).cross(c - a).normalize().dot(d).abs();
-            return Some(TriangleHit { t, cos, area: self.area });
+            return Some(TriangleHit { t, cos, area: self.density_area[i], emission: self.emission(i, bary) });
         };
         // In object space the ray is o' + t·d' with the same t (d' not unit), and which side
         // it meets is the same: n_render · d = |det M| n_object · M⁻¹d.
@@ -221,28 +394,28 @@ impl TriangleLight {
         if !(oo.is_finite() && od.is_finite()) {
             return None;
         }
-        let (t, i) = self.nearest(oo, od, t_max)?;
+        let (t, i, bary) = self.nearest(oo, od, t_max)?;
         let (normal, area) = self.posed_normal(&x, i);
-        Some(TriangleHit { t, cos: normal.dot(d).abs(), area })
+        Some(TriangleHit { t, cos: normal.dot(d).abs(), area, emission: self.emission(i, bary) })
     }
 
     /// The nearest emitting triangle along o + t·d, t in (0, `t_max`), in `tris`' space: (t,
-    /// triangle index).
-    fn nearest(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<(f32, usize)> {
+    /// triangle index, barycentrics of its a, b, c).
+    fn nearest(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<(f32, usize, [f32; 3])> {
         let bvh = self.bvh.as_ref()?;
         let wray = WatertightRay::new(o, d);
         let ray = BvhRay::new(o, crate::trace::positive_zeros(d), 0.0, t_max);
         let mut hit = RayHit::none();
-        let mut best: Option<(f32, usize)> = None;
+        let mut best: Option<(f32, usize, [f32; 3])> = None;
         bvh.ray_traverse(ray, &mut hit, |r, id| {
             let i = bvh.primitive_indices[id] as usize;
             let [a, b, c] = self.tris[i];
-            let Some((t, ..)) = wray.hit_triangle(a, b, c, r.tmax) else { return f32::INFINITY };
+            let Some((t, b0, b1, b2)) = wray.hit_triangle(a, b, c, r.tmax) else { return f32::INFINITY };
             let cos = -(b - a).cross(c - a).dot(d);
             if !(t > 0.0) || !(cos > 0.0 || (self.two_sided && cos < 0.0)) {
                 return f32::INFINITY;
             }
-            best = Some((t, i));
+            best = Some((t, i, [b0, b1, b2]));
             t
         });
         best
