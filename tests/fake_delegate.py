@@ -253,6 +253,18 @@ class FakeRenderDelegate:
             raise ValueError(f"{path}: {len(times)} motion times for {len(transforms)} transforms")
         self.calls.append(Call("set_motion", path, {"times": times, "transforms": transforms}))
 
+    def set_deformation(
+        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+    ) -> None:
+        call = self.prims.get(path)
+        if call is None or call.method != "set_mesh":
+            raise ValueError(f"{path}: set_deformation: no mesh at this path")
+        _check_array(path, "times", times, np.float32, 1)
+        _check_array(path, "points", points, np.float32, 3)
+        if len(times) != len(points):
+            raise ValueError(f"{path}: {len(times)} deformation times for {len(points)} samples")
+        self.calls.append(Call("set_deformation", path, {"times": times, "points": points}))
+
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
         call = self.prims.get(path)
         if call is None or call.method != "set_mesh":

@@ -68,6 +68,7 @@ def test_stub_declares_the_protocol() -> None:
         "RenderDelegate.set_mesh",
         "RenderDelegate.set_transform",
         "RenderDelegate.set_motion",
+        "RenderDelegate.set_deformation",
         "RenderDelegate.set_instancer",
         "RenderDelegate.set_camera",
         "RenderDelegate.set_distant_light",

@@ -293,6 +293,9 @@ pub enum Surface {
     Points(Arc<PointsSurface>),
     Curves(Arc<CurvesSurface>),
     Nurbs(Arc<NurbsSurface>),
+    /// A mesh whose points move within the shutter ([`mipray::deform`]): one surface per time
+    /// sample, over OpenSubdiv (built on first use, unless the prim is eager) or bilinear faces.
+    Deforming(Arc<dyn LimitSurface>),
 }
 
 impl Surface {
@@ -305,6 +308,7 @@ impl Surface {
             Surface::Points(s) => s.clone(),
             Surface::Curves(s) => s.clone(),
             Surface::Nurbs(s) => s.clone(),
+            Surface::Deforming(s) => s.clone(),
         }
     }
 }
@@ -332,6 +336,33 @@ pub struct MeshPrim {
     /// Build an OpenSubdiv surface when a ray first reaches it rather than at sync (the
     /// default): a mesh no ray reaches then costs its bounds, not its patch table.
     pub lazy: bool,
+    /// Its points at times across the camera's shutter, when they move within it (set by
+    /// [`crate::render_delegate::Delegate::set_deformation`]): the surface is then built at
+    /// each sample ([`mipray::deform`]) and `data.points` stands for nothing but the bounds.
+    pub deformation: Option<Arc<DeformSamples>>,
+}
+
+/// A mesh's points at shutter times (0 = open, 1 = close), strictly increasing.
+pub type DeformSamples = Vec<(f32, Vec<[f32; 3]>)>;
+
+/// Why `samples` cannot deform a mesh of `points` points, if they cannot: one line.
+pub fn check_deformation(samples: &DeformSamples, points: usize) -> Result<(), String> {
+    let max = mipray::deform::MAX_SAMPLES;
+    if !(2..=max).contains(&samples.len()) {
+        return Err(format!("{} deformation samples (2 to {max} are traced)", samples.len()));
+    }
+    if samples.iter().any(|s| !s.0.is_finite()) || samples.windows(2).any(|w| !(w[0].0 < w[1].0)) {
+        return Err("deformation sample times are not finite and strictly increasing".into());
+    }
+    for (t, p) in samples {
+        if p.len() != points {
+            return Err(format!("the points at shutter time {t} are {} (the mesh has {points})", p.len()));
+        }
+        if let Some(i) = p.iter().position(|q| !q.iter().all(|c| c.is_finite())) {
+            return Err(format!("points[{i}] at shutter time {t} is not finite"));
+        }
+    }
+    Ok(())
 }
 
 impl MeshPrim {
@@ -349,6 +380,7 @@ impl MeshPrim {
             cache_id,
             motion: None,
             lazy: true,
+            deformation: None,
         }
     }
 
@@ -452,6 +484,9 @@ impl MeshPrim {
         }
         let t = &self.data.topology;
         let primvars = self.data.primvar_list();
+        if let Some(samples) = self.deformation.clone().filter(|d| check_deformation(d, self.data.points.len()).is_ok()) {
+            return self.build_deforming(&samples, primvars);
+        }
         let points_only = !dirty.contains(DirtyBits::TOPOLOGY) && primvars.is_empty();
         if let (true, Some(Surface::Osd(s))) = (points_only, self.surface.as_mut()) {
             if let Some(osd) = Arc::get_mut(s) {
@@ -493,6 +528,40 @@ impl MeshPrim {
 }
 
 impl MeshPrim {
+    /// The mesh at each of its deformation `samples`, as one [`mipray::deform::DeformingSurface`]:
+    /// over OpenSubdiv built on first use (placed by the hull of every sample's points) unless
+    /// the prim is eager, or over bilinear faces.
+    fn build_deforming(&self, samples: &DeformSamples, primvars: Vec<Primvar2>) -> Result<Surface, mipray::error::MeshError> {
+        let invalid = |e: String| mipray::error::MeshError::Invalid(e);
+        let t = &self.data.topology;
+        if t.scheme == Scheme::None {
+            let mut built: Vec<(f32, Arc<dyn LimitSurface>)> = Vec::with_capacity(samples.len());
+            for (time, points) in samples {
+                let s = BilinearSurface::new(t, points)?.with_primvars(t, points.len(), &primvars)?;
+                built.push((*time, Arc::new(s)));
+            }
+            return Ok(Surface::Deforming(Arc::new(mipray::deform::DeformingSurface::new(built).map_err(invalid)?)));
+        }
+        let (path, topology, samples) = (self.path.clone(), t.clone(), samples.clone());
+        let hull = mipray::bounds::Bounds3::from_points(samples.iter().flat_map(|(_, p)| p.iter().map(|&q| q.into())));
+        let build: mipray::lazy_surface::SurfaceBuilder = Box::new(move || {
+            let mut built: Vec<(f32, Arc<dyn LimitSurface>)> = Vec::with_capacity(samples.len());
+            for (time, points) in &samples {
+                let s = if primvars.is_empty() {
+                    OsdSurface::new(&path, &topology, points)
+                } else {
+                    OsdSurface::with_primvars(&path, &topology, points, &mipray_bridge::OsdOptions::default(), &primvars)
+                };
+                built.push((*time, Arc::new(s.map_err(|e| e.to_string())?)));
+            }
+            Ok(Arc::new(mipray::deform::DeformingSurface::new(built)?) as Arc<dyn LimitSurface>)
+        });
+        if self.lazy {
+            return Ok(Surface::Deforming(Arc::new(LazySurface::new(hull, t.face_count(), build).deforming())));
+        }
+        Ok(Surface::Deforming(build().map_err(invalid)?))
+    }
+
     /// An OpenSubdiv surface of the mesh's data built on first use, placed by the hull of its
     /// control points (which holds its limit surface: every subdivision rule is a convex
     /// combination). It keeps its own copy of the topology, points and primvars to build from.

@@ -132,6 +132,27 @@ impl RenderDelegate {
         Ok(())
     }
 
+    /// Sets the mesh's points at times across the camera's shutter (deformation motion blur,
+    /// [`mipray::deform`]); no samples clear them. Each sample has the mesh's point count; the
+    /// topology is the mesh's. Samples that do not change the mesh's shape rebuild nothing.
+    ///
+    /// # Errors
+    /// No mesh at `path`, or samples [`crate::mesh::check_deformation`] refuses: one line.
+    pub fn set_deformation(&mut self, path: &str, samples: crate::mesh::DeformSamples) -> Result<(), DelegateError> {
+        let m = self.meshes.get_mut(path).ok_or_else(|| DelegateError::prim(path, "set_deformation: no mesh at this path"))?;
+        let deformation = if samples.is_empty() {
+            None
+        } else {
+            crate::mesh::check_deformation(&samples, m.data.points.len()).map_err(|e| DelegateError::prim(path, e))?;
+            Some(std::sync::Arc::new(samples))
+        };
+        if m.deformation != deformation {
+            m.deformation = deformation;
+            m.dirty = m.dirty | DirtyBits::POINTS;
+        }
+        Ok(())
+    }
+
     /// Inserts or replaces an instancer. Its prototypes need not exist yet: they are looked up
     /// when a render pass syncs.
     pub fn set_instancer(&mut self, path: &str, data: InstancerData) {

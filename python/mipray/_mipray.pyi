@@ -222,6 +222,26 @@ class RenderDelegate:
             PrimDataError: no mesh at ``path``, lengths differ, or a key is not finite.
         """
 
+    def set_deformation(
+        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+    ) -> None:
+        """Set the points of the mesh at ``path`` at times across the camera's shutter.
+
+        Deformation motion blur: the mesh is built at each sample over its topology,
+        and a camera sample at shutter time t sees the surface of the points blended
+        linearly between the two samples around t. No times clear the samples.
+
+        Args:
+            path: a polygonal or subdivision mesh set with :meth:`set_mesh`.
+            times: (N,) float32 shutter fractions, 0 at open and 1 at close, strictly
+                increasing; N from 2 to 16, or 0.
+            points: (N, P, 3) float32 object-space points, P the mesh's point count.
+
+        Raises:
+            PrimDataError: no mesh at ``path``, shapes that do not match, times not
+                increasing, or points not finite.
+        """
+
     def set_instancer(
         self,
         path: str,

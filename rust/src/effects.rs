@@ -79,6 +79,7 @@ pub fn analyze(scene: &Scene, options: &RenderOptions) -> Vec<Effect> {
         .moving_instances()
         .filter_map(|i| scene.meshes.get(i.mesh).map(|m| m.name.as_str()))
         .chain(moving_lights.map(|l| l.name.as_str()))
+        .chain(scene.meshes.iter().filter(|m| m.surface.deforms()).map(|m| m.name.as_str()))
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();

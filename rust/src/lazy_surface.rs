@@ -46,6 +46,8 @@ pub struct LazySurface<S: ?Sized + LimitSurface + 'static = dyn LimitSurface> {
     lock: parking_lot::Mutex<()>,
     /// Builds that ran (a surface dropped and built again counts twice).
     builds: AtomicU64,
+    /// The built surface deforms within the shutter ([`LazySurface::deforming`]).
+    deforms: bool,
 }
 
 impl<S: ?Sized + LimitSurface + 'static> std::fmt::Debug for LazySurface<S> {
@@ -77,7 +79,15 @@ impl<S: ?Sized + LimitSurface + 'static> LazySurface<S> {
             failed: OnceLock::new(),
             lock: parking_lot::Mutex::new(()),
             builds: AtomicU64::new(0),
+            deforms: false,
         }
+    }
+
+    /// Says up front that the built surface deforms within the shutter ([`crate::deform`]),
+    /// so the render calls for motion blur before any ray builds it.
+    pub fn deforming(mut self) -> Self {
+        self.deforms = true;
+        self
     }
 
     /// With no one else holding it: the built surface to change in place (new points);
@@ -177,6 +187,18 @@ impl<S: ?Sized + LimitSurface + 'static> LimitSurface for LazySurface<S> {
 
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
         self.inner().map_or_else(SurfacePoint::default, |s| s.evaluate(patch, u, v))
+    }
+
+    fn evaluate_at(&self, patch: usize, u: f32, v: f32, time: f32) -> SurfacePoint {
+        self.inner().map_or_else(SurfacePoint::default, |s| s.evaluate_at(patch, u, v, time))
+    }
+
+    fn deformation(&self) -> Option<&crate::deform::DeformingSurface> {
+        self.inner()?.deformation()
+    }
+
+    fn deforms(&self) -> bool {
+        self.deforms
     }
 
     fn evaluate_grid(&self, patch: usize, rect: UvRect, n: usize, derivatives: bool, out: &mut GridSamples) {

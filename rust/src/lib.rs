@@ -34,6 +34,7 @@ pub mod bsdf;
 pub mod bvh;
 pub mod camera;
 pub mod curves;
+pub mod deform;
 pub mod differential;
 pub mod displacement;
 pub mod displacement_texture;

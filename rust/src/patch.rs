@@ -187,6 +187,26 @@ pub trait LimitSurface: Send + Sync {
     /// The limit surface and its first and second derivatives at the patch's own (u, v).
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint;
 
+    /// [`LimitSurface::evaluate`] at shutter time `time` (0 = open, 1 = close, as
+    /// [`crate::ray::Ray::time`]): the same for a surface that does not deform — the default —
+    /// and the blend of the bracketing samples' for one that does ([`crate::deform`]).
+    fn evaluate_at(&self, patch: usize, u: f32, v: f32, _time: f32) -> SurfacePoint {
+        self.evaluate(patch, u, v)
+    }
+
+    /// The surface's time samples when its control points move within the shutter
+    /// ([`crate::deform`]): the tracer then tests each ray against the grid blended at its
+    /// time. `None` — the default — for a surface that keeps its shape.
+    fn deformation(&self) -> Option<&crate::deform::DeformingSurface> {
+        None
+    }
+
+    /// Whether the surface deforms within the shutter, known without building it (a surface
+    /// built on first use says so up front): what the render's effects list reads.
+    fn deforms(&self) -> bool {
+        self.deformation().is_some()
+    }
+
     /// Evaluates an n×n vertex grid over `rect` of one patch in one call (the bridge crosses into
     /// C++ once per grid, not once per vertex). Fills `out.p`, and `out.dpdu`/`out.dpdv` when
     /// `derivatives` is true.

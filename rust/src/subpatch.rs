@@ -191,6 +191,9 @@ pub struct MeshGeometry {
     /// the rate at which the mesh's largest patch keeps that detail at full weight, at most the
     /// fine tier's 16 (see [`MeshGeometry::displaced_rate_floor`]).
     pub rate_floor: f32,
+    /// The surface deforms within the shutter ([`crate::deform`]): its grids are blended at
+    /// each ray's time.
+    pub deforms: bool,
 }
 
 impl MeshGeometry {
@@ -235,7 +238,7 @@ impl MeshGeometry {
             let largest = subpatches.iter().map(|sp| sp.hull_size(&sp.bounds(), 2.0 * grow)).fold(0.0, f32::max);
             Self::displaced_rate_floor(largest, wavelength)
         });
-        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor })
+        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor, deforms: s.deformation().is_some() })
     }
 
     /// The rate floor (quads a side, at most 16) of a displaced mesh whose largest patch spans
@@ -265,6 +268,7 @@ impl MeshGeometry {
             bounds: Bounds3::EMPTY,
             child_ids: ChildIds::new(Arc::new(SplitIds::new(0))),
             rate_floor: 0.0,
+            deforms: false,
         }
     }
 }

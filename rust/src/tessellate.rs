@@ -249,7 +249,7 @@ impl GridBoxes {
 
     /// `cull` (by stride) followed by `sub_boxes`, in `spare`'s block if it has one of that
     /// size and nothing else shares it (an evicted entry's), else in a new one.
-    fn refill(cull: [Bounds3; CULL_STRIDES], sub_boxes: &[Bounds3], spare: GridBoxes) -> Self {
+    pub(crate) fn refill(cull: [Bounds3; CULL_STRIDES], sub_boxes: &[Bounds3], spare: GridBoxes) -> Self {
         if let Some(mut block) = spare.0 {
             if let Some(dst) = Arc::get_mut(&mut block).filter(|d| d.len() == CULL_STRIDES + sub_boxes.len()) {
                 dst[..CULL_STRIDES].copy_from_slice(&cull);

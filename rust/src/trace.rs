@@ -906,7 +906,7 @@ impl<'s> Tracer<'s> {
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
             let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
-            let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier);
+            let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier, ray.time);
             Some((org, depth, rate, tess))
         });
         // Moved off the surface by the lift, the ray starts beyond every tessellation of its
@@ -975,7 +975,7 @@ impl<'s> Tracer<'s> {
                     counters.rate_tests_by_kind[kind][5] += 1;
                     nearest_not_own(tess.chord_error, &mut |t_from| {
                         let (mut t_max, mut found) = (t_best, None);
-                        self.hit_split(instance.mesh, geom, root, &tess, depth, wray, t_from, &mut t_max, &mut found);
+                        self.hit_split(instance.mesh, geom, root, &tess, depth, ray.time, wray, t_from, &mut t_max, &mut found);
                         found
                     })
                 } else {
@@ -1035,7 +1035,7 @@ impl<'s> Tracer<'s> {
                     _ => self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
-                let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier);
+                let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier, ray.time);
                 let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
                 test(counters, wray, si, depth, rate, tess, t_best)
             });
@@ -1256,12 +1256,52 @@ impl<'s> Tracer<'s> {
         mesh.cache_id.unwrap_or(mesh_index as u32)
     }
 
-    /// The tessellation of a (root or split) subpatch at a tier, from the cache or built now.
-    fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier) -> Tessellation {
+    /// The tessellation of a (root or split) subpatch at a tier, from the cache or built now;
+    /// of a deforming mesh, the one blended at shutter time `time` ([`crate::deform`]).
+    #[inline]
+    fn lookup(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier, time: f32) -> Tessellation {
+        if geom.deforms {
+            return self.lookup_deforming(mesh_index, geom, cell, tier, time);
+        }
+        let mesh = &self.scene.meshes[mesh_index];
+        self.lookup_sample(mesh_index, geom, cell, tier, mesh.surface.as_ref(), mesh.generation)
+    }
+
+    /// A deforming mesh's grid at shutter time `time`: its bracketing samples' grids, each
+    /// cached under its own key, blended.
+    #[cold]
+    #[inline(never)]
+    fn lookup_deforming(&self, mesh_index: usize, geom: &MeshGeometry, cell: ChildCell, tier: Tier, time: f32) -> Tessellation {
+        let mesh = &self.scene.meshes[mesh_index];
+        let Some(def) = mesh.surface.deformation() else {
+            return self.lookup_sample(mesh_index, geom, cell, tier, mesh.surface.as_ref(), mesh.generation);
+        };
+        let (i, j, f) = def.bracket(time);
+        let sample = |k: usize| {
+            let generation = crate::deform::sample_generation(mesh.generation, k);
+            self.lookup_sample(mesh_index, geom, cell, tier, def.sample(k), generation)
+        };
+        match f {
+            f if f <= 0.0 => sample(i),
+            f if f >= 1.0 => sample(j),
+            f => crate::deform::blend(&sample(i), &sample(j), f),
+        }
+    }
+
+    /// The tessellation of a (root or split) subpatch of `surface` (the mesh's, or one of its
+    /// deformation samples') at a tier, cached under `generation`.
+    fn lookup_sample(
+        &self,
+        mesh_index: usize,
+        geom: &MeshGeometry,
+        cell: ChildCell,
+        tier: Tier,
+        surface: &dyn crate::patch::LimitSurface,
+        generation: u32,
+    ) -> Tessellation {
         let mesh = &self.scene.meshes[mesh_index];
         let root = &geom.subpatches[cell.root as usize];
-        let key =
-            CacheKey { mesh: Self::cache_mesh(mesh, mesh_index), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
+        let key = CacheKey { mesh: Self::cache_mesh(mesh, mesh_index), generation, subpatch: geom.child_ids.id(cell), tier };
         self.cache.get_or_build_reusing(key, |spare| {
             let sub = root.subpatch(cell.rect(&UvRect::UNIT));
             let mut scratch = GridSamples::default();
@@ -1270,7 +1310,7 @@ impl<'s> Tracer<'s> {
                 normal_sign: if mesh.left_handed { -1.0 } else { 1.0 },
                 bound: mesh.displacement_bound,
             });
-            let (t, outside) = tessellate_reusing(mesh.surface.as_ref(), &sub, tier, displace.as_ref(), &mut scratch, spare);
+            let (t, outside) = tessellate_reusing(surface, &sub, tier, displace.as_ref(), &mut scratch, spare);
             if mesh.surface.lazy_bounds().is_some() {
                 self.check_declared(mesh, &sub.bounds, &t);
             }
@@ -1318,6 +1358,7 @@ impl<'s> Tracer<'s> {
         cell: ChildCell,
         tess: &Tessellation,
         target_depth: u32,
+        time: f32,
         wray: &WatertightRay,
         t_min: f32,
         t_best: &mut f32,
@@ -1351,8 +1392,8 @@ impl<'s> Tracer<'s> {
             if wray.hit_box(&bb.expanded(pad), t_min, *t_best).is_none() {
                 continue;
             }
-            let ct = self.lookup(mesh_index, geom, child, Tier::Fine);
-            self.hit_split(mesh_index, geom, child, &ct, target_depth, wray, t_min, t_best, best);
+            let ct = self.lookup(mesh_index, geom, child, Tier::Fine, time);
+            self.hit_split(mesh_index, geom, child, &ct, target_depth, time, wray, t_min, t_best, best);
         }
     }
 

@@ -63,6 +63,11 @@ class RenderDelegateLike(Protocol):
     ) -> None:
         """Set a mesh's world transform over the camera's shutter (none: it is still)."""
 
+    def set_deformation(
+        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+    ) -> None:
+        """Set a mesh's points at times across the camera's shutter (none: they are still)."""
+
     def set_instancer(
         self,
         path: str,

@@ -47,6 +47,7 @@ from .camera import (
     find_camera_prim,
     framing_camera_arguments,
 )
+from .deform import deformation_samples
 from .gprim import is_renderable_gprim
 from .instancing import InstancerState, Instancing
 from .light import (
@@ -229,6 +230,8 @@ class UsdSceneDelegate:
         self._default_camera: dict[str, Any] | None = None
         # Meshes last sent a moving transform (set_motion), so one that stops moving is reset.
         self._moving: set[str] = set()
+        # Meshes last sent points over the shutter (set_deformation), reset when they stop.
+        self._deforming: set[str] = set()
         self._camera_light = False
         self._xform_roots: set[str] = set()  # where xform ops changed
         self._xform_only: set[str] = set()  # records whose transform alone changed in time
@@ -850,7 +853,9 @@ class UsdSceneDelegate:
         time-varying are sampled, and only when the camera's shutter is open for
         a while; a mesh that no longer moves gets its motion cleared. Returns the
         paths of the moving meshes. A rigidly deformed skinned mesh moves by its posed
-        transform (:meth:`mipray.usd.skel.SkelPoser.rigid_motion`). PointInstancer and native
+        transform (:meth:`mipray.usd.skel.SkelPoser.rigid_motion`); a mesh whose points move
+        (time-sampled, or skinned) gets its points over the shutter too, and counts as moving
+        (:mod:`mipray.usd.deform`). PointInstancer and native
         instance motion is not read (their transforms at the frame's time are used).
         """
         shutter = camera_shutter(self.stage, camera_path, self.time)
@@ -876,8 +881,40 @@ class UsdSceneDelegate:
                 self.delegate.set_motion(
                     path, np.zeros(0, dtype=np.float32), np.zeros((0, 4, 4), dtype=np.float64)
                 )
+            if self._update_deformation(path, record, shutter) and path not in moving[-1:]:
+                moving.append(path)
         self._moving = set(moving)
         return moving
+
+    def _update_deformation(self, path: str, record: _Record, shutter: tuple[float, float]) -> bool:
+        """Send the mesh at ``path``'s points over the shutter when they move in it.
+
+        Deformation motion blur (:mod:`mipray.usd.deform`): point-animated and skinned
+        meshes. A mesh whose points stop moving gets its samples cleared. Returns whether
+        the mesh deforms.
+        """
+        samples = None
+        if record.might_vary and not record.rigid and not record.light and shutter[1] > shutter[0]:
+            prim = self.stage.GetPrimAtPath(path)
+            if prim:
+                samples = deformation_samples(prim, self.time, shutter, self._poser)
+        if samples is not None:
+            try:
+                self.delegate.set_deformation(path, samples[0], samples[1])
+            except PrimError as exc:
+                _log.warning(
+                    "mipray: %s; rendering it at the frame's time without motion blur", exc
+                )
+                samples = None
+        if samples is None and path in self._deforming:
+            self.delegate.set_deformation(
+                path, np.zeros(0, dtype=np.float32), np.zeros((0, 0, 3), dtype=np.float32)
+            )
+        if samples is None:
+            self._deforming.discard(path)
+            return False
+        self._deforming.add(path)
+        return True
 
     def resolve_camera(self, requested: str | None = None) -> str:
         """The path of the camera to render through, syncing first if needed.

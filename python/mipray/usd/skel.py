@@ -9,11 +9,10 @@ not its own (UsdSkel's rule: the skinned prim's transform is ignored).
 
 A skeleton whose joints cannot be posed (its joints do not resolve, the influences name joints
 it does not have, the mesh binds no skeleton) gets one warning naming the mesh, and the mesh
-renders in its rest pose (its authored points and transform). The core blurs transforms, not
-deformations: a rigidly deformed mesh (one joint moves it whole) blurs by its posed transform
-over the shutter (:meth:`SkelPoser.rigid_motion`); other skinned meshes are posed at the
-frame's time, and their animation is listed as unsupported motion blur
-(:mod:`mipray.usd.unsupported`).
+renders in its rest pose (its authored points and transform). A rigidly deformed mesh (one
+joint moves it whole) blurs by its posed transform over the shutter
+(:meth:`SkelPoser.rigid_motion`); other skinned meshes blur by their deformation, posed at
+times across the shutter (:mod:`mipray.usd.deform`).
 """
 
 from __future__ import annotations

@@ -25,14 +25,13 @@ import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
-from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade, UsdSkel
+from pxr import Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from .gprim import GPRIM_TYPES
 from .light import AREA_LIGHT_TYPES, SHAPED_KINDS, SHAPING_INPUTS, authored_properties
 from .materialx import mtlx_surface, unsupported_nodes
 from .mtlx_files import LOADED
 from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
-from .skel import is_skinned
 
 __all__ = [
     "HEADLIGHT",
@@ -232,27 +231,6 @@ def _missing_material(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     return found
 
 
-def _skinned_motion(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
-    """A skinned mesh whose skeleton is animated: posed at the frame's time, not blurred.
-
-    A rigidly deformed one blurs by its posed transform and is not listed.
-    """
-    if not is_skinned(prim):
-        return []
-    binding = UsdSkel.BindingAPI(prim)
-    indices = binding.GetJointIndicesPrimvar()
-    rigid = indices.IsDefined() and indices.GetInterpolation() == UsdGeom.Tokens.constant
-    if rigid and not binding.GetBlendShapesAttr().HasAuthoredValue():
-        return []
-    skeleton = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
-    if not skeleton:
-        return []
-    anim = UsdSkel.BindingAPI(skeleton.GetPrim()).GetInheritedAnimationSource()
-    if anim and any(a.ValueMightBeTimeVarying() for a in anim.GetPrim().GetAuthoredAttributes()):
-        return [f"animated by {anim.GetPath()}"]
-    return []
-
-
 # A material's checks take the Material prim (bound to something rendered).
 
 
@@ -370,11 +348,6 @@ TABLE: tuple[Row, ...] = (
     Row("light input", "prim", _light_inputs),
     Row("camera clippingPlanes", "prim", _clipping_planes),
     Row("NurbsPatch trim curves", "prim", _trim_curves, warned_by="mipray.usd.gprim"),
-    Row(
-        "UsdSkel deformation motion blur (a skinned mesh is posed at the frame's time)",
-        "prim",
-        _skinned_motion,
-    ),
     Row(
         "material output (only the universal outputs:surface is read)",
         "material",

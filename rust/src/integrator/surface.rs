@@ -16,7 +16,7 @@ pub use crate::hit::ShadingPoint;
 /// rays start where this ray stopped.
 pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -> ShadingPoint {
     let mesh = &scene.meshes[hit.mesh as usize];
-    let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
+    let s = mesh.surface.evaluate_at(hit.patch as usize, hit.u, hit.v, hit.time);
     let to_world = tracer.hit_render_from_object(hit);
     let nm = tracer.hit_normal_matrix(hit);
     let (mut odpdu, mut odpdv) = (s.dpdu, s.dpdv);
@@ -27,7 +27,7 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
         let step = 0.5 / hit.quads.max(1) as f32;
         let spacing = s.dpdu.length().max(s.dpdv.length()) * 2.0 * step;
         let displaced = |u: f32, v: f32| {
-            let e = mesh.surface.evaluate(hit.patch as usize, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+            let e = mesh.surface.evaluate_at(hit.patch as usize, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0), hit.time);
             e.p + e.dpdu.cross(e.dpdv).normalize_or_zero()
                 * sign
                 * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, spacing, 2.0 * step)
@@ -110,12 +110,12 @@ pub fn tessellation_error(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &H
     let m = tracer.hit_render_from_object(hit);
     let sign = if mesh.left_handed { -1.0 } else { 1.0 };
     let surf = |u: f32, v: f32| -> (Vec3A, Vec3A, Vec3A) {
-        let e = mesh.surface.evaluate(hit.patch as usize, u, v);
+        let e = mesh.surface.evaluate_at(hit.patch as usize, u, v, hit.time);
         match &mesh.displacement {
             None => (e.p, e.dpdu, e.dpdv),
             Some(d) => {
                 let at = |u: f32, v: f32| {
-                    let e = mesh.surface.evaluate(hit.patch as usize, u, v);
+                    let e = mesh.surface.evaluate_at(hit.patch as usize, u, v, hit.time);
                     e.p + e.dpdu.cross(e.dpdv).normalize_or_zero()
                         * sign
                         * d.offset_at(mesh.surface.as_ref(), hit.patch as usize, (u, v), e.p, 0.0, 0.0)
@@ -181,7 +181,7 @@ pub fn normal_differentials(
     footprint: &RayDifferential,
 ) -> (Vec3A, Vec3A) {
     let mesh = &scene.meshes[hit.mesh as usize];
-    let s = mesh.surface.evaluate(hit.patch as usize, hit.u, hit.v);
+    let s = mesh.surface.evaluate_at(hit.patch as usize, hit.u, hit.v, hit.time);
     let m = tracer.hit_render_from_object(hit);
     let w = |v: Vec3A| m.transform_vector3a(v);
     let (mut dndu, mut dndv) = dndu_dndv(sp.dpdu, sp.dpdv, w(s.dpduu), w(s.dpduv), w(s.dpdvv));

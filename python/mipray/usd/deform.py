@@ -1,0 +1,115 @@
+"""A mesh's points across the camera's shutter, for deformation motion blur.
+
+A ``UsdGeom.Mesh`` whose ``points`` are time-sampled inside the shutter, or a skinned mesh
+(:mod:`mipray.usd.skel`) whose skeleton or blend shapes move in it, crosses as its points at
+the shutter's ends and at its authored samples between (a skinned mesh at the ends and
+:data:`~mipray.usd.transform.MOTION_SUBSAMPLES` evenly spaced times between, so a bending
+joint sweeps close to its arc rather than along the chord), each in the object space of the
+transform the mesh was sent with at the frame's time. The renderer builds the mesh at each
+sample over its one topology and blends between them at each ray's time (``mipray.deform``
+in the core).
+
+What cannot be blurred is warned about once, naming the prim, and the mesh renders at the
+frame's time: a point count that changes within the shutter (another topology), or more
+samples than :data:`MAX_SAMPLES`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from pxr import Gf, Usd, UsdGeom
+
+from .skel import SkelPoser, is_skinned
+from .transform import MOTION_SUBSAMPLES
+from .warn import warn_once
+
+__all__ = ["MAX_SAMPLES", "deformation_samples"]
+
+#: Most samples the renderer takes across one shutter (``mipray::deform::MAX_SAMPLES``).
+MAX_SAMPLES = 16
+
+_warn_once = warn_once(__name__)
+
+
+def deformation_samples(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    shutter: tuple[float, float],
+    poser: SkelPoser,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]] | None:
+    """``prim``'s points across the shutter, or None when they do not change in it.
+
+    Returns (times as fractions of the shutter, 0 = open, 1 = close; (N, P, 3) float32
+    points in the object space the mesh was sent in at ``time``). ``shutter`` is relative to
+    ``time`` (frames). None too, with one warning naming the prim, when the deformation
+    cannot be blurred (see the module's note).
+    """
+    if time.IsDefault() or shutter[1] <= shutter[0] or not prim.IsA(UsdGeom.Mesh):
+        return None
+    t0, t1 = time.GetValue() + shutter[0], time.GetValue() + shutter[1]
+    path = prim.GetPath()
+    attr = UsdGeom.Mesh(prim).GetPointsAttr()
+    rest = np.asarray(attr.Get(time) or [], dtype=np.float32).reshape(-1, 3)
+    if is_skinned(prim):
+        steps = MOTION_SUBSAMPLES + 1
+        codes = [t0 + (t1 - t0) * k / steps for k in range(steps + 1)]
+        samples = _skinned(prim, time, codes, rest, poser)
+        if samples is None:
+            return None
+        frame = samples.pop()
+    else:
+        if not attr.ValueMightBeTimeVarying():
+            return None
+        inside = [t for t in attr.GetTimeSamplesInInterval(Gf.Interval(t0, t1)) if t0 < t < t1]
+        codes = [t0, *inside, t1]
+        if len(codes) > MAX_SAMPLES:
+            _warn_once(
+                f"{path}: points has {len(codes)} samples within the shutter, more than the "
+                f"{MAX_SAMPLES} traced; rendering it at the frame's time without motion blur"
+            )
+            return None
+        samples = [np.asarray(attr.Get(Usd.TimeCode(t)) or [], dtype=np.float32) for t in codes]
+        frame = rest
+    if any(s.size != frame.size for s in samples):
+        _warn_once(
+            f"{path}: points change in number within the shutter (another topology); "
+            "rendering it at the frame's time without motion blur"
+        )
+        return None
+    stack = np.stack([s.reshape(-1, 3) for s in samples]).astype(np.float32)
+    if np.all(stack == frame.reshape(1, -1, 3)):
+        return None
+    times = np.array([(t - t0) / (t1 - t0) for t in codes], dtype=np.float32)
+    return times, np.ascontiguousarray(stack)
+
+
+def _skinned(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    codes: list[float],
+    rest: NDArray[np.float32],
+    poser: SkelPoser,
+) -> list[NDArray[np.float32]] | None:
+    """A skinned mesh posed at each of ``codes``, then at ``time`` (last).
+
+    Each in the object space of its pose at ``time``; None when it cannot be posed or is
+    rigidly deformed (its pose is then a transform motion).
+    """
+    frame = poser.pose(prim, time, rest)
+    if frame is None or frame.rigid:
+        return None
+    to_object = np.linalg.inv(frame.transform)
+    out = []
+    for t in codes:
+        posed = poser.pose(prim, Usd.TimeCode(t), rest)
+        if posed is None:
+            return None
+        points = posed.points
+        if not np.array_equal(posed.transform, frame.transform):
+            # Row vectors: object space at t, to world, back to the frame's object space.
+            m = posed.transform @ to_object
+            points = (points.astype(np.float64) @ m[:3, :3] + m[3, :3]).astype(np.float32)
+        out.append(points)
+    out.append(frame.points)
+    return out
