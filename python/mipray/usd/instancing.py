@@ -44,7 +44,7 @@ from .light import link_arguments, material_tints, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
-from .transform import matrix_to_numpy
+from .transform import ancestors_might_vary, matrix_to_numpy, shutter_times, world_transform
 
 __all__ = [
     "InstancerState",
@@ -264,6 +264,12 @@ class Instancing:
         self._stage: Usd.Stage | None = None
         self._binding_memo: dict[str, bool] = {}  # prim path → binds (see _binds_above)
         self._context: tuple[Usd.TimeCode, UsdGeom.XformCache, Counter[str]] | None = None
+        # What each top-level instancer last sent places, for its motion over the shutter:
+        # a PointInstancer's member groups; a native (or variant) instancer's instance prims,
+        # their transforms at the frame's time and its member count.
+        self._sent_points: dict[str, list[list[str]]] = {}
+        self._sent_native: dict[str, tuple[list[str], NDArray[np.float64], int]] = {}
+        self._moving: set[str] = set()  # instancers last sent motion
 
     # ------------------------------------------------------------ bookkeeping
 
@@ -517,6 +523,7 @@ class Instancing:
                     continue
                 self._hold(proto, proto, owned)
                 self._count(proto)
+                self._sent_native[proto] = (list(placed), transforms, k)
             elif proto in owned:
                 owned.discard(proto)
                 self._release(proto, {proto})
@@ -648,6 +655,7 @@ class Instancing:
             )
             self._hold(owner, root, walk.owned)
             self._count(root)
+            self._sent_native[root] = (paths, transforms, n)
             owned |= walk.owned
         self._release(owner, self._variant_owned.get(proto, set()) - owned)
         self._variant_owned[proto] = owned
@@ -717,13 +725,156 @@ class Instancing:
             path, prototypes=flat, proto_indices=indices, transforms=transforms
         )
         self._hold(path, path, state.owned)
+        self._stage = prim.GetStage()
+        self._sent_points[path] = state.groups
         return state, arrays.might_vary
 
     def forget_point_instancer(self, path: str, state: InstancerState) -> None:
         """Remove the PointInstancer at ``path`` and whatever only it held."""
         self._release(path, state.owned | {path})
+        self._sent_points.pop(path, None)
+        self._moving.discard(path)
         for prim_path in state.member_prims:
             self.errors.pop(prim_path, None)
+
+    # ----------------------------------------------------------------- motion
+
+    def update_motion(self, time: Usd.TimeCode, shutter: tuple[float, float]) -> list[str]:
+        """Send each top-level instancer's instance transforms over the shutter where they move.
+
+        Transform motion blur of instances: a PointInstancer's by usd-core's
+        ``ComputeInstanceTransformsAtTimes`` (time-sampled positions, orientations and
+        scales, and ``velocities``/``angularVelocities``) and its own world transform; a
+        native prototype's instances by their world transforms. Only instancers that
+        might move are sampled; one that no longer moves has its motion cleared.
+        Returns the paths of the moving instancers.
+        """
+        moving: list[str] = []
+        if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
+            memo: dict[str, bool] = {}
+            found: list[tuple[str, tuple[NDArray[np.float32], NDArray[np.float64]] | None]] = [
+                (path, self._points_motion(path, groups, time, shutter, memo))
+                for path, groups in sorted(self._sent_points.items())
+                if path in self._holders
+            ]
+            found += [
+                (path, self._native_motion(*sent, time, shutter, memo))
+                for path, sent in sorted(self._sent_native.items())
+                if path in self._holders
+            ]
+            for path, samples in found:
+                if samples is None:
+                    continue
+                try:
+                    self.delegate.set_instancer_motion(path, samples[0], samples[1])
+                except (PrimError, ValueError) as exc:
+                    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    _log.warning("mipray: %s; its instances render without motion blur", text)
+                    continue
+                moving.append(path)
+        for path in sorted(self._moving - set(moving)):
+            if path in self._holders:
+                self.delegate.set_instancer_motion(
+                    path, np.zeros(0, np.float32), np.zeros((0, 0, 4, 4), np.float64)
+                )
+        self._moving = set(moving)
+        return moving
+
+    @staticmethod
+    def _fractions(times: list[float]) -> NDArray[np.float32]:
+        t0, t1 = times[0], times[-1]
+        return np.array([(t - t0) / (t1 - t0) for t in times], dtype=np.float32)
+
+    def _points_motion(
+        self,
+        path: str,
+        groups: list[list[str]],
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        memo: dict[str, bool],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """The PointInstancer at ``path``'s placements over the shutter, or None if still."""
+        assert self._stage is not None
+        prim = self._stage.GetPrimAtPath(path)
+        if not prim or not prim.IsA(UsdGeom.PointInstancer):
+            return None
+        pi = UsdGeom.PointInstancer(prim)
+        attributes = tuple(
+            a
+            for a in (
+                pi.GetPositionsAttr(),
+                pi.GetOrientationsAttr(),
+                pi.GetOrientationsfAttr(),
+                pi.GetScalesAttr(),
+                pi.GetVelocitiesAttr(),
+                pi.GetAngularVelocitiesAttr(),
+                pi.GetAccelerationsAttr(),
+            )
+            if a.HasAuthoredValue()
+        )
+        velocities = any(
+            a.GetName() in ("velocities", "angularVelocities", "accelerations")
+            and len(a.Get(time) or ()) > 0
+            for a in attributes
+        )
+        varies = any(a.ValueMightBeTimeVarying() for a in attributes)
+        if not (velocities or varies or ancestors_might_vary(prim, memo)):
+            return None
+        times = shutter_times([prim], time, shutter, attributes)
+        if times is None:
+            return None
+        try:
+            arrays = read_point_instancer(pi, time)
+        except PrimError:
+            return None  # reported by its sync
+        codes = [Usd.TimeCode(t) for t in times]
+        xforms = pi.ComputeInstanceTransformsAtTimes(codes, time)
+        n = len(arrays.proto_indices)
+        if len(xforms) != len(times) or any(len(x) != n for x in xforms):
+            _log.warning(
+                "mipray: %s: the instance transforms over the shutter cannot be computed "
+                "(see USD's warning); its instances render without motion blur",
+                path,
+            )
+            return None
+        per_time = []
+        for t, x in zip(times, xforms, strict=True):
+            world = world_transform(UsdGeom.XformCache(Usd.TimeCode(t)), prim)
+            local = np.asarray(x, dtype=np.float64).reshape(-1, 4, 4)
+            per_time.append(_expand(groups, arrays.proto_indices, local @ world)[2])
+        mats = np.stack(per_time)
+        if mats.shape[1] == 0 or np.all(mats == mats[0]):
+            return None
+        return self._fractions(times), mats
+
+    def _native_motion(
+        self,
+        instances: list[str],
+        transforms: NDArray[np.float64],
+        k: int,
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        memo: dict[str, bool],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """A native instancer's placements over the shutter (each instance's world
+        transform, repeated for its ``k`` members), or None when no instance moves."""
+        assert self._stage is not None
+        prims = [self._stage.GetPrimAtPath(p) for p in instances]
+        moving = [i for i, p in enumerate(prims) if p and ancestors_might_vary(p, memo)]
+        if not moving:
+            return None
+        times = shutter_times([prims[i] for i in moving], time, shutter)
+        if times is None:
+            return None
+        # Still instances keep their frame-time transform at every key (placed as without motion).
+        mats = np.repeat(transforms[None], len(times), axis=0)
+        for j, t in enumerate(times):
+            cache = UsdGeom.XformCache(Usd.TimeCode(t))
+            for i in moving:
+                mats[j, i] = world_transform(cache, prims[i])
+        if np.all(mats == mats[0]):
+            return None
+        return self._fractions(times), np.repeat(mats, k, axis=1)
 
     def owner_of(self, changed: str, states: dict[str, InstancerState]) -> list[str]:
         """PointInstancers (path → state) whose prototypes hold the prim path ``changed``."""
