@@ -306,7 +306,9 @@ class FakeRenderDelegate:
         n = len(call.kwargs["proto_indices"])
         if len(times) and transforms.shape != (len(times), n, 4, 4):
             raise ValueError(f"{path}: motion transforms {transforms.shape} for {len(times)} times")
-        self.calls.append(Call("set_instancer_motion", path, {"times": times, "transforms": transforms}))
+        self.calls.append(
+            Call("set_instancer_motion", path, {"times": times, "transforms": transforms})
+        )
 
     def remove(self, path: str) -> None:
         self.calls.append(Call("remove", path))

@@ -270,6 +270,7 @@ class Instancing:
         self._sent_points: dict[str, list[list[str]]] = {}
         self._sent_native: dict[str, tuple[list[str], NDArray[np.float64], int]] = {}
         self._moving: set[str] = set()  # instancers last sent motion
+        self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
     # ------------------------------------------------------------ bookkeeping
 
@@ -593,9 +594,17 @@ class Instancing:
         return known
 
     def add_instance(
-        self, instance_path: str, prototype: Usd.Prim, world: NDArray[np.float64]
+        self,
+        instance_path: str,
+        prototype: Usd.Prim,
+        world: NDArray[np.float64],
+        *,
+        might_move: bool = False,
     ) -> tuple[str, ...]:
         """Place native prototype ``prototype`` at ``world`` for instance prim ``instance_path``.
+
+        ``might_move``: its world transform might vary in time (only such instances are
+        sampled over the shutter, :meth:`update_motion`).
 
         Returns the materials bound through the instance to its prototype's prims where they
         differ from the prototype's own (the scene delegate re-syncs the instance when one of
@@ -608,6 +617,10 @@ class Instancing:
             self.remove_instance(instance_path)
         self._groups.setdefault(proto, {})[instance_path] = world
         self._instance_of[instance_path] = proto
+        if might_move:
+            self._might_move.add(instance_path)
+        else:
+            self._might_move.discard(instance_path)
         instance = prototype.GetStage().GetPrimAtPath(instance_path)
         variant = self._variant(instance, proto) if instance else ()
         self._variant_of[instance_path] = variant
@@ -669,6 +682,7 @@ class Instancing:
         """Take instance prim ``instance_path`` out of its prototype's instancer."""
         proto = self._instance_of.pop(instance_path, None)
         self._variant_of.pop(instance_path, None)
+        self._might_move.discard(instance_path)
         if proto is not None:
             self._groups.get(proto, {}).pop(instance_path, None)
             self._dirty_groups.add(proto)
@@ -757,10 +771,11 @@ class Instancing:
                 for path, groups in sorted(self._sent_points.items())
                 if path in self._holders
             ]
+            # Native instances are sampled only when some might move: a still scene pays nothing.
             found += [
-                (path, self._native_motion(*sent, time, shutter, memo))
+                (path, self._native_motion(*sent, time, shutter))
                 for path, sent in sorted(self._sent_native.items())
-                if path in self._holders
+                if self._might_move and path in self._holders
             ]
             for path, samples in found:
                 if samples is None:
@@ -854,13 +869,15 @@ class Instancing:
         k: int,
         time: Usd.TimeCode,
         shutter: tuple[float, float],
-        memo: dict[str, bool],
     ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
-        """A native instancer's placements over the shutter (each instance's world
-        transform, repeated for its ``k`` members), or None when no instance moves."""
+        """A native instancer's placements over the shutter, or None when no instance moves.
+
+        Each instance's world transform, repeated for its ``k`` members.
+        """
         assert self._stage is not None
-        prims = [self._stage.GetPrimAtPath(p) for p in instances]
-        moving = [i for i, p in enumerate(prims) if p and ancestors_might_vary(p, memo)]
+        moving = [i for i, p in enumerate(instances) if p in self._might_move]
+        prims = {i: self._stage.GetPrimAtPath(instances[i]) for i in moving}
+        moving = [i for i in moving if prims[i]]
         if not moving:
             return None
         times = shutter_times([prims[i] for i in moving], time, shutter)

@@ -679,7 +679,9 @@ class UsdSceneDelegate:
                 self._forget(path)  # its type changed: drop what the old kind sent
                 previous = None
             if prim.IsInstance():
-                bound = self._instancing.add_instance(path, prim.GetPrototype(), transform)
+                bound = self._instancing.add_instance(
+                    path, prim.GetPrototype(), transform, might_move=xform_varies
+                )
                 record = _Record(
                     "instance",
                     order,
