@@ -90,6 +90,41 @@ def native_stage(shutter: tuple[float, float] | None, moving: bool = True) -> Us
     return stage
 
 
+def nested_stage(shutter: tuple[float, float] | None, kind: str) -> Usd.Stage:
+    """The sliding quad one level down: placed by a PointInstancer (``kind`` "points") or a
+    native instance ("native") inside a prototype that a still outer instancer places once,
+    at x = 0 (an outer PointInstancer, or a native instance)."""
+    stage = new_stage()
+    if kind == "points":
+        outer = UsdGeom.PointInstancer.Define(stage, "/World/Outer")
+        group = "/World/Outer/Protos/Group"
+        UsdGeom.Xform.Define(stage, group)
+        inner = UsdGeom.PointInstancer.Define(stage, f"{group}/Inner")
+        add_cube(stage, f"{group}/Inner/Protos/Quad", scheme="none", **QUAD)
+        inner.CreatePrototypesRel().AddTarget(f"{group}/Inner/Protos/Quad")
+        inner.CreateProtoIndicesAttr([0])
+        inner.CreatePositionsAttr().Set([(-0.5, 0, 0)], 1.0)
+        inner.GetPositionsAttr().Set([(0.5, 0, 0)], 2.0)
+        outer.CreatePrototypesRel().AddTarget(group)
+        outer.CreateProtoIndicesAttr([0])
+        outer.CreatePositionsAttr([(0, 0, 0)])
+    else:
+        stage.DefinePrim("/Proto", "Xform").SetSpecifier(Sdf.SpecifierClass)
+        add_cube(stage, "/Proto/Quad", scheme="none", **QUAD)
+        stage.DefinePrim("/Group", "Xform").SetSpecifier(Sdf.SpecifierClass)
+        slider = UsdGeom.Xform.Define(stage, "/Group/Slider")
+        op = slider.AddTranslateOp()
+        op.Set(Gf.Vec3d(-0.5, 0, 0), 1.0)
+        op.Set(Gf.Vec3d(0.5, 0, 0), 2.0)
+        slider.GetPrim().GetReferences().AddInternalReference("/Proto")
+        slider.GetPrim().SetInstanceable(True)
+        holder = UsdGeom.Xform.Define(stage, "/World/Holder")
+        holder.GetPrim().GetReferences().AddInternalReference("/Group")
+        holder.GetPrim().SetInstanceable(True)
+    camera(stage, shutter)
+    return stage
+
+
 # ------------------------------------------------------------------ what is sent
 
 
@@ -108,7 +143,9 @@ def test_a_moving_point_instancer_sends_its_instances_over_the_shutter(fake, how
 
 
 def test_still_instances_or_a_shut_shutter_send_no_motion(fake) -> None:
-    for stage in (points_stage((0.0, 1.0), "still"), points_stage(None), native_stage(None)):
+    stages = [points_stage((0.0, 1.0), "still"), points_stage(None), native_stage(None)]
+    stages += [nested_stage(None, "points"), nested_stage(None, "native")]
+    for stage in stages:
         scene = UsdSceneDelegate(stage, fake, time=1.0)
         scene.sync()
         scene.update_motion("/Cam")
@@ -137,6 +174,18 @@ def test_a_moving_native_instance_sends_its_prototypes_instancer_motion(fake) ->
     assert len(last.kwargs["times"]) == 0
 
 
+@pytest.mark.parametrize("kind", ["points", "native"])
+def test_an_instance_moving_inside_a_prototype_sends_its_motion_there(fake, kind) -> None:
+    scene = UsdSceneDelegate(nested_stage((0.0, 1.0), kind), fake, time=1.0)
+    scene.sync()
+    scene.update_motion("/Cam")
+    (call,) = [c for c in fake.calls if c.method == "set_instancer_motion"]
+    assert fake.instancers()[call.path]["prototype"] is True
+    times, mats = call.kwargs["times"], call.kwargs["transforms"]
+    # Relative to the prototype's root, which the outer instancer places at the origin.
+    np.testing.assert_allclose(mats[:, 0, 3, 0], -0.5 + times, atol=1e-6)
+
+
 # ------------------------------------------------------------------------ renders
 
 
@@ -146,9 +195,16 @@ def row(stage: Usd.Stage, samples: int = 128) -> np.ndarray:
 
 
 @pytest.mark.usefixtures("native")
-@pytest.mark.parametrize("how", ["positions", "velocities", "native"])
+@pytest.mark.parametrize(
+    "how", ["positions", "velocities", "native", "nested points", "nested native"]
+)
 def test_a_sliding_instance_blurs_as_the_same_quad_moved_by_its_xform(how) -> None:
-    stage = native_stage((0.0, 1.0)) if how == "native" else points_stage((0.0, 1.0), how)
+    if how.startswith("nested"):
+        stage = nested_stage((0.0, 1.0), how.split()[1])
+    elif how == "native":
+        stage = native_stage((0.0, 1.0))
+    else:
+        stage = points_stage((0.0, 1.0), how)
     got = row(stage)
     peer = row(sliding_stage((0.0, 1.0)))
     centre = row(sliding_stage(None))[15]  # the still quad's inside

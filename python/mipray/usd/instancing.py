@@ -264,11 +264,14 @@ class Instancing:
         self._stage: Usd.Stage | None = None
         self._binding_memo: dict[str, bool] = {}  # prim path → binds (see _binds_above)
         self._context: tuple[Usd.TimeCode, UsdGeom.XformCache, Counter[str]] | None = None
-        # What each top-level instancer last sent places, for its motion over the shutter:
-        # a PointInstancer's member groups; a native (or variant) instancer's instance prims,
-        # their transforms at the frame's time and its member count.
-        self._sent_points: dict[str, list[list[str]]] = {}
+        # What each instancer last sent places, by delegate path, for its motion over the
+        # shutter: a PointInstancer's USD path, the prototype root it is placed relative to
+        # (None at the top level: world) and its member groups; a native (or variant)
+        # instancer's instance prims, their transforms at the frame's time and its member
+        # count; an instance inside a prototype: its USD path, the root's and member count.
+        self._sent_points: dict[str, tuple[str, str | None, list[list[str]]]] = {}
         self._sent_native: dict[str, tuple[list[str], NDArray[np.float64], int]] = {}
+        self._sent_nested: dict[str, tuple[str, str, int]] = {}
         self._moving: set[str] = set()  # instancers last sent motion
         self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
@@ -397,6 +400,7 @@ class Instancing:
             self.delegate.set_instancer(
                 dpath, prototypes=flat, proto_indices=indices, transforms=transforms, prototype=True
             )
+            self._sent_points[dpath] = (path, str(root.GetPath()), groups)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -419,6 +423,7 @@ class Instancing:
             transforms=np.repeat(placement[None], k, axis=0),
             prototype=True,
         )
+        self._sent_nested[dpath] = (str(prim.GetPath()), str(root.GetPath()), k)
         self._hold(walk.owner, dpath, walk.owned)
         self._count(dpath)
         return True
@@ -740,7 +745,7 @@ class Instancing:
         )
         self._hold(path, path, state.owned)
         self._stage = prim.GetStage()
-        self._sent_points[path] = state.groups
+        self._sent_points[path] = (path, None, state.groups)
         return state, arrays.might_vary
 
     def forget_point_instancer(self, path: str, state: InstancerState) -> None:
@@ -767,8 +772,13 @@ class Instancing:
         if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
             memo: dict[str, bool] = {}
             found: list[tuple[str, tuple[NDArray[np.float32], NDArray[np.float64]] | None]] = [
-                (path, self._points_motion(path, groups, time, shutter, memo))
-                for path, groups in sorted(self._sent_points.items())
+                (path, self._points_motion(*sent, time, shutter, memo))
+                for path, sent in sorted(self._sent_points.items())
+                if path in self._holders
+            ]
+            found += [
+                (path, self._nested_motion(*sent, time, shutter, memo))
+                for path, sent in sorted(self._sent_nested.items())
                 if path in self._holders
             ]
             # Native instances are sampled only when some might move: a still scene pays nothing.
@@ -800,15 +810,29 @@ class Instancing:
         t0, t1 = times[0], times[-1]
         return np.array([(t - t0) / (t1 - t0) for t in times], dtype=np.float32)
 
+    def _frame(
+        self, cache: UsdGeom.XformCache, prim: Usd.Prim, root: str | None
+    ) -> NDArray[np.float64]:
+        """``prim``'s transform to the world (``root`` None) or to prototype root ``root``."""
+        if root is None:
+            return world_transform(cache, prim)
+        assert self._stage is not None
+        matrix, _ = cache.ComputeRelativeTransform(prim, self._stage.GetPrimAtPath(root))
+        return matrix_to_numpy(matrix)
+
     def _points_motion(
         self,
         path: str,
+        root: str | None,
         groups: list[list[str]],
         time: Usd.TimeCode,
         shutter: tuple[float, float],
         memo: dict[str, bool],
     ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
-        """The PointInstancer at ``path``'s placements over the shutter, or None if still."""
+        """The PointInstancer at ``path``'s placements over the shutter, or None if still.
+
+        Relative to prototype root ``root`` for one inside a prototype (None: the world).
+        """
         assert self._stage is not None
         prim = self._stage.GetPrimAtPath(path)
         if not prim or not prim.IsA(UsdGeom.PointInstancer):
@@ -854,13 +878,40 @@ class Instancing:
             return None
         per_time = []
         for t, x in zip(times, xforms, strict=True):
-            world = world_transform(UsdGeom.XformCache(Usd.TimeCode(t)), prim)
+            frame = self._frame(UsdGeom.XformCache(Usd.TimeCode(t)), prim, root)
             local = np.asarray(x, dtype=np.float64).reshape(-1, 4, 4)
-            per_time.append(_expand(groups, arrays.proto_indices, local @ world)[2])
+            per_time.append(_expand(groups, arrays.proto_indices, local @ frame)[2])
         mats = np.stack(per_time)
         if mats.shape[1] == 0 or np.all(mats == mats[0]):
             return None
         return self._fractions(times), mats
+
+    def _nested_motion(
+        self,
+        path: str,
+        root: str,
+        k: int,
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        memo: dict[str, bool],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """An instance inside a prototype over the shutter, or None when it does not move there.
+
+        Its transform to the prototype's root, repeated for its ``k`` members.
+        """
+        assert self._stage is not None
+        prim = self._stage.GetPrimAtPath(path)
+        if not prim or not ancestors_might_vary(prim, memo):
+            return None
+        times = shutter_times([prim], time, shutter)
+        if times is None:
+            return None
+        mats = np.stack(
+            [self._frame(UsdGeom.XformCache(Usd.TimeCode(t)), prim, root) for t in times]
+        )
+        if np.all(mats == mats[0]):
+            return None
+        return self._fractions(times), np.repeat(mats[:, None], k, axis=1)
 
     def _native_motion(
         self,
