@@ -222,6 +222,36 @@ def test_a_sliding_instance_blurs_as_the_same_quad_moved_by_its_xform(how) -> No
 
 
 @pytest.mark.usefixtures("native")
+def test_a_spinning_point_instance_blurs_as_the_same_quad_spun_by_its_xform() -> None:
+    # orientations from none to 45° about Z across the shutter, against a rotateZ op
+    # animated alike (USD slerps the one and interpolates the other's angle: the same turn).
+    def spinning(instanced: bool) -> Usd.Stage:
+        stage = new_stage()
+        if instanced:
+            pi = UsdGeom.PointInstancer.Define(stage, "/World/PI")
+            add_cube(stage, "/World/PI/Protos/Quad", scheme="none", **QUAD)
+            pi.CreatePrototypesRel().AddTarget("/World/PI/Protos/Quad")
+            pi.CreateProtoIndicesAttr([0])
+            pi.CreatePositionsAttr([(0, 0, 0)])
+            turn = Gf.Rotation(Gf.Vec3d(0, 0, 1), 45.0).GetQuat()
+            pi.CreateOrientationsAttr().Set([Gf.Quath(1, 0, 0, 0)], 1.0)
+            pi.GetOrientationsAttr().Set([Gf.Quath(turn)], 2.0)
+        else:
+            op = add_cube(stage, "/World/Quad", scheme="none", **QUAD).AddRotateZOp()
+            op.Set(0.0, 1.0)
+            op.Set(45.0, 2.0)
+        camera(stage, (0.0, 1.0))
+        return stage
+
+    got, peer = row(spinning(True), 256), row(spinning(False), 256)
+    centre = row(sliding_stage(None))[15]
+    # The quad's half-width along y = 0 grows from 0.5 to 0.5·√2 as it turns.
+    assert got[np.abs(XS) < 0.45].min() > 0.99 * centre
+    assert 0.0 < got[(XS > 0.55) & (XS < 0.65)].max() < 0.9 * centre
+    np.testing.assert_allclose(got, peer, atol=0.02 * centre)
+
+
+@pytest.mark.usefixtures("native")
 def test_still_instances_render_bit_for_bit_as_without_a_shutter() -> None:
     # Time-sampled but still (the native slider's two samples are equal): nothing is sent,
     # and the shutter changes no bit.

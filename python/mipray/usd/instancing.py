@@ -21,6 +21,14 @@ flow", step 4).
 * **Nesting**: a PointInstancer or an instance inside a prototype becomes an
   instancer with ``prototype=True`` inside its parent prototype.
 
+* **Motion**: when the camera's shutter is open, :meth:`Instancing.update_motion`
+  sends each instancer whose instances move within it their transforms over the
+  shutter (``set_instancer_motion``): a PointInstancer's from usd-core's
+  ``ComputeInstanceTransformsAtTimes`` (time-sampled positions, orientations and
+  scales; velocities and angular velocities) and its own transform, a native
+  instance's from its xform, nested ones relative to their prototype's root.
+  Instancers nothing moves in send nothing.
+
 Visibility and purpose are applied inside prototypes, starting from the
 prototype root. A mesh inside a prototype that cannot be read is reported
 (naming it) and left out; the rest of the prototype renders.
