@@ -125,6 +125,29 @@ def nested_stage(shutter: tuple[float, float] | None, kind: str) -> Usd.Stage:
     return stage
 
 
+def member_stage(shutter: tuple[float, float] | None, kind: str) -> Usd.Stage:
+    """The quad sliding by its own xform inside a prototype that a still PointInstancer
+    (``kind`` "points") or native instance ("native") places once at the origin."""
+    stage = new_stage()
+    root = "/World/PI/Protos/Group" if kind == "points" else "/Proto"
+    if kind == "points":
+        pi = UsdGeom.PointInstancer.Define(stage, "/World/PI")
+        UsdGeom.Xform.Define(stage, root)
+        pi.CreatePrototypesRel().AddTarget(root)
+        pi.CreateProtoIndicesAttr([0])
+        pi.CreatePositionsAttr([(0, 0, 0)])
+    else:
+        stage.DefinePrim(root, "Xform").SetSpecifier(Sdf.SpecifierClass)
+        holder = UsdGeom.Xform.Define(stage, "/World/Holder")
+        holder.GetPrim().GetReferences().AddInternalReference(root)
+        holder.GetPrim().SetInstanceable(True)
+    op = add_cube(stage, f"{root}/Quad", scheme="none", **QUAD).AddTranslateOp()
+    op.Set(Gf.Vec3d(-0.5, 0, 0), 1.0)
+    op.Set(Gf.Vec3d(0.5, 0, 0), 2.0)
+    camera(stage, shutter)
+    return stage
+
+
 # ------------------------------------------------------------------ what is sent
 
 
@@ -145,6 +168,7 @@ def test_a_moving_point_instancer_sends_its_instances_over_the_shutter(fake, how
 def test_still_instances_or_a_shut_shutter_send_no_motion(fake) -> None:
     stages = [points_stage((0.0, 1.0), "still"), points_stage(None), native_stage(None)]
     stages += [nested_stage(None, "points"), nested_stage(None, "native")]
+    stages += [member_stage(None, "points"), member_stage(None, "native")]
     for stage in stages:
         scene = UsdSceneDelegate(stage, fake, time=1.0)
         scene.sync()
@@ -186,6 +210,24 @@ def test_an_instance_moving_inside_a_prototype_sends_its_motion_there(fake, kind
     np.testing.assert_allclose(mats[:, 0, 3, 0], -0.5 + times, atol=1e-6)
 
 
+@pytest.mark.parametrize("kind", ["points", "native"])
+def test_a_mesh_moving_inside_its_prototype_sends_its_motion_there(fake, kind) -> None:
+    stage = member_stage((0.0, 1.0), kind)
+    scene = UsdSceneDelegate(stage, fake, time=1.0)
+    scene.sync()
+    scene.update_motion("/Cam")
+    (call,) = [c for c in fake.calls if c.method == "set_motion"]
+    assert fake.prims[call.path].kwargs["prototype"] is True
+    times, mats = call.kwargs["times"], call.kwargs["transforms"]
+    np.testing.assert_allclose(mats[:, 3, 0], -0.5 + times, atol=1e-6)
+    # Shut the shutter: the motion is cleared.
+    UsdGeom.Camera(stage.GetPrimAtPath("/Cam")).GetShutterCloseAttr().Set(0.0)
+    scene.sync()
+    scene.update_motion("/Cam")
+    last = [c for c in fake.calls if c.method == "set_motion"][-1]
+    assert last.path == call.path and len(last.kwargs["times"]) == 0
+
+
 # ------------------------------------------------------------------------ renders
 
 
@@ -196,11 +238,22 @@ def row(stage: Usd.Stage, samples: int = 128) -> np.ndarray:
 
 @pytest.mark.usefixtures("native")
 @pytest.mark.parametrize(
-    "how", ["positions", "velocities", "native", "nested points", "nested native"]
+    "how",
+    [
+        "positions",
+        "velocities",
+        "native",
+        "nested points",
+        "nested native",
+        "member points",
+        "member native",
+    ],
 )
 def test_a_sliding_instance_blurs_as_the_same_quad_moved_by_its_xform(how) -> None:
     if how.startswith("nested"):
         stage = nested_stage((0.0, 1.0), how.split()[1])
+    elif how.startswith("member"):
+        stage = member_stage((0.0, 1.0), how.split()[1])
     elif how == "native":
         stage = native_stage((0.0, 1.0))
     else:

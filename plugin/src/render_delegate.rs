@@ -114,8 +114,10 @@ impl RenderDelegate {
         Ok(())
     }
 
-    /// Sets a mesh's transform over the shutter: `keys` at shutter times in [0, 1] (0 = open).
-    /// Keys that do not move (fewer than two, or all equal) clear the motion.
+    /// Sets a mesh's transform over the shutter: `keys` at shutter times in [0, 1] (0 = open),
+    /// its world transform, or for a prototype's mesh its transform to the prototype's root
+    /// (its instances compose it with their own). Keys that do not move (fewer than two, or all
+    /// equal) clear the motion.
     ///
     /// # Errors
     /// No mesh at `path`, or a key that is not finite.
@@ -381,24 +383,13 @@ impl RenderDelegate {
             }
             let slot = *index.entry(path.as_str()).or_insert_with(|| self.core_mesh(m, default_displacement_bound, scene));
             if let Some(idx) = slot {
-                match (&m.motion, pose) {
-                    // A mesh placed on its own moves by its own motion (its world transform).
-                    (Some(motion), Pose::Fixed(transform)) if transform == Mat4::IDENTITY => {
-                        scene.add_moving_instance(idx, (**motion).clone());
+                match mesh_pose(m, &pose) {
+                    Pose::Moving(motion) => {
+                        scene.add_moving_instance(idx, (*motion).clone());
                     }
-                    // Prototype meshes sit in their prototype's space: instance × mesh transform.
-                    (_, Pose::Fixed(transform)) => {
-                        scene.add_instance(idx, transform * m.data.transform);
+                    Pose::Fixed(transform) => {
+                        scene.add_instance(idx, transform);
                     }
-                    // A moving instance: its pose at each key × the mesh's transform.
-                    (_, moving) => match moving.then(&Pose::Fixed(m.data.transform)) {
-                        Pose::Moving(motion) => {
-                            scene.add_moving_instance(idx, (*motion).clone());
-                        }
-                        Pose::Fixed(transform) => {
-                            scene.add_instance(idx, transform);
-                        }
-                    },
                 }
             }
         };
@@ -442,15 +433,10 @@ impl RenderDelegate {
             let limit = surface.as_limit_surface();
             let d = &m.data;
             let tint = tints.entry(path).or_insert_with(|| self.mesh_emitters(path, d, data));
-            // As for geometry: a mesh placed on its own moves by its own motion, and a
-            // prototype's sits in its prototype's space (instance × mesh transform), moving with
-            // its instance.
-            let (placed, motion) = match pose {
-                Pose::Fixed(transform) => (*transform * d.transform, m.motion.clone().filter(|_| *transform == Mat4::IDENTITY)),
-                moving => match moving.then(&Pose::Fixed(d.transform)) {
-                    Pose::Fixed(placed) => (placed, None),
-                    Pose::Moving(motion) => (Mat4::IDENTITY, Some(motion)),
-                },
+            // Placed as the geometry is (see `mesh_pose`).
+            let (placed, motion) = match mesh_pose(m, pose) {
+                Pose::Fixed(placed) => (placed, None),
+                Pose::Moving(motion) => (Mat4::IDENTITY, Some(motion)),
             };
             let motion = motion.as_deref();
             match crate::light::mesh_light(
@@ -757,5 +743,19 @@ impl RenderDelegate {
             mesh.displacement_bound = 0.0;
         }
         Some(scene.add_mesh(mesh))
+    }
+}
+
+/// Where mesh `m` placed at instance pose `pose` (identity for a mesh on its own) is over the
+/// shutter. A mesh on its own moves by its own motion (its world transform); a prototype's mesh
+/// sits in its prototype's space, so it is `pose × its transform`, or `pose × its motion` when
+/// it moves within the prototype (that motion is relative to the prototype's root). Nothing
+/// moving gives the product the static path always made.
+fn mesh_pose(m: &crate::mesh::MeshPrim, pose: &Pose) -> Pose {
+    match (&m.motion, pose) {
+        (Some(motion), Pose::Fixed(t)) if !m.data.prototype && *t == Mat4::IDENTITY => Pose::Moving(motion.clone()),
+        (Some(motion), _) if m.data.prototype => pose.then(&Pose::Moving(motion.clone())),
+        (_, Pose::Fixed(t)) => Pose::Fixed(*t * m.data.transform),
+        (_, moving) => moving.then(&Pose::Fixed(m.data.transform)),
     }
 }

@@ -280,6 +280,9 @@ class Instancing:
         self._sent_points: dict[str, tuple[str, str | None, list[list[str]]]] = {}
         self._sent_native: dict[str, tuple[list[str], NDArray[np.float64], int]] = {}
         self._sent_nested: dict[str, tuple[str, str, int]] = {}
+        # Each prototype mesh sent: its USD path and its prototype root's (its own motion there).
+        self._sent_members: dict[str, tuple[str, str]] = {}
+        self._moving_members: set[str] = set()  # prototype meshes last sent motion
         self._moving: set[str] = set()  # instancers last sent motion
         self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
@@ -374,6 +377,7 @@ class Instancing:
                 links = link_arguments(prim, walk.time, self.mesh_paths or (lambda: []))
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
+            self._sent_members[dpath] = (path, str(root.GetPath()))
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -811,7 +815,37 @@ class Instancing:
                     path, np.zeros(0, np.float32), np.zeros((0, 0, 4, 4), np.float64)
                 )
         self._moving = set(moving)
+        self._update_member_motion(time, shutter)
         return moving
+
+    def _update_member_motion(self, time: Usd.TimeCode, shutter: tuple[float, float]) -> None:
+        """Send the prototype meshes that move within their prototype their motion there.
+
+        Their transform to the prototype's root over the shutter (``set_motion``); those
+        that stopped moving have it cleared.
+        """
+        moving: set[str] = set()
+        if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
+            memo: dict[str, bool] = {}
+            for dpath, (path, root) in sorted(self._sent_members.items()):
+                if dpath not in self._holders:
+                    continue
+                samples = self._nested_motion(path, root, 1, time, shutter, memo)
+                if samples is None:
+                    continue
+                try:
+                    self.delegate.set_motion(dpath, samples[0], samples[1][:, 0])
+                except (PrimError, ValueError) as exc:
+                    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    _log.warning("mipray: %s; rendering it without motion blur", text)
+                    continue
+                moving.add(dpath)
+        for dpath in sorted(self._moving_members - moving):
+            if dpath in self._holders:
+                self.delegate.set_motion(
+                    dpath, np.zeros(0, np.float32), np.zeros((0, 4, 4), np.float64)
+                )
+        self._moving_members = moving
 
     @staticmethod
     def _fractions(times: list[float]) -> NDArray[np.float32]:
@@ -903,9 +937,10 @@ class Instancing:
         shutter: tuple[float, float],
         memo: dict[str, bool],
     ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
-        """An instance inside a prototype over the shutter, or None when it does not move there.
+        """A prim inside a prototype over the shutter, or None when it does not move there.
 
-        Its transform to the prototype's root, repeated for its ``k`` members.
+        Its transform to the prototype's root, repeated for its ``k`` members (an instance's;
+        1 for a mesh).
         """
         assert self._stage is not None
         prim = self._stage.GetPrimAtPath(path)
