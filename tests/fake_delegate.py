@@ -295,6 +295,21 @@ class FakeRenderDelegate:
         self.calls.append(call)
         self.prims[path] = call
 
+    def set_instancer_motion(
+        self, path: str, times: NDArray[np.float32], transforms: NDArray[np.float64]
+    ) -> None:
+        call = self.prims.get(path)
+        if call is None or call.method != "set_instancer":
+            raise ValueError(f"{path}: set_instancer_motion: no instancer at this path")
+        _check_array(path, "times", times, np.float32, 1)
+        _check_array(path, "transforms", transforms, np.float64, 4)
+        n = len(call.kwargs["proto_indices"])
+        if len(times) and transforms.shape != (len(times), n, 4, 4):
+            raise ValueError(f"{path}: motion transforms {transforms.shape} for {len(times)} times")
+        self.calls.append(
+            Call("set_instancer_motion", path, {"times": times, "transforms": transforms})
+        )
+
     def remove(self, path: str) -> None:
         self.calls.append(Call("remove", path))
         self.prims.pop(path, None)

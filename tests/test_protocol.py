@@ -70,6 +70,7 @@ def test_stub_declares_the_protocol() -> None:
         "RenderDelegate.set_motion",
         "RenderDelegate.set_deformation",
         "RenderDelegate.set_instancer",
+        "RenderDelegate.set_instancer_motion",
         "RenderDelegate.set_camera",
         "RenderDelegate.set_distant_light",
         "RenderDelegate.set_light",

@@ -21,7 +21,7 @@ use mipray::scene::{Mesh, Scene};
 use crate::camera::{Camera, CameraPrim};
 use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
-use crate::instancer::{check_references, expand, InstancerData, InstancerPrim};
+use crate::instancer::{check_references, expand, instance_motion, InstancerData, InstancerPrim, Pose};
 use crate::light::{AreaKind, DistantLightData, LightPrim, LinkData};
 use crate::material::{is_color, set_input, SurfaceInputs, TextureInput};
 use crate::mesh::{MeshData, MeshPrim};
@@ -114,8 +114,10 @@ impl RenderDelegate {
         Ok(())
     }
 
-    /// Sets a mesh's transform over the shutter: `keys` at shutter times in [0, 1] (0 = open).
-    /// Keys that do not move (fewer than two, or all equal) clear the motion.
+    /// Sets a mesh's transform over the shutter: `keys` at shutter times in [0, 1] (0 = open),
+    /// its world transform, or for a prototype's mesh its transform to the prototype's root
+    /// (its instances compose it with their own). Keys that do not move (fewer than two, or all
+    /// equal) clear the motion.
     ///
     /// # Errors
     /// No mesh at `path`, or a key that is not finite.
@@ -155,9 +157,27 @@ impl RenderDelegate {
 
     /// Inserts or replaces an instancer. Its prototypes need not exist yet: they are looked up
     /// when a render pass syncs.
+    /// when a render pass syncs. Its instances stop moving until
+    /// [`Delegate::set_instancer_motion`] is called again.
     pub fn set_instancer(&mut self, path: &str, data: InstancerData) {
         let updates = self.instancers.get(path).map_or(0, |i| i.updates) + 1;
-        self.instancers.insert(path.to_string(), InstancerPrim { path: path.to_string(), data, updates });
+        self.instancers.insert(path.to_string(), InstancerPrim { path: path.to_string(), data, motion: Vec::new(), updates });
+    }
+
+    /// Sets the instancer's per-instance transforms over the camera's shutter (transform motion
+    /// blur of instances): `transforms[k * n + i]` is instance `i`'s at shutter time `times[k]`
+    /// (0 = open, 1 = close), `n` its instance count, in the frame of its `transforms`. Instances
+    /// whose keys are all equal keep their transform; no times clear the motion. Every mesh the
+    /// instance places, and every mesh light, moves with it.
+    ///
+    /// # Errors
+    /// No instancer at `path`, sizes that disagree with its instance count, or values that are
+    /// not finite: one line naming the instancer.
+    pub fn set_instancer_motion(&mut self, path: &str, times: &[f32], transforms: &[Mat4]) -> Result<(), DelegateError> {
+        let inst =
+            self.instancers.get_mut(path).ok_or_else(|| DelegateError::prim(path, "set_instancer_motion: no instancer at this path"))?;
+        inst.motion = instance_motion(path, inst.data.len(), times, transforms)?;
+        Ok(())
     }
 
     /// The instancer at `path`, if any.
@@ -352,35 +372,34 @@ impl RenderDelegate {
         // Core mesh index per prim path, added on first placement: a prototype nobody places
         // costs nothing, and one placed 10,000 times is one core mesh.
         let mut index: HashMap<&str, Option<usize>> = HashMap::new();
-        // Where each emissive mesh is placed (instance transform; identity for one on its own).
-        let mut light_places: Vec<(&str, Mat4)> = Vec::new();
-        let mut place = |scene: &mut Scene, path: &str, transform: Mat4| {
+        // Where each emissive mesh is placed (instance pose; identity for one on its own).
+        let mut light_places: Vec<(&str, Pose)> = Vec::new();
+        let mut place = |scene: &mut Scene, path: &str, pose: Pose| {
             let Some((path, m)) = self.meshes.get_key_value(path) else { return };
             if m.data.light.is_some() {
                 // An emissive mesh is a light, not geometry (added with the lights below).
-                light_places.push((path.as_str(), transform));
+                light_places.push((path.as_str(), pose));
                 return;
             }
             let slot = *index.entry(path.as_str()).or_insert_with(|| self.core_mesh(m, default_displacement_bound, scene));
             if let Some(idx) = slot {
-                match &m.motion {
-                    // Only a mesh placed on its own moves (instancers' motion is not read).
-                    Some(motion) if transform == Mat4::IDENTITY => {
-                        scene.add_moving_instance(idx, (**motion).clone());
+                match mesh_pose(m, &pose) {
+                    Pose::Moving(motion) => {
+                        scene.add_moving_instance(idx, (*motion).clone());
                     }
-                    // Prototype meshes sit in their prototype's space: instance × mesh transform.
-                    _ => {
-                        scene.add_instance(idx, transform * m.data.transform);
+                    Pose::Fixed(transform) => {
+                        scene.add_instance(idx, transform);
                     }
                 }
             }
         };
         for m in self.meshes.values().filter(|m| !m.data.prototype) {
-            place(&mut scene, &m.path, Mat4::IDENTITY);
+            place(&mut scene, &m.path, Pose::Fixed(Mat4::IDENTITY));
         }
         let is_mesh = |p: &str| self.meshes.contains_key(p);
+        let top = Pose::Fixed(Mat4::IDENTITY);
         for inst in self.instancers.values().filter(|i| !i.data.prototype) {
-            expand(&self.instancers, inst, Mat4::IDENTITY, &is_mesh, &mut |p, t| place(&mut scene, p, t));
+            expand(&self.instancers, inst, &top, &is_mesh, &mut |p, t| place(&mut scene, p, t));
         }
         let sampler = self.sampler();
         let mesh_index = |p: &str| index.get(p).copied().flatten();
@@ -390,12 +409,12 @@ impl RenderDelegate {
         Ok(scene)
     }
 
-    /// The emissive meshes' lights, one per placement in `places` (mesh path, instance
-    /// transform: identity for a mesh on its own, which alone can move), their links resolved
+    /// The emissive meshes' lights, one per placement in `places` (mesh path, instance pose:
+    /// identity for a mesh on its own, which then moves by its own motion), their links resolved
     /// by `mesh_index`. A light placed more than once is named `path[k]`, k its placement's
     /// order. A mesh light whose surface did not sync, or has no area, is left out with one
     /// warning.
-    fn mesh_lights(&self, places: &[(&str, Mat4)], mesh_index: &dyn Fn(&str) -> Option<usize>) -> Vec<mipray::light::Light> {
+    fn mesh_lights(&self, places: &[(&str, Pose)], mesh_index: &dyn Fn(&str) -> Option<usize>) -> Vec<mipray::light::Light> {
         let mut out = Vec::new();
         let mut count: HashMap<&str, usize> = HashMap::new();
         for (path, _) in places {
@@ -403,7 +422,8 @@ impl RenderDelegate {
         }
         let mut seen: HashMap<&str, usize> = HashMap::new();
         let mut tints: HashMap<&str, crate::light::MeshEmitters> = HashMap::new();
-        for &(path, transform) in places {
+        for (path, pose) in places {
+            let path = *path;
             let Some(m) = self.meshes.get(path) else { continue };
             let k = seen.entry(path).or_default();
             let name = if count[path] > 1 { format!("{path}[{k}]") } else { path.to_string() };
@@ -413,10 +433,12 @@ impl RenderDelegate {
             let limit = surface.as_limit_surface();
             let d = &m.data;
             let tint = tints.entry(path).or_insert_with(|| self.mesh_emitters(path, d, data));
-            // As for geometry: only a mesh placed on its own moves, and a prototype's sits in its
-            // prototype's space (instance × mesh transform).
-            let motion = m.motion.as_deref().filter(|_| transform == Mat4::IDENTITY);
-            let placed = transform * d.transform;
+            // Placed as the geometry is (see `mesh_pose`).
+            let (placed, motion) = match mesh_pose(m, pose) {
+                Pose::Fixed(placed) => (placed, None),
+                Pose::Moving(motion) => (Mat4::IDENTITY, Some(motion)),
+            };
+            let motion = motion.as_deref();
             match crate::light::mesh_light(
                 &name,
                 data,
@@ -721,5 +743,19 @@ impl RenderDelegate {
             mesh.displacement_bound = 0.0;
         }
         Some(scene.add_mesh(mesh))
+    }
+}
+
+/// Where mesh `m` placed at instance pose `pose` (identity for a mesh on its own) is over the
+/// shutter. A mesh on its own moves by its own motion (its world transform); a prototype's mesh
+/// sits in its prototype's space, so it is `pose × its transform`, or `pose × its motion` when
+/// it moves within the prototype (that motion is relative to the prototype's root). Nothing
+/// moving gives the product the static path always made.
+fn mesh_pose(m: &crate::mesh::MeshPrim, pose: &Pose) -> Pose {
+    match (&m.motion, pose) {
+        (Some(motion), Pose::Fixed(t)) if !m.data.prototype && *t == Mat4::IDENTITY => Pose::Moving(motion.clone()),
+        (Some(motion), _) if m.data.prototype => pose.then(&Pose::Moving(motion.clone())),
+        (_, Pose::Fixed(t)) => Pose::Fixed(*t * m.data.transform),
+        (_, moving) => moving.then(&Pose::Fixed(m.data.transform)),
     }
 }

@@ -278,6 +278,29 @@ class RenderDelegate:
                 transform that is not finite; the message names ``path``.
         """
 
+    def set_instancer_motion(
+        self, path: str, times: NDArray[np.float32], transforms: NDArray[np.float64]
+    ) -> None:
+        """Set the transforms of the instancer at ``path``'s instances over the camera's shutter.
+
+        Transform motion blur of instances: each mesh an instance places (nested
+        instancers' included), and each mesh light, moves with the instance's
+        transform interpolated at the ray's time, as :meth:`set_motion` moves a mesh.
+        An instance whose keys are all equal stays at its ``set_instancer``
+        transform. :meth:`set_instancer` clears the motion; no times clear it too.
+
+        Args:
+            path: an instancer set with :meth:`set_instancer`.
+            times: (K,) float32 shutter fractions, 0 at open and 1 at close.
+            transforms: (K, N, 4, 4) float64 per time and instance, in the frame of
+                ``set_instancer``'s ``transforms``, row-vector convention; N its
+                instance count.
+
+        Raises:
+            PrimDataError: no instancer at ``path``, shapes that do not match its
+                instance count, or values that are not finite.
+        """
+
     def set_camera(
         self,
         path: str,

@@ -29,8 +29,8 @@ use mipray::topology::{BoundaryInterpolation, FaceVaryingInterpolation, MeshTopo
 use mipray_bridge::OiioImageIo;
 use numpy::ndarray::Array3;
 use numpy::{
-    IntoPyArray, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn,
-    PyUntypedArrayMethods,
+    IntoPyArray, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+    PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -390,6 +390,34 @@ impl RenderDelegate {
         };
         self.inner.set_instancer(path, data.map_err(delegate_error)?);
         Ok(())
+    }
+
+    /// Sets an instancer's per-instance transforms over the camera's shutter: `transforms[k, i]`
+    /// is instance `i`'s at `times[k]`; no times clear them. See the stubs.
+    fn set_instancer_motion(
+        &mut self,
+        path: &str,
+        times: PyReadonlyArray1<'_, f32>,
+        transforms: PyReadonlyArray4<'_, f64>,
+    ) -> PyResult<()> {
+        let times = times.as_array().to_vec();
+        let a = transforms.as_array();
+        let (k, n) = (a.shape()[0], a.shape()[1]);
+        if a.shape()[2..] != [4, 4] || k != times.len() {
+            return Err(value_error(path, format!("{} motion times for transforms of shape {:?} (want K×N×4×4)", times.len(), a.shape())));
+        }
+        let mut mats = Vec::with_capacity(k * n);
+        for per_time in a.outer_iter() {
+            for m in per_time.outer_iter() {
+                // USD's row-vector layout read as columns (see `matrix`).
+                let mut cols = [0f32; 16];
+                for (c, v) in cols.iter_mut().zip(m.iter()) {
+                    *c = *v as f32;
+                }
+                mats.push(Mat4::from_cols_array(&cols));
+            }
+        }
+        self.inner.set_instancer_motion(path, &times, &mats).map_err(delegate_error)
     }
 
     /// Inserts or replaces a camera (USD units; apertures and focal length as authored).

@@ -130,6 +130,9 @@ class _Recorder:
     def set_motion(self, path: str, *args: Any, **kwargs: Any) -> None:
         raise PrimError(path, "motion blur is not exported to Mitsuba")
 
+    def set_instancer_motion(self, path: str, *args: Any, **kwargs: Any) -> None:
+        raise PrimError(path, "motion blur is not exported to Mitsuba")
+
     def set_deformation(self, path: str, *args: Any, **kwargs: Any) -> None:
         raise PrimError(path, "motion blur is not exported to Mitsuba")
 

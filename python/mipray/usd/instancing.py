@@ -21,6 +21,14 @@ flow", step 4).
 * **Nesting**: a PointInstancer or an instance inside a prototype becomes an
   instancer with ``prototype=True`` inside its parent prototype.
 
+* **Motion**: when the camera's shutter is open, :meth:`Instancing.update_motion`
+  sends each instancer whose instances move within it their transforms over the
+  shutter (``set_instancer_motion``): a PointInstancer's from usd-core's
+  ``ComputeInstanceTransformsAtTimes`` (time-sampled positions, orientations and
+  scales; velocities and angular velocities) and its own transform, a native
+  instance's from its xform, nested ones relative to their prototype's root.
+  Instancers nothing moves in send nothing.
+
 Visibility and purpose are applied inside prototypes, starting from the
 prototype root. A mesh inside a prototype that cannot be read is reported
 (naming it) and left out; the rest of the prototype renders.
@@ -44,7 +52,7 @@ from .light import link_arguments, material_tints, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
-from .transform import matrix_to_numpy
+from .transform import ancestors_might_vary, matrix_to_numpy, shutter_times, world_transform
 
 __all__ = [
     "InstancerState",
@@ -264,6 +272,19 @@ class Instancing:
         self._stage: Usd.Stage | None = None
         self._binding_memo: dict[str, bool] = {}  # prim path → binds (see _binds_above)
         self._context: tuple[Usd.TimeCode, UsdGeom.XformCache, Counter[str]] | None = None
+        # What each instancer last sent places, by delegate path, for its motion over the
+        # shutter: a PointInstancer's USD path, the prototype root it is placed relative to
+        # (None at the top level: world) and its member groups; a native (or variant)
+        # instancer's instance prims, their transforms at the frame's time and its member
+        # count; an instance inside a prototype: its USD path, the root's and member count.
+        self._sent_points: dict[str, tuple[str, str | None, list[list[str]]]] = {}
+        self._sent_native: dict[str, tuple[list[str], NDArray[np.float64], int]] = {}
+        self._sent_nested: dict[str, tuple[str, str, int]] = {}
+        # Each prototype mesh sent: its USD path and its prototype root's (its own motion there).
+        self._sent_members: dict[str, tuple[str, str]] = {}
+        self._moving_members: set[str] = set()  # prototype meshes last sent motion
+        self._moving: set[str] = set()  # instancers last sent motion
+        self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
     # ------------------------------------------------------------ bookkeeping
 
@@ -356,6 +377,7 @@ class Instancing:
                 links = link_arguments(prim, walk.time, self.mesh_paths or (lambda: []))
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
+            self._sent_members[dpath] = (path, str(root.GetPath()))
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -390,6 +412,7 @@ class Instancing:
             self.delegate.set_instancer(
                 dpath, prototypes=flat, proto_indices=indices, transforms=transforms, prototype=True
             )
+            self._sent_points[dpath] = (path, str(root.GetPath()), groups)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -412,6 +435,7 @@ class Instancing:
             transforms=np.repeat(placement[None], k, axis=0),
             prototype=True,
         )
+        self._sent_nested[dpath] = (str(prim.GetPath()), str(root.GetPath()), k)
         self._hold(walk.owner, dpath, walk.owned)
         self._count(dpath)
         return True
@@ -517,6 +541,7 @@ class Instancing:
                     continue
                 self._hold(proto, proto, owned)
                 self._count(proto)
+                self._sent_native[proto] = (list(placed), transforms, k)
             elif proto in owned:
                 owned.discard(proto)
                 self._release(proto, {proto})
@@ -586,9 +611,17 @@ class Instancing:
         return known
 
     def add_instance(
-        self, instance_path: str, prototype: Usd.Prim, world: NDArray[np.float64]
+        self,
+        instance_path: str,
+        prototype: Usd.Prim,
+        world: NDArray[np.float64],
+        *,
+        might_move: bool = False,
     ) -> tuple[str, ...]:
         """Place native prototype ``prototype`` at ``world`` for instance prim ``instance_path``.
+
+        ``might_move``: its world transform might vary in time (only such instances are
+        sampled over the shutter, :meth:`update_motion`).
 
         Returns the materials bound through the instance to its prototype's prims where they
         differ from the prototype's own (the scene delegate re-syncs the instance when one of
@@ -601,6 +634,10 @@ class Instancing:
             self.remove_instance(instance_path)
         self._groups.setdefault(proto, {})[instance_path] = world
         self._instance_of[instance_path] = proto
+        if might_move:
+            self._might_move.add(instance_path)
+        else:
+            self._might_move.discard(instance_path)
         instance = prototype.GetStage().GetPrimAtPath(instance_path)
         variant = self._variant(instance, proto) if instance else ()
         self._variant_of[instance_path] = variant
@@ -648,6 +685,7 @@ class Instancing:
             )
             self._hold(owner, root, walk.owned)
             self._count(root)
+            self._sent_native[root] = (paths, transforms, n)
             owned |= walk.owned
         self._release(owner, self._variant_owned.get(proto, set()) - owned)
         self._variant_owned[proto] = owned
@@ -661,6 +699,7 @@ class Instancing:
         """Take instance prim ``instance_path`` out of its prototype's instancer."""
         proto = self._instance_of.pop(instance_path, None)
         self._variant_of.pop(instance_path, None)
+        self._might_move.discard(instance_path)
         if proto is not None:
             self._groups.get(proto, {}).pop(instance_path, None)
             self._dirty_groups.add(proto)
@@ -717,13 +756,236 @@ class Instancing:
             path, prototypes=flat, proto_indices=indices, transforms=transforms
         )
         self._hold(path, path, state.owned)
+        self._stage = prim.GetStage()
+        self._sent_points[path] = (path, None, state.groups)
         return state, arrays.might_vary
 
     def forget_point_instancer(self, path: str, state: InstancerState) -> None:
         """Remove the PointInstancer at ``path`` and whatever only it held."""
         self._release(path, state.owned | {path})
+        self._sent_points.pop(path, None)
+        self._moving.discard(path)
         for prim_path in state.member_prims:
             self.errors.pop(prim_path, None)
+
+    # ----------------------------------------------------------------- motion
+
+    def update_motion(self, time: Usd.TimeCode, shutter: tuple[float, float]) -> list[str]:
+        """Send each top-level instancer's instance transforms over the shutter where they move.
+
+        Transform motion blur of instances: a PointInstancer's by usd-core's
+        ``ComputeInstanceTransformsAtTimes`` (time-sampled positions, orientations and
+        scales, and ``velocities``/``angularVelocities``) and its own world transform; a
+        native prototype's instances by their world transforms. Only instancers that
+        might move are sampled; one that no longer moves has its motion cleared.
+        Returns the paths of the moving instancers.
+        """
+        moving: list[str] = []
+        if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
+            memo: dict[str, bool] = {}
+            found: list[tuple[str, tuple[NDArray[np.float32], NDArray[np.float64]] | None]] = [
+                (path, self._points_motion(*sent, time, shutter, memo))
+                for path, sent in sorted(self._sent_points.items())
+                if path in self._holders
+            ]
+            found += [
+                (path, self._nested_motion(*sent, time, shutter, memo))
+                for path, sent in sorted(self._sent_nested.items())
+                if path in self._holders
+            ]
+            # Native instances are sampled only when some might move: a still scene pays nothing.
+            found += [
+                (path, self._native_motion(*sent, time, shutter))
+                for path, sent in sorted(self._sent_native.items())
+                if self._might_move and path in self._holders
+            ]
+            for path, samples in found:
+                if samples is None:
+                    continue
+                try:
+                    self.delegate.set_instancer_motion(path, samples[0], samples[1])
+                except (PrimError, ValueError) as exc:
+                    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    _log.warning("mipray: %s; its instances render without motion blur", text)
+                    continue
+                moving.append(path)
+        for path in sorted(self._moving - set(moving)):
+            if path in self._holders:
+                self.delegate.set_instancer_motion(
+                    path, np.zeros(0, np.float32), np.zeros((0, 0, 4, 4), np.float64)
+                )
+        self._moving = set(moving)
+        self._update_member_motion(time, shutter)
+        return moving
+
+    def _update_member_motion(self, time: Usd.TimeCode, shutter: tuple[float, float]) -> None:
+        """Send the prototype meshes that move within their prototype their motion there.
+
+        Their transform to the prototype's root over the shutter (``set_motion``); those
+        that stopped moving have it cleared.
+        """
+        moving: set[str] = set()
+        if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
+            memo: dict[str, bool] = {}
+            for dpath, (path, root) in sorted(self._sent_members.items()):
+                if dpath not in self._holders:
+                    continue
+                samples = self._nested_motion(path, root, 1, time, shutter, memo)
+                if samples is None:
+                    continue
+                try:
+                    self.delegate.set_motion(dpath, samples[0], samples[1][:, 0])
+                except (PrimError, ValueError) as exc:
+                    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    _log.warning("mipray: %s; rendering it without motion blur", text)
+                    continue
+                moving.add(dpath)
+        for dpath in sorted(self._moving_members - moving):
+            if dpath in self._holders:
+                self.delegate.set_motion(
+                    dpath, np.zeros(0, np.float32), np.zeros((0, 4, 4), np.float64)
+                )
+        self._moving_members = moving
+
+    @staticmethod
+    def _fractions(times: list[float]) -> NDArray[np.float32]:
+        t0, t1 = times[0], times[-1]
+        return np.array([(t - t0) / (t1 - t0) for t in times], dtype=np.float32)
+
+    def _frame(
+        self, cache: UsdGeom.XformCache, prim: Usd.Prim, root: str | None
+    ) -> NDArray[np.float64]:
+        """``prim``'s transform to the world (``root`` None) or to prototype root ``root``."""
+        if root is None:
+            return world_transform(cache, prim)
+        assert self._stage is not None
+        matrix, _ = cache.ComputeRelativeTransform(prim, self._stage.GetPrimAtPath(root))
+        return matrix_to_numpy(matrix)
+
+    def _points_motion(
+        self,
+        path: str,
+        root: str | None,
+        groups: list[list[str]],
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        memo: dict[str, bool],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """The PointInstancer at ``path``'s placements over the shutter, or None if still.
+
+        Relative to prototype root ``root`` for one inside a prototype (None: the world).
+        """
+        assert self._stage is not None
+        prim = self._stage.GetPrimAtPath(path)
+        if not prim or not prim.IsA(UsdGeom.PointInstancer):
+            return None
+        pi = UsdGeom.PointInstancer(prim)
+        attributes = tuple(
+            a
+            for a in (
+                pi.GetPositionsAttr(),
+                pi.GetOrientationsAttr(),
+                pi.GetOrientationsfAttr(),
+                pi.GetScalesAttr(),
+                pi.GetVelocitiesAttr(),
+                pi.GetAngularVelocitiesAttr(),
+                pi.GetAccelerationsAttr(),
+            )
+            if a.HasAuthoredValue()
+        )
+        velocities = any(
+            a.GetName() in ("velocities", "angularVelocities", "accelerations")
+            and len(a.Get(time) or ()) > 0
+            for a in attributes
+        )
+        varies = any(a.ValueMightBeTimeVarying() for a in attributes)
+        if not (velocities or varies or ancestors_might_vary(prim, memo)):
+            return None
+        times = shutter_times([prim], time, shutter, attributes)
+        if times is None:
+            return None
+        try:
+            arrays = read_point_instancer(pi, time)
+        except PrimError:
+            return None  # reported by its sync
+        codes = [Usd.TimeCode(t) for t in times]
+        xforms = pi.ComputeInstanceTransformsAtTimes(codes, time)
+        n = len(arrays.proto_indices)
+        if len(xforms) != len(times) or any(len(x) != n for x in xforms):
+            _log.warning(
+                "mipray: %s: the instance transforms over the shutter cannot be computed "
+                "(see USD's warning); its instances render without motion blur",
+                path,
+            )
+            return None
+        per_time = []
+        for t, x in zip(times, xforms, strict=True):
+            frame = self._frame(UsdGeom.XformCache(Usd.TimeCode(t)), prim, root)
+            local = np.asarray(x, dtype=np.float64).reshape(-1, 4, 4)
+            per_time.append(_expand(groups, arrays.proto_indices, local @ frame)[2])
+        mats = np.stack(per_time)
+        if mats.shape[1] == 0 or np.all(mats == mats[0]):
+            return None
+        return self._fractions(times), mats
+
+    def _nested_motion(
+        self,
+        path: str,
+        root: str,
+        k: int,
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+        memo: dict[str, bool],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """A prim inside a prototype over the shutter, or None when it does not move there.
+
+        Its transform to the prototype's root, repeated for its ``k`` members (an instance's;
+        1 for a mesh).
+        """
+        assert self._stage is not None
+        prim = self._stage.GetPrimAtPath(path)
+        if not prim or not ancestors_might_vary(prim, memo):
+            return None
+        times = shutter_times([prim], time, shutter)
+        if times is None:
+            return None
+        mats = np.stack(
+            [self._frame(UsdGeom.XformCache(Usd.TimeCode(t)), prim, root) for t in times]
+        )
+        if np.all(mats == mats[0]):
+            return None
+        return self._fractions(times), np.repeat(mats[:, None], k, axis=1)
+
+    def _native_motion(
+        self,
+        instances: list[str],
+        transforms: NDArray[np.float64],
+        k: int,
+        time: Usd.TimeCode,
+        shutter: tuple[float, float],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+        """A native instancer's placements over the shutter, or None when no instance moves.
+
+        Each instance's world transform, repeated for its ``k`` members.
+        """
+        assert self._stage is not None
+        moving = [i for i, p in enumerate(instances) if p in self._might_move]
+        prims = {i: self._stage.GetPrimAtPath(instances[i]) for i in moving}
+        moving = [i for i in moving if prims[i]]
+        if not moving:
+            return None
+        times = shutter_times([prims[i] for i in moving], time, shutter)
+        if times is None:
+            return None
+        # Still instances keep their frame-time transform at every key (placed as without motion).
+        mats = np.repeat(transforms[None], len(times), axis=0)
+        for j, t in enumerate(times):
+            cache = UsdGeom.XformCache(Usd.TimeCode(t))
+            for i in moving:
+                mats[j, i] = world_transform(cache, prims[i])
+        if np.all(mats == mats[0]):
+            return None
+        return self._fractions(times), np.repeat(mats, k, axis=1)
 
     def owner_of(self, changed: str, states: dict[str, InstancerState]) -> list[str]:
         """PointInstancers (path → state) whose prototypes hold the prim path ``changed``."""

@@ -79,6 +79,11 @@ class RenderDelegateLike(Protocol):
     ) -> None:
         """Add or replace an instancer."""
 
+    def set_instancer_motion(
+        self, path: str, times: NDArray[np.float32], transforms: NDArray[np.float64]
+    ) -> None:
+        """Set an instancer's per-instance transforms over the camera's shutter (none: still)."""
+
     def set_camera(
         self,
         path: str,

@@ -679,7 +679,9 @@ class UsdSceneDelegate:
                 self._forget(path)  # its type changed: drop what the old kind sent
                 previous = None
             if prim.IsInstance():
-                bound = self._instancing.add_instance(path, prim.GetPrototype(), transform)
+                bound = self._instancing.add_instance(
+                    path, prim.GetPrototype(), transform, might_move=xform_varies
+                )
                 record = _Record(
                     "instance",
                     order,
@@ -855,8 +857,10 @@ class UsdSceneDelegate:
         paths of the moving meshes. A rigidly deformed skinned mesh moves by its posed
         transform (:meth:`mipray.usd.skel.SkelPoser.rigid_motion`); a mesh whose points move
         (time-sampled, or skinned) gets its points over the shutter too, and counts as moving
-        (:mod:`mipray.usd.deform`). PointInstancer and native
-        instance motion is not read (their transforms at the frame's time are used).
+        (:mod:`mipray.usd.deform`). PointInstancers and native instances that move get
+        their instances' transforms over the shutter too
+        (:meth:`mipray.usd.instancing.Instancing.update_motion`; their paths are not in
+        the list).
         """
         shutter = camera_shutter(self.stage, camera_path, self.time)
         moving: list[str] = []
@@ -884,6 +888,7 @@ class UsdSceneDelegate:
             if self._update_deformation(path, record, shutter) and path not in moving[-1:]:
                 moving.append(path)
         self._moving = set(moving)
+        self._instancing.update_motion(self.time, shutter)
         return moving
 
     def _update_deformation(self, path: str, record: _Record, shutter: tuple[float, float]) -> bool:

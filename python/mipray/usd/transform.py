@@ -16,6 +16,7 @@ __all__ = [
     "camera_shutter",
     "matrix_to_numpy",
     "motion_samples",
+    "shutter_times",
     "world_transform",
 ]
 
@@ -79,15 +80,17 @@ def camera_shutter(stage: Usd.Stage, camera_path: str, time: Usd.TimeCode) -> tu
     return (o, c)
 
 
-def motion_samples(
-    prim: Usd.Prim, time: Usd.TimeCode, shutter: tuple[float, float]
-) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
-    """``prim``'s world transform over the shutter, or None when it does not move in it.
+def shutter_times(
+    prims: list[Usd.Prim],
+    time: Usd.TimeCode,
+    shutter: tuple[float, float],
+    attributes: tuple[Usd.Attribute, ...] = (),
+) -> list[float] | None:
+    """The time codes a motion over the shutter is sampled at, in order; None when it is shut.
 
-    Returns (times as fractions of the shutter, 0 = open, 1 = close; (N, 4, 4)
-    matrices) at the shutter's ends, every authored xform time sample of the prim
-    and its ancestors inside it, and :data:`MOTION_SUBSAMPLES` evenly spaced
-    times. ``time`` must be numeric (the default time has no motion).
+    The shutter's ends, :data:`MOTION_SUBSAMPLES` evenly spaced times between them, and
+    every authored time sample inside it of the xform ops of ``prims`` and their ancestors
+    and of ``attributes``. ``time`` must be numeric (the default time has no motion).
     """
     if time.IsDefault() or shutter[1] <= shutter[0]:
         return None
@@ -98,13 +101,34 @@ def motion_samples(
         t0 + (t1 - t0) * k / (MOTION_SUBSAMPLES + 1) for k in range(1, MOTION_SUBSAMPLES + 1)
     )
     interval = Gf.Interval(t0, t1)
-    p = prim
-    while p and not p.IsPseudoRoot():
-        xf = UsdGeom.Xformable(p)
-        if xf:
-            times.update(t for t in xf.GetTimeSamplesInInterval(interval) if t0 < t < t1)
-        p = p.GetParent()
-    ordered = sorted(times)
+    seen: set[str] = set()
+    for prim in prims:
+        p = prim
+        while p and not p.IsPseudoRoot() and str(p.GetPath()) not in seen:
+            seen.add(str(p.GetPath()))
+            xf = UsdGeom.Xformable(p)
+            if xf:
+                times.update(t for t in xf.GetTimeSamplesInInterval(interval) if t0 < t < t1)
+            p = p.GetParent()
+    for attribute in attributes:
+        times.update(t for t in attribute.GetTimeSamplesInInterval(interval) if t0 < t < t1)
+    return sorted(times)
+
+
+def motion_samples(
+    prim: Usd.Prim, time: Usd.TimeCode, shutter: tuple[float, float]
+) -> tuple[NDArray[np.float32], NDArray[np.float64]] | None:
+    """``prim``'s world transform over the shutter, or None when it does not move in it.
+
+    Returns (times as fractions of the shutter, 0 = open, 1 = close; (N, 4, 4)
+    matrices) at the shutter's ends, every authored xform time sample of the prim
+    and its ancestors inside it, and :data:`MOTION_SUBSAMPLES` evenly spaced
+    times. ``time`` must be numeric (the default time has no motion).
+    """
+    ordered = shutter_times([prim], time, shutter)
+    if ordered is None:
+        return None
+    t0, t1 = ordered[0], ordered[-1]
     mats = np.stack([world_transform(UsdGeom.XformCache(Usd.TimeCode(t)), prim) for t in ordered])
     if np.all(mats == mats[0]):
         return None
