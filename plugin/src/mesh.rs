@@ -209,8 +209,8 @@ pub struct NurbsSpec {
     pub v_range: Option<[f64; 2]>,
     /// `pointWeights`; empty for a polynomial surface.
     pub weights: Vec<f64>,
-    /// `trimCurve:*`; `None` for an untrimmed patch.
-    pub trim: Option<TrimSpec>,
+    /// `trimCurve:*`; `None` for an untrimmed patch (boxed: most patches have none).
+    pub trim: Option<Box<TrimSpec>>,
 }
 
 /// A NurbsPatch's `trimCurve:*` attributes (see [`mipray::trim`]).

@@ -853,9 +853,9 @@ fn read_nurbs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<hd_mipray::mesh::Nu
         trim: match d.get_item("trim")? {
             None => None,
             Some(t) if t.is_none() => None,
-            Some(t) => Some(
+            Some(t) => Some(Box::new(
                 read_trim(t.cast::<PyDict>().map_err(|_| value_error(path, "trim must be a dict"))?).map_err(|e| value_error(path, e))?,
-            ),
+            )),
         },
     })
 }

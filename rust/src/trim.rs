@@ -170,8 +170,9 @@ impl Curve<'_> {
                 let i = k - p + j;
                 let den = self.knots[i + p + 1 - r] - self.knots[i];
                 let a = if den > 0.0 { (t - self.knots[i]) / den } else { 0.0 };
-                for c in 0..3 {
-                    d[j][c] = (1.0 - a) * d[j - 1][c] + a * d[j][c];
+                let prev = d[j - 1];
+                for (x, y) in d[j].iter_mut().zip(prev) {
+                    *x = (1.0 - a) * y + a * *x;
                 }
             }
         }
