@@ -45,16 +45,6 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
     UsdGeom.TetMesh.Define(stage, "/World/Ball")
     UsdGeom.TetMesh.Define(stage, "/World/Hidden").CreateVisibilityAttr("invisible")
     UsdLux.PluginLight.Define(stage, "/World/Tube")
-    # A bilinear NurbsPatch with a trim loop (rendered untrimmed; its reader warns).
-    trimmed = UsdGeom.NurbsPatch.Define(stage, "/World/Trimmed")
-    trimmed.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)])
-    for attr in (trimmed.CreateUVertexCountAttr, trimmed.CreateVVertexCountAttr):
-        attr(2)
-    for attr in (trimmed.CreateUOrderAttr, trimmed.CreateVOrderAttr):
-        attr(2)
-    for attr in (trimmed.CreateUKnotsAttr, trimmed.CreateVKnotsAttr):
-        attr([0.0, 0.0, 1.0, 1.0])
-    trimmed.CreateTrimCurveCountsAttr([1])
 
     key = add_distant_light(stage, "/World/Key").GetPrim()
     shaping = UsdLux.ShapingAPI.Apply(key)
@@ -138,7 +128,6 @@ def one_of_each(stage: Usd.Stage) -> list[Unsupported]:
             Unsupported(cam, "camera clippingPlanes 1 plane(s)"),
             Unsupported("/World/Ball", "prim type TetMesh"),
             Unsupported("/World/Tube", "prim type PluginLight"),
-            Unsupported("/World/Trimmed", "NurbsPatch trim curves 1 loop(s)"),
             Unsupported(key_path, "ShapingAPI inputs:shaping:cone:angle"),
             Unsupported(key_path, "ShadowAPI inputs:shadow:color"),
             Unsupported(key_path, "light input inputs:diffuse"),
@@ -176,8 +165,8 @@ def test_one_of_each_is_listed_exactly(fake, caplog) -> None:
     rows = {r.what for r in TABLE if r.scope not in ("render var", "render settings")}
     assert {r for r in rows if not any(u.what.startswith(r) for u in expected)} == set()
     warnings = [r.getMessage() for r in caplog.records if "not rendered" in r.getMessage()]
-    # One warning per thing, except what its reader warns about itself (types, shaders, trims).
-    readers = ("prim type", "surface shader", "NurbsPatch trim curves")
+    # One warning per thing, except what its reader warns about itself (types, shaders).
+    readers = ("prim type", "surface shader")
     listed = {u.what for u in expected if not u.what.startswith(readers)}
     assert len(warnings) == len(listed)
     for what in listed:

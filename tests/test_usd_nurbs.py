@@ -1,6 +1,7 @@
 """NurbsPatch from USD: what crosses to the delegate, what is refused (one line naming the
-prim and attribute, the rest renders), trim curves warned about, and a rational NURBS sphere
-rendered against the closed-form sphere."""
+prim and attribute, the rest renders), trim curves crossing and cutting a hole (bad ones
+warned about once, the surface untrimmed), and a rational NURBS sphere rendered against the
+closed-form sphere."""
 
 from __future__ import annotations
 
@@ -40,11 +41,31 @@ def nurbs_sphere(stage, path: str, radius: float = 1.0) -> UsdGeom.NurbsPatch:
     return patch
 
 
+def add_trim(patch: UsdGeom.NurbsPatch, centre=(0.5, 0.5), radius=0.25, box=(0.0, 1.0)) -> None:
+    """Trims ``patch`` to the square ``box``² of its parameters less the circle of ``radius``
+    about ``centre``: the square's outline (order 2) and the exact rational circle (order 3,
+    homogeneous points) as two loops."""
+    lo, hi = box
+    square = [(lo, lo), (hi, lo), (hi, hi), (lo, hi), (lo, lo)]
+    points = [Gf.Vec3d(u, v, 1.0) for u, v in square]
+    for i, (x, y) in enumerate(_CIRCLE):
+        w = _H if i % 2 else 1.0
+        points.append(Gf.Vec3d((centre[0] + radius * x) * w, (centre[1] + radius * y) * w, w))
+    patch.CreateTrimCurveCountsAttr([1, 1])
+    patch.CreateTrimCurveOrdersAttr([2, 3])
+    patch.CreateTrimCurveVertexCountsAttr([5, 9])
+    patch.CreateTrimCurveKnotsAttr(
+        [0, 0, 1, 2, 3, 4, 4, *[0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]]
+    )
+    patch.CreateTrimCurveRangesAttr([Gf.Vec2d(0, 4), Gf.Vec2d(0, 1)])
+    patch.CreateTrimCurvePointsAttr(points)
+
+
 def test_a_nurbs_patch_crosses_as_its_attributes(fake, caplog) -> None:
     stage = new_stage()
     patch = nurbs_sphere(stage, "/Ball")
     patch.CreateURangeAttr(Gf.Vec2d(0.0, 0.75))
-    patch.CreateTrimCurveCountsAttr([1])
+    add_trim(patch)
     with caplog.at_level(logging.WARNING, logger="mipray"):
         scene = UsdSceneDelegate(stage, fake)
         scene.sync()
@@ -62,14 +83,85 @@ def test_a_nurbs_patch_crosses_as_its_attributes(fake, caplog) -> None:
     assert g["u_range"] == (0.0, 0.75) and "v_range" not in g
     assert g["weights"][1] == pytest.approx(_H)
     assert kw["points"].shape == (45, 3)
-    # The prim type is rendered; its trim curves are listed and warned about once.
-    assert [(u.prim, u.what) for u in scene.unsupported] == [
-        ("/Ball", "NurbsPatch trim curves 1 loop(s)")
-    ]
+    # The trim curves cross as they are authored; nothing is unsupported or warned about.
+    t = g["trim"]
+    assert (t["counts"], t["orders"], t["vertex_counts"]) == ([1, 1], [2, 3], [5, 9])
+    assert len(t["knots"]) == 19 and t["ranges"] == [(0.0, 4.0), (0.0, 1.0)]
+    assert len(t["points"]) == 14 and t["points"][6] == pytest.approx((0.75 * _H, 0.75 * _H, _H))
+    assert scene.unsupported == []
+    assert [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING] == []
+
+
+@pytest.mark.parametrize(
+    ("spoil", "attribute"),
+    [
+        (lambda p: p.GetTrimCurveCountsAttr().Set([2, 1]), "trimCurve:orders has 2 values"),
+        (
+            lambda p: p.GetTrimCurveOrdersAttr().Set([2, 10]),
+            "trimCurve:orders[1] = 10 is more than trimCurve:vertexCounts[1] = 9",
+        ),
+        (
+            lambda p: p.GetTrimCurvePointsAttr().Set(
+                [Gf.Vec3d(math.nan, 0, 1), *list(p.GetTrimCurvePointsAttr().Get())[1:]]
+            ),
+            "trimCurve:points[0] is not finite",
+        ),
+        (lambda p: p.GetTrimCurveKnotsAttr().Set([0, 1]), "trimCurve:knots has 2 values"),
+    ],
+)
+def test_bad_trim_curves_are_one_warning_and_the_patch_renders_untrimmed(
+    fake, caplog, spoil, attribute
+) -> None:
+    stage = new_stage()
+    patch = nurbs_sphere(stage, "/World/Ball")
+    add_trim(patch)
+    spoil(patch)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+        scene.mark_all_dirty()
+        scene.sync()  # warned once
+    assert scene.delegate_errors == []
+    assert "trim" not in fake.meshes()["/World/Ball"]["gprim"]
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
-    assert warnings == [
-        "mipray: /Ball: trimCurve:* (trim curves) are not applied; rendering the untrimmed surface"
-    ]
+    assert len(warnings) == 1, warnings
+    assert warnings[0].startswith(f"mipray: /World/Ball: {attribute}"), warnings
+    assert warnings[0].endswith("; rendering the untrimmed surface"), warnings
+
+
+def test_a_trimmed_square_renders_with_its_hole(native) -> None:
+    """A bilinear NURBS square (u = x, v = y over [-1, 1]²) trimmed to its outline less a
+    circle: seen from above, the pixels whose ray meets z = 0 inside the circle (or past the
+    square) are empty and the rest covered, the circle's edge within a pixel's footprint."""
+    stage = new_stage()
+    patch = UsdGeom.NurbsPatch.Define(stage, "/World/Sheet")
+    patch.CreatePointsAttr([(-1, -1, 0), (1, -1, 0), (-1, 1, 0), (1, 1, 0)])
+    for attr in (patch.CreateUVertexCountAttr, patch.CreateVVertexCountAttr):
+        attr(2)
+    for attr in (patch.CreateUOrderAttr, patch.CreateVOrderAttr):
+        attr(2)
+    for attr in (patch.CreateUKnotsAttr, patch.CreateVKnotsAttr):
+        attr([-1.0, -1.0, 1.0, 1.0])
+    centre, radius = (0.2, -0.1), 0.55
+    add_trim(patch, centre=centre, radius=radius, box=(-1.0, 1.0))
+    cam = add_camera(stage, "/World/Camera", eye=(0.0, 0.0, 4.0))
+    cam.CreateHorizontalApertureAttr(20.0)
+    cam.CreateVerticalApertureAttr(20.0)
+    add_distant_light(stage, "/World/Sun")
+    width = 64
+    with mipray.RenderSession(stage) as session:
+        r = session.render("/World/Camera", width=width, aovs=["alpha"], camera_light=False)
+    alpha = r.aovs["alpha"][..., 0]
+    d = pinhole_directions(width)
+    t = 4.0 / -d[..., 2]
+    x, y = d[..., 0] * t, d[..., 1] * t
+    footprint = 4.0 * 2 * HALF_TAN / width
+    ring = np.hypot(x - centre[0], y - centre[1]) - radius
+    edge = np.minimum(1 - np.abs(x), 1 - np.abs(y))
+    clear = (np.abs(ring) > footprint) & (np.abs(edge) > footprint)
+    kept = (ring > 0) & (edge > 0)
+    assert (kept & clear).sum() > 1000 and (~kept & clear & (edge > 0)).sum() > 300
+    np.testing.assert_array_equal(alpha[clear] > 0.5, kept[clear])
 
 
 @pytest.mark.parametrize(

@@ -13,6 +13,7 @@ use mipray::lazy_surface::LazySurface;
 use mipray::nurbs::{NurbsDesc, NurbsSurface};
 use mipray::patch::LimitSurface;
 use mipray::topology::{MeshTopology, Scheme};
+use mipray::trim::{TrimDesc, TrimRegion};
 use mipray_bridge::OsdSurface;
 
 use crate::dirty_bits::DirtyBits;
@@ -158,6 +159,9 @@ impl MeshData {
         }
         if let Some(Gprim::Nurbs(n)) = &self.gprim {
             NurbsSurface::check(&n.desc(&self.points))?;
+            if let Some(t) = &n.trim {
+                t.desc().check()?;
+            }
         }
         Ok(())
     }
@@ -205,6 +209,35 @@ pub struct NurbsSpec {
     pub v_range: Option<[f64; 2]>,
     /// `pointWeights`; empty for a polynomial surface.
     pub weights: Vec<f64>,
+    /// `trimCurve:*`; `None` for an untrimmed patch (boxed: most patches have none).
+    pub trim: Option<Box<TrimSpec>>,
+}
+
+/// A NurbsPatch's `trimCurve:*` attributes (see [`mipray::trim`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TrimSpec {
+    pub counts: Vec<i64>,
+    pub orders: Vec<i64>,
+    pub vertex_counts: Vec<i64>,
+    pub knots: Vec<f64>,
+    /// Empty for each curve's whole domain.
+    pub ranges: Vec<[f64; 2]>,
+    /// Homogeneous `(u w, v w, w)`.
+    pub points: Vec<[f64; 3]>,
+}
+
+impl TrimSpec {
+    /// The core's description of these trim curves.
+    pub fn desc(&self) -> TrimDesc<'_> {
+        TrimDesc {
+            counts: &self.counts,
+            orders: &self.orders,
+            vertex_counts: &self.vertex_counts,
+            knots: &self.knots,
+            ranges: &self.ranges,
+            points: &self.points,
+        }
+    }
 }
 
 impl NurbsSpec {
@@ -476,9 +509,11 @@ impl MeshPrim {
                 )))
             }
             Some(Gprim::Nurbs(n)) => {
-                return Ok(Surface::Nurbs(Arc::new(
-                    NurbsSurface::new(&n.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?,
-                )))
+                let mut surface = NurbsSurface::new(&n.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?;
+                if let Some(t) = &n.trim {
+                    surface = surface.with_trim(TrimRegion::new(&t.desc()).map_err(mipray::error::MeshError::Invalid)?);
+                }
+                return Ok(Surface::Nurbs(Arc::new(surface)));
             }
             None => {}
         }

@@ -612,6 +612,11 @@ def aovs() -> list[dict[str, Any]]:
     ``clear``, ``file_channels``, ``format`` (``"half"`` or ``"float"``); see
     :class:`mipray.aovs.AovRow`."""
 
+def check_trim_curves(trim: Mapping[str, Any]) -> str | None:
+    """What is wrong with a NurbsPatch's trim curves (``gprim["trim"]`` of ``set_mesh``:
+    ``counts``, ``orders``, ``vertex_counts``, ``knots``, ``ranges``, ``points``), in one line
+    naming the ``trimCurve:*`` attribute; None when they trim."""
+
 def subdiv_compare(
     name: str,
     *,

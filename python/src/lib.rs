@@ -878,7 +878,53 @@ fn read_nurbs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<hd_mipray::mesh::Nu
         u_range: range("u_range", "uRange")?,
         v_range: range("v_range", "vRange")?,
         weights: floats("weights", "pointWeights")?,
+        trim: match d.get_item("trim")? {
+            None => None,
+            Some(t) if t.is_none() => None,
+            Some(t) => Some(Box::new(
+                read_trim(t.cast::<PyDict>().map_err(|_| value_error(path, "trim must be a dict"))?).map_err(|e| value_error(path, e))?,
+            )),
+        },
     })
+}
+
+/// A NurbsPatch's `trimCurve:*` from the dict `mipray.usd.gprim` sends: `counts`, `orders`,
+/// `vertex_counts` (integers), `knots` (numbers), `ranges` (pairs, or empty) and `points`
+/// (homogeneous triples). The error names the attribute of a value of the wrong kind.
+fn read_trim(d: &Bound<'_, PyDict>) -> Result<hd_mipray::mesh::TrimSpec, String> {
+    fn get<'py, T: for<'a> FromPyObject<'a, 'py> + Default>(
+        d: &Bound<'py, PyDict>,
+        key: &str,
+        attr: &str,
+        what: &str,
+    ) -> Result<T, String> {
+        let fail = || format!("trimCurve:{attr} must be {what}");
+        match d.get_item(key).map_err(|_| fail())? {
+            Some(v) => v.extract().map_err(|_| fail()),
+            None => Ok(T::default()),
+        }
+    }
+    let ranges: Vec<(f64, f64)> = get(d, "ranges", "ranges", "pairs of numbers")?;
+    let points: Vec<(f64, f64, f64)> = get(d, "points", "points", "triples of numbers")?;
+    Ok(hd_mipray::mesh::TrimSpec {
+        counts: get(d, "counts", "counts", "integers")?,
+        orders: get(d, "orders", "orders", "integers")?,
+        vertex_counts: get(d, "vertex_counts", "vertexCounts", "integers")?,
+        knots: get(d, "knots", "knots", "numbers")?,
+        ranges: ranges.into_iter().map(|(a, b)| [a, b]).collect(),
+        points: points.into_iter().map(|(u, v, w)| [u, v, w]).collect(),
+    })
+}
+
+/// What is wrong with a NurbsPatch's trim curves (the dict `mipray.usd.gprim` sends as
+/// `gprim["trim"]`), in one line naming the `trimCurve:*` attribute; `None` when they trim.
+#[pyfunction]
+fn check_trim_curves(trim: &Bound<'_, PyDict>) -> Option<String> {
+    let spec = match read_trim(trim) {
+        Ok(spec) => spec,
+        Err(e) => return Some(e),
+    };
+    mipray::trim::TrimRegion::new(&spec.desc()).err()
 }
 
 fn texture_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<TextureInput> {
@@ -1318,6 +1364,7 @@ fn _mipray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(parse_setting, m)?)?;
     m.add_function(wrap_pyfunction!(aov_names, m)?)?;
     m.add_function(wrap_pyfunction!(aovs, m)?)?;
+    m.add_function(wrap_pyfunction!(check_trim_curves, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     #[cfg(feature = "tools")]
     m.add_function(wrap_pyfunction!(subdiv_compare, m)?)?;

@@ -74,6 +74,7 @@ pub mod texture;
 pub mod topology;
 pub mod trace;
 pub mod transform;
+pub mod trim;
 
 /// The names most users need.
 pub mod prelude {

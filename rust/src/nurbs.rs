@@ -15,8 +15,9 @@
 //!
 //! Conventions: `points` are USD's, u fastest (`points[v * u_count + u]`, UsdGeomNurbsPatch's
 //! "row-major with U considered rows", as RiNuPatch); a patch's own (u, v) in [0, 1]² runs
-//! along the NURBS parameters of its span. Object space throughout. Trim curves are not read
-//! here (the front end warns that it ignores them).
+//! along the NURBS parameters of its span. Object space throughout. Trim curves
+//! ([`crate::trim`]) are attached with [`NurbsSurface::with_trim`]; the tracer reads them per
+//! hit through [`LimitSurface::trim`].
 
 use glam::{DVec3, Vec3A};
 
@@ -77,6 +78,10 @@ pub struct NurbsSurface {
     /// Each patch's NURBS parameter interval, normalized to the rendered range: its `st`.
     st: Vec<[f64; 4]>,
     rational: bool,
+    /// The rendered parameter ranges `[u0, u1, v0, v1]` (the knots' units): `st` is relative
+    /// to them.
+    range: [f64; 4],
+    trim: Option<crate::trim::SharedTrim>,
 }
 
 /// One direction's knots after insertion, and the control net along it.
@@ -245,7 +250,17 @@ impl NurbsSurface {
             }
         }
         let vs = bezier_spans(q, d.v_knots, &net, nu2 * 4, v_range);
-        let mut s = NurbsSurface { p, q, cps: Vec::new(), bounds: Vec::new(), affine: Vec::new(), st: Vec::new(), rational };
+        let mut s = NurbsSurface {
+            p,
+            q,
+            cps: Vec::new(),
+            bounds: Vec::new(),
+            affine: Vec::new(),
+            st: Vec::new(),
+            rational,
+            range: [u_range[0], u_range[1], v_range[0], v_range[1]],
+            trim: None,
+        };
         for &(v0, t0, t1) in &vs.spans {
             for &(u0, s0, s1) in &us.spans {
                 let start = s.cps.len();
@@ -266,6 +281,19 @@ impl NurbsSurface {
             return Err("the knots leave no span inside uRange and vRange: nothing to render".into());
         }
         Ok(s)
+    }
+
+    /// The surface trimmed by `region` (NURBS parameters, the knots' units): each patch's
+    /// parameter rectangle is kept with it, so a hit's patch (u, v) reads the region.
+    pub fn with_trim(mut self, region: crate::trim::TrimRegion) -> Self {
+        let [u0, u1, v0, v1] = self.range;
+        let rects = self
+            .st
+            .iter()
+            .map(|&[s0, t0, s1, t1]| [u0 + (u1 - u0) * s0, v0 + (v1 - v0) * t0, u0 + (u1 - u0) * s1, v0 + (v1 - v0) * t1])
+            .collect();
+        self.trim = Some(std::sync::Arc::new(crate::trim::PatchTrim { region, rects }));
+        self
     }
 
     /// Degrees in u and v.
@@ -410,6 +438,10 @@ impl LimitSurface for NurbsSurface {
 
     fn patch_is_affine(&self, patch: usize) -> bool {
         self.affine.get(patch).copied().unwrap_or(false)
+    }
+
+    fn trim(&self) -> Option<crate::trim::SharedTrim> {
+        self.trim.clone()
     }
 
     /// Channel 0 is the surface's own `st`: the NURBS parameters, normalized over the rendered

@@ -201,6 +201,13 @@ pub trait LimitSurface: Send + Sync {
         None
     }
 
+    /// The surface's trim curves when it has any (a NurbsPatch's `trimCurve:*`,
+    /// [`crate::trim`]): the tracer passes over a hit whose patch (u, v) the trim cuts away.
+    /// `None` — the default — for an untrimmed surface.
+    fn trim(&self) -> Option<crate::trim::SharedTrim> {
+        None
+    }
+
     /// Whether the surface deforms within the shutter, known without building it (a surface
     /// built on first use says so up front): what the render's effects list reads.
     fn deforms(&self) -> bool {

@@ -194,6 +194,8 @@ pub struct MeshGeometry {
     /// The surface deforms within the shutter ([`crate::deform`]): its grids are blended at
     /// each ray's time.
     pub deforms: bool,
+    /// The surface's trim curves ([`crate::trim`]): hits they cut away are passed over.
+    pub trim: Option<crate::trim::SharedTrim>,
 }
 
 impl MeshGeometry {
@@ -238,7 +240,7 @@ impl MeshGeometry {
             let largest = subpatches.iter().map(|sp| sp.hull_size(&sp.bounds(), 2.0 * grow)).fold(0.0, f32::max);
             Self::displaced_rate_floor(largest, wavelength)
         });
-        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor, deforms: s.deformation().is_some() })
+        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor, deforms: s.deformation().is_some(), trim: s.trim() })
     }
 
     /// The rate floor (quads a side, at most 16) of a displaced mesh whose largest patch spans
@@ -269,6 +271,7 @@ impl MeshGeometry {
             child_ids: ChildIds::new(Arc::new(SplitIds::new(0))),
             rate_floor: 0.0,
             deforms: false,
+            trim: None,
         }
     }
 }

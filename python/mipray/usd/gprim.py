@@ -7,9 +7,12 @@ them exactly (``rust/src/implicit.rs``, which also documents their ``st``).
 ``BasisCurves`` and ``NurbsCurves`` are read by :mod:`mipray.usd.curves`.
 ``NurbsPatch`` crosses as its control points, orders, knots, ranges and weights;
 the core cuts it into rational Bézier patches tessellated on demand
-(``rust/src/nurbs.rs``). Its trim curves are not applied (one warning naming the
-prim); counts, orders, knots or weights that do not fit are refused by the
-delegate with one line naming the prim and attribute.
+(``rust/src/nurbs.rs``); counts, orders, knots or weights that do not fit are
+refused by the delegate with one line naming the prim and attribute. Its trim
+curves (``trimCurve:*``) cross as ``gprim["trim"]`` and cut the surface
+(``rust/src/trim.rs``: a point is kept inside an odd number of loops); trim
+curves that do not fit are one warning naming the prim and attribute, and the
+surface renders untrimmed.
 ``extent`` plays no part in the shape. A size that leaves nothing to render
 (a zero radius, say) is refused with one line naming the prim and attribute.
 """
@@ -150,12 +153,45 @@ def _nurbs_patch(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32
     weights = patch.GetPointWeightsAttr().Get(time)
     if weights is not None and len(weights):
         gprim["weights"] = [float(w) for w in weights]
-    trims = patch.GetTrimCurveCountsAttr().Get(time)
-    if trims is not None and len(trims):
-        _warn_once(
-            f"{path}: trimCurve:* (trim curves) are not applied; rendering the untrimmed surface"
-        )
+    trim = _trim_curves(patch, time)
+    if trim is not None:
+        # Imported here: the USD front end imports without the extension (a recording fake
+        # delegate), and then the trim crosses unchecked.
+        try:
+            from .._mipray import check_trim_curves
+        except ImportError:
+            problem = None
+        else:
+            problem = check_trim_curves(trim)
+        if problem is None:
+            gprim["trim"] = trim
+        else:
+            _warn_once(f"{path}: {problem}; rendering the untrimmed surface")
     return positions, gprim
+
+
+def _trim_curves(patch: UsdGeom.NurbsPatch, time: Usd.TimeCode) -> dict[str, Any] | None:
+    """A NurbsPatch's ``trimCurve:*`` as ``gprim["trim"]``; None when it has no loops."""
+    counts = patch.GetTrimCurveCountsAttr().Get(time)
+    if counts is None or not len(counts):
+        return None
+
+    def values(attr: Usd.Attribute, kind: type) -> list[Any]:
+        value = attr.Get(time)
+        if value is None:
+            return []
+        if kind is tuple:
+            return [tuple(float(c) for c in v) for v in value]
+        return [kind(v) for v in value]
+
+    return {
+        "counts": [int(c) for c in counts],
+        "orders": values(patch.GetTrimCurveOrdersAttr(), int),
+        "vertex_counts": values(patch.GetTrimCurveVertexCountsAttr(), int),
+        "knots": values(patch.GetTrimCurveKnotsAttr(), float),
+        "ranges": values(patch.GetTrimCurveRangesAttr(), tuple),
+        "points": values(patch.GetTrimCurvePointsAttr(), tuple),
+    }
 
 
 def gprim_arguments(

@@ -198,13 +198,6 @@ def _clipping_planes(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
     return [f"{len(planes)} plane(s)"] if planes else []
 
 
-def _trim_curves(prim: Usd.Prim, time: Usd.TimeCode) -> list[str]:
-    if not prim.IsA(UsdGeom.NurbsPatch):
-        return []
-    counts = UsdGeom.NurbsPatch(prim).GetTrimCurveCountsAttr().Get(time)
-    return [f"{len(counts)} loop(s)"] if counts else []
-
-
 def _instanceable_gprim(prim: Usd.Prim, _: Usd.TimeCode) -> list[str]:
     # USD instances a prim's descendants; the instance prim's own geometry is in no prototype.
     return [prim.GetTypeName()] if prim.IsInstance() and prim.IsA(UsdGeom.Gprim) else []
@@ -347,7 +340,6 @@ TABLE: tuple[Row, ...] = (
     Row("MeshLightAPI", "prim", _mesh_light),
     Row("light input", "prim", _light_inputs),
     Row("camera clippingPlanes", "prim", _clipping_planes),
-    Row("NurbsPatch trim curves", "prim", _trim_curves, warned_by="mipray.usd.gprim"),
     Row(
         "material output (only the universal outputs:surface is read)",
         "material",
