@@ -189,7 +189,9 @@ pub struct MeshGeometry {
     /// The fewest quads a side any root subpatch is read at (0: no floor): for a displacement
     /// whose detail is known ([`crate::displacement::DisplacementShader::shortest_wavelength`]),
     /// the rate at which the mesh's largest patch keeps that detail at full weight, at most the
-    /// fine tier's 16 (see [`MeshGeometry::displaced_rate_floor`]).
+    /// fine tier's 16 (see [`MeshGeometry::displaced_rate_floor`]); for a texture, the rate at
+    /// which every patch reads the finest MIP level alone
+    /// ([`crate::displacement::TextureDisplacement::finest_level_rate`]), at most 16.
     pub rate_floor: f32,
     /// The surface deforms within the shutter ([`crate::deform`]): its grids are blended at
     /// each ray's time.
@@ -234,10 +236,21 @@ impl MeshGeometry {
         let bounds = boxes.iter().fold(Bounds3::EMPTY, |b, sb| b.union(sb));
         let bvh = build_bvh(&boxes);
         let child_ids = ChildIds::new(split_ids(subpatches.len() as u32));
-        let rate_floor = mesh.displacement.as_ref().and_then(|d| d.shortest_wavelength()).map_or(0.0, |wavelength| {
-            let largest = subpatches.iter().map(|sp| sp.hull_size(&sp.bounds(), 2.0 * grow)).fold(0.0, f32::max);
-            Self::displaced_rate_floor(largest, wavelength)
-        });
+        let rate_floor = match mesh.displacement.as_ref() {
+            // A texture's detail is its finest level's texels over the patches' `st`: the floor
+            // is the rate at which the patch with the most texels across reads that level alone
+            // (the whole mesh, as for the procedural floor). Unknown (no levels kept): the cap.
+            Some(crate::displacement::DisplacementShader::Texture(t)) => subpatches
+                .iter()
+                .map(|sp| t.finest_level_rate(s.as_ref(), sp.patch as usize).unwrap_or(16.0))
+                .fold(0.0, f32::max)
+                .clamp(0.0, 16.0),
+            Some(d) => d.shortest_wavelength().map_or(0.0, |wavelength| {
+                let largest = subpatches.iter().map(|sp| sp.hull_size(&sp.bounds(), 2.0 * grow)).fold(0.0, f32::max);
+                Self::displaced_rate_floor(largest, wavelength)
+            }),
+            None => 0.0,
+        };
         Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor, deforms: s.deformation().is_some() })
     }
 

@@ -703,7 +703,7 @@ impl<'s> Tracer<'s> {
         self.seams = on;
     }
 
-    /// Reads procedurally displaced meshes no coarser than their rate floor
+    /// Reads displaced meshes (procedural or texture) no coarser than their rate floor
     /// ([`MeshGeometry::rate_floor`]; the `displacementRateFloor` setting), or (the default)
     /// at the rates the beams ask for alone.
     pub fn set_displacement_rate_floor(&mut self, on: bool) {
