@@ -450,7 +450,8 @@ impl DisplacementShader {
     /// [`filter_edges_alike`]): what the tessellation stores there is then not
     /// [`DisplacementShader::offset_at`] at the grid's spacing, which the interior still is.
     /// A texture's boundary reads the edge's own step in `st`
-    /// ([`TextureDisplacement::filter_edges_alike`]).
+    /// ([`TextureDisplacement::filter_edges_alike`]; the tessellation asks for it only with the
+    /// displaced rate floor on, `DisplaceParams::texture_edges_alike`).
     pub fn filter_edges(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize, out: &mut [f32]) {
         match self {
             DisplacementShader::Procedural(d) => filter_edges_alike(d, surface, patch, rect, verts, n, out),

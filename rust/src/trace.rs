@@ -1309,6 +1309,7 @@ impl<'s> Tracer<'s> {
                 displacement,
                 normal_sign: if mesh.left_handed { -1.0 } else { 1.0 },
                 bound: mesh.displacement_bound,
+                texture_edges_alike: self.displacement_rate_floor,
             });
             let (t, outside) = tessellate_reusing(surface, &sub, tier, displace.as_ref(), &mut scratch, spare);
             if mesh.surface.lazy_bounds().is_some() {
