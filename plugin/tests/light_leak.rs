@@ -270,7 +270,7 @@ fn no_light_crosses_a_closed_texture_displaced_shell() {
     tracer.set_displacement_rate_floor(true);
     let mut c = TraceCounters::default();
     let _ = tracer.intersect(&beam_ray(Vec3A::ZERO, Vec3A::X, 0.0, 0.01, RayKind::Camera), &mut c);
-    let floor = tracer.mesh_geometry().map(|g| g.rate_floor).fold(0.0, f32::max);
+    let floor = tracer.mesh_geometry().filter_map(|g| g.texture_rate_floor_computed()).fold(0.0, f32::max);
     println!("texture-displaced shell: rate floor {floor}");
     // Patches span about 0.1 in `st`, some 6-7 of the 64 texels: a floor between the medium and
     // the fine tier, from the texture, not the cap.

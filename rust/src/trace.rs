@@ -710,11 +710,12 @@ impl<'s> Tracer<'s> {
         self.displacement_rate_floor = on;
     }
 
-    /// The rate floor `geom`'s subpatches are read with (0: none).
+    /// The rate floor the subpatches of `mesh` (whose geometry is `geom`) are read with (0:
+    /// none): the procedural one or, for a texture, the one from its texels.
     #[inline]
-    fn rate_floor(&self, geom: &MeshGeometry) -> f32 {
+    fn rate_floor(&self, geom: &MeshGeometry, mesh: &crate::scene::Mesh) -> f32 {
         if self.displacement_rate_floor {
-            geom.rate_floor
+            geom.rate_floor.max(geom.texture_rate_floor(mesh))
         } else {
             0.0
         }
@@ -904,7 +905,7 @@ impl<'s> Tracer<'s> {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
             let sp_bounds = sp.bounds();
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter);
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom, mesh), inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier, ray.time);
             Some((org, depth, rate, tess))
@@ -1032,7 +1033,7 @@ impl<'s> Tracer<'s> {
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
                 let (depth, rate) = match origin_grid {
                     Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
-                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter),
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom, mesh), inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier, ray.time);
