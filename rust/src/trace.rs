@@ -874,6 +874,7 @@ impl<'s> Tracer<'s> {
         let mesh = &self.scene.meshes[instance.mesh];
         let inst = instance.pose(ray.time);
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
+        let rate_floor = self.rate_floor(geom, mesh);
         let own = origin.filter(|org| org.instance == ii as u32);
         let sign = if mesh.left_handed { -1.0 } else { 1.0 };
         let o = inst.object_from_render.transform_point3a(ray.o);
@@ -905,7 +906,7 @@ impl<'s> Tracer<'s> {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
             let sp_bounds = sp.bounds();
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom, mesh), inst.scale, ray, t_enter);
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, rate_floor, inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier, ray.time);
             Some((org, depth, rate, tess))
@@ -1033,7 +1034,7 @@ impl<'s> Tracer<'s> {
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
                 let (depth, rate) = match origin_grid {
                     Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
-                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom, mesh), inst.scale, ray, t_enter),
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, rate_floor, inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier, ray.time);
