@@ -291,6 +291,73 @@ impl TextureDisplacement {
         self.offset_st(st, dx, dy)
     }
 
+    /// Quads a side at which a grid over the whole of `patch` reads only the finest MIP level
+    /// (every step's footprint at most one finest-level texel, so [`TexturePyramid::level`] is
+    /// 0 and the lookup is bilinear in level 0 alone): the largest of `|∂st/∂u|` and `|∂st/∂v|`
+    /// in finest-level texels, over a 3 × 3 sampling of the patch's (u, v) (corners, edge
+    /// middles, centre), × 1.25 for the derivatives' growth between samples. The texture's
+    /// shortest wavelength is two texels of that level, so grids this fine or finer all read the
+    /// same surface and differ only by their chords' sag (issue 23, docs/cracks.md rule 4).
+    /// `None` when the finest level's size is unknown (the store holds no levels: looked up
+    /// through the sampler); 0 where every lookup reads level 0 anyway ([`FilterMode::Finest`])
+    /// or the surface has no `st` (the fallback is one point).
+    ///
+    /// [`FilterMode::Finest`]: crate::texture::FilterMode::Finest
+    pub fn finest_level_rate(&self, surface: &dyn LimitSurface, patch: usize) -> Option<f32> {
+        if self.sampler.filter_mode() == crate::texture::FilterMode::Finest {
+            return Some(0.0);
+        }
+        let level0 = self.pyramid()?.levels().first()?;
+        let (w, h) = (level0.width as f32, level0.height as f32);
+        let texels = |d: [f32; 2]| ((d[0] * w) * (d[0] * w) + (d[1] * h) * (d[1] * h)).sqrt();
+        let mut most = 0.0f32;
+        for j in 0..3 {
+            for i in 0..3 {
+                if let Some((_, dsdu, dsdv)) = surface.face_varying(self.st_channel, patch, 0.5 * i as f32, 0.5 * j as f32) {
+                    most = most.max(texels(dsdu)).max(texels(dsdv));
+                }
+            }
+        }
+        Some(if most.is_finite() { 1.25 * most } else { f32::INFINITY })
+    }
+
+    /// Re-filters the boundary offsets `out` of [`TextureDisplacement::grid_offsets`] so that a
+    /// neighbour read at the same rate displaces their shared edge alike: each edge's inner
+    /// vertices read the texture with an isotropic footprint of the edge's own mean step in `st`
+    /// (the same points and steps from both sides where `st` is continuous across the edge),
+    /// its corners at the finest level. Filtered with each grid's own `∂st/∂u · Δu`, `∂st/∂v ·
+    /// Δv`, two neighbours read one edge through different footprints (the one across the edge
+    /// differs) and can leave a crack even at one rate.
+    pub fn filter_edges_alike(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, n: usize, out: &mut [f32]) {
+        use crate::seam::{edge_vertex, SeamEdges, DIAGONAL};
+        if n < 2 || out.len() < n * n {
+            return;
+        }
+        let st_at = |(i, j): (usize, usize)| {
+            let (u, v) = rect.grid_uv(i, j, n);
+            surface.face_varying(self.st_channel, patch, u, v).map(|(st, _, _)| st)
+        };
+        let domain = crate::tessellate::GridDomain::of(surface.patch_param(patch).kind, &rect);
+        let edges = SeamEdges::ALL.within(domain);
+        let mut st = Vec::with_capacity(n);
+        for e in (0..=DIAGONAL).filter(|&e| edges.contains(e)) {
+            st.clear();
+            st.extend((0..n).map(|k| st_at(edge_vertex(e, k, n))));
+            // No `st` along the edge: its vertices read the fallback, as the grid did.
+            if st.iter().any(Option::is_none) {
+                continue;
+            }
+            let st: Vec<[f32; 2]> = st.iter().flatten().copied().collect();
+            let len: f32 = st.windows(2).map(|p| ((p[1][0] - p[0][0]).powi(2) + (p[1][1] - p[0][1]).powi(2)).sqrt()).sum();
+            let step = len / (n - 1) as f32;
+            for (k, &p) in st.iter().enumerate() {
+                let (i, j) = edge_vertex(e, k, n);
+                let w = if k == 0 || k == n - 1 { 0.0 } else { step };
+                out[j * n + i] = self.offset_st(p, [w, 0.0], [0.0, w]);
+            }
+        }
+    }
+
     /// Displacements (object units) of an n×n vertex grid over `rect` of `patch`, u fastest, into
     /// `out` (cleared first). Each vertex reads the texture at its `st` with filter widths of one
     /// grid step: `dst_dx = ∂st/∂u · Δu`, `dst_dy = ∂st/∂v · Δv`, where Δu, Δv are the grid's
@@ -382,16 +449,19 @@ impl DisplacementShader {
     /// neighbours read at one rate displace their shared edge alike (the procedural shader; see
     /// [`filter_edges_alike`]): what the tessellation stores there is then not
     /// [`DisplacementShader::offset_at`] at the grid's spacing, which the interior still is.
-    /// A texture is left as it is.
+    /// A texture's boundary reads the edge's own step in `st`
+    /// ([`TextureDisplacement::filter_edges_alike`]; the tessellation asks for it only with the
+    /// displaced rate floor on, `DisplaceParams::texture_edges_alike`).
     pub fn filter_edges(&self, surface: &dyn LimitSurface, patch: usize, rect: UvRect, verts: &[[f32; 3]], n: usize, out: &mut [f32]) {
-        if let DisplacementShader::Procedural(d) = self {
-            filter_edges_alike(d, surface, patch, rect, verts, n, out);
+        match self {
+            DisplacementShader::Procedural(d) => filter_edges_alike(d, surface, patch, rect, verts, n, out),
+            DisplacementShader::Texture(t) => t.filter_edges_alike(surface, patch, rect, n, out),
         }
     }
 
-    /// The shortest wavelength of the detail (object units), where the shader knows it (the
-    /// procedural fBm's finest octave); `None` for a texture (not yet: its texel size over a
-    /// patch's `st` would give it).
+    /// The shortest wavelength of the detail (object units), where the shader knows it in object
+    /// units (the procedural fBm's finest octave); `None` for a texture, whose detail is in `st`
+    /// ([`TextureDisplacement::finest_level_rate`] gives its rate floor instead).
     pub fn shortest_wavelength(&self) -> Option<f32> {
         match self {
             DisplacementShader::Procedural(d) => Some(d.shortest_wavelength()),

@@ -76,11 +76,13 @@ pub struct RenderOptions {
     /// ([`crate::seam`], docs/cracks.md). On by default; off only to measure what they cost and
     /// what they change in an image, since rays then slip through the cracks.
     pub seams: bool,
-    /// Procedurally displaced meshes are read no coarser than the rate at which their largest
-    /// patch keeps the displacement's finest detail ([`crate::subpatch::MeshGeometry::rate_floor`]):
-    /// every rate then reads one surface, so closed displaced shells let no light through
-    /// (docs/cracks.md, rule 4). Off by default: it takes the coarse tiers from finely detailed
-    /// meshes (2.6-6x the render time measured there).
+    /// Displaced meshes are read no coarser than the rate at which their largest patch keeps
+    /// the displacement's finest detail (the procedural fBm's finest octave; a texture's finest
+    /// MIP level over the patches' `st`: [`crate::subpatch::MeshGeometry::rate_floor`]), and a
+    /// texture's shared edges are read with their own `st` step: every rate then reads one
+    /// surface, so closed displaced shells let no light through (docs/cracks.md, rules 4 and 5).
+    /// Off by default: it takes the coarse tiers from finely detailed meshes (2.6-6x the render
+    /// time measured there).
     pub displacement_rate_floor: bool,
     /// Camera rays see a dome light as the background (Hydra's `domeLightCameraVisibility`);
     /// off, the dome still lights the scene and shows in reflections, and the background is

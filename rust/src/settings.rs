@@ -564,7 +564,7 @@ settings_table! {
     "seams": seams: bool = true, SettingType::Bool, Render => seams,
         "seam boxes closing cracks between tessellation rates (docs/cracks.md); 0 only to measure them: rays then slip through cracks";
     "displacementRateFloor": displacement_rate_floor: bool = false, SettingType::Bool, Render => displacement_rate_floor,
-        "procedurally displaced meshes are never read coarser than their finest detail: closed displaced shells then let no light through at any rate, at a cost in time where that detail is fine (docs/cracks.md, rule 4)";
+        "displaced meshes are never read coarser than their finest detail (the fBm's finest octave; a texture's finest MIP level): closed displaced shells then let no light through at any rate, at a cost in time where that detail is fine (docs/cracks.md, rules 4 and 5)";
     "domeLightCameraVisibility": dome_light_camera_visibility: bool = true, SettingType::Bool, Render => dome_light_camera_visibility,
         "camera rays see a dome light as the background (0: it lights the scene and shows in reflections only)";
     "crop": crop: [f64; 4] = [0.0, 0.0, 1.0, 1.0], SettingType::Window, Render => crop,

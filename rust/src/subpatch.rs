@@ -4,7 +4,7 @@
 //! BVH over them. Tessellation happens later, on demand, per subpatch.
 
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use glam::Vec3A;
 use obvhs::cwbvh::CwBvh;
@@ -12,6 +12,7 @@ use parking_lot::Mutex;
 
 use crate::bounds::{Bounds3, MAX_COORDINATE};
 use crate::bvh::build_bvh;
+use crate::displacement::DisplacementShader;
 use crate::geometry_cache::SplitIds;
 use crate::patch::UvRect;
 use crate::scene::Mesh;
@@ -189,8 +190,11 @@ pub struct MeshGeometry {
     /// The fewest quads a side any root subpatch is read at (0: no floor): for a displacement
     /// whose detail is known ([`crate::displacement::DisplacementShader::shortest_wavelength`]),
     /// the rate at which the mesh's largest patch keeps that detail at full weight, at most the
-    /// fine tier's 16 (see [`MeshGeometry::displaced_rate_floor`]).
+    /// fine tier's 16 (see [`MeshGeometry::displaced_rate_floor`]). A texture's floor is
+    /// [`MeshGeometry::texture_rate_floor`].
     pub rate_floor: f32,
+    /// [`MeshGeometry::texture_rate_floor`], once computed.
+    texture_rate_floor: OnceLock<f32>,
     /// The surface deforms within the shutter ([`crate::deform`]): its grids are blended at
     /// each ray's time.
     pub deforms: bool,
@@ -240,7 +244,41 @@ impl MeshGeometry {
             let largest = subpatches.iter().map(|sp| sp.hull_size(&sp.bounds(), 2.0 * grow)).fold(0.0, f32::max);
             Self::displaced_rate_floor(largest, wavelength)
         });
-        Ok(MeshGeometry { subpatches, bvh, bounds, child_ids, rate_floor, deforms: s.deformation().is_some(), trim: s.trim() })
+        Ok(MeshGeometry {
+            subpatches,
+            bvh,
+            bounds,
+            child_ids,
+            rate_floor,
+            texture_rate_floor: OnceLock::new(),
+            deforms: s.deformation().is_some(),
+            trim: s.trim(),
+        })
+    }
+
+    /// The rate floor (quads a side, at most 16) of `mesh` (this geometry's) when it is displaced
+    /// by a texture, computed at the first call: a texture's detail is its finest level's texels
+    /// over the patches' `st`, so the floor is the rate at which the patch with the most texels
+    /// across reads that level alone ([`crate::displacement::TextureDisplacement::finest_level_rate`]; one floor for
+    /// the whole mesh, as for the procedural floor), the cap 16 where the level's size is
+    /// unknown. 0 for a mesh not displaced by a texture. Lazy, so a render without the floor
+    /// (`displacementRateFloor` off) samples no `st` for it.
+    pub fn texture_rate_floor(&self, mesh: &Mesh) -> f32 {
+        let Some(DisplacementShader::Texture(t)) = mesh.displacement.as_ref() else {
+            return 0.0;
+        };
+        *self.texture_rate_floor.get_or_init(|| {
+            self.subpatches
+                .iter()
+                .map(|sp| t.finest_level_rate(mesh.surface.as_ref(), sp.patch as usize).unwrap_or(16.0))
+                .fold(0.0, f32::max)
+                .clamp(0.0, 16.0)
+        })
+    }
+
+    /// The texture rate floor if [`MeshGeometry::texture_rate_floor`] has computed it.
+    pub fn texture_rate_floor_computed(&self) -> Option<f32> {
+        self.texture_rate_floor.get().copied()
     }
 
     /// The rate floor (quads a side, at most 16) of a displaced mesh whose largest patch spans
@@ -270,6 +308,7 @@ impl MeshGeometry {
             bounds: Bounds3::EMPTY,
             child_ids: ChildIds::new(Arc::new(SplitIds::new(0))),
             rate_floor: 0.0,
+            texture_rate_floor: OnceLock::new(),
             deforms: false,
             trim: None,
         }

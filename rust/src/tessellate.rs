@@ -420,6 +420,14 @@ pub struct DisplaceParams {
     pub displacement: DisplacementShader,
     pub normal_sign: f32,
     pub bound: f32,
+    /// Whether a texture's shared edges are read with their own `st` step
+    /// ([`DisplacementShader::filter_edges`]): on with the displaced rate floor
+    /// (`displacementRateFloor`), where it closes what the floor capped at 16 × 16 leaves.
+    /// Without the floor it lets more light through a closed shell, not less (coarse grids'
+    /// corners then carry the finest level's detail: docs/cracks.md), so it is off there and a
+    /// texture is filtered at each grid's own step alone. The procedural shader's edges are
+    /// always read alike.
+    pub texture_edges_alike: bool,
 }
 
 /// Tessellates `sub` of `surface` on `tier`'s grid: one grid evaluation, displacement along the
@@ -461,7 +469,9 @@ pub fn tessellate_reusing(
     if let Some(d) = displace {
         let mut offsets = Vec::with_capacity(n * n);
         d.displacement.grid_offsets(surface, sub.patch as usize, sub.rect, &scratch.p, n, &mut offsets);
-        d.displacement.filter_edges(surface, sub.patch as usize, sub.rect, &scratch.p, n, &mut offsets);
+        if d.texture_edges_alike || !matches!(d.displacement, DisplacementShader::Texture(_)) {
+            d.displacement.filter_edges(surface, sub.patch as usize, sub.rect, &scratch.p, n, &mut offsets);
+        }
         for (k, v) in scratch.p.iter_mut().enumerate() {
             let p = Vec3A::from(*v);
             let nrm = (Vec3A::from(scratch.dpdu[k]).cross(Vec3A::from(scratch.dpdv[k]))).normalize_or_zero() * d.normal_sign;

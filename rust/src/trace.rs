@@ -703,18 +703,19 @@ impl<'s> Tracer<'s> {
         self.seams = on;
     }
 
-    /// Reads procedurally displaced meshes no coarser than their rate floor
+    /// Reads displaced meshes (procedural or texture) no coarser than their rate floor
     /// ([`MeshGeometry::rate_floor`]; the `displacementRateFloor` setting), or (the default)
     /// at the rates the beams ask for alone.
     pub fn set_displacement_rate_floor(&mut self, on: bool) {
         self.displacement_rate_floor = on;
     }
 
-    /// The rate floor `geom`'s subpatches are read with (0: none).
+    /// The rate floor the subpatches of `mesh` (whose geometry is `geom`) are read with (0:
+    /// none): the procedural one or, for a texture, the one from its texels.
     #[inline]
-    fn rate_floor(&self, geom: &MeshGeometry) -> f32 {
+    fn rate_floor(&self, geom: &MeshGeometry, mesh: &crate::scene::Mesh) -> f32 {
         if self.displacement_rate_floor {
-            geom.rate_floor
+            geom.rate_floor.max(geom.texture_rate_floor(mesh))
         } else {
             0.0
         }
@@ -873,6 +874,7 @@ impl<'s> Tracer<'s> {
         let mesh = &self.scene.meshes[instance.mesh];
         let inst = instance.pose(ray.time);
         let displacement_pad = 2.0 * mesh.displacement_bound.max(0.0);
+        let rate_floor = self.rate_floor(geom, mesh);
         let own = origin.filter(|org| org.instance == ii as u32);
         let sign = if mesh.left_handed { -1.0 } else { 1.0 };
         let o = inst.object_from_render.transform_point3a(ray.o);
@@ -904,7 +906,7 @@ impl<'s> Tracer<'s> {
             let sp = geom.subpatches.get(org.subpatch as usize)?;
             let sp_bounds = sp.bounds();
             let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_max)?;
-            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter);
+            let (depth, rate) = self.rate_for(sp, &sp_bounds, displacement_pad, rate_floor, inst.scale, ray, t_enter);
             let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
             let tess = self.lookup(instance.mesh, geom, ChildCell { root: org.subpatch, depth: 0, i: 0, j: 0 }, tier, ray.time);
             Some((org, depth, rate, tess))
@@ -1061,7 +1063,7 @@ impl<'s> Tracer<'s> {
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
                 let (depth, rate) = match origin_grid {
                     Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
-                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, self.rate_floor(geom), inst.scale, ray, t_enter),
+                    _ => self.rate_for(sp, &sp_bounds, displacement_pad, rate_floor, inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier, ray.time);
@@ -1367,6 +1369,7 @@ impl<'s> Tracer<'s> {
                 displacement,
                 normal_sign: if mesh.left_handed { -1.0 } else { 1.0 },
                 bound: mesh.displacement_bound,
+                texture_edges_alike: self.displacement_rate_floor,
             });
             let (t, outside) = tessellate_reusing(surface, &sub, tier, displace.as_ref(), &mut scratch, spare);
             if mesh.surface.lazy_bounds().is_some() {

@@ -157,7 +157,7 @@ fn neighbours_of_different_shapes_displace_their_shared_edge_alike() {
     let surface = BilinearSurface::new(&topo, &pts).unwrap();
     // Octaves from 1/3 down to 1/24 unit: the two grids' spacings filter them differently.
     let d = Displacement { amplitude: 0.1, frequency: 3.0, octaves: 4, gain: 0.7 };
-    let params = DisplaceParams { displacement: d.into(), normal_sign: 1.0, bound: d.bound() };
+    let params = DisplaceParams { displacement: d.into(), normal_sign: 1.0, bound: d.bound(), texture_edges_alike: false };
     let bounds = mipray::bounds::Bounds3 { min: Vec3A::new(-1.0, -1.0, -1.0), max: Vec3A::new(4.0, 2.0, 1.0) };
     let mut scratch = GridSamples::default();
     for tier in [Tier::Coarse, Tier::Medium, Tier::Fine] {

@@ -154,7 +154,7 @@ fn tessellate_uses_the_texture_shader() {
     use mipray::tessellate::{tessellate, DisplaceParams};
     let surface = quad();
     let (checker, d) = displacement(FilterMode::Differentials);
-    let params = DisplaceParams { displacement: DisplacementShader::from(d), normal_sign: 1.0, bound: 0.1 };
+    let params = DisplaceParams { displacement: DisplacementShader::from(d), normal_sign: 1.0, bound: 0.1, texture_edges_alike: false };
     let sub = Subpatch { patch: 0, rect: UvRect::UNIT, bounds: surface.patch_bounds(0), affine: false };
     let mut scratch = GridSamples::default();
     let (coarse, _) = tessellate(&surface, &sub, Tier::Coarse, Some(&params), &mut scratch);
