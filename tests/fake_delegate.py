@@ -544,6 +544,8 @@ def fake_module() -> types.ModuleType:
     module.eight_bit_aovs = native.eight_bit_aovs  # type: ignore[attr-defined]
     module.output_plan = native.output_plan  # type: ignore[attr-defined]
     module.srgb_encode = native.srgb_encode  # type: ignore[attr-defined]
+    # So are the trim curves' checks (the USD front end asks them before sending a trim).
+    module.check_trim_curves = native.check_trim_curves  # type: ignore[attr-defined]
     module.version = lambda: "0.0.0-fake"  # type: ignore[attr-defined]
     module.written = written  # type: ignore[attr-defined]
     return module

@@ -92,6 +92,7 @@ def test_stub_declares_the_protocol() -> None:
         "aov_names",
         "aovs",
         "subdiv_compare",
+        "check_trim_curves",
     }
     assert [p[0] for p in sigs["RenderDelegate.render"]] == [
         "camera",
