@@ -942,102 +942,84 @@ impl<'s> Tracer<'s> {
         // looked-up `tess` (the fine tier when split), for a hit before `t_best`.
         // Made at the instance's first grid test: most instance entries test none.
         let mut watertight: Option<WatertightRay> = None;
-        // A trimmed NURBS patch's trim ([`crate::trim`]); every other surface has none, and
-        // pays one test of this when a subpatch test finds a hit.
+        // A trimmed NURBS patch's trim ([`crate::trim`]): applied where a subpatch test returns
+        // a hit (`kept_or_search_on`); every other surface has none.
         let trim = geom.trim.as_deref();
-        let test =
-            |counters: &mut TraceCounters, wray: &WatertightRay, si: usize, depth: u32, rate: Rate, tess: Tessellation, t_best: f32| {
-                counters.ray_subpatch_tests += 1;
-                // Near the ray's origin, skip the surface's own other tessellations: closer than the
-                // two tessellations' chord errors (along the ray), a hit on the instance the ray
-                // starts from that crosses it the way the ray left is the surface meeting itself at
-                // another rate. A coarser grid there stands up to its chord error above the fine
-                // grid the ray starts on (a facet touching the limit surface at its corners, where
-                // the fine chords sag below it), and would shadow it. Only subpatches near the
-                // origin can be hit that close, so this is the rule "the origin's own subpatch and
-                // the neighbours whose boxes hold it" without a box test (and without depending on
-                // how tight the boxes are). A hit crossing the other way is the surface itself in
-                // the ray's path and blocks however near (see `Origin::is_own_other_rate`): without
-                // that, grazing rays left closed shells through the window (issue 23).
-                // The nearest hit at or after `search`'s t_min that is not the surface at another
-                // rate: hits within the window that cross the surface the way the ray left it are
-                // passed over one by one (the next search starts at the hit's t).
-                let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
-                    let Some(o) = own else { return search(ray.t_min) };
-                    let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
-                    let mut t_from = ray.t_min;
-                    loop {
-                        let h = search(t_from)?;
-                        if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), false) {
-                            return Some(h);
-                        }
-                        t_from = next_up(h.t);
+        // From `t_from` (the ray's t_min; beyond a hit a trim cut away).
+        #[allow(clippy::too_many_arguments)]
+        let test = |counters: &mut TraceCounters,
+                    wray: &WatertightRay,
+                    si: usize,
+                    depth: u32,
+                    rate: Rate,
+                    tess: &Tessellation,
+                    t_best: f32,
+                    t_from: f32| {
+            counters.ray_subpatch_tests += 1;
+            // Near the ray's origin, skip the surface's own other tessellations: closer than the
+            // two tessellations' chord errors (along the ray), a hit on the instance the ray
+            // starts from that crosses it the way the ray left is the surface meeting itself at
+            // another rate. A coarser grid there stands up to its chord error above the fine
+            // grid the ray starts on (a facet touching the limit surface at its corners, where
+            // the fine chords sag below it), and would shadow it. Only subpatches near the
+            // origin can be hit that close, so this is the rule "the origin's own subpatch and
+            // the neighbours whose boxes hold it" without a box test (and without depending on
+            // how tight the boxes are). A hit crossing the other way is the surface itself in
+            // the ray's path and blocks however near (see `Origin::is_own_other_rate`): without
+            // that, grazing rays left closed shells through the window (issue 23).
+            // The nearest hit at or after `search`'s t_min that is not the surface at another
+            // rate: hits within the window that cross the surface the way the ray left it are
+            // passed over one by one (the next search starts at the hit's t).
+            let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
+                let Some(o) = own else { return search(t_from) };
+                let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
+                let mut t_from = t_from;
+                loop {
+                    let h = search(t_from)?;
+                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), false) {
+                        return Some(h);
                     }
-                };
-                let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
-                if depth > 0 {
-                    counters.finer_than_fine += 1;
-                    counters.rate_tests_by_kind[kind][5] += 1;
-                    let split = |t_from| {
-                        let (mut t_max, mut found) = (t_best, None);
-                        self.hit_split(instance.mesh, geom, root, &tess, depth, ray.time, wray, t_from, &mut t_max, &mut found);
-                        found
-                    };
-                    nearest_not_own(tess.chord_error, &mut |t_from| {
-                        let h = split(t_from)?;
-                        // A trimmed surface's hit the trim cuts away: search on beyond it (cold;
-                        // an untrimmed surface pays one test when a search finds a hit).
-                        match trim {
-                            Some(trim) if !Self::kept(trim, geom.subpatches[si].patch, &h) => {
-                                Self::first_kept(trim, geom.subpatches[si].patch, next_up(h.t), &mut |t| split(t))
-                            }
-                            _ => Some(h),
-                        }
-                    })
-                } else {
-                    counters.rate_tests[rate as usize] += 1;
-                    counters.rate_tests_by_kind[kind][rate as usize] += 1;
-                    if rate == Rate::R1 && own.is_some_and(|o| o.subpatch == si as u32 && o.passes_own_quad(&tess, d, sign)) {
-                        return None;
-                    }
-                    // The grid's chord error was probed at its own spacing; read at a merged stride
-                    // its quads are `stride` times wider, and a chord's sag grows with its square.
-                    let stride = rate.tier_and_stride().1;
-                    let chord_error = tess.chord_error * (stride * stride) as f32;
-                    let edges = self.seam_edges(root);
-                    // The rule of `nearest_not_own` applied to each hit inside the one search:
-                    // searching again from each hit passed over cost a displaced AO ray several
-                    // grid searches.
-                    let window = own.map(|o| (o.chord_error + chord_error * inst.scale) * o.inv_cos);
-                    let accept = |t: f32, ng: Vec3A| match (own, window) {
-                        (Some(o), Some(window)) => !o.is_own_other_rate(t, window, sign * d.dot(ng), false),
-                        _ => true,
-                    };
-                    let local = |h: crate::intersect::GridHit| LocalHit {
-                        t: h.t,
-                        uv: (h.u, h.v),
-                        rect: UvRect::UNIT,
-                        ng: h.ng,
-                        quads: rate.quads() as u32,
-                        chord_error,
-                    };
-                    let h = local(intersect_with_seams(wray, &tess, stride, edges, ray.t_min, t_best, &accept)?);
-                    // A trimmed surface's hit the trim cuts away: search on beyond it (cold; an
-                    // untrimmed surface pays one test when its search finds a hit, and the search
-                    // itself is the one it always was).
-                    match trim {
-                        Some(trim) if !Self::kept(trim, geom.subpatches[si].patch, &h) => {
-                            Self::first_kept(trim, geom.subpatches[si].patch, next_up(h.t), &mut |t| {
-                                // A filter of its own type: this search is then a copy of its
-                                // own, and the hot one above stays inlined (one copy called
-                                // from both was not: +47 instructions a plain AO ray, callgrind).
-                                intersect_with_seams(wray, &tess, stride, edges, t, t_best, &|t, ng| accept(t, ng)).map(local)
-                            })
-                        }
-                        _ => Some(h),
-                    }
+                    t_from = next_up(h.t);
                 }
             };
+            let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
+            if depth > 0 {
+                counters.finer_than_fine += 1;
+                counters.rate_tests_by_kind[kind][5] += 1;
+                nearest_not_own(tess.chord_error, &mut |t_from| {
+                    let (mut t_max, mut found) = (t_best, None);
+                    self.hit_split(instance.mesh, geom, root, tess, depth, ray.time, wray, t_from, &mut t_max, &mut found);
+                    found
+                })
+            } else {
+                counters.rate_tests[rate as usize] += 1;
+                counters.rate_tests_by_kind[kind][rate as usize] += 1;
+                if rate == Rate::R1 && own.is_some_and(|o| o.subpatch == si as u32 && o.passes_own_quad(tess, d, sign)) {
+                    return None;
+                }
+                // The grid's chord error was probed at its own spacing; read at a merged stride
+                // its quads are `stride` times wider, and a chord's sag grows with its square.
+                let stride = rate.tier_and_stride().1;
+                let chord_error = tess.chord_error * (stride * stride) as f32;
+                let edges = self.seam_edges(root);
+                // The rule of `nearest_not_own` applied to each hit inside the one search:
+                // searching again from each hit passed over cost a displaced AO ray several
+                // grid searches.
+                let window = own.map(|o| (o.chord_error + chord_error * inst.scale) * o.inv_cos);
+                let accept = |t: f32, ng: Vec3A| match (own, window) {
+                    (Some(o), Some(window)) => !o.is_own_other_rate(t, window, sign * d.dot(ng), false),
+                    _ => true,
+                };
+                intersect_with_seams(wray, tess, stride, edges, t_from, t_best, &accept).map(|h| LocalHit {
+                    t: h.t,
+                    uv: (h.u, h.v),
+                    rect: UvRect::UNIT,
+                    ng: h.ng,
+                    quads: rate.quads() as u32,
+                    chord_error,
+                })
+            }
+        };
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
         let first_si = first.as_ref().map(|(org, ..)| org.subpatch as usize);
@@ -1048,7 +1030,11 @@ impl<'s> Tracer<'s> {
         let origin_grid = own.filter(|_| displacement_pad > 0.0).and_then(|org| Some((org.subpatch, org.depth_rate()?)));
         if let Some((org, depth, rate, tess)) = first {
             let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
-            if let Some(h) = test(counters, wray, org.subpatch as usize, depth, rate, tess, t_best) {
+            let si = org.subpatch as usize;
+            let found = test(counters, wray, si, depth, rate, &tess, t_best, ray.t_min);
+            if let Some(h) =
+                Self::kept_or_search_on(trim, geom, si, found, &mut |t| test(counters, wray, si, depth, rate, &tess, t_best, t))
+            {
                 t_best = h.t;
                 best = Some((h, org.subpatch));
             }
@@ -1068,11 +1054,31 @@ impl<'s> Tracer<'s> {
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
                 let tess = self.lookup(instance.mesh, geom, ChildCell { root: si as u32, depth: 0, i: 0, j: 0 }, tier, ray.time);
                 let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
-                test(counters, wray, si, depth, rate, tess, t_best)
+                let found = test(counters, wray, si, depth, rate, &tess, t_best, ray.t_min);
+                Self::kept_or_search_on(trim, geom, si, found, &mut |t| test(counters, wray, si, depth, rate, &tess, t_best, t))
             });
         }
         let (h, si) = best?;
         Some(self.hit(ii, ray, &inst, h, si))
+    }
+
+    /// `found`, a subpatch test's hit on root subpatch `si` of `geom`, if `trim` (the mesh's)
+    /// keeps it; else the first hit beyond it that the trim keeps (`search(t_from)` tests the
+    /// subpatch again from `t_from`). Untrimmed surfaces pay the one test of `trim`.
+    #[inline(always)]
+    fn kept_or_search_on(
+        trim: Option<&crate::trim::PatchTrim>,
+        geom: &MeshGeometry,
+        si: usize,
+        found: Option<LocalHit>,
+        search: &mut dyn FnMut(f32) -> Option<LocalHit>,
+    ) -> Option<LocalHit> {
+        match (trim, found) {
+            (Some(trim), Some(h)) if !Self::kept(trim, geom.subpatches[si].patch, &h) => {
+                Self::first_kept(trim, geom.subpatches[si].patch, next_up(h.t), search)
+            }
+            (_, found) => found,
+        }
     }
 
     /// The first hit `search(t_from)` finds from `t_min` on whose patch (u, v) `trim` keeps
