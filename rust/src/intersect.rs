@@ -751,45 +751,11 @@ mod tests {
     }
 
     /// The grid test as it was before it shared sheared vertices and edges: every quad's two
-    /// triangles through [`WatertightRay::hit_triangle`], vertex by vertex.
+    /// triangles through [`WatertightRay::hit_triangle`], vertex by vertex ([`per_triangle_in`]
+    /// over the whole grid, every hit taken).
     fn per_triangle(ray: &WatertightRay, tess: &Tessellation, stride: usize, t_max: f32) -> Option<GridHit> {
         let q = (tess.n - 1) / stride;
-        let inv_q = 1.0 / q as f32;
-        let (mut best, mut t_best) = (None, t_max);
-        let triangle = tess.domain == GridDomain::LowerTriangle;
-        for j in 0..q {
-            for i in 0..q {
-                let v = |di: usize, dj: usize| tess.vert((i + di) * stride, (j + dj) * stride);
-                let (p00, p10, p11, p01) = (v(0, 0), v(1, 0), v(1, 1), v(0, 1));
-                let mut tris = vec![(p00, p10, p11, 0), (p00, p11, p01, 1)];
-                if triangle && i + j + 1 > q {
-                    continue;
-                }
-                if triangle && i + j + 1 == q {
-                    tris = vec![(p00, p10, p01, 2)];
-                }
-                for (a, b, c, which) in tris {
-                    if let Some((t, _, b1, b2)) = ray.hit_triangle(a, b, c, t_best) {
-                        if t > 0.0 {
-                            t_best = t;
-                            let (lu, lv) = match which {
-                                0 => (b1 + b2, b2),
-                                1 => (b1, b1 + b2),
-                                _ => (b1, b2),
-                            };
-                            best = Some(GridHit {
-                                t,
-                                u: (i as f32 + lu) * inv_q,
-                                v: (j as f32 + lv) * inv_q,
-                                ng: (b - a).cross(c - a),
-                                seam: false,
-                            });
-                        }
-                    }
-                }
-            }
-        }
-        best
+        per_triangle_in(ray, tess, stride, (0, q, 0, q), 0.0, t_max, &every_hit, &mut 0)
     }
 
     #[test]
