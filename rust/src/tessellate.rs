@@ -58,7 +58,12 @@ impl Rate {
     /// needed, rounding up; `None` means even 16×16 quads are too coarse (the subpatch should
     /// be split, see [`split_depth`]). A non-finite or zero width asks for the finest rate.
     pub fn for_beam(size_world: f32, beam_width: f32, tess_factor: f32) -> Option<Rate> {
-        let needed = needed_quads(size_world, beam_width, tess_factor);
+        Rate::at_least(needed_quads(size_world, beam_width, tess_factor))
+    }
+
+    /// The coarsest rate with at least `needed` quads a side; `None` beyond 16 (or NaN).
+    #[inline]
+    pub fn at_least(needed: f32) -> Option<Rate> {
         Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed)
     }
 }

@@ -121,7 +121,7 @@ impl Origin {
         match self.quads {
             0 => None,
             q if q > 16 => Some(((q / 16).trailing_zeros(), Rate::R16)),
-            q => Rate::ALL.into_iter().find(|r| r.quads() as u32 >= q).map(|r| (0, r)),
+            q => Rate::at_least(q as f32).map(|r| (0, r)),
         }
     }
 
@@ -1138,7 +1138,7 @@ impl<'s> Tracer<'s> {
         } else if sp.affine {
             Rate::R1
         } else {
-            Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
+            Rate::at_least(needed).unwrap_or(Rate::R16)
         };
         (depth, rate)
     }
@@ -1286,7 +1286,7 @@ impl<'s> Tracer<'s> {
             } else if curves.is_straight(seg) {
                 Rate::R1
             } else {
-                Rate::ALL.into_iter().find(|r| r.quads() as f32 >= needed).unwrap_or(Rate::R16)
+                Rate::at_least(needed).unwrap_or(Rate::R16)
             };
             if needed > 16.0 && !curves.is_straight(seg) {
                 counters.finer_than_fine += 1;
