@@ -9,11 +9,11 @@ import logging
 
 import numpy as np
 import pytest
-from pxr import Sdf, UsdGeom
+from pxr import Sdf, Usd, UsdGeom
 
 import mipray
 from mipray.usd import UsdSceneDelegate
-from mipray.usd.curves import _nurbs_to_bezier
+from mipray.usd.curves import _nurbs_to_bezier, curves_arguments
 
 from stages import add_camera, add_distant_light, new_stage
 
@@ -145,7 +145,7 @@ def test_wrong_counts_skip_the_prim_and_wrong_widths_fall_back_by_name(native, c
     stage = new_stage()
     bad = UsdGeom.BasisCurves.Define(stage, "/World/BadCounts")
     bad.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0), (4, 0, 0)])
-    bad.CreateCurveVertexCountsAttr([5])  # a bezier needs 4 + 3k
+    bad.CreateCurveVertexCountsAttr([6])  # 6 vertices of 5 points
     wide = UsdGeom.BasisCurves.Define(stage, "/World/BadWidths")
     wide.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)])
     wide.CreateCurveVertexCountsAttr([4])
@@ -155,14 +155,66 @@ def test_wrong_counts_skip_the_prim_and_wrong_widths_fall_back_by_name(native, c
         scene = UsdSceneDelegate(stage, native.RenderDelegate())
         scene.sync()
     assert [str(e) for e in scene.delegate_errors] == [
-        "/World/BadCounts: curveVertexCounts[0]: curve 0 has 5 vertices; a bezier curve "
-        "needs 4 + 3k"
+        "/World/BadCounts: curveVertexCounts add up to 6 vertices but points has 5"
     ]
     lines = [r.getMessage() for r in caplog.records if "BadWidths" in r.getMessage()]
     assert lines == [
         "mipray: /World/BadWidths: widths has 3 values but vertex interpolation wants 4; "
         "using the fallback width 1"
     ]
+
+
+def _two_curve_prims(fallback: bool):
+    stage = new_stage()
+    poly = UsdGeom.BasisCurves.Define(stage, "/World/Polygon")
+    poly.CreateTypeAttr("cubic" if fallback else "linear")
+    poly.CreateBasisAttr("bezier")
+    poly.CreatePointsAttr([(-3, -2, 0), (-3, 2, 0), (-1, 2, 0), (-1, -2, 0), (1, -2, 0)])
+    poly.CreateCurveVertexCountsAttr([5])
+    pinned = UsdGeom.BasisCurves.Define(stage, "/World/Pinned")
+    pinned.CreateTypeAttr("cubic")
+    pinned.CreateBasisAttr("bspline")
+    pinned.CreateWrapAttr("pinned")
+    good = [(2, -2, 0), (2, 2, 0), (3, 2, 0)]
+    pinned.CreatePointsAttr([*good, (3, -2, 0)] if fallback else good)
+    pinned.CreateCurveVertexCountsAttr([3, 1] if fallback else [3])
+    for c in (poly, pinned):
+        c.CreateWidthsAttr([0.3])
+        c.SetWidthsInterpolation("constant")
+    add_camera(stage, "/World/Camera", eye=(0.0, 0.0, 12.0))
+    add_distant_light(stage, "/World/Sun")
+    return stage
+
+
+def test_one_curve_its_basis_cannot_use_does_not_take_the_others_with_it(native, caplog) -> None:
+    # As Storm draws OpenUSD's testUsdImagingGLBasisCurvesVaryingTopology (bezier curves of
+    # 8 and 13 vertices) and testUsdImagingGLCurves/pinnedCurves (a pinned curve of one vertex
+    # beside good ones): the bezier curve of 5 vertices is its control polygon, the pinned
+    # curve of 1 is left out, the rest render, and each prim is named once (and in the stats).
+    # The image is the one of the same curves authored as a linear curve and without the
+    # pinned curve of one vertex.
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        with mipray.RenderSession(_two_curve_prims(True)) as session:
+            r = session.render(
+                "/World/Camera", width=64, aovs=["color", "alpha"], camera_light=False
+            )
+    warned = sorted(m.getMessage() for m in caplog.records if "curve(s)" in m.getMessage())
+    assert len(warned) == 2, warned
+    assert (
+        warned[0].startswith("/World/Pinned: 1 curve(s) left out")
+        and "curve 1 has 1 vertices" in warned[0]
+    )
+    assert warned[1].startswith("/World/Polygon: 1 curve(s) drawn as their control polygons")
+    assert "curve 0 has 5 vertices; a bezier curve needs 4 + 3k" in warned[1]
+    assert sorted(r.stats["scene"]["simplified"]) == warned
+    with mipray.RenderSession(_two_curve_prims(False)) as session:
+        want = session.render(
+            "/World/Camera", width=64, aovs=["color", "alpha"], camera_light=False
+        )
+    assert want.stats["scene"]["simplified"] == []
+    assert r.aovs["alpha"].sum() > 50
+    np.testing.assert_array_equal(r.aovs["alpha"], want.aovs["alpha"])
+    np.testing.assert_array_equal(r.aovs["color"], want.aovs["color"])
 
 
 def _render(stage, width: int, aovs: list[str]) -> dict[str, np.ndarray]:
@@ -226,3 +278,47 @@ def test_nurbs_curves_and_uniform_colours_render(native) -> None:
     row = round(width / 2 - 1.25 / (8 * 10 / 50) * width / 2)
     blue = r["color"][row - 1 : row + 2, width // 2 + 20].max(axis=0)
     assert blue[2] > 10 * blue[0], blue
+
+
+def test_nurbs_curves_whose_knots_cannot_be_used_are_drawn_as_their_control_polygons(
+    caplog,
+) -> None:
+    # OpenUSD's testUsdImagingGLNurbsCurves/testCurves.usda authors curves without knots; Storm
+    # draws every NurbsCurves as its control polygon. Here: no knots at all (every curve a
+    # polygon), then one curve of two with decreasing knots (only it a polygon), and a curve of
+    # one point (left out).
+    stage = new_stage()
+    pts = [(-3, -1, 0), (-1, 1, 0), (1, -1, 0), (3, 1, 0), (-3, 1, 0), (3, 1.5, 0), (9, 9, 9)]
+    n = UsdGeom.NurbsCurves.Define(stage, "/World/NoKnots")
+    n.CreatePointsAttr(pts[:6])
+    n.CreateCurveVertexCountsAttr([4, 2])
+    n.CreateOrderAttr([4, 2])
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        points, gprim = curves_arguments(n.GetPrim(), Usd.TimeCode.Default())
+    assert gprim["curve_vertex_counts"] == [10, 4]
+    a, b = np.array(pts[0]), np.array(pts[1])
+    np.testing.assert_allclose(points[:4], [a, (2 * a + b) / 3, (a + 2 * b) / 3, b], atol=1e-6)
+    np.testing.assert_allclose(points[9], pts[3])
+    np.testing.assert_allclose(points[[10, 13]], [pts[4], pts[5]])
+    assert any(
+        "/World/NoKnots: drawn as control polygons" in r.getMessage()
+        and "knots has 0 values (want 12)" in r.getMessage()
+        for r in caplog.records
+    )
+
+    m = UsdGeom.NurbsCurves.Define(stage, "/World/OneBad")
+    m.CreatePointsAttr(pts)
+    m.CreateCurveVertexCountsAttr([4, 2, 1])
+    m.CreateOrderAttr([4, 2, 1])
+    m.CreateKnotsAttr([0, 0, 0, 0, 1, 1, 1, 1, 1, 0, 0, 0, 0, 1])  # the second curve's decrease
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        points, gprim = curves_arguments(m.GetPrim(), Usd.TimeCode.Default())
+    exact = _nurbs_to_bezier(
+        "/N", np.array(pts[:4], float), 4, np.array([0, 0, 0, 0, 1, 1, 1, 1.0])
+    )
+    assert gprim["curve_vertex_counts"] == [4, 4]
+    np.testing.assert_allclose(points[:4], exact, atol=1e-6)
+    messages = [r.getMessage() for r in caplog.records]
+    assert any("curve 1: knots decrease" in t for t in messages), messages
+    assert any("1 curve(s) of fewer than 2 points left out: [2]" in t for t in messages), messages

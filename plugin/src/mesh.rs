@@ -504,9 +504,11 @@ impl MeshPrim {
                 )))
             }
             Some(Gprim::Curves(c)) => {
-                return Ok(Surface::Curves(Arc::new(
-                    CurvesSurface::new(&c.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?,
-                )))
+                let curves = CurvesSurface::new(&c.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?;
+                if let Some(note) = curves.fallbacks() {
+                    log::warn!("{}: {note}", self.path);
+                }
+                return Ok(Surface::Curves(Arc::new(curves)));
             }
             Some(Gprim::Nurbs(n)) => {
                 let mut surface = NurbsSurface::new(&n.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?;

@@ -174,6 +174,9 @@ pub struct CurvesSurface {
     straight: Vec<bool>,
     style: Style,
     curve_count: usize,
+    /// Curves drawn other than as authored, named for the warning and the stats (see
+    /// [`CurvesSurface::new`]); `None` when every curve is drawn as authored.
+    fallbacks: Option<String>,
 }
 
 /// Bézier control points of a window of 4 (cubic) or 2 (linear) values.
@@ -337,6 +340,9 @@ fn primvar_segments<const D: usize>(
     }
     let pinned = desc.wrap == Wrap::Pinned && desc.curve_type == CurveType::Cubic && desc.basis != Basis::Bezier;
     let mut out = Vec::new();
+    // A window of two is a straight piece: a linear curve's, or a cubic curve's drawn as its
+    // control polygon (see `CurvesSurface::new`).
+    let window_type = |w: &Windows| if w.size == 2 { CurveType::Linear } else { desc.curve_type };
     let (mut vertex0, mut varying0) = (0usize, 0usize);
     for (c, (w, &count)) in wins.iter().zip(desc.counts).enumerate() {
         let n = count as usize;
@@ -347,7 +353,7 @@ fn primvar_segments<const D: usize>(
                 Interpolation::Vertex => {
                     let own = &values[vertex0..vertex0 + n];
                     let window: Vec<[f64; D]> = (0..w.size as i64).map(|k| vertex_value(own, start + k, pinned)).collect();
-                    to_bezier(desc.curve_type, desc.basis, &window)
+                    to_bezier(window_type(w), desc.basis, &window)
                 }
                 Interpolation::Varying => {
                     let own = &values[varying0..varying0 + w.varying];
@@ -437,16 +443,34 @@ impl CurvesSurface {
         }
         let mut total = 0usize;
         let mut wins = Vec::with_capacity(desc.counts.len());
+        // One curve whose count its basis cannot make segments of does not take the others
+        // with it: it is drawn as its control polygon (as Storm draws it), or left out when it
+        // has fewer than two vertices, and named.
+        let (mut as_polygon, mut left_out) = (Vec::new(), Vec::new());
         for (c, &count) in desc.counts.iter().enumerate() {
             if count < 0 {
                 return Err(format!("curveVertexCounts[{c}] = {count} is negative"));
             }
-            wins.push(
-                windows(desc.curve_type, desc.basis, desc.wrap, count as usize)
-                    .map_err(|e| format!("curveVertexCounts[{c}]: curve {c} {e}"))?,
-            );
-            total += count as usize;
+            let n = count as usize;
+            wins.push(match windows(desc.curve_type, desc.basis, desc.wrap, n) {
+                Ok(w) => w,
+                Err(e) => {
+                    let wrap = if desc.wrap == Wrap::Periodic && n >= 3 { Wrap::Periodic } else { Wrap::Nonperiodic };
+                    match windows(CurveType::Linear, desc.basis, wrap, n) {
+                        Ok(w) => {
+                            as_polygon.push(format!("curve {c} {e}"));
+                            w
+                        }
+                        Err(_) => {
+                            left_out.push(format!("curve {c} {e}"));
+                            Windows { size: 2, starts: Vec::new(), varying: n }
+                        }
+                    }
+                }
+            });
+            total += n;
         }
+        let fallbacks = Self::describe_fallbacks(&as_polygon, &left_out);
         if total != desc.points.len() {
             return Err(format!("curveVertexCounts add up to {total} vertices but points has {}", desc.points.len()));
         }
@@ -470,11 +494,40 @@ impl CurvesSurface {
             // widths: clamp it (nothing to hit there).
             half_widths: widths.iter().map(|s| s.map(|w| (0.5 * w[0]).max(0.0) as f32)).collect(),
             normals: normals.iter().map(|s| s.map(f32x3)).collect(),
-            straight: vec![desc.curve_type == CurveType::Linear; curve.len()],
+            straight: wins.iter().flat_map(|w| std::iter::repeat_n(w.size == 2, w.starts.len())).collect(),
             curve,
             style: desc.style,
             curve_count: desc.counts.len(),
+            fallbacks,
         })
+    }
+
+    /// One line naming the curves drawn as control polygons and those left out, the first
+    /// few of each with the reason (`curveVertexCounts[i]`), or `None`.
+    fn describe_fallbacks(as_polygon: &[String], left_out: &[String]) -> Option<String> {
+        const SHOWN: usize = 3;
+        let list = |v: &[String]| {
+            let more = v.len().saturating_sub(SHOWN);
+            let mut s = v.iter().take(SHOWN).cloned().collect::<Vec<_>>().join("; ");
+            if more > 0 {
+                s.push_str(&format!("; and {more} more"));
+            }
+            s
+        };
+        let mut parts = Vec::new();
+        if !as_polygon.is_empty() {
+            parts.push(format!("{} curve(s) drawn as their control polygons (curveVertexCounts: {})", as_polygon.len(), list(as_polygon)));
+        }
+        if !left_out.is_empty() {
+            parts.push(format!("{} curve(s) left out (curveVertexCounts: {})", left_out.len(), list(left_out)));
+        }
+        (!parts.is_empty()).then(|| parts.join("; "))
+    }
+
+    /// Curves drawn other than as authored (control polygons for counts their basis cannot
+    /// use, curves of fewer than two vertices left out): one line for a warning, or `None`.
+    pub fn fallbacks(&self) -> Option<&str> {
+        self.fallbacks.as_deref()
     }
 
     /// Segments (patches).
@@ -892,6 +945,10 @@ impl LimitSurface for CurvesSurface {
     fn curves(&self) -> Option<&CurvesSurface> {
         Some(self)
     }
+
+    fn simplified(&self) -> Option<&str> {
+        self.fallbacks()
+    }
 }
 
 #[cfg(test)]
@@ -981,8 +1038,11 @@ mod tests {
 
     #[test]
     fn bad_counts_and_widths_are_named() {
-        let e = CurvesSurface::new(&desc(&PTS, &[5], CurveType::Cubic, Basis::Bezier, Wrap::Nonperiodic)).unwrap_err();
-        assert!(e.contains("curveVertexCounts[0]"), "{e}");
+        // A count its basis cannot use no longer refuses the prim: the curve is drawn as its
+        // control polygon and named (`a_curve_its_basis_cannot_use_is_drawn_as_its_polygon`).
+        let s = CurvesSurface::new(&desc(&PTS[..5], &[5], CurveType::Cubic, Basis::Bezier, Wrap::Nonperiodic)).unwrap();
+        let e = s.fallbacks().unwrap();
+        assert!(e.contains("curve 0 has 5 vertices; a bezier curve needs 4 + 3k"), "{e}");
         let e = CurvesSurface::new(&desc(&PTS, &[4, 4], CurveType::Cubic, Basis::Bezier, Wrap::Nonperiodic)).unwrap_err();
         assert!(e.contains("add up to 8") && e.contains("points has 7"), "{e}");
         let mut d = desc(&PTS, &[7], CurveType::Cubic, Basis::Bspline, Wrap::Nonperiodic);
@@ -993,6 +1053,43 @@ mod tests {
         d.widths = &[0.1; 5];
         d.widths_interpolation = Interpolation::Varying;
         assert!(CurvesSurface::new(&d).is_ok(), "varying: segments + 1 = 5");
+    }
+
+    /// As Storm draws them (OpenUSD's testUsdImagingGLBasisCurvesVaryingTopology and
+    /// testUsdImagingGLCurves/pinnedCurves): a bezier curve of 7 + 1 vertices is its control
+    /// polygon, a pinned cubic curve of one vertex is left out, and the other curves of the prim
+    /// are drawn as they would be alone.
+    #[test]
+    fn a_curve_its_basis_cannot_use_is_drawn_as_its_polygon() {
+        let mut pts = PTS.to_vec();
+        pts.push([7.0, 0.0, 1.0]);
+        let s = CurvesSurface::new(&desc(&pts, &[8], CurveType::Cubic, Basis::Bezier, Wrap::Nonperiodic)).unwrap();
+        assert_eq!(s.segment_count(), 7, "one straight piece per pair of vertices");
+        for seg in 0..7 {
+            assert!(s.is_straight(seg));
+            let c = s.control_points(seg);
+            assert_eq!(c[0], Vec3A::from(pts[seg]));
+            assert_eq!(c[3], Vec3A::from(pts[seg + 1]));
+        }
+        let note = s.fallbacks().unwrap();
+        assert!(note.contains("1 curve(s) drawn as their control polygons") && note.contains("curve 0 has 8 vertices"), "{note}");
+        assert_eq!(LimitSurface::simplified(&s), Some(note), "listed in the stats' scene.simplified");
+
+        // Pinned B-spline curves of 3, 2, 1 vertices: the last is left out, the others are
+        // the same segments as the first two curves alone.
+        let d = desc(&PTS[..6], &[3, 2, 1], CurveType::Cubic, Basis::Bspline, Wrap::Pinned);
+        let s = CurvesSurface::new(&d).unwrap();
+        let alone = CurvesSurface::new(&desc(&PTS[..5], &[3, 2], CurveType::Cubic, Basis::Bspline, Wrap::Pinned)).unwrap();
+        assert!(alone.fallbacks().is_none());
+        assert_eq!(s.segment_count(), alone.segment_count());
+        for seg in 0..s.segment_count() {
+            assert_eq!(s.control_points(seg), alone.control_points(seg));
+            assert!(!s.is_straight(seg));
+        }
+        let note = s.fallbacks().unwrap();
+        assert!(note.contains("1 curve(s) left out") && note.contains("curve 2 has 1 vertices"), "{note}");
+        // Uniform values still index curves as authored.
+        assert_eq!(s.curve_count, 3);
     }
 
     #[test]

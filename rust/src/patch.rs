@@ -268,8 +268,9 @@ pub trait LimitSurface: Send + Sync {
         None
     }
 
-    /// What this surface made cheaper than its exact definition to bound the work it costs, in
-    /// one line (say, bilinear end caps around a vertex of very high valence). `None` — the
+    /// What this surface made cheaper than its exact definition to bound the work it costs, or
+    /// drew other than authored, in one line (say, bilinear end caps around a vertex of very
+    /// high valence, or curves drawn as their control polygons). `None` — the
     /// default — when it is exact. Listed in the stats' `scene.simplified`.
     fn simplified(&self) -> Option<&str> {
         None

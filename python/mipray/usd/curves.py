@@ -5,8 +5,9 @@ BasisCurves cross as authored (points, ``curveVertexCounts``, ``type``, ``basis`
 to Bézier segments and ray traces them as curves (``rust/src/curves.rs``). NurbsCurves are
 converted here to cubic Bézier segments, one per knot span, and cross as a bezier
 BasisCurves: each span's polynomial is evaluated at four parameters by de Boor's algorithm
-and interpolated (exact for degree up to 3; higher degrees are refused). Rational curves
-(``pointWeights`` not all 1) are evaluated without their weights, with one warning.
+and interpolated (exact for degree up to 3). A curve of higher degree or unusable knots is
+drawn as its control polygon, as Storm draws every NurbsCurves, with one warning. Rational
+curves (``pointWeights`` not all 1) are evaluated without their weights, with one warning.
 
 What a curve looks like across: authored ``normals`` make it a ribbon facing them;
 otherwise the constant token primvar ``primvars:mipray:curveStyle`` says ``tube`` (the
@@ -18,8 +19,9 @@ is still accepted, with one deprecation warning naming the prim.
 
 Bad input gets one line naming the prim and the attribute:
 
-* ``curveVertexCounts`` that the type, basis and wrap cannot make segments of, or that
-  do not add up to the points: the prim is skipped (the delegate refuses it).
+* ``curveVertexCounts`` that do not add up to the points: the prim is skipped (the
+  delegate refuses it). One curve whose count the type, basis and wrap cannot make segments
+  of is drawn as its control polygon (or left out below two vertices) by the core, warned.
 * ``widths`` of the wrong length for their interpolation: the curves render at USD's
   fallback width 1 (warned).
 * ``normals`` of the wrong length: the curves render as tubes (warned).
@@ -212,6 +214,20 @@ def _nurbs_to_bezier(
     return np.array(out)
 
 
+def _polygon_to_bezier(cps: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A control polygon as cubic Bézier control points (3k + 1 for k edges).
+
+    None for fewer than two points. How Storm draws every NurbsCurves
+    (UsdImagingNurbsCurvesAdapter's linear basis curves), and how these curves are drawn when
+    their knots cannot be used.
+    """
+    if len(cps) < 2:
+        return np.zeros((0, cps.shape[1]))
+    a, b = cps[:-1], cps[1:]
+    thirds = np.stack([a, (2 * a + b) / 3, (a + 2 * b) / 3], axis=1).reshape(-1, cps.shape[1])
+    return np.concatenate([thirds, cps[-1:]])
+
+
 def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
     curves = UsdGeom.NurbsCurves(prim)
     path = str(prim.GetPath())
@@ -240,18 +256,54 @@ def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
     out_points: list[NDArray[np.float64]] = []
     out_widths: list[NDArray[np.float64]] = []
     out_counts: list[int] = []
+    # A curve whose knots or order cannot be used is drawn as its control polygon, as Storm
+    # draws every NurbsCurves, and named; one of fewer than two points is left out. The other
+    # curves of the prim render as authored.
+    want_knots = int(np.sum(counts + orders)) if len(counts) else 0
+    all_polygons = len(knots) != want_knots
+    as_polygon: list[str] = []
+    left_out: list[int] = []
+    if all_polygons:
+        as_polygon.append(f"knots has {len(knots)} values (want {want_knots}): every curve")
     start, kstart = 0, 0
-    for count, order in zip(counts.tolist(), orders.tolist(), strict=True):
+    for c, (count, order) in enumerate(zip(counts.tolist(), orders.tolist(), strict=True)):
         cps = points[start : start + count]
-        curve_knots = knots[kstart : kstart + count + order]
-        bez = _nurbs_to_bezier(path, cps, order, curve_knots)
-        out_points.append(bez)
-        out_counts.append(len(bez))
-        if w_interp == "vertex" and len(widths):
-            w = widths[start : start + count].reshape(-1, 1)
-            out_widths.append(_nurbs_to_bezier(path, w, order, curve_knots).reshape(-1))
+        w = widths[start : start + count].reshape(-1, 1) if w_interp == "vertex" else None
+        bez = w_bez = None
+        if not all_polygons:
+            curve_knots = knots[kstart : kstart + count + order]
+            try:
+                bez = _nurbs_to_bezier(path, cps, order, curve_knots)
+                if w is not None and len(widths):
+                    w_bez = _nurbs_to_bezier(path, w, order, curve_knots).reshape(-1)
+            except PrimError as e:
+                if count >= 2:
+                    as_polygon.append(f"curve {c}: {e.reason}")
+        if bez is None:
+            bez = _polygon_to_bezier(cps)
+            if w is not None and len(widths):
+                w_bez = _polygon_to_bezier(w).reshape(-1)
+        if len(bez) == 0:
+            left_out.append(c)
+        else:
+            out_points.append(bez)
+            out_counts.append(len(bez))
+            if w_bez is not None:
+                out_widths.append(w_bez)
         start += count
         kstart += count + order
+    if as_polygon:
+        more = len(as_polygon) - 3
+        shown = "; ".join(as_polygon[:3]) + (f"; and {more} more" if more > 0 else "")
+        _warn_once(f"{path}: drawn as control polygons (as Storm draws NurbsCurves): {shown}")
+    if left_out:
+        _warn_once(
+            f"{path}: {len(left_out)} curve(s) of fewer than 2 points left out: {left_out[:5]}"
+        )
+    if not out_points:
+        raise PrimError(path, "no curve has two points: nothing to render")
+    if w_interp == "uniform" and len(widths) and left_out:
+        widths = np.delete(widths, left_out)
     gprim: dict[str, Any] = {
         "type": "Curves",
         "curve_vertex_counts": out_counts,
