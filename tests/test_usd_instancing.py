@@ -151,6 +151,28 @@ def test_prototype_outside_the_instancer_also_renders_in_place(fake) -> None:
     assert sorted(m[3, 0] for _, m in fake.placements()) == [0.0, 10.0]
 
 
+def test_prototypes_kept_under_an_over_render_only_through_the_instancer(fake) -> None:
+    # OpenUSD's testUsdImagingGLPointInstancer/pi_sibling_pi_over: prototypes under an `over`
+    # (so they are not drawn where they stand) render through the instancer, as UsdImaging
+    # populates them; nothing renders in place.
+    stage = new_stage()
+    rock = UsdGeom.Xform.Define(stage, "/World/Library/Rock")
+    add_cube(stage, "/World/Library/Rock/Body")
+    stage.OverridePrim("/World/Library/Rock/Ghost")  # an over inside: nothing to draw
+    # Defining a prim defines its ancestors: make the library an `over` afterwards.
+    stage.GetPrimAtPath("/World/Library").SetSpecifier(Sdf.SpecifierOver)
+    pi = UsdGeom.PointInstancer.Define(stage, "/World/PI")
+    pi.CreatePrototypesRel().SetTargets([rock.GetPath()])
+    pi.CreatePositionsAttr([(10, 0, 0), (20, 0, 0)])
+    pi.CreateProtoIndicesAttr([0, 0])
+    scene = UsdSceneDelegate(stage, fake)
+    scene.sync()
+    assert scene.delegate_errors == []
+    assert set(fake.meshes()) == set()
+    assert set(fake.prototypes()) == {"/World/PI.proto0/Body"}
+    assert sorted(m[3, 0] for _, m in fake.placements()) == [10.0, 20.0]
+
+
 def test_invisible_and_proxy_prims_inside_prototypes_are_left_out(fake) -> None:
     stage = new_stage()
     pi = point_instancer(stage, "/World/PI", grid_positions(2), prototypes=("Shown",))

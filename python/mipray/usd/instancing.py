@@ -99,6 +99,13 @@ def _check_per_instance(
     return array
 
 
+#: The prims of a prototype that render: active, loaded and not abstract, but not required to
+#: be defined. A PointInstancer's prototypes are often kept under an ``over`` so that they are
+#: not drawn where they stand, only through the instancer; UsdImaging populates them with the
+#: same predicate (OpenUSD's testUsdImagingGLPointInstancer/pi_sibling_pi_over).
+_PROTOTYPE_PREDICATE = Usd.PrimIsActive & Usd.PrimIsLoaded & ~Usd.PrimIsAbstract
+
+
 def read_point_instancer(pi: UsdGeom.PointInstancer, time: Usd.TimeCode) -> PointInstancerArrays:
     """Read and check a PointInstancer's instances at ``time``.
 
@@ -355,7 +362,7 @@ class Instancing:
                     members.append(dpath)
             elif included and prim.IsA(UsdGeom.Gprim):
                 walk.unsupported[prim.GetTypeName() or "untyped"] += 1
-            children = prim.GetFilteredChildren(Usd.PrimDefaultPredicate)
+            children = prim.GetFilteredChildren(_PROTOTYPE_PREDICATE)
             stack.extend((c, info) for c in reversed(children))
         return members
 
