@@ -577,6 +577,50 @@ struct OsdMesh::Impl {
         [&](double v, double w[4], double dw[4]) { bspline(v, ends[2], ends[3], w, dw); });
   }
 
+  // A 2-float vertex primvar's grid on a regular patch (see is_regular): value, d/du, d/dv
+  // (patch-local) interleaved, 6 floats a vertex. The rows along t contracted once per grid
+  // row, as eval_regular_grid does for the points: a displaced grid's st at each vertex cost
+  // an OpenSubdiv basis evaluation and a 16-point sum. False when a control point has no value.
+  bool eval_regular_primvar_grid(std::size_t channel, std::size_t patch, float u0, float v0,
+                                 float u1, float v1, std::size_t n, float* out) const {
+    const std::vector<float>& values = vertex_primvars[channel];
+    Far::ConstIndexArray cvs = patch_table->GetPatchVertices(handle(patch));
+    for (int k = 0; k < cvs.size(); ++k)
+      if (cvs[k] < 0 || 2 * std::size_t(cvs[k]) + 1 >= values.size()) return false;
+    bool ends[4];
+    regular_ends(patch, ends);
+    const float d = float((n < 2 ? 2 : n) - 1);
+    std::vector<double> sw(4 * n), dsw(4 * n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const float u = u0 + (u1 - u0) * (float(i) / d);
+      bspline(double(u), ends[0], ends[1], &sw[4 * i], &dsw[4 * i]);
+    }
+    for (std::size_t j = 0; j < n; ++j) {
+      const float v = v0 + (v1 - v0) * (float(j) / d);
+      double tw[4], dtw[4], r[4][2] = {}, dr[4][2] = {};
+      bspline(double(v), ends[2], ends[3], tw, dtw);
+      for (int b = 0; b < 4; ++b)
+        for (int a = 0; a < 4; ++a) {
+          const float* x = values.data() + 2 * std::size_t(cvs[4 * b + a]);
+          for (int c = 0; c < 2; ++c) {
+            r[a][c] += tw[b] * x[c];
+            dr[a][c] += dtw[b] * x[c];
+          }
+        }
+      for (std::size_t i = 0; i < n; ++i) {
+        const double* w = &sw[4 * i];
+        const double* dw = &dsw[4 * i];
+        float* o = out + 6 * (j * n + i);
+        for (int c = 0; c < 2; ++c) {
+          o[c] = float(w[0] * r[0][c] + w[1] * r[1][c] + w[2] * r[2][c] + w[3] * r[3][c]);
+          o[2 + c] = float(dw[0] * r[0][c] + dw[1] * r[1][c] + dw[2] * r[2][c] + dw[3] * r[3][c]);
+          o[4 + c] = float(w[0] * dr[0][c] + w[1] * dr[1][c] + w[2] * dr[2][c] + w[3] * dr[3][c]);
+        }
+      }
+    }
+    return true;
+  }
+
   // A single-crease patch's grid (crease_sharpness > 0): its basis is a tensor product too (a
   // B-spline along the crease, the pieces' cubic across it), so rows are contracted once as on
   // a regular patch instead of evaluating all 16 weights and their second derivatives at every
@@ -1334,6 +1378,32 @@ bool OsdMesh::evaluate_primvar(bool vertex, std::size_t channel, std::size_t pat
   const std::size_t channels = vertex ? impl->vertex_primvars.size() : impl->fvar_values.size();
   if (channel >= channels || patch >= impl->num_patches || out.size() < 6) return false;
   return eval_primvar(*impl, vertex, channel, patch, u, v, out.data());
+}
+
+bool OsdMesh::evaluate_primvar_grid(bool vertex, std::size_t channel, std::size_t patch,
+                                    float u0, float v0, float u1, float v1, std::size_t n,
+                                    rust::Slice<float> out) const noexcept {
+  const std::size_t channels = vertex ? impl->vertex_primvars.size() : impl->fvar_values.size();
+  if (channel >= channels || patch >= impl->num_patches || n == 0 || out.size() != 6 * n * n)
+    return false;
+  if (vertex && impl->is_regular(patch)) {
+    try {
+      return impl->eval_regular_primvar_grid(channel, patch, u0, v0, u1, v1, n, out.data());
+    } catch (...) {
+      return false;  // std::bad_alloc of the weight rows: nothing may cross into Rust
+    }
+  }
+  // The same (u, v) as UvRect::grid_uv computes in Rust (see evaluate_grid).
+  const float d = float((n < 2 ? 2 : n) - 1);
+  for (std::size_t j = 0; j < n; ++j) {
+    const float v = v0 + (v1 - v0) * (float(j) / d);
+    for (std::size_t i = 0; i < n; ++i) {
+      const float u = u0 + (u1 - u0) * (float(i) / d);
+      if (!eval_primvar(*impl, vertex, channel, patch, u, v, out.data() + 6 * (j * n + i)))
+        return false;
+    }
+  }
+  return true;
 }
 
 namespace {

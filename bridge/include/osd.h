@@ -50,6 +50,9 @@ class OsdMesh {
   std::size_t vertex_primvar_count() const noexcept;
   bool evaluate_primvar(bool vertex, std::size_t channel, std::size_t patch, float u, float v,
                         rust::Slice<float> out) const noexcept;
+  bool evaluate_primvar_grid(bool vertex, std::size_t channel, std::size_t patch, float u0,
+                             float v0, float u1, float v1, std::size_t n,
+                             rust::Slice<float> out) const noexcept;
 
   struct Impl;
   std::unique_ptr<Impl> impl;

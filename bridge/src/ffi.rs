@@ -214,6 +214,24 @@ pub(crate) mod bridge {
         /// patch's local (u, v): value, d/du, d/dv into `out[0..6]`. False for a bad index or a
         /// short `out`.
         fn evaluate_primvar(self: &OsdMesh, vertex: bool, channel: usize, patch: usize, u: f32, v: f32, out: &mut [f32]) -> bool;
+        /// `evaluate_primvar` at every vertex of the n×n grid over [u0, u1] × [v0, v1] of the
+        /// patch (u fastest; the (u, v) of `evaluate_grid`): 6 floats a vertex into `out`, which
+        /// holds 6n². A vertex primvar on a regular patch is contracted row by row as the
+        /// positions are (equal to the point evaluation within rounding); every other case is
+        /// the point evaluation at each vertex. False for a bad index or a wrong `out` size.
+        #[allow(clippy::too_many_arguments)]
+        fn evaluate_primvar_grid(
+            self: &OsdMesh,
+            vertex: bool,
+            channel: usize,
+            patch: usize,
+            u0: f32,
+            v0: f32,
+            u1: f32,
+            v1: f32,
+            n: usize,
+            out: &mut [f32],
+        ) -> bool;
 
         /// Reference path: a fresh refiner and patch table with `Far::LimitStencilTableFactory`'s
         /// options, points refined level by level, `Far::PatchMap` and `PatchTable::EvaluateBasis`

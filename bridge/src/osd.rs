@@ -543,6 +543,34 @@ impl LimitSurface for OsdSurface {
         let mut o = [0.0f32; 6];
         self.mesh.evaluate_primvar(vertex, k, patch, u, v, &mut o).then_some(([o[0], o[1]], [o[2], o[3]], [o[4], o[5]]))
     }
+
+    /// Vertex primvars on regular patches contracted row by row in one call (see
+    /// `evaluate_primvar_grid`), other channels point by point in that call.
+    fn face_varying_grid(&self, channel: usize, patch: usize, rect: UvRect, n: usize, out: &mut Vec<Option<Value2>>) {
+        out.clear();
+        let (vertex, k) = match self.primvars.get(channel) {
+            Some(PrimvarSource::FaceVarying(k)) => (false, *k),
+            Some(PrimvarSource::Vertex(k)) => (true, *k),
+            Some(PrimvarSource::BaseFace(b)) => {
+                let param = self.params.get(patch);
+                out.extend((0..n * n).map(|k| {
+                    let (u, v) = rect.grid_uv(k % n, k / n, n);
+                    param.and_then(|p| b.at_patch(p, u, v))
+                }));
+                return;
+            }
+            None => {
+                out.resize(n * n, None);
+                return;
+            }
+        };
+        let mut o = vec![0.0f32; 6 * n * n];
+        if self.mesh.evaluate_primvar_grid(vertex, k, patch, rect.u0, rect.v0, rect.u1, rect.v1, n, &mut o) {
+            out.extend(o.chunks_exact(6).map(|o| Some(([o[0], o[1]], [o[2], o[3]], [o[4], o[5]]))));
+        } else {
+            out.resize(n * n, None);
+        }
+    }
 }
 
 /// The same error with the mesh's name in front of its message.

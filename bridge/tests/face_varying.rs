@@ -266,3 +266,66 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
     println!("summary: {checked} shapes with uvs checked, {} problems", problems.len());
     assert!(problems.is_empty(), "face-varying problems:\n{}", problems.join("\n"));
 }
+
+/// `face_varying_grid` (one call a grid; vertex primvars on regular patches contracted row by
+/// row) against `face_varying` at each grid vertex, for vertex, face-varying and constant
+/// channels, over whole patches and sub-rectangles, on a bumpy grid (boundaries and corners)
+/// and every regression shape OpenSubdiv's corpus has here.
+#[test]
+fn grid_evaluation_equals_the_point_evaluation_at_each_vertex() {
+    let (topo, mut points) = grid(5, Scheme::CatmullClark);
+    for p in &mut points {
+        p[2] = (1.3 * p[0]).sin() * (0.7 * p[1]).cos();
+    }
+    let mut shapes = vec![("bumpy".to_string(), topo, points)];
+    if let Some(paths) = corpus_paths(&corpus_dir()) {
+        for path in paths.iter().take(40) {
+            let name = path.file_stem().unwrap().to_string_lossy().to_string();
+            let shape = parse_obj_shape(&name, &std::fs::read_to_string(path).unwrap()).unwrap();
+            if shape.check_supported().is_ok() && shape.topology.scheme == Scheme::CatmullClark {
+                shapes.push((name, shape.topology, shape.points));
+            }
+        }
+    }
+    let rects = [UvRect::UNIT, UvRect { u0: 0.25, v0: 0.5, u1: 0.5, v1: 0.75 }, UvRect { u0: 0.0, v0: 0.75, u1: 0.125, v1: 1.0 }];
+    let (mut compared, mut worst_v, mut worst_d) = (0usize, 0.0f32, 0.0f32);
+    for (name, topo, points) in &shapes {
+        let mut vertex = fv(points.iter().map(|p| [p[0] + 0.3 * p[2], p[1] - 0.2 * p[2]]).collect(), Vec::new());
+        vertex.interpolation = Interpolation::Vertex;
+        let face_varying = fv(
+            topo.face_vertex_indices.iter().map(|&i| points[i as usize]).map(|p| [p[0] - p[2], 0.5 * p[1]]).collect(),
+            (0..topo.face_vertex_indices.len() as i32).collect(),
+        );
+        let constant = Primvar2 { name: "c".into(), interpolation: Interpolation::Constant, values: vec![[0.25, 0.75]], indices: vec![] };
+        let Ok(surface) = OsdSurface::with_primvars(name, topo, points, &OsdOptions::DEFAULT, &[vertex, face_varying, constant]) else {
+            continue;
+        };
+        let extent = points.iter().flat_map(|p| p.iter()).fold(0.0f32, |m, c| m.max(c.abs())).max(1.0);
+        let mut grid_values = Vec::new();
+        for channel in 0..3 {
+            for patch in 0..surface.patch_count() {
+                for rect in rects {
+                    for n in [2, 3, 5, 17] {
+                        surface.face_varying_grid(channel, patch, rect, n, &mut grid_values);
+                        assert_eq!(grid_values.len(), n * n);
+                        for (k, got) in grid_values.iter().enumerate() {
+                            let (u, v) = rect.grid_uv(k % n, k / n, n);
+                            let want = surface.face_varying(channel, patch, u, v);
+                            let (Some(g), Some(w)) = (got, want) else {
+                                panic!("{name} channel {channel} patch {patch}: {got:?} vs {want:?}");
+                            };
+                            let ev = max2(g.0, w.0) / extent;
+                            let ed = max2(g.1, w.1).max(max2(g.2, w.2)) / extent;
+                            worst_v = worst_v.max(ev);
+                            worst_d = worst_d.max(ed);
+                            assert!(ev < 1e-6 && ed < 1e-5, "{name} channel {channel} patch {patch} n {n} ({u}, {v}): {g:?} vs {w:?}");
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    println!("{} shapes, {compared} grid vertices: worst value {worst_v:.1e}, derivative {worst_d:.1e} (of the extent)", shapes.len());
+    assert!(compared >= 70_000, "{compared}");
+}

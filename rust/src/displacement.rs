@@ -367,15 +367,14 @@ impl TextureDisplacement {
         out.clear();
         let steps = (n.max(2) - 1) as f32;
         let (du, dv) = ((rect.u1 - rect.u0) / steps, (rect.v1 - rect.v0) / steps);
-        for j in 0..n {
-            for i in 0..n {
-                let (u, v) = rect.grid_uv(i, j, n);
-                let (st, dx, dy) = match surface.face_varying(self.st_channel, patch, u, v) {
-                    Some((st, dsdu, dsdv)) => (st, [dsdu[0] * du, dsdu[1] * du], [dsdv[0] * dv, dsdv[1] * dv]),
-                    None => (self.st_fallback, [0.0; 2], [0.0; 2]),
-                };
-                out.push(self.offset_st(st, dx, dy));
-            }
+        let mut st_grid = Vec::with_capacity(n * n);
+        surface.face_varying_grid(self.st_channel, patch, rect, n, &mut st_grid);
+        for value in st_grid {
+            let (st, dx, dy) = match value {
+                Some((st, dsdu, dsdv)) => (st, [dsdu[0] * du, dsdu[1] * du], [dsdv[0] * dv, dsdv[1] * dv]),
+                None => (self.st_fallback, [0.0; 2], [0.0; 2]),
+            };
+            out.push(self.offset_st(st, dx, dy));
         }
     }
 }

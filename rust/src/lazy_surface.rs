@@ -234,6 +234,23 @@ impl<S: ?Sized + LimitSurface + 'static> LimitSurface for LazySurface<S> {
         self.inner()?.face_varying(channel, patch, u, v)
     }
 
+    fn face_varying_grid(
+        &self,
+        channel: usize,
+        patch: usize,
+        rect: UvRect,
+        n: usize,
+        out: &mut Vec<Option<([f32; 2], [f32; 2], [f32; 2])>>,
+    ) {
+        match self.inner() {
+            Some(s) => s.face_varying_grid(channel, patch, rect, n, out),
+            None => {
+                out.clear();
+                out.resize(n * n, None);
+            }
+        }
+    }
+
     /// Known only once built: a surface no ray reached was not simplified in this render.
     fn simplified(&self) -> Option<&str> {
         self.built()?.simplified()

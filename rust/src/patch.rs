@@ -268,6 +268,27 @@ pub trait LimitSurface: Send + Sync {
         None
     }
 
+    /// [`LimitSurface::face_varying`] at every vertex of the n×n grid over `rect` (u fastest,
+    /// at [`UvRect::grid_uv`]), into `out` (cleared first; n² entries). Surfaces whose
+    /// evaluation has a cheaper form over a grid override it (a displaced grid reads its
+    /// texture coordinates at each vertex it builds); the default is the point evaluation.
+    fn face_varying_grid(
+        &self,
+        channel: usize,
+        patch: usize,
+        rect: UvRect,
+        n: usize,
+        out: &mut Vec<Option<([f32; 2], [f32; 2], [f32; 2])>>,
+    ) {
+        out.clear();
+        for j in 0..n {
+            for i in 0..n {
+                let (u, v) = rect.grid_uv(i, j, n);
+                out.push(self.face_varying(channel, patch, u, v));
+            }
+        }
+    }
+
     /// What this surface made cheaper than its exact definition to bound the work it costs, or
     /// drew other than authored, in one line (say, bilinear end caps around a vertex of very
     /// high valence, or curves drawn as their control polygons). `None` — the
