@@ -23,7 +23,8 @@ What maps how (render space is USD world space in both renderers):
   ``sphere`` shape with an ``area`` emitter of that radiance (÷ area with
   ``normalize``) and a black BSDF; rect → ``rectangle``, disk → ``disk``,
   both emitting along the light's -Z, a rect's ``texture:file`` as a ``bitmap``
-  radiance (s along +X, t along +Y, clamped); dome (no texture) → ``constant``;
+  radiance (s along +X, t along +Y, clamped); cylinder → ``cylinder`` (along
+  the light's X, no caps, emitting outward); dome (no texture) → ``constant``;
   a sphere light with ``ShapingAPI`` → ``spot`` (:func:`_spot`: Mitsuba's hard
   cutoff at the cone angle, UsdLux's smoothstep softness and focus as the spot's
   projected texture; a point, so a small sphere); a polygonal mesh with
@@ -760,6 +761,29 @@ def _light(mi: Any, path: str, args: dict[str, Any]) -> dict[str, Any]:
             "to_world": mi.ScalarTransform4f(to_world.tolist()),
             "bsdf": black,
             "emitter": {"type": "area", "radiance": emitted},
+        }
+    if kind == "cylinder":
+        # UsdLux: a tube along the light's X, no end caps, emitting outward; round under the
+        # mean of its Y and Z scales (as mipray). Mitsuba's cylinder: radius 1 about its +Z
+        # from z = 0 to 1, emitting outward; a right-handed frame keeps its normals so.
+        axis = m[:3, :3] @ np.array([float(args.get("length", 1.0)), 0.0, 0.0])
+        scale = float(np.mean(np.linalg.norm(m[:3, 1:3], axis=0)))
+        radius = float(args.get("radius", 0.5)) * scale
+        length = float(np.linalg.norm(axis))
+        if args.get("normalize"):
+            area = 2.0 * math.pi * radius * length
+            radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
+        a = axis / length
+        x = np.cross(a, [0.0, 1.0, 0.0] if abs(a[1]) < 0.9 else [1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        to_world = np.eye(4)
+        to_world[:3, 0], to_world[:3, 1] = radius * x, radius * np.cross(a, x)
+        to_world[:3, 2], to_world[:3, 3] = axis, center - 0.5 * axis
+        return {
+            "type": "cylinder",
+            "to_world": mi.ScalarTransform4f(to_world.tolist()),
+            "bsdf": black,
+            "emitter": {"type": "area", "radiance": _spectrum(radiance)},
         }
     raise PrimError(path, f"light kind '{kind}' is not exported to Mitsuba")
 

@@ -294,6 +294,25 @@ def _disk_light() -> Usd.Stage:
     return stage
 
 
+def _cylinder_light(axis_y: bool = False) -> Usd.Stage:
+    """A long thin CylinderLight above and behind the objects, out of the frame.
+
+    Along its X (world X), tilted 20° about it; ``axis_y``: turned to lie along world Y
+    instead (for checking that the comparison sees the tube's axis).
+    """
+    stage = _stage()
+    _still_life(stage)
+    light = UsdLux.CylinderLight.Define(stage, "/World/Tube")
+    _set(light, 10.0, (1.0, 0.9, 0.75))
+    light.CreateRadiusAttr(0.15)
+    light.CreateLengthAttr(3.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(-0.5, 3.2, -1.8))
+    if axis_y:
+        light.AddRotateZOp().Set(90.0)
+    light.AddRotateXOp().Set(20.0)
+    return stage
+
+
 def _mesh_light() -> Usd.Stage:
     stage = _stage()
     _still_life(stage)
@@ -921,6 +940,7 @@ RADIUS_SCALED: dict[str, Callable[[float], Usd.Stage]] = {
 #: Per light scene: Mitsuba stages with the feature the scene checks broken, each as the
 #: export (or mipray) would render it with that bug, for checking that the comparison sees it.
 BROKEN: dict[str, dict[str, Callable[[], Usd.Stage]]] = {
+    "cylinder_light": {"axis along Y": lambda: _cylinder_light(axis_y=True)},
     "spot_light": {"cone ignored": _spot(180.0)},
     "spot_light_soft": {
         "softness ignored": _spot(SOFT_SPOT[0], 0.0, SOFT_SPOT[2], SOFT_SPOT[3]),
@@ -1040,6 +1060,14 @@ SCENES: tuple[Scene, ...] = (
         "disk_light",
         "the same under a normalized disk light",
         _disk_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "cylinder_light",
+        "the same under a CylinderLight 3 long and 0.15 in radius (along its X, no end caps, "
+        "emitting outward) against Mitsuba's cylinder with an area emitter",
+        _cylinder_light,
         settings={"shadowSamples": 4},
         integrator=_direct(4),
     ),
