@@ -675,6 +675,40 @@ def _textured() -> Usd.Stage:
     return stage
 
 
+def _subsets_textured(bind_subset: bool = True) -> Usd.Stage:
+    """The still life on a ground of two quads, the left one a textured GeomSubset.
+
+    A materialBind subset gives the left quad the textured material (its whole network); the
+    right one keeps the mesh's grey.
+
+    ``bind_subset`` False leaves the subset unbound (the whole ground grey: what a renderer
+    that drops subset bindings shows).
+    """
+    stage = _stage()
+    _still_life(stage)
+    h = 4.0
+    mesh = _mesh(
+        stage,
+        "/World/Ground",
+        [(-h, 0, h), (0, 0, h), (h, 0, h), (h, 0, -h), (0, 0, -h), (-h, 0, -h)],
+        [4, 4],
+        [0, 1, 4, 5, 1, 2, 3, 4],
+        lambert(stage, "Ground", (0.6, 0.6, 0.6)),
+    )
+    primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
+    )
+    primvar.Set([(0, 0), (0.5, 0), (0.5, 1), (0, 1), (0.5, 0), (1, 0), (1, 1), (0.5, 1)])
+    subset = UsdGeom.Subset.CreateGeomSubset(
+        mesh, "Left", UsdGeom.Tokens.face, [0], UsdShade.Tokens.materialBind
+    )
+    if bind_subset:
+        waves = textured_lambert(stage, "Waves", texture_file())
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(waves)
+    _sun(stage, (3.0, 5.0, 2.0))
+    return stage
+
+
 def _normal_mapped() -> Usd.Stage:
     stage = _stage()
     bumps = normal_mapped_lambert(stage, "Bumps", (0.6, 0.6, 0.6), normal_map_file())
@@ -937,9 +971,11 @@ RADIUS_SCALED: dict[str, Callable[[float], Usd.Stage]] = {
 }
 
 
-#: Per light scene: Mitsuba stages with the feature the scene checks broken, each as the
-#: export (or mipray) would render it with that bug, for checking that the comparison sees it.
+#: Per light (and subset) scene: Mitsuba stages with the feature the scene checks broken, each
+#: as the export (or mipray) would render it with that bug, for checking that the comparison
+#: sees it.
 BROKEN: dict[str, dict[str, Callable[[], Usd.Stage]]] = {
+    "subsets_textured": {"subset binding dropped": lambda: _subsets_textured(bind_subset=False)},
     "cylinder_light": {"axis along Y": lambda: _cylinder_light(axis_y=True)},
     "spot_light": {"cone ignored": _spot(180.0)},
     "spot_light_soft": {
@@ -1133,6 +1169,13 @@ SCENES: tuple[Scene, ...] = (
         "sourceColorSpace auto): texture coordinates, sRGB decoding and filtering; Mitsuba "
         "decodes the file itself",
         _textured,
+        settings={},
+    ),
+    Scene(
+        "subsets_textured",
+        "the still life on a two-quad ground whose left quad is a materialBind GeomSubset "
+        "bound to textured's material (texture included), the right one the mesh's grey",
+        _subsets_textured,
         settings={},
     ),
     Scene(
