@@ -120,11 +120,12 @@ def test_an_image_times_a_constant_is_a_texture_with_that_scale(fake, tmp_path) 
     assert args["st_values"].shape == (4, 2)  # the uv primvar the geompropvalue names
 
 
-def test_texcoord_constant_mix_and_arithmetic_nodes_fold_into_the_textures_affine_map(
+def test_texcoord_constant_mix_arithmetic_and_dot_nodes_fold_into_the_textures_affine_map(
     fake, tmp_path, caplog
 ) -> None:
-    # base_color = (mix(fg = image(texcoord), bg = constant, mix = constant) − c) + d, with
-    # MaterialX's mix = bg·(1 − w) + fg·w: texel·w + (bg·(1 − w) − c + d), worked out by hand.
+    # base_color = dot((d + (mix(fg = image(texcoord), bg = constant, mix = constant) − c)) / 2)
+    # with MaterialX's mix = bg·(1 − w) + fg·w and dot a pass-through:
+    # texel·w/2 + (bg·(1 − w) − c + d)/2, worked out by hand.
     stage = new_stage()
     surface = mtlx_material(stage, "/Looks/M", "ND_standard_surface_surfaceshader", base=1.0)
     coord = node(stage, "/Looks/M/Coord", "ND_texcoord_vector2", F2)
@@ -145,16 +146,22 @@ def test_texcoord_constant_mix_and_arithmetic_nodes_fold_into_the_textures_affin
     more = node(stage, "/Looks/M/More", "ND_add_color3")
     more.CreateInput("in1", C3).Set(Gf.Vec3f(0.01, 0.02, 0.03))
     more.CreateInput("in2", C3).ConnectToSource(less.ConnectableAPI(), "out")
-    surface.CreateInput("base_color", C3).ConnectToSource(more.ConnectableAPI(), "out")
+    half = node(stage, "/Looks/M/Half", "ND_divide_color3")
+    half.CreateInput("in1", C3).ConnectToSource(more.ConnectableAPI(), "out")
+    half.CreateInput("in2", C3).Set(Gf.Vec3f(2.0, 2.0, 2.0))
+    passed = node(stage, "/Looks/M/Dot", "ND_dot_color3")
+    passed.CreateInput("in", C3).ConnectToSource(half.ConnectableAPI(), "out")
+    surface.CreateInput("base_color", C3).ConnectToSource(passed.ConnectableAPI(), "out")
     bind(quad(stage).GetPrim(), UsdShade.Material.Get(stage, "/Looks/M"))
     with caplog.at_level(logging.WARNING, logger="mipray"):
         UsdSceneDelegate(stage, fake).sync()
     assert not [r for r in caplog.records if "MaterialX" in r.getMessage()], caplog.text
     tex = fake.meshes()["/World/Quad"]["material"]["textures"]["diffuseColor"]
     assert tex["file"] == str(tmp_path / "wood.png")
-    assert tex["scale"][:3] == pytest.approx([0.25] * 3)
+    # ÷ 2 (ND_divide), passed through by ND_dot.
+    assert tex["scale"][:3] == pytest.approx([0.25 / 2] * 3)
     bg, less, more = (0.2, 0.4, 0.6), (0.05, 0.1, 0.15), (0.01, 0.02, 0.03)
-    bias = [b * 0.75 - c + d for b, c, d in zip(bg, less, more, strict=True)]
+    bias = [(b * 0.75 - c + d) / 2 for b, c, d in zip(bg, less, more, strict=True)]
     assert tex["bias"][:3] == pytest.approx(bias)
 
 

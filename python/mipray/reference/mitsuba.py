@@ -831,9 +831,10 @@ def _spot(
 ) -> dict[str, Any]:
     """A sphere light with ``ShapingAPI`` as Mitsuba's ``spot`` at its centre.
 
-    Intensity (W/sr per unit of UsdLux's radiance) is the sphere's seen from afar, radiance ·
-    πr² (its ``normalize`` already applied to ``radiance``): exact as r → 0, and a sphere of
-    radius r only blurs the cone's edge by about r/d radians at distance d. The spot points
+    Its intensity is the sphere's seen from afar, radiance · πr² (``normalize`` already
+    applied to ``radiance``): a uniform sphere above a point's horizon lights it exactly as that
+    point source does, and its radius r only blurs the cone's edge (and the shadows) by about
+    r/d radians at distance d. The spot points
     along the light's -Z. Mitsuba's own falloff ramps *linearly* in θ from ``beam_width`` to
     ``cutoff_angle``; UsdLux's is a smoothstep over the same interval (they agree at both ends
     and halfway, and differ by up to 0.096 at a fifth of the way in from either end). So the
