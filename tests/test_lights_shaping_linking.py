@@ -8,9 +8,11 @@ radiance albedo · E / π.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
+import pytest
 from pxr import Gf, Usd, UsdGeom, UsdLux
 
 import mipray
@@ -267,3 +269,32 @@ def test_a_rect_light_texture_colours_its_light_as_laid_over_the_rect(native, tm
     # mirrored, red and green would swap (about 4.5× on either end).
     assert np.allclose(got, want, rtol=0.1, atol=1e-6), (got, want)
     assert np.allclose(np.sum(got, axis=0), np.sum(want, axis=0), rtol=0.02, atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["rect", "dome"])
+def test_a_light_texture_that_cannot_be_read_is_named_once_and_lights_with_its_colour(
+    native, tmp_path, caplog, kind
+) -> None:
+    missing = tmp_path / "no-such-card.exr"
+    stage = stage_with_camera()
+    if kind == "rect":
+        light = UsdLux.RectLight.Define(stage, "/World/Light")
+        light.AddTranslateOp().Set(Gf.Vec3d(0, 0, 1.0))
+    else:
+        light = UsdLux.DomeLight.Define(stage, "/World/Light")
+    light.CreateIntensityAttr(2.0)
+    light.CreateTextureFileAttr(str(missing))
+    with caplog.at_level(logging.WARNING):
+        with mipray.RenderSession(stage) as session:
+            for _ in range(2):
+                got = session.render(
+                    "/World/Cam", width=24, settings={"samples": 2}, camera_light=False
+                )
+    named = [r.getMessage() for r in caplog.records if "no-such-card.exr" in r.getMessage()]
+    assert len(named) == 1 and "/World/Light" in named[0], named
+    # The frame renders as the same light without a texture.
+    light.GetPrim().RemoveProperty("inputs:texture:file")
+    plain = render(stage, 24, samples=2)
+    image = np.asarray(got.aovs["color"][..., :3], dtype=np.float64)
+    assert image.max() > 0.0
+    np.testing.assert_array_equal(image, plain)

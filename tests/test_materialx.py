@@ -120,6 +120,51 @@ def test_an_image_times_a_constant_is_a_texture_with_that_scale(fake, tmp_path) 
     assert args["st_values"].shape == (4, 2)  # the uv primvar the geompropvalue names
 
 
+def test_texcoord_constant_mix_arithmetic_and_dot_nodes_fold_into_the_textures_affine_map(
+    fake, tmp_path, caplog
+) -> None:
+    # base_color = dot((d + (mix(fg = image(texcoord), bg = constant, mix = constant) − c)) / 2)
+    # with MaterialX's mix = bg·(1 − w) + fg·w and dot a pass-through:
+    # texel·w/2 + (bg·(1 − w) − c + d)/2, worked out by hand.
+    stage = new_stage()
+    surface = mtlx_material(stage, "/Looks/M", "ND_standard_surface_surfaceshader", base=1.0)
+    coord = node(stage, "/Looks/M/Coord", "ND_texcoord_vector2", F2)
+    image = node(stage, "/Looks/M/Image", "ND_image_color3")
+    image.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(str(tmp_path / "wood.png"))
+    image.CreateInput("texcoord", F2).ConnectToSource(coord.ConnectableAPI(), "out")
+    bg = node(stage, "/Looks/M/Bg", "ND_constant_color3")
+    bg.CreateInput("value", C3).Set(Gf.Vec3f(0.2, 0.4, 0.6))
+    weight = node(stage, "/Looks/M/W", "ND_constant_float", F)
+    weight.CreateInput("value", F).Set(0.25)
+    mix = node(stage, "/Looks/M/Mix", "ND_mix_color3")
+    mix.CreateInput("fg", C3).ConnectToSource(image.ConnectableAPI(), "out")
+    mix.CreateInput("bg", C3).ConnectToSource(bg.ConnectableAPI(), "out")
+    mix.CreateInput("mix", F).ConnectToSource(weight.ConnectableAPI(), "out")
+    less = node(stage, "/Looks/M/Less", "ND_subtract_color3")
+    less.CreateInput("in1", C3).ConnectToSource(mix.ConnectableAPI(), "out")
+    less.CreateInput("in2", C3).Set(Gf.Vec3f(0.05, 0.1, 0.15))
+    more = node(stage, "/Looks/M/More", "ND_add_color3")
+    more.CreateInput("in1", C3).Set(Gf.Vec3f(0.01, 0.02, 0.03))
+    more.CreateInput("in2", C3).ConnectToSource(less.ConnectableAPI(), "out")
+    half = node(stage, "/Looks/M/Half", "ND_divide_color3")
+    half.CreateInput("in1", C3).ConnectToSource(more.ConnectableAPI(), "out")
+    half.CreateInput("in2", C3).Set(Gf.Vec3f(2.0, 2.0, 2.0))
+    passed = node(stage, "/Looks/M/Dot", "ND_dot_color3")
+    passed.CreateInput("in", C3).ConnectToSource(half.ConnectableAPI(), "out")
+    surface.CreateInput("base_color", C3).ConnectToSource(passed.ConnectableAPI(), "out")
+    bind(quad(stage).GetPrim(), UsdShade.Material.Get(stage, "/Looks/M"))
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        UsdSceneDelegate(stage, fake).sync()
+    assert not [r for r in caplog.records if "MaterialX" in r.getMessage()], caplog.text
+    tex = fake.meshes()["/World/Quad"]["material"]["textures"]["diffuseColor"]
+    assert tex["file"] == str(tmp_path / "wood.png")
+    # ÷ 2 (ND_divide), passed through by ND_dot.
+    assert tex["scale"][:3] == pytest.approx([0.25 / 2] * 3)
+    bg, less, more = (0.2, 0.4, 0.6), (0.05, 0.1, 0.15), (0.01, 0.02, 0.03)
+    bias = [(b * 0.75 - c + d) / 2 for b, c, d in zip(bg, less, more, strict=True)]
+    assert tex["bias"][:3] == pytest.approx(bias)
+
+
 def _render(stage: Usd.Stage) -> np.ndarray:
     add_camera(stage, "/World/Cam", eye=(0, 0, 2))
     add_distant_light(stage, "/World/Sun")
@@ -196,6 +241,34 @@ def test_an_unsupported_node_is_named_once_and_its_input_takes_the_default(fake,
     named = [r.getMessage() for r in caplog.records if "ND_fractal3d_color3" in r.getMessage()]
     assert len(named) == 1 and "/Looks/M" in named[0] and "/Looks/M/Noise" in named[0]
     assert any(u.what.startswith("MaterialX node") for u in scene.unsupported)
+
+
+def test_a_node_input_of_the_wrong_type_is_named_and_the_input_takes_its_default(
+    fake, caplog, tmp_path
+) -> None:
+    stage = new_stage()
+    surface = mtlx_material(stage, "/Looks/M", "ND_standard_surface_surfaceshader")
+    rough = node(stage, "/Looks/M/Rough", "ND_constant_float", F)
+    rough.CreateInput("value", Sdf.ValueTypeNames.String).Set("0.7")
+    surface.CreateInput("specular_roughness", F).ConnectToSource(rough.ConnectableAPI(), "out")
+    image = node(stage, "/Looks/M/Image", "ND_image_color3")
+    image.CreateInput("file", Sdf.ValueTypeNames.String).Set(str(tmp_path / "wood.png"))
+    surface.CreateInput("base_color", C3).ConnectToSource(image.ConnectableAPI(), "out")
+    bind(quad(stage).GetPrim(), UsdShade.Material.Get(stage, "/Looks/M"))
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    m = fake.meshes()["/World/Quad"]["material"]
+    # standard_surface's defaults: roughness 0.2; base_color the image's default (black).
+    assert m["roughness"] == pytest.approx(0.2) and "textures" not in m
+    # One warning each, naming the node, the input and (after "on") the material.
+    for where, what in (
+        ("/Looks/M/Rough", "input value of type string"),
+        ("/Looks/M/Image", "input file of type string"),
+    ):
+        named = [r.getMessage() for r in caplog.records if what in r.getMessage()]
+        assert len(named) == 1 and where in named[0], caplog.text
+        assert named[0].endswith("on /Looks/M"), named[0]
 
 
 # ------------------------------------------------------------ .mtlx files referenced

@@ -97,9 +97,9 @@ impl IesData {
     }
 }
 
-/// Lights and files already warned about (a bad IES file is named once, not every render).
-static IES_WARNED: std::sync::Mutex<std::collections::BTreeSet<(String, String)>> =
-    std::sync::Mutex::new(std::collections::BTreeSet::new());
+/// Lights and files already warned about: a bad IES file or a light texture that cannot be
+/// read is named once, not at every render (each render converts the lights again).
+static WARNED: std::sync::Mutex<std::collections::BTreeSet<(String, String)>> = std::sync::Mutex::new(std::collections::BTreeSet::new());
 
 /// Light and shadow linking, resolved by the scene delegate: the mesh prims (paths) a light's
 /// `collection:lightLink` leaves out, and those its `collection:shadowLink` leaves out.
@@ -181,7 +181,14 @@ impl LightPrim {
                                     glam::Mat3A::from_quat(m.to_scale_rotation_translation().1),
                                 )),
                                 Err(e) => {
-                                    log::warn!("{}: cannot read dome texture {file}: {}; lighting with its colour", self.path, e.message);
+                                    let mut warned = WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                                    if warned.insert((self.path.clone(), file.clone())) {
+                                        log::warn!(
+                                            "{}: cannot read dome texture {file}: {}; lighting with its colour",
+                                            self.path,
+                                            e.message
+                                        );
+                                    }
                                     None
                                 }
                             }
@@ -197,7 +204,12 @@ impl LightPrim {
         if let (Some(AreaKind::Rect { texture: Some(file), .. }), Some(sampler)) = (&self.area, textures) {
             match sampler.handle_encoded(file, mipray::texture::SourceColorSpace::Auto) {
                 Ok(texture) => l.texture = Some(mipray::light::RectTexture { sampler: sampler.clone(), texture }),
-                Err(e) => log::warn!("{}: cannot read rect light texture {file}: {}; lighting with its colour", self.path, e.message),
+                Err(e) => {
+                    let mut warned = WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                    if warned.insert((self.path.clone(), file.clone())) {
+                        log::warn!("{}: cannot read rect light texture {file}: {}; lighting with its colour", self.path, e.message);
+                    }
+                }
             }
         }
         if let (Some(sh), Some(AreaKind::Sphere { .. } | AreaKind::Rect { .. } | AreaKind::Disk { .. } | AreaKind::Cylinder { .. })) =
@@ -208,7 +220,7 @@ impl LightPrim {
             match sh.ies.as_ref().map(|ies| (ies, &ies.profile)) {
                 Some((ies, Ok(profile))) => {
                     if profile.kind != mipray::light::Photometry::C && ies.angle_scale != 0.0 {
-                        let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                        let mut warned = WARNED.lock().unwrap_or_else(|p| p.into_inner());
                         if warned.insert((self.path.clone(), format!("{} angleScale", ies.file))) {
                             log::warn!(
                                 "{}: ies:angleScale applies to type C profiles only; {} is type {:?}, rendered unscaled",
@@ -237,7 +249,7 @@ impl LightPrim {
                     l.profile_sampling = ies.profile_sampling;
                 }
                 Some((ies, Err(e))) => {
-                    let mut warned = IES_WARNED.lock().unwrap_or_else(|p| p.into_inner());
+                    let mut warned = WARNED.lock().unwrap_or_else(|p| p.into_inner());
                     if warned.insert((self.path.clone(), ies.file.clone())) {
                         log::warn!("{}: cannot read IES profile {}: {e}; the light renders without it", self.path, ies.file);
                     }

@@ -22,10 +22,18 @@ What maps how (render space is USD world space in both renderers):
   → ``directional`` of irradiance intensity·2^exposure·color; sphere → a
   ``sphere`` shape with an ``area`` emitter of that radiance (÷ area with
   ``normalize``) and a black BSDF; rect → ``rectangle``, disk → ``disk``,
-  both emitting along the light's -Z; dome (no texture) → ``constant``; a
-  polygonal mesh with MeshLightAPI → ``area`` emitters on its triangles (front
-  faces, and a turned-over copy when ``doubleSided``), black. Camera rays see
-  lights in both renderers (the dome as the background).
+  both emitting along the light's -Z, a rect's ``texture:file`` as a ``bitmap``
+  radiance (s along +X, t along +Y, clamped); cylinder → ``cylinder`` (along
+  the light's X, no caps, emitting outward); dome (no texture) → ``constant``;
+  a sphere light with ``ShapingAPI`` → ``spot`` (:func:`_spot`: Mitsuba's hard
+  cutoff at the cone angle, UsdLux's smoothstep softness and focus as the spot's
+  projected texture; a point, so a small sphere); a polygonal mesh with
+  MeshLightAPI → ``area`` emitters on its triangles (front faces, and a
+  turned-over copy when ``doubleSided``), black, each face's radiance tinted as
+  mipray tints it (its GeomSubset's or the mesh's ``emissiveColor``, a textured
+  one as a ``bitmap`` at the mesh's ``st``). Shaping on other lights, IES
+  profiles and dome textures are refused. Camera rays see lights in both
+  renderers (the dome as the background).
 - Materials (UsdPreviewSurface, clamped as mipray clamps them), wrapped in
   ``twosided`` because mipray shades both sides of a surface: no specular
   (F0 = 0, no clearcoat) → ``diffuse`` (exact); a full metal (metallic
@@ -271,6 +279,25 @@ def _bitmap(path: str, tex: dict[str, Any], normal: bool = False) -> dict[str, A
         "filter_type": "bilinear",
         "wrap_mode": _WRAP[next(iter(wraps))],
     }
+
+
+def _scaled_bitmap(
+    path: str, tex: dict[str, Any], scale: tuple[float, float, float]
+) -> dict[str, Any]:
+    """A texture's colour times ``scale`` as Mitsuba's ``bitmap`` (an emitter's radiance).
+
+    Mitsuba's bitmap has no scale, so Mitsuba decodes the file (:func:`_bitmap`'s rules:
+    its own sRGB curve where mipray reads sRGB) and the product is handed over as data.
+    """
+    mi = _mitsuba()
+    spec = _bitmap(path, tex)
+    bitmap = mi.Bitmap(spec.pop("filename"))
+    if spec["raw"]:
+        # A raw file's values as they are (convert would take an sRGB-tagged file's curve off).
+        bitmap.set_srgb_gamma(False)
+    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    data = np.array(linear, dtype=np.float32) * np.asarray(scale, dtype=np.float32)
+    return {**spec, "data": mi.TensorXf(data), "raw": True}
 
 
 def _surface(material: dict[str, Any] | None) -> dict[str, Any]:
@@ -677,6 +704,15 @@ def _light(mi: Any, path: str, args: dict[str, Any]) -> dict[str, Any]:
         if args.get("texture"):
             raise PrimError(path, "dome textures are not exported to Mitsuba")
         return {"type": "constant", "radiance": _spectrum(radiance)}
+    if args.get("ies_file"):
+        raise PrimError(path, "IES profiles are not exported to Mitsuba")
+    shaped = "cone_angle" in args
+    if shaped and kind != "sphere":
+        raise PrimError(
+            path,
+            f"ShapingAPI on a {kind} light is not exported to Mitsuba (only on a sphere light, "
+            "as a spot)",
+        )
     center = m[:3, 3]
     if kind == "sphere":
         scale = float(np.mean(np.linalg.norm(m[:3, :3], axis=0)))
@@ -684,6 +720,8 @@ def _light(mi: Any, path: str, args: dict[str, Any]) -> dict[str, Any]:
         area = 4.0 * math.pi * radius * radius
         if args.get("normalize"):
             radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
+        if shaped:
+            return _spot(mi, path, args, m, radiance, radius)
         return {
             "type": "sphere",
             "center": center.tolist(),
@@ -693,8 +731,11 @@ def _light(mi: Any, path: str, args: dict[str, Any]) -> dict[str, Any]:
         }
     if kind in ("rect", "disk"):
         if kind == "rect":
+            # Mitsuba's rectangle reads its texture at uv = ((x + 1)/2, (y + 1)/2) of its
+            # local square, v down the image; UsdLux's s runs along +X, t along +Y up the
+            # image: local y is the light's -Y.
             u = m[:3, :3] @ np.array([float(args.get("width", 1.0)) * 0.5, 0.0, 0.0])
-            v = m[:3, :3] @ np.array([0.0, float(args.get("height", 1.0)) * 0.5, 0.0])
+            v = m[:3, :3] @ np.array([0.0, -float(args.get("height", 1.0)) * 0.5, 0.0])
             area = 4.0 * float(np.linalg.norm(np.cross(u, v)))
         else:
             r = float(args.get("radius", 0.5))
@@ -709,13 +750,138 @@ def _light(mi: Any, path: str, args: dict[str, Any]) -> dict[str, Any]:
         n /= np.linalg.norm(n)
         to_world = np.eye(4)
         to_world[:3, 0], to_world[:3, 1], to_world[:3, 2], to_world[:3, 3] = u, v, n, center
+        emitted: dict[str, Any] = _spectrum(radiance)
+        if kind == "rect" and args.get("texture"):
+            # The light's colour times the texture (hdEmbree's rect texture), read with
+            # Hydra's sourceColorSpace auto and clamped at the rect's edges, as mipray does.
+            texture = {"file": args["texture"], "wrapS": "clamp", "wrapT": "clamp"}
+            emitted = _scaled_bitmap(path, texture, radiance)
         return {
             "type": "rectangle" if kind == "rect" else "disk",
+            "to_world": mi.ScalarTransform4f(to_world.tolist()),
+            "bsdf": black,
+            "emitter": {"type": "area", "radiance": emitted},
+        }
+    if kind == "cylinder":
+        # UsdLux: a tube along the light's X, no end caps, emitting outward; round under the
+        # mean of its Y and Z scales (as mipray). Mitsuba's cylinder: radius 1 about its +Z
+        # from z = 0 to 1, emitting outward; a right-handed frame keeps its normals so.
+        axis = m[:3, :3] @ np.array([float(args.get("length", 1.0)), 0.0, 0.0])
+        scale = float(np.mean(np.linalg.norm(m[:3, 1:3], axis=0)))
+        radius = float(args.get("radius", 0.5)) * scale
+        length = float(np.linalg.norm(axis))
+        if args.get("normalize"):
+            area = 2.0 * math.pi * radius * length
+            radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
+        a = axis / length
+        x = np.cross(a, [0.0, 1.0, 0.0] if abs(a[1]) < 0.9 else [1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        to_world = np.eye(4)
+        to_world[:3, 0], to_world[:3, 1] = radius * x, radius * np.cross(a, x)
+        to_world[:3, 2], to_world[:3, 3] = axis, center - 0.5 * axis
+        return {
+            "type": "cylinder",
             "to_world": mi.ScalarTransform4f(to_world.tolist()),
             "bsdf": black,
             "emitter": {"type": "area", "radiance": _spectrum(radiance)},
         }
     raise PrimError(path, f"light kind '{kind}' is not exported to Mitsuba")
+
+
+#: Texels a side of the bitmap carrying UsdLux's cone softness and focus on a Mitsuba spot.
+SPOT_TEXELS = 512
+
+
+def shaping_factor(
+    theta: NDArray[np.float64],
+    cone_deg: float,
+    softness: float,
+    focus: float,
+    focus_tint: tuple[float, float, float],
+) -> NDArray[np.float64]:
+    """UsdLux ShapingAPI's factor at angles ``theta`` (radians) off the light's axis, (..., 3).
+
+    As Hydra's hdEmbree applies it (and ``mipray::light::Shaping`` documents it):
+    ``lerp(|cos θ|^focus, focusTint, 1)`` when focus > 0, times
+    ``1 − smoothstep(θ; θsoft, θcone)`` with θcone = cone angle and θsoft = θcone·(1 − softness)
+    (softness 0: a hard edge at θcone). Written here from the schema, apart from the core's.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    out = np.ones((*theta.shape, 3))
+    if focus > 0.0:
+        ff = np.abs(np.cos(theta)) ** focus
+        tint = np.asarray(focus_tint, dtype=np.float64)
+        out = tint + (1.0 - tint) * ff[..., None]
+    cone = math.radians(min(max(cone_deg, 0.0), 180.0))
+    if cone < math.pi:
+        soft = cone * (1.0 - min(max(softness, 0.0), 1.0))
+        t = np.clip((theta - soft) / max(cone - soft, 1e-30), 0.0, 1.0)
+        step = np.where(theta >= cone, 1.0, np.where(theta <= soft, 0.0, t * t * (3.0 - 2.0 * t)))
+        out = out * (1.0 - step)[..., None]
+    return out
+
+
+def _spot(
+    mi: Any,
+    path: str,
+    args: dict[str, Any],
+    m: NDArray[np.float64],
+    radiance: tuple[float, float, float],
+    radius: float,
+) -> dict[str, Any]:
+    """A sphere light with ``ShapingAPI`` as Mitsuba's ``spot`` at its centre.
+
+    Its intensity is the sphere's seen from afar, radiance · πr² (``normalize`` already
+    applied to ``radiance``): a uniform sphere above a point's horizon lights it exactly as that
+    point source does, and its radius r only blurs the cone's edge (and the shadows) by about
+    r/d radians at distance d. The spot points
+    along the light's -Z. Mitsuba's own falloff ramps *linearly* in θ from ``beam_width`` to
+    ``cutoff_angle``; UsdLux's is a smoothstep over the same interval (they agree at both ends
+    and halfway, and differ by up to 0.096 at a fifth of the way in from either end). So the
+    spot's edge is Mitsuba's hard ``cutoff_angle`` = cone angle (``beam_width`` the same), and
+    softness and focus ride on the spot's projected ``texture``: a bitmap over its tangent
+    plane (uv = ½ + ½·(x/z, y/z)/tan(cutoff)) holding :func:`shaping_factor`, SPOT_TEXELS a
+    side, read bilinearly. That needs a cone under 89°; a hard cone alone needs no texture.
+    """
+    cone = float(args["cone_angle"])
+    softness = min(max(float(args.get("cone_softness", 0.0)), 0.0), 1.0)
+    focus = max(float(args.get("focus", 0.0)), 0.0)
+    tint = tuple(float(c) for c in args.get("focus_tint", (0.0, 0.0, 0.0)))
+    axis = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    axis /= np.linalg.norm(axis)
+    side = np.cross(axis, [0.0, 1.0, 0.0] if abs(axis[1]) < 0.9 else [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    to_world = np.eye(4)
+    to_world[:3, 0], to_world[:3, 1] = side, np.cross(axis, side)
+    to_world[:3, 2], to_world[:3, 3] = axis, m[:3, 3]
+    area = math.pi * radius * radius
+    spot: dict[str, Any] = {
+        "type": "spot",
+        "to_world": mi.ScalarTransform4f(to_world.tolist()),
+        "intensity": _spectrum((radiance[0] * area, radiance[1] * area, radiance[2] * area)),
+        "cutoff_angle": min(cone, 180.0),
+        "beam_width": min(cone, 180.0),
+    }
+    if softness > 0.0 or focus > 0.0:
+        if not 0.0 < cone < 89.0:
+            raise PrimError(
+                path,
+                f"a shaped light of cone angle {cone:g} with softness or focus is not exported "
+                "to Mitsuba (its spot's texture needs a cone under 89 degrees)",
+            )
+        n = SPOT_TEXELS
+        c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+        x, y = np.meshgrid(c, c)
+        theta = np.arctan(np.hypot(x, y) * math.tan(math.radians(cone)))
+        factor = shaping_factor(theta, cone, softness, focus, (tint[0], tint[1], tint[2]))
+        spot["texture"] = {
+            "type": "bitmap",
+            "data": mi.TensorXf(factor.astype(np.float32)),
+            "raw": True,
+            "filter_type": "bilinear",
+            "wrap_mode": "clamp",
+        }
+    return spot
 
 
 # ----------------------------------------------------------------------------- camera
@@ -904,12 +1070,17 @@ def _mesh_light(
     """A mesh light (``set_mesh``'s ``light``) as Mitsuba area emitters on its triangles.
 
     Black (mipray's mesh lights reflect nothing), emitting from the front faces, and from
-    the turned-over copy too when ``double_sided``; ``tint`` multiplies the radiance by the
-    material's ``emissiveColor`` as mipray does. Only polygonal meshes: a subdivision
-    surface's lighting tessellation is mipray's own.
+    the turned-over copy too when ``double_sided``. Under ``tint`` / ``tint_materials``
+    (UsdLux ``materialGlowTintsLight``) each face's radiance is multiplied by what mipray's
+    render delegate gives it: a GeomSubset's faces whose material is in ``tint_materials``
+    that material's ``emissiveColor``, the other faces the mesh's own material's under
+    ``tint`` (else the light's colour alone); a textured ``emissiveColor`` is a ``bitmap``
+    radiance read at the mesh's ``st``. Only polygonal meshes: a subdivision surface's
+    lighting tessellation is mipray's own.
 
     Raises:
-        PrimError: a subdivision mesh light, or one that casts no shadows.
+        PrimError: a subdivision mesh light, one that casts no shadows, or a textured tint
+            on a mesh without ``st``.
 
     """
     light = args["light"]
@@ -918,13 +1089,6 @@ def _mesh_light(
     if not light.get("shadow_enable", True):
         raise PrimError(path, "inputs:shadow:enable is off: Mitsuba's lights always cast shadows")
     radiance = _light_radiance(light)
-    if light.get("tint"):
-        # UsdLux materialGlowTintsLight: the bound material's emissiveColor multiplies it.
-        material = args.get("material") or {}
-        if "emissiveColor" in (material.get("textures") or {}):
-            raise PrimError(path, "a mesh light tinted by a textured emissiveColor is not exported")
-        tint = _rgb(material.get("emissiveColor"), (0.0, 0.0, 0.0))
-        radiance = (radiance[0] * tint[0], radiance[1] * tint[1], radiance[2] * tint[2])
     if light.get("normalize"):
         corners = points[tris[:, :3]]
         cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
@@ -932,15 +1096,62 @@ def _mesh_light(
         radiance = (radiance[0] / area, radiance[1] / area, radiance[2] / area)
     black = {"type": "diffuse", "reflectance": _spectrum((0.0, 0.0, 0.0))}
 
-    def props() -> Any:
-        p = mi.Properties()
-        p["bsdf"] = mi.load_dict(black)
-        p["emitter"] = mi.load_dict({"type": "area", "radiance": _spectrum(radiance)})
-        return p
+    def emission(material: dict[str, Any] | None) -> tuple[str, Any]:
+        """A face group's tint: ("rgb", colour) or ("texture", the emissiveColor texture)."""
+        if material is None:
+            return ("rgb", (1.0, 1.0, 1.0))
+        tex = (material.get("textures") or {}).get("emissiveColor")
+        if tex is not None:
+            return ("texture", tex)
+        tint = _rgb(material.get("emissiveColor"), (0.0, 0.0, 0.0))
+        return ("rgb", tuple(0.0 if math.isnan(c) else max(c, 0.0) for c in tint))
 
-    out = {key: _mesh(mi, path, points, tris, props())}
-    if args.get("double_sided"):
-        out[f"{key}_back"] = _mesh(mi, f"{path} back", *_back_faces(points, tris), props())
+    own = emission(args.get("material") if light.get("tint") else None)
+    own_name = (args.get("material") or {}).get("name") if light.get("tint") else None
+    tinting = set(light.get("tint_materials") or [])
+    # Per triangle: an index into `kinds` (0 the mesh's own emission).
+    kinds: list[tuple[str, Any]] = [own]
+    slot = np.zeros(len(tris), dtype=np.int64)
+    table = args.get("face_material_indices")
+    if table is not None and tinting:
+        face_group = np.asarray(table, dtype=np.int64)[tris[:, 3]]
+        for g in np.unique(face_group).tolist():
+            if g < 0:
+                continue
+            material = args["face_materials"][g]
+            if material.get("name") in tinting:
+                kinds.append(emission(material))
+                slot[face_group == g] = len(kinds) - 1
+            elif material.get("name") != own_name:
+                kinds.append(("rgb", (1.0, 1.0, 1.0)))
+                slot[face_group == g] = len(kinds) - 1
+    out: dict[str, Any] = {}
+    for j, (what, value) in enumerate(kinds):
+        sel = tris[slot == j]
+        if len(sel) == 0:
+            continue
+        st = None
+        if what == "texture":
+            st = _face_vertex_st(path, args)
+            if st is None:
+                raise PrimError(path, "a mesh light tinted by a texture on a mesh without st")
+            emitted = _scaled_bitmap(path, value, radiance)
+        else:
+            emitted = _spectrum(tuple(r * c for r, c in zip(radiance, value, strict=True)))
+
+        def props(emitter: dict[str, Any] = emitted) -> Any:
+            p = mi.Properties()
+            p["bsdf"] = mi.load_dict(black)
+            p["emitter"] = mi.load_dict({"type": "area", "radiance": emitter})
+            return p
+
+        name = f"{key}_{j}"
+        out[name] = _mesh(mi, f"{path}[{j}]", points, sel, props(), st)
+        if args.get("double_sided"):
+            back_points, back_tris = _back_faces(points, sel)
+            out[f"{name}_back"] = _mesh(
+                mi, f"{path}[{j}] back", back_points, back_tris, props(), st
+            )
     return out
 
 
@@ -960,7 +1171,8 @@ def _back_faces(
     size = float(np.ptp(corners.reshape(-1, 3), axis=0).max())
     moved = corners[:, ::-1] - (1e-5 * size) * n[:, None, :]
     idx = np.arange(3 * len(tris), dtype=np.int64).reshape(-1, 3)
-    faces = np.hstack([idx, tris[:, 3:]])
+    # The face, and its corners' face-vertex positions in the turned-over order.
+    faces = np.hstack([idx, tris[:, 3:4], tris[:, 6:3:-1]])
     return moved.reshape(-1, 3), faces
 
 

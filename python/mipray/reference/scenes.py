@@ -31,7 +31,7 @@ from typing import Any
 
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
-__all__ = ["RADIUS_SCALED", "SCENES", "Scene", "by_name"]
+__all__ = ["BROKEN", "RADIUS_SCALED", "SCENES", "Scene", "by_name"]
 
 Vec3 = tuple[float, float, float]
 
@@ -294,28 +294,30 @@ def _disk_light() -> Usd.Stage:
     return stage
 
 
+def _cylinder_light(axis_y: bool = False) -> Usd.Stage:
+    """A long thin CylinderLight above and behind the objects, out of the frame.
+
+    Along its X (world X), tilted 20° about it; ``axis_y``: turned to lie along world Y
+    instead (for checking that the comparison sees the tube's axis).
+    """
+    stage = _stage()
+    _still_life(stage)
+    light = UsdLux.CylinderLight.Define(stage, "/World/Tube")
+    _set(light, 10.0, (1.0, 0.9, 0.75))
+    light.CreateRadiusAttr(0.15)
+    light.CreateLengthAttr(3.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(-0.5, 3.2, -1.8))
+    if axis_y:
+        light.AddRotateZOp().Set(90.0)
+    light.AddRotateXOp().Set(20.0)
+    return stage
+
+
 def _mesh_light() -> Usd.Stage:
     stage = _stage()
     _still_life(stage)
-    # An L of three unit squares (0.8 units here), high above the objects and out of the
-    # frame (where the rect light sits), facing the origin: its right-hand normal e1 × e2 is
-    # the direction d from it to the origin.
-    c, s = (-1.0, 4.5, -2.0), 0.8
-    length = math.sqrt(1.0 + 4.5**2 + 2.0**2)
-    d = (1.0 / length, -4.5 / length, 2.0 / length)
-    across = math.hypot(d[0], d[2])
-    u = (-d[2] / across, 0.0, d[0] / across)  # d × +Y, normalized
-    v = (d[1] * u[2] - d[2] * u[1], d[2] * u[0] - d[0] * u[2], d[0] * u[1] - d[1] * u[0])
-    e1, e2 = tuple(s * x for x in u), tuple(s * x for x in v)
-    grid = [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1), (0, 2), (1, 2)]
-    points = [
-        tuple(c[k] + (x - 1.0) * e1[k] + (y - 1.0) * e2[k] for k in range(3)) for x, y in grid
-    ]
-    mesh = UsdGeom.Mesh.Define(stage, "/World/Glow")
-    mesh.CreatePointsAttr([Gf.Vec3f(*p) for p in points])
-    mesh.CreateFaceVertexCountsAttr([4, 4, 4])
-    mesh.CreateFaceVertexIndicesAttr([0, 1, 4, 3, 1, 2, 5, 4, 3, 4, 7, 6])
-    mesh.CreateSubdivisionSchemeAttr("none")
+    # The L sits where the rect light does, facing the objects.
+    mesh = _l_mesh(stage, "/World/Glow")
     light = UsdLux.MeshLightAPI.Apply(mesh.GetPrim())
     UsdLux.LightAPI(light).CreateIntensityAttr(12.0)
     UsdLux.LightAPI(light).CreateColorAttr(Gf.Vec3f(1.0, 0.85, 0.7))
@@ -328,6 +330,199 @@ def _dome() -> Usd.Stage:
     dome = UsdLux.DomeLight.Define(stage, "/World/Sky")
     _set(dome, 1.0, (0.8, 0.9, 1.0))
     return stage
+
+
+def _spot(
+    cone: float = 22.0, softness: float = 0.0, focus: float = 0.0, tint: Vec3 = (0.0, 0.0, 0.0)
+) -> Callable[[], Usd.Stage]:
+    """The still life under a small sphere light with ShapingAPI, aimed at the scene.
+
+    Radius 0.02 at about 5.4 units (Mitsuba's ``spot`` is a point: the sphere blurs the
+    cone's edge by 0.2°), normalized, so its intensity is 120/4 W/sr at the axis; the cone's
+    edge crosses the ground, the box and the ball. ``cone`` = 180 is no cone.
+    """
+
+    def build() -> Usd.Stage:
+        stage = _stage()
+        _still_life(stage)
+        light = UsdLux.SphereLight.Define(stage, "/World/Spot")
+        _set(light, 120.0, (1.0, 0.95, 0.85))
+        light.CreateRadiusAttr(0.02)
+        light.CreateNormalizeAttr(True)
+        _place(light, (2.0, 5.0, 1.5), (0.1, 0.3, -0.2))
+        if cone < 180.0 or focus > 0.0:
+            shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
+            shaping.CreateShapingConeAngleAttr(cone)
+            shaping.CreateShapingConeSoftnessAttr(softness)
+            shaping.CreateShapingFocusAttr(focus)
+            shaping.CreateShapingFocusTintAttr(Gf.Vec3f(*tint))
+        return stage
+
+    return build
+
+
+#: The soft spot's shaping: (cone angle in degrees, softness, focus, focus tint).
+SOFT_SPOT = (30.0, 0.6, 3.0, (0.3, 0.15, 0.05))
+
+
+def light_texture_file() -> str:
+    """An 8-bit sRGB PNG for a rect light: red rising along s, blue falling, green with t.
+
+    A flipped or swapped coordinate moves colour across what the light lights.
+    """
+    import numpy as np
+
+    def ramps(s: Any, t: Any) -> Any:
+        return np.stack([0.1 + 0.9 * s, 0.15 + 0.7 * t * t, 1.0 - 0.9 * s * t], axis=-1)
+
+    return _png_once("light-ramps-v1.png", 64, np.float32, ramps)
+
+
+def _textured_rect_light(flip_t: bool = False) -> Usd.Stage:
+    """A big rect light with ``texture:file`` close over the objects, out of the frame.
+
+    With ``flip_t`` the texture is a copy turned upside down (for checking that the
+    comparison sees the texture's orientation).
+    """
+    stage = _stage()
+    _still_life(stage)
+    light = UsdLux.RectLight.Define(stage, "/World/Panel")
+    _set(light, 6.0)
+    light.CreateWidthAttr(4.0)
+    light.CreateHeightAttr(3.0)
+    file = light_texture_file()
+    if flip_t:
+        file = _flipped(file)
+    light.CreateTextureFileAttr(file)
+    _place(light, (-1.5, 3.5, -2.5), (0.0, 0.0, 0.0))
+    return stage
+
+
+def _rect_light_untextured() -> Usd.Stage:
+    stage = _textured_rect_light()
+    stage.GetPrimAtPath("/World/Panel").GetAttribute("inputs:texture:file").Clear()
+    return stage
+
+
+def _flipped(file: str) -> str:
+    """``file`` (a PNG this module wrote) upside down, beside it (its codes as they are)."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from mipray import _mipray
+
+    out = file[: -len(".png")] + "-flipped.png"
+    if not Path(out).exists():
+        pixels, _ = _mipray.read_image(file)
+        codes = np.ascontiguousarray(pixels[::-1, :, :3], dtype=np.float32)
+        _mipray.write_image(out, {"color": codes}, atomic=True)
+    return out
+
+
+def _l_mesh(stage: Usd.Stage, path: str) -> UsdGeom.Mesh:
+    """An L of three squares (0.8 units) high above the objects and out of the frame.
+
+    Facing the origin: its right-hand normal e1 × e2 is the direction from it to the origin;
+    faces 0 and 1 are the L's foot, 2 its upright; vertex ``st`` (0.5 per square).
+    """
+    c, s = (-1.0, 4.5, -2.0), 0.8
+    length = math.sqrt(1.0 + 4.5**2 + 2.0**2)
+    d = (1.0 / length, -4.5 / length, 2.0 / length)
+    across = math.hypot(d[0], d[2])
+    u = (-d[2] / across, 0.0, d[0] / across)  # d × +Y, normalized
+    v = (d[1] * u[2] - d[2] * u[1], d[2] * u[0] - d[0] * u[2], d[0] * u[1] - d[1] * u[0])
+    e1, e2 = tuple(s * x for x in u), tuple(s * x for x in v)
+    grid = [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1), (0, 2), (1, 2)]
+    points = [
+        tuple(c[k] + (x - 1.0) * e1[k] + (y - 1.0) * e2[k] for k in range(3)) for x, y in grid
+    ]
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr([Gf.Vec3f(*p) for p in points])
+    mesh.CreateFaceVertexCountsAttr([4, 4, 4])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 4, 3, 1, 2, 5, 4, 3, 4, 7, 6])
+    mesh.CreateSubdivisionSchemeAttr("none")
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    )
+    st.Set([(0.5 * x, 0.5 * y) for x, y in grid])
+    return mesh
+
+
+def _mesh_light_subsets(one_tint: bool = False) -> Usd.Stage:
+    """mesh_light's L, its foot warm and its upright cool (``one_tint``: both warm)."""
+    stage = _stage()
+    _still_life(stage)
+    mesh = _l_mesh(stage, "/World/Glow")
+    light = UsdLux.MeshLightAPI.Apply(mesh.GetPrim())
+    UsdLux.LightAPI(light).CreateIntensityAttr(12.0)
+    # materialGlowTintsLight (MeshLightAPI's fallback): each subset's emissiveColor tints it.
+    warm = _material(stage, "Warm", diffuseColor=(0.0, 0.0, 0.0), emissiveColor=(1.0, 0.45, 0.1))
+    cool = _material(stage, "Cool", diffuseColor=(0.0, 0.0, 0.0), emissiveColor=(0.1, 0.5, 1.0))
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+    for name, faces, material in (
+        ("Foot", [0, 1], warm),
+        ("Upright", [2], warm if one_tint else cool),
+    ):
+        subset = UsdGeom.Subset.CreateGeomSubset(
+            mesh, name, UsdGeom.Tokens.face, faces, UsdShade.Tokens.materialBind
+        )
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(material)
+    return stage
+
+
+def _mesh_light_textured(flip_t: bool = False) -> Usd.Stage:
+    """mesh_light's L emitting a texture (``flip_t``: the texture upside down)."""
+    stage = _stage()
+    _still_life(stage)
+    mesh = _l_mesh(stage, "/World/Glow")
+    light = UsdLux.MeshLightAPI.Apply(mesh.GetPrim())
+    UsdLux.LightAPI(light).CreateIntensityAttr(16.0)
+    glow = _material(stage, "Glow", diffuseColor=(0.0, 0.0, 0.0))
+    shader = UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/Glow/Surface"))
+    file = _flipped(light_texture_file()) if flip_t else light_texture_file()
+    tex = _uv_texture(stage, "/World/Looks/Glow", "Texture", file)
+    shader.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+        tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    )
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(glow)
+    return stage
+
+
+def textured_package() -> str:
+    """*textured*'s stage as a ``.usdz`` package holding its texture (written once).
+
+    The layer names the texture by a package-relative path, so it is read from inside the
+    package (mipray through usd-core's resolver).
+    """
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    from pxr import UsdUtils
+
+    folder = Path(tempfile.gettempdir()) / "mipray-reference"
+    package = folder / "textured-v1.usdz"
+    if package.exists():
+        return str(package)
+    work = Path(tempfile.mkdtemp(dir=folder.parent, prefix="mipray-usdz-"))
+    try:
+        shutil.copy(texture_file(), work / "waves.png")
+        stage = _stage()
+        _still_life(stage, ground_material=textured_lambert(stage, "Waves", "./waves.png"))
+        _sun(stage, (3.0, 5.0, 2.0))
+        stage.GetRootLayer().Export(str(work / "textured.usdc"))
+        if not UsdUtils.CreateNewUsdzPackage(str(work / "textured.usdc"), str(work / "p.usdz")):
+            raise RuntimeError(f"could not package {work / 'textured.usdc'}")
+        # Renamed into place: a concurrent run sees the whole package or none.
+        (work / "p.usdz").replace(package)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return str(package)
+
+
+def _textured_usdz() -> Usd.Stage:
+    return Usd.Stage.Open(textured_package())
 
 
 def _mirror() -> Usd.Stage:
@@ -476,6 +671,40 @@ def _sun(stage: Usd.Stage, eye: Vec3) -> None:
 def _textured() -> Usd.Stage:
     stage = _stage()
     _still_life(stage, ground_material=textured_lambert(stage, "Waves", texture_file()))
+    _sun(stage, (3.0, 5.0, 2.0))
+    return stage
+
+
+def _subsets_textured(bind_subset: bool = True) -> Usd.Stage:
+    """The still life on a ground of two quads, the left one a textured GeomSubset.
+
+    A materialBind subset gives the left quad the textured material (its whole network); the
+    right one keeps the mesh's grey.
+
+    ``bind_subset`` False leaves the subset unbound (the whole ground grey: what a renderer
+    that drops subset bindings shows).
+    """
+    stage = _stage()
+    _still_life(stage)
+    h = 4.0
+    mesh = _mesh(
+        stage,
+        "/World/Ground",
+        [(-h, 0, h), (0, 0, h), (h, 0, h), (h, 0, -h), (0, 0, -h), (-h, 0, -h)],
+        [4, 4],
+        [0, 1, 4, 5, 1, 2, 3, 4],
+        lambert(stage, "Ground", (0.6, 0.6, 0.6)),
+    )
+    primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
+    )
+    primvar.Set([(0, 0), (0.5, 0), (0.5, 1), (0, 1), (0.5, 0), (1, 0), (1, 1), (0.5, 1)])
+    subset = UsdGeom.Subset.CreateGeomSubset(
+        mesh, "Left", UsdGeom.Tokens.face, [0], UsdShade.Tokens.materialBind
+    )
+    if bind_subset:
+        waves = textured_lambert(stage, "Waves", texture_file())
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(waves)
     _sun(stage, (3.0, 5.0, 2.0))
     return stage
 
@@ -742,11 +971,35 @@ RADIUS_SCALED: dict[str, Callable[[float], Usd.Stage]] = {
 }
 
 
-def _direct(samples: int) -> dict[str, Any]:
+#: Per light (and subset) scene: Mitsuba stages with the feature the scene checks broken, each
+#: as the export (or mipray) would render it with that bug, for checking that the comparison
+#: sees it.
+BROKEN: dict[str, dict[str, Callable[[], Usd.Stage]]] = {
+    "subsets_textured": {"subset binding dropped": lambda: _subsets_textured(bind_subset=False)},
+    "cylinder_light": {"axis along Y": lambda: _cylinder_light(axis_y=True)},
+    "spot_light": {"cone ignored": _spot(180.0)},
+    "spot_light_soft": {
+        "softness ignored": _spot(SOFT_SPOT[0], 0.0, SOFT_SPOT[2], SOFT_SPOT[3]),
+        "focus ignored": _spot(SOFT_SPOT[0], SOFT_SPOT[1], 0.0),
+    },
+    "rect_light_textured": {
+        "texture ignored": _rect_light_untextured,
+        "texture upside down": lambda: _textured_rect_light(flip_t=True),
+    },
+    "mesh_light_subsets": {"one tint": lambda: _mesh_light_subsets(one_tint=True)},
+    "mesh_light_textured": {"texture upside down": lambda: _mesh_light_textured(flip_t=True)},
+}
+
+
+def _direct(samples: int, delta: bool = False) -> dict[str, Any]:
     """Mitsuba's direct-light integrator with ``samples`` light samples.
 
     mipray's ``shadowSamples`` and no BSDF samples: what its classic integrator estimates.
+    ``delta``: the scene's light is a point (a spot), which needs one sample, and must have
+    one: Mitsuba 3.9's ``direct`` sums a delta emitter's samples without dividing by their
+    number (4 emitter samples light a spot 4 times over; measured).
     """
+    assert samples == 1 or not delta
     return {"type": "direct", "emitter_samples": samples, "bsdf_samples": 0}
 
 
@@ -847,10 +1100,59 @@ SCENES: tuple[Scene, ...] = (
         integrator=_direct(4),
     ),
     Scene(
+        "cylinder_light",
+        "the same under a CylinderLight 3 long and 0.15 in radius (along its X, no end caps, "
+        "emitting outward) against Mitsuba's cylinder with an area emitter",
+        _cylinder_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
         "mesh_light",
         "the same under an L-shaped polygonal mesh with MeshLightAPI (one-sided, facing the "
         "objects from above): area sampling over its triangles against Mitsuba's area emitter",
         _mesh_light,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "mesh_light_subsets",
+        "mesh_light's L with two materialBind GeomSubsets, warm and cool emissiveColor "
+        "(materialGlowTintsLight): each subset's faces emit their own material's colour",
+        _mesh_light_subsets,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "mesh_light_textured",
+        "mesh_light's L tinted by a textured emissiveColor (8-bit sRGB PNG, vertex st): "
+        "radiance read at each emitting point against Mitsuba's bitmap radiance",
+        _mesh_light_textured,
+        settings={"shadowSamples": 4},
+        integrator=_direct(4),
+    ),
+    Scene(
+        "spot_light",
+        "the same under a small sphere light (radius 0.02) with ShapingAPI, a hard 22° cone "
+        "crossing the ground, box and ball, against Mitsuba's spot of that cutoff",
+        _spot(),
+        settings={"shadowSamples": 4},
+        integrator=_direct(1, delta=True),
+    ),
+    Scene(
+        "spot_light_soft",
+        "the same spot with a 30° cone, softness 0.6, focus 3 and focus tint (0.3, 0.15, "
+        "0.05): UsdLux's smoothstep and focus as the Mitsuba spot's projected texture",
+        _spot(*SOFT_SPOT),
+        settings={"shadowSamples": 4},
+        integrator=_direct(1, delta=True),
+    ),
+    Scene(
+        "rect_light_textured",
+        "a 4 × 3 rect light with texture:file (an 8-bit sRGB PNG of colour ramps), over the "
+        "objects: s along its +X, t along its +Y, against Mitsuba's rectangle with a bitmap "
+        "radiance",
+        _textured_rect_light,
         settings={"shadowSamples": 4},
         integrator=_direct(4),
     ),
@@ -867,6 +1169,20 @@ SCENES: tuple[Scene, ...] = (
         "sourceColorSpace auto): texture coordinates, sRGB decoding and filtering; Mitsuba "
         "decodes the file itself",
         _textured,
+        settings={},
+    ),
+    Scene(
+        "subsets_textured",
+        "the still life on a two-quad ground whose left quad is a materialBind GeomSubset "
+        "bound to textured's material (texture included), the right one the mesh's grey",
+        _subsets_textured,
+        settings={},
+    ),
+    Scene(
+        "textured_usdz",
+        "textured's stage packaged in a .usdz with its PNG: the texture read from inside the "
+        "package (usd-core's resolver); the export hands Mitsuba the file extracted from it",
+        _textured_usdz,
         settings={},
     ),
     Scene(

@@ -11,9 +11,11 @@ map (``texel · scale + bias``, what a ``UsdUVTexture`` is): ``ND_constant_*``,
 ``ND_image_*`` / ``ND_tiledimage_*`` (their ``texcoord`` from ``ND_texcoord_vector2`` or
 ``ND_geompropvalue_vector2``), ``ND_normalmap*`` on ``normal``, and ``ND_multiply_*``,
 ``ND_add_*``, ``ND_subtract_*``, ``ND_divide_*`` and ``ND_mix_*`` where at most one operand is a
-texture. Anything else — another node, two textures combined — leaves the input at its
-default; the stats' ``unsupported`` list names the material and the node, with one warning
-(:mod:`mipray.usd.unsupported`, row ``MaterialX node``).
+texture. Anything else — another node, two textures combined, an input value of the wrong
+type (a string where a number goes, an image's ``file`` that is no asset) — leaves the input
+at its default; the stats' ``unsupported`` list names the material and the node (and the
+input, for a wrong type), with one warning (:mod:`mipray.usd.unsupported`, row
+``MaterialX node``).
 """
 
 from __future__ import annotations
@@ -138,7 +140,15 @@ class _Eval:
         for attr in inp.GetValueProducingAttributes():
             if UsdShade.Utils.GetType(attr.GetName()) == UsdShade.AttributeType.Output:
                 return self.node(UsdShade.Shader(attr.GetPrim()))
-            return _floats(attr.Get(self.time)) if attr.HasAuthoredValue() else None
+            if not attr.HasAuthoredValue():
+                return None
+            value = _floats(attr.Get(self.time))
+            if value is None:
+                # A value of the wrong type (a string where a number goes): named, and the
+                # input is left at its default rather than read as something else.
+                kind = attr.GetTypeName()
+                self._skip(shader, f"{shader.GetShaderId() or 'no id'} input {name} of type {kind}")
+            return value
         return None
 
     def _skip(self, node: UsdShade.Shader, node_id: str) -> None:
@@ -179,6 +189,10 @@ class _Eval:
         attrs = file_inp.GetValueProducingAttributes() if file_inp else []
         value = attrs[0].Get(self.time) if attrs else None
         default = _floats(_get(node, "default", self.time)) or (0.0,)
+        if value is not None and not isinstance(value, Sdf.AssetPath):
+            kind = attrs[0].GetTypeName()
+            self._skip(node, f"{node_id} input file of type {kind} (not an asset)")
+            return default
         if not isinstance(value, Sdf.AssetPath) or not value.path:
             return default
         from .shading import _resolve
