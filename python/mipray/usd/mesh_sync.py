@@ -19,6 +19,7 @@ from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
 from .curves import CURVE_TYPES
+from .deform import moves_by_velocities
 from .face_albedo import compute_surface_albedo, material_subsets
 from .gprim import curve_colors, gprim_arguments, point_colors
 from .material import compute_albedo, display_opacity, lambertian
@@ -70,7 +71,9 @@ def read_mesh(
             prim, or the GeomSubset at fault).
 
     """
-    data_varies = any(
+    # A mesh moving by velocities from one points sample is re-read and blurred like one whose
+    # points are sampled twice (ValueMightBeTimeVarying is False for one sample).
+    data_varies = moves_by_velocities(prim) or any(
         a.ValueMightBeTimeVarying()
         for a in prim.GetAuthoredAttributes()
         if not a.GetName().startswith("xformOp")
