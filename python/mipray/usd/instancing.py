@@ -47,11 +47,13 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
+from .deform import deformation_samples
 from .gprim import is_renderable_gprim
 from .light import link_arguments, material_tints, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
+from .skel import SkelPoser, is_skinned
 from .transform import ancestors_might_vary, matrix_to_numpy, shutter_times, world_transform
 
 __all__ = [
@@ -283,6 +285,12 @@ class Instancing:
         # Each prototype mesh sent: its USD path and its prototype root's (its own motion there).
         self._sent_members: dict[str, tuple[str, str]] = {}
         self._moving_members: set[str] = set()  # prototype meshes last sent motion
+        # Prototype meshes whose points might move within a shutter (time-sampled points or
+        # velocities; not lights nor skinned meshes, which render at the frame's time), and
+        # those last sent points over the shutter (set_deformation).
+        self._might_deform: set[str] = set()
+        self._deforming: set[str] = set()
+        self._poser = SkelPoser()
         self._moving: set[str] = set()  # instancers last sent motion
         self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
@@ -378,6 +386,10 @@ class Instancing:
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
             self._sent_members[dpath] = (path, str(root.GetPath()))
+            if read.might_vary and light is None and not is_skinned(prim):
+                self._might_deform.add(dpath)
+            else:
+                self._might_deform.discard(dpath)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -846,6 +858,38 @@ class Instancing:
                     dpath, np.zeros(0, np.float32), np.zeros((0, 4, 4), np.float64)
                 )
         self._moving_members = moving
+        self._update_member_deformation(time, shutter)
+
+    def _update_member_deformation(self, time: Usd.TimeCode, shutter: tuple[float, float]) -> None:
+        """Send the prototype meshes whose points move within the shutter those points.
+
+        Deformation motion blur inside prototypes (:mod:`mipray.usd.deform`): the points are
+        in the mesh's object space, which its transform to the prototype's root and then each
+        instance's placement carry, so the one deforming prototype mesh deforms in every
+        instance. Those that stopped deforming have their samples cleared.
+        """
+        deforming: set[str] = set()
+        if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
+            for dpath in sorted(self._might_deform & set(self._holders)):
+                prim = self._stage.GetPrimAtPath(self._sent_members[dpath][0])
+                samples = deformation_samples(prim, time, shutter, self._poser) if prim else None
+                if samples is None:
+                    continue
+                try:
+                    self.delegate.set_deformation(dpath, samples[0], samples[1])
+                except (PrimError, ValueError) as exc:
+                    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    _log.warning(
+                        "mipray: %s; rendering it at the frame's time without motion blur", text
+                    )
+                    continue
+                deforming.add(dpath)
+        for dpath in sorted(self._deforming - deforming):
+            if dpath in self._holders:
+                self.delegate.set_deformation(
+                    dpath, np.zeros(0, np.float32), np.zeros((0, 0, 3), np.float32)
+                )
+        self._deforming = deforming
 
     @staticmethod
     def _fractions(times: list[float]) -> NDArray[np.float32]:

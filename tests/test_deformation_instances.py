@@ -1,0 +1,109 @@
+"""Deformation motion blur inside instancing prototypes (issue 18): a quad whose points are
+time-sampled (or move by velocities) inside a native instance's or a PointInstancer's
+prototype deforms in every instance, each instance rendering as the same mesh, not instanced,
+at its position (itself held to the analytic coverage of a slide)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom
+from test_instance_motion import XS, camera
+from test_motion_blur import QUAD
+
+import mipray
+from mipray.usd import UsdSceneDelegate
+
+from stages import add_cube, new_stage
+
+#: The two instances' x; the quad slides from x − 0.5 to x + 0.5 across the shutter.
+PLACES = (-1.0, 1.0)
+
+
+def _deforming_quad(stage: Usd.Stage, path: str, how: str) -> None:
+    """The unit quad at ``path``, its points sliding from x = −0.5 at frame 1 to 0.5 at
+    frame 2: time-sampled (``how`` "points") or one sample moved by ``velocities``."""
+    points = add_cube(stage, path, scheme="none", **QUAD).GetPointsAttr()
+    rest = np.array(QUAD["points"], dtype=np.float32)
+    points.Clear()
+    if how == "velocities":
+        points.Set([Gf.Vec3f(*map(float, p)) for p in rest - np.array([0.5, 0, 0])], 1.0)
+        fps = stage.GetTimeCodesPerSecond()
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(path))
+        mesh.GetVelocitiesAttr().Set([Gf.Vec3f(fps, 0, 0)] * 4, 1.0)
+        return
+    for frame, dx in ((1.0, -0.5), (2.0, 0.5)):
+        points.Set(
+            [Gf.Vec3f(*map(float, p)) for p in rest + np.array([dx, 0, 0], np.float32)], frame
+        )
+
+
+def instanced_stage(kind: str, how: str = "points") -> Usd.Stage:
+    """Two instances of the deforming quad at :data:`PLACES`: native instances of a class
+    prototype (``kind`` "native"), a PointInstancer's ("points"), or (``kind`` "plain") two
+    such meshes under Xforms, not instanced: the truth."""
+    stage = new_stage()
+    if kind == "native":
+        stage.DefinePrim("/Proto", "Xform").SetSpecifier(Sdf.SpecifierClass)
+        _deforming_quad(stage, "/Proto/Quad", how)
+        for name, x in zip("AB", PLACES, strict=True):
+            inst = UsdGeom.Xform.Define(stage, f"/World/{name}")
+            inst.AddTranslateOp().Set(Gf.Vec3d(x, 0, 0))
+            inst.GetPrim().GetReferences().AddInternalReference("/Proto")
+            inst.GetPrim().SetInstanceable(True)
+    elif kind == "points":
+        pi = UsdGeom.PointInstancer.Define(stage, "/World/PI")
+        _deforming_quad(stage, "/World/PI/Protos/Quad", how)
+        pi.CreatePrototypesRel().AddTarget("/World/PI/Protos/Quad")
+        pi.CreateProtoIndicesAttr([0, 0])
+        pi.CreatePositionsAttr([(x, 0, 0) for x in PLACES])
+    else:
+        for name, x in zip("AB", PLACES, strict=True):
+            UsdGeom.Xform.Define(stage, f"/World/{name}").AddTranslateOp().Set(Gf.Vec3d(x, 0, 0))
+            _deforming_quad(stage, f"/World/{name}/Quad", how)
+    camera(stage, (0.0, 1.0))
+    return stage
+
+
+@pytest.mark.parametrize(("kind", "mesh"), [("native", "/__Prototype_1/Quad"), ("points", None)])
+def test_a_prototype_mesh_whose_points_move_sends_them_over_the_shutter(fake, kind, mesh) -> None:
+    scene = UsdSceneDelegate(instanced_stage(kind), fake, time=1.0)
+    scene.sync()
+    scene.update_motion("/Cam")
+    (path,) = fake.prototypes()
+    assert mesh is None or path == mesh
+    (call,) = [c for c in fake.calls_for(path) if c.method == "set_deformation"]
+    np.testing.assert_array_equal(call.kwargs["times"], [0.0, 1.0])
+    rest = np.array(QUAD["points"], dtype=np.float32)
+    np.testing.assert_allclose(call.kwargs["points"][0], rest - np.array([0.5, 0, 0]), atol=1e-6)
+    np.testing.assert_allclose(call.kwargs["points"][1], rest + np.array([0.5, 0, 0]), atol=1e-6)
+    # A shut shutter clears them.
+    UsdGeom.Camera(scene.stage.GetPrimAtPath("/Cam")).GetShutterCloseAttr().Set(0.0)
+    scene.update_motion("/Cam")
+    assert (
+        len([c for c in fake.calls_for(path) if c.method == "set_deformation"][-1].kwargs["times"])
+        == 0
+    )
+
+
+def _row(stage: Usd.Stage) -> np.ndarray:
+    image = mipray.render(stage, "/Cam", 40, settings={"samples": 128}, time=1.0)
+    return np.asarray(image.aovs["color"][0, :, 0], dtype=np.float64)
+
+
+@pytest.mark.usefixtures("native")
+@pytest.mark.parametrize("how", ["points", "velocities"])
+@pytest.mark.parametrize("kind", ["native", "points"])
+def test_each_instance_of_a_deforming_prototype_renders_as_the_mesh_not_instanced(
+    kind, how
+) -> None:
+    got = _row(instanced_stage(kind, how))
+    truth = _row(instanced_stage("plain", how))
+    # Each instance's quad slides from x − 0.5 to x + 0.5: a pixel at X is covered for
+    # 1 − |X − x| of the shutter.
+    coverage = sum(np.clip(1.0 - np.abs(XS - x), 0.0, None) for x in PLACES)
+    lit = truth[np.argmax(coverage)] / coverage.max()
+    assert lit > 0.0
+    np.testing.assert_allclose(truth, coverage * lit, atol=0.05 * lit)
+    # The same camera samples at the same times: the instances agree far within the noise.
+    np.testing.assert_allclose(got, truth, atol=0.01 * lit)
