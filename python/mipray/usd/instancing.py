@@ -286,10 +286,15 @@ class Instancing:
         self._sent_members: dict[str, tuple[str, str]] = {}
         self._moving_members: set[str] = set()  # prototype meshes last sent motion
         # Prototype meshes whose points might move within a shutter (time-sampled points or
-        # velocities; not lights nor skinned meshes, which render at the frame's time), and
-        # those last sent points over the shutter (set_deformation).
+        # velocities; not skinned meshes, which render at rest in a prototype), and those
+        # last sent points over the shutter (set_deformation). Mesh lights are never sent
+        # theirs: the core's triangle lights move by transforms alone.
         self._might_deform: set[str] = set()
+        self._light_members: set[str] = set()  # prototype meshes that are lights
         self._deforming: set[str] = set()
+        #: USD paths of the prototype mesh lights whose points moved within the last shutter
+        #: :meth:`update_motion` saw (lit at the frame's time; the scene delegate lists them).
+        self.deforming_lights: list[str] = []
         self._poser = SkelPoser()
         self._moving: set[str] = set()  # instancers last sent motion
         self._might_move: set[str] = set()  # native instance prims whose transform might vary
@@ -386,10 +391,14 @@ class Instancing:
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
             self._sent_members[dpath] = (path, str(root.GetPath()))
-            if read.might_vary and light is None and not is_skinned(prim):
+            if read.might_vary and not is_skinned(prim):
                 self._might_deform.add(dpath)
             else:
                 self._might_deform.discard(dpath)
+            if light is not None:
+                self._light_members.add(dpath)
+            else:
+                self._light_members.discard(dpath)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -869,11 +878,16 @@ class Instancing:
         instance. Those that stopped deforming have their samples cleared.
         """
         deforming: set[str] = set()
+        lights: set[str] = set()
         if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
             for dpath in sorted(self._might_deform & set(self._holders)):
-                prim = self._stage.GetPrimAtPath(self._sent_members[dpath][0])
+                path = self._sent_members[dpath][0]
+                prim = self._stage.GetPrimAtPath(path)
                 samples = deformation_samples(prim, time, shutter, self._poser) if prim else None
                 if samples is None:
+                    continue
+                if dpath in self._light_members:
+                    lights.add(path)
                     continue
                 try:
                     self.delegate.set_deformation(dpath, samples[0], samples[1])
@@ -890,6 +904,7 @@ class Instancing:
                     dpath, np.zeros(0, np.float32), np.zeros((0, 0, 3), np.float32)
                 )
         self._deforming = deforming
+        self.deforming_lights = sorted(lights)
 
     @staticmethod
     def _fractions(times: list[float]) -> NDArray[np.float32]:

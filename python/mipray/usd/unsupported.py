@@ -35,6 +35,7 @@ from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 
 __all__ = [
     "HEADLIGHT",
+    "LIGHT_DEFORMATION",
     "RENDERED_TYPES",
     "TABLE",
     "Row",
@@ -361,6 +362,10 @@ TABLE: tuple[Row, ...] = (
 #: The camera light (``UsdSceneDelegate.update_camera_light``) lights a stage whose only
 #: lights are of unsupported types: those lights are named with this.
 HEADLIGHT = "headlight added: no light on the stage is of a rendered type"
+#: A mesh light whose points move within the shutter (time-sampled, velocities, skinned): its
+#: light is built from the points at the frame's time (the core's triangle lights move only by
+#: transforms), so it lights, and is seen, there without motion blur.
+LIGHT_DEFORMATION = "mesh light deformation (lit and seen at the frame's time, without blur)"
 
 
 def _apply(scope: str, prim: Usd.Prim, time: Usd.TimeCode, shown: str) -> Iterator[Unsupported]:
