@@ -46,8 +46,12 @@ def deformation_samples(
     time: Usd.TimeCode,
     shutter: tuple[float, float],
     poser: SkelPoser,
+    root: Usd.Prim | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]] | None:
     """``prim``'s points across the shutter, or None when they do not change in it.
+
+    ``root``: the root of the instancing prototype ``prim`` is in (a skinned mesh there is
+    posed relative to it, :meth:`~mipray.usd.skel.SkelPoser.pose`); None outside one.
 
     Returns (times as fractions of the shutter, 0 = open, 1 = close; (N, P, 3) float32
     points in the object space the mesh was sent in at ``time``). ``shutter`` is relative to
@@ -63,7 +67,7 @@ def deformation_samples(
     if is_skinned(prim):
         steps = MOTION_SUBSAMPLES + 1
         codes = [t0 + (t1 - t0) * k / steps for k in range(steps + 1)]
-        samples = _skinned(prim, time, codes, rest, poser)
+        samples = _skinned(prim, time, codes, rest, poser, root)
         if samples is None:
             return None
         frame = samples.pop()
@@ -101,19 +105,20 @@ def _skinned(
     codes: list[float],
     rest: NDArray[np.float32],
     poser: SkelPoser,
+    root: Usd.Prim | None,
 ) -> list[NDArray[np.float32]] | None:
     """A skinned mesh posed at each of ``codes``, then at ``time`` (last).
 
     Each in the object space of its pose at ``time``; None when it cannot be posed or is
     rigidly deformed (its pose is then a transform motion).
     """
-    frame = poser.pose(prim, time, rest)
+    frame = poser.pose(prim, time, rest, root)
     if frame is None or frame.rigid:
         return None
     to_object = np.linalg.inv(frame.transform)
     out = []
     for t in codes:
-        posed = poser.pose(prim, Usd.TimeCode(t), rest)
+        posed = poser.pose(prim, Usd.TimeCode(t), rest, root)
         if posed is None:
             return None
         points = posed.points

@@ -53,7 +53,7 @@ from .light import link_arguments, material_tints, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
-from .skel import SkelPoser, is_skinned
+from .skel import SkelPoser
 from .transform import ancestors_might_vary, matrix_to_numpy, shutter_times, world_transform
 
 __all__ = [
@@ -241,6 +241,7 @@ class Instancing:
         delegate: the render delegate.
         purposes: the purposes rendered.
         sync_counts: the scene delegate's counts, path → sends.
+        poser: poses skinned meshes inside prototypes (one is made if None).
 
     """
 
@@ -250,6 +251,7 @@ class Instancing:
         purposes: tuple[str, ...],
         sync_counts: dict[str, int],
         mesh_paths: Callable[[], Iterable[str]] | None = None,
+        poser: SkelPoser | None = None,
     ) -> None:
         self.delegate = delegate
         self.purposes = purposes
@@ -295,7 +297,8 @@ class Instancing:
         #: USD paths of the prototype mesh lights whose points moved within the last shutter
         #: :meth:`update_motion` saw (lit at the frame's time; the scene delegate lists them).
         self.deforming_lights: list[str] = []
-        self._poser = SkelPoser()
+        # Poses prototypes' skinned meshes (the scene delegate's, cleared with its own).
+        self._poser = poser or SkelPoser()
         self._moving: set[str] = set()  # instancers last sent motion
         self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
@@ -380,7 +383,14 @@ class Instancing:
         path = str(prim.GetPath())
         walk.member_prims.add(path)
         try:
-            read = read_mesh(prim, walk.time, self._relative(prim, root, walk), prototype=True)
+            read = read_mesh(
+                prim,
+                walk.time,
+                self._relative(prim, root, walk),
+                prototype=True,
+                poser=self._poser,
+                root=root,
+            )
             if read.args is None:
                 return False
             # A mesh light in a prototype emits from every instance, linked as resolved now.
@@ -391,7 +401,7 @@ class Instancing:
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
             self._sent_members[dpath] = (path, str(root.GetPath()))
-            if read.might_vary and not is_skinned(prim):
+            if read.might_vary and not read.rigid:
                 self._might_deform.add(dpath)
             else:
                 self._might_deform.discard(dpath)
@@ -881,9 +891,13 @@ class Instancing:
         lights: set[str] = set()
         if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
             for dpath in sorted(self._might_deform & set(self._holders)):
-                path = self._sent_members[dpath][0]
-                prim = self._stage.GetPrimAtPath(path)
-                samples = deformation_samples(prim, time, shutter, self._poser) if prim else None
+                path, root_path = self._sent_members[dpath]
+                prim, root = self._stage.GetPrimAtPath(path), self._stage.GetPrimAtPath(root_path)
+                samples = (
+                    deformation_samples(prim, time, shutter, self._poser, root)
+                    if prim and root
+                    else None
+                )
                 if samples is None:
                     continue
                 if dpath in self._light_members:

@@ -250,13 +250,14 @@ class UsdSceneDelegate:
         # keeps this delegate, its stage and the stage's layers alive until the collector runs,
         # so usd-core would hand the next Usd.Stage.Open of the same file the stale layer.
         gprim_paths = weakref.WeakMethod(self._gprim_paths)
+        self._poser = SkelPoser()
         self._instancing = Instancing(
             delegate,
             self.purposes,
             self.sync_counts,
             mesh_paths=lambda: (gprim_paths() or list)(),
+            poser=self._poser,
         )
-        self._poser = SkelPoser()
         # Before anything is read: .mtlx references usd-core cannot compose.
         load_mtlx_references(stage)
         self._linked: set[str] = set()  # lights whose linking leaves some meshes out

@@ -13,6 +13,13 @@ renders in its rest pose (its authored points and transform). A rigidly deformed
 joint moves it whole) blurs by its posed transform over the shutter
 (:meth:`SkelPoser.rigid_motion`); other skinned meshes blur by their deformation, posed at
 times across the shutter (:mod:`mipray.usd.deform`).
+
+Inside an instancing prototype a skinned mesh is posed relative to the prototype's root (its
+transform there is the skeleton's to that root), so every instance places the one posed mesh;
+a native prototype whose SkelRoot is the instance prim (or above it) is posed through its first
+instance's proxies. Instances share their prototype's pose: an animation bound per instance
+outside the prototype is not told apart (the first instance's is rendered). A rigidly
+deformed mesh in a prototype is posed at the frame's time without blur.
 """
 
 from __future__ import annotations
@@ -64,8 +71,20 @@ class SkelPoser:
         self._cache.Clear()
         self._populated.clear()
 
-    def pose(self, prim: Usd.Prim, time: Usd.TimeCode, points: NDArray[np.float32]) -> Posed | None:
+    def pose(
+        self,
+        prim: Usd.Prim,
+        time: Usd.TimeCode,
+        points: NDArray[np.float32],
+        root: Usd.Prim | None = None,
+    ) -> Posed | None:
         """``prim`` (a mesh whose rest ``points`` are given) posed at ``time``.
+
+        ``root``: an instancing prototype's root ``prim`` is in; the transform is then the
+        skeleton's to it, not to the world. A native prototype with no SkelRoot of its own
+        (the instance prim is the SkelRoot, as for an instanced character) is posed through
+        its first instance's proxy of ``prim``: instances share one prototype mesh, so they
+        share that pose (UsdSkel's, as for the instance's own skeleton and animation).
 
         Returns:
             The posed points and the transform placing them; None when the mesh is not
@@ -73,12 +92,28 @@ class SkelPoser:
             cannot be posed — then with one warning naming the mesh: it renders at rest.
 
         """
-        root = UsdSkel.Root.Find(prim)
-        if not root:
+        if root is not None and root.IsPrototype() and not UsdSkel.Root.Find(prim):
+            instances = sorted(root.GetInstances(), key=lambda i: str(i.GetPath()))
+            if not instances:
+                return None
+            rel = str(prim.GetPath())[len(str(root.GetPath())) :]
+            root = instances[0]
+            prim = prim.GetStage().GetPrimAtPath(str(root.GetPath()) + rel)
+            if not prim:
+                return None
+        skel_root = UsdSkel.Root.Find(prim)
+        if not skel_root:
             return None
-        key = str(root.GetPath())
+        # An instance proxy's skinning is found only walking through instance proxies.
+        proxy = prim.IsInstanceProxy()
+        key = f"{skel_root.GetPath()}{' (proxies)' if proxy else ''}"
         if key not in self._populated:
-            self._cache.Populate(root, Usd.PrimDefaultPredicate)
+            predicate = (
+                Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+                if proxy
+                else Usd.PrimDefaultPredicate
+            )
+            self._cache.Populate(skel_root, predicate)
             self._populated.add(key)
         query = self._cache.GetSkinningQuery(prim)
         if not query or not (query.HasJointInfluences() or query.HasBlendShapes()):
@@ -100,7 +135,13 @@ class SkelPoser:
             problem = _blend(prim, query, anim, time, posed)
             if problem:
                 return self._rest(path, problem)
-        skel_to_world = UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time)
+        if root is None:
+            skel_to_world = UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time)
+        else:
+            # To the prototype's root (or the instance standing for it), as its meshes are.
+            skel_to_world, _ = UsdGeom.XformCache(time).ComputeRelativeTransform(
+                skeleton.GetPrim(), root
+            )
         if query.HasJointInfluences():
             xforms = skel_query.ComputeSkinningTransforms(time)
             if xforms is None or len(xforms) != len(skel_query.GetJointOrder()):
