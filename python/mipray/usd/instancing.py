@@ -27,7 +27,11 @@ flow", step 4).
   ``ComputeInstanceTransformsAtTimes`` (time-sampled positions, orientations and
   scales; velocities and angular velocities) and its own transform, a native
   instance's from its xform, nested ones relative to their prototype's root.
-  Instancers nothing moves in send nothing.
+  Instancers nothing moves in send nothing. A prototype mesh whose points move
+  within the shutter (time-sampled, ``velocities``, skinned: :mod:`mipray.usd.deform`)
+  is sent them (``set_deformation``), in its object space, so it deforms in every
+  instance; a prototype mesh light's are not (listed as unsupported by the scene
+  delegate).
 
 Visibility and purpose are applied inside prototypes, starting from the
 prototype root. A mesh inside a prototype that cannot be read is reported

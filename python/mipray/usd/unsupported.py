@@ -16,6 +16,10 @@ support for one means removing its row (or adding the type to
 A row whose thing is already warned about where it is read (the reader says
 what it falls back to) has ``warned_by``: the audit lists it in the stats but
 does not warn a second time.
+
+Two entries depend on the render's camera, not on what a prim authors, and are made by the
+scene delegate with the same :class:`Unsupported` form and warning: :data:`HEADLIGHT` and
+:data:`LIGHT_DEFORMATION` (a mesh light whose points move within the camera's shutter).
 """
 
 from __future__ import annotations
