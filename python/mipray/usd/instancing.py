@@ -291,10 +291,10 @@ class Instancing:
         # Each prototype mesh sent: its USD path and its prototype root's (its own motion there).
         self._sent_members: dict[str, tuple[str, str]] = {}
         self._moving_members: set[str] = set()  # prototype meshes last sent motion
-        # Prototype meshes whose points might move within a shutter (time-sampled points or
-        # velocities; not skinned meshes, which render at rest in a prototype), and those
-        # last sent points over the shutter (set_deformation). Mesh lights are never sent
-        # theirs: the core's triangle lights move by transforms alone.
+        # Prototype meshes whose points might move within a shutter (time-sampled points,
+        # velocities, skinning; not a rigidly skinned mesh, whose pose is a transform), and
+        # those last sent points over the shutter (set_deformation). Mesh lights are never
+        # sent theirs: the core's triangle lights move by transforms alone.
         self._might_deform: set[str] = set()
         self._light_members: set[str] = set()  # prototype meshes that are lights
         self._deforming: set[str] = set()
