@@ -5,9 +5,11 @@ at its position (itself held to the analytic coverage of a slide)."""
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdGeom
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
 from test_instance_motion import XS, camera
 from test_motion_blur import QUAD
 from test_usd_skel import arm, bent
@@ -177,3 +179,32 @@ def test_each_instance_of_a_skinned_prototype_renders_as_the_arm_not_instanced(k
     assert np.count_nonzero((truth > 0.15) & (truth < 0.85)) > 20
     # The same camera samples at the same times: equal far within the noise.
     assert np.abs(got - truth).max() < 0.02, np.abs(got - truth).max()
+
+
+def test_instances_binding_other_animations_outside_the_prototype_are_warned(fake, caplog) -> None:
+    # The arm's skeleton binds no animation itself; each instance prim binds one: A the bending
+    # one inside it, B a still one outside. The instances share one prototype mesh, so B renders
+    # A's pose, and that is said once.
+    stage = skinned_stage("native")
+    stage.GetPrimAtPath("/World/Arm/Skel").RemoveProperty("skel:animationSource")
+    still = UsdSkel.Animation.Define(stage, "/World/Still")
+    still.CreateJointsAttr(["shoulder", "shoulder/elbow"])
+    still.CreateTranslationsAttr([Gf.Vec3f(0, 0, 0), Gf.Vec3f(1, 0, 0)])
+    still.CreateRotationsAttr([Gf.Quatf(1, 0, 0, 0)] * 2)
+    still.CreateScalesAttr([Gf.Vec3h(1, 1, 1)] * 2)
+    for name, anim in (("A", "/World/A/Skel/Anim"), ("B", "/World/Still")):
+        binding = UsdSkel.BindingAPI.Apply(stage.GetPrimAtPath(f"/World/{name}"))
+        binding.CreateAnimationSourceRel().SetTargets([anim])
+    scene = UsdSceneDelegate(stage, fake, time=2.0)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene.sync()
+        scene.update_motion("/World/Camera")
+    said = [r.getMessage() for r in caplog.records if "/World/B" in r.getMessage()]
+    assert said == [
+        "mipray: /World/B/Mesh: binds another skeleton or animation than /World/A/Mesh, outside "
+        "the instancing prototype they share; every instance renders /World/A's pose"
+    ]
+    (args,) = fake.prototypes().values()
+    rest = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath("/World/Arm/Mesh")).GetPointsAttr().Get())
+    posed = args["points"].astype(np.float64) @ args["transform"][:3, :3] + args["transform"][3, :3]
+    np.testing.assert_allclose(posed, bent(rest.astype(np.float64)), atol=1e-5)  # A's pose

@@ -17,9 +17,9 @@ times across the shutter (:mod:`mipray.usd.deform`).
 Inside an instancing prototype a skinned mesh is posed relative to the prototype's root (its
 transform there is the skeleton's to that root), so every instance places the one posed mesh;
 a native prototype whose SkelRoot is the instance prim (or above it) is posed through its first
-instance's proxies. Instances share their prototype's pose: an animation bound per instance
-outside the prototype is not told apart (the first instance's is rendered). A rigidly
-deformed mesh in a prototype is posed at the frame's time without blur.
+instance's proxies. Instances share their prototype's pose: one binding another skeleton or
+animation outside the prototype gets one warning naming it, and renders the first instance's
+pose. A rigidly deformed mesh in a prototype is posed at the frame's time without blur.
 """
 
 from __future__ import annotations
@@ -65,11 +65,14 @@ class SkelPoser:
         self._cache = UsdSkel.Cache()
         self._populated: set[str] = set()
         self._warned: set[str] = set()
+        # Prototype meshes whose instances' skeleton bindings were compared.
+        self._compared: set[str] = set()
 
     def clear(self) -> None:
         """Forget what the cache read (the stage's skeletons or bindings changed)."""
         self._cache.Clear()
         self._populated.clear()
+        self._compared.clear()
 
     def pose(
         self,
@@ -93,14 +96,10 @@ class SkelPoser:
 
         """
         if root is not None and root.IsPrototype() and not UsdSkel.Root.Find(prim):
-            instances = sorted(root.GetInstances(), key=lambda i: str(i.GetPath()))
-            if not instances:
+            through = self._first_instance(prim, root)
+            if through is None:
                 return None
-            rel = str(prim.GetPath())[len(str(root.GetPath())) :]
-            root = instances[0]
-            prim = prim.GetStage().GetPrimAtPath(str(root.GetPath()) + rel)
-            if not prim:
-                return None
+            prim, root = through
         skel_root = UsdSkel.Root.Find(prim)
         if not skel_root:
             return None
@@ -162,6 +161,41 @@ class SkelPoser:
         return Posed(
             np.ascontiguousarray(out), matrix_to_numpy(skel_to_world), bool(varies), is_rigid
         )
+
+    def _first_instance(
+        self, prim: Usd.Prim, prototype: Usd.Prim
+    ) -> tuple[Usd.Prim, Usd.Prim] | None:
+        """The first instance's proxy of prototype mesh ``prim``, and that instance prim.
+
+        The instances share the prototype's one mesh: if another instance binds another
+        skeleton or animation (authored on or above the instance, outside the prototype), one
+        warning says that every instance renders the first's pose.
+        """
+        instances = sorted(prototype.GetInstances(), key=lambda i: str(i.GetPath()))
+        if not instances:
+            return None
+        stage = prim.GetStage()
+        rel = str(prim.GetPath())[len(str(prototype.GetPath())) :]
+        first = instances[0]
+        proxy = stage.GetPrimAtPath(f"{first.GetPath()}{rel}")
+        if not proxy:
+            return None
+        key = str(prim.GetPath())
+        if key not in self._compared:
+            self._compared.add(key)
+            want = _skel_binding(proxy, first)
+            for other in instances[1:]:
+                seen = stage.GetPrimAtPath(f"{other.GetPath()}{rel}")
+                if seen and _skel_binding(seen, other) != want:
+                    _log.warning(
+                        "mipray: %s: binds another skeleton or animation than %s, outside the "
+                        "instancing prototype they share; every instance renders %s's pose",
+                        seen.GetPath(),
+                        proxy.GetPath(),
+                        first.GetPath(),
+                    )
+                    break
+        return proxy, first
 
     def rigid_motion(
         self,
@@ -235,3 +269,21 @@ def _blend(
     ):
         return "its blend shapes do not fit its points"
     return None
+
+
+def _skel_binding(mesh: Usd.Prim, instance: Usd.Prim) -> tuple[str, str]:
+    """The skeleton and animation ``mesh`` (an instance proxy) is posed by, as paths.
+
+    Relative to ``instance`` where they are inside it, so instances binding their own copies
+    inside the prototype compare equal.
+    """
+    base = str(instance.GetPath())
+    skeleton = UsdSkel.BindingAPI(mesh).GetInheritedSkeleton()
+    if not skeleton:
+        return ("", "")
+    anim = UsdSkel.BindingAPI(skeleton.GetPrim()).GetInheritedAnimationSource()
+
+    def inside(path: str) -> str:
+        return path.removeprefix(base) if path.startswith(base + "/") else path
+
+    return inside(str(skeleton.GetPath())), inside(str(anim.GetPath()) if anim else "")
