@@ -266,3 +266,97 @@ def test_a_subdivision_surface_slid_by_its_points_renders_as_one_slid_by_its_tra
     # tessellates at (the deforming mesh's swept boxes ask for finer ones): measured 2.5e-4 of
     # the brightest pixel, against 1.3 for the sharp frame-time render.
     assert np.abs(a - b).max() < 0.005 * a.max(), np.abs(a - b).max()
+
+
+def velocity_stage(
+    velocity: float, acceleration: float | None = None, *, count: int = 4
+) -> Usd.Stage:
+    """:func:`deforming_stage`'s quad with one points sample, at x − 0.5 on frame 1, moved by
+    ``velocities`` (and ``accelerations``) along x in units per second; 24 time codes a second.
+    ``count`` velocities (the points are 4)."""
+    stage = sliding_stage((0.0, 1.0))
+    stage.SetTimeCodesPerSecond(24.0)
+    stage.RemovePrim("/World/Slider")
+    quad = add_cube(stage, "/World/Slider", scheme="none", **QUAD)
+    rest = np.array(QUAD["points"], dtype=np.float32) + np.array([-0.5, 0, 0], np.float32)
+    quad.GetPointsAttr().Clear()
+    quad.GetPointsAttr().Set([Gf.Vec3f(*map(float, p)) for p in rest], 1.0)
+    quad.GetVelocitiesAttr().Set([Gf.Vec3f(velocity, 0, 0)] * count, 1.0)
+    if acceleration is not None:
+        quad.GetAccelerationsAttr().Set([Gf.Vec3f(acceleration, 0, 0)] * 4, 1.0)
+    return stage
+
+
+def test_velocities_move_the_points_across_the_shutter(fake) -> None:
+    # 24 units a second for 1/24 s: the quad moves by one unit, as deforming_stage's does.
+    scene = UsdSceneDelegate(velocity_stage(24.0), fake, time=1.0)
+    scene.sync()
+    assert scene.update_motion("/Cam") == ["/World/Slider"]
+    (call,) = deformations(fake, "/World/Slider")
+    times, points = call.kwargs["times"], call.kwargs["points"]
+    np.testing.assert_array_equal(times, [0.0, 1.0])  # linear: the ends are exact
+    rest = np.array(QUAD["points"], dtype=np.float32)
+    np.testing.assert_allclose(points[0], rest + np.array([-0.5, 0, 0]), atol=1e-6)
+    np.testing.assert_allclose(points[1], rest + np.array([0.5, 0, 0]), atol=1e-6)
+
+
+def test_accelerations_bend_the_path_into_a_parabola(fake) -> None:
+    # x(s) = x0 + v·s + a·s²/2, s in seconds from frame 1 (1/24 s a frame): sampled at enough
+    # times that the blend between them follows the curve.
+    v, a = 6.0, 1152.0
+    scene = UsdSceneDelegate(velocity_stage(v, a), fake, time=1.0)
+    scene.sync()
+    scene.update_motion("/Cam")
+    (call,) = deformations(fake, "/World/Slider")
+    times, points = call.kwargs["times"], call.kwargs["points"]
+    assert len(times) >= 3 and times[0] == 0.0 and times[-1] == 1.0
+    rest = np.array(QUAD["points"], dtype=np.float64) + np.array([-0.5, 0, 0])
+    for f, p in zip(times, points, strict=True):
+        s = f / 24.0
+        np.testing.assert_allclose(p[:, 0], rest[:, 0] + v * s + 0.5 * a * s * s, atol=1e-5)
+        np.testing.assert_allclose(p[:, 1:], rest[:, 1:], atol=1e-6)
+
+
+def test_velocities_of_the_wrong_count_are_warned_and_not_blurred(fake, caplog) -> None:
+    scene = UsdSceneDelegate(velocity_stage(24.0, count=3), fake, time=1.0)
+    scene.sync()
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        assert scene.update_motion("/Cam") == []
+        scene.update_motion("/Cam")
+    assert deformations(fake, "/World/Slider") == []
+    said = [r.getMessage() for r in caplog.records if "/World/Slider" in r.getMessage()]
+    assert said == [
+        "mipray: /World/Slider: velocities has 3 entries but points has 4; rendering it at "
+        "the frame's time without motion blur"
+    ]
+
+
+@pytest.mark.usefixtures("native")
+def test_a_quad_moved_by_velocities_renders_as_one_moved_by_its_points() -> None:
+    settings = {"samples": 128}
+    by_velocity = mipray.render(velocity_stage(24.0), "/Cam", 40, settings=settings, time=1.0)
+    by_points = mipray.render(deforming_stage((0.0, 1.0)), "/Cam", 40, settings=settings, time=1.0)
+    row, peer = by_velocity.aovs["color"][0, :, 0], by_points.aovs["color"][0, :, 0]
+    x = -2.0 + 0.1 * (np.arange(40) + 0.5)
+    coverage = np.maximum(0.0, 1.0 - np.abs(x))
+    lit = peer[np.argmax(coverage)] / coverage.max()
+    np.testing.assert_allclose(row, coverage * lit, atol=0.05 * lit)
+    np.testing.assert_allclose(row, peer, atol=0.01 * lit)
+
+
+@pytest.mark.usefixtures("native")
+def test_an_accelerating_quad_covers_what_its_parabola_sweeps() -> None:
+    # From rest at x − 0.5, a = 1152 units/s² over 1/24 s: the centre is at −0.5 + f² at
+    # shutter fraction f, so a pixel centre at x is covered while f² is within (x, x + 1).
+    out = mipray.render(
+        velocity_stage(0.0, 1152.0), "/Cam", 40, settings={"samples": 256}, time=1.0
+    )
+    row = out.aovs["color"][0, :, 0]
+    # Averaged over each pixel's width (0.1), where the square root bends within a pixel.
+    x = -2.0 + 0.1 * (np.arange(40)[:, None] + (np.arange(100) + 0.5) / 100)
+    lo, hi = np.sqrt(np.clip(x, 0.0, 1.0)), np.sqrt(np.clip(x + 1.0, 0.0, 1.0))
+    coverage = np.maximum(0.0, hi - lo).mean(axis=1)
+    linear = np.maximum(0.0, 1.0 - np.abs(x)).mean(axis=1)  # the chord from end to end's
+    assert np.abs(coverage - linear).max() > 0.2
+    lit = row[np.argmax(coverage)] / coverage.max()
+    np.testing.assert_allclose(row, coverage * lit, atol=0.05 * lit)

@@ -205,3 +205,57 @@ def test_an_instanced_mesh_lights_links_are_resolved(native) -> None:
     assert float(image.max()) == 0.0
     lights = stats["scene"]["lights"]
     assert len(lights) == 2 and all(e["not_illuminating"] == ["/World/Ground"] for e in lights)
+
+
+def _deform_square(stage: Usd.Stage, path: str, x0: float) -> None:
+    """Time-sample the square at ``path``'s points: shifted by −x0 at frame 1, +x0 at frame 2."""
+    points = UsdGeom.Mesh(stage.GetPrimAtPath(path)).GetPointsAttr()
+    rest = np.array(points.Get(), dtype=np.float64)
+    for frame, dx in ((1.0, -x0), (2.0, x0)):
+        points.Set([Gf.Vec3f(*(p + np.array([dx, 0.0, 0.0]))) for p in rest], frame)
+
+
+def test_a_deforming_mesh_light_is_warned_listed_and_lit_at_the_frames_time(native, caplog) -> None:
+    # The core's triangle lights move by transforms alone: a mesh light whose points move is
+    # built from its points at the frame's time, with one warning naming it and a stats entry.
+    x0 = 0.6
+    stage = stage_with_camera()
+    square_light(stage, intensity=3.0)
+    _deform_square(stage, "/World/Glow", x0)
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+    cam.CreateShutterOpenAttr(0.0)
+    cam.CreateShutterCloseAttr(1.0)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        image, stats = render_with_stats(stage, time=1.0)
+    said = [r.getMessage() for r in caplog.records if "/World/Glow" in r.getMessage()]
+    assert said == [
+        "mipray: not rendered: mesh light deformation (lit and seen at the frame's time, "
+        "without blur) on /World/Glow"
+    ]
+    assert {"prim": "/World/Glow", "what": mipray.usd.unsupported.LIGHT_DEFORMATION} in stats[
+        "unsupported"
+    ]
+    x, y = floor_xy(image, stage)
+    truth = 3.0 * lambert_square(x + x0, y) * ALBEDO / math.pi  # the square at frame 1
+    mean, worst = relative_error(image[..., 0], truth)
+    assert abs(mean) < 0.01 and worst < 0.08, (mean, worst)
+
+
+def test_a_deforming_instanced_mesh_light_is_listed(fake) -> None:
+    from mipray.usd import UsdSceneDelegate
+    from mipray.usd.unsupported import LIGHT_DEFORMATION
+
+    for native_instances in (False, True):
+        stage = stage_with_camera()
+        instanced_squares(stage, native_instances)
+        glow = "/Lamp/Glow" if native_instances else "/World/Lamps/Protos/Lamp/Glow"
+        _deform_square(stage, glow, 0.6)
+        cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+        cam.CreateShutterOpenAttr(0.0)
+        cam.CreateShutterCloseAttr(1.0)
+        scene = UsdSceneDelegate(stage, fake, time=1.0)
+        scene.sync()
+        scene.update_motion("/World/Cam")
+        assert not [c for c in fake.calls if c.method == "set_deformation"]
+        (entry,) = [u for u in scene.unsupported if u.what == LIGHT_DEFORMATION]
+        assert entry.prim.endswith("/Glow"), entry

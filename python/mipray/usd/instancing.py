@@ -27,7 +27,11 @@ flow", step 4).
   ``ComputeInstanceTransformsAtTimes`` (time-sampled positions, orientations and
   scales; velocities and angular velocities) and its own transform, a native
   instance's from its xform, nested ones relative to their prototype's root.
-  Instancers nothing moves in send nothing.
+  Instancers nothing moves in send nothing. A prototype mesh whose points move
+  within the shutter (time-sampled, ``velocities``, skinned: :mod:`mipray.usd.deform`)
+  is sent them (``set_deformation``), in its object space, so it deforms in every
+  instance; a prototype mesh light's are not (listed as unsupported by the scene
+  delegate).
 
 Visibility and purpose are applied inside prototypes, starting from the
 prototype root. A mesh inside a prototype that cannot be read is reported
@@ -47,11 +51,13 @@ from numpy.typing import NDArray
 from pxr import Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
+from .deform import deformation_samples
 from .gprim import is_renderable_gprim
 from .light import link_arguments, material_tints, mesh_light_arguments
 from .mesh_sync import read_mesh
 from .protocol import RenderDelegateLike
 from .shading import bound_material
+from .skel import SkelPoser
 from .transform import ancestors_might_vary, matrix_to_numpy, shutter_times, world_transform
 
 __all__ = [
@@ -246,6 +252,7 @@ class Instancing:
         delegate: the render delegate.
         purposes: the purposes rendered.
         sync_counts: the scene delegate's counts, path → sends.
+        poser: poses skinned meshes inside prototypes (one is made if None).
 
     """
 
@@ -255,6 +262,7 @@ class Instancing:
         purposes: tuple[str, ...],
         sync_counts: dict[str, int],
         mesh_paths: Callable[[], Iterable[str]] | None = None,
+        poser: SkelPoser | None = None,
     ) -> None:
         self.delegate = delegate
         self.purposes = purposes
@@ -290,6 +298,18 @@ class Instancing:
         # Each prototype mesh sent: its USD path and its prototype root's (its own motion there).
         self._sent_members: dict[str, tuple[str, str]] = {}
         self._moving_members: set[str] = set()  # prototype meshes last sent motion
+        # Prototype meshes whose points might move within a shutter (time-sampled points,
+        # velocities, skinning; not a rigidly skinned mesh, whose pose is a transform), and
+        # those last sent points over the shutter (set_deformation). Mesh lights are never
+        # sent theirs: the core's triangle lights move by transforms alone.
+        self._might_deform: set[str] = set()
+        self._light_members: set[str] = set()  # prototype meshes that are lights
+        self._deforming: set[str] = set()
+        #: USD paths of the prototype mesh lights whose points moved within the last shutter
+        #: :meth:`update_motion` saw (lit at the frame's time; the scene delegate lists them).
+        self.deforming_lights: list[str] = []
+        # Poses prototypes' skinned meshes (the scene delegate's, cleared with its own).
+        self._poser = poser or SkelPoser()
         self._moving: set[str] = set()  # instancers last sent motion
         self._might_move: set[str] = set()  # native instance prims whose transform might vary
 
@@ -374,7 +394,14 @@ class Instancing:
         path = str(prim.GetPath())
         walk.member_prims.add(path)
         try:
-            read = read_mesh(prim, walk.time, self._relative(prim, root, walk), prototype=True)
+            read = read_mesh(
+                prim,
+                walk.time,
+                self._relative(prim, root, walk),
+                prototype=True,
+                poser=self._poser,
+                root=root,
+            )
             if read.args is None:
                 return False
             # A mesh light in a prototype emits from every instance, linked as resolved now.
@@ -385,6 +412,14 @@ class Instancing:
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
             self._sent_members[dpath] = (path, str(root.GetPath()))
+            if read.might_vary and not read.rigid:
+                self._might_deform.add(dpath)
+            else:
+                self._might_deform.discard(dpath)
+            if light is not None:
+                self._light_members.add(dpath)
+            else:
+                self._light_members.discard(dpath)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -853,6 +888,48 @@ class Instancing:
                     dpath, np.zeros(0, np.float32), np.zeros((0, 4, 4), np.float64)
                 )
         self._moving_members = moving
+        self._update_member_deformation(time, shutter)
+
+    def _update_member_deformation(self, time: Usd.TimeCode, shutter: tuple[float, float]) -> None:
+        """Send the prototype meshes whose points move within the shutter those points.
+
+        Deformation motion blur inside prototypes (:mod:`mipray.usd.deform`): the points are
+        in the mesh's object space, which its transform to the prototype's root and then each
+        instance's placement carry, so the one deforming prototype mesh deforms in every
+        instance. Those that stopped deforming have their samples cleared.
+        """
+        deforming: set[str] = set()
+        lights: set[str] = set()
+        if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
+            for dpath in sorted(self._might_deform & set(self._holders)):
+                path, root_path = self._sent_members[dpath]
+                prim, root = self._stage.GetPrimAtPath(path), self._stage.GetPrimAtPath(root_path)
+                samples = (
+                    deformation_samples(prim, time, shutter, self._poser, root)
+                    if prim and root
+                    else None
+                )
+                if samples is None:
+                    continue
+                if dpath in self._light_members:
+                    lights.add(path)
+                    continue
+                try:
+                    self.delegate.set_deformation(dpath, samples[0], samples[1])
+                except (PrimError, ValueError) as exc:
+                    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    _log.warning(
+                        "mipray: %s; rendering it at the frame's time without motion blur", text
+                    )
+                    continue
+                deforming.add(dpath)
+        for dpath in sorted(self._deforming - deforming):
+            if dpath in self._holders:
+                self.delegate.set_deformation(
+                    dpath, np.zeros(0, np.float32), np.zeros((0, 0, 3), np.float32)
+                )
+        self._deforming = deforming
+        self.deforming_lights = sorted(lights)
 
     @staticmethod
     def _fractions(times: list[float]) -> NDArray[np.float32]:

@@ -19,6 +19,7 @@ from pxr import Usd, UsdGeom
 
 from ..errors import PrimError
 from .curves import CURVE_TYPES
+from .deform import moves_by_velocities
 from .face_albedo import compute_surface_albedo, material_subsets
 from .gprim import curve_colors, gprim_arguments, point_colors
 from .material import compute_albedo, display_opacity, lambertian
@@ -58,19 +59,23 @@ def read_mesh(
     *,
     prototype: bool = False,
     poser: SkelPoser | None = None,
+    root: Usd.Prim | None = None,
 ) -> MeshRead:
     """Read the mesh ``prim`` at ``time``.
 
-    ``transform`` is object-to-world, or for a prototype object-to-prototype-root. A skinned
-    mesh is posed at ``time`` by ``poser`` (:mod:`mipray.usd.skel`; one is made if None):
-    its points posed, its transform the skeleton's.
+    ``transform`` is object-to-world, or for a prototype object-to-prototype-root (``root``,
+    the prototype's root prim). A skinned mesh is posed at ``time`` by ``poser``
+    (:mod:`mipray.usd.skel`; one is made if None): its points posed, its transform the
+    skeleton's (in a prototype: the skeleton's to ``root``).
 
     Raises:
         PrimError: the mesh's data is inconsistent (the message names the
             prim, or the GeomSubset at fault).
 
     """
-    data_varies = any(
+    # A mesh moving by velocities from one points sample is re-read and blurred like one whose
+    # points are sampled twice (ValueMightBeTimeVarying is False for one sample).
+    data_varies = moves_by_velocities(prim) or any(
         a.ValueMightBeTimeVarying()
         for a in prim.GetAuthoredAttributes()
         if not a.GetName().startswith("xformOp")
@@ -81,7 +86,7 @@ def read_mesh(
     args = mesh_arguments(mesh, time, transform)
     if args is None:
         return MeshRead(None, (), data_varies)
-    posed = _pose(prim, time, args["points"], prototype, poser)
+    posed = _pose(prim, time, args["points"], root if prototype else None, poser)
     if posed is not None:
         args["points"], args["transform"] = posed.points, posed.transform
     counts, n_points = args["face_vertex_counts"], len(args["points"])
@@ -119,20 +124,16 @@ def _pose(
     prim: Usd.Prim,
     time: Usd.TimeCode,
     points: NDArray[np.float32],
-    prototype: bool,
+    root: Usd.Prim | None,
     poser: SkelPoser | None,
 ) -> Posed | None:
-    """A skinned mesh posed at ``time``, or None (not skinned, or at rest with a warning)."""
+    """A skinned mesh posed at ``time``, or None (not skinned, or at rest with a warning).
+
+    ``root``: the root of the instancing prototype the mesh is in (None: not in one).
+    """
     if not is_skinned(prim):
         return None
-    if prototype:
-        # A prototype's transform is relative to its root; the skeleton's is a world one.
-        _warn_once(
-            f"{prim.GetPath()}: a skinned mesh inside an instancing prototype is not posed; "
-            "rendering its rest pose"
-        )
-        return None
-    return (poser or SkelPoser()).pose(prim, time, points)
+    return (poser or SkelPoser()).pose(prim, time, points, root)
 
 
 def _normals(

@@ -68,7 +68,14 @@ from .mtlx_files import load_mtlx_references
 from .protocol import RenderDelegateLike
 from .skel import SkelPoser
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
-from .unsupported import HEADLIGHT, Unsupported, audit_stage, is_rendered_type, warn_unsupported
+from .unsupported import (
+    HEADLIGHT,
+    LIGHT_DEFORMATION,
+    Unsupported,
+    audit_stage,
+    is_rendered_type,
+    warn_unsupported,
+)
 
 __all__ = ["PURPOSES", "SyncError", "UsdSceneDelegate"]
 
@@ -226,6 +233,8 @@ class UsdSceneDelegate:
         self._warned_types: set[str] = set()
         self._unsupported: list[Unsupported] = []
         self._headlight: list[Unsupported] = []  # lights the camera light stands in for
+        # Mesh lights whose points move within the shutter (lit at the frame's time).
+        self._light_deformation: list[Unsupported] = []
         self._warned_unsupported: set[Unsupported] = set()
         self._default_camera: dict[str, Any] | None = None
         # Meshes last sent a moving transform (set_motion), so one that stops moving is reset.
@@ -241,13 +250,14 @@ class UsdSceneDelegate:
         # keeps this delegate, its stage and the stage's layers alive until the collector runs,
         # so usd-core would hand the next Usd.Stage.Open of the same file the stale layer.
         gprim_paths = weakref.WeakMethod(self._gprim_paths)
+        self._poser = SkelPoser()
         self._instancing = Instancing(
             delegate,
             self.purposes,
             self.sync_counts,
             mesh_paths=lambda: (gprim_paths() or list)(),
+            poser=self._poser,
         )
-        self._poser = SkelPoser()
         # Before anything is read: .mtlx references usd-core cannot compose.
         load_mtlx_references(stage)
         self._linked: set[str] = set()  # lights whose linking leaves some meshes out
@@ -273,7 +283,7 @@ class UsdSceneDelegate:
         See :mod:`mipray.usd.unsupported`; the camera light standing in for unsupported
         lights is listed too.
         """
-        return sorted((*self._unsupported, *self._headlight))
+        return sorted((*self._unsupported, *self._headlight, *self._light_deformation))
 
     @property
     def synced_paths(self) -> list[str]:
@@ -864,6 +874,7 @@ class UsdSceneDelegate:
         """
         shutter = camera_shutter(self.stage, camera_path, self.time)
         moving: list[str] = []
+        self._light_deformation = []
         for path, record in self._records.items():
             if record.kind != "mesh" or not record.in_delegate:
                 continue
@@ -889,6 +900,10 @@ class UsdSceneDelegate:
                 moving.append(path)
         self._moving = set(moving)
         self._instancing.update_motion(self.time, shutter)
+        self._light_deformation += [
+            Unsupported(p, LIGHT_DEFORMATION) for p in self._instancing.deforming_lights
+        ]
+        warn_unsupported(self._light_deformation, self._warned_unsupported)
         return moving
 
     def _update_deformation(self, path: str, record: _Record, shutter: tuple[float, float]) -> bool:
@@ -896,13 +911,17 @@ class UsdSceneDelegate:
 
         Deformation motion blur (:mod:`mipray.usd.deform`): point-animated and skinned
         meshes. A mesh whose points stop moving gets its samples cleared. Returns whether
-        the mesh deforms.
+        the mesh deforms. A mesh light's points are not blurred: it is listed in
+        :attr:`unsupported` (``LIGHT_DEFORMATION``) and lights at the frame's time.
         """
         samples = None
-        if record.might_vary and not record.rigid and not record.light and shutter[1] > shutter[0]:
+        if record.might_vary and not record.rigid and shutter[1] > shutter[0]:
             prim = self.stage.GetPrimAtPath(path)
             if prim:
                 samples = deformation_samples(prim, self.time, shutter, self._poser)
+        if samples is not None and record.light:
+            self._light_deformation.append(Unsupported(path, LIGHT_DEFORMATION))
+            samples = None
         if samples is not None:
             try:
                 self.delegate.set_deformation(path, samples[0], samples[1])

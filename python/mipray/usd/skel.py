@@ -13,6 +13,13 @@ renders in its rest pose (its authored points and transform). A rigidly deformed
 joint moves it whole) blurs by its posed transform over the shutter
 (:meth:`SkelPoser.rigid_motion`); other skinned meshes blur by their deformation, posed at
 times across the shutter (:mod:`mipray.usd.deform`).
+
+Inside an instancing prototype a skinned mesh is posed relative to the prototype's root (its
+transform there is the skeleton's to that root), so every instance places the one posed mesh;
+a native prototype whose SkelRoot is the instance prim (or above it) is posed through its first
+instance's proxies. Instances share their prototype's pose: one binding another skeleton or
+animation outside the prototype gets one warning naming it, and renders the first instance's
+pose. A rigidly deformed mesh in a prototype is posed at the frame's time without blur.
 """
 
 from __future__ import annotations
@@ -58,14 +65,29 @@ class SkelPoser:
         self._cache = UsdSkel.Cache()
         self._populated: set[str] = set()
         self._warned: set[str] = set()
+        # Prototype meshes whose instances' skeleton bindings were compared.
+        self._compared: set[str] = set()
 
     def clear(self) -> None:
         """Forget what the cache read (the stage's skeletons or bindings changed)."""
         self._cache.Clear()
         self._populated.clear()
+        self._compared.clear()
 
-    def pose(self, prim: Usd.Prim, time: Usd.TimeCode, points: NDArray[np.float32]) -> Posed | None:
+    def pose(
+        self,
+        prim: Usd.Prim,
+        time: Usd.TimeCode,
+        points: NDArray[np.float32],
+        root: Usd.Prim | None = None,
+    ) -> Posed | None:
         """``prim`` (a mesh whose rest ``points`` are given) posed at ``time``.
+
+        ``root``: an instancing prototype's root ``prim`` is in; the transform is then the
+        skeleton's to it, not to the world. A native prototype with no SkelRoot of its own
+        (the instance prim is the SkelRoot, as for an instanced character) is posed through
+        its first instance's proxy of ``prim``: instances share one prototype mesh, so they
+        share that pose (UsdSkel's, as for the instance's own skeleton and animation).
 
         Returns:
             The posed points and the transform placing them; None when the mesh is not
@@ -73,12 +95,24 @@ class SkelPoser:
             cannot be posed — then with one warning naming the mesh: it renders at rest.
 
         """
-        root = UsdSkel.Root.Find(prim)
-        if not root:
+        if root is not None and root.IsPrototype() and not UsdSkel.Root.Find(prim):
+            through = self._first_instance(prim, root)
+            if through is None:
+                return None
+            prim, root = through
+        skel_root = UsdSkel.Root.Find(prim)
+        if not skel_root:
             return None
-        key = str(root.GetPath())
+        # An instance proxy's skinning is found only walking through instance proxies.
+        proxy = prim.IsInstanceProxy()
+        key = f"{skel_root.GetPath()}{' (proxies)' if proxy else ''}"
         if key not in self._populated:
-            self._cache.Populate(root, Usd.PrimDefaultPredicate)
+            predicate = (
+                Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+                if proxy
+                else Usd.PrimDefaultPredicate
+            )
+            self._cache.Populate(skel_root, predicate)
             self._populated.add(key)
         query = self._cache.GetSkinningQuery(prim)
         if not query or not (query.HasJointInfluences() or query.HasBlendShapes()):
@@ -100,7 +134,13 @@ class SkelPoser:
             problem = _blend(prim, query, anim, time, posed)
             if problem:
                 return self._rest(path, problem)
-        skel_to_world = UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time)
+        if root is None:
+            skel_to_world = UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time)
+        else:
+            # To the prototype's root (or the instance standing for it), as its meshes are.
+            skel_to_world, _ = UsdGeom.XformCache(time).ComputeRelativeTransform(
+                skeleton.GetPrim(), root
+            )
         if query.HasJointInfluences():
             xforms = skel_query.ComputeSkinningTransforms(time)
             if xforms is None or len(xforms) != len(skel_query.GetJointOrder()):
@@ -121,6 +161,41 @@ class SkelPoser:
         return Posed(
             np.ascontiguousarray(out), matrix_to_numpy(skel_to_world), bool(varies), is_rigid
         )
+
+    def _first_instance(
+        self, prim: Usd.Prim, prototype: Usd.Prim
+    ) -> tuple[Usd.Prim, Usd.Prim] | None:
+        """The first instance's proxy of prototype mesh ``prim``, and that instance prim.
+
+        The instances share the prototype's one mesh: if another instance binds another
+        skeleton or animation (authored on or above the instance, outside the prototype), one
+        warning says that every instance renders the first's pose.
+        """
+        instances = sorted(prototype.GetInstances(), key=lambda i: str(i.GetPath()))
+        if not instances:
+            return None
+        stage = prim.GetStage()
+        rel = str(prim.GetPath())[len(str(prototype.GetPath())) :]
+        first = instances[0]
+        proxy = stage.GetPrimAtPath(f"{first.GetPath()}{rel}")
+        if not proxy:
+            return None
+        key = str(prim.GetPath())
+        if key not in self._compared:
+            self._compared.add(key)
+            want = _skel_binding(proxy, first)
+            for other in instances[1:]:
+                seen = stage.GetPrimAtPath(f"{other.GetPath()}{rel}")
+                if seen and _skel_binding(seen, other) != want:
+                    _log.warning(
+                        "mipray: %s: binds another skeleton or animation than %s, outside the "
+                        "instancing prototype they share; every instance renders %s's pose",
+                        seen.GetPath(),
+                        proxy.GetPath(),
+                        first.GetPath(),
+                    )
+                    break
+        return proxy, first
 
     def rigid_motion(
         self,
@@ -194,3 +269,21 @@ def _blend(
     ):
         return "its blend shapes do not fit its points"
     return None
+
+
+def _skel_binding(mesh: Usd.Prim, instance: Usd.Prim) -> tuple[str, str]:
+    """The skeleton and animation ``mesh`` (an instance proxy) is posed by, as paths.
+
+    Relative to ``instance`` where they are inside it, so instances binding their own copies
+    inside the prototype compare equal.
+    """
+    base = str(instance.GetPath())
+    skeleton = UsdSkel.BindingAPI(mesh).GetInheritedSkeleton()
+    if not skeleton:
+        return ("", "")
+    anim = UsdSkel.BindingAPI(skeleton.GetPrim()).GetInheritedAnimationSource()
+
+    def inside(path: str) -> str:
+        return path.removeprefix(base) if path.startswith(base + "/") else path
+
+    return inside(str(skeleton.GetPath())), inside(str(anim.GetPath()) if anim else "")

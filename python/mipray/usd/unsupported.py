@@ -16,6 +16,10 @@ support for one means removing its row (or adding the type to
 A row whose thing is already warned about where it is read (the reader says
 what it falls back to) has ``warned_by``: the audit lists it in the stats but
 does not warn a second time.
+
+Two entries depend on the render's camera, not on what a prim authors, and are made by the
+scene delegate with the same :class:`Unsupported` form and warning: :data:`HEADLIGHT` and
+:data:`LIGHT_DEFORMATION` (a mesh light whose points move within the camera's shutter).
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 
 __all__ = [
     "HEADLIGHT",
+    "LIGHT_DEFORMATION",
     "RENDERED_TYPES",
     "TABLE",
     "Row",
@@ -361,6 +366,10 @@ TABLE: tuple[Row, ...] = (
 #: The camera light (``UsdSceneDelegate.update_camera_light``) lights a stage whose only
 #: lights are of unsupported types: those lights are named with this.
 HEADLIGHT = "headlight added: no light on the stage is of a rendered type"
+#: A mesh light whose points move within the shutter (time-sampled, velocities, skinned): its
+#: light is built from the points at the frame's time (the core's triangle lights move only by
+#: transforms), so it lights, and is seen, there without motion blur.
+LIGHT_DEFORMATION = "mesh light deformation (lit and seen at the frame's time, without blur)"
 
 
 def _apply(scope: str, prim: Usd.Prim, time: Usd.TimeCode, shown: str) -> Iterator[Unsupported]:
