@@ -360,3 +360,41 @@ def test_an_accelerating_quad_covers_what_its_parabola_sweeps() -> None:
     assert np.abs(coverage - linear).max() > 0.2
     lit = row[np.argmax(coverage)] / coverage.max()
     np.testing.assert_allclose(row, coverage * lit, atol=0.05 * lit)
+
+
+def test_non_mesh_gprims_changing_shape_within_the_shutter_are_named_not_dropped(caplog) -> None:
+    # The core blurs only meshes' deformation: curves and points whose points move, and an
+    # implicit sphere whose radius grows, inside an open shutter render at the frame's time
+    # and are named once (warning and stats), not silently. Still ones, a sample only at the
+    # frame's time, or a closed shutter are not named.
+    def stage_with(shutter_close: float, moving: bool) -> Usd.Stage:
+        stage = new_stage()
+        c = UsdGeom.BasisCurves.Define(stage, "/World/Hair")
+        c.CreateTypeAttr("linear")
+        c.CreateCurveVertexCountsAttr([2])
+        c.CreateWidthsAttr([0.2])
+        c.SetWidthsInterpolation("constant")
+        p = UsdGeom.Points.Define(stage, "/World/Dust")
+        s = UsdGeom.Sphere.Define(stage, "/World/Ball")
+        s.AddTranslateOp().Set(Gf.Vec3d(0, -2, 0))
+        for t in (0, 1) if moving else (0,):
+            c.GetPointsAttr().Set([(t, -1, 0), (t, 1, 0)], t)
+            p.GetPointsAttr().Set([(t, 2, 0)], t)
+            s.GetRadiusAttr().Set(0.3 + 0.3 * t, t)
+        cam = add_camera(stage, "/World/Camera", eye=(0.0, 0.0, 8.0))
+        cam.CreateShutterOpenAttr(0.0)
+        cam.CreateShutterCloseAttr(shutter_close)
+        add_distant_light(stage, "/World/Sun")
+        return stage
+
+    def named(stage: Usd.Stage) -> list[str]:
+        with mipray.RenderSession(stage) as session:
+            r = session.render("/World/Camera", width=16, time=0.0)
+        return sorted(u["prim"] for u in r.stats["unsupported"] if "non-mesh gprim" in u["what"])
+
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        assert named(stage_with(1.0, moving=True)) == ["/World/Ball", "/World/Dust", "/World/Hair"]
+    lines = [r.getMessage() for r in caplog.records if "non-mesh gprim" in r.getMessage()]
+    assert len(lines) == 1 and "/World/Ball" in lines[0], lines
+    assert named(stage_with(1.0, moving=False)) == []
+    assert named(stage_with(0.0, moving=True)) == []

@@ -33,7 +33,7 @@ from .skel import SkelPoser, is_skinned
 from .transform import MOTION_SUBSAMPLES
 from .warn import warn_once
 
-__all__ = ["MAX_SAMPLES", "deformation_samples", "moves_by_velocities"]
+__all__ = ["MAX_SAMPLES", "changes_shape_in_shutter", "deformation_samples", "moves_by_velocities"]
 
 #: Most samples the renderer takes across one shutter (``mipray::deform::MAX_SAMPLES``).
 MAX_SAMPLES = 16
@@ -129,6 +129,40 @@ def _skinned(
         out.append(points)
     out.append(frame.points)
     return out
+
+
+#: The attributes that shape each implicit prim (UsdGeom's schemas; ``axis`` is uniform).
+_IMPLICIT_SHAPE = ("radius", "radiusTop", "radiusBottom", "height", "size", "width", "length")
+
+
+def changes_shape_in_shutter(
+    prim: Usd.Prim, time: Usd.TimeCode, shutter: tuple[float, float]
+) -> bool:
+    """Whether ``prim``, a gprim other than a mesh, changes shape within the shutter.
+
+    Point-based prims (curves, points, NURBS patches): ``points`` sampled strictly inside the
+    shutter at a time other than the frame's, or moving by ``velocities``; implicit prims:
+    a shaping attribute (radius, height, size, ...) sampled there. Meshes: False (they blur,
+    :func:`deformation_samples`).
+    """
+    if time.IsDefault() or shutter[1] <= shutter[0] or prim.IsA(UsdGeom.Mesh):
+        return False
+    t0, t1 = time.GetValue() + shutter[0], time.GetValue() + shutter[1]
+    if prim.IsA(UsdGeom.PointBased):
+        attrs = [UsdGeom.PointBased(prim).GetPointsAttr()]
+        if moves_by_velocities(prim):
+            return True
+    else:
+        attrs = [a for a in (prim.GetAttribute(n) for n in _IMPLICIT_SHAPE) if a]
+
+    def sampled_inside(attr: Usd.Attribute) -> bool:
+        inside = attr.GetTimeSamplesInInterval(Gf.Interval(t0, t1))
+        if [t for t in inside if t0 < t < t1 and t != time.GetValue()]:
+            return True
+        # Samples only beyond the shutter's ends still interpolate across it.
+        return bool(attr.ValueMightBeTimeVarying()) and attr.Get(t0) != attr.Get(t1)
+
+    return any(sampled_inside(a) for a in attrs)
 
 
 def moves_by_velocities(prim: Usd.Prim) -> bool:

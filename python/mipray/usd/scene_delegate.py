@@ -47,7 +47,7 @@ from .camera import (
     find_camera_prim,
     framing_camera_arguments,
 )
-from .deform import deformation_samples
+from .deform import changes_shape_in_shutter, deformation_samples
 from .gprim import is_renderable_gprim
 from .instancing import InstancerState, Instancing
 from .light import (
@@ -69,6 +69,7 @@ from .protocol import RenderDelegateLike
 from .skel import SkelPoser
 from .transform import ancestors_might_vary, camera_shutter, motion_samples, world_transform
 from .unsupported import (
+    GPRIM_DEFORMATION,
     HEADLIGHT,
     LIGHT_DEFORMATION,
     Unsupported,
@@ -919,6 +920,8 @@ class UsdSceneDelegate:
             prim = self.stage.GetPrimAtPath(path)
             if prim:
                 samples = deformation_samples(prim, self.time, shutter, self._poser)
+                if samples is None and changes_shape_in_shutter(prim, self.time, shutter):
+                    self._light_deformation.append(Unsupported(path, GPRIM_DEFORMATION))
         if samples is not None and record.light:
             self._light_deformation.append(Unsupported(path, LIGHT_DEFORMATION))
             samples = None

@@ -38,6 +38,7 @@ from .mtlx_files import LOADED
 from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 
 __all__ = [
+    "GPRIM_DEFORMATION",
     "HEADLIGHT",
     "LIGHT_DEFORMATION",
     "RENDERED_TYPES",
@@ -370,6 +371,11 @@ HEADLIGHT = "headlight added: no light on the stage is of a rendered type"
 #: light is built from the points at the frame's time (the core's triangle lights move only by
 #: transforms), so it lights, and is seen, there without motion blur.
 LIGHT_DEFORMATION = "mesh light deformation (lit and seen at the frame's time, without blur)"
+#: A gprim other than a mesh whose shape changes within the shutter (curves' or points'
+#: ``points`` sampled inside it or moving by ``velocities``, an implicit prim's radius, size or
+#: height sampled inside it): the core blurs only meshes' deformation, so it renders at the
+#: frame's time (its transform still blurs).
+GPRIM_DEFORMATION = "deformation of a non-mesh gprim (rendered at the frame's time, without blur)"
 
 
 def _apply(scope: str, prim: Usd.Prim, time: Usd.TimeCode, shown: str) -> Iterator[Unsupported]:
