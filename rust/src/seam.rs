@@ -657,9 +657,11 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
         // that bounds how far it reaches from its chord in any axis direction. At stride 1 every
         // reach is the radius; merged, each chord's is computed again below where it is needed
         // (one skipped vertex at stride 2: cheaper than keeping them in an array per edge).
+        // An edge of one or two chords is culled chord by chord: its box is made only for
+        // longer edges (a merged 2×2 grid made it, and its chords' reaches, for nothing).
         let mut edge_box = crate::bounds::Bounds3::EMPTY;
         let mut r_max: f32 = base;
-        if stride > 1 || q > 2 {
+        if q > 2 {
             for k in 0..q {
                 let (a, b) = (vert(k * stride), vert((k + 1) * stride));
                 if stride > 1 {
@@ -669,7 +671,6 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
                 edge_box.grow(b);
             }
         }
-        // (An edge of one or two chords is culled chord by chord.)
         if q > 2 && ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
             continue;
         }
