@@ -249,6 +249,17 @@ fn hit_quads<A: Fn(f32, Vec3A) -> bool>(
     if i1 - i0 == 1 && j1 - j0 == 1 {
         return hit_one_quad(ray, tess, stride, i0, j0, t_min, best, t_max, accept);
     }
+    // Nearly all other calls read rows of five vertices: a medium grid (or a fine grid's
+    // sub-box) as 4×4 quads at stride 1 or 2×2 at stride 2. Their rows are taken as
+    // fixed-size arrays and kept in registers (the general path below indexes the grid per
+    // lane and goes through row buffers on the stack).
+    if (i1 - i0) * stride == 4 {
+        match (stride, j1 - j0) {
+            (1, _) => return hit_quads_span5(ray, tess, range, t_min, best, t_max, accept),
+            (2, 2) => return hit_2x2_span5(ray, tess, range, t_min, best, t_max, accept),
+            _ => {}
+        }
+    }
     match i1 - i0 + 1 {
         0..=3 => hit_quad_pairs(ray, tess, stride, range, t_min, best, t_max, accept),
         4..=5 => hit_quads_rows::<5, 8, A>(ray, tess, stride, range, t_min, best, t_max, accept),
@@ -521,8 +532,14 @@ fn hit_one_quad<A: Fn(f32, Vec3A) -> bool>(
         return;
     }
     let verts: &[[f32; 3]] = &tess.verts;
-    let (row, base) = (stride * tess.n, (j * tess.n + i) * stride);
-    let (x, y, z) = ray.shear4([&verts[base], &verts[base + stride], &verts[base + row], &verts[base + row + stride]]);
+    let (x, y, z) = match <&[[f32; 3]; 4]>::try_from(verts) {
+        // A coarse grid (the most calls): its four vertices are the quad's, no indexing.
+        Ok(v) => ray.shear4([&v[0], &v[1], &v[2], &v[3]]),
+        Err(_) => {
+            let (row, base) = (stride * tess.n, (j * tess.n + i) * stride);
+            ray.shear4([&verts[base], &verts[base + stride], &verts[base + row], &verts[base + row + stride]])
+        }
+    };
     let (xs, ys, zs) = (x.to_array(), y.to_array(), z.to_array());
     let corners = [0, 1, 2, 3].map(|k| Sheared { x: xs[k], y: ys[k], z: zs[k] });
     if triangle && i + j + 1 == q {
@@ -586,6 +603,123 @@ fn hit_quad_pairs<A: Fn(f32, Vec3A) -> bool>(
         rows[0] = rows[2];
         j += 2;
     }
+}
+
+/// Vertices `start..start + 5` of `tess` (a row of five), as an array: one bounds check for
+/// the row instead of one per lane.
+#[inline(always)]
+fn row5(tess: &Tessellation, start: usize) -> &[[f32; 3]; 5] {
+    tess.verts[start..].first_chunk::<5>().expect("a grid row of five vertices")
+}
+
+/// Five vertices of a row in the ray's sheared frame: the first four as lanes, the fifth apart.
+#[derive(Clone, Copy)]
+struct Sheared5 {
+    x: Vec4,
+    y: Vec4,
+    z: Vec4,
+    last: Sheared,
+}
+
+impl Sheared5 {
+    /// `r` sheared: lanes by [`WatertightRay::shear4`], the fifth by [`WatertightRay::shear`]
+    /// (the same operations, so the same bits as shearing each vertex alone).
+    #[inline(always)]
+    fn new(ray: &WatertightRay, r: &[[f32; 3]; 5]) -> Self {
+        let (x, y, z) = ray.shear4([&r[0], &r[1], &r[2], &r[3]]);
+        Sheared5 { x, y, z, last: ray.shear(&r[4]) }
+    }
+
+    /// Vertices 0–3 as lanes.
+    #[inline(always)]
+    fn lanes(&self) -> Lanes {
+        Lanes { x: self.x, y: self.y }
+    }
+
+    /// Vertices 1–4 as lanes.
+    #[inline(always)]
+    fn lanes_shifted(&self) -> Lanes {
+        let shift = |v: Vec4, e: f32| Vec4::new(v.y, v.z, v.w, e);
+        Lanes { x: shift(self.x, self.last.x), y: shift(self.y, self.last.y) }
+    }
+
+    /// Vertex `k` (0–4). Only for the few quads the lanes pass: it goes through memory.
+    #[inline(always)]
+    fn get(&self, k: usize) -> Sheared {
+        if k < 4 {
+            Sheared { x: self.x[k], y: self.y[k], z: self.z[k] }
+        } else {
+            self.last
+        }
+    }
+}
+
+/// [`hit_quads`] at stride 1 on rows of five vertices (`i1 − i0 = 4`: a medium grid's 4×4
+/// quads, a fine grid's sub-box): each row sheared once, as [`Sheared5`], the four quads of a
+/// row pair tested as four lanes.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn hit_quads_span5<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    (i0, _, j0, j1): (usize, usize, usize, usize),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let n = tess.n;
+    let q = n - 1;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    let mut lo = Sheared5::new(ray, row5(tess, j0 * n + i0));
+    for j in j0..j1 {
+        let hi = Sheared5::new(ray, row5(tess, (j + 1) * n + i0));
+        let masks = row_masks(triangle, q, i0, j, 4);
+        let lanes = (lo.lanes(), lo.lanes_shifted(), hi.lanes(), hi.lanes_shifted());
+        let corners = |l: usize| (i0 + l, j, [lo.get(l), lo.get(l + 1), hi.get(l), hi.get(l + 1)]);
+        finish_lanes(ray, tess, 1, masks, lanes, corners, t_min, best, t_max, accept);
+        lo = hi;
+    }
+}
+
+/// [`hit_quads`] at stride 2 for 2×2 quads on rows of five vertices (a medium grid at rate 2,
+/// a fine grid's sub-box at rate 8): the three rows' vertices 0, 2, 4 sheared as lanes (the
+/// fourth repeats the third), the four quads as the lanes (i0, j0), (i0 + 1, j0), (i0, j0 + 1),
+/// (i0 + 1, j0 + 1), as [`hit_quad_pairs`] orders them.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn hit_2x2_span5<A: Fn(f32, Vec3A) -> bool>(
+    ray: &WatertightRay,
+    tess: &Tessellation,
+    (i0, _, j0, _): (usize, usize, usize, usize),
+    t_min: f32,
+    best: &mut Option<GridHit>,
+    t_max: &mut f32,
+    accept: &A,
+) {
+    let n = tess.n;
+    let q = (n - 1) / 2;
+    let triangle = tess.domain == GridDomain::LowerTriangle;
+    let row = |j: usize| {
+        let r = row5(tess, 2 * (j * n + i0));
+        ray.shear4([&r[0], &r[2], &r[4], &r[4]])
+    };
+    let rows = [row(j0), row(j0 + 1), row(j0 + 2)];
+    // Lanes k, k + 1 of row r and of row r + 1.
+    let pair = |r: usize, k: usize| {
+        let two = |a: Vec4, b: Vec4| if k == 0 { Vec4::new(a.x, a.y, b.x, b.y) } else { Vec4::new(a.y, a.z, b.y, b.z) };
+        Lanes { x: two(rows[r].0, rows[r + 1].0), y: two(rows[r].1, rows[r + 1].1) }
+    };
+    let (full0, half0) = row_masks(triangle, q, i0, j0, 2);
+    let (full1, half1) = row_masks(triangle, q, i0, j0 + 1, 2);
+    let masks = (full0 | full1 << 2, half0 | half1 << 2);
+    let lanes = (pair(0, 0), pair(0, 1), pair(1, 0), pair(1, 1));
+    let corners = |l: usize| {
+        let (c, r) = (l & 1, l >> 1);
+        let at = |r: usize, k: usize| Sheared { x: rows[r].0[k], y: rows[r].1[k], z: rows[r].2[k] };
+        (i0 + c, j0 + r, [at(r, c), at(r, c + 1), at(r + 1, c), at(r + 1, c + 1)])
+    };
+    finish_lanes(ray, tess, 2, masks, lanes, corners, t_min, best, t_max, accept);
 }
 
 /// Takes every hit: the `accept` of [`intersect_tessellation`] and the seam tests for callers
@@ -869,7 +1003,7 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 40) as f32 / (1u64 << 24) as f32
         };
-        let (mut compared, mut hits, mut refused, mut zero_edges) = (0, 0, 0, 0);
+        let (mut compared, mut hits, mut refused, mut zero_edges, mut rows_of_five) = (0, 0, 0, 0, 0);
         for case in 0..600 {
             let n = [2usize, 3, 5, 9, 17][case % 5];
             let mut t = flat_grid(n);
@@ -920,16 +1054,28 @@ mod tests {
                         ranges.extend((0..16).map(|k| (k % 4 * per, k % 4 * per + per, k / 4 * per, k / 4 * per + per)));
                     }
                     for range in ranges {
+                        // Every hit offered to the filter, in order: the lanes must offer the
+                        // same hits in the same order as the triangle-by-triangle walk.
+                        let (offered_lanes, offered_walk) = (std::cell::RefCell::new(Vec::new()), std::cell::RefCell::new(Vec::new()));
+                        let logged = |log: &std::cell::RefCell<Vec<(u32, [u32; 3])>>, t: f32, ng: Vec3A| {
+                            log.borrow_mut().push((t.to_bits(), ng.to_array().map(f32::to_bits)));
+                            accept(t, ng)
+                        };
                         let mut got = None;
                         let mut t_got = t_max;
-                        hit_quads(&ray, &t, stride, range, t_min, &mut got, &mut t_got, &accept);
+                        hit_quads(&ray, &t, stride, range, t_min, &mut got, &mut t_got, &|t, ng| logged(&offered_lanes, t, ng));
                         let refusing = std::cell::Cell::new(0);
                         let counting = |t: f32, ng: Vec3A| {
-                            let ok = accept(t, ng);
+                            let ok = logged(&offered_walk, t, ng);
                             refusing.set(refusing.get() + usize::from(!ok));
                             ok
                         };
                         let want = per_triangle_in(&ray, &t, stride, range, t_min, t_max, &counting, &mut zero_edges);
+                        assert_eq!(offered_lanes.take(), offered_walk.take(), "case {case} n {n} stride {stride} range {range:?}");
+                        let (quads_i, quads_j) = (range.1 - range.0, range.3 - range.2);
+                        if quads_i * stride == 4 && (stride == 1 || quads_j == 2) {
+                            rows_of_five += 1;
+                        }
                         let bits = |h: Option<GridHit>| {
                             h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.ng.to_array().map(f32::to_bits)))
                         };
@@ -945,6 +1091,8 @@ mod tests {
         // The cases the lanes must get right all occur, many times over.
         assert!(hits > compared / 10, "{hits} hits of {compared}");
         assert!(refused > 1000 && zero_edges > 1000, "{refused} refused hits, {zero_edges} triangles with a zero edge function");
+        // The rows-of-five layouts (4×4 quads at stride 1, 2×2 at stride 2) are most of them.
+        assert!(rows_of_five > compared / 3, "{rows_of_five} ranges with rows of five of {compared}");
     }
 
     #[test]

@@ -657,29 +657,36 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
         // that bounds how far it reaches from its chord in any axis direction. At stride 1 every
         // reach is the radius; merged, each chord's is computed again below where it is needed
         // (one skipped vertex at stride 2: cheaper than keeping them in an array per edge).
+        // An edge of one or two chords is culled chord by chord: its box is made only for
+        // longer edges (a merged 2×2 grid made it, and its chords' reaches, for nothing).
         let mut edge_box = crate::bounds::Bounds3::EMPTY;
         let mut r_max: f32 = base;
-        if stride > 1 || q > 2 {
+        if q > 2 {
+            // Each vertex read once: a chord's end is the next one's start.
+            let mut a = vert(0);
+            edge_box.grow(a);
             for k in 0..q {
-                let (a, b) = (vert(k * stride), vert((k + 1) * stride));
+                let b = vert((k + 1) * stride);
                 if stride > 1 {
                     r_max = r_max.max(reach(k, a, b));
                 }
-                edge_box.grow(a);
                 edge_box.grow(b);
+                a = b;
             }
         }
-        // (An edge of one or two chords is culled chord by chord.)
         if q > 2 && ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
             continue;
         }
+        let mut b = vert(0);
         for k in 0..q {
             // Then each chord, before building its box: every point of the box lies within √3
             // times its reach of the chord (r beyond an end, and r across both ways), so a ray
             // that passes farther from the chord in (t_min, t_best) misses the box.
             // The axis-aligned test is the cheaper, the distance the tighter for chords running
             // diagonally to the axes: most rays fail the first, most of the rest the second.
-            let (a, b) = (vert(k * stride), vert((k + 1) * stride));
+            // (The chord's start is the previous one's end, read once.)
+            let a = b;
+            b = vert((k + 1) * stride);
             let r = if stride > 1 { reach(k, a, b) } else { base };
             let chord = crate::bounds::Bounds3 { min: a.min(b), max: a.max(b) };
             if ray.hit_box(&chord.expanded(1.8 * r), t_min, t_best).is_none()
