@@ -24,7 +24,6 @@
 #include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
 #include <opensubdiv/far/stencilTable.h>
-#include <opensubdiv/far/stencilTableFactory.h>
 #include <opensubdiv/far/topologyDescriptor.h>
 #include <opensubdiv/far/topologyRefinerFactory.h>
 
@@ -271,7 +270,7 @@ Far::PatchTableFactory::Options patch_options_of(const OsdMeshDesc& d, bool bili
 }
 
 // `single_crease` false isolates every semi-sharp crease fully, as the references want it
-// (osd_limit_reference_eval, and OpenSubdiv's limit stencils in osd_limit_stencil_fvar_eval).
+// (osd_limit_reference_eval and osd_limit_reference_fvar_eval, as OpenSubdiv's limit stencils do).
 void refine_adaptive(Far::TopologyRefiner& refiner, const OsdMeshDesc& d,
                      const FarCapture& capture, bool single_crease = true) {
   Far::TopologyRefiner::AdaptiveOptions ao = patch_options_of(d).GetRefineAdaptiveOptions();
@@ -1523,26 +1522,6 @@ std::unique_ptr<OsdMesh> osd_mesh_new(const OsdMeshDesc& desc, rust::Slice<const
   }
 }
 
-// One LocationArray per run of equal ptex faces, so the stencils come out in the input's order.
-// The arrays point into `u` and `v`, which must outlive them.
-static Far::LimitStencilTableFactory::LocationArrayVec location_arrays(rust::Slice<const int32_t> ptex_faces,
-                                                                       rust::Slice<const float> u,
-                                                                       rust::Slice<const float> v) {
-  Far::LimitStencilTableFactory::LocationArrayVec arrays;
-  for (std::size_t i = 0; i < ptex_faces.size();) {
-    std::size_t j = i;
-    while (j < ptex_faces.size() && ptex_faces[j] == ptex_faces[i]) ++j;
-    Far::LimitStencilTableFactory::LocationArray la;
-    la.ptexIdx = ptex_faces[i];
-    la.numLocations = int(j - i);
-    la.s = u.data() + i;
-    la.t = v.data() + i;
-    arrays.push_back(la);
-    i = j;
-  }
-  return arrays;
-}
-
 // A point of the reference's own refinement, in double: masks around high-valence vertices have
 // many small weights.
 struct RefPoint {
@@ -1639,7 +1618,7 @@ OsdLimitSamples osd_limit_reference_eval(const OsdMeshDesc& desc, rust::Slice<co
   }
 }
 
-OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
+OsdLimitSamples osd_limit_reference_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
                                             rust::Slice<const int32_t> ptex_faces,
                                             rust::Slice<const float> u,
                                             rust::Slice<const float> v) {
@@ -1653,43 +1632,78 @@ OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t
     RefinerPtr refiner = create_refiner(desc, capture);
     refine_adaptive(*refiner, desc, capture, false);
 
-    Far::LimitStencilTableFactory::LocationArrayVec arrays = location_arrays(ptex_faces, u, v);
-    // OpenSubdiv's own face-varying path: stencils of the channel's refined values (from
-    // StencilTableFactory, not PrimvarRefiner) and its own patch table.
-    Far::LimitStencilTableFactory::Options lo;
-    lo.interpolationMode = Far::LimitStencilTableFactory::INTERPOLATE_FACE_VARYING;
-    lo.fvarChannel = unsigned(channel);
-    lo.generate1stDerivatives = true;
-    lo.generate2ndDerivatives = false;
-    std::unique_ptr<const Far::LimitStencilTable> lst(
-        Far::LimitStencilTableFactory::Create(*refiner, arrays, nullptr, nullptr, lo));
-    if (!lst) capture.fail("OpenSubdiv could not build the face-varying limit stencil table");
-    capture.check("OpenSubdiv face-varying limit stencils");
-    const std::size_t n = ptex_faces.size();
-    if (std::size_t(lst->GetNumStencils()) != n)
-      throw std::runtime_error("face-varying limit stencil table has " +
-                               std::to_string(lst->GetNumStencils()) + " stencils for " +
-                               std::to_string(n) + " locations");
+    // The patch table Far::LimitStencilTableFactory builds for a face-varying channel when given
+    // none (its options in OpenSubdiv 3.5): Gregory end caps, this channel only, smooth
+    // face-varying patches where the refiner considered the channels. Evaluated as the vertex
+    // reference is (osd_limit_reference_eval): values refined level by level, the end caps'
+    // local values from their stencils over those, PatchMap and EvaluateBasisFaceVarying; the
+    // factory's stencils would factorize every value down to the mesh's, O(n^2) a value near a
+    // vertex of valence n.
+    const int fvar_channel = int(channel);
+    Far::PatchTableFactory::Options po;
+    po.includeBaseLevelIndices = true;
+    po.generateVaryingTables = false;
+    po.generateFVarTables = true;
+    po.includeFVarBaseLevelIndices = true;
+    po.numFVarChannels = 1;
+    po.fvarChannelIndices = &fvar_channel;
+    po.generateFVarLegacyLinearPatches = !refiner->GetAdaptiveOptions().considerFVarChannels;
+    po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+    po.useInfSharpPatch = refiner->GetAdaptiveOptions().useInfSharpPatch;
+    std::unique_ptr<const Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, po));
+    if (!table) capture.fail("OpenSubdiv could not build the face-varying reference patch table");
+    capture.check("OpenSubdiv face-varying reference patch table");
+
     std::size_t first = 0;
     for (std::size_t c = 0; c < channel; ++c) first += std::size_t(desc.fvar_value_counts[c]);
-    const std::size_t count = std::size_t(desc.fvar_value_counts[channel]);
-    const std::vector<int>& sizes = lst->GetSizes();
-    const std::vector<Far::Index>& idx = lst->GetControlIndices();
-    const std::vector<float>& w = lst->GetWeights();
-    const std::vector<float>& wu = lst->GetDuWeights();
-    const std::vector<float>& wv = lst->GetDvWeights();
+    const int base = refiner->GetLevel(0).GetNumFVarValues(fvar_channel);
+    if (base != desc.fvar_value_counts[channel])
+      throw std::runtime_error("OpenSubdiv kept " + std::to_string(base) + " of " +
+                               std::to_string(desc.fvar_value_counts[channel]) +
+                               " face-varying values");
+    const std::size_t refined = std::size_t(refiner->GetNumFVarValuesTotal(fvar_channel));
+    const std::size_t local = std::size_t(std::max(table->GetNumLocalPointsFaceVarying(0), 0));
+    std::vector<RefPoint> values(refined + local);
+    for (int i = 0; i < base; ++i)
+      for (int a = 0; a < 2; ++a)
+        values[std::size_t(i)].x[a] = desc.fvar_values[2 * (first + std::size_t(i)) + std::size_t(a)];
+    Far::PrimvarRefiner primvar(*refiner);
+    RefPoint* src = values.data();
+    for (int level = 1; level <= refiner->GetMaxLevel(); ++level) {
+      RefPoint* dst = src + refiner->GetLevel(level - 1).GetNumFVarValues(fvar_channel);
+      primvar.InterpolateFaceVarying(level, src, dst, fvar_channel);
+      src = dst;
+    }
+    if (local > 0)
+      table->ComputeLocalPointValuesFaceVarying(values.data(), values.data() + refined, 0);
+    capture.check("OpenSubdiv face-varying reference refinement");
+
+    const Far::PatchMap map(*table);
+    const std::size_t n = ptex_faces.size();
     OsdLimitSamples out;
-    std::size_t ofs = 0;
+    out.p.reserve(3 * n);
+    out.dpdu.reserve(3 * n);
+    out.dpdv.reserve(3 * n);
+    double w[20], wu[20], wv[20];
     for (std::size_t s = 0; s < n; ++s) {
+      const Far::PatchTable::PatchHandle* h = map.FindPatch(ptex_faces[s], u[s], v[s]);
+      if (!h)
+        throw std::runtime_error("no face-varying reference patch at ptex face " +
+                                 std::to_string(ptex_faces[s]) + ": a location fell in a hole or "
+                                 "outside its face");
+      const Far::ConstIndexArray cvs = table->GetPatchFVarValues(*h, 0);
+      if (cvs.size() > 20) throw std::runtime_error("face-varying patch with more than 20 values");
+      table->EvaluateBasisFaceVarying(*h, double(u[s]), double(v[s]), w, wu, wv, nullptr, nullptr,
+                                      nullptr, 0);
       double acc[3][2] = {};
-      for (int k = 0; k < sizes[s]; ++k, ++ofs) {
-        if (idx[ofs] < 0 || std::size_t(idx[ofs]) >= count)
-          throw std::runtime_error("face-varying limit stencil index out of range");
-        const float* c = desc.fvar_values.data() + 2 * (first + std::size_t(idx[ofs]));
+      for (int k = 0; k < cvs.size(); ++k) {
+        if (cvs[k] < 0 || std::size_t(cvs[k]) >= values.size())
+          throw std::runtime_error("face-varying reference index out of range");
+        const double* c = values[std::size_t(cvs[k])].x;
         for (int a = 0; a < 2; ++a) {
-          acc[0][a] += double(w[ofs]) * c[a];
-          acc[1][a] += double(wu[ofs]) * c[a];
-          acc[2][a] += double(wv[ofs]) * c[a];
+          acc[0][a] += w[k] * c[a];
+          acc[1][a] += wu[k] * c[a];
+          acc[2][a] += wv[k] * c[a];
         }
       }
       // 3 floats per sample, as OsdLimitSamples holds them; the third is 0.
@@ -1703,7 +1717,7 @@ OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t
   } catch (const std::exception&) {
     throw;
   } catch (...) {
-    throw std::runtime_error("unknown C++ exception in the face-varying limit stencil evaluation");
+    throw std::runtime_error("unknown C++ exception in the face-varying reference evaluation");
   }
 }
 

@@ -64,7 +64,7 @@ OsdLimitSamples osd_limit_reference_eval(const OsdMeshDesc& desc, rust::Slice<co
                                          rust::Slice<const int32_t> ptex_faces,
                                          rust::Slice<const float> u, rust::Slice<const float> v);
 
-OsdLimitSamples osd_limit_stencil_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
+OsdLimitSamples osd_limit_reference_fvar_eval(const OsdMeshDesc& desc, std::size_t channel,
                                             rust::Slice<const int32_t> ptex_faces,
                                             rust::Slice<const float> u,
                                             rust::Slice<const float> v);

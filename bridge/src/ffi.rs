@@ -243,10 +243,12 @@ pub(crate) mod bridge {
             u: &[f32],
             v: &[f32],
         ) -> Result<OsdLimitSamples>;
-        /// Reference path for face-varying channel `channel`: a fresh refiner and
-        /// `Far::LimitStencilTableFactory` in face-varying mode at (ptex face, u, v) locations.
-        /// Values and derivatives come back as 3 floats each, the third 0.
-        fn osd_limit_stencil_fvar_eval(
+        /// Reference path for face-varying channel `channel`, as `osd_limit_reference_eval` for
+        /// points: a fresh refiner, the patch table `Far::LimitStencilTableFactory` would build
+        /// in face-varying mode, the channel's values refined level by level, `Far::PatchMap` and
+        /// `PatchTable::EvaluateBasisFaceVarying` at (ptex face, u, v) locations. Values and
+        /// derivatives come back as 3 floats each, the third 0.
+        fn osd_limit_reference_fvar_eval(
             desc: &OsdMeshDesc,
             channel: usize,
             ptex_faces: &[i32],

@@ -41,5 +41,5 @@ pub mod texture;
 pub mod texture_cache;
 
 pub use oiio::{oiio_version, OiioImageIo};
-pub use osd::{limit_reference, limit_stencil_fvar_reference, LimitSample, OsdOptions, OsdSurface, UniformMesh};
+pub use osd::{limit_fvar_reference, limit_reference, LimitSample, OsdOptions, OsdSurface, UniformMesh};
 pub use texture::{OiioTextureOptions, OiioTextureSystem};

@@ -383,15 +383,16 @@ pub fn limit_reference(
     Ok((0..locations.len()).map(|i| LimitSample { p: v3(&r.p, i), dpdu: v3(&r.dpdu, i), dpdv: v3(&r.dpdv, i) }).collect())
 }
 
-/// A face-varying primvar's value and first derivatives from OpenSubdiv's
-/// `Far::LimitStencilTableFactory` in face-varying mode (the reference path for tests), at
-/// (ptex face, u, v) locations; derivatives as [`LimitSample`]'s. The primvar must be
+/// A face-varying primvar's value and first derivatives from OpenSubdiv's own evaluation (the
+/// reference path for tests), at (ptex face, u, v) locations; derivatives as [`LimitSample`]'s.
+/// The patch table `Far::LimitStencilTableFactory` builds in face-varying mode, evaluated as
+/// [`limit_reference`] evaluates points: values refined level by level, no limit stencils. The primvar must be
 /// face-varying; `topology.face_varying` sets its linear interpolation.
 ///
 /// # Errors
 /// As [`limit_reference`], and [`MeshError::Invalid`] for a primvar that is not
 /// face-varying or does not fit the topology.
-pub fn limit_stencil_fvar_reference(
+pub fn limit_fvar_reference(
     name: &str,
     topology: &MeshTopology,
     points: &[[f32; 3]],
@@ -416,7 +417,7 @@ pub fn limit_stencil_fvar_reference(
     }
     let us: Vec<f32> = locations.iter().map(|l| l.1).collect();
     let vs: Vec<f32> = locations.iter().map(|l| l.2).collect();
-    let r = ffi::osd_limit_stencil_fvar_eval(&desc, 0, &faces, &us, &vs).map_err(|e| subdivision_error(name, &e))?;
+    let r = ffi::osd_limit_reference_fvar_eval(&desc, 0, &faces, &us, &vs).map_err(|e| subdivision_error(name, &e))?;
     let v2 = |a: &[f32], i: usize| [a[3 * i], a[3 * i + 1]];
     Ok((0..locations.len()).map(|i| (v2(&r.p, i), v2(&r.dpdu, i), v2(&r.dpdv, i))).collect())
 }

@@ -16,7 +16,7 @@ use mipray::obj_shape::{corpus_dir, corpus_paths, parse_obj_shape};
 use mipray::patch::{LimitSurface, UvRect};
 use mipray::texture::{BaseFacePrimvar, Interpolation, Primvar2, Value2};
 use mipray::topology::{FaceVaryingInterpolation, MeshTopology, Scheme};
-use mipray_bridge::{limit_stencil_fvar_reference, OsdOptions, OsdSurface};
+use mipray_bridge::{limit_fvar_reference, OsdOptions, OsdSurface};
 
 fn max2(a: [f32; 2], b: [f32; 2]) -> f32 {
     (a[0] - b[0]).abs().max((a[1] - b[1]).abs())
@@ -190,9 +190,9 @@ fn bad_primvars_are_refused_naming_mesh_and_primvar() {
 }
 
 /// Every regression shape with texture coordinates: our face-varying patches against OpenSubdiv's
-/// face-varying limit stencils (its own refiner, stencil tables and patch table).
+/// own face-varying evaluation (its own refiner and patch table, values refined level by level).
 #[test]
-fn regression_shapes_face_varying_matches_limit_stencils() {
+fn regression_shapes_face_varying_matches_opensubdiv() {
     let Some(paths) = corpus_paths(&corpus_dir()) else {
         println!("note: the OpenSubdiv shape corpus is absent; skipping");
         return;
@@ -228,14 +228,14 @@ fn regression_shapes_face_varying_matches_limit_stencils() {
                     let (fu, fv) = pp.to_face_uv(u, v);
                     ours.push(surface.face_varying(0, patch, u, v).unwrap());
                     locations.push((pp.ptex_face, fu, fv));
-                    // Limit-stencil derivatives are per ptex face, per half sub-face on the
+                    // The reference's derivatives are per ptex face, per half sub-face on the
                     // sub-faces of a non-quad (see LimitSample); ours are per patch.
                     let n = shape.topology.face_vertex_counts[pp.base_face as usize];
                     scale.push((pp.size, if n != regular { 2.0 } else { 1.0 }, u > 0.0 && v > 0.0 && u < 1.0 && v < 1.0));
                 }
             }
         }
-        let reference = match limit_stencil_fvar_reference(&name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, &st, &locations) {
+        let reference = match limit_fvar_reference(&name, &shape.topology, &shape.points, &OsdOptions::DEFAULT, &st, &locations) {
             Ok(r) => r,
             Err(e) => {
                 println!("{name:32} FAIL    reference: {e}");

@@ -157,6 +157,115 @@ fn infinitely_sharp_creases_keep_the_cube_and_semi_sharp_ones_lie_between() {
     assert!(all_finite(&film) && dropped(&stats) == 0);
 }
 
+/// Rays crossing the seams between the end caps around the centre of `quad_pole(n)` and their
+/// regular neighbours that pass through the disk: (passed, rays). At the default isolation
+/// level 4 the end cap of each face spans ptex (u, v) ∈ [0, 1/16]² at the centre; its edges
+/// u = 1/16 and v = 1/16 meet regular patches. For points `a` of such an edge as the end cap
+/// evaluates it, `b` is the nearest of 129 points of the edge as the neighbour evaluates it
+/// (the curves may agree as sets where their parameterizations differ). A ray aims at the
+/// midpoint of `a` and `b` (a point of the surface when they agree) across the gap between them
+/// (perpendicular to the gap and the edge, or the surface's normal where there is no gap), both
+/// ways and tilted by ±30° towards the gap, from 0.05 before it; it has passed through when it
+/// finds no hit up to 1e-3 beyond that point (the tessellations of these small patches are
+/// within 1e-5 of the limit). Beam widths from 1 to 64 quads a patch side, so every pair of rates
+/// meets at the seam.
+fn end_cap_seam_passes(n: usize, seams: bool) -> (usize, usize) {
+    let surface = osd(&format!("/pole{n}"), quad_pole(n));
+    // The limit point at (u, v) of face f as the patch holding `inside` evaluates it (each
+    // patch here spans 1/16 of the face, so its own (s, t) moves 16 times as fast).
+    let side = |f: u32, u: f32, v: f32, inside: (f32, f32)| {
+        let (p, s, t) = surface.find_patch(f, inside.0, inside.1).expect("a patch");
+        surface.evaluate(p, s + 16.0 * (u - inside.0), t + 16.0 * (v - inside.1)).p
+    };
+    let scene = scene_of(surface.clone());
+    let mut tracer = Tracer::new(&scene, CacheConfig::unbounded(), 1.0);
+    tracer.set_seams(seams);
+    let mut c = TraceCounters::default();
+    let mut rng = Rng(15);
+    let (e, lead, beyond) = (1.0f32 / 16.0, 0.05f32, 1e-3f32);
+    let (mut passed, mut rays) = (0, 0);
+    for f in (0..n as u32).step_by(5) {
+        for along_v in [true, false] {
+            // (u, v) of the edge at parameter t, and a point inside the end cap / the neighbour
+            // that picks the patch.
+            let at = |t: f32| if along_v { (e, t) } else { (t, e) };
+            let cap_in = (e * 0.5, e * 0.5);
+            let nb_in = if along_v { (e * 1.5, e * 0.5) } else { (e * 0.5, e * 1.5) };
+            let curve: Vec<Vec3A> = (0..=128)
+                .map(|j| {
+                    let (u, v) = at(e * j as f32 / 128.0);
+                    side(f, u, v, nb_in)
+                })
+                .collect();
+            for k in 0..=8 {
+                let (u, v) = at(e * k as f32 / 8.0);
+                let a = side(f, u, v, cap_in);
+                let b = *curve.iter().min_by(|p, q| (**p - a).length().total_cmp(&(**q - a).length())).unwrap();
+                let sp = surface.limit_at(f, u, v).expect("on the disk");
+                let tangent = if along_v { sp.dpdv } else { sp.dpdu }.normalize();
+                let gap = b - a;
+                let (w, g) = if gap.length() > 1e-6 {
+                    (tangent.cross(gap).normalize(), gap.normalize())
+                } else {
+                    (sp.dpdu.cross(sp.dpdv).normalize(), Vec3A::ZERO)
+                };
+                let target = a.lerp(b, 0.5);
+                for sign in [1.0f32, -1.0] {
+                    for tilt in [0.0f32, 0.5, -0.5] {
+                        let d = (w * sign + g * tilt).normalize();
+                        let spread = 2.0 * 2f32.powf(-8.0 * rng.f32());
+                        let r = beam_ray(target - lead * d, d, 0.0, spread, RayKind::Camera);
+                        passed += usize::from(tracer.intersect(&r, &mut c).is_none_or(|h| h.t > lead + beyond));
+                        rays += 1;
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("valence {n}, seams {seams}: {passed} of {rays} rays passed through");
+    (passed, rays)
+}
+
+/// A closed lens: two `quad_pole(n)`-like disks (centres at z = ±0.3, so two vertices of valence
+/// `n`) sharing their rim (ring vertices at radius 1, corner vertices at 1.4, all at z = 0; the
+/// corner vertices have valence 2).
+fn pole_lens(n: usize) -> (MeshTopology, Vec<[f32; 3]>) {
+    let mut pts = vec![[0.0, 0.0, 0.3], [0.0, 0.0, -0.3]];
+    for i in 0..n {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        pts.push([a.cos(), a.sin(), 0.0]);
+        let b = std::f32::consts::TAU * (i as f32 + 0.5) / n as f32;
+        pts.push([1.4 * b.cos(), 1.4 * b.sin(), 0.0]);
+    }
+    let r = |i: usize| (2 + 2 * (i % n)) as i32;
+    let q = |i: usize| (3 + 2 * (i % n)) as i32;
+    let mut idx: Vec<i32> = (0..n).flat_map(|i| [0, r(i), q(i), r(i + 1)]).collect();
+    idx.extend((0..n).flat_map(|i| [1, r(i + 1), q(i), r(i)]));
+    (MeshTopology { scheme: Scheme::CatmullClark, face_vertex_counts: vec![4; 2 * n], face_vertex_indices: idx, ..Default::default() }, pts)
+}
+
+#[test]
+fn end_cap_seams_at_valence_256_and_300_let_no_ray_through() {
+    // Gregory end caps at 256, bilinear ones at 300 (OsdSurface's `simplified`): their straight
+    // edges run between refined points where the neighbours' edges are the limit's curves, 3.5e-3
+    // of the diagonal apart at equal parameters but 2e-4 apart as curves (docs/subdivision-
+    // compare.md, "Above valence 256"); the seam boxes close both. Without seams rays pass.
+    for n in [256, 300] {
+        let (passed, rays) = end_cap_seam_passes(n, true);
+        assert_eq!(passed, 0, "valence {n}: {passed} of {rays} rays passed between an end cap and its neighbour");
+    }
+    assert!(end_cap_seam_passes(256, false).0 > 0, "without seams the measurement sees cracks");
+}
+
+#[test]
+fn closed_lens_with_poles_of_valence_300_traced_from_inside_never_lets_a_ray_out() {
+    let scene = scene_of(osd("/lens300", pole_lens(300)));
+    assert!(scene.meshes[0].surface.patch_count() > 0);
+    let (escapes, unoccluded, _) = crack_escapes(&scene, 10_000, 7, true);
+    assert_eq!((escapes, unoccluded), (0, 0), "rays escaped the lens through cracks");
+    assert!(crack_escapes(&scene, 10_000, 7, false).0 > 0, "without seams the measurement sees cracks");
+}
+
 // --- holes ------------------------------------------------------------------------------------
 
 fn down_ray(x: f32, y: f32) -> Ray {

@@ -322,10 +322,15 @@ fn apply_tag(
     Ok(())
 }
 
-/// OpenSubdiv's regression-shape corpus as this workplace lays it out: `shared/osd-shapes`
-/// beside the checkout (every crate of the workspace sits one level below its root).
+/// OpenSubdiv's regression-shape corpus: `MIPRAY_OSD_SHAPES` when set, else as this workplace
+/// lays it out, `shared/osd-shapes` beside the checkout (every crate of the workspace sits one
+/// level below its root). A worktree elsewhere (`/work/wt/NAME`) has no such neighbour and its
+/// corpus tests skip unless the variable names the folder.
 pub fn corpus_dir() -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/osd-shapes")
+    match std::env::var_os("MIPRAY_OSD_SHAPES") {
+        Some(dir) => std::path::PathBuf::from(dir),
+        None => std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/osd-shapes"),
+    }
 }
 
 /// The `.obj` files in `dir`, sorted; when `MIPRAY_SHAPES` is set (comma-separated stems), only
