@@ -353,3 +353,33 @@ def test_infinite_settings_and_the_geometry_budget_reach_the_renderer(
     assert code != 0
     lines = [line for line in err.splitlines() if "geometryMemoryMb" in line]
     assert len(lines) == 1 and "it needs at least 30" in lines[0], err
+
+
+@pytest.mark.parametrize("unboundable", ["inf_point", "skel_root"])
+def test_a_prim_usd_cannot_bound_is_left_out_of_the_framing(unboundable: str) -> None:
+    # OpenUSD's testUsdviewInfGeom (a point at infinity) and testUsdSkelCache (a SkelRoot
+    # whose skeleton has no rest pose, bounded by ±FLT_MAX) framed a camera at infinity: the
+    # render stopped on "clippingRange (NaN, NaN)". The framing is the good prims' alone.
+    from pxr import Usd, UsdSkel, Vt
+
+    from mipray.usd.camera import framing_camera_arguments
+
+    def framing(with_bad: bool) -> dict:
+        stage = new_stage()
+        add_cube(stage, "/Cube").AddTranslateOp().Set(Gf.Vec3d(2, 1, 0))
+        if with_bad and unboundable == "inf_point":
+            mesh = UsdGeom.Mesh.Define(stage, "/Inf")
+            inf = float("inf")
+            mesh.CreatePointsAttr(Vt.Vec3fArray([(0, 0, 0), (1, 0, 0), (inf, inf, inf)]))
+            mesh.CreateFaceVertexCountsAttr([3])
+            mesh.CreateFaceVertexIndicesAttr([0, 1, 2])
+        elif with_bad:
+            UsdSkel.Root.Define(stage, "/Rig")
+            UsdSkel.Skeleton.Define(stage, "/Rig/Skel")
+        return framing_camera_arguments(stage, Usd.TimeCode.Default(), ("default", "render"))
+
+    good, bad = framing(False), framing(True)
+    near, far = bad["clipping_range"]
+    assert 0.0 < near < far < 1e3
+    np.testing.assert_allclose(bad["transform"], good["transform"])
+    assert bad["clipping_range"] == pytest.approx(good["clipping_range"])

@@ -135,9 +135,24 @@ def _bounds_without(
         if str(prim.GetPath()) in skip or prim.IsA(UsdSkel.Skeleton):
             prims.PruneChildren()
         elif prim.IsInstance() or (prim.IsA(UsdGeom.Boundable) and not prim.IsA(UsdSkel.Root)):
-            box.UnionWith(cache.ComputeWorldBound(prim).ComputeAlignedRange())
+            one = cache.ComputeWorldBound(prim).ComputeAlignedRange()
+            if _finite(one):
+                box.UnionWith(one)
             prims.PruneChildren()
     return box
+
+
+def _finite(box: Gf.Range3d) -> bool:
+    """Whether ``box`` is empty or a real box.
+
+    usd-core bounds a prim it cannot bound (a SkelRoot whose skeletons have no rest pose, a
+    mesh with an infinite point) by ±FLT_MAX or by non-finite corners; framing such a box
+    gives a camera at infinity and a clipping range the renderer refuses.
+    """
+    if box.IsEmpty():
+        return True
+    corners = (*box.GetMin(), *box.GetMax())
+    return all(math.isfinite(x) and abs(x) < 1e30 for x in corners)
 
 
 def framing_camera_arguments(
@@ -152,7 +167,8 @@ def framing_camera_arguments(
     is Z. The bounds are computed with ``UsdGeom.BBoxCache`` for the included
     purposes, except for the prims in ``posed`` (skinned meshes: path → posed
     world (min, max) corners), whose rest extents are replaced by their posed
-    bounds; an empty stage frames the unit cube at the origin.
+    bounds; prims usd-core bounds by infinite or ±FLT_MAX boxes are left out, and an empty
+    stage frames the unit cube at the origin.
     """
     cache = UsdGeom.BBoxCache(time, list(purposes), useExtentsHint=True)
     root = stage.GetPseudoRoot()
@@ -162,6 +178,10 @@ def framing_camera_arguments(
             box.UnionWith(Gf.Range3d(Gf.Vec3d(*map(float, lo)), Gf.Vec3d(*map(float, hi))))
     else:
         box = cache.ComputeWorldBound(root).ComputeAlignedRange()
+        if not _finite(box):
+            # One prim usd-core cannot bound makes the whole stage's box unbounded: frame the
+            # prims it can bound instead.
+            box = _bounds_without(cache, root, {})
     if box.IsEmpty():
         box = Gf.Range3d(Gf.Vec3d(-1, -1, -1), Gf.Vec3d(1, 1, 1))
     center = box.GetMidpoint()
