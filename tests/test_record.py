@@ -383,3 +383,19 @@ def test_a_prim_usd_cannot_bound_is_left_out_of_the_framing(unboundable: str) ->
     assert 0.0 < near < far < 1e3
     np.testing.assert_allclose(bad["transform"], good["transform"])
     assert bad["clipping_range"] == pytest.approx(good["clipping_range"])
+
+
+def test_a_package_whose_first_file_is_not_usd_says_so(capsys, tmp_path: Path) -> None:
+    # OpenUSD's usdMtlx tests ship .usdz packages of .mtlx documents only; usd-core cannot
+    # open them, and the error says which file it took for the root layer.
+    import zipfile
+
+    package = tmp_path / "looks.usdz"
+    with zipfile.ZipFile(package, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("Include.mtlx", '<?xml version="1.0"?>\n<materialx version="1.38"/>\n')
+    code, _, err = run([package, tmp_path / "o.exr", "-w", "8"], capsys)
+    assert code == 1
+    assert err == (
+        f"mipray-record: {package}: cannot open as a USD layer: its first file, Include.mtlx, "
+        "is not a USD layer (a package's first file is its root layer)\n"
+    )

@@ -17,6 +17,7 @@ import re
 import stat
 import sys
 import tempfile
+import zipfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -117,8 +118,32 @@ def _open_layer(path: str, what: str) -> Sdf.Layer:
             f"{path}: cannot open {what}as a USD layer: {_tf_reason(exc)}", path=path
         ) from exc
     if not layer:
-        raise StageError(f"{path}: cannot open {what}as a USD layer", path=path)
+        raise StageError(
+            f"{path}: cannot open {what}as a USD layer{_package_reason(path)}", path=path
+        )
     return layer
+
+
+def _package_reason(path: str) -> str:
+    """Why a ``.usdz`` package did not open, when its first file says (else "")."""
+    if not path.lower().endswith(".usdz"):
+        return ""
+    try:
+        with zipfile.ZipFile(path) as package:
+            names = package.namelist()
+    except (OSError, zipfile.BadZipFile) as exc:
+        return f": not a zip archive ({exc})"
+    if not names:
+        return ": the package is empty"
+    first = names[0]
+    if os.path.splitext(first)[1].lower() not in (".usd", ".usda", ".usdc"):
+        # usdz's rule: the first file is the root layer. MaterialX-only packages (OpenUSD's
+        # usdMtlx tests) need usdMtlx's file format, which usd-core's wheel does not register.
+        return (
+            f": its first file, {first}, is not a USD layer"
+            " (a package's first file is its root layer)"
+        )
+    return ""
 
 
 def _refuse_special_dependencies(top: Sdf.Layer) -> None:
