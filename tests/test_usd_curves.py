@@ -322,3 +322,22 @@ def test_nurbs_curves_whose_knots_cannot_be_used_are_drawn_as_their_control_poly
     messages = [r.getMessage() for r in caplog.records]
     assert any("curve 1: knots decrease" in t for t in messages), messages
     assert any("1 curve(s) of fewer than 2 points left out: [2]" in t for t in messages), messages
+
+
+@pytest.mark.parametrize("interpolation", ["vertex", "varying"])
+def test_one_width_for_vertex_or_varying_interpolation_is_the_constant_width(
+    native, caplog, interpolation: str
+) -> None:
+    # Storm reads one value of a vertex or varying primvar as the constant (OpenUSD's imaging
+    # test stages author widths = [w] with the schema's vertex interpolation).
+    stage = new_stage()
+    curve = UsdGeom.BasisCurves.Define(stage, "/World/Curve")
+    curve.CreateTypeAttr("linear")
+    curve.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)])
+    curve.CreateCurveVertexCountsAttr([4])
+    curve.CreateWidthsAttr([0.25])
+    curve.SetWidthsInterpolation(interpolation)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        _, gprim = curves_arguments(stage.GetPrimAtPath("/World/Curve"), Usd.TimeCode.Default())
+    assert (gprim["widths"], gprim["widths_interpolation"]) == ([0.25], "constant")
+    assert not [r for r in caplog.records if "Curve" in r.getMessage()]

@@ -23,7 +23,8 @@ Bad input gets one line naming the prim and the attribute:
   delegate refuses it). One curve whose count the type, basis and wrap cannot make segments
   of is drawn as its control polygon (or left out below two vertices) by the core, warned.
 * ``widths`` of the wrong length for their interpolation: the curves render at USD's
-  fallback width 1 (warned).
+  fallback width 1 (warned); one value for vertex or varying interpolation is the constant
+  width, as Storm reads it.
 * ``normals`` of the wrong length: the curves render as tubes (warned).
 """
 
@@ -112,6 +113,10 @@ def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
     widths = read_array(curves.GetWidthsAttr(), time, np.float32)
     if len(widths):
         interpolation = str(curves.GetWidthsInterpolation())
+        if len(widths) == 1 and interpolation in ("vertex", "varying"):
+            # Storm's rule (HdSt_BasisCurvesPrimvarInterpolaterComputation): one value of a
+            # vertex or varying primvar is the constant.
+            interpolation = "constant"
         fallback = "using the fallback width 1"
         _put_checked(gprim, path, "widths", widths, interpolation, counts, kind, fallback)
     normals = read_array(curves.GetNormalsAttr(), time, np.float32, 3)
@@ -243,6 +248,8 @@ def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
         _warn_once(f"{path}: pointWeights (a rational curve) are not applied")
     widths = read_array(curves.GetWidthsAttr(), time, np.float64)
     w_interp = str(curves.GetWidthsInterpolation()) if len(widths) else "constant"
+    if len(widths) == 1 and w_interp in ("vertex", "varying"):
+        w_interp = "constant"  # Storm's rule, as for BasisCurves
     if len(widths) and not (
         (w_interp == "constant" and len(widths) == 1)
         or (w_interp == "uniform" and len(widths) == len(counts))
