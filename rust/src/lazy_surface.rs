@@ -234,14 +234,7 @@ impl<S: ?Sized + LimitSurface + 'static> LimitSurface for LazySurface<S> {
         self.inner()?.face_varying(channel, patch, u, v)
     }
 
-    fn face_varying_grid(
-        &self,
-        channel: usize,
-        patch: usize,
-        rect: UvRect,
-        n: usize,
-        out: &mut Vec<Option<([f32; 2], [f32; 2], [f32; 2])>>,
-    ) {
+    fn face_varying_grid(&self, channel: usize, patch: usize, rect: UvRect, n: usize, out: &mut Vec<Option<crate::texture::Value2>>) {
         match self.inner() {
             Some(s) => s.face_varying_grid(channel, patch, rect, n, out),
             None => {

@@ -272,14 +272,7 @@ pub trait LimitSurface: Send + Sync {
     /// at [`UvRect::grid_uv`]), into `out` (cleared first; n² entries). Surfaces whose
     /// evaluation has a cheaper form over a grid override it (a displaced grid reads its
     /// texture coordinates at each vertex it builds); the default is the point evaluation.
-    fn face_varying_grid(
-        &self,
-        channel: usize,
-        patch: usize,
-        rect: UvRect,
-        n: usize,
-        out: &mut Vec<Option<([f32; 2], [f32; 2], [f32; 2])>>,
-    ) {
+    fn face_varying_grid(&self, channel: usize, patch: usize, rect: UvRect, n: usize, out: &mut Vec<Option<crate::texture::Value2>>) {
         out.clear();
         for j in 0..n {
             for i in 0..n {
