@@ -1,5 +1,5 @@
 //! UsdLux's `ShapingAPI` and light and shadow linking against closed forms: a spot's cone edge on
-//! the floor at h·tan(angle), its soft edge and focus as the schema's formulas say, a light
+//! the floor at h·tan(angle) (disk, sphere, rect and cylinder lights), its soft edge and focus as the schema's formulas say, a light
 //! linked away from a surface leaving it dark, and an occluder outside a light's shadow-linking
 //! set casting no shadow — by every direct-lighting estimator.
 
@@ -53,22 +53,48 @@ fn with(lights: Vec<Light>) -> Scene {
 
 #[test]
 fn a_spot_lights_the_floor_inside_h_tan_angle_and_nothing_outside() {
-    for (cone, kind) in [(30.0f32, "disk"), (50.0, "sphere")] {
+    // The cone is the light's −Z whatever its shape: a rect and a tube (UsdLux's CylinderLight,
+    // axis along X) shaped as the disk and the sphere are.
+    for (cone, kind) in [(30.0f32, "disk"), (50.0, "sphere"), (35.0, "rect"), (45.0, "cylinder")] {
         let a = 0.01;
         let mut light = spot(a, cone, 0.0, 0.0, Vec3A::ZERO);
-        if kind == "sphere" {
-            light.shape = LightShape::Sphere { center: Vec3A::Z * H, radius: a };
+        let center = Vec3A::Z * H;
+        match kind {
+            "sphere" => light.shape = LightShape::Sphere { center, radius: a },
+            // Half-extents b with 4b² = πa²: the disk's area.
+            "rect" => {
+                let b = a * PI.sqrt() / 2.0;
+                light.shape = LightShape::Rect { center, u: Vec3A::X * b, v: Vec3A::Y * b, normal: Vec3A::NEG_Z };
+            }
+            "cylinder" => {
+                light.shape = LightShape::Cylinder { center, axis: Vec3A::X * a, radius: a, e1: Vec3A::Y, e2: Vec3A::Z };
+            }
+            _ => {}
         }
         let scene = with(vec![light]);
         let edge = H * cone.to_radians().tan();
         for mode in [Mode::Mis, Mode::LightOnly, Mode::PathTracer] {
-            let inside = floor_radiance(&scene, 0.97 * edge, mode);
-            let mut truth = small_disk_radiance(a, 0.97 * edge);
+            // Area sampling of a tube wastes the half facing away: 16 times the samples.
+            let calls = if kind == "cylinder" { 6400 } else { 400 };
+            let inside = estimate_at(&scene, Vec3A::new(0.97 * edge, 0.0, 0.0), 4, calls, mode, white);
+            let r = 0.97 * edge;
+            let d = r.hypot(H);
+            let mut truth = small_disk_radiance(a, r);
             if kind == "sphere" {
                 // A sphere shows πa² whatever the direction: no cos θ at the light.
-                truth /= (H / (0.97 * edge).hypot(H)).min(1.0);
+                truth /= (H / d).min(1.0);
+            } else if kind == "cylinder" {
+                // A tube of radius a and half-length a along X shows its silhouette, 4a² times
+                // the sine of the direction's angle to the axis (H/d here), to a floor point
+                // whose own cosine is H/d.
+                truth = 4.0 * a * a * (H / d) * (H / d) / (d * d) / PI;
             }
-            assert!((inside.mean.x - truth).abs() < 0.01 * truth, "{kind} {mode:?}: inside {} vs {truth}", inside.mean.x);
+            assert!(
+                (inside.mean.x - truth).abs() < 0.01 * truth + 4.0 * inside.std_error,
+                "{kind} {mode:?}: inside {} ± {} vs {truth}",
+                inside.mean.x,
+                inside.std_error
+            );
             let outside = floor_radiance(&scene, 1.03 * edge, mode);
             assert_eq!(outside.mean.x, 0.0, "{kind} {mode:?}: outside the cone");
         }
