@@ -1,7 +1,7 @@
 //! UsdLux's `ShapingAPI` and light and shadow linking against closed forms: a spot's cone edge on
-//! the floor at h·tan(angle) (disk, sphere, rect and cylinder lights), its soft edge and focus as the schema's formulas say, a light
-//! linked away from a surface leaving it dark, and an occluder outside a light's shadow-linking
-//! set casting no shadow — by every direct-lighting estimator.
+//! the floor at h·tan(angle) (disk, sphere, rect and cylinder lights), its soft edge and focus as
+//! the schema's formulas say, a light linked away from a surface leaving it dark, and an occluder
+//! outside a light's shadow-linking set casting no shadow — by every direct-lighting estimator.
 
 mod lights_common;
 
