@@ -399,7 +399,9 @@ class _Eval:
         tiled = node_id.startswith("ND_tiledimage_")
         for key, usd_key in (("uaddressmode", "wrapS"), ("vaddressmode", "wrapT")):
             # NG_tiledimage_* reads its image with periodic address modes.
-            mode = "periodic" if tiled else _get(node, key, self.time)
+            nd = _nodedef(node_id)
+            default = nd[0].get(key, (None, "periodic"))[1] if nd else "periodic"
+            mode = "periodic" if tiled else (_get(node, key, self.time) or default)
             if mode and str(mode) in _WRAPS:
                 desc[usd_key] = _WRAPS[str(mode)]
         uv = self.coord(node, node_id, self.arg(node, node_id, "texcoord"))
