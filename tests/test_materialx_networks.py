@@ -27,7 +27,13 @@ from mipray.usd import UsdSceneDelegate
 from stages import add_camera, add_distant_light, bind, new_stage
 
 C3, F, F2 = Sdf.ValueTypeNames.Color3f, Sdf.ValueTypeNames.Float, Sdf.ValueTypeNames.Float2
-TYPES = {"color3": C3, "float": F, "vector2": F2, "integer": Sdf.ValueTypeNames.Int}
+TYPES = {
+    "color3": C3,
+    "vector3": Sdf.ValueTypeNames.Float3,
+    "float": F,
+    "vector2": F2,
+    "integer": Sdf.ValueTypeNames.Int,
+}
 WIDTH = 64
 HALF = 1.6  # the quad's half size; the camera sees ±2 at its distance (10)
 #: Radiance of a white lambertian quad facing +Z under stages.add_distant_light (irradiance 2
@@ -97,7 +103,9 @@ def node(stage: Usd.Stage, name: str, node_id: str, out: str, **inputs) -> UsdSh
     return shader
 
 
-def lambertian(stage: Usd.Stage, diffuse: UsdShade.Shader) -> None:
+def lambertian(
+    stage: Usd.Stage, diffuse: UsdShade.Shader, normal: UsdShade.Shader | None = None
+) -> None:
     """/Looks/M: a lambertian MaterialX UsdPreviewSurface whose diffuseColor is ``diffuse``,
     bound to the quad, with the camera and the light."""
     material = UsdShade.Material.Define(stage, "/Looks/M")
@@ -108,6 +116,9 @@ def lambertian(stage: Usd.Stage, diffuse: UsdShade.Shader) -> None:
     surface.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(1)
     surface.CreateInput("specularColor", C3).Set(Gf.Vec3f(0.0, 0.0, 0.0))
     surface.CreateInput("diffuseColor", C3).ConnectToSource(diffuse.ConnectableAPI(), "out")
+    if normal is not None:
+        kind = Sdf.ValueTypeNames.Normal3f
+        surface.CreateInput("normal", kind).ConnectToSource(normal.ConnectableAPI(), "out")
     bind(quad(stage, half=HALF).GetPrim(), material)
     add_camera(stage, "/World/Camera")
     add_distant_light(stage, "/World/Sun")
@@ -121,13 +132,15 @@ class Render:
     st: np.ndarray
     #: Pixels wholly on the quad.
     on: np.ndarray
+    normal: np.ndarray
 
 
 def render(stage: Usd.Stage) -> Render:
-    aovs = ("albedo", "color", "position", "alpha")
+    aovs = ("albedo", "color", "position", "alpha", "normal")
     r = mipray.render(stage, width=WIDTH, aovs=aovs, settings={"samples": 1}).aovs
     st = r["position"][..., :2] / (2 * HALF) + 0.5
-    return Render(r["albedo"][..., :3], r["color"][..., :3], st, r["alpha"][..., 0] == 1.0)
+    on = r["alpha"][..., 0] == 1.0
+    return Render(r["albedo"][..., :3], r["color"][..., :3], st, on, r["normal"][..., :3])
 
 
 def assert_albedo(albedo: np.ndarray, truth: np.ndarray, where: np.ndarray, atol: float = 2e-3):
@@ -251,6 +264,47 @@ def test_tiledimage_repeats_the_image_uvtiling_times(native, tmp_path) -> None:
     r = render(stage)
     truth, inside = quadrant_truth(2.0 * r.st)  # NG_tiledimage: uv · uvtiling − uvoffset
     assert_albedo(r.albedo, truth, r.on & inside)
+
+
+def test_checkerboard_cells_follow_uvtiling_and_uvoffset(native, tmp_path) -> None:
+    stage = new_stage()
+    board = node(
+        stage, "Board", "ND_checkerboard_color3", "color3",
+        color1=("color3", A), color2=("color3", B), uvtiling=("vector2", (4.0, 2.0)),
+        uvoffset=("vector2", (0.5, 0.0)),
+    )  # fmt: skip
+    lambertian(stage, board)
+    r = render(stage)
+    # NG_checkerboard_color3: mix(color2, color1, mod(floor(u') + floor(v'), 2)).
+    cell = r.st * (4.0, 2.0) - (0.5, 0.0)
+    odd = (np.floor(cell).sum(-1) % 2)[..., None]
+    truth = np.multiply(B, 1 - odd) + np.multiply(A, odd)
+    inside = r.on & (np.abs(cell - np.round(cell)).min(-1) > 0.05)
+    assert_albedo(r.albedo, truth, inside, atol=1e-5)
+
+
+def test_a_normal_map_chain_tilts_the_shading_normal(native, tmp_path) -> None:
+    # normalize(normalmap(image, scale 0.5)): n = normalize((2t − 1) · (0.5, 0.5, 1)) in the
+    # quad's (dP/ds, dP/dt, N) = (+X, +Y, +Z) frame.
+    texel = (0.75, 0.375, 0.875)
+    stage = new_stage()
+    file = constant_image(native, tmp_path / "n.exr", texel)
+    image = node(stage, "NormalImage", "ND_image_vector3", "vector3", file=file)
+    mapped = node(
+        stage, "Map", "ND_normalmap_float", "vector3", scale=("float", 0.5), **{"in": image}
+    )
+    unit = node(stage, "Unit", "ND_normalize_vector3", "vector3", **{"in": mapped})
+    lambertian(
+        stage, node(stage, "Grey", "ND_constant_color3", "color3", value=("color3", A)), unit
+    )
+    r = render(stage)
+    n = (2 * np.array(texel) - 1) * (0.5, 0.5, 1.0)
+    truth = n / np.linalg.norm(n)
+    assert abs(truth[0]) > 0.2 and abs(truth[1]) > 0.1
+    assert r.on.sum() > WIDTH * WIDTH // 4
+    np.testing.assert_allclose(
+        r.normal[r.on], np.broadcast_to(truth, r.normal.shape)[r.on], atol=2e-3
+    )
 
 
 def test_channels_extracted_combined_converted_and_clamped(native, tmp_path) -> None:

@@ -438,11 +438,9 @@ impl Material {
             let st = site.st(net.st_channel);
             let v = net.eval(st.map(|v| [v[0], v[1], v[2]]));
             match input {
-                Input::Normal => {
-                    // The tangent frame of the texcoord the normal map is read at.
-                    let t = net.frame_transform();
-                    ns = normal_mapped(sp, v.truncate().into(), st.map(|v| (t.vector(v[3]), t.vector(v[4]))));
-                }
+                // MaterialX's normalmap works in the frame of the surface's own texcoord (its
+                // `tangent` input defaults to Tworld), whatever place2d does to the lookup's.
+                Input::Normal => ns = normal_mapped(sp, v.truncate().into(), st.map(|v| (v[3], v[4]))),
                 Input::EmissiveColor => {
                     let e = Vec3A::from(v.truncate());
                     inputs.emissive_color = Vec3A::select(e.is_nan_mask(), Vec3A::ZERO, e).clamp(Vec3A::ZERO, Vec3A::splat(f32::MAX));

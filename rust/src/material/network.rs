@@ -267,12 +267,6 @@ impl InputNetwork {
         &self.ops
     }
 
-    /// The lookups' affine map of `st` for a tangent frame (a normal map's): the first
-    /// lookup's, identity without one.
-    pub fn frame_transform(&self) -> StTransform {
-        self.lookups.first().map_or(StTransform::IDENTITY, |l| l.st_transform)
-    }
-
     /// The value at a shading point: `st` = (st, d(st)/dx, d(st)/dy) of channel
     /// [`InputNetwork::st_channel`], `None` where the surface has none (lookups then give their
     /// fallbacks, [`Op::Coord`] zero). Unclamped and possibly non-finite (`divide` by 0,
