@@ -423,3 +423,58 @@ def test_an_input_of_the_wrong_type_in_a_network_is_named_once(fake, tmp_path, c
     assert len(named) == 1 and "/Looks/M/Pow" in named[0] and named[0].endswith("on /Looks/M"), (
         caplog.text
     )
+
+
+def test_an_unreadable_lookup_takes_its_default_and_the_rest_of_the_network_still_runs(
+    native, tmp_path, caplog
+) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    missing = str(tmp_path / "missing.exr")
+    gone = node(stage, "Gone", "ND_image_color3", "color3", file=missing, default=("color3", B))
+    lambertian(stage, node(stage, "Add", "ND_add_color3", "color3", in1=a, in2=gone))
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    assert_albedo(r.albedo, np.add(A, B), r.on, atol=1e-5)  # ND_image's default where unread
+    assert np.isfinite(r.color).all()
+    named = _warnings(caplog, missing)
+    assert len(named) == 1 and "/World/Quad" in named[0], caplog.text
+
+
+def test_a_malformed_network_is_an_error_naming_the_prim(native) -> None:
+    delegate = native.RenderDelegate()
+    quad_args = {
+        "points": np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32),
+        "face_vertex_counts": np.array([4], np.int32),
+        "face_vertex_indices": np.array([0, 1, 2, 3], np.int32),
+        "transform": np.eye(4),
+        "scheme": "none",
+    }
+    one = [{"file": "x.exr"}]
+    for network, words in (
+        ({"ops": [("texture", 0), ("add",)], "lookups": one}, "needs 2 value"),
+        ({"ops": [("texture", 1)], "lookups": one}, "reads lookup 1 of 1"),
+        ({"ops": [("noise3d",)], "lookups": []}, "noise3d"),
+        ({"ops": [("const", math.nan, 0, 0, 0)], "lookups": []}, "non-finite"),
+        ({"ops": [("texture", 0)], "lookups": [{"file": "x.exr", "channels": 5}]}, "channels"),
+    ):
+        material = {"networks": {"diffuseColor": network}}
+        with pytest.raises(ValueError, match=rf"/World/Bad: .*{words}"):
+            delegate.set_mesh("/World/Bad", material=material, **quad_args)
+    both = {
+        "textures": {"roughness": one[0]},
+        "networks": {"roughness": {"ops": [("const", 1, 1, 1, 1)]}},
+    }
+    with pytest.raises(ValueError, match="both a texture and a network"):
+        delegate.set_mesh("/World/Bad", material=both, **quad_args)
+    ok = {
+        "networks": {
+            "roughness": {
+                "ops": [("texture", 0), ("const", 2, 2, 2, 2), ("power",)],
+                "lookups": one,
+            }
+        }
+    }
+    delegate.set_mesh("/World/Good", material=ok, **quad_args)
