@@ -478,3 +478,29 @@ def test_a_malformed_network_is_an_error_naming_the_prim(native) -> None:
         }
     }
     delegate.set_mesh("/World/Good", material=ok, **quad_args)
+
+
+def test_a_network_renders_the_same_bits_with_any_thread_count_and_cache_mode(
+    native, tmp_path
+) -> None:
+    stage = new_stage()
+    uv = node(stage, "Uv", "ND_texcoord_vector2", "vector2")
+    place = node(
+        stage, "Place", "ND_place2d_vector2", "vector2", texcoord=uv, rotate=("float", 30.0)
+    )
+    file = quadrant_image(native, tmp_path / "quadrants.exr")
+    image = node(stage, "Image", "ND_image_color3", "color3", file=file, texcoord=place)
+    lambertian(
+        stage, node(stage, "Pow", "ND_power_color3FA", "color3", in1=image, in2=("float", 0.5))
+    )
+    images = [
+        mipray.render(stage, width=32, aovs=("color",), settings=settings).aovs["color"]
+        for settings in (
+            {"threads": 1, "cacheMode": "multires"},
+            {"threads": 2, "cacheMode": "none"},
+            {"threads": 2, "cacheMode": "unbounded"},
+        )
+    ]
+    assert images[0].std() > 0.01
+    for other in images[1:]:
+        np.testing.assert_array_equal(other, images[0])
