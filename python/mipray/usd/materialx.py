@@ -288,6 +288,8 @@ class _Eval:
 
     def node(self, node: UsdShade.Shader) -> _Value:
         node_id = str(node.GetShaderId() or "")
+        # MaterialX 1.38's normalmap, before 1.39 split it by its scale's type.
+        node_id = "ND_normalmap_float" if node_id == "ND_normalmap" else node_id
         parts = node_id.split("_")
         kind = parts[1] if node_id.startswith("ND_") and len(parts) > 2 else ""
         nd = _nodedef(node_id)
