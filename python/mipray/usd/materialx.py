@@ -402,8 +402,8 @@ class _Eval:
         for key, usd_key in (("uaddressmode", "wrapS"), ("vaddressmode", "wrapT")):
             # NG_tiledimage_* reads its image with periodic address modes.
             nd = _nodedef(node_id)
-            default = nd[0].get(key, (None, "periodic"))[1] if nd else "periodic"
-            mode = "periodic" if tiled else (_get(node, key, self.time) or default)
+            unset = nd[0].get(key, (None, "periodic"))[1] if nd else "periodic"
+            mode = "periodic" if tiled else (_get(node, key, self.time) or unset)
             if mode and str(mode) in _WRAPS:
                 desc[usd_key] = _WRAPS[str(mode)]
         uv = self.coord(node, node_id, self.arg(node, node_id, "texcoord"))
