@@ -306,6 +306,45 @@ def test_a_normal_map_chain_tilts_the_shading_normal(native, tmp_path, normalmap
     )
 
 
+def test_remap_luminance_sqrt_and_ifgreater_on_a_textured_mask(native, tmp_path) -> None:
+    mask = np.where(np.arange(64)[None, :] < 32, 0.25, 0.75) * np.ones((64, 1))
+    stage = new_stage()
+    m = node(stage, "Mask", "ND_image_float", "float", file=write(native, tmp_path / "m.exr", mask))
+    m.CreateInput("uaddressmode", Sdf.ValueTypeNames.String).Set("clamp")
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    b = node(
+        stage, "B", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    grey = node(stage, "Grey", "ND_luminance_color3", "color3", **{"in": b})
+    root = node(stage, "Root", "ND_sqrt_color3", "color3", **{"in": grey})
+    remapped = node(
+        stage, "Remap", "ND_remap_color3FA", "color3", inlow=("float", 0.1), inhigh=("float", 0.6),
+        outlow=("float", 0.2), outhigh=("float", 0.4), **{"in": a},
+    )  # fmt: skip
+    pick = node(
+        stage,
+        "Pick",
+        "ND_ifgreater_color3",
+        "color3",
+        value1=m,
+        value2=("float", 0.5),
+        in1=root,
+        in2=remapped,
+    )
+    lambertian(stage, pick)
+    r = render(stage)
+    s = r.st[..., 0]
+    # Right (mask 0.75 > 0.5): sqrt of B's luminance (ACEScg coefficients, stdlib_defs.mtlx);
+    # left: remap(A) = 0.2 + (A − 0.1) · 0.2 / 0.5.
+    lum = np.dot(B, (0.2722287, 0.6740818, 0.0536895))
+    right = np.full(3, math.sqrt(lum))
+    left = 0.2 + (np.array(A) - 0.1) * (0.4 - 0.2) / (0.6 - 0.1)
+    truth = np.where((s > 0.5)[..., None], right, left)
+    assert_albedo(r.albedo, truth, r.on & (np.abs(s - 0.5) > 0.1), atol=1e-4)
+
+
 def test_channels_extracted_combined_converted_and_clamped(native, tmp_path) -> None:
     stage = new_stage()
     a = node(

@@ -56,7 +56,8 @@ EVALUATED = (
     "constant", "image", "tiledimage", "texcoord", "geompropvalue", "place2d", "normalmap",
     "dot", "add", "subtract", "multiply", "divide", "modulo", "power", "min", "max", "mix",
     "clamp", "invert", "absval", "floor", "ceil", "dotproduct", "normalize", "magnitude",
-    "extract", "combine2", "combine3", "combine4", "convert", "checkerboard",
+    "extract", "combine2", "combine3", "combine4", "convert", "checkerboard", "remap",
+    "luminance", "sqrt", "ifgreater", "ifgreatereq", "ifequal",
 )  # fmt: skip
 
 _WRAPS = {"periodic": "repeat", "clamp": "clamp", "constant": "black", "mirror": "mirror"}
@@ -328,6 +329,24 @@ class _Eval:
             return self.op(("clamp",), (a("in"), a("low"), a("high")), width)
         if kind in ("absval", "floor", "ceil"):
             return self.op((kind,), (a("in"),), width)
+        if kind == "sqrt":
+            return self.binary("power", a("in"), (0.5,), width)
+        if kind == "remap":
+            # outlow + (in − inlow) · (outhigh − outlow) / (inhigh − inlow), GLSL's order; an
+            # image with constant bounds stays one affine lookup.
+            span = self.binary("subtract", a("outhigh"), a("outlow"), width)
+            v = self.binary(
+                "multiply", self.binary("subtract", a("in"), a("inlow"), width), span, width
+            )
+            v = self.binary(
+                "divide", v, self.binary("subtract", a("inhigh"), a("inlow"), width), width
+            )
+            return self.binary("add", a("outlow"), v, width)
+        if kind == "luminance" and width == 3:
+            # mx_luminance_color3: vec3(dot(in, lumacoeffs)).
+            return self.op(("dotproduct", 3), (a("in"), a("lumacoeffs")), 3)
+        if kind in ("ifgreater", "ifgreatereq", "ifequal"):
+            return self.op((kind,), (a("value1"), a("value2"), a("in1"), a("in2")), width)
         if kind in ("dotproduct", "normalize", "magnitude"):
             n = _width(a("in1") if kind == "dotproduct" else a("in"))
             ins = (a("in1"), a("in2")) if kind == "dotproduct" else (a("in"),)
@@ -559,6 +578,14 @@ def _fold(op: tuple[Any, ...], args: tuple[tuple[float, ...], ...]) -> tuple[flo
             "ceil": math.ceil,
         }
         return tuple(float(unary[name](x)) for x in args[0])
+    if name in ("ifgreater", "ifgreatereq", "ifequal"):
+        v1, v2, in1, in2 = args
+        test = {
+            "ifgreater": v1[0] > v2[0],
+            "ifgreatereq": v1[0] >= v2[0],
+            "ifequal": v1[0] == v2[0],
+        }
+        return in1 if test[name] else in2
     if name == "dotproduct":
         n = op[1]
         a, b = (_four(x, 0.0) for x in args)

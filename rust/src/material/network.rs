@@ -134,6 +134,13 @@ pub enum Op {
     Mix,
     /// Pops `high`, `low`, `in`: `min(max(in, low), high)` (GLSL `clamp`).
     Clamp,
+    /// Pops `in2`, `in1`, `value2`, `value1`: `value1 > value2 ? in1 : in2`, lane by lane
+    /// (`ifgreater`; its values are floats, so splatted, and every lane agrees).
+    IfGreater,
+    /// `value1 >= value2 ? in1 : in2` (`ifgreatereq`).
+    IfGreaterEq,
+    /// `value1 == value2 ? in1 : in2` (`ifequal`).
+    IfEqual,
     Abs,
     Floor,
     Ceil,
@@ -191,6 +198,9 @@ impl Op {
             "max" => Op::Max,
             "mix" => Op::Mix,
             "clamp" => Op::Clamp,
+            "ifgreater" => Op::IfGreater,
+            "ifgreatereq" => Op::IfGreaterEq,
+            "ifequal" => Op::IfEqual,
             "absval" => Op::Abs,
             "floor" => Op::Floor,
             "ceil" => Op::Ceil,
@@ -208,6 +218,7 @@ impl Op {
         match self {
             Op::Const(_) | Op::Texture(_) | Op::Coord(_) => (0, 1),
             Op::Mix | Op::Clamp => (3, 1),
+            Op::IfGreater | Op::IfGreaterEq | Op::IfEqual => (4, 1),
             Op::Abs | Op::Floor | Op::Ceil | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => (1, 1),
             _ => (2, 1),
         }
@@ -290,6 +301,16 @@ impl InputNetwork {
                     } else {
                         a.max(b).min(c)
                     }
+                }
+                Op::IfGreater | Op::IfGreaterEq | Op::IfEqual => {
+                    let (v1, v2, a, b) = (stack[n - 4], stack[n - 3], stack[n - 2], stack[n - 1]);
+                    n -= 4;
+                    let take_a = match op {
+                        Op::IfGreater => v1.cmpgt(v2),
+                        Op::IfGreaterEq => v1.cmpge(v2),
+                        _ => v1.cmpeq(v2),
+                    };
+                    Vec4::select(take_a, a, b)
                 }
                 Op::Abs | Op::Floor | Op::Ceil | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => {
                     n -= 1;
@@ -439,6 +460,16 @@ mod tests {
         let mask = lookup(&ramp, 0, 1, StTransform::IDENTITY);
         let mixed = eval(vec![Op::Const([1.0, 0.0, 0.0, 0.0]), Op::Const([0.0, 0.0, 1.0, 0.0]), Op::Texture(0), Op::Mix], vec![mask]);
         assert_eq!(mixed, Vec4::new(1.0 - s, 0.0, s, 0.0));
+        // ifgreater(mask, 0.5, a, b) with the textured mask s, splatted: b where s ≤ 0.5.
+        let cond = |op: Op, v2: f32| {
+            let ops = vec![Op::Texture(0), Op::Const([v2; 4]), Op::Const([1.0; 4]), Op::Const([2.0; 4]), op];
+            eval(ops, vec![lookup(&ramp, 0, 1, StTransform::IDENTITY)])
+        };
+        assert_eq!(cond(Op::IfGreater, 0.1), Vec4::ONE);
+        assert_eq!(cond(Op::IfGreater, s), Vec4::splat(2.0));
+        assert_eq!(cond(Op::IfGreaterEq, s), Vec4::ONE);
+        assert_eq!(cond(Op::IfEqual, s), Vec4::ONE);
+        assert_eq!(cond(Op::IfEqual, 0.5), Vec4::splat(2.0));
         // clamp(in, low, high).
         let clamped = eval(vec![Op::Texture(0), Op::Const([0.3; 4]), Op::Const([0.7; 4]), Op::Clamp], both());
         assert_eq!(clamped, Vec4::new(0.3, 0.6, 0.7, 0.7));
