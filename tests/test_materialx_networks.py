@@ -376,6 +376,23 @@ def test_channels_extracted_combined_converted_and_clamped(native, tmp_path) -> 
     assert_albedo(r.albedo, truth, r.on, atol=1e-5)
 
 
+def test_separate3_outputs_feed_a_combine3(native, tmp_path) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    split = UsdShade.Shader.Define(stage, "/Looks/M/Split")
+    split.CreateIdAttr("ND_separate3_color3")
+    split.CreateInput("in", C3).ConnectToSource(a.ConnectableAPI(), "out")
+    rgb = node(stage, "Rgb", "ND_combine3_color3", "color3")
+    for name, channel in (("in1", "outb"), ("in2", "outr"), ("in3", "outg")):
+        split.CreateOutput(channel, F)
+        rgb.CreateInput(name, F).ConnectToSource(split.ConnectableAPI(), channel)
+    lambertian(stage, rgb)
+    r = render(stage)
+    assert_albedo(r.albedo, (A[2], A[0], A[1]), r.on, atol=1e-5)
+
+
 def test_one_lookup_through_the_network_renders_as_the_affine_fast_path(native, tmp_path) -> None:
     # max(image, −1) is the image itself, through the core's network instead of TexturedColor:
     # the same lookup, filtered over the same footprint, so the same bits.

@@ -57,7 +57,8 @@ EVALUATED = (
     "dot", "add", "subtract", "multiply", "divide", "modulo", "power", "min", "max", "mix",
     "clamp", "invert", "absval", "floor", "ceil", "dotproduct", "normalize", "magnitude",
     "extract", "combine2", "combine3", "combine4", "convert", "checkerboard", "remap",
-    "luminance", "sqrt", "ifgreater", "ifgreatereq", "ifequal",
+    "luminance", "sqrt", "ifgreater", "ifgreatereq", "ifequal", "separate2", "separate3",
+    "separate4",
 )  # fmt: skip
 
 _WRAPS = {"periodic": "repeat", "clamp": "clamp", "constant": "black", "mirror": "mirror"}
@@ -251,7 +252,8 @@ class _Eval:
             return None
         for attr in inp.GetValueProducingAttributes():
             if UsdShade.Utils.GetType(attr.GetName()) == UsdShade.AttributeType.Output:
-                return self.node(UsdShade.Shader(attr.GetPrim()))
+                output, _ = UsdShade.Utils.GetBaseNameAndType(attr.GetName())
+                return self.node(UsdShade.Shader(attr.GetPrim()), str(output))
             if not attr.HasAuthoredValue():
                 return None
             value = _floats(attr.Get(self.time))
@@ -287,7 +289,8 @@ class _Eval:
             self._skip(node, f"{node_id} input {name} not a constant")
         return v  # type: ignore[return-value]
 
-    def node(self, node: UsdShade.Shader) -> _Value:
+    def node(self, node: UsdShade.Shader, output: str = "out") -> _Value:
+        """The value of ``node``'s output ``output``."""
         node_id = str(node.GetShaderId() or "")
         # MaterialX 1.38's normalmap, before 1.39 split it by its scale's type.
         node_id = "ND_normalmap_float" if node_id == "ND_normalmap" else node_id
@@ -351,6 +354,15 @@ class _Eval:
             n = _width(a("in1") if kind == "dotproduct" else a("in"))
             ins = (a("in1"), a("in2")) if kind == "dotproduct" else (a("in"),)
             return self.op((kind, n), ins, width)
+        if kind in ("separate2", "separate3", "separate4"):
+            # One float output per channel: outr/outx, outg/outy, outb/outz, outa/outw.
+            v = a("in")
+            index = {"r": 0, "x": 0, "g": 1, "y": 1, "b": 2, "z": 2, "a": 3, "w": 3}.get(
+                output[-1:]
+            )
+            if index is None or not output.startswith("out") or index >= _width(v):
+                self._skip(node, f"{node_id} output {output}")
+            return self.extract(v, index)  # type: ignore[arg-type]
         if kind == "extract":
             index = int(self.const(node, node_id, "index")[0])
             v = a("in")
