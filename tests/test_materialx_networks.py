@@ -559,3 +559,39 @@ def test_a_network_renders_the_same_bits_with_any_thread_count_and_cache_mode(
     assert images[0].std() > 0.01
     for other in images[1:]:
         np.testing.assert_array_equal(other, images[0])
+
+
+def test_a_cycle_of_connections_is_named_once_and_the_frame_renders(
+    native, tmp_path, caplog
+) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    first = node(stage, "First", "ND_add_color3", "color3", in1=a)
+    second = node(stage, "Second", "ND_multiply_color3", "color3", in1=first, in2=a)
+    first.CreateInput("in2", C3).ConnectToSource(second.ConnectableAPI(), "out")
+    lambertian(stage, first)
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    named = _warnings(caplog, "in a cycle")
+    assert len(named) == 1 and "/Looks/M" in named[0], caplog.text
+    assert_albedo(r.albedo, np.full(3, 0.18), r.on, atol=1e-3)  # UsdPreviewSurface's fallback
+
+
+def test_a_network_deeper_than_the_evaluator_is_named_and_the_input_keeps_its_default(
+    native, tmp_path, caplog
+) -> None:
+    # add(image, add(image, …)) twenty deep: each level holds one more value on the stack.
+    stage = new_stage()
+    file = constant_image(native, tmp_path / "a.exr", (0.01, 0.01, 0.01))
+    inner = node(stage, "Image0", "ND_image_color3", "color3", file=file)
+    for k in range(1, 20):
+        image = node(stage, f"Image{k}", "ND_image_color3", "color3", file=file)
+        inner = node(stage, f"Add{k}", "ND_add_color3", "color3", in1=image, in2=inner)
+    lambertian(stage, inner)
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    named = _warnings(caplog, "more than 16 values")
+    assert len(named) == 1 and "/Looks/M" in named[0], caplog.text
+    assert_albedo(r.albedo, np.full(3, 0.18), r.on, atol=1e-3)

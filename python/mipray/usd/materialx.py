@@ -235,6 +235,11 @@ class _Eval:
     time: Usd.TimeCode
     #: Nodes not evaluated: (node path, id).
     unsupported: list[tuple[str, str]] = field(default_factory=list)
+    #: Each (node, output) evaluated so far (None: not evaluated), so a node read by several
+    #: others is evaluated, and named, once.
+    _done: dict[tuple[str, str], _Value | None] = field(default_factory=dict)
+    #: The (node, output)s being evaluated: a connection back to one of them is a cycle.
+    _open: set[tuple[str, str]] = field(default_factory=set)
 
     def input(self, shader: UsdShade.Shader, name: str) -> _Value | None:
         """``shader``'s input ``name``: a value, or None.
@@ -253,7 +258,7 @@ class _Eval:
         for attr in inp.GetValueProducingAttributes():
             if UsdShade.Utils.GetType(attr.GetName()) == UsdShade.AttributeType.Output:
                 output, _ = UsdShade.Utils.GetBaseNameAndType(attr.GetName())
-                return self.node(UsdShade.Shader(attr.GetPrim()), str(output))
+                return self.output(UsdShade.Shader(attr.GetPrim()), str(output))
             if not attr.HasAuthoredValue():
                 return None
             value = _floats(attr.Get(self.time))
@@ -288,6 +293,27 @@ class _Eval:
         if not isinstance(v, tuple):
             self._skip(node, f"{node_id} input {name} not a constant")
         return v  # type: ignore[return-value]
+
+    def output(self, node: UsdShade.Shader, output: str) -> _Value:
+        """:meth:`node`, once per (node, output), refusing cycles."""
+        key = (str(node.GetPath()), output)
+        if key in self._done:
+            value = self._done[key]
+            if value is None:
+                raise _Unsupported
+            return value
+        if key in self._open:
+            self._skip(node, f"{node.GetShaderId() or 'no id'} in a cycle of connections")
+        self._open.add(key)
+        try:
+            value = self.node(node, output)
+        except _Unsupported:
+            self._done[key] = None
+            raise
+        finally:
+            self._open.discard(key)
+        self._done[key] = value
+        return value
 
     def node(self, node: UsdShade.Shader, output: str = "out") -> _Value:
         """The value of ``node``'s output ``output``."""
@@ -644,6 +670,21 @@ def _lower(
             ops.append(v.op)
 
 
+#: The values the core's network evaluator holds at once (``mipray::material::network::MAX_STACK``).
+MAX_STACK = 16
+
+
+def _depth(v: _Value) -> int:
+    """The stack values :func:`_lower`'s ops for ``v`` need at once (post-order)."""
+    if isinstance(v, _Tex):
+        return 2 if v.scale != (1.0,) * 4 or v.bias != (0.0,) * 4 else 1
+    if not isinstance(v, _Net):
+        return 1
+    if v.op[0] == "combine":
+        return max([_depth(v.args[0])] + [1 + _depth(p) for p in v.args[1:]])
+    return max(i + _depth(a) for i, a in enumerate(v.args))
+
+
 def _get(shader: UsdShade.Shader, name: str, time: Usd.TimeCode) -> Any:
     inp = shader.GetInput(name)
     return inp.Get(time) if inp else None
@@ -715,6 +756,10 @@ def _set(
         out.textures.append((name, desc, value.varname))
         return
     if isinstance(value, _Tex | _Net):
+        if _depth(value) > MAX_STACK:
+            what = f"{name} network needing more than {MAX_STACK} values at once"
+            out.unsupported.append((str(out.args["name"]), what))
+            return
         ops: list[tuple[Any, ...]] = []
         lookups: list[dict[str, Any]] = []
         st: set[str] = set()
