@@ -595,3 +595,25 @@ def test_a_network_deeper_than_the_evaluator_is_named_and_the_input_keeps_its_de
     named = _warnings(caplog, "more than 16 values")
     assert len(named) == 1 and "/Looks/M" in named[0], caplog.text
     assert_albedo(r.albedo, np.full(3, 0.18), r.on, atol=1e-3)
+
+
+def test_a_mesh_lights_network_emission_is_named_once_as_not_tinting(native, tmp_path, caplog):
+    from pxr import UsdLux
+
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    b = node(
+        stage, "B", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    glow = node(stage, "Glow", "ND_add_color3", "color3", in1=a, in2=b)
+    lambertian(stage, node(stage, "Grey", "ND_constant_color3", "color3", value=("color3", A)))
+    surface = UsdShade.Shader(stage.GetPrimAtPath("/Looks/M/Surface"))
+    surface.CreateInput("emissiveColor", C3).ConnectToSource(glow.ConnectableAPI(), "out")
+    UsdLux.MeshLightAPI.Apply(stage.GetPrimAtPath("/World/Quad"))
+    with caplog.at_level(logging.WARNING):
+        image = mipray.render(stage, width=16, aovs=("color",)).aovs["color"]
+    assert np.isfinite(image).all()
+    named = _warnings(caplog, "node network, which a mesh light's tint does not evaluate")
+    assert len(named) == 1 and "/World/Quad" in named[0] and "/Looks/M" in named[0], caplog.text
