@@ -79,6 +79,27 @@ impl TextureInput {
     }
 }
 
+/// A texture lookup of a [`NetworkInput`]: a MaterialX `image` / `tiledimage` node as the
+/// scene delegate resolved it (`texture.scale` and `bias` unused: the network's ops apply them).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetworkTextureInput {
+    /// File, wraps, colour space, first channel (`texture.channel`) and `fallback` (MaterialX
+    /// `default`).
+    pub texture: TextureInput,
+    /// Channels read, 1–4 (the node's output type).
+    pub channels: u8,
+    /// The lookup's texcoord as an affine map of the mesh's `st` (`place2d`, tiling).
+    pub st_transform: mipray::material::network::StTransform,
+}
+
+/// A node network feeding one input, as the scene delegate lowered it: the core's ops
+/// ([`mipray::material::network::Op`]) over these lookups.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetworkInput {
+    pub ops: Vec<mipray::material::network::Op>,
+    pub lookups: Vec<NetworkTextureInput>,
+}
+
 /// A mesh's UsdPreviewSurface as the scene delegate read it: every constant input as authored
 /// (out-of-range values included: [`PreviewSurface::clamped`] brings them into range when the
 /// render delegate builds the core material, with one warning naming the material) and the
@@ -93,12 +114,20 @@ pub struct SurfaceInputs {
     /// Textured inputs, at most one per input, all reading the mesh's `st` primvar
     /// ([`crate::mesh::MeshData::st`]).
     pub textures: Vec<(Input, TextureInput)>,
+    /// Inputs fed by a node network (MaterialX nodes not folded into one lookup), all reading
+    /// the mesh's `st`; an input is in `textures` or here, not both.
+    pub networks: Vec<(Input, NetworkInput)>,
 }
 
 impl SurfaceInputs {
     /// UsdPreviewSurface's fallbacks everywhere, no textures.
     pub fn new(name: impl Into<String>) -> Self {
-        SurfaceInputs { name: name.into(), surface: PreviewSurface::default(), textures: Vec::new() }
+        SurfaceInputs { name: name.into(), surface: PreviewSurface::default(), textures: Vec::new(), networks: Vec::new() }
+    }
+
+    /// Whether any input reads a texture file (a texture, or a network's lookup).
+    pub fn reads_files(&self) -> bool {
+        !self.textures.is_empty() || self.networks.iter().any(|(_, n)| !n.lookups.is_empty())
     }
 
     /// A lambertian surface of linear RGB `diffuse_color`: the specular workflow with no

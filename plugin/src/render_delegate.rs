@@ -7,7 +7,8 @@ use std::sync::{Arc, Mutex};
 
 use mipray::displacement::{DisplacementShader, TextureDisplacement};
 use mipray::displacement_texture::DisplacementTextures;
-use mipray::material::{Input, Material, TexturedColor};
+use mipray::material::network::{NetworkLookup, Op};
+use mipray::material::{Input, InputNetwork, Material, TexturedColor};
 use mipray::texture::{SourceColorSpace, TextureHandle, TextureSampler, UdimSampler};
 use mipray_bridge::{OiioTextureOptions, OiioTextureSystem};
 
@@ -23,7 +24,7 @@ use crate::dirty_bits::DirtyBits;
 use crate::error::DelegateError;
 use crate::instancer::{check_references, expand, instance_motion, InstancerData, InstancerPrim, Pose};
 use crate::light::{AreaKind, DistantLightData, LightPrim, LinkData};
-use crate::material::{is_color, set_input, SurfaceInputs, TextureInput};
+use crate::material::{is_color, set_input, NetworkInput, SurfaceInputs, TextureInput};
 use crate::mesh::{MeshData, MeshPrim};
 
 /// Rprim types the delegate renders.
@@ -224,8 +225,8 @@ impl RenderDelegate {
     pub fn prepare_textures(&mut self, options: OiioTextureOptions) -> Result<(), DelegateError> {
         let needed = self.meshes.values().any(|m| {
             m.data.displacement_texture.is_some()
-                || m.data.material.as_ref().is_some_and(|s| !s.textures.is_empty())
-                || m.data.face_materials.as_ref().is_some_and(|f| f.materials.iter().any(|s| !s.textures.is_empty()))
+                || m.data.material.as_ref().is_some_and(SurfaceInputs::reads_files)
+                || m.data.face_materials.as_ref().is_some_and(|f| f.materials.iter().any(SurfaceInputs::reads_files))
         }) || self
             .lights
             .values()
@@ -533,7 +534,18 @@ impl RenderDelegate {
                 },
                 None => tex.affine(*input).2,
             },
-            None => inputs.surface.emissive_color,
+            None => {
+                if inputs.networks.iter().any(|(i, _)| *i == Input::EmissiveColor) {
+                    self.warn_once(
+                        format!("{path} network light {}", inputs.name),
+                        format!(
+                            "{path}: material {}'s emissiveColor is a node network, which a mesh light's tint does not evaluate; using its constant",
+                            inputs.name
+                        ),
+                    );
+                }
+                inputs.surface.emissive_color
+            }
         };
         let tint = if tint.is_finite() { tint.max(Vec3A::ZERO) } else { Vec3A::ZERO };
         if tint.max_element() <= 0.0 {
@@ -552,8 +564,16 @@ impl RenderDelegate {
     /// naming prim, input and file) when the texture cannot be read. Float inputs read the
     /// connected output's channel: scale, bias and fallback are that channel's.
     fn textured_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+        let (sampler, texture) = self.open_texture(path, input, tex)?;
+        let (scale, bias, fallback) = tex.affine(input);
+        Some(TexturedColor { sampler, texture, path: tex.file.clone(), lookup: tex.lookup(), scale, bias, fallback, st_channel: 0 })
+    }
+
+    /// The sampler and handle that read `tex` (a `<UDIM>` set through a [`UdimSampler`]), or
+    /// `None` (warned once, naming prim, input and file) when it cannot be read.
+    fn open_texture(&self, path: &str, input: Input, tex: &TextureInput) -> Option<(Arc<dyn TextureSampler>, TextureHandle)> {
         if !tex.udim_tiles.is_empty() {
-            return self.udim_color(path, input, tex);
+            return self.open_udim(path, input, tex);
         }
         let problem = match self.sampler() {
             // prepare_textures makes a texture system whenever a mesh has a texture input.
@@ -563,17 +583,7 @@ impl RenderDelegate {
                     if !is_color(input) {
                         self.warn_data_decoded(path, input.usd_name(), tex, sampler.as_ref(), texture);
                     }
-                    let (scale, bias, fallback) = tex.affine(input);
-                    return Some(TexturedColor {
-                        sampler,
-                        texture,
-                        path: tex.file.clone(),
-                        lookup: tex.lookup(),
-                        scale,
-                        bias,
-                        fallback,
-                        st_channel: 0,
-                    });
+                    return Some((sampler, texture));
                 }
                 Err(e) => e.message,
             },
@@ -585,10 +595,10 @@ impl RenderDelegate {
         None
     }
 
-    /// [`Delegate::textured_color`] for a `<UDIM>` set: every tile opened (one that cannot be is
+    /// [`Delegate::open_texture`] for a `<UDIM>` set: every tile opened (one that cannot be is
     /// warned about, naming it, and its st reads the fallback), looked up through a
     /// [`UdimSampler`]; `None` when no tile can be read.
-    fn udim_color(&self, path: &str, input: Input, tex: &TextureInput) -> Option<TexturedColor> {
+    fn open_udim(&self, path: &str, input: Input, tex: &TextureInput) -> Option<(Arc<dyn TextureSampler>, TextureHandle)> {
         let sampler = self.sampler()?;
         let mut tiles = Vec::new();
         for (number, file) in &tex.udim_tiles {
@@ -607,21 +617,55 @@ impl RenderDelegate {
             );
             return None;
         }
-        let udim = Arc::new(UdimSampler::new(sampler, tiles));
+        let udim: Arc<dyn TextureSampler> = Arc::new(UdimSampler::new(sampler, tiles));
         if !is_color(input) {
             self.warn_data_decoded(path, input.usd_name(), tex, udim.as_ref(), TextureHandle::new(0));
         }
-        let (scale, bias, fallback) = tex.affine(input);
-        Some(TexturedColor {
-            sampler: udim,
-            texture: TextureHandle::new(0),
-            path: tex.file.clone(),
-            lookup: tex.lookup(),
-            scale,
-            bias,
-            fallback,
-            st_channel: 0,
-        })
+        Some((udim, TextureHandle::new(0)))
+    }
+
+    /// The core network of `net` feeding `input`: each lookup's texture opened (one that cannot
+    /// be read is warned about by [`Delegate::open_texture`] and gives its fallback). `None`
+    /// (warned) for a list that does not check, which `_mipray`'s `set_mesh` already refuses.
+    fn input_network(&self, path: &str, input: Input, net: &NetworkInput) -> Option<InputNetwork> {
+        let mut ops = net.ops.clone();
+        let mut lookups = Vec::new();
+        let mut slot = Vec::with_capacity(net.lookups.len());
+        for l in &net.lookups {
+            let fallback = glam::Vec4::from(l.texture.fallback);
+            slot.push(match self.open_texture(path, input, &l.texture) {
+                Some((sampler, texture)) => {
+                    lookups.push(NetworkLookup {
+                        sampler,
+                        texture,
+                        path: l.texture.file.clone(),
+                        lookup: l.texture.lookup(),
+                        channels: l.channels,
+                        fallback,
+                        st_transform: l.st_transform,
+                    });
+                    Ok(lookups.len() as u16 - 1)
+                }
+                None => Err(if l.channels == 1 { glam::Vec4::splat(fallback.x) } else { fallback }),
+            });
+        }
+        for op in &mut ops {
+            if let Op::Texture(i) = op {
+                *op = match slot.get(*i as usize) {
+                    Some(Ok(k)) => Op::Texture(*k),
+                    Some(Err(v)) => Op::Const(v.to_array()),
+                    None => *op, // refused by InputNetwork::new below
+                };
+            }
+        }
+        InputNetwork::new(ops, lookups)
+            .map_err(|e| {
+                self.warn_once(
+                    format!("{path} network {}", input.usd_name()),
+                    format!("{path}: {} network: {e}; using its constant", input.usd_name()),
+                )
+            })
+            .ok()
     }
 
     /// The core material of a mesh bound to a UsdPreviewSurface: its inputs clamped into range
@@ -645,6 +689,8 @@ impl RenderDelegate {
             );
         }
         material.textures = textures;
+        material.networks =
+            inputs.networks.iter().filter_map(|(input, net)| Some((*input, self.input_network(path, *input, net)?))).collect();
         material
     }
 
@@ -701,6 +747,9 @@ impl RenderDelegate {
         for (_, t) in &mut material.textures {
             t.st_channel = channels.st;
         }
+        for (_, n) in &mut material.networks {
+            n.st_channel = channels.st;
+        }
         material.primvars = channels.inputs.clone();
         let mat = scene.add_material(material);
         let mut mesh = Mesh::new(&m.path, surface.as_limit_surface());
@@ -714,6 +763,9 @@ impl RenderDelegate {
                     let mut material = self.preview_material(&m.path, inputs);
                     for (_, t) in &mut material.textures {
                         t.st_channel = channels.st;
+                    }
+                    for (_, n) in &mut material.networks {
+                        n.st_channel = channels.st;
                     }
                     scene.add_material(material) as u32
                 })

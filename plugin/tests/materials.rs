@@ -71,7 +71,7 @@ fn constant_inputs_reach_the_core_material_clamped() {
         ior: -2.0,
     };
     let mut d = delegate();
-    d.set_mesh("/quad", quad(Some(SurfaceInputs { name: "/Looks/M".into(), surface, textures: Vec::new() })));
+    d.set_mesh("/quad", quad(Some(SurfaceInputs { name: "/Looks/M".into(), surface, textures: Vec::new(), networks: Vec::new() })));
     let m = built(d);
     assert_eq!(m.name, "/Looks/M");
     let (expected, changed) = surface.clamped();
@@ -109,7 +109,10 @@ fn textured_inputs_become_texture_lookups_with_their_channel() {
     let file = file.to_str().unwrap();
     let textures = vec![(Input::DiffuseColor, texture(file, 0)), (Input::Roughness, texture(file, 1)), (Input::Ior, texture(file, 3))];
     let mut d = delegate();
-    d.set_mesh("/quad", quad(Some(SurfaceInputs { name: "/Looks/T".into(), surface: PreviewSurface::default(), textures })));
+    d.set_mesh(
+        "/quad",
+        quad(Some(SurfaceInputs { name: "/Looks/T".into(), surface: PreviewSurface::default(), textures, networks: Vec::new() })),
+    );
     let m = built(d);
     assert_eq!(m.textures.len(), 3);
     let diffuse = m.texture(Input::DiffuseColor).unwrap();
@@ -131,7 +134,10 @@ fn textured_inputs_become_texture_lookups_with_their_channel() {
 fn an_unreadable_texture_makes_its_fallback_the_constant() {
     let textures = vec![(Input::Roughness, texture("/no/such/file.exr", 2)), (Input::SpecularColor, texture("/no/such/file.exr", 0))];
     let mut d = delegate();
-    d.set_mesh("/quad", quad(Some(SurfaceInputs { name: "/Looks/U".into(), surface: PreviewSurface::default(), textures })));
+    d.set_mesh(
+        "/quad",
+        quad(Some(SurfaceInputs { name: "/Looks/U".into(), surface: PreviewSurface::default(), textures, networks: Vec::new() })),
+    );
     let m = built(d);
     assert!(m.textures.is_empty());
     assert_eq!(m.surface.roughness, 0.8, "the b channel's fallback");

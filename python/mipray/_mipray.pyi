@@ -128,7 +128,11 @@ class RenderDelegate:
                 ``"normal"`` is a tangent-space normal map. Out-of-range values
                 are clamped with one warning naming the material; an unreadable
                 texture renders its ``fallback`` with one warning naming prim
-                and file.
+                and file. ``"networks": {input name: {"ops": [(name, *floats)],
+                "lookups": [UsdUVTexture + "channels" (1-4), "st_transform"
+                (6 floats)]}}``: MaterialX nodes evaluated per shading point
+                (``mipray::material::network``; docs/materials.md); an input
+                is in ``textures`` or ``networks``, not both.
             gprim: a gprim other than a mesh, intersected exactly (the mesh
                 arguments' topology is then empty): ``{"type": "Sphere",
                 "radius"}``, ``{"type": "Cube", "size"}``, ``{"type":

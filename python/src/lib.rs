@@ -14,7 +14,7 @@ use glam::Mat4;
 use hd_mipray::instancer::InstancerData;
 use hd_mipray::light::{AreaKind, DistantLightData, IesData, LightPrim, LinkData, MeshLightData, ShapingData};
 
-use hd_mipray::material::{input_from_usd, FaceMaterials, SurfaceInputs, TextureInput};
+use hd_mipray::material::{input_from_usd, FaceMaterials, NetworkInput, NetworkTextureInput, SurfaceInputs, TextureInput};
 use hd_mipray::mesh::{Gprim, MeshData};
 use hd_mipray::{RenderDelegate as Delegate, RenderPass, RenderSettings};
 use mipray::aov::Aov;
@@ -655,7 +655,8 @@ impl RenderDelegate {
 /// A UsdPreviewSurface from Python: `{"name": material path, <input>: value for any of
 /// diffuseColor, emissiveColor, specularColor (3 floats), useSpecularWorkflow (bool or int),
 /// metallic, roughness, clearcoat, clearcoatRoughness, opacity, opacityThreshold, ior (float),
-/// "textures": {<input>: UsdUVTexture description}}`. Inputs left out keep UsdPreviewSurface's
+/// "textures": {<input>: UsdUVTexture description}, "networks": {<input>: node network}}`
+/// (an input in one of the two at most; [`network_input`]). Inputs left out keep UsdPreviewSurface's
 /// fallbacks; values out of range (NaN included) are kept, and clamped with one warning when the
 /// delegate builds the material. Unknown keys are errors naming the prim (a misspelt input
 /// would otherwise silently render its fallback).
@@ -703,12 +704,75 @@ fn surface_inputs(path: &str, d: &Bound<'_, PyDict>) -> PyResult<SurfaceInputs> 
                     out.textures.push((input, texture_input(path, &name, tex)?));
                 }
             }
+            "networks" => {
+                let networks = v.cast::<PyDict>().map_err(|_| value_error(path, "material networks must be a dict"))?;
+                for (name, net) in networks.iter() {
+                    let name: String = name.extract()?;
+                    let input = input_from_usd(&name)
+                        .ok_or_else(|| value_error(path, format!("material network for '{name}', which is not a textured input")))?;
+                    let net = net.cast::<PyDict>().map_err(|_| value_error(path, format!("material {name} network must be a dict")))?;
+                    out.networks.retain(|(i, _)| *i != input);
+                    out.networks.push((input, network_input(path, &name, net)?));
+                }
+            }
             _ => return Err(value_error(path, format!("material input '{key}' is not a UsdPreviewSurface input mipray reads"))),
         }
     }
     // Dict order is the caller's; the delegate's comparisons (dirty bits) want one order.
     out.textures.sort_by_key(|(i, _)| *i as u8);
+    out.networks.sort_by_key(|(i, _)| *i as u8);
+    if let Some((input, _)) = out.networks.iter().find(|(i, _)| out.textures.iter().any(|(t, _)| t == i)) {
+        return Err(value_error(path, format!("material {} has both a texture and a network", input.usd_name())));
+    }
     Ok(out)
+}
+
+/// A node network feeding material input `input`: `{"ops": [(name, *float arguments), …],
+/// "lookups": [texture description as in `textures`, plus "channels" (1–4) and
+/// "st_transform" (6 floats: s' = a·s + b·t + c, t' = d·s + e·t + f)]}`; the ops are
+/// [`mipray::material::network::Op::parse`]'s, checked as a whole
+/// ([`mipray::material::InputNetwork::check`]).
+fn network_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<NetworkInput> {
+    use mipray::material::network::{Op, StTransform};
+    let bad = |e: String| value_error(path, format!("{input} network: {e}"));
+    let mut ops = Vec::new();
+    if let Some(list) = d.get_item("ops")? {
+        for item in list.try_iter()? {
+            let parts: Vec<Bound<'_, PyAny>> = item?.extract().map_err(|_| bad("an op must be a tuple (name, *arguments)".into()))?;
+            let Some((name, args)) = parts.split_first() else { return Err(bad("an op is empty".into())) };
+            let name: String = name.extract().map_err(|_| bad("an op's name must be a string".into()))?;
+            let args = args.iter().map(|a| a.extract::<f32>()).collect::<Result<Vec<_>, _>>();
+            let args = args.map_err(|_| bad(format!("op '{name}' arguments must be numbers")))?;
+            ops.push(Op::parse(&name, &args).map_err(bad)?);
+        }
+    }
+    let mut lookups = Vec::new();
+    if let Some(list) = d.get_item("lookups")? {
+        for item in list.try_iter()? {
+            let item = item?;
+            let tex = item.cast::<PyDict>().map_err(|_| bad("a lookup must be a dict".into()))?;
+            let channels: u8 = match tex.get_item("channels")? {
+                None => 3,
+                Some(v) => v.extract().map_err(|_| bad("lookup channels must be 1–4".into()))?,
+            };
+            if !(1..=4).contains(&channels) {
+                return Err(bad(format!("lookup channels {channels} is not 1–4")));
+            }
+            let st_transform = match tex.get_item("st_transform")? {
+                None => StTransform::IDENTITY,
+                Some(v) => {
+                    let m: [f32; 6] = v.extract().map_err(|_| bad("lookup st_transform must be 6 floats".into()))?;
+                    if !m.iter().all(|x| x.is_finite()) {
+                        return Err(bad(format!("lookup st_transform {m:?} is not finite")));
+                    }
+                    StTransform(m)
+                }
+            };
+            lookups.push(NetworkTextureInput { texture: texture_input(path, input, tex)?, channels, st_transform });
+        }
+    }
+    mipray::material::InputNetwork::check(&ops, lookups.len()).map_err(bad)?;
+    Ok(NetworkInput { ops, lookups })
 }
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats

@@ -1,6 +1,10 @@
 //! Materials: UsdPreviewSurface's inputs, constant or fed by textures; [`Material::resolve`]
 //! reads them at a shading point (textures filtered over the ray's footprint, normal mapping),
-//! and [`ResolvedSurface::bsdf`] makes the BSDF ([`crate::bsdf::PreviewSurfaceBsdf`]).
+//! and [`ResolvedSurface::bsdf`] makes the BSDF ([`crate::bsdf::PreviewSurfaceBsdf`]). An
+//! input may also be fed by a small node network ([`network::InputNetwork`]: MaterialX nodes
+//! the scene delegate could not fold into one affine lookup).
+
+pub mod network;
 
 use std::sync::Arc;
 
@@ -11,6 +15,7 @@ use crate::differential::{RayDifferential, UvDifferentials};
 use crate::hit::{Hit, ShadingPoint};
 use crate::patch::LimitSurface;
 use crate::texture::{Lookup, TextureHandle, TextureSampler};
+pub use network::InputNetwork;
 
 /// A colour input fed by a texture (UsdUVTexture → UsdPreviewSurface `diffuseColor`):
 /// `texel.rgb · scale + bias`, looked up at the surface's `st` primvar channel with filter
@@ -192,6 +197,9 @@ pub struct Material {
     /// `UsdPrimvarReader_*`); an input is fed by one node, a texture or a primvar. Channel
     /// numbers are the surface's, so a material with these belongs to one mesh.
     pub primvars: Vec<(Input, PrimvarInput)>,
+    /// Inputs fed by a node network (evaluated after the textures and primvars, so a network
+    /// wins where both feed one input; the scene delegate sends one or the other).
+    pub networks: Vec<(Input, InputNetwork)>,
 }
 
 /// A UsdPreviewSurface input read from the surface's 2-float primvar channels
@@ -233,7 +241,7 @@ impl Material {
         let clamped = c != diffuse_color;
         let surface =
             PreviewSurface { diffuse_color: c, use_specular_workflow: true, specular_color: Vec3A::ZERO, ..PreviewSurface::default() };
-        (Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new() }, clamped)
+        (Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new(), networks: Vec::new() }, clamped)
     }
 
     /// A smooth specular-workflow surface: diffuse `diffuse_color` under a delta mirror of
@@ -246,14 +254,14 @@ impl Material {
             roughness: 0.0,
             ..PreviewSurface::default()
         };
-        Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new() }
+        Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new(), networks: Vec::new() }
     }
 
     /// A UsdPreviewSurface material, its inputs clamped into range; the names of the inputs that
     /// were out of range (warn once, naming the material).
     pub fn preview_surface(name: impl Into<String>, surface: PreviewSurface) -> (Self, Vec<&'static str>) {
         let (surface, changed) = surface.clamped();
-        (Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new() }, changed)
+        (Material { name: name.into(), surface, textures: Vec::new(), primvars: Vec::new(), networks: Vec::new() }, changed)
     }
 
     /// The texture feeding `input`, if any.
@@ -261,9 +269,10 @@ impl Material {
         self.textures.iter().find(|(i, _)| *i == input).map(|(_, t)| t)
     }
 
-    /// Whether a texture or a primvar feeds `input`: its value varies over the surface.
+    /// Whether a texture, a primvar or a network feeds `input`: its value varies over the
+    /// surface.
     pub fn varies(&self, input: Input) -> bool {
-        self.texture(input).is_some() || self.primvars.iter().any(|(i, _)| *i == input)
+        self.texture(input).is_some() || self.primvars.iter().any(|(i, _)| *i == input) || self.networks.iter().any(|(i, _)| *i == input)
     }
 
     /// The rays this material may call for anywhere on a surface (textured inputs may take any
@@ -296,6 +305,11 @@ impl Material {
         }
         if let Some(v) = self.primvars.iter().rev().find(|(i, _)| *i == Input::Opacity).and_then(|(_, p)| p.eval(surface, hit, 1)) {
             opacity = unit_input(v.x);
+        }
+        if let Some((_, net)) = self.networks.iter().rev().find(|(i, _)| *i == Input::Opacity) {
+            let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
+            let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
+            opacity = unit_input(net.eval(site.st(net.st_channel).map(|v| [v[0], v[1], v[2]])).x);
         }
         opacity < self.surface.opacity_threshold
     }
@@ -389,7 +403,7 @@ impl Material {
                 set_varying_input(&mut inputs, *input, v, self.surface.ior);
             }
         }
-        if self.textures.is_empty() {
+        if self.textures.is_empty() && self.networks.is_empty() {
             return ResolvedSurface { inputs, ns };
         }
         let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
@@ -418,6 +432,20 @@ impl Material {
                     let st = site.st(tex.st_channel);
                     ns = normal_mapped(sp, t, st.map(|v| (v[3], v[4])));
                 }
+            }
+        }
+        for (input, net) in &self.networks {
+            let st = site.st(net.st_channel);
+            let v = net.eval(st.map(|v| [v[0], v[1], v[2]]));
+            match input {
+                // MaterialX's normalmap works in the frame of the surface's own texcoord (its
+                // `tangent` input defaults to Tworld), whatever place2d does to the lookup's.
+                Input::Normal => ns = normal_mapped(sp, v.truncate().into(), st.map(|v| (v[3], v[4]))),
+                Input::EmissiveColor => {
+                    let e = Vec3A::from(v.truncate());
+                    inputs.emissive_color = Vec3A::select(e.is_nan_mask(), Vec3A::ZERO, e).clamp(Vec3A::ZERO, Vec3A::splat(f32::MAX));
+                }
+                _ => set_varying_input(&mut inputs, *input, v.truncate().into(), self.surface.ior),
             }
         }
         ResolvedSurface { inputs, ns }

@@ -454,3 +454,44 @@ fn extreme_inputs_never_reach_the_film_as_nan() {
         assert_eq!(out.stats["render"]["dropped_samples"].as_u64(), Some(0));
     }
 }
+
+#[test]
+fn a_network_feeds_an_input_and_its_non_finite_values_never_reach_the_image() {
+    use glam::Vec4;
+    use mipray::material::network::{NetworkLookup, Op, StTransform};
+    use mipray::material::InputNetwork;
+    // diffuseColor = a ÷ b of two split textures: on the left (0.2, 0.4, 0.1) ÷ 0.5, on the right
+    // (0.3, 0, 0.6) ÷ 0 = (inf, NaN, inf), which the input clamps as a texture's value: (1, 0, 1).
+    let lookup = |left: [f32; 4], right: [f32; 4]| NetworkLookup {
+        sampler: Arc::new(SplitSampler { left, right }),
+        texture: TextureHandle::new(0),
+        path: "split.tx".into(),
+        lookup: Lookup::DEFAULT,
+        channels: 3,
+        fallback: Vec4::ZERO,
+        st_transform: StTransform::IDENTITY,
+    };
+    let a = lookup([0.2, 0.4, 0.1, 1.0], [0.3, 0.0, 0.6, 1.0]);
+    let b = lookup([0.5; 4], [0.0; 4]);
+    let net = InputNetwork::new(vec![Op::Texture(0), Op::Texture(1), Op::Divide], vec![a, b]).unwrap();
+    let mut mat = Material::lambertian("/ratio", Vec3A::splat(0.18)).0;
+    mat.networks.push((Input::DiffuseColor, net));
+    assert!(mat.varies(Input::DiffuseColor));
+    let mut scene = Scene::default();
+    add(&mut scene, "/plate", st_quad(1.0, 0.0, false), mat);
+    scene.lights.push(Light::distant("/sun", -Vec3A::Z, Vec3A::splat(PI)));
+    scene.camera = top_camera(2.0);
+    let options = RenderOptions { width: 8, height: 8, aovs: aovs(&["color", "albedo"]), ..Default::default() };
+    let out = render(&scene, &options, &NoProgress).unwrap();
+    for y in 0..8 {
+        for (x, want) in [(1, [0.4, 0.8, 0.2]), (6, [1.0, 0.0, 1.0])] {
+            let albedo = out.film.pixel("albedo", x, y);
+            let color = out.film.pixel("color", x, y);
+            for c in 0..3 {
+                assert!((albedo[c] - want[c]).abs() < 1e-6, "({x}, {y}) albedo {albedo:?} vs {want:?}");
+                // Lambertian under irradiance π head on: the albedo itself.
+                assert!((color[c] - want[c]).abs() < 1e-5, "({x}, {y}) color {color:?} vs {want:?}");
+            }
+        }
+    }
+}

@@ -6,29 +6,37 @@ lobe mipray lacks becomes. Three surface shaders are read:
 ``ND_UsdPreviewSurface_surfaceshader`` (its inputs as they are),
 ``ND_standard_surface_surfaceshader`` and ``ND_open_pbr_surface_surfaceshader``.
 
-What feeds an input is evaluated to a constant, or to one texture lookup under an affine
-map (``texel · scale + bias``, what a ``UsdUVTexture`` is): ``ND_constant_*``,
-``ND_image_*`` / ``ND_tiledimage_*`` (their ``texcoord`` from ``ND_texcoord_vector2`` or
-``ND_geompropvalue_vector2``), ``ND_normalmap*`` on ``normal``, and ``ND_multiply_*``,
-``ND_add_*``, ``ND_subtract_*``, ``ND_divide_*`` and ``ND_mix_*`` where at most one operand is a
-texture. Anything else — another node, two textures combined, an input value of the wrong
-type (a string where a number goes, an image's ``file`` that is no asset) — leaves the input
-at its default; the stats' ``unsupported`` list names the material and the node (and the
-input, for a wrong type), with one warning (:mod:`mipray.usd.unsupported`, row
+What feeds an input is folded here to a constant, or to one texture lookup under an affine map
+(``texel · scale + bias``, what a ``UsdUVTexture`` is, the renderer's fast path); anything else
+of the nodes in :data:`EVALUATED` is lowered to a node network the renderer evaluates per
+shading point (``mipray::material::network``: ``"networks"`` in the ``material`` argument).
+Each node's inputs default as its nodedef in the MaterialX package's standard library says
+(``libraries/stdlib/stdlib_defs.mtlx``), and each operator is the one of the library's GLSL
+implementation (``genglsl/stdlib_genglsl_impl.mtlx``; ``place2d``, ``tiledimage``, ``convert``
+and ``checkerboard`` as their nodegraphs in ``stdlib_ng.mtlx`` build them). Texture
+coordinates (``texcoord``, ``geompropvalue`` of a vector2, ``place2d``, tiling, arithmetic with
+constants) are kept as affine maps of the ``st`` primvar, so each lookup is filtered at its own
+footprint. Any other node, a texture coordinate that is not affine in ``st``, or an input value
+of the wrong type (a string where a number goes, an image's ``file`` that is no asset) leaves
+the input at its default; the stats' ``unsupported`` list names the material and the node (and
+the input, for a wrong type), with one warning (:mod:`mipray.usd.unsupported`, row
 ``MaterialX node``).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from pxr import Sdf, Usd, UsdShade
 
 __all__ = [
+    "EVALUATED",
     "MTLX_SURFACES",
-    "SUPPORTED_NODE_PREFIXES",
     "MtlxRead",
     "mtlx_surface",
     "read_mtlx_surface",
@@ -43,33 +51,49 @@ MTLX_SURFACES = (
     "ND_standard_surface_surfaceshader",
     "ND_open_pbr_surface_surfaceshader",
 )
-#: Node definitions evaluated (a prefix, then the output type).
-SUPPORTED_NODE_PREFIXES = (
-    "ND_constant_",
-    "ND_image_",
-    "ND_tiledimage_",
-    "ND_texcoord_",
-    "ND_geompropvalue_vector2",
-    "ND_normalmap",
-    "ND_multiply_",
-    "ND_add_",
-    "ND_subtract_",
-    "ND_divide_",
-    "ND_mix_",
-    "ND_dot_",
-)
+#: Nodes evaluated (the node name of ``ND_<node>_<types>``); ``geompropvalue`` of a vector2 only.
+EVALUATED = (
+    "constant", "image", "tiledimage", "texcoord", "geompropvalue", "place2d", "normalmap",
+    "dot", "add", "subtract", "multiply", "divide", "modulo", "power", "min", "max", "mix",
+    "clamp", "invert", "absval", "floor", "ceil", "dotproduct", "normalize", "magnitude",
+    "extract", "combine2", "combine3", "combine4", "convert", "checkerboard", "remap",
+    "luminance", "sqrt", "ifgreater", "ifgreatereq", "ifequal", "separate2", "separate3",
+    "separate4",
+)  # fmt: skip
 
 _WRAPS = {"periodic": "repeat", "clamp": "clamp", "constant": "black", "mirror": "mirror"}
+_WIDTH = {
+    "float": 1, "integer": 1, "boolean": 1, "vector2": 2, "color3": 3, "vector3": 3,
+    "color4": 4, "vector4": 4,
+}  # fmt: skip
+#: An affine map of st: s' = a·s + b·t + c, t' = d·s + e·t + f.
+Affine = tuple[float, float, float, float, float, float]
+_IDENTITY: Affine = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+def _then(m: Affine, lin: tuple[float, float, float, float], t: tuple[float, float]) -> Affine:
+    """``lin · m(st) + t`` (``lin`` row-major 2×2)."""
+    a, b, c, d, e, f = m
+    l00, l01, l10, l11 = lin
+    return (
+        l00 * a + l01 * d, l00 * b + l01 * e, l00 * c + l01 * f + t[0],
+        l10 * a + l11 * d, l10 * b + l11 * e, l10 * c + l11 * f + t[1],
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
 class _Tex:
-    """One texture lookup under an affine map: ``texel · scale + bias`` (four channels)."""
+    """One texture lookup under an affine map: ``texel · scale + bias`` (four lanes).
+
+    It reads ``channels`` channels at the texcoord ``transform`` of the primvar ``varname``.
+    """
 
     desc: dict[str, Any]
     varname: str
     scale: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     bias: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    channels: int = 3
+    transform: Affine = _IDENTITY
 
     def affine(self, k: tuple[float, ...], c: tuple[float, ...]) -> _Tex:
         """``(texel · scale + bias) · k + c``."""
@@ -81,12 +105,26 @@ class _Tex:
 
 @dataclass(frozen=True)
 class _Coord:
-    """A texcoord source: the primvar read."""
+    """A texcoord: the primvar ``varname`` under an affine map."""
 
     varname: str
+    transform: Affine = _IDENTITY
 
 
-_Value = tuple[float, ...] | _Tex | _Coord | None
+@dataclass(frozen=True)
+class _Net:
+    """``op`` (the core's op name and arguments) applied to ``args``; ``width`` lanes."""
+
+    op: tuple[Any, ...]
+    args: tuple[Any, ...]
+    width: int
+
+
+_Value = tuple[float, ...] | _Tex | _Coord | _Net
+
+
+class _Unsupported(Exception):
+    """A node or input value the input cannot be evaluated through (already recorded)."""
 
 
 def _four(v: tuple[float, ...], pad: float = 1.0) -> tuple[float, float, float, float]:
@@ -99,6 +137,10 @@ def _four(v: tuple[float, ...], pad: float = 1.0) -> tuple[float, float, float, 
 def _floats(value: Any) -> tuple[float, ...] | None:
     if value is None:
         return None
+    if hasattr(value, "asTuple"):  # a MaterialX Color3, Vector2, ...
+        value = value.asTuple()
+    if isinstance(value, str):
+        return None
     try:
         return tuple(float(x) for x in value)
     except TypeError:
@@ -110,17 +152,79 @@ def _floats(value: Any) -> tuple[float, ...] | None:
         return None
 
 
+def _width(v: _Value) -> int:
+    if isinstance(v, tuple):
+        return len(v)
+    if isinstance(v, _Tex):
+        return v.channels
+    if isinstance(v, _Coord):
+        return 2
+    return v.width
+
+
+def _pow(x: float, y: float) -> float:
+    try:
+        return math.pow(x, y)
+    except (ValueError, OverflowError):
+        return math.nan
+
+
+def _mod(x: float, y: float) -> float:
+    return x - y * math.floor(x / y) if y else math.nan
+
+
+def _divide(x: float, y: float) -> float:
+    return x / y if y else (math.copysign(math.inf, x) if x else math.nan)
+
+
+#: Constant folding of the lane-wise operators, as GLSL computes them.
+_FOLD: dict[str, Callable[[float, float], float]] = {
+    "add": lambda x, y: x + y,
+    "subtract": lambda x, y: x - y,
+    "multiply": lambda x, y: x * y,
+    "divide": _divide,
+    "modulo": _mod,
+    "power": _pow,
+    "min": min,
+    "max": max,
+}
+
+
 def _const(a: tuple[float, ...], b: tuple[float, ...], op: str) -> tuple[float, ...]:
     n = max(len(a), len(b))
     a = a * n if len(a) == 1 else a
     b = b * n if len(b) == 1 else b
-    if op == "multiply":
-        return tuple(x * y for x, y in zip(a, b, strict=False))
-    if op == "add":
-        return tuple(x + y for x, y in zip(a, b, strict=False))
-    if op == "subtract":
-        return tuple(x - y for x, y in zip(a, b, strict=False))
-    return tuple(x / y if y else 0.0 for x, y in zip(a, b, strict=False))
+    return tuple(_FOLD[op](x, y) for x, y in zip(a, b, strict=False))
+
+
+@functools.cache
+def _stdlib() -> Any:
+    """The MaterialX standard library's definitions (None without the package)."""
+    try:
+        import MaterialX as mx
+    except ImportError:
+        return None
+    lib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
+    return lib
+
+
+@functools.cache
+def _nodedef(node_id: str) -> tuple[dict[str, tuple[str, Any]], str] | None:
+    """``node_id``'s inputs and output type, from the standard library.
+
+    Inputs: name → (type, default value; a geomprop's name as ``geomprop:<name>``).
+    """
+    lib = _stdlib()
+    nd = lib.getNodeDef(node_id) if lib is not None else None
+    if nd is None:
+        return None
+    inputs: dict[str, tuple[str, Any]] = {}
+    for i in nd.getActiveInputs():
+        geomprop = i.getDefaultGeomPropString()
+        inputs[i.getName()] = (i.getType(), f"geomprop:{geomprop}" if geomprop else i.getValue())
+    outputs = nd.getActiveOutputs()
+    return inputs, outputs[0].getType() if outputs else ""
 
 
 @dataclass
@@ -131,15 +235,30 @@ class _Eval:
     time: Usd.TimeCode
     #: Nodes not evaluated: (node path, id).
     unsupported: list[tuple[str, str]] = field(default_factory=list)
+    #: Each (node, output) evaluated so far (None: not evaluated), so a node read by several
+    #: others is evaluated, and named, once.
+    _done: dict[tuple[str, str], _Value | None] = field(default_factory=dict)
+    #: The (node, output)s being evaluated: a connection back to one of them is a cycle.
+    _open: set[tuple[str, str]] = field(default_factory=set)
 
-    def input(self, shader: UsdShade.Shader, name: str) -> _Value:
-        """The value of ``shader``'s input ``name``: constant, texture, or None (unauthored)."""
+    def input(self, shader: UsdShade.Shader, name: str) -> _Value | None:
+        """``shader``'s input ``name``: a value, or None.
+
+        None: unauthored, or fed by something not evaluated (recorded in ``unsupported``).
+        """
+        try:
+            return self._input(shader, name)
+        except _Unsupported:
+            return None
+
+    def _input(self, shader: UsdShade.Shader, name: str) -> _Value | None:
         inp = shader.GetInput(name)
         if not inp:
             return None
         for attr in inp.GetValueProducingAttributes():
             if UsdShade.Utils.GetType(attr.GetName()) == UsdShade.AttributeType.Output:
-                return self.node(UsdShade.Shader(attr.GetPrim()))
+                output, _ = UsdShade.Utils.GetBaseNameAndType(attr.GetName())
+                return self.output(UsdShade.Shader(attr.GetPrim()), str(output))
             if not attr.HasAuthoredValue():
                 return None
             value = _floats(attr.Get(self.time))
@@ -153,45 +272,176 @@ class _Eval:
 
     def _skip(self, node: UsdShade.Shader, node_id: str) -> None:
         self.unsupported.append((str(node.GetPath()), node_id or "no id"))
+        raise _Unsupported
 
-    def node(self, node: UsdShade.Shader) -> _Value:
-        node_id = str(node.GetShaderId() or "")
-        kind = node_id[3:].split("_")[0] if node_id.startswith("ND_") else ""
-        if node_id.startswith("ND_constant_"):
-            return self.input(node, "value")
-        if node_id.startswith(("ND_image_", "ND_tiledimage_")):
-            return self.image(node, node_id)
-        if node_id.startswith("ND_texcoord_"):
+    def arg(self, node: UsdShade.Shader, node_id: str, name: str) -> _Value:
+        """Input ``name`` of ``node``, else its nodedef's default (a texcoord's: ``st``)."""
+        v = self._input(node, name)
+        if v is not None:
+            return v
+        nd = _nodedef(node_id)
+        default = nd[0].get(name, (None, None))[1] if nd else None
+        if isinstance(default, str) and default.startswith("geomprop:"):
             return _Coord("st")
-        if node_id == "ND_geompropvalue_vector2":
+        f = _floats(default)
+        if f is None:
+            self._skip(node, f"{node_id} input {name} (no value and no default)")
+        return f  # type: ignore[return-value]
+
+    def const(self, node: UsdShade.Shader, node_id: str, name: str) -> tuple[float, ...]:
+        v = self.arg(node, node_id, name)
+        if not isinstance(v, tuple):
+            self._skip(node, f"{node_id} input {name} not a constant")
+        return v  # type: ignore[return-value]
+
+    def output(self, node: UsdShade.Shader, output: str) -> _Value:
+        """:meth:`node`, once per (node, output), refusing cycles."""
+        key = (str(node.GetPath()), output)
+        if key in self._done:
+            value = self._done[key]
+            if value is None:
+                raise _Unsupported
+            return value
+        if key in self._open:
+            self._skip(node, f"{node.GetShaderId() or 'no id'} in a cycle of connections")
+        self._open.add(key)
+        try:
+            value = self.node(node, output)
+        except _Unsupported:
+            self._done[key] = None
+            raise
+        finally:
+            self._open.discard(key)
+        self._done[key] = value
+        return value
+
+    def node(self, node: UsdShade.Shader, output: str = "out") -> _Value:
+        """The value of ``node``'s output ``output``."""
+        node_id = str(node.GetShaderId() or "")
+        # MaterialX 1.38's normalmap, before 1.39 split it by its scale's type.
+        node_id = "ND_normalmap_float" if node_id == "ND_normalmap" else node_id
+        parts = node_id.split("_")
+        kind = parts[1] if node_id.startswith("ND_") and len(parts) > 2 else ""
+        nd = _nodedef(node_id)
+        out_type = nd[1] if nd else parts[-1]
+        width = _WIDTH.get(out_type, 0)
+        if kind not in EVALUATED or not width:
+            self._skip(node, node_id)
+        a = functools.partial(self.arg, node, node_id)
+        if kind == "constant":
+            return a("value")
+        if kind in ("image", "tiledimage"):
+            return self.image(node, node_id, width)
+        if kind == "texcoord" and width == 2:
+            return _Coord("st")
+        if kind == "geompropvalue" and width == 2:
             name = node.GetInput("geomprop")
             value = name.Get(self.time) if name else None
             return _Coord(str(value) if value else "st")
-        if node_id.startswith("ND_normalmap"):
-            inner = self.input(node, "in")
-            if isinstance(inner, _Tex):
-                # MaterialX stores normals in [0, 1]: n = 2 · texel − 1, as UsdPreviewSurface's
-                # normal map with scale 2 and bias −1.
-                return inner.affine((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0))
-            self._skip(node, node_id)
-            return None
-        if node_id.startswith("ND_dot_"):
-            return self.input(node, "in")
-        if kind in ("multiply", "add", "subtract", "divide"):
-            return self.binary(node, node_id, kind)
+        if kind == "place2d":
+            return self.place2d(node, node_id)
+        if kind == "normalmap":
+            s = _four(self.const(node, node_id, "scale"))
+            # MaterialX stores normals in [0, 1]: n = (2 · texel − 1) · (scale, scale, 1)
+            # (mx_normalmap_vector2), as UsdPreviewSurface's normal map with scale 2, bias −1.
+            k, c = (2 * s[0], 2 * s[1], 2.0, 1.0), (-s[0], -s[1], -1.0, 0.0)
+            return self.binary("add", self.binary("multiply", a("in"), k, 3), c, 3)
+        if kind == "dot":
+            return a("in")
+        if kind in _FOLD:
+            return self.binary(kind, a("in1"), a("in2"), width)
+        if kind == "invert":
+            return self.binary("subtract", a("amount"), a("in"), width)
         if kind == "mix":
-            return self.mix(node, node_id)
+            return self.mix(a("bg"), a("fg"), a("mix"), width)
+        if kind == "clamp":
+            return self.op(("clamp",), (a("in"), a("low"), a("high")), width)
+        if kind in ("absval", "floor", "ceil"):
+            return self.op((kind,), (a("in"),), width)
+        if kind == "sqrt":
+            return self.binary("power", a("in"), (0.5,), width)
+        if kind == "remap":
+            # outlow + (in − inlow) · (outhigh − outlow) / (inhigh − inlow), GLSL's order; an
+            # image with constant bounds stays one affine lookup.
+            span = self.binary("subtract", a("outhigh"), a("outlow"), width)
+            v = self.binary(
+                "multiply", self.binary("subtract", a("in"), a("inlow"), width), span, width
+            )
+            v = self.binary(
+                "divide", v, self.binary("subtract", a("inhigh"), a("inlow"), width), width
+            )
+            return self.binary("add", a("outlow"), v, width)
+        if kind == "luminance" and width == 3:
+            # mx_luminance_color3: vec3(dot(in, lumacoeffs)).
+            return self.op(("dotproduct", 3), (a("in"), a("lumacoeffs")), 3)
+        if kind in ("ifgreater", "ifgreatereq", "ifequal"):
+            return self.op((kind,), (a("value1"), a("value2"), a("in1"), a("in2")), width)
+        if kind in ("dotproduct", "normalize", "magnitude"):
+            n = _width(a("in1") if kind == "dotproduct" else a("in"))
+            ins = (a("in1"), a("in2")) if kind == "dotproduct" else (a("in"),)
+            return self.op((kind, n), ins, width)
+        if kind in ("separate2", "separate3", "separate4"):
+            # One float output per channel: outr/outx, outg/outy, outb/outz, outa/outw.
+            v = a("in")
+            index = {"r": 0, "x": 0, "g": 1, "y": 1, "b": 2, "z": 2, "a": 3, "w": 3}.get(
+                output[-1:]
+            )
+            if index is None or not output.startswith("out") or index >= _width(v):
+                self._skip(node, f"{node_id} output {output}")
+            return self.extract(v, index)  # type: ignore[arg-type]
+        if kind == "extract":
+            index = int(self.const(node, node_id, "index")[0])
+            v = a("in")
+            if not 0 <= index < _width(v):
+                self._skip(node, f"{node_id} index {index}")
+            return self.extract(v, index)
+        if kind.startswith("combine"):
+            names = [f"in{i}" for i in range(1, int(kind[-1]) + 1)]
+            return self.combine(tuple(a(n) for n in names))
+        if kind == "convert":
+            v = a("in")
+            return self.convert(v, _width(v), width)
+        if kind == "checkerboard":
+            # NG_checkerboard_color3: mix(color2, color1, mod(dot(floor(uv·tiling − offset),
+            # (1, 1)), 2)).
+            uv = self.coord(node, node_id, a("texcoord"))
+            tiling, offset = (
+                self.const(node, node_id, "uvtiling"),
+                self.const(node, node_id, "uvoffset"),
+            )
+            uv = _Coord(
+                uv.varname,
+                _then(uv.transform, (tiling[0], 0, 0, tiling[1]), (-offset[0], -offset[1])),
+            )
+            cell = self.op(("dotproduct", 2), (self.op(("floor",), (uv,), 2), (1.0, 1.0)), 1)
+            mask = self.binary("modulo", cell, (2.0,), 1)
+            return self.mix(a("color2"), a("color1"), mask, width)
         self._skip(node, node_id)
-        return None
+        raise AssertionError  # unreachable: _skip raises
 
-    def image(self, node: UsdShade.Shader, node_id: str) -> _Value:
+    def op(self, op: tuple[Any, ...], args: tuple[_Value, ...], width: int) -> _Value:
+        """``op`` of ``args``: folded when every argument is a constant."""
+        if all(isinstance(x, tuple) for x in args):
+            folded = _fold(op, args)  # type: ignore[arg-type]
+            if folded is not None:
+                return folded
+        return _Net(op, args, width)
+
+    def coord(self, node: UsdShade.Shader, node_id: str, v: _Value) -> _Coord:
+        if not isinstance(v, _Coord):
+            self._skip(node, f"{node_id} texcoord that is not an affine map of a primvar")
+        return v  # type: ignore[return-value]
+
+    def image(self, node: UsdShade.Shader, node_id: str, width: int) -> _Value:
         file_inp = node.GetInput("file")
         attrs = file_inp.GetValueProducingAttributes() if file_inp else []
         value = attrs[0].Get(self.time) if attrs else None
-        default = _floats(_get(node, "default", self.time)) or (0.0,)
+        default = _floats(_get(node, "default", self.time)) or self.const(node, node_id, "default")
         if value is not None and not isinstance(value, Sdf.AssetPath):
             kind = attrs[0].GetTypeName()
-            self._skip(node, f"{node_id} input file of type {kind} (not an asset)")
+            self.unsupported.append(
+                (str(node.GetPath()), f"{node_id} input file of type {kind} (not an asset)")
+            )
             return default
         if not isinstance(value, Sdf.AssetPath) or not value.path:
             return default
@@ -200,66 +450,239 @@ class _Eval:
         desc: dict[str, Any] = {
             "file": _resolve(attrs[0], value),
             "channel": 0,
-            "fallback": list(_four(default)),
+            "fallback": list(_four(default, 0.0)),
         }
         space = attrs[0].GetColorSpace() if attrs[0].HasColorSpace() else ""
         if space:
             desc["sourceColorSpace"] = "sRGB" if space == "srgb_texture" else "raw"
+        tiled = node_id.startswith("ND_tiledimage_")
         for key, usd_key in (("uaddressmode", "wrapS"), ("vaddressmode", "wrapT")):
-            mode = _get(node, key, self.time)
+            # NG_tiledimage_* reads its image with periodic address modes.
+            nd = _nodedef(node_id)
+            unset = nd[0].get(key, (None, "periodic"))[1] if nd else "periodic"
+            mode = "periodic" if tiled else (_get(node, key, self.time) or unset)
             if mode and str(mode) in _WRAPS:
                 desc[usd_key] = _WRAPS[str(mode)]
-        coord = self.input(node, "texcoord")
-        varname = coord.varname if isinstance(coord, _Coord) else "st"
-        tex = _Tex(desc, varname)
-        if node_id.startswith("ND_tiledimage_"):
-            tiling = _floats(_get(node, "uvtiling", self.time)) or (1.0, 1.0)
-            if tiling != (1.0, 1.0):
-                self._skip(node, node_id + " uvtiling")
-        return tex
+        uv = self.coord(node, node_id, self.arg(node, node_id, "texcoord"))
+        transform = uv.transform
+        if tiled:
+            # NG_tiledimage_*: (uv · uvtiling − uvoffset) / realworldimagesize · realworldtilesize.
+            tiling, offset = (
+                self.const(node, node_id, "uvtiling"),
+                self.const(node, node_id, "uvoffset"),
+            )
+            image = self.const(node, node_id, "realworldimagesize")
+            tile = self.const(node, node_id, "realworldtilesize")
+            if not image[0] or not image[1]:
+                self._skip(node, f"{node_id} realworldimagesize 0")
+            k = (tile[0] / image[0], tile[1] / image[1])
+            transform = _then(
+                transform,
+                (tiling[0] * k[0], 0.0, 0.0, tiling[1] * k[1]),
+                (-offset[0] * k[0], -offset[1] * k[1]),
+            )
+        return _Tex(desc, uv.varname, channels=width, transform=transform)
 
-    def binary(self, node: UsdShade.Shader, node_id: str, op: str) -> _Value:
-        a, b = self.input(node, "in1"), self.input(node, "in2")
-        a = a if a is not None else (1.0,) if op in ("multiply", "divide") else (0.0,)
-        b = b if b is not None else (1.0,) if op in ("multiply", "divide") else (0.0,)
+    def place2d(self, node: UsdShade.Shader, node_id: str) -> _Coord:
+        """A ``place2d`` node's texcoord, as NG_place2d_vector2 builds it.
+
+        SRT (``operationorder`` 0): rotate((uv − pivot) / scale) − offset + pivot; TRS (1):
+        rotate(uv − pivot − offset) / scale + pivot; ``rotate`` in degrees, mx_rotate_vector2's
+        (x cos + y sin, −x sin + y cos).
+        """
+        uv = self.coord(node, node_id, self.arg(node, node_id, "texcoord"))
+        pivot, scale = self.const(node, node_id, "pivot"), self.const(node, node_id, "scale")
+        offset = self.const(node, node_id, "offset")
+        degrees = self.const(node, node_id, "rotate")[0]
+        order = int(self.const(node, node_id, "operationorder")[0])
+        if not scale[0] or not scale[1]:
+            self._skip(node, f"{node_id} scale 0")
+        r = math.radians(degrees)
+        ca, sa = math.cos(r), math.sin(r)
+        rot = (ca, sa, -sa, ca)
+        inv = (1.0 / scale[0], 0.0, 0.0, 1.0 / scale[1])
+        one = (1.0, 0.0, 0.0, 1.0)
+        if order == 0:
+            m = _then(uv.transform, one, (-pivot[0], -pivot[1]))
+            m = _then(_then(m, inv, (0.0, 0.0)), rot, (pivot[0] - offset[0], pivot[1] - offset[1]))
+        else:
+            m = _then(uv.transform, one, (-pivot[0] - offset[0], -pivot[1] - offset[1]))
+            m = _then(_then(m, rot, (0.0, 0.0)), inv, (pivot[0], pivot[1]))
+        return _Coord(uv.varname, m)
+
+    def binary(self, op: str, a: _Value, b: _Value, width: int) -> _Value:
+        """``op(a, b)`` lane by lane (a float operand splatted).
+
+        Folded into a constant, into a lookup's affine map, or into a texcoord's, where it can be.
+        """
         if isinstance(a, tuple) and isinstance(b, tuple):
             return _const(a, b, op)
-        if isinstance(a, _Tex) and isinstance(b, tuple):
+        affine = op in ("add", "subtract", "multiply", "divide")
+        if affine and isinstance(a, _Tex) and isinstance(b, tuple):
             if op == "multiply":
                 return a.affine(b, (0.0,))
             if op == "add":
                 return a.affine((1.0,), b)
             if op == "subtract":
                 return a.affine((1.0,), tuple(-x for x in b))
-            return a.affine(tuple(1.0 / x if x else 0.0 for x in b), (0.0,))
-        if isinstance(b, _Tex) and isinstance(a, tuple):
+            if all(b):
+                return a.affine(tuple(1.0 / x for x in b), (0.0,))
+        if affine and isinstance(b, _Tex) and isinstance(a, tuple) and op != "divide":
             if op == "multiply":
                 return b.affine(a, (0.0,))
             if op == "add":
                 return b.affine((1.0,), a)
+            return b.affine((-1.0,), a)
+        if affine and isinstance(a, _Coord) and isinstance(b, tuple) and len(b) <= 2:
+            v = (b[0], b[-1])
+            if op == "add":
+                return _Coord(a.varname, _then(a.transform, (1, 0, 0, 1), v))
             if op == "subtract":
-                return b.affine((-1.0,), a)
-        self._skip(node, node_id)
-        return None
+                return _Coord(a.varname, _then(a.transform, (1, 0, 0, 1), (-v[0], -v[1])))
+            if op == "multiply":
+                return _Coord(a.varname, _then(a.transform, (v[0], 0, 0, v[1]), (0, 0)))
+            if v[0] and v[1]:
+                return _Coord(a.varname, _then(a.transform, (1 / v[0], 0, 0, 1 / v[1]), (0, 0)))
+        return _Net((op,), (a, b), width)
 
-    def mix(self, node: UsdShade.Shader, node_id: str) -> _Value:
-        # MaterialX: bg · (1 − mix) + fg · mix.
-        fg, bg, m = self.input(node, "fg"), self.input(node, "bg"), self.input(node, "mix")
-        fg = fg if fg is not None else (0.0,)
-        bg = bg if bg is not None else (0.0,)
-        m = m if m is not None else (0.0,)
-        if not isinstance(m, tuple):
-            self._skip(node, node_id)
-            return None
-        w = m[0]
-        if isinstance(fg, tuple) and isinstance(bg, tuple):
-            return _const(_const(fg, (w,), "multiply"), _const(bg, (1.0 - w,), "multiply"), "add")
-        if isinstance(fg, _Tex) and isinstance(bg, tuple):
-            return fg.affine((w,), _const(bg, (1.0 - w,), "multiply"))
-        if isinstance(bg, _Tex) and isinstance(fg, tuple):
-            return bg.affine((1.0 - w,), _const(fg, (w,), "multiply"))
-        self._skip(node, node_id)
-        return None
+    def mix(self, bg: _Value, fg: _Value, m: _Value, width: int) -> _Value:
+        """GLSL ``mix(bg, fg, m)`` = bg · (1 − m) + fg · m."""
+        if isinstance(m, tuple) and len(m) == 1:
+            w = m[0]
+            if isinstance(fg, tuple) and isinstance(bg, tuple):
+                return _const(
+                    _const(fg, (w,), "multiply"), _const(bg, (1.0 - w,), "multiply"), "add"
+                )
+            if isinstance(fg, _Tex) and isinstance(bg, tuple):
+                return fg.affine((w,), _const(bg, (1.0 - w,), "multiply"))
+            if isinstance(bg, _Tex) and isinstance(fg, tuple):
+                return bg.affine((1.0 - w,), _const(fg, (w,), "multiply"))
+        return self.op(("mix",), (bg, fg, m), width)
+
+    def extract(self, v: _Value, index: int) -> _Value:
+        if isinstance(v, tuple):
+            return (v[index],)
+        if isinstance(v, _Tex):
+            # One channel of the file: its own lookup (and the fast path, on a float input).
+            def splat(t: tuple[float, ...]) -> tuple[float, float, float, float]:
+                return (t[index],) * 4
+
+            desc = dict(v.desc, channel=v.desc.get("channel", 0) + index)
+            desc["fallback"] = list(splat(tuple(v.desc.get("fallback", (0.0,) * 4))))
+            return replace(v, desc=desc, scale=splat(v.scale), bias=splat(v.bias), channels=1)
+        return _Net(("swizzle", index, index, index, index), (v,), 1)
+
+    def combine(self, parts: tuple[_Value, ...]) -> _Value:
+        if all(isinstance(p, tuple) for p in parts):
+            out: tuple[float, ...] = ()
+            for p in parts:
+                out += p  # type: ignore[operator]
+            return out
+        return _Net(("combine",), parts, sum(_width(p) for p in parts))
+
+    def convert(self, v: _Value, n_in: int, n_out: int) -> _Value:
+        """NG_convert_*'s value.
+
+        A float is splatted; otherwise the first lanes are kept, and new ones are 0 but a
+        color4's or vector4's fourth, 1.
+        """
+        if n_in == 1 or n_in == n_out:
+            return v
+        pad = tuple(1.0 if k == 3 else 0.0 for k in range(n_in, n_out))
+        if isinstance(v, tuple):
+            return v[:n_out] + pad
+        if n_out < n_in:
+            return (
+                replace(v, channels=n_out) if isinstance(v, _Tex) else _Net(("pass",), (v,), n_out)
+            )
+        return _Net(("combine",), (v, pad), n_out)
+
+
+def _fold(op: tuple[Any, ...], args: tuple[tuple[float, ...], ...]) -> tuple[float, ...] | None:
+    """``op`` of constant ``args``, or None when it is left to the renderer."""
+    name = op[0]
+    if name == "mix":
+        bg, fg, m = args
+        return _const(
+            _const(fg, m, "multiply"), _const(bg, _const((1.0,), m, "subtract"), "multiply"), "add"
+        )
+    if name == "clamp":
+        v, lo, hi = args
+        return _const(_const(v, lo, "max"), hi, "min")
+    if name in ("absval", "floor", "ceil"):
+        unary: dict[str, Callable[[float], float]] = {
+            "absval": abs,
+            "floor": math.floor,
+            "ceil": math.ceil,
+        }
+        return tuple(float(unary[name](x)) for x in args[0])
+    if name in ("ifgreater", "ifgreatereq", "ifequal"):
+        v1, v2, in1, in2 = args
+        test = {
+            "ifgreater": v1[0] > v2[0],
+            "ifgreatereq": v1[0] >= v2[0],
+            "ifequal": v1[0] == v2[0],
+        }
+        return in1 if test[name] else in2
+    if name == "dotproduct":
+        n = op[1]
+        a, b = (_four(x, 0.0) for x in args)
+        return (sum(a[k] * b[k] for k in range(n)),)
+    return None
+
+
+def _lower(
+    v: _Value, ops: list[tuple[Any, ...]], lookups: list[dict[str, Any]], st: set[str]
+) -> None:
+    """Appends the core's ops computing ``v``: its lookups to ``lookups``, primvars to ``st``."""
+    if isinstance(v, tuple):
+        lanes = _four(v, 0.0) if len(v) > 1 else (v[0],) * 4
+        # Folded constants may be infinite (1/0) or NaN (0/0); the core takes finite numbers.
+        ops.append(
+            ("const", *(0.0 if math.isnan(x) else max(-3.4e38, min(3.4e38, x)) for x in lanes))
+        )
+    elif isinstance(v, _Tex):
+        st.add(v.varname)
+        lookups.append(dict(v.desc, channels=v.channels, st_transform=list(v.transform)))
+        ops.append(("texture", len(lookups) - 1))
+        if v.scale != (1.0,) * 4:
+            _lower(v.scale, ops, lookups, st)
+            ops.append(("multiply",))
+        if v.bias != (0.0,) * 4:
+            _lower(v.bias, ops, lookups, st)
+            ops.append(("add",))
+    elif isinstance(v, _Coord):
+        st.add(v.varname)
+        ops.append(("coord", *v.transform))
+    elif v.op[0] == "combine":
+        _lower(v.args[0], ops, lookups, st)
+        k = _width(v.args[0])
+        for part in v.args[1:]:
+            if k >= 4:
+                break
+            _lower(part, ops, lookups, st)
+            ops.append(("combine", k))
+            k += _width(part)
+    else:
+        for a in v.args:
+            _lower(a, ops, lookups, st)
+        if v.op[0] != "pass":
+            ops.append(v.op)
+
+
+#: The values the core's network evaluator holds at once (``mipray::material::network::MAX_STACK``).
+MAX_STACK = 16
+
+
+def _depth(v: _Value) -> int:
+    """The stack values :func:`_lower`'s ops for ``v`` need at once (post-order)."""
+    if isinstance(v, _Tex):
+        return 2 if v.scale != (1.0,) * 4 or v.bias != (0.0,) * 4 else 1
+    if not isinstance(v, _Net):
+        return 1
+    if v.op[0] == "combine":
+        return max([_depth(v.args[0])] + [1 + _depth(p) for p in v.args[1:]])
+    return max(i + _depth(a) for i, a in enumerate(v.args))
 
 
 def _get(shader: UsdShade.Shader, name: str, time: Usd.TimeCode) -> Any:
@@ -312,15 +735,36 @@ class MtlxRead:
     #: (input, texture description, primvar its st reads), in the inputs' order.
     textures: list[tuple[str, dict[str, Any], str]]
     unsupported: list[tuple[str, str]]
+    #: (input, node network as the ``material`` argument's ``networks`` entry, the primvars its
+    #: lookups and texcoords read).
+    networks: list[tuple[str, dict[str, Any], list[str]]] = field(default_factory=list)
 
 
-def _set(out: MtlxRead, name: str, value: _Value, colour: bool, normal: bool = False) -> None:
+def _set(
+    out: MtlxRead, name: str, value: _Value | None, colour: bool, normal: bool = False
+) -> None:
     if value is None or isinstance(value, _Coord):
         return
-    if isinstance(value, _Tex):
+    if (
+        isinstance(value, _Tex)
+        and value.transform == _IDENTITY
+        and (value.channels >= 3 or not (colour or normal))
+    ):
+        # The fast path: one UsdUVTexture-like lookup (a float input reads its first channel).
         desc = dict(value.desc)
         desc["scale"], desc["bias"] = list(value.scale), list(value.bias)
         out.textures.append((name, desc, value.varname))
+        return
+    if isinstance(value, _Tex | _Net):
+        if _depth(value) > MAX_STACK:
+            what = f"{name} network needing more than {MAX_STACK} values at once"
+            out.unsupported.append((str(out.args["name"]), what))
+            return
+        ops: list[tuple[Any, ...]] = []
+        lookups: list[dict[str, Any]] = []
+        st: set[str] = set()
+        _lower(value, ops, lookups, st)
+        out.networks.append((name, {"ops": ops, "lookups": lookups}, sorted(st)))
         return
     if normal:
         return
@@ -353,15 +797,7 @@ def read_mtlx_surface(material_path: str, surface: UsdShade.Shader, time: Usd.Ti
             w = ev.input(surface, weight) if weight else None
             w = w if w is not None else ((weight_default,) if weight else None)
             if w is not None:
-                if isinstance(w, tuple) and isinstance(value, tuple):
-                    value = _const(value, w, "multiply")
-                elif isinstance(w, tuple) and isinstance(value, _Tex):
-                    value = value.affine(w, (0.0,))
-                elif isinstance(w, _Tex) and isinstance(value, tuple):
-                    value = w.affine(value, (0.0,))
-                else:
-                    ev.unsupported.append((str(surface.GetPath()), f"{mtlx} × {weight}"))
-                    continue
+                value = ev.binary("multiply", value, w, 3 if name in colours else 1)
             _set(out, name, value, name in colours)
         _transmission(ev, surface, node_id, out)
         _set(out, "normal", ev.input(surface, "normal"), True, True)
@@ -373,6 +809,8 @@ def read_mtlx_surface(material_path: str, surface: UsdShade.Shader, time: Usd.Ti
                     ev.unsupported.append((str(surface.GetPath()), f"{node_id} input {lacking}"))
     if out.textures:
         out.args["textures"] = {name: desc for name, desc, _ in out.textures}
+    if out.networks:
+        out.args["networks"] = {name: net for name, net, _ in out.networks}
     return out
 
 
@@ -386,14 +824,14 @@ def _transmission(ev: _Eval, surface: UsdShade.Shader, node_id: str, out: MtlxRe
     t = ev.input(surface, name)
     if isinstance(t, tuple) and t[0] > 0.0:
         out.args["opacity"] = 1.0 - min(max(t[0], 0.0), 1.0)  # glass, with ior
-    elif isinstance(t, _Tex):
-        _set(out, "opacity", t.affine((-1.0,), (1.0,)), False)
+    elif t is not None and not isinstance(t, tuple | _Coord):
+        _set(out, "opacity", ev.binary("subtract", (1.0,), t, 1), False)
     cutout = "opacity" if node_id == "ND_standard_surface_surfaceshader" else "geometry_opacity"
     c = ev.input(surface, cutout)
     if isinstance(c, tuple) and min(c) < 1.0:
         out.args["opacity"] = sum(c) / len(c)
         out.args["opacityThreshold"] = 1e-3  # MaterialX opacity is coverage: a cut-out
-    elif isinstance(c, _Tex):
+    elif c is not None and not isinstance(c, tuple | _Coord):
         _set(out, "opacity", c, False)
         out.args["opacityThreshold"] = 1e-3
 

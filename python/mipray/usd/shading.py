@@ -497,6 +497,12 @@ def _surface_material(
     if mtlx is not None:
         read = read_mtlx_surface(material_path, mtlx, time)
         textures = [(name, _Texture(desc, varname, None)) for name, desc, varname in read.textures]
+        # A network's lookups and texcoords read the mesh's st as a texture's do.
+        textures += [
+            (name, _Texture({}, varname, None))
+            for name, _, names in read.networks
+            for varname in names
+        ]
         return _Material(read.args, textures, {})
     if surface:
         _warn_once(

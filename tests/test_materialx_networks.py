@@ -1,0 +1,619 @@
+"""MaterialX node networks beyond one affine texture lookup, evaluated per shading point.
+
+Each stage is a flat quad facing the camera with ``st`` over [0, 1]², lambertian
+(``ND_UsdPreviewSurface_surfaceshader``, specular workflow without specular) and lit by a
+distant light; its ``diffuseColor`` is fed by a network of MaterialX standard-library nodes
+reading float EXR files the test writes. The truth is the network worked out in numpy from
+the nodes' definitions (MaterialX 1.39 ``stdlib_defs.mtlx`` defaults, the GLSL
+implementations' operators, ``stdlib_ng.mtlx`` for place2d and tiledimage) at each pixel's
+``st``: the ``albedo`` AOV is that colour, and the ``color`` AOV that colour times the
+light's irradiance over π.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdShade
+from test_materials import quad
+
+import mipray
+from mipray.usd import UsdSceneDelegate
+
+from stages import add_camera, add_distant_light, bind, new_stage
+
+C3, F, F2 = Sdf.ValueTypeNames.Color3f, Sdf.ValueTypeNames.Float, Sdf.ValueTypeNames.Float2
+TYPES = {
+    "color3": C3,
+    "vector3": Sdf.ValueTypeNames.Float3,
+    "float": F,
+    "vector2": F2,
+    "integer": Sdf.ValueTypeNames.Int,
+}
+WIDTH = 64
+HALF = 1.6  # the quad's half size; the camera sees ±2 at its distance (10)
+#: Radiance of a white lambertian quad facing +Z under stages.add_distant_light (irradiance 2
+#: facing the light, tilted 45°).
+WHITE = 2.0 * math.cos(math.radians(45.0)) / math.pi
+#: Two constant colours, exact in half floats.
+A = (0.125, 0.25, 0.5)
+B = (0.5, 0.375, 0.25)
+
+
+def write(native, path, values) -> str:
+    values = np.asarray(values, np.float32)
+    if values.ndim == 2:
+        values = values[..., None]
+    native.write_image(
+        str(path), {"color": np.ascontiguousarray(values)}, ["color"], {"color": "float"}
+    )
+    return str(path)
+
+
+def constant_image(native, path, colour) -> str:
+    return write(native, path, np.broadcast_to(np.float32(colour), (8, 8, 3)))
+
+
+#: Colours of the four quadrants of QUADRANTS, indexed [s ≥ 0.5][t ≥ 0.5].
+QUADRANT = np.array(
+    [[(0.75, 0.125, 0.125), (0.125, 0.75, 0.125)], [(0.125, 0.125, 0.75), (0.5, 0.5, 0.5)]]
+)
+
+
+def quadrant_image(native, path) -> str:
+    n = 64
+    rows = np.arange(n)
+    t_high = (rows < n // 2)[:, None]  # row 0 is the top: t = 1
+    s_high = (rows >= n // 2)[None, :]
+    img = QUADRANT[
+        s_high.astype(int) * np.ones((n, 1), int), t_high.astype(int) * np.ones((1, n), int)
+    ]
+    return write(native, path, img)
+
+
+def quadrant_truth(st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """QUADRANT at frac(st), and where that is at least 0.1 from a quadrant's edge."""
+    f = st - np.floor(st)
+    truth = QUADRANT[(f[..., 0] >= 0.5).astype(int), (f[..., 1] >= 0.5).astype(int)]
+    edge = np.minimum(np.abs(f - 0.5), np.minimum(f, 1 - f)).min(-1)
+    return truth, edge > 0.1
+
+
+def node(stage: Usd.Stage, name: str, node_id: str, out: str, **inputs) -> UsdShade.Shader:
+    """A MaterialX node at /Looks/M/<name>; inputs: a Shader (connected), an asset path
+    (``file``), or a (type, value) pair."""
+    shader = UsdShade.Shader.Define(stage, f"/Looks/M/{name}")
+    shader.CreateIdAttr(node_id)
+    shader.CreateOutput("out", TYPES[out])
+    for key, value in inputs.items():
+        if isinstance(value, UsdShade.Shader):
+            kind = value.GetOutput("out").GetTypeName()
+            shader.CreateInput(key, kind).ConnectToSource(value.ConnectableAPI(), "out")
+        elif key == "file":
+            shader.CreateInput(key, Sdf.ValueTypeNames.Asset).Set(value)
+        else:
+            kind, v = value
+            shader.CreateInput(key, TYPES[kind]).Set(
+                Gf.Vec3f(*v) if kind == "color3" else Gf.Vec2f(*v) if kind == "vector2" else v
+            )
+    return shader
+
+
+def lambertian(
+    stage: Usd.Stage, diffuse: UsdShade.Shader, normal: UsdShade.Shader | None = None
+) -> None:
+    """/Looks/M: a lambertian MaterialX UsdPreviewSurface whose diffuseColor is ``diffuse``,
+    bound to the quad, with the camera and the light."""
+    material = UsdShade.Material.Define(stage, "/Looks/M")
+    surface = UsdShade.Shader.Define(stage, "/Looks/M/Surface")
+    surface.CreateIdAttr("ND_UsdPreviewSurface_surfaceshader")
+    surface.CreateOutput("out", Sdf.ValueTypeNames.Token)
+    material.CreateSurfaceOutput("mtlx").ConnectToSource(surface.ConnectableAPI(), "out")
+    surface.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(1)
+    surface.CreateInput("specularColor", C3).Set(Gf.Vec3f(0.0, 0.0, 0.0))
+    surface.CreateInput("diffuseColor", C3).ConnectToSource(diffuse.ConnectableAPI(), "out")
+    if normal is not None:
+        kind = Sdf.ValueTypeNames.Normal3f
+        surface.CreateInput("normal", kind).ConnectToSource(normal.ConnectableAPI(), "out")
+    bind(quad(stage, half=HALF).GetPrim(), material)
+    add_camera(stage, "/World/Camera")
+    add_distant_light(stage, "/World/Sun")
+
+
+@dataclass
+class Render:
+    albedo: np.ndarray
+    color: np.ndarray
+    #: Each pixel's st on the quad (from its mean world position: the quad is z = 0).
+    st: np.ndarray
+    #: Pixels wholly on the quad.
+    on: np.ndarray
+    normal: np.ndarray
+
+
+def render(stage: Usd.Stage) -> Render:
+    aovs = ("albedo", "color", "position", "alpha", "normal")
+    r = mipray.render(stage, width=WIDTH, aovs=aovs, settings={"samples": 1}).aovs
+    st = r["position"][..., :2] / (2 * HALF) + 0.5
+    on = r["alpha"][..., 0] == 1.0
+    return Render(r["albedo"][..., :3], r["color"][..., :3], st, on, r["normal"][..., :3])
+
+
+def assert_albedo(albedo: np.ndarray, truth: np.ndarray, where: np.ndarray, atol: float = 2e-3):
+    assert where.sum() > WIDTH * WIDTH // 16
+    np.testing.assert_allclose(
+        albedo[where], np.broadcast_to(truth, albedo.shape)[where], atol=atol
+    )
+
+
+@pytest.mark.parametrize(
+    ("op", "truth"),
+    [
+        ("add", np.add(A, B)),
+        ("multiply", np.multiply(A, B)),
+        ("subtract", np.clip(np.subtract(B, A), 0, 1)),  # in1 − in2, clamped as a colour is
+        ("max", np.maximum(A, B)),
+    ],
+)
+def test_two_images_combine_as_the_node_says(native, tmp_path, op, truth) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    b = node(
+        stage, "B", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    first, second = (b, a) if op == "subtract" else (a, b)
+    lambertian(stage, node(stage, "Op", f"ND_{op}_color3", "color3", in1=first, in2=second))
+    r = render(stage)
+    assert_albedo(r.albedo, truth, r.on, atol=1e-5)
+    # The light's response: lambertian, colour × irradiance / π (UsdLux's distant light is a
+    # 0.53° disc, sampled: 0.5 % noise at one sample a pixel).
+    np.testing.assert_allclose(
+        r.color[r.on], np.broadcast_to(truth * WHITE, r.color.shape)[r.on], rtol=5e-3, atol=1e-5
+    )
+
+
+def test_a_textured_mask_mixes_a_constant_and_an_image(native, tmp_path) -> None:
+    mask = np.where(np.arange(64)[None, :] < 32, 0.25, 0.75) * np.ones((64, 1))
+    stage = new_stage()
+    m = node(
+        stage, "Mask", "ND_image_float", "float", file=write(native, tmp_path / "mask.exr", mask)
+    )
+    m.CreateInput("uaddressmode", Sdf.ValueTypeNames.String).Set("clamp")
+    bg = node(
+        stage, "Bg", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    fg = node(stage, "Fg", "ND_constant_color3", "color3", value=("color3", A))
+    lambertian(stage, node(stage, "Mix", "ND_mix_color3", "color3", fg=fg, bg=bg, mix=m))
+    r = render(stage)
+    s = r.st[..., 0]
+    w = np.where(s < 0.5, 0.25, 0.75)[..., None]
+    truth = np.multiply(B, 1 - w) + np.multiply(A, w)  # GLSL mix(bg, fg, mask)
+    assert_albedo(r.albedo, truth, r.on & (np.abs(s - 0.5) > 0.1), atol=1e-5)
+
+
+def test_power_of_a_ramp(native, tmp_path) -> None:
+    # A ramp in s: texel centres hold s, and bilinear and MIP filtering keep a linear ramp.
+    ramp = (np.arange(64) + 0.5)[None, :] / 64 * np.ones((8, 1))
+    stage = new_stage()
+    image = node(
+        stage, "Ramp", "ND_image_float", "float", file=write(native, tmp_path / "ramp.exr", ramp)
+    )
+    image.CreateInput("uaddressmode", Sdf.ValueTypeNames.String).Set("clamp")
+    grey = node(stage, "Grey", "ND_convert_float_color3", "color3", **{"in": image})
+    lambertian(
+        stage, node(stage, "Pow", "ND_power_color3FA", "color3", in1=grey, in2=("float", 2.2))
+    )
+    r = render(stage)
+    s = r.st[..., 0]
+    truth = (s**2.2)[..., None] * np.ones(3)
+    inside = r.on & (s > 0.05) & (s < 0.95)
+    assert_albedo(r.albedo, truth, inside)
+    np.testing.assert_allclose(r.color[inside], truth[inside] * WHITE, atol=2e-3 * WHITE, rtol=5e-3)
+
+
+def _place2d(st: np.ndarray, scale, rotate: float, offset, pivot) -> np.ndarray:
+    """NG_place2d_vector2, operationorder 0 (SRT), mx_rotate_vector2's rotation, in numpy."""
+    v = (st - pivot) / scale
+    a = math.radians(rotate)
+    ca, sa = math.cos(a), math.sin(a)
+    v = np.stack([ca * v[..., 0] + sa * v[..., 1], -sa * v[..., 0] + ca * v[..., 1]], -1)
+    return v - offset + pivot
+
+
+@pytest.mark.parametrize(
+    ("scale", "rotate", "offset", "pivot"),
+    [((0.5, 0.5), 0.0, (0.25, 0.0), (0.0, 0.0)), ((1.0, 0.5), 90.0, (0.0, 0.125), (0.5, 0.5))],
+)
+def test_place2d_moves_scales_and_turns_the_lookup(
+    native, tmp_path, scale, rotate, offset, pivot
+) -> None:
+    stage = new_stage()
+    uv = node(stage, "Uv", "ND_texcoord_vector2", "vector2")
+    place = node(
+        stage, "Place", "ND_place2d_vector2", "vector2", texcoord=uv,
+        scale=("vector2", scale), rotate=("float", rotate), offset=("vector2", offset),
+        pivot=("vector2", pivot),
+    )  # fmt: skip
+    file = quadrant_image(native, tmp_path / "quadrants.exr")
+    lambertian(stage, node(stage, "Image", "ND_image_color3", "color3", file=file, texcoord=place))
+    r = render(stage)
+    truth, inside = quadrant_truth(_place2d(r.st, np.array(scale), rotate, offset, pivot))
+    assert_albedo(r.albedo, truth, r.on & inside)
+
+
+def test_tiledimage_repeats_the_image_uvtiling_times(native, tmp_path) -> None:
+    stage = new_stage()
+    file = quadrant_image(native, tmp_path / "quadrants.exr")
+    lambertian(
+        stage,
+        node(
+            stage,
+            "Tiled",
+            "ND_tiledimage_color3",
+            "color3",
+            file=file,
+            uvtiling=("vector2", (2.0, 2.0)),
+        ),
+    )
+    r = render(stage)
+    truth, inside = quadrant_truth(2.0 * r.st)  # NG_tiledimage: uv · uvtiling − uvoffset
+    assert_albedo(r.albedo, truth, r.on & inside)
+
+
+def test_checkerboard_cells_follow_uvtiling_and_uvoffset(native, tmp_path) -> None:
+    stage = new_stage()
+    board = node(
+        stage, "Board", "ND_checkerboard_color3", "color3",
+        color1=("color3", A), color2=("color3", B), uvtiling=("vector2", (4.0, 2.0)),
+        uvoffset=("vector2", (0.5, 0.0)),
+    )  # fmt: skip
+    lambertian(stage, board)
+    r = render(stage)
+    # NG_checkerboard_color3: mix(color2, color1, mod(floor(u') + floor(v'), 2)).
+    cell = r.st * (4.0, 2.0) - (0.5, 0.0)
+    odd = (np.floor(cell).sum(-1) % 2)[..., None]
+    truth = np.multiply(B, 1 - odd) + np.multiply(A, odd)
+    inside = r.on & (np.abs(cell - np.round(cell)).min(-1) > 0.05)
+    assert_albedo(r.albedo, truth, inside, atol=1e-5)
+
+
+@pytest.mark.parametrize("normalmap", ["ND_normalmap_float", "ND_normalmap"])  # 1.39, 1.38
+def test_a_normal_map_chain_tilts_the_shading_normal(native, tmp_path, normalmap) -> None:
+    # normalize(normalmap(image, scale 0.5)): n = normalize((2t − 1) · (0.5, 0.5, 1)) in the
+    # quad's (dP/ds, dP/dt, N) = (+X, +Y, +Z) frame.
+    texel = (0.75, 0.375, 0.875)
+    stage = new_stage()
+    file = constant_image(native, tmp_path / "n.exr", texel)
+    image = node(stage, "NormalImage", "ND_image_vector3", "vector3", file=file)
+    mapped = node(stage, "Map", normalmap, "vector3", scale=("float", 0.5), **{"in": image})
+    unit = node(stage, "Unit", "ND_normalize_vector3", "vector3", **{"in": mapped})
+    lambertian(
+        stage, node(stage, "Grey", "ND_constant_color3", "color3", value=("color3", A)), unit
+    )
+    r = render(stage)
+    n = (2 * np.array(texel) - 1) * (0.5, 0.5, 1.0)
+    truth = n / np.linalg.norm(n)
+    assert abs(truth[0]) > 0.2 and abs(truth[1]) > 0.1
+    assert r.on.sum() > WIDTH * WIDTH // 4
+    np.testing.assert_allclose(
+        r.normal[r.on], np.broadcast_to(truth, r.normal.shape)[r.on], atol=2e-3
+    )
+
+
+def test_remap_luminance_sqrt_and_ifgreater_on_a_textured_mask(native, tmp_path) -> None:
+    mask = np.where(np.arange(64)[None, :] < 32, 0.25, 0.75) * np.ones((64, 1))
+    stage = new_stage()
+    m = node(stage, "Mask", "ND_image_float", "float", file=write(native, tmp_path / "m.exr", mask))
+    m.CreateInput("uaddressmode", Sdf.ValueTypeNames.String).Set("clamp")
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    b = node(
+        stage, "B", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    grey = node(stage, "Grey", "ND_luminance_color3", "color3", **{"in": b})
+    root = node(stage, "Root", "ND_sqrt_color3", "color3", **{"in": grey})
+    remapped = node(
+        stage, "Remap", "ND_remap_color3FA", "color3", inlow=("float", 0.1), inhigh=("float", 0.6),
+        outlow=("float", 0.2), outhigh=("float", 0.4), **{"in": a},
+    )  # fmt: skip
+    pick = node(
+        stage,
+        "Pick",
+        "ND_ifgreater_color3",
+        "color3",
+        value1=m,
+        value2=("float", 0.5),
+        in1=root,
+        in2=remapped,
+    )
+    lambertian(stage, pick)
+    r = render(stage)
+    s = r.st[..., 0]
+    # Right (mask 0.75 > 0.5): sqrt of B's luminance (ACEScg coefficients, stdlib_defs.mtlx);
+    # left: remap(A) = 0.2 + (A − 0.1) · 0.2 / 0.5.
+    lum = np.dot(B, (0.2722287, 0.6740818, 0.0536895))
+    right = np.full(3, math.sqrt(lum))
+    left = 0.2 + (np.array(A) - 0.1) * (0.4 - 0.2) / (0.6 - 0.1)
+    truth = np.where((s > 0.5)[..., None], right, left)
+    assert_albedo(r.albedo, truth, r.on & (np.abs(s - 0.5) > 0.1), atol=1e-4)
+
+
+def test_channels_extracted_combined_converted_and_clamped(native, tmp_path) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    b = node(
+        stage, "B", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    a_red = node(stage, "ARed", "ND_image_float", "float", file=str(tmp_path / "a.exr"))
+    blue = node(stage, "Blue", "ND_extract_color3", "float", index=("integer", 2), **{"in": a})
+    green = node(stage, "Green", "ND_extract_color3", "float", index=("integer", 1), **{"in": b})
+    rgb = node(
+        stage, "Rgb", "ND_combine3_color3", "color3", in1=blue, in2=green, in3=("float", 0.125)
+    )
+    clamped = node(
+        stage,
+        "Clamp",
+        "ND_clamp_color3FA",
+        "color3",
+        low=("float", 0.2),
+        high=("float", 0.45),
+        **{"in": rgb},
+    )
+    grey = node(stage, "Grey", "ND_convert_float_color3", "color3", **{"in": a_red})
+    lambertian(stage, node(stage, "Times", "ND_multiply_color3", "color3", in1=clamped, in2=grey))
+    r = render(stage)
+    # combine3(A.b, B.g, 0.125) = (0.5, 0.375, 0.125), clamped into [0.2, 0.45], × A.r.
+    truth = np.clip((A[2], B[1], 0.125), 0.2, 0.45) * A[0]
+    assert_albedo(r.albedo, truth, r.on, atol=1e-5)
+
+
+def test_separate3_outputs_feed_a_combine3(native, tmp_path) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    split = UsdShade.Shader.Define(stage, "/Looks/M/Split")
+    split.CreateIdAttr("ND_separate3_color3")
+    split.CreateInput("in", C3).ConnectToSource(a.ConnectableAPI(), "out")
+    rgb = node(stage, "Rgb", "ND_combine3_color3", "color3")
+    for name, channel in (("in1", "outb"), ("in2", "outr"), ("in3", "outg")):
+        split.CreateOutput(channel, F)
+        rgb.CreateInput(name, F).ConnectToSource(split.ConnectableAPI(), channel)
+    lambertian(stage, rgb)
+    r = render(stage)
+    assert_albedo(r.albedo, (A[2], A[0], A[1]), r.on, atol=1e-5)
+
+
+def test_one_lookup_through_the_network_renders_as_the_affine_fast_path(native, tmp_path) -> None:
+    # max(image, −1) is the image itself, through the core's network instead of TexturedColor:
+    # the same lookup, filtered over the same footprint, so the same bits.
+    ramp = np.stack([(np.arange(64) + 0.5)[None, :] / 64 * np.ones((64, 1))] * 3, -1)
+    ramp[..., 1] = ramp[..., 1].T[::-1]
+    file = write(native, tmp_path / "ramp.exr", ramp)
+    images = []
+    for through_network in (False, True):
+        stage = new_stage()
+        image = node(stage, "Image", "ND_image_color3", "color3", file=file)
+        if through_network:
+            image = node(stage, "Max", "ND_max_color3FA", "color3", in1=image, in2=("float", -1.0))
+        lambertian(stage, image)
+        images.append(render(stage))
+    fast, network = images
+    assert fast.albedo[fast.on].std() > 0.1
+    np.testing.assert_array_equal(network.albedo, fast.albedo)
+    np.testing.assert_array_equal(network.color, fast.color)
+
+
+def test_a_network_is_sent_as_ops_over_lookups(fake, tmp_path, caplog) -> None:
+    stage = new_stage()
+    a = node(stage, "A", "ND_image_color3", "color3", file=str(tmp_path / "a.exr"))
+    b = node(
+        stage,
+        "B",
+        "ND_tiledimage_color3",
+        "color3",
+        file=str(tmp_path / "b.exr"),
+        uvtiling=("vector2", (2.0, 3.0)),
+    )
+    lambertian(stage, node(stage, "Add", "ND_add_color3", "color3", in1=a, in2=b))
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        UsdSceneDelegate(stage, fake).sync()
+    assert not caplog.records, caplog.text
+    material = fake.meshes()["/World/Quad"]["material"]
+    assert "textures" not in material
+    net = material["networks"]["diffuseColor"]
+    assert net["ops"] == [("texture", 0), ("texture", 1), ("add",)]
+    first, second = net["lookups"]
+    assert first["file"] == str(tmp_path / "a.exr") and first["channels"] == 3
+    assert first["st_transform"] == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+    assert second["st_transform"] == [2.0, 0.0, 0.0, 0.0, 3.0, 0.0]
+    assert second["wrapS"] == second["wrapT"] == "repeat"  # NG_tiledimage reads periodic
+
+
+def _warnings(caplog, text: str) -> list[str]:
+    return [r.getMessage() for r in caplog.records if text in r.getMessage()]
+
+
+def test_an_unsupported_node_in_a_network_is_named_once_and_the_input_keeps_its_default(
+    fake, tmp_path, caplog
+) -> None:
+    stage = new_stage()
+    image = node(stage, "Image", "ND_image_color3", "color3", file=str(tmp_path / "a.exr"))
+    position = node(stage, "Position", "ND_position_vector3", "color3")
+    tint = node(stage, "Tint", "ND_multiply_color3", "color3", in1=image, in2=position)
+    lambertian(stage, tint)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    material = fake.meshes()["/World/Quad"]["material"]
+    assert "networks" not in material and "textures" not in material
+    assert "diffuseColor" not in material  # UsdPreviewSurface's fallback
+    named = _warnings(caplog, "ND_position_vector3")
+    assert (
+        len(named) == 1 and "/Looks/M/Position" in named[0] and named[0].endswith("on /Looks/M")
+    ), caplog.text
+    assert any(u.what.startswith("MaterialX node ND_position_vector3") for u in scene.unsupported)
+
+
+def test_an_input_of_the_wrong_type_in_a_network_is_named_once(fake, tmp_path, caplog) -> None:
+    stage = new_stage()
+    image = node(stage, "Image", "ND_image_color3", "color3", file=str(tmp_path / "a.exr"))
+    power = node(stage, "Pow", "ND_power_color3FA", "color3", in1=image)
+    power.CreateInput("in2", Sdf.ValueTypeNames.String).Set("2.2")
+    lambertian(stage, power)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        UsdSceneDelegate(stage, fake).sync()
+    material = fake.meshes()["/World/Quad"]["material"]
+    assert "networks" not in material and "textures" not in material
+    named = _warnings(caplog, "input in2 of type string")
+    assert len(named) == 1 and "/Looks/M/Pow" in named[0] and named[0].endswith("on /Looks/M"), (
+        caplog.text
+    )
+
+
+def test_an_unreadable_lookup_takes_its_default_and_the_rest_of_the_network_still_runs(
+    native, tmp_path, caplog
+) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    missing = str(tmp_path / "missing.exr")
+    gone = node(stage, "Gone", "ND_image_color3", "color3", file=missing, default=("color3", B))
+    lambertian(stage, node(stage, "Add", "ND_add_color3", "color3", in1=a, in2=gone))
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    assert_albedo(r.albedo, np.add(A, B), r.on, atol=1e-5)  # ND_image's default where unread
+    assert np.isfinite(r.color).all()
+    named = _warnings(caplog, missing)
+    assert len(named) == 1 and "/World/Quad" in named[0], caplog.text
+
+
+def test_a_malformed_network_is_an_error_naming_the_prim(native) -> None:
+    delegate = native.RenderDelegate()
+    quad_args = {
+        "points": np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32),
+        "face_vertex_counts": np.array([4], np.int32),
+        "face_vertex_indices": np.array([0, 1, 2, 3], np.int32),
+        "transform": np.eye(4),
+        "scheme": "none",
+    }
+    one = [{"file": "x.exr"}]
+    for network, words in (
+        ({"ops": [("texture", 0), ("add",)], "lookups": one}, "needs 2 value"),
+        ({"ops": [("texture", 1)], "lookups": one}, "reads lookup 1 of 1"),
+        ({"ops": [("noise3d",)], "lookups": []}, "noise3d"),
+        ({"ops": [("const", math.nan, 0, 0, 0)], "lookups": []}, "non-finite"),
+        ({"ops": [("texture", 0)], "lookups": [{"file": "x.exr", "channels": 5}]}, "channels"),
+    ):
+        material = {"networks": {"diffuseColor": network}}
+        with pytest.raises(ValueError, match=rf"/World/Bad: .*{words}"):
+            delegate.set_mesh("/World/Bad", material=material, **quad_args)
+    both = {
+        "textures": {"roughness": one[0]},
+        "networks": {"roughness": {"ops": [("const", 1, 1, 1, 1)]}},
+    }
+    with pytest.raises(ValueError, match="both a texture and a network"):
+        delegate.set_mesh("/World/Bad", material=both, **quad_args)
+    ok = {
+        "networks": {
+            "roughness": {
+                "ops": [("texture", 0), ("const", 2, 2, 2, 2), ("power",)],
+                "lookups": one,
+            }
+        }
+    }
+    delegate.set_mesh("/World/Good", material=ok, **quad_args)
+
+
+def test_a_network_renders_the_same_bits_with_any_thread_count_and_cache_mode(
+    native, tmp_path
+) -> None:
+    stage = new_stage()
+    uv = node(stage, "Uv", "ND_texcoord_vector2", "vector2")
+    place = node(
+        stage, "Place", "ND_place2d_vector2", "vector2", texcoord=uv, rotate=("float", 30.0)
+    )
+    file = quadrant_image(native, tmp_path / "quadrants.exr")
+    image = node(stage, "Image", "ND_image_color3", "color3", file=file, texcoord=place)
+    lambertian(
+        stage, node(stage, "Pow", "ND_power_color3FA", "color3", in1=image, in2=("float", 0.5))
+    )
+    images = [
+        mipray.render(stage, width=32, aovs=("color",), settings=settings).aovs["color"]
+        for settings in (
+            {"threads": 1, "cacheMode": "multires"},
+            {"threads": 2, "cacheMode": "none"},
+            {"threads": 2, "cacheMode": "unbounded"},
+        )
+    ]
+    assert images[0].std() > 0.01
+    for other in images[1:]:
+        np.testing.assert_array_equal(other, images[0])
+
+
+def test_a_cycle_of_connections_is_named_once_and_the_frame_renders(
+    native, tmp_path, caplog
+) -> None:
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    first = node(stage, "First", "ND_add_color3", "color3", in1=a)
+    second = node(stage, "Second", "ND_multiply_color3", "color3", in1=first, in2=a)
+    first.CreateInput("in2", C3).ConnectToSource(second.ConnectableAPI(), "out")
+    lambertian(stage, first)
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    named = _warnings(caplog, "in a cycle")
+    assert len(named) == 1 and "/Looks/M" in named[0], caplog.text
+    assert_albedo(r.albedo, np.full(3, 0.18), r.on, atol=1e-3)  # UsdPreviewSurface's fallback
+
+
+def test_a_network_deeper_than_the_evaluator_is_named_and_the_input_keeps_its_default(
+    native, tmp_path, caplog
+) -> None:
+    # add(image, add(image, …)) twenty deep: each level holds one more value on the stack.
+    stage = new_stage()
+    file = constant_image(native, tmp_path / "a.exr", (0.01, 0.01, 0.01))
+    inner = node(stage, "Image0", "ND_image_color3", "color3", file=file)
+    for k in range(1, 20):
+        image = node(stage, f"Image{k}", "ND_image_color3", "color3", file=file)
+        inner = node(stage, f"Add{k}", "ND_add_color3", "color3", in1=image, in2=inner)
+    lambertian(stage, inner)
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    named = _warnings(caplog, "more than 16 values")
+    assert len(named) == 1 and "/Looks/M" in named[0], caplog.text
+    assert_albedo(r.albedo, np.full(3, 0.18), r.on, atol=1e-3)
+
+
+def test_a_mesh_lights_network_emission_is_named_once_as_not_tinting(native, tmp_path, caplog):
+    from pxr import UsdLux
+
+    stage = new_stage()
+    a = node(
+        stage, "A", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "a.exr", A)
+    )
+    b = node(
+        stage, "B", "ND_image_color3", "color3", file=constant_image(native, tmp_path / "b.exr", B)
+    )
+    glow = node(stage, "Glow", "ND_add_color3", "color3", in1=a, in2=b)
+    lambertian(stage, node(stage, "Grey", "ND_constant_color3", "color3", value=("color3", A)))
+    surface = UsdShade.Shader(stage.GetPrimAtPath("/Looks/M/Surface"))
+    surface.CreateInput("emissiveColor", C3).ConnectToSource(glow.ConnectableAPI(), "out")
+    UsdLux.MeshLightAPI.Apply(stage.GetPrimAtPath("/World/Quad"))
+    with caplog.at_level(logging.WARNING):
+        image = mipray.render(stage, width=16, aovs=("color",)).aovs["color"]
+    assert np.isfinite(image).all()
+    named = _warnings(caplog, "node network, which a mesh light's tint does not evaluate")
+    assert len(named) == 1 and "/World/Quad" in named[0] and "/Looks/M" in named[0], caplog.text
