@@ -362,11 +362,11 @@ def test_an_accelerating_quad_covers_what_its_parabola_sweeps() -> None:
     np.testing.assert_allclose(row, coverage * lit, atol=0.05 * lit)
 
 
-def test_non_mesh_gprims_changing_shape_within_the_shutter_are_named_not_dropped(caplog) -> None:
-    # The core blurs only meshes' deformation: curves and points whose points move, and an
-    # implicit sphere whose radius grows, inside an open shutter render at the frame's time
-    # and are named once (warning and stats), not silently. Still ones, a sample only at the
-    # frame's time, or a closed shutter are not named.
+def test_implicit_prims_changing_shape_within_the_shutter_are_named_not_dropped(caplog) -> None:
+    # The core blurs the deformation of meshes, Points and curves: curves and points whose
+    # points move inside an open shutter blur, while an implicit sphere whose radius grows
+    # renders at the frame's time and is named once (warning and stats), not silently. Still
+    # ones, a sample only at the frame's time, or a closed shutter are not named.
     def stage_with(shutter_close: float, moving: bool) -> Usd.Stage:
         stage = new_stage()
         c = UsdGeom.BasisCurves.Define(stage, "/World/Hair")
@@ -387,14 +387,19 @@ def test_non_mesh_gprims_changing_shape_within_the_shutter_are_named_not_dropped
         add_distant_light(stage, "/World/Sun")
         return stage
 
-    def named(stage: Usd.Stage) -> list[str]:
+    what = "implicit prim or NurbsPatch"
+
+    def named(stage: Usd.Stage) -> tuple[list[str], str]:
         with mipray.RenderSession(stage) as session:
             r = session.render("/World/Camera", width=16, time=0.0)
-        return sorted(u["prim"] for u in r.stats["unsupported"] if "non-mesh gprim" in u["what"])
+        blur = {e["name"]: e["why"] for e in r.stats["effects"]["enabled"]}.get("motion_blur", "")
+        return sorted(u["prim"] for u in r.stats["unsupported"] if what in u["what"]), blur
 
     with caplog.at_level(logging.WARNING, logger="mipray"):
-        assert named(stage_with(1.0, moving=True)) == ["/World/Ball", "/World/Dust", "/World/Hair"]
-    lines = [r.getMessage() for r in caplog.records if "non-mesh gprim" in r.getMessage()]
+        prims, blur = named(stage_with(1.0, moving=True))
+    assert prims == ["/World/Ball"]
+    assert "/World/Dust" in blur and "/World/Hair" in blur, blur
+    lines = [r.getMessage() for r in caplog.records if what in r.getMessage()]
     assert len(lines) == 1 and "/World/Ball" in lines[0], lines
-    assert named(stage_with(1.0, moving=False)) == []
-    assert named(stage_with(0.0, moving=True)) == []
+    assert named(stage_with(1.0, moving=False)) == ([], "")
+    assert named(stage_with(0.0, moving=True)) == ([], "")

@@ -223,23 +223,33 @@ class RenderDelegate:
         """
 
     def set_deformation(
-        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+        self,
+        path: str,
+        times: NDArray[np.float32],
+        points: NDArray[np.float32],
+        widths: NDArray[np.float32] | None = None,
     ) -> None:
         """Set the points of the mesh at ``path`` at times across the camera's shutter.
 
         Deformation motion blur: the mesh is built at each sample over its topology,
         and a camera sample at shutter time t sees the surface of the points blended
-        linearly between the two samples around t. No times clear the samples.
+        linearly between the two samples around t. A Points prim's spheres and a curves
+        prim's control points (and widths) blend the same way. No times clear the samples.
 
         Args:
-            path: a polygonal or subdivision mesh set with :meth:`set_mesh`.
+            path: a polygonal or subdivision mesh, a Points or a curves prim set with
+                :meth:`set_mesh`.
             times: (N,) float32 shutter fractions, 0 at open and 1 at close, strictly
                 increasing; N from 2 to 16, or 0.
             points: (N, P, 3) float32 object-space points, P the mesh's point count.
+            widths: (N, W) float32 widths at each sample, for a Points or curves prim whose
+                widths change within the shutter (W as many as the prim's own, or for
+                Points 1 or one per point); None keeps the prim's widths.
 
         Raises:
-            PrimDataError: no mesh at ``path``, shapes that do not match, times not
-                increasing, or points not finite.
+            PrimDataError: no mesh at ``path``, a prim that cannot deform (implicit prims,
+                NurbsPatch), shapes that do not match, times not increasing, or points or
+                widths not finite.
         """
 
     def set_instancer(

@@ -64,9 +64,13 @@ class RenderDelegateLike(Protocol):
         """Set a mesh's world transform over the camera's shutter (none: it is still)."""
 
     def set_deformation(
-        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+        self,
+        path: str,
+        times: NDArray[np.float32],
+        points: NDArray[np.float32],
+        widths: NDArray[np.float32] | None = None,
     ) -> None:
-        """Set a mesh's points at times across the camera's shutter (none: they are still)."""
+        """Set a mesh's points (and widths) across the camera's shutter (none: still)."""
 
     def set_instancer(
         self,
