@@ -489,11 +489,25 @@ fn st_of_uv(channel: usize, u: f32, v: f32) -> Option<([f32; 2], [f32; 2], [f32;
 }
 
 /// An implicit gprim as a limit surface of analytic patches, intersected exactly.
+///
+/// A shape whose sizes (radius, height, size, ...) change within the shutter holds its pieces
+/// at each sample ([`ImplicitSurface::deforming`]): every piece's parameters are linear in the
+/// shape's sizes, so the pieces blended between two samples are the pieces of the blended
+/// shape, and a ray at shutter time t meets them exactly ([`ExactSurface::intersect_at`]) and
+/// is shaded on them ([`LimitSurface::evaluate_at`]). A piece's box is the union of its boxes
+/// at the samples, which holds every blend (each box's corners are linear in the sizes too).
 #[derive(Clone, Debug)]
 pub struct ImplicitSurface {
     shape: Shape,
     axis: Axis,
+    /// The pieces (of the first sample, for a shape that changes within the shutter).
     pieces: Vec<Piece>,
+    /// The samples' shutter times (0 = open, 1 = close), strictly increasing; empty for a
+    /// shape that keeps still.
+    times: Vec<f32>,
+    /// Every sample's pieces, as many and of the same kinds as `pieces`; empty for a shape
+    /// that keeps still.
+    samples: Vec<Vec<Piece>>,
 }
 
 impl ImplicitSurface {
@@ -501,11 +515,90 @@ impl ImplicitSurface {
     /// The shape's sizes are refused by [`Shape::validate`].
     pub fn new(shape: Shape) -> Result<Self, String> {
         shape.validate()?;
-        Ok(ImplicitSurface { shape, axis: shape_axis(&shape), pieces: pieces(&shape) })
+        Ok(ImplicitSurface { shape, axis: shape_axis(&shape), pieces: pieces(&shape), times: Vec::new(), samples: Vec::new() })
     }
 
+    /// A shape whose sizes change within the shutter: `samples` (shutter time, the shape
+    /// then), all of one type and axis.
+    ///
+    /// # Errors
+    /// One line: fewer than 2 or more than [`crate::deform::MAX_SAMPLES`] samples, times not
+    /// finite and strictly increasing, a sample [`Shape::validate`] refuses, of another type
+    /// or axis than the first, or with other pieces (a cylinder's radius or a capsule's height
+    /// reaching 0 adds or drops a cap or the body).
+    pub fn deforming(samples: Vec<(f32, Shape)>) -> Result<Self, String> {
+        let times: Vec<f32> = samples.iter().map(|s| s.0).collect();
+        crate::deform::check_times(&times)?;
+        let first = samples[0].1;
+        let mut out = ImplicitSurface::new(first)?;
+        for &(t, shape) in &samples {
+            shape.validate().map_err(|e| format!("{e} at shutter time {t}"))?;
+            if std::mem::discriminant(&shape) != std::mem::discriminant(&first) || shape_axis(&shape) != out.axis {
+                return Err(format!("the {} at shutter time {t} is of another type or axis than the first sample's", first.type_name()));
+            }
+            let p = pieces(&shape);
+            let same = p.len() == out.pieces.len() && p.iter().zip(&out.pieces).all(|(a, b)| Piece::lerp(a, b, 0.5).is_some());
+            if !same {
+                return Err(format!(
+                    "the {} at shutter time {t} has other pieces than the first sample's (a size reaching 0)",
+                    first.type_name()
+                ));
+            }
+            out.samples.push(p);
+        }
+        out.times = times;
+        Ok(out)
+    }
+
+    /// The shape (of the first sample, for a shape that changes within the shutter).
     pub fn shape(&self) -> &Shape {
         &self.shape
+    }
+
+    /// The samples' shutter times; empty for a shape that keeps still.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// Piece `patch` at shutter time `time`: blended between the bracketing samples' (a
+    /// sample's own at its time).
+    fn piece_at(&self, patch: usize, time: f32) -> Option<Piece> {
+        if self.times.is_empty() {
+            return self.pieces.get(patch).copied();
+        }
+        let (i, j, f) = crate::deform::bracket(&self.times, time);
+        let (a, b) = (self.samples[i].get(patch)?, self.samples[j].get(patch)?);
+        match f {
+            f if f <= 0.0 => Some(*a),
+            f if f >= 1.0 => Some(*b),
+            f => Piece::lerp(a, b, f64::from(f)),
+        }
+    }
+}
+
+impl Piece {
+    /// The piece `f` of the way from `a` to `b` (two samples of one piece of a shape; its
+    /// parameters are linear in the shape's sizes), or `None` for pieces of different kinds.
+    fn lerp(a: &Piece, b: &Piece, f: f64) -> Option<Piece> {
+        let l = |x: f64, y: f64| x * (1.0 - f) + y * f;
+        let lv = |x: DVec3, y: DVec3| x * (1.0 - f) + y * f;
+        Some(match (*a, *b) {
+            (Piece::Zone { z, radius, theta0, theta1 }, Piece::Zone { z: z1, radius: r1, theta0: a0, theta1: a1 })
+                if theta0 == a0 && theta1 == a1 =>
+            {
+                Piece::Zone { z: l(z, z1), radius: l(radius, r1), theta0, theta1 }
+            }
+            (Piece::Side { z0, z1, r0, r1 }, Piece::Side { z0: w0, z1: w1, r0: s0, r1: s1 }) => {
+                Piece::Side { z0: l(z0, w0), z1: l(z1, w1), r0: l(r0, s0), r1: l(r1, s1) }
+            }
+            (Piece::Disk { z, radius, up }, Piece::Disk { z: z1, radius: r1, up: up1 }) if up == up1 => {
+                Piece::Disk { z: l(z, z1), radius: l(radius, r1), up }
+            }
+            (Piece::Rect { origin, eu, ev }, Piece::Rect { origin: o1, eu: u1, ev: v1 }) => {
+                Piece::Rect { origin: lv(origin, o1), eu: lv(eu, u1), ev: lv(ev, v1) }
+            }
+            _ => return None,
+        })
     }
 }
 
@@ -518,12 +611,26 @@ impl LimitSurface for ImplicitSurface {
         PatchParam::root(patch as u32, patch as u32, PatchKind::Other)
     }
 
+    /// The union over the samples, for a shape that changes within the shutter.
     fn patch_bounds(&self, patch: usize) -> Bounds3 {
-        self.pieces.get(patch).map_or(Bounds3::EMPTY, |p| object_bounds(self.axis, p.bounds()))
+        if self.times.is_empty() {
+            return self.pieces.get(patch).map_or(Bounds3::EMPTY, |p| object_bounds(self.axis, p.bounds()));
+        }
+        self.samples.iter().filter_map(|s| s.get(patch)).fold(Bounds3::EMPTY, |b, p| b.union(&object_bounds(self.axis, p.bounds())))
     }
 
+    /// At shutter open for a shape that changes within the shutter;
+    /// [`LimitSurface::evaluate_at`] for a ray's time.
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
-        self.pieces.get(patch).map_or_else(SurfacePoint::default, |p| surface_point(self.axis, p.evaluate(f64::from(u), f64::from(v))))
+        self.evaluate_at(patch, u, v, 0.0)
+    }
+
+    fn evaluate_at(&self, patch: usize, u: f32, v: f32, time: f32) -> SurfacePoint {
+        self.piece_at(patch, time).map_or_else(SurfacePoint::default, |p| surface_point(self.axis, p.evaluate(f64::from(u), f64::from(v))))
+    }
+
+    fn deforms(&self) -> bool {
+        !self.times.is_empty()
     }
 
     fn control_face_count(&self) -> usize {
@@ -545,7 +652,11 @@ impl LimitSurface for ImplicitSurface {
 
 impl ExactSurface for ImplicitSurface {
     fn intersect(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32) -> Option<ExactHit> {
-        let piece = self.pieces.get(patch)?;
+        self.intersect_at(patch, o, d, t_min, t_max, 0.0)
+    }
+
+    fn intersect_at(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32, time: f32) -> Option<ExactHit> {
+        let piece = self.piece_at(patch, time)?;
         let (oc, dc) = (self.axis.to_canonical(d3(o)), self.axis.to_canonical(d3(d)));
         let (t, u, v, n) = piece.intersect(oc, dc, f64::from(t_min), f64::from(t_max))?;
         let tf = t as f32;
@@ -869,6 +980,30 @@ mod tests {
         let e = PointsSurface::deforming(vec![(0.0, vec![[0.0; 3]]), (1.0, vec![[0.0; 3]])], &[vec![1.0], vec![-1.0]]).unwrap_err();
         assert!(e.contains("widths[0] = -1 must be a non-negative number at shutter time 1"), "{e}");
         assert!(PointsSurface::deforming(vec![(0.5, vec![[0.0; 3]]), (0.5, vec![[0.0; 3]])], &[vec![]]).is_err());
+    }
+
+    #[test]
+    fn a_shape_whose_sizes_change_is_the_blended_shape_and_refuses_other_pieces() {
+        let cyl = |r: f32, h: f32| Shape::Cylinder { radius_bottom: r, radius_top: r, height: h, axis: Axis::X };
+        let s = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (0.5, cyl(2.0, 2.0)), (1.0, cyl(2.0, 4.0))]).unwrap();
+        assert!(s.deforms());
+        // At t = 0.75: radius 2, height 3, its pieces exactly those of that cylinder.
+        let mid = ImplicitSurface::new(cyl(2.0, 3.0)).unwrap();
+        for patch in 0..3 {
+            let (a, b) = (s.evaluate_at(patch, 0.3, 0.4, 0.75), mid.evaluate(patch, 0.3, 0.4));
+            assert!((a.p - b.p).length() < 1e-6 && (a.dpdu - b.dpdu).length() < 1e-5, "patch {patch}");
+            let hit = s.intersect_at(patch, a.p + Vec3A::X * 5.0 + Vec3A::Y * 0.01, Vec3A::NEG_X, 0.0, f32::INFINITY, 0.75);
+            let want = mid.intersect(patch, a.p + Vec3A::X * 5.0 + Vec3A::Y * 0.01, Vec3A::NEG_X, 0.0, f32::INFINITY);
+            assert_eq!(hit, want, "patch {patch}");
+            assert!(s.patch_bounds(patch).contains(ImplicitSurface::new(cyl(2.0, 4.0)).unwrap().evaluate(patch, 0.1, 0.0).p));
+        }
+        let cone = Shape::Cylinder { radius_bottom: 1.0, radius_top: 0.0, height: 2.0, axis: Axis::X };
+        let e = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (1.0, cone)]).unwrap_err();
+        assert!(e.contains("other pieces"), "{e}");
+        let e = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (1.0, Shape::Sphere { radius: 1.0 })]).unwrap_err();
+        assert!(e.contains("another type or axis"), "{e}");
+        let e = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (1.0, cyl(-1.0, 2.0))]).unwrap_err();
+        assert!(e.contains("at shutter time 1"), "{e}");
     }
 
     #[test]

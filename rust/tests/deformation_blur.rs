@@ -328,3 +328,30 @@ fn cache_modes_give_bit_identical_images_of_a_moving_curve() {
     let scene = common::scene_of("/hair", Arc::new(curve), Mat4::IDENTITY, camera);
     common::assert_cache_modes_give_bit_identical_images(&scene);
 }
+
+/// An implicit sphere whose radius grows from 0.1 to 0.9 across the shutter covers each pixel
+/// for the share of the shutter and pixel the growing disc does.
+#[test]
+fn a_sphere_whose_radius_grows_covers_each_pixel_once_its_radius_reaches_it() {
+    use mipray::implicit::{ImplicitSurface, Shape};
+    let grow = ImplicitSurface::deforming(vec![(0.0, Shape::Sphere { radius: 0.1 }), (1.0, Shape::Sphere { radius: 0.9 })]).unwrap();
+    let out = render(&scene(Arc::new(grow), None), &alpha_options(), &NoProgress).unwrap();
+    for y in 0..2 {
+        for x in 0..40 {
+            let expected = disc_coverage(x, y, |_| 0.0, |t| 0.1 + 0.8 * t);
+            let got = out.film.pixel("alpha", x, y)[0];
+            assert!((got - expected).abs() < 0.04, "pixel ({x}, {y}): alpha {got} vs analytic {expected}");
+        }
+    }
+}
+
+/// A capsule growing in radius and height, in perspective: bit-identical across cache modes.
+#[test]
+fn cache_modes_give_bit_identical_images_of_a_growing_capsule() {
+    use mipray::implicit::{Axis, ImplicitSurface, Shape};
+    let capsule = |r: f32, h: f32| Shape::Capsule { radius_bottom: r, radius_top: 0.5 * r, height: h, axis: Axis::Y };
+    let grow = ImplicitSurface::deforming(vec![(0.0, capsule(0.3, 0.5)), (0.4, capsule(0.5, 0.8)), (1.0, capsule(0.6, 1.5))]).unwrap();
+    let camera = Camera::perspective(Camera::look_at(Vec3::new(1.5, -2.0, 2.5), Vec3::ZERO, Vec3::Z), 35.0);
+    let scene = common::scene_of("/capsule", Arc::new(grow), Mat4::IDENTITY, camera);
+    common::assert_cache_modes_give_bit_identical_images(&scene);
+}
