@@ -199,7 +199,7 @@ def test_a_point_whose_width_grows_covers_each_pixel_once_its_radius_reaches_it(
     assert want.max() - want[want > 0].min() > 0.5  # a blur, not one size held
 
 
-def test_the_delegate_refuses_bad_widths_and_undeformable_prims_in_one_line(native) -> None:
+def test_the_delegate_refuses_bad_widths_in_one_line(native) -> None:
     delegate = native.RenderDelegate()
     empty = np.zeros(0, np.int32)
     common = dict(face_vertex_counts=empty, face_vertex_indices=empty, transform=np.eye(4))
@@ -213,7 +213,7 @@ def test_the_delegate_refuses_bad_widths_and_undeformable_prims_in_one_line(nati
         ("/P", two, np.zeros((3, 1), np.float32), "2 deformation times for widths of shape (3, 1)"),
         ("/P", two, np.ones((2, 2), np.float32), "widths has 2 values for 1 points"),
         ("/P", two, np.array([[1.0], [-1.0]], np.float32), "widths[0] = -1"),
-        ("/S", np.zeros((2, 0, 3), np.float32), None, "set_deformation: only meshes, Points"),
+        ("/S", np.zeros((2, 0, 3), np.float32), np.ones((2, 1), np.float32), "without widths"),
     ]
     for path, points, widths, reason in cases:
         with pytest.raises(PrimDataError) as caught:
@@ -221,3 +221,88 @@ def test_the_delegate_refuses_bad_widths_and_undeformable_prims_in_one_line(nati
         assert caught.value.prim_path == path
         assert reason in caught.value.reason, caught.value.reason
     delegate.set_deformation("/P", times, two, np.array([[1.0], [2.0]], np.float32))
+
+
+def _growing_sphere(how: str) -> Usd.Stage:
+    """:func:`_stage`'s camera over a sphere at the origin growing from radius 0.1 at frame 1
+    to 0.9 at frame 2: an implicit ``Sphere`` (``radius`` sampled) or one point (``widths``
+    sampled)."""
+    stage = _stage("points", "transform")
+    stage.RemovePrim("/World/Slider")
+    if how == "sphere":
+        radius = UsdGeom.Sphere.Define(stage, "/World/Ball").GetRadiusAttr()
+        radius.Set(0.1, 1.0)
+        radius.Set(0.9, 2.0)
+    else:
+        points = UsdGeom.Points.Define(stage, "/World/Ball")
+        points.CreatePointsAttr([Gf.Vec3f(0, 0, 0)])
+        points.GetWidthsAttr().Set([0.2], 1.0)
+        points.GetWidthsAttr().Set([1.8], 2.0)
+    return stage
+
+
+def test_an_implicit_prim_s_sizes_cross_over_the_shutter(fake) -> None:
+    stage = _growing_sphere("sphere")
+    UsdGeom.Sphere(stage.GetPrimAtPath("/World/Ball")).GetRadiusAttr().Set(0.7, 1.25)
+    scene = UsdSceneDelegate(stage, fake, time=1.0)
+    scene.sync()
+    assert scene.update_motion("/Cam") == ["/World/Ball"]
+    (call,) = deformations(fake, "/World/Ball")
+    np.testing.assert_array_equal(call.kwargs["times"], [0.0, 0.25, 1.0])
+    assert call.kwargs["points"].shape == (3, 0, 3)
+    radii = [g["radius"] for g in call.kwargs["gprims"]]
+    assert [g["type"] for g in call.kwargs["gprims"]] == ["Sphere"] * 3
+    np.testing.assert_allclose(radii, [0.1, 0.7, 0.9], atol=1e-6)
+    assert scene.unsupported == []
+
+
+def test_sizes_an_implicit_prim_cannot_take_within_the_shutter_are_one_warning(
+    fake, caplog
+) -> None:
+    stage = _growing_sphere("sphere")
+    UsdGeom.Sphere(stage.GetPrimAtPath("/World/Ball")).GetRadiusAttr().Set(0.0, 1.5)
+    scene = UsdSceneDelegate(stage, fake, time=1.0)
+    scene.sync()
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        assert scene.update_motion("/Cam") == []
+        scene.update_motion("/Cam")
+    said = [r.getMessage() for r in caplog.records if "/World/Ball" in r.getMessage()]
+    assert said == [
+        "mipray: /World/Ball: radius = 0 must be a positive number within the shutter; "
+        "rendering it at the frame's time without motion blur"
+    ], said
+    assert deformations(fake, "/World/Ball") == []
+
+
+@pytest.mark.usefixtures("native")
+def test_a_sphere_whose_radius_grows_covers_each_pixel_once_its_radius_reaches_it() -> None:
+    alpha, color = _alpha_and_color(_growing_sphere("sphere"))
+    want = _pixel_mean(lambda x, y, t: x * x + y * y < (0.1 + 0.8 * t) ** 2)
+    np.testing.assert_allclose(alpha, want, atol=0.06)
+    # The same growth as a point's widths: the same spheres at the same times.
+    alpha_p, color_p = _alpha_and_color(_growing_sphere("point"))
+    np.testing.assert_allclose(alpha, alpha_p, atol=2e-3)
+    np.testing.assert_allclose(color, color_p, atol=2e-3 * color_p.max())
+
+
+def test_the_delegate_refuses_bad_implicit_samples_in_one_line(native) -> None:
+    delegate = native.RenderDelegate()
+    empty = np.zeros(0, np.int32)
+    common = dict(face_vertex_counts=empty, face_vertex_indices=empty, transform=np.eye(4))
+    none = np.zeros((0, 3), np.float32)
+    cyl = {"type": "Cylinder", "radius_bottom": 1.0, "radius_top": 1.0, "height": 2.0}
+    delegate.set_mesh("/C", points=none, gprim=cyl, **common)
+    times, no_points = np.array([0.0, 1.0], np.float32), np.zeros((2, 0, 3), np.float32)
+    cone = {**cyl, "radius_top": 0.0}
+    cases = [
+        (None, "0 shapes for 2 deformation samples of an implicit prim"),
+        ([cyl, cone], "has other pieces than the first sample's"),
+        ([cyl, {"type": "Sphere", "radius": 1.0}], "of another type or axis"),
+        ([cyl, {**cyl, "height": -1.0}], "height = -1"),
+    ]
+    for gprims, reason in cases:
+        with pytest.raises(PrimDataError) as caught:
+            delegate.set_deformation("/C", times, no_points, None, gprims)
+        assert caught.value.prim_path == "/C"
+        assert reason in caught.value.reason, caught.value.reason
+    delegate.set_deformation("/C", times, no_points, None, [cyl, {**cyl, "radius_top": 2.0}])

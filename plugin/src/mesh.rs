@@ -376,6 +376,9 @@ pub struct MeshPrim {
     /// A Points or curves prim's widths at the times of `deformation`, one list per sample,
     /// when they change within the shutter; `None` for the data's widths at every sample.
     pub deformation_widths: Option<Arc<Vec<Vec<f32>>>>,
+    /// An implicit prim's shape at the times of `deformation`, one per sample, when its sizes
+    /// change within the shutter.
+    pub deformation_shapes: Option<Arc<Vec<Shape>>>,
 }
 
 /// A mesh's points at shutter times (0 = open, 1 = close), strictly increasing.
@@ -429,6 +432,20 @@ pub fn check_deformation_widths(widths: &[Vec<f32>], samples: &DeformSamples, da
     Ok(())
 }
 
+/// Why `shapes` (one per sample of `samples`, or none) cannot be the shapes over the shutter
+/// of the prim of `data`, if they cannot: one line. Only implicit prims take shapes, and an
+/// implicit prim's samples need them ([`ImplicitSurface::deforming`] checks them).
+pub fn check_deformation_shapes(shapes: &[Shape], samples: &DeformSamples, data: &MeshData) -> Result<(), String> {
+    match &data.gprim {
+        Some(Gprim::Implicit(_)) if shapes.len() == samples.len() => {
+            ImplicitSurface::deforming(samples.iter().map(|s| s.0).zip(shapes.iter().copied()).collect()).map(|_| ())
+        }
+        Some(Gprim::Implicit(_)) => Err(format!("{} shapes for {} deformation samples of an implicit prim", shapes.len(), samples.len())),
+        _ if shapes.is_empty() => Ok(()),
+        _ => Err("shapes over the shutter for a prim other than an implicit one".into()),
+    }
+}
+
 impl MeshPrim {
     pub fn new(path: &str, data: MeshData, cache_id: u32) -> Self {
         let invalid = data.validate().err();
@@ -446,6 +463,7 @@ impl MeshPrim {
             lazy: true,
             deformation: None,
             deformation_widths: None,
+            deformation_shapes: None,
         }
     }
 
@@ -528,7 +546,13 @@ impl MeshPrim {
     fn build(&mut self, dirty: DirtyBits) -> Result<Surface, mipray::error::MeshError> {
         match &self.data.gprim {
             Some(Gprim::Implicit(shape)) => {
-                return Ok(Surface::Implicit(Arc::new(ImplicitSurface::new(*shape).map_err(mipray::error::MeshError::Invalid)?)))
+                if let (Some(samples), Some(shapes)) = (self.checked_deformation(), self.deformation_shapes.as_deref()) {
+                    match ImplicitSurface::deforming(samples.iter().map(|s| s.0).zip(shapes.iter().copied()).collect()) {
+                        Ok(s) => return Ok(Surface::Implicit(Arc::new(s))),
+                        Err(e) => self.warn_not_blurred(&e),
+                    }
+                }
+                return Ok(Surface::Implicit(Arc::new(ImplicitSurface::new(*shape).map_err(mipray::error::MeshError::Invalid)?)));
             }
             Some(Gprim::Points { widths }) => {
                 if let Some(samples) = self.checked_deformation() {

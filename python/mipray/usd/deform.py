@@ -20,9 +20,14 @@ points). A curve's ``normals`` stay the frame's.
 
 What cannot be blurred is warned about once, naming the prim, and the prim renders at the
 frame's time: a point count that changes within the shutter (another topology), widths whose
-count changes within it, or more samples than :data:`MAX_SAMPLES`. Implicit prims and
-NurbsPatch whose shape changes within the shutter are named by
-:func:`changes_shape_in_shutter` and render at the frame's time.
+count changes within it, or more samples than :data:`MAX_SAMPLES`.
+
+Implicit prims whose sizes (``radius``, ``height``, ``size``, ...) are sampled inside the
+shutter cross as their ``gprim`` argument at the shutter's ends and at those samples; the
+renderer intersects the shape of sizes blended at each ray's time exactly. Sizes a shape
+cannot take at one of the samples: one warning, rendered at the frame's time. A NurbsPatch
+whose points move within the shutter is named by :func:`changes_shape_in_shutter` and
+renders at the frame's time.
 
 A mesh whose ``points`` have no sample inside the shutter (other than at the frame's time) but
 ``velocities`` (and maybe ``accelerations``) authored moves by them: its points at shutter
@@ -36,7 +41,7 @@ attribute, and the mesh renders at the frame's time without motion blur.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +49,7 @@ from pxr import Gf, Usd, UsdGeom
 
 from ..errors import PrimError
 from .curves import CURVE_TYPES, curves_arguments
+from .gprim import implicit_shape
 from .skel import SkelPoser, is_skinned
 from .transform import MOTION_SUBSAMPLES
 from .warn import warn_once
@@ -72,6 +78,9 @@ class Deformation(NamedTuple):
     #: (N, W) float32 widths of a Points or curves prim whose widths change within the
     #: shutter (as many as the prim sent); None keeps the prim's own.
     widths: NDArray[np.float32] | None = None
+    #: An implicit prim's ``gprim`` argument at each sample (its points are then (N, 0, 3));
+    #: None for other prims.
+    gprims: list[dict[str, Any]] | None = None
 
 
 def deformation_samples(
@@ -98,7 +107,38 @@ def deformation_samples(
         return _mesh_samples(prim, time, (t0, t1), poser, root)
     if prim.IsA(UsdGeom.Points) or any(prim.IsA(t) for t in CURVE_TYPES):
         return _points_or_curves(prim, time, (t0, t1))
-    return None
+    return _implicit(prim, time, (t0, t1))
+
+
+def _implicit(
+    prim: Usd.Prim, time: Usd.TimeCode, shutter: tuple[float, float]
+) -> Deformation | None:
+    """An implicit prim's shape at ``shutter``'s ends (time codes) and its sizes' samples.
+
+    When a size (radius, height, size, ...) changes within the shutter; None for other prims,
+    or (with one warning naming the prim) sizes the prim cannot take there.
+    """
+    if implicit_shape(prim, time) is None:
+        return None
+    attrs = [a for a in (prim.GetAttribute(n) for n in _IMPLICIT_SHAPE) if a]
+    varying = [a for a in attrs if _varies_in(a, time, shutter)]
+    if not varying:
+        return None
+    path = prim.GetPath()
+    codes = sorted({*shutter, *(t for a in varying for t in _inside(a, time, shutter))})
+    if len(codes) > MAX_SAMPLES:
+        _too_many(path, "its sizes", len(codes))
+        return None
+    try:
+        shapes = [implicit_shape(prim, Usd.TimeCode(t)) for t in codes]
+    except PrimError as e:
+        _warn_once(
+            f"{path}: {e.reason} within the shutter; rendering it at the frame's time without "
+            "motion blur"
+        )
+        return None
+    points = np.zeros((len(codes), 0, 3), dtype=np.float32)
+    return Deformation(_fractions(codes, shutter), points, None, [s for s in shapes if s])
 
 
 def _inside(attr: Usd.Attribute, time: Usd.TimeCode, shutter: tuple[float, float]) -> list[float]:
@@ -297,22 +337,15 @@ def changes_shape_in_shutter(
     """Whether ``prim``, a gprim whose deformation is not blurred, changes shape in the shutter.
 
     NurbsPatch: ``points`` sampled strictly inside the shutter at a time other than the
-    frame's, or moving by ``velocities``; implicit prims: a shaping attribute (radius, height,
-    size, ...) sampled there. Meshes, Points and curves: False (they blur,
-    :func:`deformation_samples`).
+    frame's, or moving by ``velocities``. Meshes, Points, curves and implicit prims: False
+    (they blur, :func:`deformation_samples`).
     """
-    if time.IsDefault() or shutter[1] <= shutter[0] or prim.IsA(UsdGeom.Mesh):
-        return False
-    if prim.IsA(UsdGeom.Points) or any(prim.IsA(t) for t in CURVE_TYPES):
+    if time.IsDefault() or shutter[1] <= shutter[0] or not prim.IsA(UsdGeom.NurbsPatch):
         return False
     window = (time.GetValue() + shutter[0], time.GetValue() + shutter[1])
-    if prim.IsA(UsdGeom.PointBased):
-        attrs = [UsdGeom.PointBased(prim).GetPointsAttr()]
-        if moves_by_velocities(prim):
-            return True
-    else:
-        attrs = [a for a in (prim.GetAttribute(n) for n in _IMPLICIT_SHAPE) if a]
-    return any(_varies_in(a, time, window) for a in attrs)
+    if moves_by_velocities(prim):
+        return True
+    return _varies_in(UsdGeom.PointBased(prim).GetPointsAttr(), time, window)
 
 
 def moves_by_velocities(prim: Usd.Prim) -> bool:

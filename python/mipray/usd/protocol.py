@@ -8,7 +8,7 @@ without it, for tests and for tools that only read USD).
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,6 +69,7 @@ class RenderDelegateLike(Protocol):
         times: NDArray[np.float32],
         points: NDArray[np.float32],
         widths: NDArray[np.float32] | None = None,
+        gprims: list[dict[str, Any]] | None = None,
     ) -> None:
         """Set a mesh's points (and widths) across the camera's shutter (none: still)."""
 
