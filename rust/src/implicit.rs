@@ -845,10 +845,6 @@ impl LimitSurface for PointsSurface {
         st_of_uv(channel, u, v)
     }
 
-    fn memory_bytes(&self) -> usize {
-        self.centers.capacity() * 12 + self.radii.capacity() * 4
-    }
-
     fn exact(&self) -> Option<&dyn ExactSurface> {
         Some(self)
     }
