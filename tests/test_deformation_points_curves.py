@@ -11,7 +11,7 @@ import logging
 
 import numpy as np
 import pytest
-from pxr import Gf, Usd, UsdGeom
+from pxr import Gf, Sdf, Usd, UsdGeom
 from test_motion_blur import sliding_stage
 
 import mipray
@@ -306,3 +306,61 @@ def test_the_delegate_refuses_bad_implicit_samples_in_one_line(native) -> None:
         assert caught.value.prim_path == "/C"
         assert reason in caught.value.reason, caught.value.reason
     delegate.set_deformation("/C", times, no_points, None, [cyl, {**cyl, "radius_top": 2.0}])
+
+
+def _instanced_dust(kind: str) -> Usd.Stage:
+    """Two instances, at x = −1 and 1, of a Points prim of one point of width 0.6 sliding
+    by its points from −0.5 to 0.5 across the shutter and a sphere growing from radius 0.1 to
+    0.3 at y = 0: a PointInstancer's prototype (``kind`` "points"), native instances of a
+    class ("native") or (``kind`` "plain") the same prims under Xforms: the truth."""
+    stage = _stage("points", "transform")
+    stage.RemovePrim("/World/Slider")
+
+    def prims(root: str) -> None:
+        UsdGeom.Xform.Define(stage, root)
+        dust = UsdGeom.Points.Define(stage, f"{root}/Dust")
+        dust.CreateWidthsAttr([0.6])
+        dust.GetPointsAttr().Set([Gf.Vec3f(-0.5, 0, 0)], 1.0)
+        dust.GetPointsAttr().Set([Gf.Vec3f(0.5, 0, 0)], 2.0)
+        ball = UsdGeom.Sphere.Define(stage, f"{root}/Ball").GetRadiusAttr()
+        ball.Set(0.1, 1.0)
+        ball.Set(0.3, 2.0)
+
+    if kind == "points":
+        pi = UsdGeom.PointInstancer.Define(stage, "/World/PI")
+        prims("/World/PI/Protos/P")
+        pi.CreatePrototypesRel().AddTarget("/World/PI/Protos/P")
+        pi.CreateProtoIndicesAttr([0, 0])
+        pi.CreatePositionsAttr([(-1, 0, 0), (1, 0, 0)])
+    elif kind == "native":
+        stage.DefinePrim("/Proto", "Xform").SetSpecifier(Sdf.SpecifierClass)
+        prims("/Proto/P")
+        for name, x in (("A", -1.0), ("B", 1.0)):
+            inst = UsdGeom.Xform.Define(stage, f"/World/{name}")
+            inst.AddTranslateOp().Set(Gf.Vec3d(x, 0, 0))
+            inst.GetPrim().GetReferences().AddInternalReference("/Proto")
+            inst.GetPrim().SetInstanceable(True)
+    else:
+        for name, x in (("A", -1.0), ("B", 1.0)):
+            prims(f"/World/{name}")
+            UsdGeom.Xform(stage.GetPrimAtPath(f"/World/{name}")).AddTranslateOp().Set(
+                Gf.Vec3d(x, 0, 0)
+            )
+    return stage
+
+
+@pytest.mark.usefixtures("native")
+@pytest.mark.parametrize("kind", ["points", "native"])
+def test_points_and_implicit_prims_deform_in_every_instance_of_a_prototype(kind: str) -> None:
+    alpha, color = _alpha_and_color(_instanced_dust(kind))
+    alpha_t, color_t = _alpha_and_color(_instanced_dust("plain"))
+    want = _pixel_mean(
+        lambda x, y, t: sum(
+            ((x - c - (t - 0.5)) ** 2 + y * y < 0.09)
+            | ((x - c) ** 2 + y * y < (0.1 + 0.2 * t) ** 2)
+            for c in (-1.0, 1.0)
+        )
+    )
+    np.testing.assert_allclose(alpha_t, want, atol=0.06)
+    np.testing.assert_allclose(alpha, alpha_t, atol=2e-3)
+    np.testing.assert_allclose(color, color_t, atol=2e-3 * color_t.max())
