@@ -355,3 +355,32 @@ fn cache_modes_give_bit_identical_images_of_a_growing_capsule() {
     let scene = common::scene_of("/capsule", Arc::new(grow), Mat4::IDENTITY, camera);
     common::assert_cache_modes_give_bit_identical_images(&scene);
 }
+
+/// Moving points, a moving curve and a growing capsule in one scene: the same bits with 1 and
+/// 3 threads (each ray's time, blend and exact test are functions of the ray alone).
+#[test]
+fn thread_counts_give_bit_identical_images_of_moving_points_curves_and_implicit_prims() {
+    use mipray::implicit::{Axis, ImplicitSurface, PointsSurface, Shape};
+    let mut s = Scene::default();
+    let pts =
+        PointsSurface::deforming(vec![(0.0, vec![[-1.0, 0.0, 0.0]]), (1.0, vec![[-0.5, 0.3, 0.2]])], &[vec![0.4], vec![0.6]]).unwrap();
+    let at = |x: f32| tube(&[[x, -1.0, 0.0], [x + 0.2, 0.0, 0.3], [x, 0.5, 0.0], [x, 1.0, 0.2]], &[4], CurveType::Cubic, &[0.1]);
+    let curve = CurvesSurface::deforming(vec![(0.0, at(0.0)), (1.0, at(0.4))]).unwrap();
+    let capsule = |r: f32| Shape::Capsule { radius_bottom: r, radius_top: r, height: 0.5, axis: Axis::Z };
+    let grow = ImplicitSurface::deforming(vec![(0.0, capsule(0.2)), (1.0, capsule(0.4))]).unwrap();
+    let surfaces: [Arc<dyn LimitSurface>; 3] = [Arc::new(pts), Arc::new(curve), Arc::new(grow)];
+    for (k, surface) in surfaces.into_iter().enumerate() {
+        let m = s.add_mesh(Mesh::new(&format!("/m{k}"), surface));
+        s.add_instance(m, Mat4::from_translation(Vec3::new(0.9 * k as f32 - 0.5, 0.0, 0.0)));
+    }
+    let camera = Camera::perspective(Camera::look_at(Vec3::new(0.5, -3.0, 2.0), Vec3::ZERO, Vec3::Z), 40.0);
+    let s = common::lit(s, camera);
+    let bits = |threads: usize| {
+        let opts = RenderOptions { width: 48, height: 32, samples: 4, threads, ..Default::default() };
+        let out = render(&s, &opts, &NoProgress).unwrap();
+        (0..32).flat_map(|y| (0..48).map(move |x| (x, y))).map(|(x, y)| out.film.pixel("color", x, y)[0].to_bits()).collect::<Vec<_>>()
+    };
+    let one = bits(1);
+    assert!(one.iter().filter(|&&b| f32::from_bits(b) > 0.0).count() > 100, "the prims are in view");
+    assert!(one == bits(3), "1 and 3 threads differ");
+}
