@@ -370,7 +370,7 @@ fn thread_counts_give_bit_identical_images_of_moving_points_curves_and_implicit_
     let grow = ImplicitSurface::deforming(vec![(0.0, capsule(0.2)), (1.0, capsule(0.4))]).unwrap();
     let surfaces: [Arc<dyn LimitSurface>; 3] = [Arc::new(pts), Arc::new(curve), Arc::new(grow)];
     for (k, surface) in surfaces.into_iter().enumerate() {
-        let m = s.add_mesh(Mesh::new(&format!("/m{k}"), surface));
+        let m = s.add_mesh(Mesh::new(format!("/m{k}"), surface));
         s.add_instance(m, Mat4::from_translation(Vec3::new(0.9 * k as f32 - 0.5, 0.0, 0.0)));
     }
     let camera = Camera::perspective(Camera::look_at(Vec3::new(0.5, -3.0, 2.0), Vec3::ZERO, Vec3::Z), 40.0);
