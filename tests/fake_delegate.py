@@ -254,7 +254,12 @@ class FakeRenderDelegate:
         self.calls.append(Call("set_motion", path, {"times": times, "transforms": transforms}))
 
     def set_deformation(
-        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+        self,
+        path: str,
+        times: NDArray[np.float32],
+        points: NDArray[np.float32],
+        widths: NDArray[np.float32] | None = None,
+        gprims: list[dict[str, Any]] | None = None,
     ) -> None:
         call = self.prims.get(path)
         if call is None or call.method != "set_mesh":
@@ -263,7 +268,17 @@ class FakeRenderDelegate:
         _check_array(path, "points", points, np.float32, 3)
         if len(times) != len(points):
             raise ValueError(f"{path}: {len(times)} deformation times for {len(points)} samples")
-        self.calls.append(Call("set_deformation", path, {"times": times, "points": points}))
+        args: dict[str, Any] = {"times": times, "points": points}
+        if widths is not None:
+            _check_array(path, "widths", widths, np.float32, 2)
+            if len(widths) != len(times):
+                raise ValueError(f"{path}: {len(times)} deformation times for {len(widths)} widths")
+            args["widths"] = widths
+        if gprims is not None:
+            if len(gprims) != len(times):
+                raise ValueError(f"{path}: {len(times)} deformation times for {len(gprims)} gprims")
+            args["gprims"] = gprims
+        self.calls.append(Call("set_deformation", path, args))
 
     def set_transform(self, path: str, transform: NDArray[np.float64]) -> None:
         call = self.prims.get(path)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from pxr import Gf, Usd, UsdGeom
 from test_motion_blur import QUAD, sliding_stage
+from test_usd_nurbs import nurbs_sphere
 from test_usd_skel import ELBOW, arm, bent
 
 import mipray
@@ -362,11 +363,12 @@ def test_an_accelerating_quad_covers_what_its_parabola_sweeps() -> None:
     np.testing.assert_allclose(row, coverage * lit, atol=0.05 * lit)
 
 
-def test_non_mesh_gprims_changing_shape_within_the_shutter_are_named_not_dropped(caplog) -> None:
-    # The core blurs only meshes' deformation: curves and points whose points move, and an
-    # implicit sphere whose radius grows, inside an open shutter render at the frame's time
-    # and are named once (warning and stats), not silently. Still ones, a sample only at the
-    # frame's time, or a closed shutter are not named.
+def test_a_nurbs_patch_changing_shape_within_the_shutter_is_named_not_dropped(caplog) -> None:
+    # The core blurs the deformation of meshes, Points, curves and implicit prims: curves and
+    # points whose points move inside an open shutter, and a sphere whose radius grows, blur,
+    # while a NurbsPatch whose points move renders at the frame's time and is named once
+    # (warning and stats), not silently. Still ones, a sample only at the frame's time, or a
+    # closed shutter are not named.
     def stage_with(shutter_close: float, moving: bool) -> Usd.Stage:
         stage = new_stage()
         c = UsdGeom.BasisCurves.Define(stage, "/World/Hair")
@@ -377,24 +379,35 @@ def test_non_mesh_gprims_changing_shape_within_the_shutter_are_named_not_dropped
         p = UsdGeom.Points.Define(stage, "/World/Dust")
         s = UsdGeom.Sphere.Define(stage, "/World/Ball")
         s.AddTranslateOp().Set(Gf.Vec3d(0, -2, 0))
+        sheet = nurbs_sphere(stage, "/World/Sheet", 0.5)
+        rest = np.array(sheet.GetPointsAttr().Get(), dtype=np.float64)
+        sheet.GetPointsAttr().Clear()
+        sheet.AddTranslateOp().Set(Gf.Vec3d(2, 0, 0))
         for t in (0, 1) if moving else (0,):
             c.GetPointsAttr().Set([(t, -1, 0), (t, 1, 0)], t)
             p.GetPointsAttr().Set([(t, 2, 0)], t)
             s.GetRadiusAttr().Set(0.3 + 0.3 * t, t)
+            sheet.GetPointsAttr().Set([Gf.Vec3f(*(q * (1 + t))) for q in rest], t)
         cam = add_camera(stage, "/World/Camera", eye=(0.0, 0.0, 8.0))
         cam.CreateShutterOpenAttr(0.0)
         cam.CreateShutterCloseAttr(shutter_close)
         add_distant_light(stage, "/World/Sun")
         return stage
 
-    def named(stage: Usd.Stage) -> list[str]:
+    what = "deformation of a NurbsPatch"
+
+    def named(stage: Usd.Stage) -> tuple[list[str], str]:
         with mipray.RenderSession(stage) as session:
             r = session.render("/World/Camera", width=16, time=0.0)
-        return sorted(u["prim"] for u in r.stats["unsupported"] if "non-mesh gprim" in u["what"])
+        blur = {e["name"]: e["why"] for e in r.stats["effects"]["enabled"]}.get("motion_blur", "")
+        return sorted(u["prim"] for u in r.stats["unsupported"] if what in u["what"]), blur
 
     with caplog.at_level(logging.WARNING, logger="mipray"):
-        assert named(stage_with(1.0, moving=True)) == ["/World/Ball", "/World/Dust", "/World/Hair"]
-    lines = [r.getMessage() for r in caplog.records if "non-mesh gprim" in r.getMessage()]
-    assert len(lines) == 1 and "/World/Ball" in lines[0], lines
-    assert named(stage_with(1.0, moving=False)) == []
-    assert named(stage_with(0.0, moving=True)) == []
+        prims, blur = named(stage_with(1.0, moving=True))
+    assert prims == ["/World/Sheet"]
+    for moving in ("/World/Ball", "/World/Dust", "/World/Hair"):
+        assert moving in blur, blur
+    lines = [r.getMessage() for r in caplog.records if what in r.getMessage()]
+    assert len(lines) == 1 and "/World/Sheet" in lines[0], lines
+    assert named(stage_with(1.0, moving=False)) == ([], "")
+    assert named(stage_with(0.0, moving=True)) == ([], "")

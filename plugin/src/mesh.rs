@@ -373,6 +373,12 @@ pub struct MeshPrim {
     /// [`crate::render_delegate::Delegate::set_deformation`]): the surface is then built at
     /// each sample ([`mipray::deform`]) and `data.points` stands for nothing but the bounds.
     pub deformation: Option<Arc<DeformSamples>>,
+    /// A Points or curves prim's widths at the times of `deformation`, one list per sample,
+    /// when they change within the shutter; `None` for the data's widths at every sample.
+    pub deformation_widths: Option<Arc<Vec<Vec<f32>>>>,
+    /// An implicit prim's shape at the times of `deformation`, one per sample, when its sizes
+    /// change within the shutter.
+    pub deformation_shapes: Option<Arc<Vec<Shape>>>,
 }
 
 /// A mesh's points at shutter times (0 = open, 1 = close), strictly increasing.
@@ -398,6 +404,48 @@ pub fn check_deformation(samples: &DeformSamples, points: usize) -> Result<(), S
     Ok(())
 }
 
+/// Why `widths` (one list per sample of `samples`, or none) cannot be the widths over the
+/// shutter of the prim of `data`, if they cannot: one line. Only Points and curves have
+/// widths; a Points sample's widths are checked against its points
+/// ([`PointsSurface::check`]), a curves sample's must have as many values as the prim's own
+/// (so they keep their interpolation).
+pub fn check_deformation_widths(widths: &[Vec<f32>], samples: &DeformSamples, data: &MeshData) -> Result<(), String> {
+    if widths.is_empty() {
+        return Ok(());
+    }
+    if widths.len() != samples.len() {
+        return Err(format!("{} widths samples for {} points samples", widths.len(), samples.len()));
+    }
+    for ((t, points), w) in samples.iter().zip(widths) {
+        match &data.gprim {
+            Some(Gprim::Points { .. }) => PointsSurface::check(points, w).map_err(|e| format!("{e} at shutter time {t}"))?,
+            Some(Gprim::Curves(c)) if w.len() == c.widths.len() => {}
+            Some(Gprim::Curves(c)) => {
+                return Err(format!("widths at shutter time {t} has {} values (the curves have {})", w.len(), c.widths.len()))
+            }
+            _ => return Err("widths over the shutter for a prim without widths (only Points and curves have them)".into()),
+        }
+        if let Some(i) = w.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
+            return Err(format!("widths[{i}] = {} at shutter time {t} must be a non-negative number", w[i]));
+        }
+    }
+    Ok(())
+}
+
+/// Why `shapes` (one per sample of `samples`, or none) cannot be the shapes over the shutter
+/// of the prim of `data`, if they cannot: one line. Only implicit prims take shapes, and an
+/// implicit prim's samples need them ([`ImplicitSurface::deforming`] checks them).
+pub fn check_deformation_shapes(shapes: &[Shape], samples: &DeformSamples, data: &MeshData) -> Result<(), String> {
+    match &data.gprim {
+        Some(Gprim::Implicit(_)) if shapes.len() == samples.len() => {
+            ImplicitSurface::deforming(samples.iter().map(|s| s.0).zip(shapes.iter().copied()).collect()).map(|_| ())
+        }
+        Some(Gprim::Implicit(_)) => Err(format!("{} shapes for {} deformation samples of an implicit prim", shapes.len(), samples.len())),
+        _ if shapes.is_empty() => Ok(()),
+        _ => Err("shapes over the shutter for a prim other than an implicit one".into()),
+    }
+}
+
 impl MeshPrim {
     pub fn new(path: &str, data: MeshData, cache_id: u32) -> Self {
         let invalid = data.validate().err();
@@ -414,6 +462,8 @@ impl MeshPrim {
             motion: None,
             lazy: true,
             deformation: None,
+            deformation_widths: None,
+            deformation_shapes: None,
         }
     }
 
@@ -496,17 +546,36 @@ impl MeshPrim {
     fn build(&mut self, dirty: DirtyBits) -> Result<Surface, mipray::error::MeshError> {
         match &self.data.gprim {
             Some(Gprim::Implicit(shape)) => {
-                return Ok(Surface::Implicit(Arc::new(ImplicitSurface::new(*shape).map_err(mipray::error::MeshError::Invalid)?)))
+                if let (Some(samples), Some(shapes)) = (self.checked_deformation(), self.deformation_shapes.as_deref()) {
+                    match ImplicitSurface::deforming(samples.iter().map(|s| s.0).zip(shapes.iter().copied()).collect()) {
+                        Ok(s) => return Ok(Surface::Implicit(Arc::new(s))),
+                        Err(e) => self.warn_not_blurred(&e),
+                    }
+                }
+                return Ok(Surface::Implicit(Arc::new(ImplicitSurface::new(*shape).map_err(mipray::error::MeshError::Invalid)?)));
             }
             Some(Gprim::Points { widths }) => {
+                if let Some(samples) = self.checked_deformation() {
+                    let w = self.deformation_widths.as_deref().cloned().unwrap_or_else(|| vec![widths.clone()]);
+                    match PointsSurface::deforming(samples.as_ref().clone(), &w) {
+                        Ok(s) => return Ok(Surface::Points(Arc::new(s))),
+                        Err(e) => self.warn_not_blurred(&e),
+                    }
+                }
                 return Ok(Surface::Points(Arc::new(
                     PointsSurface::new(self.data.points.clone(), widths).map_err(mipray::error::MeshError::Invalid)?,
-                )))
+                )));
             }
             Some(Gprim::Curves(c)) => {
                 let curves = CurvesSurface::new(&c.desc(&self.data.points)).map_err(mipray::error::MeshError::Invalid)?;
                 if let Some(note) = curves.fallbacks() {
                     log::warn!("{}: {note}", self.path);
+                }
+                if let Some(samples) = self.checked_deformation() {
+                    match self.deforming_curves(c, &samples) {
+                        Ok(s) => return Ok(Surface::Curves(Arc::new(s))),
+                        Err(e) => self.warn_not_blurred(&e),
+                    }
                 }
                 return Ok(Surface::Curves(Arc::new(curves)));
             }
@@ -521,7 +590,7 @@ impl MeshPrim {
         }
         let t = &self.data.topology;
         let primvars = self.data.primvar_list();
-        if let Some(samples) = self.deformation.clone().filter(|d| check_deformation(d, self.data.points.len()).is_ok()) {
+        if let Some(samples) = self.checked_deformation() {
             return self.build_deforming(&samples, primvars);
         }
         let points_only = !dirty.contains(DirtyBits::TOPOLOGY) && primvars.is_empty();
@@ -565,6 +634,33 @@ impl MeshPrim {
 }
 
 impl MeshPrim {
+    /// The deformation samples when they fit the data as it is now (the data may have changed
+    /// since they were set); `None` without any.
+    fn checked_deformation(&self) -> Option<Arc<DeformSamples>> {
+        self.deformation.clone().filter(|d| check_deformation(d, self.data.points.len()).is_ok())
+    }
+
+    /// The curves `c` at each of `samples` (their widths, if sampled, from
+    /// `deformation_widths`), as one moving [`CurvesSurface`].
+    fn deforming_curves(&self, c: &CurvesSpec, samples: &DeformSamples) -> Result<CurvesSurface, String> {
+        let widths = self.deformation_widths.as_deref();
+        let mut built = Vec::with_capacity(samples.len());
+        for (k, (t, points)) in samples.iter().enumerate() {
+            let mut desc = c.desc(points);
+            if let Some(w) = widths.and_then(|w| w.get(k)) {
+                desc.widths = w;
+            }
+            built.push((*t, CurvesSurface::new(&desc).map_err(|e| format!("{e} at shutter time {t}"))?));
+        }
+        CurvesSurface::deforming(built)
+    }
+
+    /// One line: the prim's deformation samples cannot be built (`why`), so it renders at the
+    /// frame's time.
+    fn warn_not_blurred(&self, why: &str) {
+        log::warn!("{}: {why}; rendering it at the frame's time without motion blur", self.path);
+    }
+
     /// The mesh at each of its deformation `samples`, as one [`mipray::deform::DeformingSurface`]:
     /// over OpenSubdiv built on first use (placed by the hull of every sample's points) unless
     /// the prim is eager, or over bilinear faces.

@@ -137,20 +137,43 @@ impl RenderDelegate {
 
     /// Sets the mesh's points at times across the camera's shutter (deformation motion blur,
     /// [`mipray::deform`]); no samples clear them. Each sample has the mesh's point count; the
-    /// topology is the mesh's. Samples that do not change the mesh's shape rebuild nothing.
+    /// topology is the mesh's. Points and curves prims deform too (their points, and with
+    /// `widths`, one list per sample, their widths; empty `widths` keep the prim's own), and
+    /// implicit prims by `shapes`, one per sample (their points samples empty). Samples that
+    /// do not change the mesh's shape rebuild nothing.
     ///
     /// # Errors
-    /// No mesh at `path`, or samples [`crate::mesh::check_deformation`] refuses: one line.
-    pub fn set_deformation(&mut self, path: &str, samples: crate::mesh::DeformSamples) -> Result<(), DelegateError> {
+    /// No mesh at `path`, a NurbsPatch, samples [`crate::mesh::check_deformation`] refuses,
+    /// widths [`crate::mesh::check_deformation_widths`] refuses, or shapes
+    /// [`crate::mesh::check_deformation_shapes`] refuses: one line.
+    pub fn set_deformation(
+        &mut self,
+        path: &str,
+        samples: crate::mesh::DeformSamples,
+        widths: Vec<Vec<f32>>,
+        shapes: Vec<mipray::implicit::Shape>,
+    ) -> Result<(), DelegateError> {
         let m = self.meshes.get_mut(path).ok_or_else(|| DelegateError::prim(path, "set_deformation: no mesh at this path"))?;
         let deformation = if samples.is_empty() {
             None
         } else {
+            if let Some(crate::mesh::Gprim::Nurbs(_)) = &m.data.gprim {
+                return Err(DelegateError::prim(
+                    path,
+                    "set_deformation: a NurbsPatch does not deform (meshes, Points, curves and implicit prims do)",
+                ));
+            }
             crate::mesh::check_deformation(&samples, m.data.points.len()).map_err(|e| DelegateError::prim(path, e))?;
+            crate::mesh::check_deformation_widths(&widths, &samples, &m.data).map_err(|e| DelegateError::prim(path, e))?;
+            crate::mesh::check_deformation_shapes(&shapes, &samples, &m.data).map_err(|e| DelegateError::prim(path, e))?;
             Some(std::sync::Arc::new(samples))
         };
-        if m.deformation != deformation {
+        let widths = (deformation.is_some() && !widths.is_empty()).then(|| std::sync::Arc::new(widths));
+        let shapes = (deformation.is_some() && !shapes.is_empty()).then(|| std::sync::Arc::new(shapes));
+        if m.deformation != deformation || m.deformation_widths != widths || m.deformation_shapes != shapes {
             m.deformation = deformation;
+            m.deformation_widths = widths;
+            m.deformation_shapes = shapes;
             m.dirty = m.dirty | DirtyBits::POINTS;
         }
         Ok(())

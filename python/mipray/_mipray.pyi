@@ -227,23 +227,39 @@ class RenderDelegate:
         """
 
     def set_deformation(
-        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+        self,
+        path: str,
+        times: NDArray[np.float32],
+        points: NDArray[np.float32],
+        widths: NDArray[np.float32] | None = None,
+        gprims: list[dict[str, Any]] | None = None,
     ) -> None:
         """Set the points of the mesh at ``path`` at times across the camera's shutter.
 
         Deformation motion blur: the mesh is built at each sample over its topology,
         and a camera sample at shutter time t sees the surface of the points blended
-        linearly between the two samples around t. No times clear the samples.
+        linearly between the two samples around t. A Points prim's spheres, a curves
+        prim's control points (and widths) and an implicit prim's sizes blend the same
+        way. No times clear the samples.
 
         Args:
-            path: a polygonal or subdivision mesh set with :meth:`set_mesh`.
+            path: a polygonal or subdivision mesh, a Points, curves or implicit prim set
+                with :meth:`set_mesh`.
             times: (N,) float32 shutter fractions, 0 at open and 1 at close, strictly
                 increasing; N from 2 to 16, or 0.
             points: (N, P, 3) float32 object-space points, P the mesh's point count.
+            widths: (N, W) float32 widths at each sample, for a Points or curves prim whose
+                widths change within the shutter (W as many as the prim's own, or for
+                Points 1 or one per point); None keeps the prim's widths.
+            gprims: for an implicit prim whose sizes change within the shutter, its ``gprim``
+                argument (as :meth:`set_mesh` takes it) at each sample, of one type and
+                axis; its points are then (N, 0, 3). A ray at shutter time t meets the
+                shape of sizes blended between the two samples around t, exactly.
 
         Raises:
-            PrimDataError: no mesh at ``path``, shapes that do not match, times not
-                increasing, or points not finite.
+            PrimDataError: no mesh at ``path``, a NurbsPatch, shapes that do not match,
+                times not increasing, points or widths not finite, or gprims not one per
+                sample, of another type or axis, or with sizes the shape cannot take.
         """
 
     def set_instancer(

@@ -354,21 +354,46 @@ impl RenderDelegate {
         self.inner.set_motion(path, keys).map_err(delegate_error)
     }
 
-    /// Sets a mesh's points at times across the camera's shutter (deformation motion blur);
-    /// no times clear them. See the stubs.
-    fn set_deformation(&mut self, path: &str, times: PyReadonlyArray1<'_, f32>, points: PyReadonlyArray3<'_, f32>) -> PyResult<()> {
+    /// Sets a mesh's (or a Points or curves prim's) points, and maybe widths, at times across
+    /// the camera's shutter (deformation motion blur); no times clear them. See the stubs.
+    #[pyo3(signature = (path, times, points, widths=None, gprims=None))]
+    fn set_deformation(
+        &mut self,
+        path: &str,
+        times: PyReadonlyArray1<'_, f32>,
+        points: PyReadonlyArray3<'_, f32>,
+        widths: Option<PyReadonlyArray2<'_, f32>>,
+        gprims: Option<Vec<Bound<'_, PyDict>>>,
+    ) -> PyResult<()> {
         let times = times.as_array().to_vec();
         let points = points.as_array();
         let (n, count, three) = points.dim();
         if n != times.len() || (n > 0 && three != 3) {
             return Err(value_error(path, format!("{} deformation times for points of shape {:?}", times.len(), points.dim())));
         }
+        let widths: Vec<Vec<f32>> = match &widths {
+            None => Vec::new(),
+            Some(w) => {
+                let w = w.as_array();
+                if w.nrows() != n {
+                    return Err(value_error(path, format!("{n} deformation times for widths of shape {:?}", w.dim())));
+                }
+                w.rows().into_iter().map(|r| r.to_vec()).collect()
+            }
+        };
+        let mut shapes = Vec::new();
+        for (k, g) in gprims.iter().flatten().enumerate() {
+            match read_gprim(path, g)? {
+                Gprim::Implicit(shape) => shapes.push(shape),
+                _ => return Err(value_error(path, format!("gprims[{k}] is not an implicit prim"))),
+            }
+        }
         let samples = times
             .into_iter()
             .enumerate()
             .map(|(k, time)| (time, (0..count).map(|i| [points[[k, i, 0]], points[[k, i, 1]], points[[k, i, 2]]]).collect()))
             .collect();
-        self.inner.set_deformation(path, samples).map_err(delegate_error)
+        self.inner.set_deformation(path, samples, widths, shapes).map_err(delegate_error)
     }
 
     /// Inserts or replaces an instancer: `prototypes[proto_indices[i]]` placed at

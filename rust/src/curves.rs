@@ -162,12 +162,18 @@ pub struct CurvesDesc<'a> {
 /// A curve's surface: its Bézier segments, each a patch. Object units.
 #[derive(Clone, Debug)]
 pub struct CurvesSurface {
-    /// Control points of each segment's cubic Bézier.
+    /// Control points of each segment's cubic Bézier; of every sample's segments for curves
+    /// that move within the shutter, sample-major (sample k's segment s at k · segments + s).
     cps: Vec<[[f32; 3]; 4]>,
-    /// Half widths of each segment as a cubic Bézier in u.
+    /// Half widths of each segment as a cubic Bézier in u, laid out as `cps`.
     half_widths: Vec<[f32; 4]>,
-    /// Ribbon normals per segment as a cubic Bézier in u (oriented ribbons only).
+    /// Ribbon normals per segment as a cubic Bézier in u (oriented ribbons only; the frame's,
+    /// the same at every sample).
     normals: Vec<[[f32; 3]; 4]>,
+    /// The samples' shutter times (0 = open, 1 = close), strictly increasing, for curves whose
+    /// control points or widths move within the shutter ([`CurvesSurface::deforming`]); empty
+    /// for curves that keep still.
+    times: Vec<f32>,
     /// The curve each segment belongs to.
     curve: Vec<u32>,
     /// Straight segments (linear curves): one piece is exact.
@@ -495,6 +501,7 @@ impl CurvesSurface {
             half_widths: widths.iter().map(|s| s.map(|w| (0.5 * w[0]).max(0.0) as f32)).collect(),
             normals: normals.iter().map(|s| s.map(f32x3)).collect(),
             straight: wins.iter().flat_map(|w| std::iter::repeat_n(w.size == 2, w.starts.len())).collect(),
+            times: Vec::new(),
             curve,
             style: desc.style,
             curve_count: desc.counts.len(),
@@ -530,17 +537,104 @@ impl CurvesSurface {
         self.fallbacks.as_deref()
     }
 
-    /// Segments (patches).
-    pub fn segment_count(&self) -> usize {
-        self.cps.len()
+    /// Curves moving within the shutter: `samples` (shutter time, the curves then: the same
+    /// prim's curves built from that time's points and widths). A ray at shutter time t meets
+    /// the curves of control points and widths blended between the bracketing samples; every
+    /// basis is linear in its control points (the Bézier conversion too), so that is the curve
+    /// of the blended authored points. Ribbon normals are the first sample's (USD's `normals`
+    /// of the frame).
+    ///
+    /// Tessellated pieces are cached per sample (under [`crate::deform::sample_generation`],
+    /// as a deforming mesh's grids are) and blended per ray ([`crate::deform::blend`]), not
+    /// tessellated per ray from blended control points: a segment's pieces are evaluated
+    /// once per sample and tier, and a ray pays one lerp of at most 34 vertices — the cache
+    /// keeps serving hair that moves. The blend of two samples' pieces is the blended curve's
+    /// polyline at the same parameters (positions and half widths are linear in the control
+    /// points); an oriented ribbon's across vectors blend as vectors, within the chord error
+    /// of the blended ribbon's for the small turns a shutter sees.
+    ///
+    /// # Errors
+    /// One line: fewer than 2 or more than [`crate::deform::MAX_SAMPLES`] samples, times not
+    /// finite and strictly increasing, or a sample whose segments differ from the first's in
+    /// count, curves, straightness or style (another topology).
+    pub fn deforming(samples: Vec<(f32, CurvesSurface)>) -> Result<Self, String> {
+        let times: Vec<f32> = samples.iter().map(|s| s.0).collect();
+        crate::deform::check_times(&times)?;
+        let mut iter = samples.into_iter();
+        let Some((_, mut out)) = iter.next() else { return Err("no deformation samples".into()) };
+        if !out.times.is_empty() {
+            return Err("a deforming curves sample is itself deforming".into());
+        }
+        for (t, s) in iter {
+            let same = s.curve == out.curve && s.straight == out.straight && s.style == out.style && s.times.is_empty();
+            if !same {
+                return Err(format!("the curves at shutter time {t} have other segments than the first sample's"));
+            }
+            out.cps.extend(s.cps);
+            out.half_widths.extend(s.half_widths);
+        }
+        out.times = times;
+        Ok(out)
     }
 
-    /// The segment's Bézier control points (object space).
+    /// The samples' shutter times; empty for curves that keep still.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// Segments (patches).
+    pub fn segment_count(&self) -> usize {
+        self.curve.len()
+    }
+
+    /// Sample `k`'s segment `seg`.
+    fn sample_segment(&self, seg: usize, k: usize) -> Segment {
+        let i = k * self.curve.len() + seg;
+        Segment { cps: self.cps[i].map(dv), half_widths: self.half_widths[i], normals: self.normals.get(seg).map(|n| n.map(dv)) }
+    }
+
+    /// Segment `seg` at shutter time `time`: its control points and half widths blended
+    /// between the bracketing samples (a sample's own at its time; curves that keep still
+    /// are the same at every time).
+    fn segment(&self, seg: usize, time: f32) -> Segment {
+        if self.times.is_empty() {
+            return self.sample_segment(seg, 0);
+        }
+        let (i, j, f) = crate::deform::bracket(&self.times, time);
+        match f {
+            f if f <= 0.0 => self.sample_segment(seg, i),
+            f if f >= 1.0 => self.sample_segment(seg, j),
+            f => {
+                let (a, b) = (self.sample_segment(seg, i), self.sample_segment(seg, j));
+                let fd = f64::from(f);
+                Segment {
+                    cps: std::array::from_fn(|k| a.cps[k] * (1.0 - fd) + b.cps[k] * fd),
+                    half_widths: std::array::from_fn(|k| a.half_widths[k] * (1.0 - f) + b.half_widths[k] * f),
+                    normals: a.normals,
+                }
+            }
+        }
+    }
+
+    /// Segment `seg`'s centre, tangent derivative and frame at u (the first sample's).
+    #[cfg(test)]
+    fn frame(&self, seg: usize, u: f64) -> (DVec3, DVec3, DVec3, DVec3, DVec3) {
+        self.sample_segment(seg, 0).frame(u)
+    }
+
+    /// Segment `seg`'s surface point and first derivatives at (u, v) (the first sample's).
+    #[cfg(test)]
+    fn first(&self, seg: usize, u: f64, v: f64) -> (DVec3, DVec3, DVec3) {
+        self.sample_segment(seg, 0).first(u, v)
+    }
+
+    /// The segment's Bézier control points (object space; the first sample's when the curves
+    /// move).
     pub fn control_points(&self, seg: usize) -> [Vec3A; 4] {
         self.cps[seg].map(Vec3A::from)
     }
 
-    /// The segment's half width at u (object units).
+    /// The segment's half width at u (object units; the first sample's when the curves move).
     pub fn half_width(&self, seg: usize, u: f32) -> f32 {
         bezier1(&self.half_widths[seg], f64::from(u)).0 as f32
     }
@@ -568,104 +662,44 @@ impl CurvesSurface {
     /// on the Bézier's second derivative (6 × its control points' largest second difference)
     /// plus the half width's; n pieces stray 1/n² of it. The tracer chooses the rate from
     /// it — as many pieces as keep that sag within the ray's beam — so a straight hair
-    /// segment takes one piece whatever its length and only bends are refined.
+    /// segment takes one piece whatever its length and only bends are refined. Of curves that
+    /// move, the largest over the samples, which bounds every blend's (a blend's second
+    /// differences are the blend of the samples'), so the rate does not depend on the time.
     pub fn sag_of_one_piece(&self, seg: usize) -> f32 {
-        let c = self.cps[seg].map(dv);
-        let second = 6.0 * (c[2] - c[1] * 2.0 + c[0]).length().max((c[3] - c[2] * 2.0 + c[1]).length());
-        let w = self.half_widths[seg].map(f64::from);
-        let second_w = 6.0 * (w[2] - 2.0 * w[1] + w[0]).abs().max((w[3] - 2.0 * w[2] + w[1]).abs());
-        ((second + second_w) / 8.0) as f32
-    }
-
-    /// The fixed axis the frame around segment `seg` is built from: the coordinate axis least
-    /// aligned with its chord.
-    fn frame_axis(&self, seg: usize) -> DVec3 {
-        let c = self.cps[seg].map(dv);
-        let mut chord = c[3] - c[0];
-        if chord.length_squared() == 0.0 {
-            chord = c[1] - c[0] + (c[2] - c[1]);
-        }
-        let a = chord.abs();
-        if a.x <= a.y && a.x <= a.z {
-            DVec3::X
-        } else if a.y <= a.z {
-            DVec3::Y
-        } else {
-            DVec3::Z
-        }
-    }
-
-    /// Centre, tangent derivative and frame (unit T, N, B with B = N × T) at u.
-    fn frame(&self, seg: usize, u: f64) -> (DVec3, DVec3, DVec3, DVec3, DVec3) {
-        let c = self.cps[seg].map(dv);
-        let (p, d, _) = bezier3(&c, u);
-        let mut t = d.normalize_or_zero();
-        if t == DVec3::ZERO {
-            t = (c[3] - c[0]).normalize_or(DVec3::Z);
-        }
-        let (n, b) = if self.normals.is_empty() {
-            let n = t.cross(self.frame_axis(seg)).normalize_or(t.any_orthonormal_vector());
-            (n, n.cross(t))
-        } else {
-            // Ribbons: v runs across W = normal × T; the surface normal is the authored one's
-            // part perpendicular to T.
-            let (nn, _, _) = bezier3(&self.normals[seg].map(dv), u);
-            let w = nn.cross(t).normalize_or(t.any_orthonormal_vector());
-            (w, w.cross(t))
-        };
-        (p, d, t, n, b)
-    }
-
-    /// The surface point and its first derivatives at (u, v), f64.
-    fn first(&self, seg: usize, u: f64, v: f64) -> (DVec3, DVec3, DVec3) {
-        let (p, d, _, n, b) = self.frame(seg, u);
-        let (r, dr) = bezier1(&self.half_widths[seg], u);
-        let h = 1e-5;
-        let (ua, ub) = ((u - h).max(0.0), (u + h).min(1.0));
-        let (_, _, _, na, ba) = self.frame(seg, ua);
-        let (_, _, _, nb, bb) = self.frame(seg, ub);
-        let (dn, db) = ((nb - na) / (ub - ua), (bb - ba) / (ub - ua));
-        if !self.normals.is_empty() {
-            // Ribbon: P = C + (2v − 1)·r·W, W = n here.
-            let s = 2.0 * v - 1.0;
-            return (p + n * (s * r), d + n * (s * dr) + dn * (s * r), n * (2.0 * r));
-        }
-        let th = std::f64::consts::TAU * v;
-        let (cs, sn) = (th.cos(), th.sin());
-        let radial = n * cs + b * sn;
-        let dpdu = d + radial * dr + (dn * cs + db * sn) * r;
-        let dpdv = (b * cs - n * sn) * (std::f64::consts::TAU * r);
-        (p + radial * r, dpdu, dpdv)
+        (0..self.times.len().max(1)).map(|k| self.sample_segment(seg, k).sag_of_one_piece()).fold(0.0, f32::max)
     }
 
     /// The segment's centreline point at u, and the turn v around the tube at which its
-    /// surface normal points along `dir` (object space).
+    /// surface normal points along `dir` (object space), at shutter open.
     pub fn v_facing(&self, seg: usize, u: f32, dir: Vec3A) -> f32 {
-        let (_, _, _, n, b) = self.frame(seg, f64::from(u));
-        let dir = DVec3::new(f64::from(dir.x), f64::from(dir.y), f64::from(dir.z));
-        let v = dir.dot(b).atan2(dir.dot(n)) / std::f64::consts::TAU;
-        (if v < 0.0 { v + 1.0 } else { v }).clamp(0.0, 1.0) as f32
+        self.segment(seg, 0.0).v_facing(u, dir)
     }
 
     /// The piece vertices of a segment tessellated into `pieces` linear pieces, as a cache
     /// entry: `n` = pieces + 1, `verts` holds the n centreline points, then n entries of
     /// (half width, 0, 0) for tubes and camera-facing ribbons or the half-width vector across an
     /// oriented ribbon. `chord_error` bounds how far the curve strays from the polyline
-    /// (object units: [`CurvesSurface::sag_of_one_piece`] over pieces², plus rounding).
+    /// (object units: [`CurvesSurface::sag_of_one_piece`] over pieces², plus rounding). Of
+    /// curves that move, the first sample's ([`CurvesSurface::tessellate_sample`]).
     pub fn tessellate(&self, seg: usize, pieces: usize) -> Tessellation {
+        self.tessellate_sample(seg, 0, pieces)
+    }
+
+    /// [`CurvesSurface::tessellate`] of sample `k` (0 for curves that keep still).
+    pub fn tessellate_sample(&self, seg: usize, k: usize, pieces: usize) -> Tessellation {
+        let s = self.sample_segment(seg, k);
         let n = pieces + 1;
         let mut verts = Vec::with_capacity(2 * n);
         let mut across = Vec::with_capacity(n);
         for i in 0..n {
             let u = i as f64 / pieces as f64;
-            let (p, _, _, w, _) = self.frame(seg, u);
-            let (r, _) = bezier1(&self.half_widths[seg], u);
+            let (p, _, _, w, _) = s.frame(u);
+            let (r, _) = bezier1(&s.half_widths, u);
             verts.push(f32x3(p.to_array()));
-            across.push(if self.normals.is_empty() { [r as f32, 0.0, 0.0] } else { f32x3((w * r).to_array()) });
+            across.push(if s.normals.is_none() { [r as f32, 0.0, 0.0] } else { f32x3((w * r).to_array()) });
         }
         verts.extend(across);
-        let c = self.cps[seg].map(dv);
-        let scale = c.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
+        let scale = s.cps.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
         let chord_error = self.sag_of_one_piece(seg) / (pieces * pieces) as f32 + gamma(8) * scale as f32;
         Tessellation {
             n,
@@ -679,7 +713,8 @@ impl CurvesSurface {
     }
 
     /// The nearest hit of the object-space ray `o + t·d`, t in (t_min, t_max), on segment
-    /// `seg`'s tessellation `tess` read at vertex stride `stride` (2: pieces merged in pairs).
+    /// `seg`'s tessellation `tess` read at vertex stride `stride` (2: pieces merged in pairs):
+    /// [`CurvesSurface::intersect_at`] at shutter open.
     #[allow(clippy::too_many_arguments)]
     pub fn intersect(
         &self,
@@ -690,6 +725,24 @@ impl CurvesSurface {
         d: Vec3A,
         t_min: f32,
         t_max: f32,
+    ) -> Option<CurveHit> {
+        self.intersect_at(seg, tess, stride, o, d, t_min, t_max, 0.0)
+    }
+
+    /// [`CurvesSurface::intersect`] at shutter time `time`: the hit's v is read on the
+    /// segment of that time, and `tess` is the segment's tessellation at that time (the
+    /// samples' blended, [`crate::deform::blend`], for curves that move).
+    #[allow(clippy::too_many_arguments)]
+    pub fn intersect_at(
+        &self,
+        seg: usize,
+        tess: &Tessellation,
+        stride: usize,
+        o: Vec3A,
+        d: Vec3A,
+        t_min: f32,
+        t_max: f32,
+        time: f32,
     ) -> Option<CurveHit> {
         let n = tess.n;
         let verts = tess.verts.as_slice();
@@ -723,18 +776,148 @@ impl CurvesSurface {
         }
         let u = u.clamp(0.0, 1.0);
         let nv = va(nrm);
+        let s = self.segment(seg, time);
         let v = if self.normals.is_empty() {
             // Around the tube: where its normal points the way the piece's does.
-            self.v_facing(seg, u as f32, nv)
+            s.v_facing(u as f32, nv)
         } else {
             // Across the ribbon: the hit's offset along W over the full width.
             let p = od + dd * t;
-            let (c, _, _, w, _) = self.frame(seg, u);
-            let r = bezier1(&self.half_widths[seg], u).0.max(f64::MIN_POSITIVE);
+            let (c, _, _, w, _) = s.frame(u);
+            let r = bezier1(&s.half_widths, u).0.max(f64::MIN_POSITIVE);
             ((p - c).dot(w) / r * 0.5 + 0.5).clamp(0.0, 1.0) as f32
         };
-        let uncertainty = if self.faces_ray() { bezier1(&self.half_widths[seg], u).0 as f32 } else { 0.0 };
+        let uncertainty = if self.faces_ray() { bezier1(&s.half_widths, u).0 as f32 } else { 0.0 };
         Some(CurveHit { t: tf, u: u as f32, v, n: nv, facing: self.faces_ray(), uncertainty })
+    }
+}
+
+/// One segment's data at one time: its Bézier control points and half widths (a sample's, or
+/// blended between two), and its ribbon normals. Every per-segment evaluation reads this.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    cps: [DVec3; 4],
+    half_widths: [f32; 4],
+    /// Oriented ribbons only.
+    normals: Option<[DVec3; 4]>,
+}
+
+impl Segment {
+    /// See [`CurvesSurface::sag_of_one_piece`].
+    fn sag_of_one_piece(&self) -> f32 {
+        let c = &self.cps;
+        let second = 6.0 * (c[2] - c[1] * 2.0 + c[0]).length().max((c[3] - c[2] * 2.0 + c[1]).length());
+        let w = self.half_widths.map(f64::from);
+        let second_w = 6.0 * (w[2] - 2.0 * w[1] + w[0]).abs().max((w[3] - 2.0 * w[2] + w[1]).abs());
+        ((second + second_w) / 8.0) as f32
+    }
+
+    /// The fixed axis the frame around the segment is built from: the coordinate axis least
+    /// aligned with its chord.
+    fn frame_axis(&self) -> DVec3 {
+        let c = &self.cps;
+        let mut chord = c[3] - c[0];
+        if chord.length_squared() == 0.0 {
+            chord = c[1] - c[0] + (c[2] - c[1]);
+        }
+        let a = chord.abs();
+        if a.x <= a.y && a.x <= a.z {
+            DVec3::X
+        } else if a.y <= a.z {
+            DVec3::Y
+        } else {
+            DVec3::Z
+        }
+    }
+
+    /// Centre, tangent derivative and frame (unit T, N, B with B = N × T) at u.
+    fn frame(&self, u: f64) -> (DVec3, DVec3, DVec3, DVec3, DVec3) {
+        let c = &self.cps;
+        let (p, d, _) = bezier3(c, u);
+        let mut t = d.normalize_or_zero();
+        if t == DVec3::ZERO {
+            t = (c[3] - c[0]).normalize_or(DVec3::Z);
+        }
+        let (n, b) = match &self.normals {
+            None => {
+                let n = t.cross(self.frame_axis()).normalize_or(t.any_orthonormal_vector());
+                (n, n.cross(t))
+            }
+            Some(normals) => {
+                // Ribbons: v runs across W = normal × T; the surface normal is the authored
+                // one's part perpendicular to T.
+                let (nn, _, _) = bezier3(normals, u);
+                let w = nn.cross(t).normalize_or(t.any_orthonormal_vector());
+                (w, w.cross(t))
+            }
+        };
+        (p, d, t, n, b)
+    }
+
+    /// The surface point and its first derivatives at (u, v), f64.
+    fn first(&self, u: f64, v: f64) -> (DVec3, DVec3, DVec3) {
+        let (p, d, _, n, b) = self.frame(u);
+        let (r, dr) = bezier1(&self.half_widths, u);
+        let h = 1e-5;
+        let (ua, ub) = ((u - h).max(0.0), (u + h).min(1.0));
+        let (_, _, _, na, ba) = self.frame(ua);
+        let (_, _, _, nb, bb) = self.frame(ub);
+        let (dn, db) = ((nb - na) / (ub - ua), (bb - ba) / (ub - ua));
+        if self.normals.is_some() {
+            // Ribbon: P = C + (2v − 1)·r·W, W = n here.
+            let s = 2.0 * v - 1.0;
+            return (p + n * (s * r), d + n * (s * dr) + dn * (s * r), n * (2.0 * r));
+        }
+        let th = std::f64::consts::TAU * v;
+        let (cs, sn) = (th.cos(), th.sin());
+        let radial = n * cs + b * sn;
+        let dpdu = d + radial * dr + (dn * cs + db * sn) * r;
+        let dpdv = (b * cs - n * sn) * (std::f64::consts::TAU * r);
+        (p + radial * r, dpdu, dpdv)
+    }
+
+    /// The turn v around the tube at u at which its surface normal points along `dir`.
+    fn v_facing(&self, u: f32, dir: Vec3A) -> f32 {
+        let (_, _, _, n, b) = self.frame(f64::from(u));
+        let dir = DVec3::new(f64::from(dir.x), f64::from(dir.y), f64::from(dir.z));
+        let v = dir.dot(b).atan2(dir.dot(n)) / std::f64::consts::TAU;
+        (if v < 0.0 { v + 1.0 } else { v }).clamp(0.0, 1.0) as f32
+    }
+
+    /// The surface point and its derivatives at (u, v): closed form along the tube, central
+    /// differences in f64 for the frame's and the second derivatives along u.
+    fn evaluate(&self, u: f32, v: f32) -> SurfacePoint {
+        let (u, v) = (f64::from(u).clamp(0.0, 1.0), f64::from(v));
+        let (p, dpdu, dpdv) = self.first(u, v);
+        let h = 1e-4;
+        let (ua, ub) = ((u - h).max(0.0), (u + h).min(1.0));
+        let (_, du_a, dv_a) = self.first(ua, v);
+        let (_, du_b, dv_b) = self.first(ub, v);
+        let (_, _, dv_c) = self.first(u, v + h);
+        let (_, _, dv_d) = self.first(u, v - h);
+        SurfacePoint {
+            p: va(p),
+            dpdu: va(dpdu),
+            dpdv: va(dpdv),
+            dpduu: va((du_b - du_a) / (ub - ua)),
+            dpduv: va((dv_b - dv_a) / (ub - ua)),
+            dpdvv: va((dv_c - dv_d) / (2.0 * h)),
+        }
+    }
+
+    /// The control hull grown by the largest half width (and rounding); empty for a segment
+    /// of width 0 throughout.
+    fn bounds(&self) -> Bounds3 {
+        let r = self.half_widths.iter().copied().fold(0.0f32, f32::max);
+        if !(r > 0.0) {
+            return Bounds3::EMPTY;
+        }
+        let mut b = Bounds3::EMPTY;
+        for p in &self.cps {
+            b.grow(va(*p));
+        }
+        let pad = r + gamma(8) * b.max_abs();
+        b.expanded(pad)
     }
 }
 
@@ -888,7 +1071,7 @@ fn facing_piece(o: DVec3, d: DVec3, a: DVec3, b: DVec3, ra: f64, rb: f64, t_min:
 
 impl LimitSurface for CurvesSurface {
     fn patch_count(&self) -> usize {
-        self.cps.len()
+        self.curve.len()
     }
 
     fn patch_param(&self, patch: usize) -> PatchParam {
@@ -897,41 +1080,30 @@ impl LimitSurface for CurvesSurface {
         PatchParam::root(curve, curve, PatchKind::Other)
     }
 
+    /// The control hull grown by the half width; of curves that move, the union over the
+    /// samples, which holds every blend (a blended point lies in the hull of the samples'
+    /// control points, its half width at most the larger of theirs there).
     fn patch_bounds(&self, patch: usize) -> Bounds3 {
-        let Some(c) = self.cps.get(patch) else { return Bounds3::EMPTY };
-        let r = self.half_widths[patch].iter().copied().fold(0.0f32, f32::max);
-        if !(r > 0.0) {
-            // A curve of width 0 is nothing to hit.
+        if patch >= self.curve.len() {
             return Bounds3::EMPTY;
         }
-        let mut b = Bounds3::EMPTY;
-        for p in c {
-            b.grow(Vec3A::from(*p));
-        }
-        let pad = r + gamma(8) * b.max_abs();
-        b.expanded(pad)
+        (0..self.times.len().max(1)).fold(Bounds3::EMPTY, |b, k| b.union(&self.sample_segment(patch, k).bounds()))
     }
 
+    /// At shutter open for curves that move; [`LimitSurface::evaluate_at`] for a ray's time.
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
-        if patch >= self.cps.len() {
+        self.evaluate_at(patch, u, v, 0.0)
+    }
+
+    fn evaluate_at(&self, patch: usize, u: f32, v: f32, time: f32) -> SurfacePoint {
+        if patch >= self.curve.len() {
             return SurfacePoint::default();
         }
-        let (u, v) = (f64::from(u).clamp(0.0, 1.0), f64::from(v));
-        let (p, dpdu, dpdv) = self.first(patch, u, v);
-        let h = 1e-4;
-        let (ua, ub) = ((u - h).max(0.0), (u + h).min(1.0));
-        let (_, du_a, dv_a) = self.first(patch, ua, v);
-        let (_, du_b, dv_b) = self.first(patch, ub, v);
-        let (_, _, dv_c) = self.first(patch, u, v + h);
-        let (_, _, dv_d) = self.first(patch, u, v - h);
-        SurfacePoint {
-            p: va(p),
-            dpdu: va(dpdu),
-            dpdv: va(dpdv),
-            dpduu: va((du_b - du_a) / (ub - ua)),
-            dpduv: va((dv_b - dv_a) / (ub - ua)),
-            dpdvv: va((dv_c - dv_d) / (2.0 * h)),
-        }
+        self.segment(patch, time).evaluate(u, v)
+    }
+
+    fn deforms(&self) -> bool {
+        !self.times.is_empty()
     }
 
     fn control_face_count(&self) -> usize {
@@ -992,6 +1164,32 @@ mod tests {
 
     const PTS: [[f32; 3]; 7] =
         [[0.0, 0.0, 0.0], [1.0, 2.0, 0.0], [2.0, -1.0, 1.0], [3.0, 0.5, 0.0], [4.0, 1.0, -1.0], [5.0, 0.0, 0.0], [6.0, 2.0, 1.0]];
+
+    /// Moving curves: a blend of two samples' pieces is the tessellation of the curve of
+    /// blended control points; bounds hold every sample; other segments are refused by name.
+    #[test]
+    fn moving_curves_blend_as_their_blended_control_points() {
+        let counts = [7];
+        let shifted = |dy: f32| PTS.map(|p| [p[0], p[1] + dy * p[0], p[2]]);
+        let at = |dy: f32| CurvesSurface::new(&desc(&shifted(dy), &counts, CurveType::Cubic, Basis::Bspline, Wrap::Nonperiodic)).unwrap();
+        let moving = CurvesSurface::deforming(vec![(0.0, at(0.0)), (1.0, at(1.0))]).unwrap();
+        assert!(moving.deforms());
+        let mid = at(0.25);
+        for seg in 0..moving.segment_count() {
+            let blended = crate::deform::blend(&moving.tessellate_sample(seg, 0, 16), &moving.tessellate_sample(seg, 1, 16), 0.25);
+            for (p, q) in blended.verts.iter().zip(mid.tessellate(seg, 16).verts.iter()) {
+                assert!((Vec3A::from(*p) - Vec3A::from(*q)).length() < 1e-5, "segment {seg}: {p:?} vs {q:?}");
+            }
+            let (a, b) = (moving.evaluate_at(seg, 0.3, 0.2, 0.25), mid.evaluate(seg, 0.3, 0.2));
+            assert!((a.p - b.p).length() < 1e-5 && (a.dpdu - b.dpdu).length() < 1e-4, "segment {seg}");
+            let bb = moving.patch_bounds(seg);
+            assert!(bb.contains(at(1.0).evaluate(seg, 0.5, 0.0).p) && bb.contains(at(0.0).evaluate(seg, 0.5, 0.5).p));
+        }
+        let fewer = CurvesSurface::new(&desc(&PTS[..6], &[6], CurveType::Cubic, Basis::Bspline, Wrap::Nonperiodic)).unwrap();
+        let e = CurvesSurface::deforming(vec![(0.0, at(0.0)), (1.0, fewer)]).unwrap_err();
+        assert!(e.contains("the curves at shutter time 1 have other segments"), "{e}");
+        assert!(CurvesSurface::deforming(vec![(0.0, at(0.0))]).unwrap_err().contains("1 deformation samples"));
+    }
 
     #[test]
     fn segments_follow_usd_bases_and_wraps() {

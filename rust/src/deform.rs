@@ -9,6 +9,12 @@
 //! cache key, [`sample_generation`]) and is shaded by the blend of their evaluations
 //! ([`LimitSurface::evaluate_at`]). A patch's box is the union of its boxes at the samples,
 //! which holds every blend (a box is convex). A mesh without samples takes none of this path.
+//!
+//! Points and curves deform by the same rules without this type: `PointsSurface` holds each
+//! sample's spheres and intersects the sphere blended at the ray's time exactly
+//! ([`crate::implicit`]); `CurvesSurface` caches each sample's pieces under
+//! [`sample_generation`] and blends them with [`blend`] ([`crate::curves`]). All bracket a
+//! ray's time by [`bracket`].
 
 use std::sync::Arc;
 
@@ -45,12 +51,7 @@ impl DeformingSurface {
     /// strictly increasing, samples whose patches differ in count or layout (another
     /// topology), or a sample that is itself deforming, exact or a curve.
     pub fn new(samples: Vec<(f32, Arc<dyn LimitSurface>)>) -> Result<Self, String> {
-        if !(2..=MAX_SAMPLES).contains(&samples.len()) {
-            return Err(format!("{} deformation samples (2 to {MAX_SAMPLES} are traced)", samples.len()));
-        }
-        if samples.windows(2).any(|w| !(w[0].0 < w[1].0)) || samples.iter().any(|s| !s.0.is_finite()) {
-            return Err("deformation sample times are not finite and strictly increasing".into());
-        }
+        check_times(&samples.iter().map(|s| s.0).collect::<Vec<_>>())?;
         let first = &samples[0].1;
         for (t, s) in &samples {
             if s.exact().is_some() || s.curves().is_some() || s.deformation().is_some() {
@@ -81,17 +82,37 @@ impl DeformingSurface {
     /// f) with the surface at `t` = (1 − f)·sample k + f·sample k + 1. Times outside the
     /// samples hold the nearest (f = 0 or 1), as [`crate::motion::MotionTransform::at`] does.
     pub fn bracket(&self, t: f32) -> (usize, usize, f32) {
-        let k = &self.times;
-        let last = k.len() - 1;
-        if !(t > k[0]) {
-            return (0, 1, 0.0);
-        }
-        if t >= k[last] {
-            return (last - 1, last, 1.0);
-        }
-        let i = k.partition_point(|&x| x <= t) - 1;
-        (i, i + 1, (t - k[i]) / (k[i + 1] - k[i]))
+        bracket(&self.times, t)
     }
+}
+
+/// The samples among strictly increasing shutter times `times` (at least 2) bracketing shutter
+/// time `t`, and the blend weight of the second: (k, k + 1, f), the value at `t` being
+/// (1 − f)·value k + f·value k + 1. Times outside the samples (and NaN) hold the nearest (f = 0
+/// or 1), as [`crate::motion::MotionTransform::at`] does. Every deforming surface (meshes here,
+/// points in [`crate::implicit`], curves in [`crate::curves`]) brackets by this one rule.
+pub fn bracket(times: &[f32], t: f32) -> (usize, usize, f32) {
+    let last = times.len() - 1;
+    if !(t > times[0]) {
+        return (0, 1, 0.0);
+    }
+    if t >= times[last] {
+        return (last - 1, last, 1.0);
+    }
+    let i = times.partition_point(|&x| x <= t) - 1;
+    (i, i + 1, (t - times[i]) / (times[i + 1] - times[i]))
+}
+
+/// Why `times` cannot be a deforming surface's sample times, if they cannot: one line (2 to
+/// [`MAX_SAMPLES`] of them, finite and strictly increasing).
+pub fn check_times(times: &[f32]) -> Result<(), String> {
+    if !(2..=MAX_SAMPLES).contains(&times.len()) {
+        return Err(format!("{} deformation samples (2 to {MAX_SAMPLES} are traced)", times.len()));
+    }
+    if times.windows(2).any(|w| !(w[0] < w[1])) || times.iter().any(|t| !t.is_finite()) {
+        return Err("deformation sample times are not finite and strictly increasing".into());
+    }
+    Ok(())
 }
 
 /// The cache key generation of sample `k`'s tessellations of a mesh at `generation`: sample 0

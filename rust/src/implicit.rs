@@ -191,6 +191,13 @@ pub trait ExactSurface: Send + Sync {
     /// The nearest hit of the object-space ray `o + t·d` on patch `patch` with t in
     /// (t_min, t_max), or `None`.
     fn intersect(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32) -> Option<ExactHit>;
+
+    /// [`ExactSurface::intersect`] at shutter time `time` (0 = open, 1 = close, as
+    /// [`crate::ray::Ray::time`]): the same for a surface that keeps its shape — the default —
+    /// and the surface of that time for one that deforms (moving points).
+    fn intersect_at(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32, _time: f32) -> Option<ExactHit> {
+        self.intersect(patch, o, d, t_min, t_max)
+    }
 }
 
 /// A root in (t_min, t_max) of `a t² + 2 b t + c`, nearest first, that `accept` takes.
@@ -482,11 +489,25 @@ fn st_of_uv(channel: usize, u: f32, v: f32) -> Option<([f32; 2], [f32; 2], [f32;
 }
 
 /// An implicit gprim as a limit surface of analytic patches, intersected exactly.
+///
+/// A shape whose sizes (radius, height, size, ...) change within the shutter holds its pieces
+/// at each sample ([`ImplicitSurface::deforming`]): every piece's parameters are linear in the
+/// shape's sizes, so the pieces blended between two samples are the pieces of the blended
+/// shape, and a ray at shutter time t meets them exactly ([`ExactSurface::intersect_at`]) and
+/// is shaded on them ([`LimitSurface::evaluate_at`]). A piece's box is the union of its boxes
+/// at the samples, which holds every blend (each box's corners are linear in the sizes too).
 #[derive(Clone, Debug)]
 pub struct ImplicitSurface {
     shape: Shape,
     axis: Axis,
+    /// The pieces (of the first sample, for a shape that changes within the shutter).
     pieces: Vec<Piece>,
+    /// The samples' shutter times (0 = open, 1 = close), strictly increasing; empty for a
+    /// shape that keeps still.
+    times: Vec<f32>,
+    /// Every sample's pieces, as many and of the same kinds as `pieces`; empty for a shape
+    /// that keeps still.
+    samples: Vec<Vec<Piece>>,
 }
 
 impl ImplicitSurface {
@@ -494,11 +515,90 @@ impl ImplicitSurface {
     /// The shape's sizes are refused by [`Shape::validate`].
     pub fn new(shape: Shape) -> Result<Self, String> {
         shape.validate()?;
-        Ok(ImplicitSurface { shape, axis: shape_axis(&shape), pieces: pieces(&shape) })
+        Ok(ImplicitSurface { shape, axis: shape_axis(&shape), pieces: pieces(&shape), times: Vec::new(), samples: Vec::new() })
     }
 
+    /// A shape whose sizes change within the shutter: `samples` (shutter time, the shape
+    /// then), all of one type and axis.
+    ///
+    /// # Errors
+    /// One line: fewer than 2 or more than [`crate::deform::MAX_SAMPLES`] samples, times not
+    /// finite and strictly increasing, a sample [`Shape::validate`] refuses, of another type
+    /// or axis than the first, or with other pieces (a cylinder's radius or a capsule's height
+    /// reaching 0 adds or drops a cap or the body).
+    pub fn deforming(samples: Vec<(f32, Shape)>) -> Result<Self, String> {
+        let times: Vec<f32> = samples.iter().map(|s| s.0).collect();
+        crate::deform::check_times(&times)?;
+        let first = samples[0].1;
+        let mut out = ImplicitSurface::new(first)?;
+        for &(t, shape) in &samples {
+            shape.validate().map_err(|e| format!("{e} at shutter time {t}"))?;
+            if std::mem::discriminant(&shape) != std::mem::discriminant(&first) || shape_axis(&shape) != out.axis {
+                return Err(format!("the {} at shutter time {t} is of another type or axis than the first sample's", first.type_name()));
+            }
+            let p = pieces(&shape);
+            let same = p.len() == out.pieces.len() && p.iter().zip(&out.pieces).all(|(a, b)| Piece::lerp(a, b, 0.5).is_some());
+            if !same {
+                return Err(format!(
+                    "the {} at shutter time {t} has other pieces than the first sample's (a size reaching 0)",
+                    first.type_name()
+                ));
+            }
+            out.samples.push(p);
+        }
+        out.times = times;
+        Ok(out)
+    }
+
+    /// The shape (of the first sample, for a shape that changes within the shutter).
     pub fn shape(&self) -> &Shape {
         &self.shape
+    }
+
+    /// The samples' shutter times; empty for a shape that keeps still.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// Piece `patch` at shutter time `time`: blended between the bracketing samples' (a
+    /// sample's own at its time).
+    fn piece_at(&self, patch: usize, time: f32) -> Option<Piece> {
+        if self.times.is_empty() {
+            return self.pieces.get(patch).copied();
+        }
+        let (i, j, f) = crate::deform::bracket(&self.times, time);
+        let (a, b) = (self.samples[i].get(patch)?, self.samples[j].get(patch)?);
+        match f {
+            f if f <= 0.0 => Some(*a),
+            f if f >= 1.0 => Some(*b),
+            f => Piece::lerp(a, b, f64::from(f)),
+        }
+    }
+}
+
+impl Piece {
+    /// The piece `f` of the way from `a` to `b` (two samples of one piece of a shape; its
+    /// parameters are linear in the shape's sizes), or `None` for pieces of different kinds.
+    fn lerp(a: &Piece, b: &Piece, f: f64) -> Option<Piece> {
+        let l = |x: f64, y: f64| x * (1.0 - f) + y * f;
+        let lv = |x: DVec3, y: DVec3| x * (1.0 - f) + y * f;
+        Some(match (*a, *b) {
+            (Piece::Zone { z, radius, theta0, theta1 }, Piece::Zone { z: z1, radius: r1, theta0: a0, theta1: a1 })
+                if theta0 == a0 && theta1 == a1 =>
+            {
+                Piece::Zone { z: l(z, z1), radius: l(radius, r1), theta0, theta1 }
+            }
+            (Piece::Side { z0, z1, r0, r1 }, Piece::Side { z0: w0, z1: w1, r0: s0, r1: s1 }) => {
+                Piece::Side { z0: l(z0, w0), z1: l(z1, w1), r0: l(r0, s0), r1: l(r1, s1) }
+            }
+            (Piece::Disk { z, radius, up }, Piece::Disk { z: z1, radius: r1, up: up1 }) if up == up1 => {
+                Piece::Disk { z: l(z, z1), radius: l(radius, r1), up }
+            }
+            (Piece::Rect { origin, eu, ev }, Piece::Rect { origin: o1, eu: u1, ev: v1 }) => {
+                Piece::Rect { origin: lv(origin, o1), eu: lv(eu, u1), ev: lv(ev, v1) }
+            }
+            _ => return None,
+        })
     }
 }
 
@@ -511,12 +611,26 @@ impl LimitSurface for ImplicitSurface {
         PatchParam::root(patch as u32, patch as u32, PatchKind::Other)
     }
 
+    /// The union over the samples, for a shape that changes within the shutter.
     fn patch_bounds(&self, patch: usize) -> Bounds3 {
-        self.pieces.get(patch).map_or(Bounds3::EMPTY, |p| object_bounds(self.axis, p.bounds()))
+        if self.times.is_empty() {
+            return self.pieces.get(patch).map_or(Bounds3::EMPTY, |p| object_bounds(self.axis, p.bounds()));
+        }
+        self.samples.iter().filter_map(|s| s.get(patch)).fold(Bounds3::EMPTY, |b, p| b.union(&object_bounds(self.axis, p.bounds())))
     }
 
+    /// At shutter open for a shape that changes within the shutter;
+    /// [`LimitSurface::evaluate_at`] for a ray's time.
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
-        self.pieces.get(patch).map_or_else(SurfacePoint::default, |p| surface_point(self.axis, p.evaluate(f64::from(u), f64::from(v))))
+        self.evaluate_at(patch, u, v, 0.0)
+    }
+
+    fn evaluate_at(&self, patch: usize, u: f32, v: f32, time: f32) -> SurfacePoint {
+        self.piece_at(patch, time).map_or_else(SurfacePoint::default, |p| surface_point(self.axis, p.evaluate(f64::from(u), f64::from(v))))
+    }
+
+    fn deforms(&self) -> bool {
+        !self.times.is_empty()
     }
 
     fn control_face_count(&self) -> usize {
@@ -538,7 +652,11 @@ impl LimitSurface for ImplicitSurface {
 
 impl ExactSurface for ImplicitSurface {
     fn intersect(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32) -> Option<ExactHit> {
-        let piece = self.pieces.get(patch)?;
+        self.intersect_at(patch, o, d, t_min, t_max, 0.0)
+    }
+
+    fn intersect_at(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32, time: f32) -> Option<ExactHit> {
+        let piece = self.piece_at(patch, time)?;
         let (oc, dc) = (self.axis.to_canonical(d3(o)), self.axis.to_canonical(d3(d)));
         let (t, u, v, n) = piece.intersect(oc, dc, f64::from(t_min), f64::from(t_max))?;
         let tf = t as f32;
@@ -553,10 +671,25 @@ impl ExactSurface for ImplicitSurface {
 
 /// `Points`: a sphere per point (centre, radius = width / 2), one patch each, so the mesh's
 /// bottom-level BVH is a BVH over the points. Object units.
+///
+/// Points that move within the shutter (sparks, rain, spray: `points` sampled inside it, or
+/// moved by `velocities`) hold their centres and radii at each sample
+/// ([`PointsSurface::deforming`]): a ray at shutter time t meets each sphere at its centre and
+/// radius blended between the bracketing samples ([`crate::deform::bracket`]), exactly — the
+/// spheres are never tessellated — and is shaded on that sphere
+/// ([`LimitSurface::evaluate_at`]). A point's box is the union of its spheres' boxes at the
+/// samples, which holds every blend (a blend of two balls lies in the hull of both).
 #[derive(Clone, Debug)]
 pub struct PointsSurface {
+    /// Centres of each sample, sample-major: sample k's point i at k·n + i.
     centers: Vec<[f32; 3]>,
+    /// Radii, laid out as `centers`.
     radii: Vec<f32>,
+    /// The samples' shutter times (0 = open, 1 = close), strictly increasing; empty for points
+    /// that keep still (one sample).
+    times: Vec<f32>,
+    /// Points per sample.
+    n: usize,
 }
 
 impl PointsSurface {
@@ -569,12 +702,46 @@ impl PointsSurface {
     /// `points.len()` entries: the message names the attribute and index.
     pub fn new(points: Vec<[f32; 3]>, widths: &[f32]) -> Result<Self, String> {
         Self::check(&points, widths)?;
-        let radii = match widths.len() {
-            0 => vec![0.5; points.len()],
-            1 => vec![0.5 * widths[0]; points.len()],
+        let radii = Self::radii_of(points.len(), widths);
+        Ok(PointsSurface { n: points.len(), centers: points, radii, times: Vec::new() })
+    }
+
+    /// Points moving within the shutter: `samples` (shutter time, the points then; each as
+    /// many), with `widths` the diameters at every sample (one list for all samples, as
+    /// [`PointsSurface::new`] takes it) or at each (one list per sample, each of 0, 1 or one
+    /// per point values).
+    ///
+    /// # Errors
+    /// One line: fewer than 2 or more than [`crate::deform::MAX_SAMPLES`] samples, times not
+    /// finite and strictly increasing, samples of another point count than the first, widths
+    /// neither one list nor one per sample, or a sample [`PointsSurface::check`] refuses (the
+    /// message names its shutter time).
+    pub fn deforming(samples: Vec<(f32, Vec<[f32; 3]>)>, widths: &[Vec<f32>]) -> Result<Self, String> {
+        let times: Vec<f32> = samples.iter().map(|s| s.0).collect();
+        crate::deform::check_times(&times)?;
+        if !(widths.len() == 1 || widths.len() == samples.len()) {
+            return Err(format!("{} widths samples for {} points samples (want 1 or one per sample)", widths.len(), samples.len()));
+        }
+        let n = samples[0].1.len();
+        let (mut centers, mut radii) = (Vec::with_capacity(n * samples.len()), Vec::with_capacity(n * samples.len()));
+        for (k, (t, points)) in samples.into_iter().enumerate() {
+            if points.len() != n {
+                return Err(format!("the points at shutter time {t} are {} (the first sample has {n})", points.len()));
+            }
+            let w = &widths[k.min(widths.len() - 1)];
+            Self::check(&points, w).map_err(|e| format!("{e} at shutter time {t}"))?;
+            radii.extend(Self::radii_of(n, w));
+            centers.extend(points);
+        }
+        Ok(PointsSurface { centers, radii, times, n })
+    }
+
+    fn radii_of(n: usize, widths: &[f32]) -> Vec<f32> {
+        match widths.len() {
+            0 => vec![0.5; n],
+            1 => vec![0.5 * widths[0]; n],
             _ => widths.iter().map(|w| 0.5 * w).collect(),
-        };
-        Ok(PointsSurface { centers: points, radii })
+        }
     }
 
     /// What [`PointsSurface::new`] refuses, without building anything.
@@ -595,37 +762,83 @@ impl PointsSurface {
         }
     }
 
-    fn sphere(&self, patch: usize) -> Option<(DVec3, f64)> {
-        let c = self.centers.get(patch)?;
-        Some((DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2])), f64::from(*self.radii.get(patch)?)))
+    /// The samples' shutter times; empty for points that keep still.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// Point `patch`'s sphere in sample `k`: (centre, radius).
+    fn sample_sphere(&self, patch: usize, k: usize) -> (DVec3, f64) {
+        let i = k * self.n + patch;
+        (d3(Vec3A::from(self.centers[i])), f64::from(self.radii[i]))
+    }
+
+    /// Point `patch`'s sphere at shutter time `time`: (centre, radius), blended in f64 between
+    /// the bracketing samples (exactly a sample's at its own time).
+    fn sphere_at(&self, patch: usize, time: f32) -> Option<(DVec3, f64)> {
+        if patch >= self.n {
+            return None;
+        }
+        if self.times.is_empty() {
+            return Some(self.sample_sphere(patch, 0));
+        }
+        let (i, j, f) = crate::deform::bracket(&self.times, time);
+        let ((ca, ra), (cb, rb)) = (self.sample_sphere(patch, i), self.sample_sphere(patch, j));
+        Some(match f {
+            f if f <= 0.0 => (ca, ra),
+            f if f >= 1.0 => (cb, rb),
+            f => {
+                let f = f64::from(f);
+                (ca * (1.0 - f) + cb * f, ra * (1.0 - f) + rb * f)
+            }
+        })
     }
 }
 
 impl LimitSurface for PointsSurface {
     fn patch_count(&self) -> usize {
-        self.centers.len()
+        self.n
     }
 
     fn patch_param(&self, patch: usize) -> PatchParam {
         PatchParam::root(patch as u32, patch as u32, PatchKind::Other)
     }
 
+    /// The union over the samples of the sphere's box (a sample of width 0 adds its centre,
+    /// which the blends toward it approach).
     fn patch_bounds(&self, patch: usize) -> Bounds3 {
-        match self.sphere(patch) {
-            // A point of width 0 is nothing to hit: no subpatch, no BVH leaf.
-            Some((c, r)) if r > 0.0 => object_bounds(Axis::Z, (c - DVec3::splat(r), c + DVec3::splat(r))),
-            _ => Bounds3::EMPTY,
+        if patch >= self.n {
+            return Bounds3::EMPTY;
         }
+        let samples = self.times.len().max(1);
+        // A point of width 0 throughout is nothing to hit: no subpatch, no BVH leaf.
+        if (0..samples).all(|k| !(self.radii[k * self.n + patch] > 0.0)) {
+            return Bounds3::EMPTY;
+        }
+        (0..samples).fold(Bounds3::EMPTY, |b, k| {
+            let (c, r) = self.sample_sphere(patch, k);
+            b.union(&object_bounds(Axis::Z, (c - DVec3::splat(r), c + DVec3::splat(r))))
+        })
     }
 
+    /// At shutter open (the first sample) for moving points; [`LimitSurface::evaluate_at`] for
+    /// a ray's time.
     fn evaluate(&self, patch: usize, u: f32, v: f32) -> SurfacePoint {
-        self.sphere(patch).map_or_else(SurfacePoint::default, |(c, r)| {
+        self.evaluate_at(patch, u, v, 0.0)
+    }
+
+    fn evaluate_at(&self, patch: usize, u: f32, v: f32, time: f32) -> SurfacePoint {
+        self.sphere_at(patch, time).map_or_else(SurfacePoint::default, |(c, r)| {
             surface_point(Axis::Z, sphere_eval(c, r, -FRAC_PI_2, FRAC_PI_2, f64::from(u), f64::from(v)))
         })
     }
 
+    fn deforms(&self) -> bool {
+        !self.times.is_empty()
+    }
+
     fn control_face_count(&self) -> usize {
-        self.centers.len()
+        self.n
     }
 
     fn face_varying(&self, channel: usize, _patch: usize, u: f32, v: f32) -> Option<([f32; 2], [f32; 2], [f32; 2])> {
@@ -639,7 +852,11 @@ impl LimitSurface for PointsSurface {
 
 impl ExactSurface for PointsSurface {
     fn intersect(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32) -> Option<ExactHit> {
-        let (c, r) = self.sphere(patch)?;
+        self.intersect_at(patch, o, d, t_min, t_max, 0.0)
+    }
+
+    fn intersect_at(&self, patch: usize, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32, time: f32) -> Option<ExactHit> {
+        let (c, r) = self.sphere_at(patch, time)?;
         if !(r > 0.0) {
             return None;
         }
@@ -740,6 +957,49 @@ mod tests {
         assert!(ImplicitSurface::new(Shape::Plane { width: 1.0, length: -1.0, axis: Axis::Z }).unwrap_err().contains("length = -1"));
         assert!(PointsSurface::new(vec![[0.0; 3]; 3], &[1.0, 2.0]).unwrap_err().contains("widths has 2 values for 3 points"));
         assert!(PointsSurface::new(vec![[0.0; 3]], &[-1.0]).unwrap_err().contains("widths[0] = -1"));
+    }
+
+    #[test]
+    fn moving_points_blend_their_spheres_and_refuse_bad_samples_by_name() {
+        let p = PointsSurface::deforming(vec![(0.0, vec![[0.0; 3]]), (1.0, vec![[2.0, 0.0, 0.0]])], &[vec![1.0], vec![3.0]]).unwrap();
+        assert!(p.deforms());
+        // At t = 0.25 the centre is (0.5, 0, 0) and the radius 0.5 + 0.25 · 1 = 0.75.
+        let hit = p.intersect_at(0, Vec3A::new(0.5, 0.0, 5.0), Vec3A::NEG_Z, 0.0, f32::INFINITY, 0.25).unwrap();
+        assert!((hit.t - 4.25).abs() < 1e-5, "t {}", hit.t);
+        assert!((p.evaluate_at(0, 0.0, 0.5, 0.25).p - Vec3A::new(1.25, 0.0, 0.0)).length() < 1e-5);
+        let b = p.patch_bounds(0);
+        assert!(b.contains(Vec3A::new(-0.5, 0.0, 0.0)) && b.contains(Vec3A::new(3.5, 1.5, 0.0)), "{b:?}");
+        let e = PointsSurface::deforming(vec![(0.0, vec![[0.0; 3]]), (1.0, vec![[0.0; 3]; 2])], &[vec![]]).unwrap_err();
+        assert!(e.contains("the points at shutter time 1 are 2 (the first sample has 1)"), "{e}");
+        let e = PointsSurface::deforming(vec![(0.0, vec![[0.0; 3]]), (1.0, vec![[0.0; 3]])], &[vec![], vec![], vec![]]).unwrap_err();
+        assert!(e.contains("3 widths samples for 2 points samples"), "{e}");
+        let e = PointsSurface::deforming(vec![(0.0, vec![[0.0; 3]]), (1.0, vec![[0.0; 3]])], &[vec![1.0], vec![-1.0]]).unwrap_err();
+        assert!(e.contains("widths[0] = -1 must be a non-negative number at shutter time 1"), "{e}");
+        assert!(PointsSurface::deforming(vec![(0.5, vec![[0.0; 3]]), (0.5, vec![[0.0; 3]])], &[vec![]]).is_err());
+    }
+
+    #[test]
+    fn a_shape_whose_sizes_change_is_the_blended_shape_and_refuses_other_pieces() {
+        let cyl = |r: f32, h: f32| Shape::Cylinder { radius_bottom: r, radius_top: r, height: h, axis: Axis::X };
+        let s = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (0.5, cyl(2.0, 2.0)), (1.0, cyl(2.0, 4.0))]).unwrap();
+        assert!(s.deforms());
+        // At t = 0.75: radius 2, height 3, its pieces exactly those of that cylinder.
+        let mid = ImplicitSurface::new(cyl(2.0, 3.0)).unwrap();
+        for patch in 0..3 {
+            let (a, b) = (s.evaluate_at(patch, 0.3, 0.4, 0.75), mid.evaluate(patch, 0.3, 0.4));
+            assert!((a.p - b.p).length() < 1e-6 && (a.dpdu - b.dpdu).length() < 1e-5, "patch {patch}");
+            let hit = s.intersect_at(patch, a.p + Vec3A::X * 5.0 + Vec3A::Y * 0.01, Vec3A::NEG_X, 0.0, f32::INFINITY, 0.75);
+            let want = mid.intersect(patch, a.p + Vec3A::X * 5.0 + Vec3A::Y * 0.01, Vec3A::NEG_X, 0.0, f32::INFINITY);
+            assert_eq!(hit, want, "patch {patch}");
+            assert!(s.patch_bounds(patch).contains(ImplicitSurface::new(cyl(2.0, 4.0)).unwrap().evaluate(patch, 0.1, 0.0).p));
+        }
+        let cone = Shape::Cylinder { radius_bottom: 1.0, radius_top: 0.0, height: 2.0, axis: Axis::X };
+        let e = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (1.0, cone)]).unwrap_err();
+        assert!(e.contains("other pieces"), "{e}");
+        let e = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (1.0, Shape::Sphere { radius: 1.0 })]).unwrap_err();
+        assert!(e.contains("another type or axis"), "{e}");
+        let e = ImplicitSurface::deforming(vec![(0.0, cyl(1.0, 2.0)), (1.0, cyl(-1.0, 2.0))]).unwrap_err();
+        assert!(e.contains("at shutter time 1"), "{e}");
     }
 
     #[test]

@@ -1234,7 +1234,7 @@ impl<'s> Tracer<'s> {
             counters.ray_subpatch_tests += 1;
             let mut t_from = ray.t_min;
             let h = loop {
-                let Some(h) = exact.intersect(patch, o, d, t_from, t_best) else { break None };
+                let Some(h) = exact.intersect_at(patch, o, d, t_from, t_best, ray.time) else { break None };
                 let window = own.map_or(0.0, |org| (org.chord_error + h.error * scale) * org.inv_cos);
                 match own {
                     Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), false) => t_from = h.t,
@@ -1298,12 +1298,28 @@ impl<'s> Tracer<'s> {
             let mesh = &self.scene.meshes[mesh_index];
             let key =
                 CacheKey { mesh: Self::cache_mesh(mesh, mesh_index), generation: mesh.generation, subpatch: geom.child_ids.id(cell), tier };
-            let tess = self.cache.get_or_build(key, || curves.tessellate(seg, crate::curves::tier_pieces(tier)));
+            let pieces = crate::curves::tier_pieces(tier);
+            let tess = if curves.times().is_empty() {
+                self.cache.get_or_build(key, || curves.tessellate(seg, pieces))
+            } else {
+                // Moving curves: the bracketing samples' pieces, each cached under its own key
+                // as a deforming mesh's grids are, blended at the ray's time.
+                let (i, j, f) = crate::deform::bracket(curves.times(), ray.time);
+                let sample = |k: usize| {
+                    let key = CacheKey { generation: crate::deform::sample_generation(mesh.generation, k), ..key };
+                    self.cache.get_or_build(key, || curves.tessellate_sample(seg, k, pieces))
+                };
+                match f {
+                    f if f <= 0.0 => sample(i),
+                    f if f >= 1.0 => sample(j),
+                    f => crate::deform::blend(&sample(i), &sample(j), f),
+                }
+            };
             // Merged pieces sag four times as far as the stored ones.
             let chord_error = tess.chord_error * (stride * stride) as f32;
             let mut t_from = ray.t_min;
             let found = loop {
-                let Some(h) = curves.intersect(seg, &tess, stride, o, d, t_from, t_best) else { break None };
+                let Some(h) = curves.intersect_at(seg, &tess, stride, o, d, t_from, t_best, ray.time) else { break None };
                 let window = own.map_or(0.0, |org| (org.chord_error + (chord_error + h.uncertainty) * scale) * org.inv_cos);
                 match own {
                     Some(org) if org.is_own_other_rate(h.t, window, sign * d.dot(h.n), h.facing) => t_from = next_up(h.t),

@@ -93,10 +93,16 @@ def _put_checked(
     return False
 
 
-def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
+def _basis_curves(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    points: NDArray[np.float32] | None,
+    widths: NDArray[np.float32] | None,
+) -> tuple[NDArray[np.float32], dict[str, Any]]:
     curves = UsdGeom.BasisCurves(prim)
     path = str(prim.GetPath())
-    points = read_array(curves.GetPointsAttr(), time, np.float32, 3)
+    if points is None:
+        points = read_array(curves.GetPointsAttr(), time, np.float32, 3)
     counts = read_array(curves.GetCurveVertexCountsAttr(), time, np.int32)
     curve_type = str(curves.GetTypeAttr().Get(time) or "cubic")
     basis = str(curves.GetBasisAttr().Get(time) or "bezier")
@@ -110,7 +116,8 @@ def _basis_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
         "wrap": wrap,
     }
     check_vertex_counts(path, counts, len(points))
-    widths = read_array(curves.GetWidthsAttr(), time, np.float32)
+    if widths is None:
+        widths = read_array(curves.GetWidthsAttr(), time, np.float32)
     if len(widths):
         interpolation = str(curves.GetWidthsInterpolation())
         if len(widths) == 1 and interpolation in ("vertex", "varying"):
@@ -233,10 +240,18 @@ def _polygon_to_bezier(cps: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([thirds, cps[-1:]])
 
 
-def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:
+def _nurbs_curves(
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    given_points: NDArray[np.float32] | None,
+    given_widths: NDArray[np.float32] | None,
+) -> tuple[NDArray[np.float32], dict[str, Any]]:
     curves = UsdGeom.NurbsCurves(prim)
     path = str(prim.GetPath())
-    points = read_array(curves.GetPointsAttr(), time, np.float64, 3)
+    if given_points is None:
+        points = read_array(curves.GetPointsAttr(), time, np.float64, 3)
+    else:
+        points = np.asarray(given_points, dtype=np.float64).reshape(-1, 3)
     counts = read_array(curves.GetCurveVertexCountsAttr(), time, np.int64)
     orders = read_array(curves.GetOrderAttr(), time, np.int64)
     knots = read_array(curves.GetKnotsAttr(), time, np.float64)
@@ -246,7 +261,10 @@ def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
     weights = curves.GetPointWeightsAttr().Get(time)
     if weights is not None and len(weights) and not np.allclose(np.asarray(weights), 1.0):
         _warn_once(f"{path}: pointWeights (a rational curve) are not applied")
-    widths = read_array(curves.GetWidthsAttr(), time, np.float64)
+    if given_widths is None:
+        widths = read_array(curves.GetWidthsAttr(), time, np.float64)
+    else:
+        widths = np.asarray(given_widths, dtype=np.float64)
     w_interp = str(curves.GetWidthsInterpolation()) if len(widths) else "constant"
     if len(widths) == 1 and w_interp in ("vertex", "varying"):
         w_interp = "constant"  # Storm's rule, as for BasisCurves
@@ -329,14 +347,21 @@ def _nurbs_curves(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float3
 
 
 def curves_arguments(
-    prim: Usd.Prim, time: Usd.TimeCode
+    prim: Usd.Prim,
+    time: Usd.TimeCode,
+    points: NDArray[np.float32] | None = None,
+    widths: NDArray[np.float32] | None = None,
 ) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """A curves prim's vertices and its ``gprim`` argument for ``set_mesh``.
+
+    ``points`` and ``widths``: the prim's ``points`` and ``widths`` values to use instead of
+    those at ``time`` (its samples across a shutter, :mod:`mipray.usd.deform`); every other
+    attribute is read at ``time``.
 
     Raises:
         PrimError: the prim cannot be rendered (the message names the attribute).
 
     """
     if prim.IsA(UsdGeom.NurbsCurves):
-        return _nurbs_curves(prim, time)
-    return _basis_curves(prim, time)
+        return _nurbs_curves(prim, time, points, widths)
+    return _basis_curves(prim, time, points, widths)

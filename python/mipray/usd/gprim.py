@@ -32,23 +32,35 @@ from .curves import CURVE_TYPES, curves_arguments
 from .material import lambertian
 from .warn import warn_once
 
-__all__ = ["GPRIM_TYPES", "curve_colors", "gprim_arguments", "is_renderable_gprim", "point_colors"]
+__all__ = [
+    "GPRIM_TYPES",
+    "curve_colors",
+    "gprim_arguments",
+    "implicit_shape",
+    "is_renderable_gprim",
+    "point_colors",
+]
 
 _warn_once = warn_once(__name__)
 
 
-#: The gprims besides ``Mesh`` that render, by schema class.
-GPRIM_TYPES: tuple[type, ...] = (
+#: The implicit gprims, by schema class.
+_IMPLICIT_TYPES: tuple[type, ...] = (
     UsdGeom.Sphere,
     UsdGeom.Cube,
     UsdGeom.Cylinder,
     UsdGeom.Cone,
     UsdGeom.Capsule,
     UsdGeom.Plane,
+    *(t for t in (getattr(UsdGeom, "Cylinder_1", None), getattr(UsdGeom, "Capsule_1", None)) if t),
+)
+
+#: The gprims besides ``Mesh`` that render, by schema class.
+GPRIM_TYPES: tuple[type, ...] = (
+    *_IMPLICIT_TYPES,
     UsdGeom.Points,
     UsdGeom.NurbsPatch,
     *CURVE_TYPES,
-    *(t for t in (getattr(UsdGeom, "Cylinder_1", None), getattr(UsdGeom, "Capsule_1", None)) if t),
 )
 
 
@@ -115,6 +127,18 @@ def _shape(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any]:
         "height": _size(prim, "height", time, zero_ok=capsule),
         "axis": _axis(prim, time),
     }
+
+
+def implicit_shape(prim: Usd.Prim, time: Usd.TimeCode) -> dict[str, Any] | None:
+    """The ``gprim`` argument of an implicit prim at ``time``; None for any other prim.
+
+    Raises:
+        PrimError: a size that is not a positive number, or an ``axis`` not X, Y or Z.
+
+    """
+    if not any(prim.IsA(t) for t in _IMPLICIT_TYPES):
+        return None
+    return _shape(prim, time)
 
 
 def _points(prim: Usd.Prim, time: Usd.TimeCode) -> tuple[NDArray[np.float32], dict[str, Any]]:

@@ -915,7 +915,7 @@ class Instancing:
                     lights.add(path)
                     continue
                 try:
-                    self.delegate.set_deformation(dpath, samples[0], samples[1])
+                    self.delegate.set_deformation(dpath, *samples)
                 except (PrimError, ValueError) as exc:
                     text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
                     _log.warning(

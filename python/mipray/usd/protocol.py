@@ -8,7 +8,7 @@ without it, for tests and for tools that only read USD).
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -64,9 +64,14 @@ class RenderDelegateLike(Protocol):
         """Set a mesh's world transform over the camera's shutter (none: it is still)."""
 
     def set_deformation(
-        self, path: str, times: NDArray[np.float32], points: NDArray[np.float32]
+        self,
+        path: str,
+        times: NDArray[np.float32],
+        points: NDArray[np.float32],
+        widths: NDArray[np.float32] | None = None,
+        gprims: list[dict[str, Any]] | None = None,
     ) -> None:
-        """Set a mesh's points at times across the camera's shutter (none: they are still)."""
+        """Set a mesh's points (and widths) across the camera's shutter (none: still)."""
 
     def set_instancer(
         self,

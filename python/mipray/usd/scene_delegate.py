@@ -911,7 +911,8 @@ class UsdSceneDelegate:
         """Send the mesh at ``path``'s points over the shutter when they move in it.
 
         Deformation motion blur (:mod:`mipray.usd.deform`): point-animated and skinned
-        meshes. A mesh whose points stop moving gets its samples cleared. Returns whether
+        meshes, moving Points and curves (their widths too). A prim whose points stop moving
+        gets its samples cleared. Returns whether
         the mesh deforms. A mesh light's points are not blurred: it is listed in
         :attr:`unsupported` (``LIGHT_DEFORMATION``) and lights at the frame's time.
         """
@@ -927,7 +928,7 @@ class UsdSceneDelegate:
             samples = None
         if samples is not None:
             try:
-                self.delegate.set_deformation(path, samples[0], samples[1])
+                self.delegate.set_deformation(path, *samples)
             except PrimError as exc:
                 _log.warning(
                     "mipray: %s; rendering it at the frame's time without motion blur", exc

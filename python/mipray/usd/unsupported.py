@@ -371,11 +371,10 @@ HEADLIGHT = "headlight added: no light on the stage is of a rendered type"
 #: light is built from the points at the frame's time (the core's triangle lights move only by
 #: transforms), so it lights, and is seen, there without motion blur.
 LIGHT_DEFORMATION = "mesh light deformation (lit and seen at the frame's time, without blur)"
-#: A gprim other than a mesh whose shape changes within the shutter (curves' or points'
-#: ``points`` sampled inside it or moving by ``velocities``, an implicit prim's radius, size or
-#: height sampled inside it): the core blurs only meshes' deformation, so it renders at the
-#: frame's time (its transform still blurs).
-GPRIM_DEFORMATION = "deformation of a non-mesh gprim (rendered at the frame's time, without blur)"
+#: A NurbsPatch whose shape changes within the shutter (its ``points`` sampled inside it or
+#: moving by ``velocities``): the core blurs the deformation of meshes, Points, curves and
+#: implicit prims only, so it renders at the frame's time (its transform still blurs).
+GPRIM_DEFORMATION = "deformation of a NurbsPatch (rendered at the frame's time, without blur)"
 
 
 def _apply(scope: str, prim: Usd.Prim, time: Usd.TimeCode, shown: str) -> Iterator[Unsupported]:
