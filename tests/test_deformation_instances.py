@@ -208,3 +208,29 @@ def test_instances_binding_other_animations_outside_the_prototype_are_warned(fak
     rest = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath("/World/Arm/Mesh")).GetPointsAttr().Get())
     posed = args["points"].astype(np.float64) @ args["transform"][:3, :3] + args["transform"][3, :3]
     np.testing.assert_allclose(posed, bent(rest.astype(np.float64)), atol=1e-5)  # A's pose
+
+
+def _rigid(stage: Usd.Stage) -> Usd.Stage:
+    """:func:`skinned_stage`'s arm bound whole to the elbow (constant joint influences:
+    UsdSkel's rigid deformation), so it turns about the elbow over the shutter."""
+    binding = UsdSkel.BindingAPI(stage.GetPrimAtPath("/World/Arm/Mesh"))
+    binding.CreateJointIndicesPrimvar(True, 1).Set([1])
+    binding.CreateJointWeightsPrimvar(True, 1).Set([1.0])
+    return stage
+
+
+@pytest.mark.usefixtures("native")
+@pytest.mark.parametrize("kind", ["native", "points"])
+def test_a_rigidly_skinned_prototype_mesh_blurs_in_every_instance(kind) -> None:
+    # Outside a prototype a rigid pose is a transform motion; inside one the prototype holds
+    # no transform motion of the mesh, and it rendered sharp at the frame's pose. Its points
+    # now carry the pose over the shutter: each instance sweeps as the plain arm does.
+    def render(stage: Usd.Stage) -> np.ndarray:
+        out = mipray.render(
+            stage, "/World/Camera", 48, aovs=["alpha"], settings={"samples": 64}, time=1.0
+        )
+        return np.asarray(out.aovs["alpha"][..., 0], dtype=np.float64)
+
+    got, truth = render(_rigid(skinned_stage(kind))), render(_rigid(skinned_stage("plain")))
+    assert np.count_nonzero((truth > 0.15) & (truth < 0.85)) > 20  # the truth is blurred
+    assert np.abs(got - truth).max() < 0.02, np.abs(got - truth).max()

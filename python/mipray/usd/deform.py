@@ -305,11 +305,13 @@ def _skinned(
 ) -> list[NDArray[np.float32]] | None:
     """A skinned mesh posed at each of ``codes``, then at ``time`` (last).
 
-    Each in the object space of its pose at ``time``; None when it cannot be posed or is
-    rigidly deformed (its pose is then a transform motion).
+    Each in the object space of its pose at ``time``; None when it cannot be posed, or is
+    rigidly deformed outside a prototype (its pose is then a transform motion). Inside one
+    (``root``) a rigid pose moves the points too: the prototype mesh's transform is its own,
+    not the skeleton's over the shutter, so the motion travels as points.
     """
     frame = poser.pose(prim, time, rest, root)
-    if frame is None or frame.rigid:
+    if frame is None or (frame.rigid and root is None):
         return None
     to_object = np.linalg.inv(frame.transform)
     out = []

@@ -299,7 +299,7 @@ class Instancing:
         self._sent_members: dict[str, tuple[str, str]] = {}
         self._moving_members: set[str] = set()  # prototype meshes last sent motion
         # Prototype meshes whose points might move within a shutter (time-sampled points,
-        # velocities, skinning; not a rigidly skinned mesh, whose pose is a transform), and
+        # velocities, skinning, a rigidly skinned mesh's pose), and
         # those last sent points over the shutter (set_deformation). Mesh lights are never
         # sent theirs: the core's triangle lights move by transforms alone.
         self._might_deform: set[str] = set()
@@ -412,7 +412,9 @@ class Instancing:
                 read.args["light"] = {**light, **links, **tints}
             self.delegate.set_mesh(dpath, **read.args)
             self._sent_members[dpath] = (path, str(root.GetPath()))
-            if read.might_vary and not read.rigid:
+            if read.might_vary:
+                # A rigidly skinned prototype mesh too: its pose over the shutter moves its
+                # points (deform._skinned), as the prototype holds no transform motion of it.
                 self._might_deform.add(dpath)
             else:
                 self._might_deform.discard(dpath)

@@ -19,7 +19,7 @@ transform there is the skeleton's to that root), so every instance places the on
 a native prototype whose SkelRoot is the instance prim (or above it) is posed through its first
 instance's proxies. Instances share their prototype's pose: one binding another skeleton or
 animation outside the prototype gets one warning naming it, and renders the first instance's
-pose. A rigidly deformed mesh in a prototype is posed at the frame's time without blur.
+pose. A rigidly deformed mesh in a prototype blurs by its points, posed over the shutter.
 """
 
 from __future__ import annotations
