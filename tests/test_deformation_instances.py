@@ -181,11 +181,10 @@ def test_each_instance_of_a_skinned_prototype_renders_as_the_arm_not_instanced(k
     assert np.abs(got - truth).max() < 0.02, np.abs(got - truth).max()
 
 
-def test_instances_binding_other_animations_outside_the_prototype_are_warned(fake, caplog) -> None:
-    # The arm's skeleton binds no animation itself; each instance prim binds one: A the bending
-    # one inside it, B a still one outside. The instances share one prototype mesh, so B renders
-    # A's pose, and that is said once.
-    stage = skinned_stage("native")
+def _crowd(kind: str) -> Usd.Stage:
+    """:func:`skinned_stage` as a crowd: the arm's skeleton binds no animation itself; each
+    instance prim binds one, A the bending one inside it, B a still one outside."""
+    stage = skinned_stage(kind)
     stage.GetPrimAtPath("/World/Arm/Skel").RemoveProperty("skel:animationSource")
     still = UsdSkel.Animation.Define(stage, "/World/Still")
     still.CreateJointsAttr(["shoulder", "shoulder/elbow"])
@@ -195,19 +194,44 @@ def test_instances_binding_other_animations_outside_the_prototype_are_warned(fak
     for name, anim in (("A", "/World/A/Skel/Anim"), ("B", "/World/Still")):
         binding = UsdSkel.BindingAPI.Apply(stage.GetPrimAtPath(f"/World/{name}"))
         binding.CreateAnimationSourceRel().SetTargets([anim])
+    return stage
+
+
+def test_instances_binding_other_animations_outside_the_prototype_are_posed_apart(
+    fake, caplog
+) -> None:
+    # UsdSkel's instanced crowd: one prototype, an animation bound on each instance prim. The
+    # prototype's mesh shows the first instance's pose (A, bent at frame 2); B, binding
+    # another animation, is a variant of its own posed through its proxies (still: at rest).
+    # It rendered A's pose, with a warning.
+    stage = _crowd("native")
     scene = UsdSceneDelegate(stage, fake, time=2.0)
     with caplog.at_level(logging.WARNING, logger="mipray"):
         scene.sync()
         scene.update_motion("/World/Camera")
-    said = [r.getMessage() for r in caplog.records if "/World/B" in r.getMessage()]
-    assert said == [
-        "mipray: /World/B/Mesh: binds another skeleton or animation than /World/A/Mesh, outside "
-        "the instancing prototype they share; every instance renders /World/A's pose"
-    ]
-    (args,) = fake.prototypes().values()
+    assert not [r for r in caplog.records if "/World/" in r.getMessage()]
     rest = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath("/World/Arm/Mesh")).GetPointsAttr().Get())
-    posed = args["points"].astype(np.float64) @ args["transform"][:3, :3] + args["transform"][3, :3]
-    np.testing.assert_allclose(posed, bent(rest.astype(np.float64)), atol=1e-5)  # A's pose
+    poses = []
+    for args in fake.prototypes().values():
+        p = args["points"].astype(np.float64) @ args["transform"][:3, :3]
+        poses.append(p + args["transform"][3, :3])
+    assert len(poses) == 2
+    bent_pose, rest_pose = bent(rest.astype(np.float64)), rest.astype(np.float64)
+    assert sum(np.allclose(p, bent_pose, atol=1e-5) for p in poses) == 1  # A's
+    assert sum(np.allclose(p, rest_pose, atol=1e-5) for p in poses) == 1  # B's
+
+
+@pytest.mark.usefixtures("native")
+def test_a_crowd_of_instances_each_binding_its_animation_renders_as_the_plain_references() -> None:
+    def render(stage: Usd.Stage) -> np.ndarray:
+        out = mipray.render(
+            stage, "/World/Camera", 96, aovs=["alpha"], settings={"samples": 16}, time=2.0
+        )
+        return np.asarray(out.aovs["alpha"][..., 0], dtype=np.float64)
+
+    got, truth = render(_crowd("native")), render(_crowd("plain"))
+    assert np.count_nonzero(truth > 0.5) > 20
+    assert np.abs(got - truth).max() < 0.02, np.abs(got - truth).max()
 
 
 def _rigid(stage: Usd.Stage) -> Usd.Stage:

@@ -197,8 +197,10 @@ class _Walk:
 
 #: The materials bound to a gprim and to each of its materialBind GeomSubsets.
 _Bindings = tuple[str, ...]
-#: (path below the prototype, bindings) of the gprims an instance sees bound differently.
-_Variant = tuple[tuple[str, _Bindings], ...]
+#: (path below the prototype, material bindings, skeleton and animation) of the gprims an
+#: instance sees bound differently: other materials, or (a skinned mesh) another skeleton or
+#: animation than the prototype's pose, which is its first instance's (``("", "")`` if same).
+_Variant = tuple[tuple[str, _Bindings, tuple[str, str]], ...]
 
 
 def _bindings(prim: Usd.Prim) -> _Bindings:
@@ -619,23 +621,32 @@ class Instancing:
         return True
 
     def _variant(self, instance: Usd.Prim, proto: str) -> _Variant:
-        """The prototype's gprims whose materials differ seen through ``instance``.
+        """The prototype's gprims whose materials or pose differ seen through ``instance``.
 
         A binding on the instance prim (or an ancestor, or a collection naming instance
         proxies) reaches the prototype's prims only through the instance proxies, so the
         bindings are resolved there (usd-core's ComputeBoundMaterial) and compared with the
-        prototype's own. Empty: the instance renders the shared prototype.
+        prototype's own. A skinned mesh whose skeleton or animation, bound on or above the
+        instance (UsdSkel's instanced crowd: one prototype, an animation per instance),
+        differs from the first instance's (whose pose the prototype shows) is another
+        variant too, posed through this instance's proxies. Empty: the instance renders the
+        shared prototype.
         """
-        if not self._binds_above(instance):
-            return ()  # nothing outside the prototype binds: its own bindings hold
         root = str(instance.GetPath())
         stage = instance.GetStage()
-        found = []
-        for rel, own in self._native_bindings.get(proto, []):
-            proxy = stage.GetPrimAtPath(root + rel)
-            if proxy and (seen := _bindings(proxy)) != own:
-                found.append((rel, seen))
-        return tuple(found)
+        found: dict[str, tuple[_Bindings, tuple[str, str]]] = {}
+        if self._binds_above(instance):  # else nothing outside the prototype binds materials
+            for rel, own in self._native_bindings.get(proto, []):
+                proxy = stage.GetPrimAtPath(root + rel)
+                if proxy and (seen := _bindings(proxy)) != own:
+                    found[rel] = (seen, ("", ""))
+        prototype = stage.GetPrimAtPath(proto)
+        if prototype:
+            for rel in self._poser.posed_apart(instance, prototype):
+                proxy = stage.GetPrimAtPath(root + rel)
+                seen, _ = found.get(rel, (_bindings(proxy), ("", "")))
+                found[rel] = (seen, self._poser.binding_of(proxy, instance))
+        return tuple((rel, b, k) for rel, (b, k) in sorted(found.items()))
 
     def _binds_above(self, prim: Usd.Prim) -> bool:
         """Whether ``prim`` or an ancestor has MaterialBindingAPI (memoized for the sync).
@@ -686,7 +697,7 @@ class Instancing:
         variant = self._variant(instance, proto) if instance else ()
         self._variant_of[instance_path] = variant
         self._dirty_groups.add(proto)
-        return tuple(sorted({m for _, b in variant for m in b if m}))
+        return tuple(sorted({m for _, b, _ in variant for m in b if m}))
 
     def _send_variants(self, proto: str, instances: dict[str, NDArray[np.float64]]) -> list[str]:
         """Send one instancer per distinct variant of ``proto``'s instances; hold its meshes.
@@ -712,7 +723,7 @@ class Instancing:
             root = f"{proto}.variant{k}"
             walk = _Walk(owner, time, xform_cache, unsupported)
             replaced: dict[str, str] = {}
-            for rel, _ in variant:
+            for rel, _, _ in variant:
                 proxy = self._stage_prim(paths[0] + rel)
                 if proxy is not None and self._prototype_mesh(proxy, first, root + rel, walk):
                     replaced[proto + rel] = root + rel

@@ -17,9 +17,10 @@ times across the shutter (:mod:`mipray.usd.deform`).
 Inside an instancing prototype a skinned mesh is posed relative to the prototype's root (its
 transform there is the skeleton's to that root), so every instance places the one posed mesh;
 a native prototype whose SkelRoot is the instance prim (or above it) is posed through its first
-instance's proxies. Instances share their prototype's pose: one binding another skeleton or
-animation outside the prototype gets one warning naming it, and renders the first instance's
-pose. A rigidly deformed mesh in a prototype blurs by its points, posed over the shutter.
+instance's proxies. The prototype's meshes show the first instance's pose; an instance that
+binds another skeleton or animation outside the prototype (a crowd: one animation per
+instance) renders its own, its skinned meshes posed through its proxies. A rigidly deformed
+mesh in a prototype blurs by its points, posed over the shutter.
 """
 
 from __future__ import annotations
@@ -65,14 +66,15 @@ class SkelPoser:
         self._cache = UsdSkel.Cache()
         self._populated: set[str] = set()
         self._warned: set[str] = set()
-        # Prototype meshes whose instances' skeleton bindings were compared.
-        self._compared: set[str] = set()
+        # Per native prototype: its skinned meshes (paths below it) and the skeleton and
+        # animation each is posed by through the prototype's first instance.
+        self._skinned: dict[str, dict[str, tuple[str, str]]] = {}
 
     def clear(self) -> None:
         """Forget what the cache read (the stage's skeletons or bindings changed)."""
         self._cache.Clear()
         self._populated.clear()
-        self._compared.clear()
+        self._skinned.clear()
 
     def pose(
         self,
@@ -167,9 +169,9 @@ class SkelPoser:
     ) -> tuple[Usd.Prim, Usd.Prim] | None:
         """The first instance's proxy of prototype mesh ``prim``, and that instance prim.
 
-        The instances share the prototype's one mesh: if another instance binds another
-        skeleton or animation (authored on or above the instance, outside the prototype), one
-        warning says that every instance renders the first's pose.
+        The prototype's mesh shows the first instance's pose; an instance binding another
+        skeleton or animation (on or above it, outside the prototype) renders its own
+        (:meth:`posed_apart`).
         """
         instances = sorted(prototype.GetInstances(), key=lambda i: str(i.GetPath()))
         if not instances:
@@ -180,22 +182,46 @@ class SkelPoser:
         proxy = stage.GetPrimAtPath(f"{first.GetPath()}{rel}")
         if not proxy:
             return None
-        key = str(prim.GetPath())
-        if key not in self._compared:
-            self._compared.add(key)
-            want = _skel_binding(proxy, first)
-            for other in instances[1:]:
-                seen = stage.GetPrimAtPath(f"{other.GetPath()}{rel}")
-                if seen and _skel_binding(seen, other) != want:
-                    _log.warning(
-                        "mipray: %s: binds another skeleton or animation than %s, outside the "
-                        "instancing prototype they share; every instance renders %s's pose",
-                        seen.GetPath(),
-                        proxy.GetPath(),
-                        first.GetPath(),
-                    )
-                    break
         return proxy, first
+
+    def posed_apart(self, instance: Usd.Prim, prototype: Usd.Prim) -> list[str]:
+        """The skinned meshes of native ``prototype`` that ``instance`` poses otherwise.
+
+        Paths below the prototype of the meshes whose skeleton or animation, seen through
+        ``instance``'s proxies, is not the first instance's (whose pose the prototype's
+        meshes show): UsdSkel's instanced crowds bind an animation on each instance prim.
+        """
+        key = str(prototype.GetPath())
+        first = self._skinned.get(key)
+        if first is None:
+            first = {}
+            instances = sorted(prototype.GetInstances(), key=lambda i: str(i.GetPath()))
+            if instances:
+                base = str(instances[0].GetPath())
+                stage = prototype.GetStage()
+                predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+                for proxy in Usd.PrimRange(instances[0], predicate):
+                    if proxy.IsA(UsdGeom.Mesh) and UsdSkel.BindingAPI(proxy).GetInheritedSkeleton():
+                        rel = str(proxy.GetPath())[len(base) :]
+                        if stage.GetPrimAtPath(key + rel):
+                            first[rel] = _skel_binding(proxy, instances[0])
+            self._skinned[key] = first
+        base = str(instance.GetPath())
+        stage = instance.GetStage()
+        apart = []
+        for rel, want in first.items():
+            proxy = stage.GetPrimAtPath(base + rel)
+            if proxy and _skel_binding(proxy, instance) != want:
+                apart.append(rel)
+        return apart
+
+    @staticmethod
+    def binding_of(mesh: Usd.Prim, instance: Usd.Prim) -> tuple[str, str]:
+        """The skeleton and animation instance proxy ``mesh`` is posed by.
+
+        Paths relative to ``instance`` where they are inside it.
+        """
+        return _skel_binding(mesh, instance)
 
     def rigid_motion(
         self,
