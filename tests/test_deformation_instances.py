@@ -112,6 +112,14 @@ def test_each_instance_of_a_deforming_prototype_renders_as_the_mesh_not_instance
     np.testing.assert_allclose(got, truth, atol=0.01 * lit)
 
 
+def _alpha(stage: Usd.Stage, width: int = 48, samples: int = 64, time: float = 1.0) -> np.ndarray:
+    """The alpha AOV of ``stage`` from /World/Camera."""
+    out = mipray.render(
+        stage, "/World/Camera", width, aovs=["alpha"], settings={"samples": samples}, time=time
+    )
+    return np.asarray(out.aovs["alpha"][..., 0], dtype=np.float64)
+
+
 def skinned_stage(kind: str) -> Usd.Stage:
     """Two instances of test_usd_skel's arm (the elbow straight at frame 1, bent 90° at
     frame 2) at y = −2 and y = 1: native instances whose instance prim is the SkelRoot
@@ -167,13 +175,7 @@ def test_a_skinned_prototype_mesh_is_posed_and_sent_its_pose_over_the_shutter(fa
 @pytest.mark.usefixtures("native")
 @pytest.mark.parametrize("kind", ["native", "points"])
 def test_each_instance_of_a_skinned_prototype_renders_as_the_arm_not_instanced(kind) -> None:
-    def render(stage: Usd.Stage) -> np.ndarray:
-        out = mipray.render(
-            stage, "/World/Camera", 48, aovs=["alpha"], settings={"samples": 64}, time=1.0
-        )
-        return np.asarray(out.aovs["alpha"][..., 0], dtype=np.float64)
-
-    got, truth = render(skinned_stage(kind)), render(skinned_stage("plain"))
+    got, truth = _alpha(skinned_stage(kind)), _alpha(skinned_stage("plain"))
     # Blurred: the forearms sweep pixels for part of the shutter (the truth itself is held
     # to UsdSkel's swept coverage in test_deformation_blur.py).
     assert np.count_nonzero((truth > 0.15) & (truth < 0.85)) > 20
@@ -223,13 +225,7 @@ def test_instances_binding_other_animations_outside_the_prototype_are_posed_apar
 
 @pytest.mark.usefixtures("native")
 def test_a_crowd_of_instances_each_binding_its_animation_renders_as_the_plain_references() -> None:
-    def render(stage: Usd.Stage) -> np.ndarray:
-        out = mipray.render(
-            stage, "/World/Camera", 96, aovs=["alpha"], settings={"samples": 16}, time=2.0
-        )
-        return np.asarray(out.aovs["alpha"][..., 0], dtype=np.float64)
-
-    got, truth = render(_crowd("native")), render(_crowd("plain"))
+    got, truth = _alpha(_crowd("native"), 96, 16, 2.0), _alpha(_crowd("plain"), 96, 16, 2.0)
     assert np.count_nonzero(truth > 0.5) > 20
     assert np.abs(got - truth).max() < 0.02, np.abs(got - truth).max()
 
@@ -249,12 +245,6 @@ def test_a_rigidly_skinned_prototype_mesh_blurs_in_every_instance(kind) -> None:
     # Outside a prototype a rigid pose is a transform motion; inside one the prototype holds
     # no transform motion of the mesh, and it rendered sharp at the frame's pose. Its points
     # now carry the pose over the shutter: each instance sweeps as the plain arm does.
-    def render(stage: Usd.Stage) -> np.ndarray:
-        out = mipray.render(
-            stage, "/World/Camera", 48, aovs=["alpha"], settings={"samples": 64}, time=1.0
-        )
-        return np.asarray(out.aovs["alpha"][..., 0], dtype=np.float64)
-
-    got, truth = render(_rigid(skinned_stage(kind))), render(_rigid(skinned_stage("plain")))
+    got, truth = _alpha(_rigid(skinned_stage(kind))), _alpha(_rigid(skinned_stage("plain")))
     assert np.count_nonzero((truth > 0.15) & (truth < 0.85)) > 20  # the truth is blurred
     assert np.abs(got - truth).max() < 0.02, np.abs(got - truth).max()
