@@ -215,9 +215,12 @@ def _deform_square(stage: Usd.Stage, path: str, x0: float) -> None:
         points.Set([Gf.Vec3f(*(p + np.array([dx, 0.0, 0.0]))) for p in rest], frame)
 
 
-def test_a_deforming_mesh_light_is_warned_listed_and_lit_at_the_frames_time(native, caplog) -> None:
-    # The core's triangle lights move by transforms alone: a mesh light whose points move is
-    # built from its points at the frame's time, with one warning naming it and a stats entry.
+def test_a_deforming_mesh_light_lights_the_floor_as_its_blend_over_the_shutter(
+    native, caplog
+) -> None:
+    # The square's points slide from x = −x0 (frame 1, shutter open) to +x0 (frame 2, close):
+    # the floor's irradiance is Lambert's over the slide, averaged over the shutter. It was
+    # built from the frame's points (lit at −x0), with a warning.
     x0 = 0.6
     stage = stage_with_camera()
     square_light(stage, intensity=3.0)
@@ -226,24 +229,22 @@ def test_a_deforming_mesh_light_is_warned_listed_and_lit_at_the_frames_time(nati
     cam.CreateShutterOpenAttr(0.0)
     cam.CreateShutterCloseAttr(1.0)
     with caplog.at_level(logging.WARNING, logger="mipray"):
-        image, stats = render_with_stats(stage, time=1.0)
-    said = [r.getMessage() for r in caplog.records if "/World/Glow" in r.getMessage()]
-    assert said == [
-        "mipray: not rendered: mesh light deformation (lit and seen at the frame's time, "
-        "without blur) on /World/Glow"
-    ]
-    assert {"prim": "/World/Glow", "what": mipray.usd.unsupported.LIGHT_DEFORMATION} in stats[
-        "unsupported"
-    ]
+        image, stats = render_with_stats(stage, time=1.0, samples=256)
+    assert not [r for r in caplog.records if "/World/Glow" in r.getMessage()]
+    assert not [u for u in stats["unsupported"] if u["prim"] == "/World/Glow"]
+    (entry,) = [e for e in stats["scene"]["lights"] if e["name"] == "/World/Glow"]
+    assert entry["moving"] is True
     x, y = floor_xy(image, stage)
-    truth = 3.0 * lambert_square(x + x0, y) * ALBEDO / math.pi  # the square at frame 1
+    shifts = (np.arange(64) + 0.5) / 64 * 2 * x0 - x0  # the square's x over the shutter
+    truth = np.mean([lambert_square(x - dx, y) for dx in shifts], axis=0) * 3.0 * ALBEDO / math.pi
     mean, worst = relative_error(image[..., 0], truth)
-    assert abs(mean) < 0.01 and worst < 0.08, (mean, worst)
+    assert abs(mean) < 0.02 and worst < 0.15, (mean, worst)
+    still = 3.0 * lambert_square(x + x0, y) * ALBEDO / math.pi  # the frame's square alone
+    assert relative_error(image[..., 0], still)[1] > 0.5  # the measurement sees the blur
 
 
-def test_a_deforming_instanced_mesh_light_is_listed(fake) -> None:
+def test_a_deforming_instanced_mesh_light_is_sent_its_points_over_the_shutter(fake) -> None:
     from mipray.usd import UsdSceneDelegate
-    from mipray.usd.unsupported import LIGHT_DEFORMATION
 
     for native_instances in (False, True):
         stage = stage_with_camera()
@@ -253,9 +254,11 @@ def test_a_deforming_instanced_mesh_light_is_listed(fake) -> None:
         cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
         cam.CreateShutterOpenAttr(0.0)
         cam.CreateShutterCloseAttr(1.0)
+        before = len(fake.calls)
         scene = UsdSceneDelegate(stage, fake, time=1.0)
         scene.sync()
         scene.update_motion("/World/Cam")
-        assert not [c for c in fake.calls if c.method == "set_deformation"]
-        (entry,) = [u for u in scene.unsupported if u.what == LIGHT_DEFORMATION]
-        assert entry.prim.endswith("/Glow"), entry
+        (call,) = [c for c in fake.calls[before:] if c.method == "set_deformation"]
+        points = call.kwargs["points"]
+        np.testing.assert_allclose(points[-1][:, 0] - points[0][:, 0], 1.2, atol=1e-6)
+        assert scene.unsupported == []

@@ -477,20 +477,37 @@ pub fn mesh_light(
     let grid = if polygonal { 2 } else { MESH_LIGHT_GRID };
     let f = |x: f32| if x.is_finite() { x } else { 0.0 };
     let place = if motion.is_some() { Mat4::IDENTITY } else { *transform };
+    // A deforming mesh: its triangles at every sample (one topology, so the same triangles in
+    // the same order), blended at each ray's time as its geometry is.
+    let deformed = |tris0: Vec<[Vec3A; 3]>| -> Option<Vec<(f32, Vec<[Vec3A; 3]>)>> {
+        let d = surface.deformation()?;
+        let mut out: Vec<(f32, Vec<[Vec3A; 3]>)> = vec![(d.times()[0], tris0)];
+        for (k, &t) in d.times().iter().enumerate().skip(1) {
+            out.push((t, light_triangles(d.sample(k), &place, left_handed, grid)));
+        }
+        Some(out)
+    };
     let (tris, tint) = match emitters {
         MeshEmitters::Uniform(tint) => {
-            let tris = light_triangles(surface, &place, left_handed, grid);
-            let tris = match motion {
-                Some(motion) => mipray::light::TriangleLight::moving(tris, double_sided, motion.clone())?,
-                None => mipray::light::TriangleLight::new(tris, double_sided)?,
+            let first = surface.deformation().map_or(surface, |d| d.sample(0));
+            let tris = light_triangles(first, &place, left_handed, grid);
+            let tris = match (deformed(tris.clone()), motion) {
+                (Some(samples), _) => mipray::light::TriangleLight::deforming(samples, double_sided, motion.cloned(), None)?,
+                (None, Some(motion)) => mipray::light::TriangleLight::moving(tris, double_sided, motion.clone())?,
+                (None, None) => mipray::light::TriangleLight::new(tris, double_sided)?,
             };
             (tris, Vec3A::from(tint.to_array().map(|x| f(x).max(0.0))))
         }
         MeshEmitters::PerFace { emitters, per_face, st_channel } => {
-            let (tris, faces, st) = tessellate_light(surface, &place, left_handed, grid, *st_channel);
+            let first = surface.deformation().map_or(surface, |d| d.sample(0));
+            let (tris, faces, st) = tessellate_light(first, &place, left_handed, grid, *st_channel);
             let per_triangle = faces.iter().map(|&face| per_face.get(face as usize).copied().unwrap_or(u32::MAX)).collect();
             let emission = mipray::light::MeshEmission { emitters: emitters.clone(), per_triangle, st };
-            (mipray::light::TriangleLight::with_emission(tris, double_sided, motion.cloned(), emission)?, Vec3A::ONE)
+            let light = match deformed(tris.clone()) {
+                Some(samples) => mipray::light::TriangleLight::deforming(samples, double_sided, motion.cloned(), Some(emission))?,
+                None => mipray::light::TriangleLight::with_emission(tris, double_sided, motion.cloned(), emission)?,
+            };
+            (light, Vec3A::ONE)
         }
     };
     let color = Vec3A::from(light.color.map(f)) * tint;

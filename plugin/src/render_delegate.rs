@@ -453,7 +453,9 @@ impl RenderDelegate {
             let name = if count[path] > 1 { format!("{path}[{k}]") } else { path.to_string() };
             *k += 1;
             let (Some(data), Some(surface)) = (&m.data.light, &m.surface) else { continue };
-            let polygonal = matches!(surface, crate::mesh::Surface::Bilinear(_));
+            // A deforming polygonal mesh too (its samples are bilinear surfaces).
+            let polygonal = matches!(surface, crate::mesh::Surface::Bilinear(_))
+                || (m.data.topology.scheme == mipray::topology::Scheme::None && matches!(surface, crate::mesh::Surface::Deforming(_)));
             let limit = surface.as_limit_surface();
             let d = &m.data;
             let tint = tints.entry(path).or_insert_with(|| self.mesh_emitters(path, d, data));

@@ -302,14 +302,9 @@ class Instancing:
         self._moving_members: set[str] = set()  # prototype meshes last sent motion
         # Prototype meshes whose points might move within a shutter (time-sampled points,
         # velocities, skinning, a rigidly skinned mesh's pose), and
-        # those last sent points over the shutter (set_deformation). Mesh lights are never
-        # sent theirs: the core's triangle lights move by transforms alone.
+        # those last sent points over the shutter (set_deformation); mesh lights too.
         self._might_deform: set[str] = set()
-        self._light_members: set[str] = set()  # prototype meshes that are lights
         self._deforming: set[str] = set()
-        #: USD paths of the prototype mesh lights whose points moved within the last shutter
-        #: :meth:`update_motion` saw (lit at the frame's time; the scene delegate lists them).
-        self.deforming_lights: list[str] = []
         # Poses prototypes' skinned meshes (the scene delegate's, cleared with its own).
         self._poser = poser or SkelPoser()
         self._moving: set[str] = set()  # instancers last sent motion
@@ -420,10 +415,6 @@ class Instancing:
                 self._might_deform.add(dpath)
             else:
                 self._might_deform.discard(dpath)
-            if light is not None:
-                self._light_members.add(dpath)
-            else:
-                self._light_members.discard(dpath)
         except (PrimError, ValueError, TypeError, OverflowError) as exc:
             self._fail(path, exc)
             return False
@@ -912,7 +903,6 @@ class Instancing:
         instance. Those that stopped deforming have their samples cleared.
         """
         deforming: set[str] = set()
-        lights: set[str] = set()
         if shutter[1] > shutter[0] and not time.IsDefault() and self._stage is not None:
             for dpath in sorted(self._might_deform & set(self._holders)):
                 path, root_path = self._sent_members[dpath]
@@ -923,9 +913,6 @@ class Instancing:
                     else None
                 )
                 if samples is None:
-                    continue
-                if dpath in self._light_members:
-                    lights.add(path)
                     continue
                 try:
                     self.delegate.set_deformation(dpath, *samples)
@@ -942,7 +929,6 @@ class Instancing:
                     dpath, np.zeros(0, np.float32), np.zeros((0, 0, 3), np.float32)
                 )
         self._deforming = deforming
-        self.deforming_lights = sorted(lights)
 
     @staticmethod
     def _fractions(times: list[float]) -> NDArray[np.float32]:

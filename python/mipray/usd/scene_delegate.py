@@ -71,7 +71,6 @@ from .transform import ancestors_might_vary, camera_shutter, motion_samples, wor
 from .unsupported import (
     GPRIM_DEFORMATION,
     HEADLIGHT,
-    LIGHT_DEFORMATION,
     Unsupported,
     audit_stage,
     is_rendered_type,
@@ -235,7 +234,7 @@ class UsdSceneDelegate:
         self._unsupported: list[Unsupported] = []
         self._headlight: list[Unsupported] = []  # lights the camera light stands in for
         # Mesh lights whose points move within the shutter (lit at the frame's time).
-        self._light_deformation: list[Unsupported] = []
+        self._in_shutter: list[Unsupported] = []
         self._warned_unsupported: set[Unsupported] = set()
         self._default_camera: dict[str, Any] | None = None
         # Meshes last sent a moving transform (set_motion), so one that stops moving is reset.
@@ -284,7 +283,7 @@ class UsdSceneDelegate:
         See :mod:`mipray.usd.unsupported`; the camera light standing in for unsupported
         lights is listed too.
         """
-        return sorted((*self._unsupported, *self._headlight, *self._light_deformation))
+        return sorted((*self._unsupported, *self._headlight, *self._in_shutter))
 
     @property
     def synced_paths(self) -> list[str]:
@@ -875,7 +874,7 @@ class UsdSceneDelegate:
         """
         shutter = camera_shutter(self.stage, camera_path, self.time)
         moving: list[str] = []
-        self._light_deformation = []
+        self._in_shutter = []
         for path, record in self._records.items():
             if record.kind != "mesh" or not record.in_delegate:
                 continue
@@ -901,20 +900,16 @@ class UsdSceneDelegate:
                 moving.append(path)
         self._moving = set(moving)
         self._instancing.update_motion(self.time, shutter)
-        self._light_deformation += [
-            Unsupported(p, LIGHT_DEFORMATION) for p in self._instancing.deforming_lights
-        ]
-        warn_unsupported(self._light_deformation, self._warned_unsupported)
+        warn_unsupported(self._in_shutter, self._warned_unsupported)
         return moving
 
     def _update_deformation(self, path: str, record: _Record, shutter: tuple[float, float]) -> bool:
         """Send the mesh at ``path``'s points over the shutter when they move in it.
 
         Deformation motion blur (:mod:`mipray.usd.deform`): point-animated and skinned
-        meshes, moving Points and curves (their widths too). A prim whose points stop moving
-        gets its samples cleared. Returns whether
-        the mesh deforms. A mesh light's points are not blurred: it is listed in
-        :attr:`unsupported` (``LIGHT_DEFORMATION``) and lights at the frame's time.
+        meshes (mesh lights too: their light is blended at each ray's time as their surface is),
+        moving Points and curves (their widths too). A prim whose points stop moving gets its
+        samples cleared. Returns whether the mesh deforms.
         """
         samples = None
         if record.might_vary and not record.rigid and shutter[1] > shutter[0]:
@@ -922,10 +917,7 @@ class UsdSceneDelegate:
             if prim:
                 samples = deformation_samples(prim, self.time, shutter, self._poser)
                 if samples is None and changes_shape_in_shutter(prim, self.time, shutter):
-                    self._light_deformation.append(Unsupported(path, GPRIM_DEFORMATION))
-        if samples is not None and record.light:
-            self._light_deformation.append(Unsupported(path, LIGHT_DEFORMATION))
-            samples = None
+                    self._in_shutter.append(Unsupported(path, GPRIM_DEFORMATION))
         if samples is not None:
             try:
                 self.delegate.set_deformation(path, *samples)

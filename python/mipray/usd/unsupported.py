@@ -19,7 +19,7 @@ does not warn a second time.
 
 Two entries depend on the render's camera, not on what a prim authors, and are made by the
 scene delegate with the same :class:`Unsupported` form and warning: :data:`HEADLIGHT` and
-:data:`LIGHT_DEFORMATION` (a mesh light whose points move within the camera's shutter).
+:data:`GPRIM_DEFORMATION` (a NurbsPatch whose points move within the camera's shutter).
 """
 
 from __future__ import annotations
@@ -40,7 +40,6 @@ from .shading import COLOR_INPUTS, FLOAT_INPUTS, bound_material
 __all__ = [
     "GPRIM_DEFORMATION",
     "HEADLIGHT",
-    "LIGHT_DEFORMATION",
     "RENDERED_TYPES",
     "TABLE",
     "Row",
@@ -367,10 +366,6 @@ TABLE: tuple[Row, ...] = (
 #: The camera light (``UsdSceneDelegate.update_camera_light``) lights a stage whose only
 #: lights are of unsupported types: those lights are named with this.
 HEADLIGHT = "headlight added: no light on the stage is of a rendered type"
-#: A mesh light whose points move within the shutter (time-sampled, velocities, skinned): its
-#: light is built from the points at the frame's time (the core's triangle lights move only by
-#: transforms), so it lights, and is seen, there without motion blur.
-LIGHT_DEFORMATION = "mesh light deformation (lit and seen at the frame's time, without blur)"
 #: A NurbsPatch whose shape changes within the shutter (its ``points`` sampled inside it or
 #: moving by ``velocities``): the core blurs the deformation of meshes, Points, curves and
 #: implicit prims only, so it renders at the frame's time (its transform still blurs).

@@ -102,6 +102,10 @@ pub struct TriangleLight {
     bvh: Option<CwBvh>,
     /// Object to render space over the shutter; `None`: `tris` are in render space.
     motion: Option<MotionTransform>,
+    /// A deforming mesh's triangles at its samples' shutter times, in `tris`' space (`tris` is
+    /// sample 0): a ray or a sample at time t meets the triangles blended between the
+    /// bracketing samples ([`crate::deform::bracket`]), as the deforming geometry is.
+    deform: Option<DeformTris>,
     /// Per triangle: its area in `tris`' space over the probability of choosing it (the
     /// reciprocal of a point's density there, per unit² of `tris`' space).
     density_area: Vec<f32>,
@@ -177,23 +181,65 @@ impl TriangleLight {
         Self::build(triangles, two_sided, Some(motion), None)
     }
 
+    /// A deforming mesh: `samples` are its triangles (the same triangles, in the same order,
+    /// in object space with `motion`, else render space) at strictly increasing shutter times
+    /// (2 to [`crate::deform::MAX_SAMPLES`]); each triangle emits what `emission` gives it
+    /// (`None`: 1). The choice of triangles is by their area at the first sample; a point's
+    /// density follows its triangle's area at the ray's time. `None` when the samples do not
+    /// fit (times, counts) or nothing has area.
+    pub fn deforming(
+        samples: Vec<(f32, Vec<[Vec3A; 3]>)>,
+        two_sided: bool,
+        motion: Option<MotionTransform>,
+        emission: Option<MeshEmission>,
+    ) -> Option<Arc<TriangleLight>> {
+        let times: Vec<f32> = samples.iter().map(|s| s.0).collect();
+        crate::deform::check_times(&times).ok()?;
+        let n = samples[0].1.len();
+        if samples.iter().any(|s| s.1.len() != n) {
+            return None;
+        }
+        let mut all: Vec<Vec<[Vec3A; 3]>> = samples.into_iter().map(|s| s.1).collect();
+        let first = std::mem::take(&mut all[0]);
+        Self::build_with(first, two_sided, motion, emission, Some((times, all)))
+    }
+
     fn build(
         triangles: Vec<[Vec3A; 3]>,
         two_sided: bool,
         motion: Option<MotionTransform>,
         emission: Option<MeshEmission>,
     ) -> Option<Arc<TriangleLight>> {
+        Self::build_with(triangles, two_sided, motion, emission, None)
+    }
+
+    /// `deform`: the sample times and every sample's triangles (sample 0's slot empty: it is
+    /// `triangles`).
+    fn build_with(
+        triangles: Vec<[Vec3A; 3]>,
+        two_sided: bool,
+        motion: Option<MotionTransform>,
+        emission: Option<MeshEmission>,
+        deform: Option<(Vec<f32>, Vec<Vec<[Vec3A; 3]>>)>,
+    ) -> Option<Arc<TriangleLight>> {
         let limit = crate::bounds::MAX_COORDINATE;
+        let usable = |t: &[Vec3A; 3]| t.iter().all(|p| p.is_finite() && p.abs().max_element() < limit);
         let keep: Vec<usize> = (0..triangles.len())
             .filter(|&k| {
                 let t = &triangles[k];
-                t.iter().all(|p| p.is_finite() && p.abs().max_element() < limit) && tri_area(t) > 0.0
+                let later = deform.as_ref().is_none_or(|(_, d)| d.iter().skip(1).all(|s| usable(&s[k])));
+                usable(t) && tri_area(t) > 0.0 && later
             })
             .collect();
         if keep.is_empty() {
             return None;
         }
         let tris: Vec<[Vec3A; 3]> = keep.iter().map(|&k| triangles[k]).collect();
+        let deform = deform.map(|(times, d)| {
+            let mut tris_at: Vec<Vec<[Vec3A; 3]>> = d.iter().skip(1).map(|s| keep.iter().map(|&k| s[k]).collect()).collect();
+            tris_at.insert(0, tris.clone());
+            DeformTris { times, tris: tris_at }
+        });
         let areas: Vec<f32> = tris.iter().map(tri_area).collect();
         let own_area = areas.iter().map(|&a| f64::from(a)).sum::<f64>() as f32;
         let (sources, source_of, st) = match emission {
@@ -240,14 +286,30 @@ impl TriangleLight {
             let sum = areas.iter().zip(&source_of).fold(Vec3A::ZERO, |acc, (&a, &s)| acc + sources[s as usize].mean * a);
             sum / own_area
         };
-        let boxes: Vec<Bounds3> = tris.iter().map(|t| Bounds3::from_points(t.iter().copied())).collect();
+        // A deforming triangle's box holds it at every sample, so every blend (a box is convex).
+        let boxes: Vec<Bounds3> = (0..tris.len())
+            .map(|i| match &deform {
+                None => Bounds3::from_points(tris[i].iter().copied()),
+                Some(d) => Bounds3::from_points(d.tris.iter().flat_map(|s| s[i].iter().copied())),
+            })
+            .collect();
         let own_bounds = boxes.iter().skip(1).fold(boxes[0], |a, b| a.union(b));
         let bvh = crate::bvh::build_bvh(&boxes);
+        // The largest area over the samples: an upper bound for importance (each sample's sum;
+        // a blend's area is at most the larger of its two ends' by convexity of the norm).
+        let sample_areas = |x: &Mat4| -> f32 {
+            let area_of =
+                |ts: &[[Vec3A; 3]]| ts.iter().map(|t| f64::from(tri_area(&t.map(|p| x.transform_point3a(p))))).sum::<f64>() as f32;
+            match &deform {
+                None => area_of(&tris),
+                Some(d) => d.tris.iter().map(|s| area_of(s)).fold(0.0f32, f32::max),
+            }
+        };
         let (area, max_area, bounds) = match &motion {
-            None => (own_area, own_area, own_bounds),
+            None => (own_area, sample_areas(&Mat4::IDENTITY).max(own_area), own_bounds),
             Some(m) => {
                 let posed = |x: &Mat4| tris.iter().map(|t| f64::from(tri_area(&t.map(|p| x.transform_point3a(p))))).sum::<f64>() as f32;
-                let max_area = m.keys().iter().map(|k| posed(&k.render_from_object)).fold(0.0f32, f32::max);
+                let max_area = m.keys().iter().map(|k| sample_areas(&k.render_from_object)).fold(0.0f32, f32::max);
                 (posed(&m.at(0.0)), max_area, m.swept_bounds(&own_bounds))
             }
         };
@@ -263,6 +325,7 @@ impl TriangleLight {
             two_sided,
             bvh,
             motion,
+            deform,
             density_area,
             source_of,
             sources,
@@ -299,14 +362,15 @@ impl TriangleLight {
         self.area
     }
 
-    /// The largest area the mesh has at a motion key (its area when it does not move).
+    /// The largest area the mesh has at a motion key or deformation sample (its area when it
+    /// does not move).
     pub fn max_area(&self) -> f32 {
         self.max_area
     }
 
-    /// True when the mesh moves over the shutter.
+    /// True when the mesh moves or deforms over the shutter.
     pub fn is_moving(&self) -> bool {
-        self.motion.is_some()
+        self.motion.is_some() || self.deform.is_some()
     }
 
     /// Triangle count.
@@ -338,7 +402,7 @@ impl TriangleLight {
         let (x, _, i) = self.by_area.sample(u1);
         let n = self.tris.len() as f32;
         let v1 = (x * n - i as f32).clamp(0.0, 1.0);
-        let [a, b, c] = self.tris[i];
+        let [a, b, c] = self.tri_at(i, time);
         // Uniform over the triangle (the square-root map).
         let s = v1.sqrt();
         let (b0, b1) = (1.0 - s, u2 * s);
@@ -346,26 +410,48 @@ impl TriangleLight {
         let p = a * b0 + b * b1 + c * b2;
         let emission = self.emission(i, [b0, b1, b2]);
         match &self.motion {
-            None => TrianglePoint { p, normal: (b - a).cross(c - a).normalize(), area: self.density_area[i], emission },
+            None => {
+                let (normal, area) = self.posed_normal(&Mat4::IDENTITY, i, [a, b, c]);
+                TrianglePoint { p, normal, area, emission }
+            }
             Some(m) => {
                 let x = m.at(time);
-                let (normal, area) = self.posed_normal(&x, i);
+                let (normal, area) = self.posed_normal(&x, i, [a, b, c]);
                 TrianglePoint { p: x.transform_point3a(p), normal, area, emission }
             }
         }
     }
 
-    /// Triangle `i`'s unit emitting normal under pose `x`, and the area whose reciprocal is the
-    /// render-space density of a point sampled on it: its own-space one times the ratio by
-    /// which the pose scales this triangle (an affine map scales each triangle's area by one
-    /// factor).
-    fn posed_normal(&self, x: &Mat4, i: usize) -> (Vec3A, f32) {
+    /// Triangle `i` at shutter time `time`, in `tris`' space (blended between the bracketing
+    /// samples of a deforming mesh; `tris[i]` otherwise).
+    fn tri_at(&self, i: usize, time: f32) -> [Vec3A; 3] {
+        match &self.deform {
+            None => self.tris[i],
+            Some(d) => {
+                let (k0, k1, f) = crate::deform::bracket(&d.times, time);
+                let (p, q) = (d.tris[k0][i], d.tris[k1][i]);
+                [p[0].lerp(q[0], f), p[1].lerp(q[1], f), p[2].lerp(q[2], f)]
+            }
+        }
+    }
+
+    /// Triangle `i`, as `now` (its vertices at the ray's time), its unit emitting normal under
+    /// pose `x`, and the area whose reciprocal is the render-space density of a point sampled
+    /// on it: its own-space one at sample 0 times the ratio by which the deformation and the
+    /// pose scale this triangle (an affine map scales a triangle's area by one factor). A
+    /// triangle deformed to no area has density area 0: it gives nothing.
+    fn posed_normal(&self, x: &Mat4, i: usize, now: [Vec3A; 3]) -> (Vec3A, f32) {
         let [a, b, c] = self.tris[i];
         let own = (b - a).cross(c - a);
+        let [a, b, c] = now;
         let posed = x.transform_vector3a(b - a).cross(x.transform_vector3a(c - a));
         // (Ma) × (Mb) = det(M) M⁻ᵀ(a × b): a mirroring pose turns it against the covector's pose.
         let sign = if x.determinant() < 0.0 { -1.0 } else { 1.0 };
-        (posed.normalize() * sign, self.density_area[i] * posed.length() / own.length())
+        let normal = posed.normalize_or_zero() * sign;
+        if normal == Vec3A::ZERO {
+            return (own.normalize(), 0.0);
+        }
+        (normal, self.density_area[i] * posed.length() / own.length())
     }
 
     /// The nearest emitting side the ray from `o` along unit `d` meets in (0, `t_max`) at the
@@ -381,10 +467,9 @@ impl TriangleLight {
             return None;
         }
         let Some(m) = &self.motion else {
-            let (t, i, bary) = self.nearest(o, d, t_max)?;
-            let [a, b, c] = self.tris[i];
-            let cos = (b - a).cross(c - a).normalize().dot(d).abs();
-            return Some(TriangleHit { t, cos, area: self.density_area[i], emission: self.emission(i, bary) });
+            let (t, i, bary) = self.nearest(o, d, t_max, time)?;
+            let (normal, area) = self.posed_normal(&Mat4::IDENTITY, i, self.tri_at(i, time));
+            return Some(TriangleHit { t, cos: normal.dot(d).abs(), area, emission: self.emission(i, bary) });
         };
         // In object space the ray is o' + t·d' with the same t (d' not unit), and which side
         // it meets is the same: n_render · d = |det M| n_object · M⁻¹d.
@@ -394,14 +479,14 @@ impl TriangleLight {
         if !(oo.is_finite() && od.is_finite()) {
             return None;
         }
-        let (t, i, bary) = self.nearest(oo, od, t_max)?;
-        let (normal, area) = self.posed_normal(&x, i);
+        let (t, i, bary) = self.nearest(oo, od, t_max, time)?;
+        let (normal, area) = self.posed_normal(&x, i, self.tri_at(i, time));
         Some(TriangleHit { t, cos: normal.dot(d).abs(), area, emission: self.emission(i, bary) })
     }
 
-    /// The nearest emitting triangle along o + t·d, t in (0, `t_max`), in `tris`' space: (t,
-    /// triangle index, barycentrics of its a, b, c).
-    fn nearest(&self, o: Vec3A, d: Vec3A, t_max: f32) -> Option<(f32, usize, [f32; 3])> {
+    /// The nearest emitting triangle along o + t·d, t in (0, `t_max`), in `tris`' space at
+    /// shutter time `time`: (t, triangle index, barycentrics of its a, b, c).
+    fn nearest(&self, o: Vec3A, d: Vec3A, t_max: f32, time: f32) -> Option<(f32, usize, [f32; 3])> {
         let bvh = self.bvh.as_ref()?;
         let wray = WatertightRay::new(o, d);
         let ray = BvhRay::new(o, crate::trace::positive_zeros(d), 0.0, t_max);
@@ -409,7 +494,7 @@ impl TriangleLight {
         let mut best: Option<(f32, usize, [f32; 3])> = None;
         bvh.ray_traverse(ray, &mut hit, |r, id| {
             let i = bvh.primitive_indices[id] as usize;
-            let [a, b, c] = self.tris[i];
+            let [a, b, c] = self.tri_at(i, time);
             let Some((t, b0, b1, b2)) = wray.hit_triangle(a, b, c, r.tmax) else { return f32::INFINITY };
             let cos = -(b - a).cross(c - a).dot(d);
             if !(t > 0.0) || !(cos > 0.0 || (self.two_sided && cos < 0.0)) {
@@ -420,6 +505,15 @@ impl TriangleLight {
         });
         best
     }
+}
+
+/// A deforming mesh light's triangles at its samples (see [`TriangleLight::deforming`]).
+#[derive(Clone, Debug)]
+struct DeformTris {
+    /// Strictly increasing shutter times.
+    times: Vec<f32>,
+    /// Per sample, every triangle (kept ones, in `tris`' order).
+    tris: Vec<Vec<[Vec3A; 3]>>,
 }
 
 fn tri_area(t: &[Vec3A; 3]) -> f32 {
@@ -471,5 +565,30 @@ mod tests {
         assert!(both.intersect(Vec3A::new(0.3, 0.2, 4.0), Vec3A::NEG_Z, f32::INFINITY).is_some());
         // Nothing usable: no light.
         assert!(TriangleLight::new(vec![[Vec3A::ZERO; 3], [Vec3A::NAN, Vec3A::X, Vec3A::Y]], false).is_none());
+    }
+
+    #[test]
+    fn a_deforming_mesh_is_sampled_and_met_as_blended_at_the_ray_s_time() {
+        // A downward quad at z = 2 growing from half-width 1 (shutter open) to 2 (close).
+        let light = TriangleLight::deforming(vec![(0.0, quad(2.0, 1.0, true)), (1.0, quad(2.0, 2.0, true))], false, None, None).unwrap();
+        assert!(light.is_moving() && (light.area() - 4.0).abs() < 1e-6 && (light.max_area() - 16.0).abs() < 1e-5);
+        let mut s = crate::sampling::Sampler::new(3, 0, 0);
+        let mut widest = 0.0f32;
+        for _ in 0..4000 {
+            let p = light.sample_at(s.next_f32(), s.next_f32(), 0.5);
+            // Half-width 1.5 at mid-shutter: the density is uniform over its area, 9.
+            assert!((p.area - 9.0).abs() < 1e-4 && (p.normal - Vec3A::NEG_Z).length() < 1e-6, "{p:?}");
+            assert!(p.p.x.abs() <= 1.5 + 1e-5 && p.p.y.abs() <= 1.5 + 1e-5 && (p.p.z - 2.0).abs() < 1e-6);
+            widest = widest.max(p.p.x.abs());
+        }
+        assert!(widest > 1.4, "samples cover the blended quad, not the first sample's");
+        let up = |x: f32, t: f32| light.intersect_at(Vec3A::new(x, 0.0, 0.0), Vec3A::Z, f32::INFINITY, t);
+        assert!(up(1.2, 0.0).is_none() && up(1.2, 0.5).is_some() && up(1.7, 0.5).is_none() && up(1.7, 1.0).is_some());
+        let h = up(0.3, 0.5).unwrap();
+        assert!((h.t - 2.0).abs() < 1e-6 && (h.area - 9.0).abs() < 1e-4 && (h.cos - 1.0).abs() < 1e-6);
+        // Samples that do not fit: no light.
+        assert!(TriangleLight::deforming(vec![(0.0, quad(2.0, 1.0, true)), (1.0, quad(2.0, 2.0, true)[..1].to_vec())], false, None, None)
+            .is_none());
+        assert!(TriangleLight::deforming(vec![(0.5, quad(2.0, 1.0, true)), (0.5, quad(2.0, 2.0, true))], false, None, None).is_none());
     }
 }
