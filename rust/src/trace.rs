@@ -883,12 +883,15 @@ impl<'s> Tracer<'s> {
             // A render-space ray far beyond the scene can overflow in a small object's space.
             return None;
         }
-        let ray_in = Local { o, d, sign, own, scale: inst.scale };
+        // Made in the branches that read it: made before them, every subdivision instance
+        // entry stored it for nothing (~18 instructions an entry, callgrind).
         if let Some(exact) = mesh.surface.exact() {
+            let ray_in = Local { o, d, sign, own, scale: inst.scale };
             let (h, si) = self.nearest_exact(geom, blas, exact, &ray_in, ray, t_max, counters, any_hit)?;
             return Some(self.hit(ii, ray, &inst, h, si));
         }
         if let Some(curves) = mesh.surface.curves() {
+            let ray_in = Local { o, d, sign, own, scale: inst.scale };
             let (h, si) = self.nearest_curve(instance.mesh, geom, blas, curves, &ray_in, ray, t_max, counters, any_hit)?;
             return Some(self.hit(ii, ray, &inst, h, si));
         }
@@ -967,23 +970,23 @@ impl<'s> Tracer<'s> {
             // how tight the boxes are). A hit crossing the other way is the surface itself in
             // the ray's path and blocks however near (see `Origin::is_own_other_rate`): without
             // that, grazing rays left closed shells through the window (issue 23).
-            // The nearest hit at or after `search`'s t_min that is not the surface at another
-            // rate: hits within the window that cross the surface the way the ray left it are
-            // passed over one by one (the next search starts at the hit's t).
-            let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
-                let Some(o) = own else { return search(t_from) };
-                let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
-                let mut t_from = t_from;
-                loop {
-                    let h = search(t_from)?;
-                    if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), false) {
-                        return Some(h);
-                    }
-                    t_from = next_up(h.t);
-                }
-            };
             let root = ChildCell { root: si as u32, depth: 0, i: 0, j: 0 };
             if depth > 0 {
+                // The nearest hit at or after `search`'s t_min that is not the surface at another
+                // rate: hits within the window that cross the surface the way the ray left it are
+                // passed over one by one (the next search starts at the hit's t).
+                let nearest_not_own = |chord_error: f32, search: &mut dyn FnMut(f32) -> Option<LocalHit>| {
+                    let Some(o) = own else { return search(t_from) };
+                    let window = (o.chord_error + chord_error * inst.scale) * o.inv_cos;
+                    let mut t_from = t_from;
+                    loop {
+                        let h = search(t_from)?;
+                        if !o.is_own_other_rate(h.t, window, sign * d.dot(h.ng), false) {
+                            return Some(h);
+                        }
+                        t_from = next_up(h.t);
+                    }
+                };
                 counters.finer_than_fine += 1;
                 counters.rate_tests_by_kind[kind][5] += 1;
                 nearest_not_own(tess.chord_error, &mut |t_from| {
