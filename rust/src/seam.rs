@@ -302,8 +302,8 @@ pub fn seam_extent_with(
     let edges = SeamEdges::ALL.within(domain);
     // The chords (e, k): edges in order, k along each. Plain loops over them, not a chained
     // iterator: collected through `flat_map`, the probes' (u, v) grew their vector a push at a
-    // time and each chord's probes went through a call, ~7 k instructions a grid built, as much
-    // as the surface evaluations (callgrind, displaced AO render).
+    // time and each probe went through a call: ~3 k instructions a grid built, most of what
+    // the surface evaluations cost (callgrind, displaced AO render).
     let edge_list = (0..=DIAGONAL).filter(|&e| edges.contains(e));
     let chord_count = edge_list.clone().count() * (n - 1);
     let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
