@@ -300,43 +300,53 @@ pub fn seam_extent_with(
     let domain = GridDomain::of(surface.patch_param(patch).kind, &rect);
     let triangle = domain == GridDomain::LowerTriangle;
     let edges = SeamEdges::ALL.within(domain);
-    let chords = || (0..=DIAGONAL).filter(move |&e| edges.contains(e)).flat_map(move |e| (0..n - 1).map(move |k| (e, k)));
+    // The chords (e, k): edges in order, k along each. Plain loops over them, not a chained
+    // iterator: collected through `flat_map`, the probes' (u, v) grew their vector a push at a
+    // time and each probe went through a call: ~3 k instructions a grid built, most of what
+    // the surface evaluations cost (callgrind, displaced AO render).
+    let edge_list = (0..=DIAGONAL).filter(|&e| edges.contains(e));
+    let chord_count = edge_list.clone().count() * (n - 1);
     let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
     // Every probe of every chord in one evaluation: positions only.
-    let uv: Vec<[f32; 2]> = chords()
-        .flat_map(|(e, k)| {
-            (0..SEAM_PROBES).map(move |p| {
+    let mut uv: Vec<[f32; 2]> = Vec::with_capacity(chord_count * SEAM_PROBES);
+    for e in edge_list.clone() {
+        for k in 0..n - 1 {
+            for p in 0..SEAM_PROBES {
                 let (lu, lv) = edge_uv(e, (k as f32 + tau(p)) / q);
-                [rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv]
-            })
-        })
-        .collect();
+                uv.push([rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv]);
+            }
+        }
+    }
     let mut probes = Vec::with_capacity(uv.len());
     surface.evaluate_points(patch, &uv, &mut probes);
     let knots = surface.edge_knots(patch);
     let to_patch = |lu: f32, lv: f32| [rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv];
-    for ((e, k), curve) in chords().zip(probes.chunks_exact(SEAM_PROBES)) {
-        let frame = if normals { chord_frame(at, e, k, n, 1, triangle) } else { None };
-        let (ia, ja) = edge_vertex(e, k, n);
-        let (ib, jb) = edge_vertex(e, k + 1, n);
-        let (a, b) = (at(ia, ja), at(ib, jb));
-        let side = frame.map(|f| f.e1);
-        // A chord across a knot of a piecewise polynomial edge (a single-crease patch's) is
-        // fitted piece by piece; every other chord at once.
-        let (ua, ub) = (edge_uv(e, k as f32 / q), edge_uv(e, (k + 1) as f32 / q));
-        let (pa, pb) = (to_patch(ua.0, ua.1), to_patch(ub.0, ub.1));
-        let fitted = match chord_knots(&knots, pa, pb) {
-            Some(cuts) => piecewise_chord(surface, patch, a, b, pa, pb, &cuts, side),
-            None => fit_chord(a, b, curve, side),
-        };
-        let Some((chord_sq, low, high)) = fitted else { continue };
-        dev_sq = dev_sq.max(chord_sq);
-        if !normals {
-            continue;
-        }
-        match side {
-            Some(_) => (below, above) = (below.max(-low), above.max(high)),
-            None => (below, above) = (below.max(chord_sq.sqrt()), above.max(chord_sq.sqrt())),
+    let mut curves = probes.chunks_exact(SEAM_PROBES);
+    'chords: for e in edge_list {
+        for k in 0..n - 1 {
+            let Some(curve) = curves.next() else { break 'chords };
+            let frame = if normals { chord_frame(at, e, k, n, 1, triangle) } else { None };
+            let (ia, ja) = edge_vertex(e, k, n);
+            let (ib, jb) = edge_vertex(e, k + 1, n);
+            let (a, b) = (at(ia, ja), at(ib, jb));
+            let side = frame.map(|f| f.e1);
+            // A chord across a knot of a piecewise polynomial edge (a single-crease patch's) is
+            // fitted piece by piece; every other chord at once.
+            let (ua, ub) = (edge_uv(e, k as f32 / q), edge_uv(e, (k + 1) as f32 / q));
+            let (pa, pb) = (to_patch(ua.0, ua.1), to_patch(ub.0, ub.1));
+            let fitted = match chord_knots(&knots, pa, pb) {
+                Some(cuts) => piecewise_chord(surface, patch, a, b, pa, pb, &cuts, side),
+                None => fit_chord(a, b, curve, side),
+            };
+            let Some((chord_sq, low, high)) = fitted else { continue };
+            dev_sq = dev_sq.max(chord_sq);
+            if !normals {
+                continue;
+            }
+            match side {
+                Some(_) => (below, above) = (below.max(-low), above.max(high)),
+                None => (below, above) = (below.max(chord_sq.sqrt()), above.max(chord_sq.sqrt())),
+            }
         }
     }
     let dev = dev_sq.sqrt();

@@ -532,10 +532,11 @@ fn probe_chord_error(surface: &dyn LimitSurface, sub: &Subpatch, t: &Tessellatio
         GridDomain::Empty => false,
     };
     // The probed quads (i, j) and where on the patch their middles are, evaluated in one call.
-    let probes: Vec<(usize, usize)> = (0..k * k)
-        .map(|b| ((b % k) * quads / k + (quads / k) / 2, (b / k) * quads / k + (quads / k) / 2))
-        .filter(|&(i, j)| inside(i, j))
-        .collect();
+    // Sized once: collected through `filter`, the vector grew a push at a time.
+    let mut probes: Vec<(usize, usize)> = Vec::with_capacity(k * k);
+    probes.extend(
+        (0..k * k).map(|b| ((b % k) * quads / k + (quads / k) / 2, (b / k) * quads / k + (quads / k) / 2)).filter(|&(i, j)| inside(i, j)),
+    );
     let to_patch = |lu: f32, lv: f32| [sub.rect.u0 + (sub.rect.u1 - sub.rect.u0) * lu, sub.rect.v0 + (sub.rect.v1 - sub.rect.v0) * lv];
     let mut uv: Vec<[f32; 2]> = probes.iter().map(|&(i, j)| to_patch((i as f32 + 0.5) / q, (j as f32 + 0.5) / q)).collect();
     let across = knot_probes(surface.edge_knots(sub.patch as usize), sub, quads, k);
