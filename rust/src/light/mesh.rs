@@ -201,7 +201,7 @@ impl TriangleLight {
         }
         let mut all: Vec<Vec<[Vec3A; 3]>> = samples.into_iter().map(|s| s.1).collect();
         let first = std::mem::take(&mut all[0]);
-        Self::build_with(first, two_sided, motion, emission, Some((times, all)))
+        Self::build_with(first, two_sided, motion, emission, Some(DeformTris { times, tris: all }))
     }
 
     fn build(
@@ -213,21 +213,21 @@ impl TriangleLight {
         Self::build_with(triangles, two_sided, motion, emission, None)
     }
 
-    /// `deform`: the sample times and every sample's triangles (sample 0's slot empty: it is
-    /// `triangles`).
+    /// `deform`: the sample times and every sample's triangles, all of them (sample 0's slot
+    /// empty: it is `triangles`).
     fn build_with(
         triangles: Vec<[Vec3A; 3]>,
         two_sided: bool,
         motion: Option<MotionTransform>,
         emission: Option<MeshEmission>,
-        deform: Option<(Vec<f32>, Vec<Vec<[Vec3A; 3]>>)>,
+        deform: Option<DeformTris>,
     ) -> Option<Arc<TriangleLight>> {
         let limit = crate::bounds::MAX_COORDINATE;
         let usable = |t: &[Vec3A; 3]| t.iter().all(|p| p.is_finite() && p.abs().max_element() < limit);
         let keep: Vec<usize> = (0..triangles.len())
             .filter(|&k| {
                 let t = &triangles[k];
-                let later = deform.as_ref().is_none_or(|(_, d)| d.iter().skip(1).all(|s| usable(&s[k])));
+                let later = deform.as_ref().is_none_or(|d| d.tris.iter().skip(1).all(|s| usable(&s[k])));
                 usable(t) && tri_area(t) > 0.0 && later
             })
             .collect();
@@ -235,10 +235,10 @@ impl TriangleLight {
             return None;
         }
         let tris: Vec<[Vec3A; 3]> = keep.iter().map(|&k| triangles[k]).collect();
-        let deform = deform.map(|(times, d)| {
-            let mut tris_at: Vec<Vec<[Vec3A; 3]>> = d.iter().skip(1).map(|s| keep.iter().map(|&k| s[k]).collect()).collect();
+        let deform = deform.map(|d| {
+            let mut tris_at: Vec<Vec<[Vec3A; 3]>> = d.tris.iter().skip(1).map(|s| keep.iter().map(|&k| s[k]).collect()).collect();
             tris_at.insert(0, tris.clone());
-            DeformTris { times, tris: tris_at }
+            DeformTris { times: d.times, tris: tris_at }
         });
         let areas: Vec<f32> = tris.iter().map(tri_area).collect();
         let own_area = areas.iter().map(|&a| f64::from(a)).sum::<f64>() as f32;
