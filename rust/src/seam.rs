@@ -307,20 +307,20 @@ pub fn seam_extent_with(
     let edge_list = (0..=DIAGONAL).filter(|&e| edges.contains(e));
     let chord_count = edge_list.clone().count() * (n - 1);
     let tau = |p: usize| (p + 1) as f32 / (SEAM_PROBES + 1) as f32;
+    let to_patch = |lu: f32, lv: f32| [rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv];
     // Every probe of every chord in one evaluation: positions only.
     let mut uv: Vec<[f32; 2]> = Vec::with_capacity(chord_count * SEAM_PROBES);
     for e in edge_list.clone() {
         for k in 0..n - 1 {
             for p in 0..SEAM_PROBES {
                 let (lu, lv) = edge_uv(e, (k as f32 + tau(p)) / q);
-                uv.push([rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv]);
+                uv.push(to_patch(lu, lv));
             }
         }
     }
     let mut probes = Vec::with_capacity(uv.len());
     surface.evaluate_points(patch, &uv, &mut probes);
     let knots = surface.edge_knots(patch);
-    let to_patch = |lu: f32, lv: f32| [rect.u0 + (rect.u1 - rect.u0) * lu, rect.v0 + (rect.v1 - rect.v0) * lv];
     let mut curves = probes.chunks_exact(SEAM_PROBES);
     'chords: for e in edge_list {
         for k in 0..n - 1 {
@@ -669,10 +669,10 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
         // (one skipped vertex at stride 2: cheaper than keeping them in an array per edge).
         // An edge of one or two chords is culled chord by chord: its box is made only for
         // longer edges (a merged 2×2 grid made it, and its chords' reaches, for nothing).
-        let mut edge_box = crate::bounds::Bounds3::EMPTY;
-        let mut r_max: f32 = base;
         if q > 2 {
             // Each vertex read once: a chord's end is the next one's start.
+            let mut edge_box = crate::bounds::Bounds3::EMPTY;
+            let mut r_max: f32 = base;
             let mut a = vert(0);
             edge_box.grow(a);
             for k in 0..q {
@@ -683,9 +683,9 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
                 edge_box.grow(b);
                 a = b;
             }
-        }
-        if q > 2 && ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
-            continue;
+            if ray.hit_box(&edge_box.expanded(1.8 * r_max), t_min, t_best).is_none() {
+                continue;
+            }
         }
         let mut b = vert(0);
         for k in 0..q {
