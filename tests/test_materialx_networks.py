@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdShade
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
 from test_materials import quad
 
 import mipray
@@ -617,3 +617,33 @@ def test_a_mesh_lights_network_emission_is_named_once_as_not_tinting(native, tmp
     assert np.isfinite(image).all()
     named = _warnings(caplog, "node network, which a mesh light's tint does not evaluate")
     assert len(named) == 1 and "/World/Quad" in named[0] and "/Looks/M" in named[0], caplog.text
+
+
+@pytest.mark.parametrize("gprim", ["mesh", "mesh without st", "implicit sphere"])
+def test_a_geompropvalue_of_a_primvar_the_gprim_lacks_is_its_default(
+    native, tmp_path, caplog, gprim
+) -> None:
+    # MaterialX (and Storm): geompropvalue's `default` where the geometry has no such
+    # property. Here a texcoord reading primvars:uv, which no gprim here has, defaults to a
+    # constant (0.25, 0.75): the whole surface is the quadrant there, with st or without; a
+    # colour reading primvars:tint defaults to B and tints it.
+    stage = new_stage()
+    uv = node(stage, "Uv", "ND_geompropvalue_vector2", "vector2", default=("vector2", (0.25, 0.75)))
+    uv.CreateInput("geomprop", Sdf.ValueTypeNames.String).Set("uv")
+    tint = node(stage, "Tint", "ND_geompropvalue_color3", "color3", default=("color3", B))
+    tint.CreateInput("geomprop", Sdf.ValueTypeNames.String).Set("tint")
+    file = quadrant_image(native, tmp_path / "quadrants.exr")
+    image = node(stage, "Image", "ND_image_color3", "color3", file=file, texcoord=uv)
+    lambertian(stage, node(stage, "Mul", "ND_multiply_color3", "color3", in1=image, in2=tint))
+    if gprim == "mesh without st":
+        # The constant texcoord is looked up where the surface has no st channel at all.
+        UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Quad")).RemovePrimvar("st")
+    elif gprim != "mesh":
+        stage.RemovePrim("/World/Quad")
+        sphere = UsdGeom.Sphere.Define(stage, "/World/Ball")
+        sphere.CreateRadiusAttr(HALF)
+        bind(sphere.GetPrim(), UsdShade.Material.Get(stage, "/Looks/M"))
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    assert not _warnings(caplog, "primvars"), caplog.text
+    assert_albedo(r.albedo, QUADRANT[0][1] * np.array(B), r.on, atol=1e-5)

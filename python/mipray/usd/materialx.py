@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from pxr import Sdf, Usd, UsdShade
+from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 __all__ = [
     "EVALUATED",
@@ -233,6 +233,11 @@ class _Eval:
 
     material: str
     time: Usd.TimeCode
+    #: The gprim being shaded (None: the material alone, as the audit reads it): a
+    #: ``geompropvalue`` naming a primvar it lacks is the node's ``default``.
+    prim: Usd.Prim | None = None
+    #: The gprim's textures read its surface's own (u, v) for ``st`` (implicit gprims).
+    surface_st: bool = False
     #: Nodes not evaluated: (node path, id).
     unsupported: list[tuple[str, str]] = field(default_factory=list)
     #: Each (node, output) evaluated so far (None: not evaluated), so a node read by several
@@ -334,10 +339,16 @@ class _Eval:
             return self.image(node, node_id, width)
         if kind == "texcoord" and width == 2:
             return _Coord("st")
-        if kind == "geompropvalue" and width == 2:
+        if kind == "geompropvalue":
             name = node.GetInput("geomprop")
             value = name.Get(self.time) if name else None
-            return _Coord(str(value) if value else "st")
+            varname = str(value) if value else "st"
+            if self.lacks(varname):
+                # MaterialX: the node's `default` where the geometry has no such property (as
+                # Storm renders it); a texcoord then is a constant one.
+                return a("default")
+            if width == 2:
+                return _Coord(varname)
         if kind == "place2d":
             return self.place2d(node, node_id)
         if kind == "normalmap":
@@ -427,7 +438,17 @@ class _Eval:
                 return folded
         return _Net(op, args, width)
 
+    def lacks(self, varname: str) -> bool:
+        """Whether the gprim being shaded has no primvar ``varname`` (False when unknown)."""
+        if self.prim is None or (self.surface_st and varname == "st"):
+            return False
+        primvar = UsdGeom.PrimvarsAPI(self.prim).GetPrimvar(varname)
+        return not primvar or not primvar.HasValue()
+
     def coord(self, node: UsdShade.Shader, node_id: str, v: _Value) -> _Coord:
+        if isinstance(v, tuple) and len(v) in (1, 2):
+            # A constant texcoord (a geompropvalue's default): a map of st with no linear part.
+            return _Coord("", (0.0, 0.0, v[0], 0.0, 0.0, v[-1]))
         if not isinstance(v, _Coord):
             self._skip(node, f"{node_id} texcoord that is not an affine map of a primvar")
         return v  # type: ignore[return-value]
@@ -642,7 +663,8 @@ def _lower(
             ("const", *(0.0 if math.isnan(x) else max(-3.4e38, min(3.4e38, x)) for x in lanes))
         )
     elif isinstance(v, _Tex):
-        st.add(v.varname)
+        if v.varname:  # "": a constant texcoord, which reads no primvar
+            st.add(v.varname)
         lookups.append(dict(v.desc, channels=v.channels, st_transform=list(v.transform)))
         ops.append(("texture", len(lookups) - 1))
         if v.scale != (1.0,) * 4:
@@ -652,7 +674,8 @@ def _lower(
             _lower(v.bias, ops, lookups, st)
             ops.append(("add",))
     elif isinstance(v, _Coord):
-        st.add(v.varname)
+        if v.varname:
+            st.add(v.varname)
         ops.append(("coord", *v.transform))
     elif v.op[0] == "combine":
         _lower(v.args[0], ops, lookups, st)
@@ -775,10 +798,20 @@ def _set(
         out.args[name] = float(value[0])
 
 
-def read_mtlx_surface(material_path: str, surface: UsdShade.Shader, time: Usd.TimeCode) -> MtlxRead:
-    """``surface`` (one of :data:`MTLX_SURFACES`) as UsdPreviewSurface inputs."""
+def read_mtlx_surface(
+    material_path: str,
+    surface: UsdShade.Shader,
+    time: Usd.TimeCode,
+    prim: Usd.Prim | None = None,
+    surface_st: bool = False,
+) -> MtlxRead:
+    """``surface`` (one of :data:`MTLX_SURFACES`) as UsdPreviewSurface inputs on ``prim``.
+
+    ``prim``: the gprim shaded, whose primvars ``geompropvalue`` nodes read (None: the
+    material alone); ``surface_st``: its textures read its surface's own (u, v) as ``st``.
+    """
     node_id = str(surface.GetShaderId())
-    ev = _Eval(material_path, time)
+    ev = _Eval(material_path, time, prim, surface_st)
     out = MtlxRead({"name": material_path}, [], ev.unsupported)
     colours = ("diffuseColor", "emissiveColor", "specularColor")
     if node_id == "ND_UsdPreviewSurface_surfaceshader":

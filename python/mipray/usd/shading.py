@@ -486,16 +486,20 @@ def bound_material(prim: Usd.Prim) -> UsdShade.Material | None:
 
 
 def _surface_material(
-    prim: Usd.Prim, material: UsdShade.Material, time: Usd.TimeCode
+    prim: Usd.Prim, material: UsdShade.Material, time: Usd.TimeCode, surface_st: bool = False
 ) -> _Material | None:
-    """The ``material`` argument of ``material``'s UsdPreviewSurface on ``prim``, or None."""
+    """The ``material`` argument of ``material``'s UsdPreviewSurface on ``prim``, or None.
+
+    ``surface_st``: ``prim``'s textures read its surface's own (u, v) (see
+    :func:`shading_arguments`).
+    """
     material_path = str(material.GetPath())
     surface, _, _ = material.ComputeSurfaceSource()
     if surface and surface.GetShaderId() == "UsdPreviewSurface":
         return _preview_surface(prim, material_path, surface, time)
     mtlx = mtlx_surface(material)
     if mtlx is not None:
-        read = read_mtlx_surface(material_path, mtlx, time)
+        read = read_mtlx_surface(material_path, mtlx, time, prim, surface_st)
         textures = [(name, _Texture(desc, varname, None)) for name, desc, varname in read.textures]
         # A network's lookups and texcoords read the mesh's st as a texture's do.
         textures += [
@@ -592,7 +596,7 @@ def shading_arguments(
     material = bound_material(prim)
     # Every texture of the mesh reads one st: (who reads it, varname, transform) of the first.
     st_users: list[tuple[str, str, Transform2d | None]] = []
-    read = _surface_material(prim, material, time) if material else None
+    read = _surface_material(prim, material, time, surface_st) if material else None
     if read is not None:
         args["material"] = read.args
         if read.primvars and not surface_st:

@@ -41,6 +41,13 @@ impl StTransform {
         [m[0] * st[0] + m[1] * st[1] + m[2], m[3] * st[0] + m[4] * st[1] + m[5]]
     }
 
+    /// Whether the map has no linear part: the point is the same wherever the surface is, and
+    /// whether it has an `st` at all (a MaterialX `geompropvalue`'s `default` as a texcoord).
+    pub fn is_constant(&self) -> bool {
+        let m = &self.0;
+        m[0] == 0.0 && m[1] == 0.0 && m[3] == 0.0 && m[4] == 0.0
+    }
+
     /// A transformed derivative (the linear part alone): how a footprint or a tangent maps.
     pub fn vector(&self, d: [f32; 2]) -> [f32; 2] {
         let m = &self.0;
@@ -88,10 +95,11 @@ impl PartialEq for NetworkLookup {
 
 impl NetworkLookup {
     /// The filtered value at `st` with footprint `dst_dx`, `dst_dy` (of the surface's `st`, not
-    /// yet transformed); the fallback where the lookup fails or there is no `st`.
+    /// yet transformed); the fallback where the lookup fails or there is no `st` (a constant
+    /// texcoord needs none: the finest level at its point).
     fn eval(&self, st: Option<[[f32; 2]; 3]>) -> Vec4 {
-        let Some([st, dx, dy]) = st else { return self.fallback };
         let t = &self.st_transform;
+        let Some([st, dx, dy]) = st.or(t.is_constant().then_some([[0.0; 2]; 3])) else { return self.fallback };
         let mut out = [0.0f32; 4];
         let n = (self.channels as usize).clamp(1, 4);
         if !self.sampler.sample(self.texture, t.point(st), t.vector(dx), t.vector(dy), &self.lookup, &mut out[..n]) {
@@ -114,7 +122,8 @@ pub enum Op {
     /// Pushes lookup `i` of [`InputNetwork::lookups`].
     Texture(u16),
     /// Pushes the surface's `st` under a transform, as (s, t, 0, 0) (a `texcoord` feeding
-    /// arithmetic, a `checkerboard`); (0, 0, 0, 0) without `st`.
+    /// arithmetic, a `checkerboard`); (0, 0, 0, 0) without `st`, unless the transform is
+    /// constant.
     Coord(StTransform),
     /// `in1 + in2`.
     Add,
@@ -289,10 +298,13 @@ impl InputNetwork {
             let v = match *op {
                 Op::Const(c) => Vec4::from(c),
                 Op::Texture(i) => self.lookups[i as usize].eval(st),
-                Op::Coord(t) => st.map_or(Vec4::ZERO, |s| {
-                    let p = t.point(s[0]);
-                    Vec4::new(p[0], p[1], 0.0, 0.0)
-                }),
+                Op::Coord(t) => match st.map(|s| s[0]).or(t.is_constant().then_some([0.0; 2])) {
+                    Some(s) => {
+                        let p = t.point(s);
+                        Vec4::new(p[0], p[1], 0.0, 0.0)
+                    }
+                    None => Vec4::ZERO,
+                },
                 Op::Mix | Op::Clamp => {
                     let (a, b, c) = (stack[n - 3], stack[n - 2], stack[n - 1]);
                     n -= 3;
@@ -520,6 +532,12 @@ mod tests {
         assert_eq!(net.eval(None), Vec4::ZERO);
         let net = InputNetwork::new(vec![Op::Texture(0)], vec![lookup(&ramp, 0, 3, tiled)]).unwrap();
         assert_eq!(net.eval(None), Vec4::new(0.25, 0.5, 0.75, 1.0));
+        // A constant texcoord (a geompropvalue's default) is looked up, and pushed, without st.
+        let fixed = StTransform([0.0, 0.0, 0.25, 0.0, 0.0, 0.75]);
+        let net = InputNetwork::new(vec![Op::Texture(0)], vec![lookup(&ramp, 0, 3, fixed)]).unwrap();
+        assert_eq!(net.eval(None), Vec4::new(0.25, 0.75, 1.0, 0.0));
+        assert_eq!(*ramp.last.lock().unwrap(), Some([[0.25, 0.75], [0.0; 2], [0.0; 2]]));
+        assert_eq!(InputNetwork::new(vec![Op::Coord(fixed)], vec![]).unwrap().eval(None), Vec4::new(0.25, 0.75, 0.0, 0.0));
         // An unreadable texture gives its fallback too.
         assert_eq!(eval(vec![Op::Texture(0)], vec![lookup(&ramp, 1, 3, tiled)]), Vec4::new(0.25, 0.5, 0.75, 1.0));
     }
