@@ -647,3 +647,47 @@ def test_a_geompropvalue_of_a_primvar_the_gprim_lacks_is_its_default(
         r = render(stage)
     assert not _warnings(caplog, "primvars"), caplog.text
     assert_albedo(r.albedo, QUADRANT[0][1] * np.array(B), r.on, atol=1e-5)
+
+
+def _geomprop(stage: Usd.Stage, name: str, out: str, primvar: str) -> UsdShade.Shader:
+    shader = node(stage, name, f"ND_geompropvalue_{out}", out)
+    shader.CreateInput("geomprop", Sdf.ValueTypeNames.String).Set(primvar)
+    return shader
+
+
+def test_geompropvalue_reads_a_primvar_of_any_type_into_the_nodes_lanes(native, caplog) -> None:
+    # tint (color3f, constant) · gain (float, uniform over the one face) · the first three
+    # lanes of dir (float4 read as a vector3, constant), through geompropvalue of color3, float
+    # and vector3: MaterialX's geompropvalue is the primvar's value, whatever its type.
+    stage = new_stage()
+    tint, gain, direction = (0.25, 0.5, 1.0), 0.75, (1.0, 0.5, 0.25, 9.0)
+    a = _geomprop(stage, "Tint", "color3", "tint")
+    b = _geomprop(stage, "Gain", "float", "gain")
+    c = _geomprop(stage, "Dir", "vector3", "dir")
+    c3 = node(stage, "AsColor", "ND_convert_vector3_color3", "color3", **{"in": c})
+    ab = node(stage, "Ab", "ND_multiply_color3FA", "color3", in1=a, in2=b)
+    lambertian(stage, node(stage, "Abc", "ND_multiply_color3", "color3", in1=ab, in2=c3))
+    primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Quad"))
+    primvars.CreatePrimvar("tint", Sdf.ValueTypeNames.Color3fArray, "constant").Set([tint])
+    primvars.CreatePrimvar("gain", Sdf.ValueTypeNames.FloatArray, "uniform").Set([gain])
+    primvars.CreatePrimvar("dir", Sdf.ValueTypeNames.Float4, "constant").Set(Gf.Vec4f(*direction))
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    assert not caplog.records, caplog.text
+    assert_albedo(r.albedo, np.multiply(tint, direction[:3]) * gain, r.on, atol=1e-5)
+
+
+def test_a_geompropvalue_of_a_primvar_varying_over_the_mesh_is_its_mean_named_once(
+    fake, caplog
+) -> None:
+    stage = new_stage()
+    lambertian(stage, _geomprop(stage, "Tint", "color3", "tint"))
+    colours = [(0.0, 0.25, 1.0), (0.5, 0.25, 1.0), (1.0, 0.25, 0.0), (0.5, 0.25, 0.0)]
+    primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Quad"))
+    primvars.CreatePrimvar("tint", Sdf.ValueTypeNames.Color3fArray, "vertex").Set(colours)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        UsdSceneDelegate(stage, fake).sync()
+    material = fake.meshes()["/World/Quad"]["material"]
+    np.testing.assert_allclose(material["diffuseColor"], np.mean(colours, axis=0))
+    named = _warnings(caplog, "primvars:tint, which varies over /World/Quad")
+    assert len(named) == 1 and "/Looks/M/Tint" in named[0], caplog.text

@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 __all__ = [
@@ -51,7 +52,8 @@ MTLX_SURFACES = (
     "ND_standard_surface_surfaceshader",
     "ND_open_pbr_surface_surfaceshader",
 )
-#: Nodes evaluated (the node name of ``ND_<node>_<types>``); ``geompropvalue`` of a vector2 only.
+#: Nodes evaluated (the node name of ``ND_<node>_<types>``); ``geompropvalue`` of a vector2 as
+#: a texcoord, of another type as its primvar's (constant or mean) value.
 EVALUATED = (
     "constant", "image", "tiledimage", "texcoord", "geompropvalue", "place2d", "normalmap",
     "dot", "add", "subtract", "multiply", "divide", "modulo", "power", "min", "max", "mix",
@@ -240,6 +242,8 @@ class _Eval:
     surface_st: bool = False
     #: Nodes not evaluated: (node path, id).
     unsupported: list[tuple[str, str]] = field(default_factory=list)
+    #: What of the gprim's own data is approximated, one line each (warned once by the caller).
+    warnings: list[str] = field(default_factory=list)
     #: Each (node, output) evaluated so far (None: not evaluated), so a node read by several
     #: others is evaluated, and named, once.
     _done: dict[tuple[str, str], _Value | None] = field(default_factory=dict)
@@ -349,6 +353,7 @@ class _Eval:
                 return a("default")
             if width == 2:
                 return _Coord(varname)
+            return self.primvar(node, node_id, varname, width)
         if kind == "place2d":
             return self.place2d(node, node_id)
         if kind == "normalmap":
@@ -437,6 +442,35 @@ class _Eval:
             if folded is not None:
                 return folded
         return _Net(op, args, width)
+
+    def primvar(self, node: UsdShade.Shader, node_id: str, varname: str, width: int) -> _Value:
+        """A ``geompropvalue`` of ``width`` lanes: primvar ``varname`` of the gprim, as a constant.
+
+        Lanes as ``convert`` makes them: a one-component primvar splatted, extra components
+        dropped, missing ones 0 (a fourth 1). A primvar varying over the gprim is its mean, named
+        once (the evaluator reads no primvar but ``st``). Without a gprim (the audit), the
+        node's ``default``.
+        """
+        if self.prim is None:
+            return self.arg(node, node_id, "default")
+        primvar = UsdGeom.PrimvarsAPI(self.prim).GetPrimvar(varname)
+        try:
+            values = np.asarray(primvar.ComputeFlattened(self.time), dtype=np.float64)
+        except (TypeError, ValueError):
+            self._skip(node, f"{node_id} of primvars:{varname} of type {primvar.GetTypeName()}")
+        array = primvar.GetTypeName().isArray and values.ndim
+        rows = values.reshape(len(values), -1) if array else values.reshape(1, -1)
+        if not rows.size:
+            return self.arg(node, node_id, "default")
+        if len(rows) > 1 and not (rows == rows[0]).all():
+            self.warnings.append(
+                f"{self.material}: {node.GetPath()} ({node_id}) reads primvars:{varname}, which "
+                f"varies over {self.prim.GetPath()}; mipray uses its mean"
+            )
+        row = tuple(float(x) for x in rows.mean(axis=0))
+        if len(row) == 1:
+            return row
+        return row[:width] + tuple(1.0 if k == 3 else 0.0 for k in range(len(row), width))
 
     def lacks(self, varname: str) -> bool:
         """Whether the gprim being shaded has no primvar ``varname`` (False when unknown)."""
@@ -761,6 +795,8 @@ class MtlxRead:
     #: (input, node network as the ``material`` argument's ``networks`` entry, the primvars its
     #: lookups and texcoords read).
     networks: list[tuple[str, dict[str, Any], list[str]]] = field(default_factory=list)
+    #: What of the gprim's own data is approximated (a varying primvar's mean), one line each.
+    warnings: list[str] = field(default_factory=list)
 
 
 def _set(
@@ -812,7 +848,7 @@ def read_mtlx_surface(
     """
     node_id = str(surface.GetShaderId())
     ev = _Eval(material_path, time, prim, surface_st)
-    out = MtlxRead({"name": material_path}, [], ev.unsupported)
+    out = MtlxRead({"name": material_path}, [], ev.unsupported, warnings=ev.warnings)
     colours = ("diffuseColor", "emissiveColor", "specularColor")
     if node_id == "ND_UsdPreviewSurface_surfaceshader":
         from .shading import COLOR_INPUTS, FLOAT_INPUTS

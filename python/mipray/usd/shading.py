@@ -500,6 +500,8 @@ def _surface_material(
     mtlx = mtlx_surface(material)
     if mtlx is not None:
         read = read_mtlx_surface(material_path, mtlx, time, prim, surface_st)
+        for line in read.warnings:
+            _warn_once(line)
         textures = [(name, _Texture(desc, varname, None)) for name, desc, varname in read.textures]
         # A network's lookups and texcoords read the mesh's st as a texture's do.
         textures += [
