@@ -691,3 +691,71 @@ def test_a_geompropvalue_of_a_primvar_varying_over_the_mesh_is_its_mean_named_on
     np.testing.assert_allclose(material["diffuseColor"], np.mean(colours, axis=0))
     named = _warnings(caplog, "primvars:tint, which varies over /World/Quad")
     assert len(named) == 1 and "/Looks/M/Tint" in named[0], caplog.text
+
+
+_PI = math.pi
+
+
+@pytest.mark.parametrize(
+    ("op", "pre", "post", "truth"),
+    [
+        ("sin_float", (6.0, 0.0), (0.5, 0.5), np.sin),
+        ("cos_float", (6.0, 0.0), (0.5, 0.5), np.cos),
+        ("tan_float", (1.2, -0.6), (0.5, 0.5), np.tan),
+        ("asin_float", (2.0, -1.0), (1 / _PI, 0.5), np.arcsin),
+        ("acos_float", (2.0, -1.0), (1 / _PI, 0.0), np.arccos),
+        ("exp_float", (-2.0, 0.0), (1.0, 0.0), np.exp),
+        ("ln_float", (2.0, 0.1), (0.3, 0.7), np.log),
+        ("sign_float", (1.0, -0.5), (0.25, 0.5), np.sign),
+        ("atan2_float", (1.0, -0.5), (1 / _PI, 0.5), lambda y: np.arctan2(y, 0.25)),
+        ("sin_vector3", (6.0, 0.0), (0.5, 0.5), np.sin),
+        ("atan2_vector3", (1.0, -0.5), (1 / _PI, 0.5), lambda y: np.arctan2(y, 0.25)),
+    ],
+)
+def test_math_nodes_of_a_ramp_are_glsls(native, tmp_path, op, pre, post, truth) -> None:
+    # post · op(pre · s) per pixel, s from a ramp image: genglsl's mx_sin(in) … log(in),
+    # sign(in), mx_atan(iny, inx) (inx 0.25), float and vector variants.
+    ramp = (np.arange(64) + 0.5)[None, :] / 64 * np.ones((8, 1))
+    stage = new_stage()
+    image = node(
+        stage, "Ramp", "ND_image_float", "float", file=write(native, tmp_path / "ramp.exr", ramp)
+    )
+    image.CreateInput("uaddressmode", Sdf.ValueTypeNames.String).Set("clamp")
+    scaled = node(stage, "Pre", "ND_multiply_float", "float", in1=image, in2=("float", pre[0]))
+    x = node(stage, "Pre2", "ND_add_float", "float", in1=scaled, in2=("float", pre[1]))
+    name, kind = op.split("_")
+    if kind == "vector3":
+        x = node(stage, "AsVector", "ND_convert_float_vector3", "vector3", **{"in": x})
+    if name == "atan2":
+        inx = ("vector3", (0.25,) * 3) if kind == "vector3" else ("float", 0.25)
+        y = node(stage, "Op", f"ND_{op}", kind, iny=x, inx=inx)
+    else:
+        y = node(stage, "Op", f"ND_{op}", kind, **{"in": x})
+    colour = node(stage, "Colour", f"ND_convert_{kind}_color3", "color3", **{"in": y})
+    k = node(stage, "Post", "ND_multiply_color3FA", "color3", in1=colour, in2=("float", post[0]))
+    lambertian(
+        stage, node(stage, "Post2", "ND_add_color3FA", "color3", in1=k, in2=("float", post[1]))
+    )
+    r = render(stage)
+    s = r.st[..., 0]
+    want = (post[0] * truth(pre[0] * s + pre[1]) + post[1])[..., None] * np.ones(3)
+    inside = r.on & (s > 0.05) & (s < 0.95) & (np.abs(pre[0] * s + pre[1]) > 0.03)
+    assert_albedo(r.albedo, np.clip(want, 0, 1), inside, atol=4e-3)
+
+
+def test_math_nodes_of_constants_fold_as_glsl_computes_them(fake) -> None:
+    # (sin 0.5, 0.25 · atan2(1, −1), sign(0)), folded to the constant diffuseColor.
+    stage = new_stage()
+    half = node(stage, "Half", "ND_constant_float", "float", value=("float", 0.5))
+    sin = node(stage, "Sin", "ND_sin_float", "float", **{"in": half})
+    at = node(stage, "At", "ND_atan2_float", "float", iny=("float", 1.0), inx=("float", -1.0))
+    quarter = node(stage, "Quarter", "ND_multiply_float", "float", in1=at, in2=("float", 0.25))
+    zero = node(stage, "Sign", "ND_sign_float", "float", **{"in": ("float", 0.0)})
+    parts = {"in1": sin, "in2": quarter, "in3": zero}
+    lambertian(stage, node(stage, "Rgb", "ND_combine3_color3", "color3", **parts))
+    UsdSceneDelegate(stage, fake).sync()
+    material = fake.meshes()["/World/Quad"]["material"]
+    assert "networks" not in material
+    np.testing.assert_allclose(
+        material["diffuseColor"], (math.sin(0.5), 0.25 * math.atan2(1, -1), 0.0), rtol=1e-6
+    )

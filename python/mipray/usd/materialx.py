@@ -60,7 +60,7 @@ EVALUATED = (
     "clamp", "invert", "absval", "floor", "ceil", "dotproduct", "normalize", "magnitude",
     "extract", "combine2", "combine3", "combine4", "convert", "checkerboard", "remap",
     "luminance", "sqrt", "ifgreater", "ifgreatereq", "ifequal", "separate2", "separate3",
-    "separate4",
+    "separate4", "sin", "cos", "tan", "asin", "acos", "atan2", "sign", "exp", "ln",
 )  # fmt: skip
 
 _WRAPS = {"periodic": "repeat", "clamp": "clamp", "constant": "black", "mirror": "mirror"}
@@ -189,6 +189,40 @@ _FOLD: dict[str, Callable[[float, float], float]] = {
     "power": _pow,
     "min": min,
     "max": max,
+}
+
+
+def _domain(f: Callable[[float], float]) -> Callable[[float], float]:
+    """``f``, NaN outside its domain and ±inf past overflow (as GLSL and the core give)."""
+
+    def g(x: float) -> float:
+        try:
+            return float(f(x))
+        except OverflowError:
+            return math.inf
+        except ValueError:
+            return math.nan
+
+    return g
+
+
+def _ln(x: float) -> float:
+    return math.log(x) if x > 0 else (-math.inf if x == 0 else math.nan)
+
+
+#: The one-argument nodes, as GLSL computes them (the core's ``Op::Unary``, ``abs``, …).
+_UNARY: dict[str, Callable[[float], float]] = {
+    "absval": abs,
+    "floor": _domain(math.floor),
+    "ceil": _domain(math.ceil),
+    "sin": _domain(math.sin),
+    "cos": _domain(math.cos),
+    "tan": _domain(math.tan),
+    "asin": _domain(math.asin),
+    "acos": _domain(math.acos),
+    "exp": _domain(math.exp),
+    "ln": _ln,
+    "sign": lambda x: 1.0 if x > 0 else (-1.0 if x < 0 else 0.0),
 }
 
 
@@ -372,8 +406,11 @@ class _Eval:
             return self.mix(a("bg"), a("fg"), a("mix"), width)
         if kind == "clamp":
             return self.op(("clamp",), (a("in"), a("low"), a("high")), width)
-        if kind in ("absval", "floor", "ceil"):
+        if kind in _UNARY:
             return self.op((kind,), (a("in"),), width)
+        if kind == "atan2":
+            # genglsl mx_atan({{iny}}, {{inx}}).
+            return self.op(("atan2",), (a("iny"), a("inx")), width)
         if kind == "sqrt":
             return self.binary("power", a("in"), (0.5,), width)
         if kind == "remap":
@@ -664,13 +701,13 @@ def _fold(op: tuple[Any, ...], args: tuple[tuple[float, ...], ...]) -> tuple[flo
     if name == "clamp":
         v, lo, hi = args
         return _const(_const(v, lo, "max"), hi, "min")
-    if name in ("absval", "floor", "ceil"):
-        unary: dict[str, Callable[[float], float]] = {
-            "absval": abs,
-            "floor": math.floor,
-            "ceil": math.ceil,
-        }
-        return tuple(float(unary[name](x)) for x in args[0])
+    if name in _UNARY:
+        return tuple(_UNARY[name](x) for x in args[0])
+    if name == "atan2":
+        y, x = args
+        n = max(len(y), len(x))
+        y, x = (v * n if len(v) == 1 else v for v in (y, x))
+        return tuple(math.atan2(a, b) for a, b in zip(y, x, strict=False))
     if name in ("ifgreater", "ifgreatereq", "ifequal"):
         v1, v2, in1, in2 = args
         test = {

@@ -153,6 +153,13 @@ pub enum Op {
     Abs,
     Floor,
     Ceil,
+    /// Lane-wise `sin`, `cos`, `tan` (radians), `asin`, `acos` (NaN outside [−1, 1]), `exp`,
+    /// `ln` (natural; NaN below 0, −∞ at 0) and GLSL `sign` (−1, 0 or 1), as the stdlib's
+    /// genglsl `mx_sin(in)` … `log(in)`, `sign(in)`.
+    Unary(Unary),
+    /// `atan(in1, in2)` (GLSL's two-argument `atan`, `atan2`): the angle of (in2, in1), in
+    /// radians in [−π, π]; MaterialX `atan2` pushes `iny` then `inx`.
+    Atan2,
     /// The dot product of the first `n` lanes of `in1` and `in2` (`dotproduct_vectorN`),
     /// splatted.
     DotProduct(u8),
@@ -164,6 +171,43 @@ pub enum Op {
     Swizzle([u8; 4]),
     /// Pops `b`, `a`: `a`'s first `n` lanes, then `b`'s first `4 − n` (`combineN`, `convert`).
     Combine(u8),
+}
+
+/// The one-argument functions of [`Op::Unary`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unary {
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Exp,
+    Ln,
+    Sign,
+}
+
+impl Unary {
+    fn apply(self, x: f32) -> f32 {
+        match self {
+            Unary::Sin => x.sin(),
+            Unary::Cos => x.cos(),
+            Unary::Tan => x.tan(),
+            Unary::Asin => x.asin(),
+            Unary::Acos => x.acos(),
+            Unary::Exp => x.exp(),
+            Unary::Ln => x.ln(),
+            // GLSL sign: 0 at 0 (f32::signum would give ±1).
+            Unary::Sign => {
+                if x > 0.0 {
+                    1.0
+                } else if x < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
 }
 
 impl Op {
@@ -213,6 +257,15 @@ impl Op {
             "absval" => Op::Abs,
             "floor" => Op::Floor,
             "ceil" => Op::Ceil,
+            "sin" => Op::Unary(Unary::Sin),
+            "cos" => Op::Unary(Unary::Cos),
+            "tan" => Op::Unary(Unary::Tan),
+            "asin" => Op::Unary(Unary::Asin),
+            "acos" => Op::Unary(Unary::Acos),
+            "exp" => Op::Unary(Unary::Exp),
+            "ln" => Op::Unary(Unary::Ln),
+            "sign" => Op::Unary(Unary::Sign),
+            "atan2" => Op::Atan2,
             "dotproduct" => Op::DotProduct(lane(args[0], 1, 4)?),
             "normalize" => Op::Normalize(lane(args[0], 1, 4)?),
             "magnitude" => Op::Magnitude(lane(args[0], 1, 4)?),
@@ -228,7 +281,7 @@ impl Op {
             Op::Const(_) | Op::Texture(_) | Op::Coord(_) => (0, 1),
             Op::Mix | Op::Clamp => (3, 1),
             Op::IfGreater | Op::IfGreaterEq | Op::IfEqual => (4, 1),
-            Op::Abs | Op::Floor | Op::Ceil | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => (1, 1),
+            Op::Abs | Op::Floor | Op::Ceil | Op::Unary(_) | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => (1, 1),
             _ => (2, 1),
         }
     }
@@ -324,11 +377,12 @@ impl InputNetwork {
                     };
                     Vec4::select(take_a, a, b)
                 }
-                Op::Abs | Op::Floor | Op::Ceil | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => {
+                Op::Abs | Op::Floor | Op::Ceil | Op::Unary(_) | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => {
                     n -= 1;
                     let a = stack[n];
                     match *op {
                         Op::Abs => a.abs(),
+                        Op::Unary(f) => Vec4::from(a.to_array().map(|x| f.apply(x))),
                         Op::Floor => a.floor(),
                         Op::Ceil => a.ceil(),
                         Op::Normalize(k) => {
@@ -358,6 +412,7 @@ impl InputNetwork {
                         Op::Divide => a / b,
                         Op::Modulo => a - b * (a / b).floor(),
                         Op::Power => Vec4::new(a.x.powf(b.x), a.y.powf(b.y), a.z.powf(b.z), a.w.powf(b.w)),
+                        Op::Atan2 => Vec4::new(a.x.atan2(b.x), a.y.atan2(b.y), a.z.atan2(b.z), a.w.atan2(b.w)),
                         Op::Min => a.min(b),
                         Op::Max => a.max(b),
                         Op::DotProduct(k) => Vec4::splat(lanes(a, k).dot(lanes(b, k))),
@@ -514,6 +569,30 @@ mod tests {
         assert_eq!(eval(vec![Op::Const([-1.5, 1.5, -0.0, 2.0]), Op::Abs], vec![]), Vec4::new(1.5, 1.5, 0.0, 2.0));
         assert_eq!(eval(vec![Op::Const([-1.5, 1.5, 0.0, 2.0]), Op::Floor], vec![]), Vec4::new(-2.0, 1.0, 0.0, 2.0));
         assert_eq!(eval(vec![Op::Const([-1.5, 1.5, 0.0, 2.0]), Op::Ceil], vec![]), Vec4::new(-1.0, 2.0, 0.0, 2.0));
+    }
+
+    #[test]
+    fn math_functions_are_glsls_lane_by_lane() {
+        let x = [0.5f32, -0.25, 0.0, 2.0];
+        let unary = |name: &str| eval(vec![Op::Const(x), Op::parse(name, &[]).unwrap()], vec![]).to_array();
+        assert_eq!(unary("sin"), x.map(f32::sin));
+        assert_eq!(unary("cos"), x.map(f32::cos));
+        assert_eq!(unary("tan"), x.map(f32::tan));
+        assert_eq!(unary("exp"), x.map(f32::exp));
+        // GLSL sign is 0 at 0; asin, acos and ln are NaN outside their domains (the caller
+        // clamps NaN to 0 before the image).
+        assert_eq!(unary("sign"), [1.0, -1.0, 0.0, 1.0]);
+        let (asin, acos, ln) = (unary("asin"), unary("acos"), unary("ln"));
+        assert_eq!(asin[..3], [0.5f32.asin(), (-0.25f32).asin(), 0.0]);
+        assert_eq!(acos[..3], [0.5f32.acos(), (-0.25f32).acos(), std::f32::consts::FRAC_PI_2]);
+        assert!(asin[3].is_nan() && acos[3].is_nan());
+        assert_eq!(ln[0], 0.5f32.ln());
+        assert!(ln[1].is_nan() && ln[2] == f32::NEG_INFINITY);
+        // atan2(iny, inx): the angle of (inx, iny), every quadrant.
+        let y = Op::Const([1.0, 1.0, -1.0, -1.0]);
+        let at = eval(vec![y, Op::Const([1.0, -1.0, -1.0, 1.0]), Op::Atan2], vec![]);
+        let q = std::f32::consts::FRAC_PI_4;
+        assert_eq!(at.to_array(), [q, 3.0 * q, -3.0 * q, -q]);
     }
 
     #[test]
