@@ -759,3 +759,91 @@ def test_math_nodes_of_constants_fold_as_glsl_computes_them(fake) -> None:
     np.testing.assert_allclose(
         material["diffuseColor"], (math.sin(0.5), 0.25 * math.atan2(1, -1), 0.0), rtol=1e-6
     )
+
+
+_CUSTOM_DEFS = """<?xml version="1.0"?>
+<materialx version="1.39" namespace="Test">
+  <nodedef name="ND_tinted_image" node="tinted_image">
+    <input name="file" type="filename" value="" />
+    <input name="tint" type="color3" value="1, 1, 1" />
+    <input name="scale" type="vector2" value="2, 2" />
+    <output name="out" type="color3" />
+  </nodedef>
+  <nodegraph name="NG_tinted_image" nodedef="ND_tinted_image">
+    <texcoord name="uv" type="vector2" />
+    <multiply name="scaled" type="vector2">
+      <input name="in1" type="vector2" nodename="uv" />
+      <input name="in2" type="vector2" interfacename="scale" />
+    </multiply>
+    <image name="img" type="color3">
+      <input name="file" type="filename" interfacename="file" />
+      <input name="texcoord" type="vector2" nodename="scaled" />
+    </image>
+    <multiply name="tinted" type="color3">
+      <input name="in1" type="color3" nodename="img" />
+      <input name="in2" type="color3" interfacename="tint" />
+    </multiply>
+    <output name="out" type="color3" nodename="tinted" />
+  </nodegraph>
+</materialx>
+"""
+
+_CUSTOM_LOOKS = """<?xml version="1.0"?>
+<materialx version="1.39">
+  {include}
+  <nodegraph name="G">
+    <constant name="tint" type="color3">
+      <input name="value" type="color3" value="0.5, 1, 0.75" />
+    </constant>
+    <tinted_image name="tex" type="color3" namespace="Test">
+      <input name="file" type="filename" value="quadrants.exr" />
+      <input name="tint" type="color3" nodename="tint" />
+    </tinted_image>
+    <multiply name="half" type="color3">
+      <input name="in1" type="color3" nodename="tex" />
+      <input name="in2" type="float" value="0.5" />
+    </multiply>
+    <output name="out" type="color3" nodename="half" />
+  </nodegraph>
+  <UsdPreviewSurface name="S" type="surfaceshader">
+    <input name="diffuseColor" type="color3" nodegraph="G" output="out" />
+    <input name="useSpecularWorkflow" type="integer" value="1" />
+    <input name="specularColor" type="color3" value="0, 0, 0" />
+  </UsdPreviewSurface>
+  <surfacematerial name="M" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="S" />
+  </surfacematerial>
+</materialx>
+"""
+
+
+@pytest.mark.parametrize("found", ["included", "PXR_MTLX_PLUGIN_SEARCH_PATHS"])
+def test_a_custom_nodedef_built_as_a_nodegraph_renders_as_its_graph(
+    native, tmp_path, monkeypatch, caplog, found
+) -> None:
+    # A namespaced custom node (Test:ND_tinted_image: image(file, texcoord · scale) · tint) in
+    # a referenced .mtlx, its nodedef included by the document or found where usdMtlx looks:
+    # its file from the node, its tint from a node of the outer graph, its scale the
+    # nodedef's default (2, 2); then halved downstream.
+    pytest.importorskip("MaterialX")
+    quadrant_image(native, tmp_path / "quadrants.exr")
+    defs = tmp_path / "defs"
+    defs.mkdir()
+    (defs / "tinted.mtlx").write_text(_CUSTOM_DEFS)
+    include = '<xi:include href="defs/tinted.mtlx" />' if found == "included" else ""
+    if found != "included":
+        monkeypatch.setenv("PXR_MTLX_PLUGIN_SEARCH_PATHS", str(defs))
+    (tmp_path / "looks.mtlx").write_text(_CUSTOM_LOOKS.format(include=include))
+    stage = new_stage()
+    material = UsdShade.Material.Define(stage, "/Looks/M")
+    material.GetPrim().GetReferences().AddReference(
+        str(tmp_path / "looks.mtlx"), "/MaterialX/Materials/M"
+    )
+    bind(quad(stage, half=HALF).GetPrim(), material)
+    add_camera(stage, "/World/Camera")
+    add_distant_light(stage, "/World/Sun")
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    assert not caplog.records, caplog.text
+    truth, inside = quadrant_truth(2.0 * r.st)
+    assert_albedo(r.albedo, truth * (0.5, 1.0, 0.75) * 0.5, r.on & inside)

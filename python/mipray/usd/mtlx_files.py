@@ -7,14 +7,18 @@ document with MaterialX (the ``MaterialX`` PyPI package) and writes what ``usdMt
 have composed there — a Shader prim per node (``info:id`` its nodedef), their inputs and
 connections, ``outputs:mtlx:surface`` — into an anonymous layer under the stage's session
 layer, so the rest of the front end reads it as any inline MaterialX network
-(:mod:`mipray.usd.materialx`). A document that cannot be read is warned about once, naming the
-prim and the file; the material then renders as if unbound.
+(:mod:`mipray.usd.materialx`). Custom nodedefs (the document's, its includes', or those of
+the folders in ``PXR_MTLX_PLUGIN_SEARCH_PATHS``, as usdMtlx finds them) implemented by a
+nodegraph are flattened into that graph's standard-library nodes. A document that cannot be
+read is warned about once, naming the prim and the file; the material then renders as if
+unbound.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+from dataclasses import dataclass
 from typing import Any
 
 from pxr import Gf, Sdf, Usd
@@ -76,10 +80,44 @@ def _value(mx: Any, value: Any, kind: str, folder: str) -> Any:
     return value
 
 
+#: How deep custom nodes may nest in their implementations (a nodedef implemented by itself).
+_MAX_NESTING = 32
+
+
+@dataclass(frozen=True)
+class _Call:
+    """A custom node expanded into its implementation graph.
+
+    The graph's ``interfacename`` inputs read ``node``'s inputs, which belong to the graph
+    ``prefix`` names (itself inside ``outer``).
+    """
+
+    node: Any
+    nodedef: Any
+    prefix: str
+    outer: _Call | None
+    depth: int
+
+
 def _translate(
-    mx: Any, doc: Any, name: str, folder: str, layer: Sdf.Layer, at: Sdf.Path, *, define: bool
+    mx: Any,
+    doc: Any,
+    name: str,
+    folder: str,
+    layer: Sdf.Layer,
+    at: Sdf.Path,
+    *,
+    define: bool,
+    stdlib: Any = None,
 ) -> None:
-    """Author material ``name`` of ``doc`` at ``at`` in ``layer`` (see the module doc)."""
+    """Author material ``name`` of ``doc`` at ``at`` in ``layer`` (see the module doc).
+
+    A node whose nodedef is not the standard library's (``stdlib``) and is implemented by a
+    nodegraph is replaced by that graph (MaterialX's ``flattenSubgraphs``, done here so a
+    namespaced node's connections survive): its nodes are authored as
+    ``<node>_<graph node>``, the graph's ``interfacename`` inputs read the node's own inputs
+    (else the nodedef's defaults).
+    """
     material = doc.getChild(name)
     if material is None or material.getCategory() != "surfacematerial":
         raise ValueError(f"it has no surfacematerial named {name}")
@@ -89,7 +127,32 @@ def _translate(
         root.typeName = "Material"
     done: dict[str, Sdf.Path] = {}
 
-    def shader(node: Any, prefix: str) -> Sdf.Path:
+    def implementation(node: Any) -> tuple[Any, Any] | None:
+        """(nodedef, implementation graph) of a custom node built as a nodegraph."""
+        nodedef = node.getNodeDef()
+        if nodedef is None or stdlib is None or stdlib.getNodeDef(nodedef.getName()) is not None:
+            return None
+        graph = nodedef.getImplementation()
+        return (nodedef, graph) if isinstance(graph, mx.NodeGraph) else None
+
+    def shader(node: Any, prefix: str, call: _Call | None, output: str = "") -> Sdf.Path:
+        custom = implementation(node)
+        if custom is not None:
+            nodedef, graph = custom
+            depth = call.depth + 1 if call else 1
+            if depth > _MAX_NESTING:
+                raise ValueError(
+                    f"custom nodes nest deeper than {_MAX_NESTING} at {node.getName()}"
+                )
+            out = graph.getOutput(output) if output else None
+            out = out or (graph.getOutputs() or [None])[0]
+            upstream = out.getConnectedNode() if out is not None else None
+            if upstream is None:
+                raise ValueError(
+                    f"{graph.getName()}, implementing {nodedef.getName()}, has no node output"
+                )
+            inner = _Call(node, nodedef, prefix, call, depth)
+            return shader(upstream, f"{prefix}{node.getName()}_", inner)
         key = prefix + node.getName()
         if key in done:
             return done[key]
@@ -109,33 +172,50 @@ def _translate(
             a = Sdf.AttributeSpec(
                 spec, f"inputs:{inp.getName()}", _TYPES.get(kind, Sdf.ValueTypeNames.Token)
             )
-            upstream = inp.getConnectedNode()
-            graph_name = inp.getNodeGraphString()
-            if upstream is None and graph_name:
-                graph = doc.getNodeGraph(graph_name)
-                out = graph.getOutput(inp.getOutputString() or "out") if graph else None
-                upstream = out.getConnectedNode() if out is not None else None
-                if upstream is not None:
-                    source = shader(upstream, graph_name + "_")
-                    a.connectionPathList.Append(source.AppendProperty("outputs:out"))
-                    continue
-            if upstream is not None:
-                source = shader(upstream, prefix)
-                a.connectionPathList.Append(source.AppendProperty("outputs:out"))
-                continue
-            value = inp.getResolvedValueString() if kind == "filename" else inp.getValue()
-            if value is not None:
-                a.default = _value(mx, value, kind, folder)
-            if inp.getColorSpace():
-                a.SetInfo("colorSpace", inp.getColorSpace())
+            author(a, inp, kind, prefix, call)
         return path
+
+    def author(a: Sdf.AttributeSpec, inp: Any, kind: str, prefix: str, call: _Call | None) -> None:
+        """``inp``'s connection or value on ``a``."""
+        space = inp.getColorSpace()
+        iface = inp.getInterfaceName()
+        if iface and call is not None:
+            # An implementation graph's interface input: the custom node's own input, else the
+            # nodedef's default; the graph's colour space unless the node's input has its own.
+            outer = call.node.getInput(iface)
+            if outer is not None:
+                if space and not outer.getColorSpace():
+                    a.SetInfo("colorSpace", space)
+                author(a, outer, kind, call.prefix, call.outer)
+                return
+            inp = call.nodedef.getActiveInput(iface) or inp
+            space = space or inp.getColorSpace()
+        upstream = inp.getConnectedNode()
+        graph_name = inp.getNodeGraphString()
+        if upstream is None and graph_name:
+            graph = doc.getNodeGraph(graph_name)
+            out = graph.getOutput(inp.getOutputString() or "out") if graph else None
+            upstream = out.getConnectedNode() if out is not None else None
+            if upstream is not None:
+                source = shader(upstream, graph_name + "_", None)
+                a.connectionPathList.Append(source.AppendProperty("outputs:out"))
+                return
+        if upstream is not None:
+            source = shader(upstream, prefix, call, inp.getOutputString())
+            a.connectionPathList.Append(source.AppendProperty("outputs:out"))
+            return
+        value = inp.getResolvedValueString() if kind == "filename" else inp.getValue()
+        if value is not None:
+            a.default = _value(mx, value, kind, folder)
+        if space:
+            a.SetInfo("colorSpace", space)
 
     surface_input = material.getInput("surfaceshader")
     surface = surface_input.getConnectedNode() if surface_input is not None else None
     if surface is None:
         raise ValueError(f"material {name} has no surfaceshader")
     out = Sdf.AttributeSpec(root, "outputs:mtlx:surface", Sdf.ValueTypeNames.Token)
-    out.connectionPathList.Append(shader(surface, "").AppendProperty("outputs:out"))
+    out.connectionPathList.Append(shader(surface, "", None).AppendProperty("outputs:out"))
 
 
 def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
@@ -166,21 +246,23 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
         return problems
     layer = Sdf.Layer.CreateAnonymous("mipray-mtlx.usda")
     docs: dict[str, Any] = {}
+    stdlib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), stdlib)
     for prim, refs in targets:
         for file, name, folder, nested in refs:
             try:
                 if file not in docs:
                     doc = mx.createDocument()
                     mx.readFromXmlFile(doc, file)
-                    stdlib = mx.createDocument()
-                    mx.loadLibraries(
-                        mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), stdlib
-                    )
+                    for custom in _plugin_documents(mx):
+                        doc.importLibrary(custom)
                     doc.importLibrary(stdlib)
                     docs[file] = doc
                 doc = docs[file]
                 if name:
-                    _translate(mx, doc, name, folder, layer, prim.GetPath(), define=False)
+                    _translate(
+                        mx, doc, name, folder, layer, prim.GetPath(), define=False, stdlib=stdlib
+                    )
                 elif nested:
                     scope = Sdf.CreatePrimInLayer(layer, prim.GetPath().AppendChild("Materials"))
                     scope.specifier, scope.typeName = Sdf.SpecifierDef, "Scope"
@@ -189,7 +271,9 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
                 if not name:
                     for node in doc.getMaterialNodes():
                         at = scope.path.AppendChild(node.getName())
-                        _translate(mx, doc, node.getName(), folder, layer, at, define=True)
+                        _translate(
+                            mx, doc, node.getName(), folder, layer, at, define=True, stdlib=stdlib
+                        )
                 LOADED.add(file)
             except Exception as exc:
                 text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -203,6 +287,37 @@ def load_mtlx_references(stage: Usd.Stage) -> list[tuple[str, str]]:
     return problems
 
 
+def _plugin_documents(mx: Any) -> list[Any]:
+    """The ``.mtlx`` files of the folders in ``PXR_MTLX_PLUGIN_SEARCH_PATHS``.
+
+    usdMtlx (and so Storm) finds custom nodedefs there; one that cannot be read is warned about
+    once.
+    """
+    docs = []
+    for folder in os.environ.get("PXR_MTLX_PLUGIN_SEARCH_PATHS", "").split(os.pathsep):
+        if not folder or not os.path.isdir(folder):
+            continue
+        for base, _, files in sorted(os.walk(folder)):
+            for f in sorted(files):
+                if not f.lower().endswith(".mtlx"):
+                    continue
+                path = os.path.join(base, f)
+                doc = mx.createDocument()
+                try:
+                    mx.readFromXmlFile(doc, path)
+                except Exception as exc:
+                    if path not in _UNREADABLE:
+                        _UNREADABLE.add(path)
+                        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                        _log.warning(
+                            "mipray: PXR_MTLX_PLUGIN_SEARCH_PATHS: cannot read %s: %s", path, text
+                        )
+                    continue
+                docs.append(doc)
+    return docs
+
+
+_UNREADABLE: set[str] = set()
 _keep_alive: dict[int, list[Sdf.Layer]] = {}
 #: The .mtlx documents composed here: usd-core's composition errors about them are not news.
 LOADED: set[str] = set()
