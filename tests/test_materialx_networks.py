@@ -33,6 +33,7 @@ TYPES = {
     "float": F,
     "vector2": F2,
     "integer": Sdf.ValueTypeNames.Int,
+    "vector4": Sdf.ValueTypeNames.Float4,
 }
 WIDTH = 64
 HALF = 1.6  # the quad's half size; the camera sees ±2 at its distance (10)
@@ -677,19 +678,55 @@ def test_geompropvalue_reads_a_primvar_of_any_type_into_the_nodes_lanes(native, 
     assert_albedo(r.albedo, np.multiply(tint, direction[:3]) * gain, r.on, atol=1e-5)
 
 
-def test_a_geompropvalue_of_a_primvar_varying_over_the_mesh_is_its_mean_named_once(
+def test_a_geompropvalue_of_a_primvar_varying_over_a_mesh_is_interpolated_as_authored(
+    native, caplog
+) -> None:
+    # tint (color3f, vertex) · the fourth component of dir (float4, vertex, read as a vector4
+    # and extracted): each bilinear over the quad's corners, as a subdivisionScheme none quad
+    # interpolates a vertex primvar, and so their product per pixel.
+    stage = new_stage()
+    tint = _geomprop(stage, "Tint", "color3", "tint")
+    w = node(stage, "W", "ND_extract_vector4", "float", index=("integer", 3))
+    w.CreateInput("in", Sdf.ValueTypeNames.Float4).ConnectToSource(
+        _geomprop(stage, "Dir", "vector4", "dir").ConnectableAPI(), "out"
+    )
+    lambertian(stage, node(stage, "Mul", "ND_multiply_color3FA", "color3", in1=tint, in2=w))
+    corners = np.array([(0.0, 0.25, 1.0), (0.5, 0.25, 1.0), (1.0, 0.25, 0.0), (0.5, 0.75, 0.0)])
+    weights = np.array([0.25, 0.5, 1.0, 0.75])
+    primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Quad"))
+    primvars.CreatePrimvar("tint", Sdf.ValueTypeNames.Color3fArray, "vertex").Set(
+        [Gf.Vec3f(*c) for c in corners]
+    )
+    primvars.CreatePrimvar("dir", Sdf.ValueTypeNames.Float4Array, "vertex").Set(
+        [Gf.Vec4f(9.0, 9.0, 9.0, x) for x in weights]
+    )
+    with caplog.at_level(logging.WARNING):
+        r = render(stage)
+    assert not caplog.records, caplog.text
+    s, t = r.st[..., :1], r.st[..., 1:]
+    # Corners (0, 0), (1, 0), (1, 1), (0, 1), in the quad's point order.
+    bilinear = [(1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t]
+    want_tint = sum(b * c for b, c in zip(bilinear, corners, strict=True))
+    want_w = sum(b * x for b, x in zip(bilinear, weights, strict=True))
+    assert_albedo(r.albedo, want_tint * want_w, r.on, atol=2e-3)
+
+
+def test_a_geompropvalue_of_a_primvar_varying_over_an_implicit_prim_is_its_mean_named_once(
     fake, caplog
 ) -> None:
     stage = new_stage()
     lambertian(stage, _geomprop(stage, "Tint", "color3", "tint"))
+    stage.RemovePrim("/World/Quad")
+    ball = UsdGeom.Sphere.Define(stage, "/World/Ball")
+    bind(ball.GetPrim(), UsdShade.Material.Get(stage, "/Looks/M"))
     colours = [(0.0, 0.25, 1.0), (0.5, 0.25, 1.0), (1.0, 0.25, 0.0), (0.5, 0.25, 0.0)]
-    primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Quad"))
+    primvars = UsdGeom.PrimvarsAPI(ball.GetPrim())
     primvars.CreatePrimvar("tint", Sdf.ValueTypeNames.Color3fArray, "vertex").Set(colours)
     with caplog.at_level(logging.WARNING, logger="mipray"):
         UsdSceneDelegate(stage, fake).sync()
-    material = fake.meshes()["/World/Quad"]["material"]
+    material = fake.meshes()["/World/Ball"]["material"]
     np.testing.assert_allclose(material["diffuseColor"], np.mean(colours, axis=0))
-    named = _warnings(caplog, "primvars:tint, which varies over /World/Quad")
+    named = _warnings(caplog, "primvars:tint, which varies over /World/Ball")
     assert len(named) == 1 and "/Looks/M/Tint" in named[0], caplog.text
 
 

@@ -98,6 +98,9 @@ pub struct NetworkTextureInput {
 pub struct NetworkInput {
     pub ops: Vec<mipray::material::network::Op>,
     pub lookups: Vec<NetworkTextureInput>,
+    /// The primvars its `primvar` ops read (channels unset: the mesh's
+    /// [`crate::mesh::Channels::named`] places them).
+    pub primvars: Vec<mipray::material::network::NetworkPrimvar>,
 }
 
 /// A mesh's UsdPreviewSurface as the scene delegate read it: every constant input as authored

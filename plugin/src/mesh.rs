@@ -54,6 +54,9 @@ pub struct MeshData {
     /// mesh without a material, a `UsdPrimvarReader_*`): each primvar as the channels of
     /// [`Primvar2::split`] (one for a float, two for a colour).
     pub primvar_inputs: Vec<(Input, Vec<Primvar2>)>,
+    /// Primvars node networks read by name (MaterialX `geompropvalue` of a primvar varying
+    /// over the mesh), each as the channels of [`Primvar2::split`] (one or two).
+    pub network_primvars: Vec<(String, Vec<Primvar2>)>,
     /// `displacement` from a texture (replaces the procedural displacement).
     pub displacement_texture: Option<TextureInput>,
     /// Set for gprims other than meshes, which are intersected exactly: their shape replaces
@@ -71,6 +74,18 @@ pub struct Channels {
     pub st: usize,
     pub normals: Option<[usize; 2]>,
     pub inputs: Vec<(Input, PrimvarInput)>,
+    /// [`MeshData::network_primvars`]' channels, by name.
+    pub named: Vec<(String, [usize; 2])>,
+}
+
+impl Channels {
+    /// Sets each network primvar's channels: the mesh's primvar of that name, else none (the
+    /// primvar's fallback is read).
+    pub fn place(&self, primvars: &mut [mipray::material::network::NetworkPrimvar]) {
+        for p in primvars {
+            p.channels = self.named.iter().find(|(n, _)| *n == p.name).map(|(_, c)| *c);
+        }
+    }
 }
 
 impl MeshData {
@@ -82,6 +97,9 @@ impl MeshData {
             list.extend(self.normals.iter().cloned());
         }
         for (_, parts) in &self.primvar_inputs {
+            list.extend(parts.iter().take(2).cloned());
+        }
+        for (_, parts) in &self.network_primvars {
             list.extend(parts.iter().take(2).cloned());
         }
         list
@@ -105,6 +123,14 @@ impl MeshData {
                 continue;
             }
             channels.inputs.push((*input, PrimvarInput { channels: [next, next + n - 1] }));
+            next += n;
+        }
+        for (name, parts) in &self.network_primvars {
+            let n = parts.len().min(2);
+            if n == 0 {
+                continue;
+            }
+            channels.named.push((name.clone(), [next, next + n - 1]));
             next += n;
         }
         channels
@@ -138,7 +164,12 @@ impl MeshData {
         if let Some(table) = &self.face_materials {
             table.validate(self.face_count())?;
         }
-        let channels = self.st.iter().chain(&self.normals).chain(self.primvar_inputs.iter().flat_map(|(_, c)| c));
+        let channels = self
+            .st
+            .iter()
+            .chain(&self.normals)
+            .chain(self.primvar_inputs.iter().flat_map(|(_, c)| c))
+            .chain(self.network_primvars.iter().flat_map(|(_, c)| c));
         for c in channels {
             c.face_varying_indices(&self.topology, self.points.len()).map_err(|e| e.to_string())?;
         }
@@ -308,6 +339,7 @@ impl Default for MeshData {
             st: None,
             normals: Vec::new(),
             primvar_inputs: Vec::new(),
+            network_primvars: Vec::new(),
             displacement_texture: None,
             gprim: None,
             light: None,
@@ -474,6 +506,7 @@ impl MeshPrim {
             || self.data.st != new.st
             || self.data.normals != new.normals
             || self.data.primvar_inputs != new.primvar_inputs
+            || self.data.network_primvars != new.network_primvars
             || self.data.gprim != new.gprim
         {
             d = d | DirtyBits::TOPOLOGY;

@@ -683,7 +683,7 @@ impl RenderDelegate {
                 };
             }
         }
-        InputNetwork::new(ops, lookups)
+        InputNetwork::with_primvars(ops, lookups, net.primvars.clone())
             .map_err(|e| {
                 self.warn_once(
                     format!("{path} network {}", input.usd_name()),
@@ -774,6 +774,7 @@ impl RenderDelegate {
         }
         for (_, n) in &mut material.networks {
             n.st_channel = channels.st;
+            channels.place(&mut n.primvars);
         }
         material.primvars = channels.inputs.clone();
         let mat = scene.add_material(material);
@@ -791,6 +792,7 @@ impl RenderDelegate {
                     }
                     for (_, n) in &mut material.networks {
                         n.st_channel = channels.st;
+                        channels.place(&mut n.primvars);
                     }
                     scene.add_material(material) as u32
                 })

@@ -131,14 +131,20 @@ fn matrices(path: &str, m: &PyReadonlyArray3<'_, f64>) -> PyResult<Vec<Mat4>> {
     Ok(out)
 }
 
-/// The normals and primvar-fed inputs of `set_mesh`'s `primvars`: `{"normals" or a
-/// UsdPreviewSurface input name: {"values": (N, C) float32, C ≤ 3, "indices": int32 or None,
-/// "interpolation": USD token}}` (checked against the topology by the delegate's `set_mesh`).
-/// An input's primvar shades the faces of the mesh's own material.
+/// The normals, primvar-fed inputs and network primvars of `set_mesh`'s `primvars`:
+/// `{"normals", a UsdPreviewSurface input name or "geomprop:<primvar>": {"values": (N, C)
+/// float32, C ≤ 3 (≤ 4 for a geomprop), "indices": int32 or None, "interpolation": USD
+/// token}}` (checked against the topology by the delegate's `set_mesh`). An input's primvar
+/// shades the faces of the mesh's own material; a geomprop is read by the networks that name
+/// it (`"primvars"` of a network).
 #[allow(clippy::type_complexity)]
-fn read_primvars(path: &str, d: &Bound<'_, PyDict>) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>)> {
+fn read_primvars(
+    path: &str,
+    d: &Bound<'_, PyDict>,
+) -> PyResult<(Vec<Primvar2>, Vec<(Input, Vec<Primvar2>)>, Vec<(String, Vec<Primvar2>)>)> {
     let mut normals = Vec::new();
     let mut inputs = Vec::new();
+    let mut named = Vec::new();
     for (key, value) in d.iter() {
         let role: String = key.extract()?;
         let entry = value.cast::<PyDict>().map_err(|_| value_error(path, format!("primvars['{role}'] must be a dict")))?;
@@ -161,8 +167,10 @@ fn read_primvars(path: &str, d: &Bound<'_, PyDict>) -> PyResult<(Vec<Primvar2>, 
             .ok_or_else(|| value_error(path, format!("primvars:{role} interpolation '{token}' is not a USD interpolation")))?;
         let a = values.as_array();
         let components = a.ncols();
+        let geomprop = role.strip_prefix("geomprop:");
         let wanted = match role.as_str() {
             "normals" => 3,
+            _ if geomprop.is_some() => a.ncols().clamp(1, 4),
             name => match input_from_usd(name) {
                 Some(Input::DiffuseColor | Input::SpecularColor | Input::EmissiveColor) => 3,
                 Some(Input::Normal) | None => {
@@ -174,15 +182,23 @@ fn read_primvars(path: &str, d: &Bound<'_, PyDict>) -> PyResult<(Vec<Primvar2>, 
         if components != wanted {
             return Err(value_error(path, format!("primvars:{role} has {components} components, expected {wanted}")));
         }
-        let rows: Vec<[f32; 3]> =
-            a.rows().into_iter().map(|r| [r[0], r.get(1).copied().unwrap_or(0.0), r.get(2).copied().unwrap_or(0.0)]).collect();
-        let channels = Primvar2::split(&role, interpolation, &rows, components, &vec_i32(indices));
-        match role.as_str() {
-            "normals" => normals = channels,
-            name => inputs.push((input_from_usd(name).expect("checked above"), channels)),
+        let lane = |r: &numpy::ndarray::ArrayView1<'_, f32>, k: usize| r.get(k).copied().unwrap_or(0.0);
+        let rows: Vec<[f32; 3]> = a.rows().into_iter().map(|r| [lane(&r, 0), lane(&r, 1), lane(&r, 2)]).collect();
+        let indices = vec_i32(indices);
+        let mut channels = Primvar2::split(&role, interpolation, &rows, components.min(3), &indices);
+        if components == 4 {
+            // The second channel holds components 2 and 3.
+            let rows: Vec<[f32; 3]> = a.rows().into_iter().map(|r| [lane(&r, 2), lane(&r, 3), 0.0]).collect();
+            channels.truncate(1);
+            channels.extend(Primvar2::split(&role, interpolation, &rows, 2, &indices));
+        }
+        match (role.as_str(), geomprop) {
+            ("normals", _) => normals = channels,
+            (_, Some(name)) => named.push((name.to_string(), channels)),
+            (name, None) => inputs.push((input_from_usd(name).expect("checked above"), channels)),
         }
     }
-    Ok((normals, inputs))
+    Ok((normals, inputs, named))
 }
 
 fn vec_i32(a: Option<PyReadonlyArray1<'_, i32>>) -> Vec<i32> {
@@ -295,8 +311,8 @@ impl RenderDelegate {
                 })
             }
         };
-        let (normals, primvar_inputs) = match primvars {
-            None => (Vec::new(), Vec::new()),
+        let (normals, primvar_inputs, network_primvars) = match primvars {
+            None => (Vec::new(), Vec::new(), Vec::new()),
             Some(d) => read_primvars(path, d)?,
         };
         let displacement_texture = displacement_texture.map(|d| texture_input(path, "displacement", d)).transpose()?;
@@ -318,6 +334,7 @@ impl RenderDelegate {
                 st,
                 normals,
                 primvar_inputs,
+                network_primvars,
                 displacement_texture,
                 gprim,
                 light,
@@ -796,8 +813,41 @@ fn network_input(path: &str, input: &str, d: &Bound<'_, PyDict>) -> PyResult<Net
             lookups.push(NetworkTextureInput { texture: texture_input(path, input, tex)?, channels, st_transform });
         }
     }
+    let mut primvars = Vec::new();
+    if let Some(list) = d.get_item("primvars")? {
+        for item in list.try_iter()? {
+            let item = item?;
+            let p = item.cast::<PyDict>().map_err(|_| bad("a primvar must be a dict".into()))?;
+            let name: String = p
+                .get_item("name")?
+                .ok_or_else(|| bad("a primvar has no name".into()))?
+                .extract()
+                .map_err(|_| bad("a primvar's name must be a string".into()))?;
+            let components: u8 = match p.get_item("components")? {
+                None => 1,
+                Some(v) => v.extract().map_err(|_| bad("primvar components must be 1–4".into()))?,
+            };
+            if !(1..=4).contains(&components) {
+                return Err(bad(format!("primvar {name} components {components} is not 1–4")));
+            }
+            let fallback: [f32; 4] = match p.get_item("fallback")? {
+                None => [0.0; 4],
+                Some(v) => v.extract().map_err(|_| bad(format!("primvar {name} fallback must be 4 floats")))?,
+            };
+            if !fallback.iter().all(|x| x.is_finite()) {
+                return Err(bad(format!("primvar {name} fallback {fallback:?} is not finite")));
+            }
+            primvars.push(mipray::material::network::NetworkPrimvar {
+                name,
+                components,
+                channels: None,
+                fallback: glam::Vec4::from(fallback),
+            });
+        }
+    }
     mipray::material::InputNetwork::check(&ops, lookups.len()).map_err(bad)?;
-    Ok(NetworkInput { ops, lookups })
+    mipray::material::InputNetwork::check_primvars(&ops, primvars.len()).map_err(bad)?;
+    Ok(NetworkInput { ops, lookups, primvars })
 }
 
 /// A UsdUVTexture description from Python: `{"file", "scale", "bias", "fallback" (4 floats

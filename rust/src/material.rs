@@ -309,7 +309,8 @@ impl Material {
         if let Some((_, net)) = self.networks.iter().rev().find(|(i, _)| *i == Input::Opacity) {
             let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
             let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
-            opacity = unit_input(net.eval(site.st(net.st_channel).map(|v| [v[0], v[1], v[2]])).x);
+            let read = |c: usize| surface.face_varying(c, hit.patch as usize, hit.u, hit.v).map(|(v, _, _)| v);
+            opacity = unit_input(net.eval_with(site.st(net.st_channel).map(|v| [v[0], v[1], v[2]]), &read).x);
         }
         opacity < self.surface.opacity_threshold
     }
@@ -436,7 +437,8 @@ impl Material {
         }
         for (input, net) in &self.networks {
             let st = site.st(net.st_channel);
-            let v = net.eval(st.map(|v| [v[0], v[1], v[2]]));
+            let read = |c: usize| surface.face_varying(c, hit.patch as usize, hit.u, hit.v).map(|(v, _, _)| v);
+            let v = net.eval_with(st.map(|v| [v[0], v[1], v[2]]), &read);
             match input {
                 // MaterialX's normalmap works in the frame of the surface's own texcoord (its
                 // `tangent` input defaults to Tworld), whatever place2d does to the lookup's.

@@ -122,7 +122,20 @@ class _Net:
     width: int
 
 
-_Value = tuple[float, ...] | _Tex | _Coord | _Net
+@dataclass(frozen=True)
+class _Var:
+    """Primvar ``varname`` of the mesh, varying over it, read per shading point.
+
+    ``components`` (1–4) floats, one splatted, else the components and zeros; ``fallback``
+    (four lanes) where the mesh lacks it.
+    """
+
+    varname: str
+    components: int
+    fallback: tuple[float, float, float, float]
+
+
+_Value = tuple[float, ...] | _Tex | _Coord | _Net | _Var
 
 
 class _Unsupported(Exception):
@@ -161,6 +174,8 @@ def _width(v: _Value) -> int:
         return v.channels
     if isinstance(v, _Coord):
         return 2
+    if isinstance(v, _Var):
+        return v.components
     return v.width
 
 
@@ -500,6 +515,12 @@ class _Eval:
         if not rows.size:
             return self.arg(node, node_id, "default")
         if len(rows) > 1 and not (rows == rows[0]).all():
+            if self.prim.IsA(UsdGeom.Mesh) and not self.surface_st and rows.shape[1] <= 4:
+                # Read per shading point, interpolated as authored (the mesh's primvar channels).
+                default = _floats(self.arg(node, node_id, "default")) or (0.0,)
+                fallback = _four(default, 0.0) if len(default) > 1 else (default[0],) * 4
+                var = _Var(varname, rows.shape[1], fallback)
+                return self.convert(var, rows.shape[1], width)
             self.warnings.append(
                 f"{self.material}: {node.GetPath()} ({node_id}) reads primvars:{varname}, which "
                 f"varies over {self.prim.GetPath()}; mipray uses its mean"
@@ -683,6 +704,8 @@ class _Eval:
         pad = tuple(1.0 if k == 3 else 0.0 for k in range(n_in, n_out))
         if isinstance(v, tuple):
             return v[:n_out] + pad
+        if n_out < n_in and isinstance(v, _Var):
+            return v  # the lanes past the type's are not read
         if n_out < n_in:
             return (
                 replace(v, channels=n_out) if isinstance(v, _Tex) else _Net(("pass",), (v,), n_out)
@@ -724,10 +747,25 @@ def _fold(op: tuple[Any, ...], args: tuple[tuple[float, ...], ...]) -> tuple[flo
 
 
 def _lower(
-    v: _Value, ops: list[tuple[Any, ...]], lookups: list[dict[str, Any]], st: set[str]
+    v: _Value,
+    ops: list[tuple[Any, ...]],
+    lookups: list[dict[str, Any]],
+    st: set[str],
+    primvars: list[dict[str, Any]],
 ) -> None:
-    """Appends the core's ops computing ``v``: its lookups to ``lookups``, primvars to ``st``."""
-    if isinstance(v, tuple):
+    """Appends the core's ops computing ``v``.
+
+    Its lookups go to ``lookups``, its texcoords' primvars to ``st``, the primvars it reads as
+    values to ``primvars`` (the network's ``"primvars"``).
+    """
+    if isinstance(v, _Var):
+        names = [p["name"] for p in primvars]
+        if v.varname not in names:
+            entry = {"name": v.varname, "components": v.components, "fallback": list(v.fallback)}
+            primvars.append(entry)
+            names.append(v.varname)
+        ops.append(("primvar", names.index(v.varname)))
+    elif isinstance(v, tuple):
         lanes = _four(v, 0.0) if len(v) > 1 else (v[0],) * 4
         # Folded constants may be infinite (1/0) or NaN (0/0); the core takes finite numbers.
         ops.append(
@@ -739,27 +777,27 @@ def _lower(
         lookups.append(dict(v.desc, channels=v.channels, st_transform=list(v.transform)))
         ops.append(("texture", len(lookups) - 1))
         if v.scale != (1.0,) * 4:
-            _lower(v.scale, ops, lookups, st)
+            _lower(v.scale, ops, lookups, st, primvars)
             ops.append(("multiply",))
         if v.bias != (0.0,) * 4:
-            _lower(v.bias, ops, lookups, st)
+            _lower(v.bias, ops, lookups, st, primvars)
             ops.append(("add",))
     elif isinstance(v, _Coord):
         if v.varname:
             st.add(v.varname)
         ops.append(("coord", *v.transform))
     elif v.op[0] == "combine":
-        _lower(v.args[0], ops, lookups, st)
+        _lower(v.args[0], ops, lookups, st, primvars)
         k = _width(v.args[0])
         for part in v.args[1:]:
             if k >= 4:
                 break
-            _lower(part, ops, lookups, st)
+            _lower(part, ops, lookups, st, primvars)
             ops.append(("combine", k))
             k += _width(part)
     else:
         for a in v.args:
-            _lower(a, ops, lookups, st)
+            _lower(a, ops, lookups, st, primvars)
         if v.op[0] != "pass":
             ops.append(v.op)
 
@@ -851,7 +889,7 @@ def _set(
         desc["scale"], desc["bias"] = list(value.scale), list(value.bias)
         out.textures.append((name, desc, value.varname))
         return
-    if isinstance(value, _Tex | _Net):
+    if isinstance(value, _Tex | _Net | _Var):
         if _depth(value) > MAX_STACK:
             what = f"{name} network needing more than {MAX_STACK} values at once"
             out.unsupported.append((str(out.args["name"]), what))
@@ -859,8 +897,12 @@ def _set(
         ops: list[tuple[Any, ...]] = []
         lookups: list[dict[str, Any]] = []
         st: set[str] = set()
-        _lower(value, ops, lookups, st)
-        out.networks.append((name, {"ops": ops, "lookups": lookups}, sorted(st)))
+        primvars: list[dict[str, Any]] = []
+        _lower(value, ops, lookups, st, primvars)
+        net: dict[str, Any] = {"ops": ops, "lookups": lookups}
+        if primvars:
+            net["primvars"] = primvars
+        out.networks.append((name, net, sorted(st)))
         return
     if normal:
         return

@@ -27,7 +27,8 @@ Read from the ``UsdPreviewSurface`` of the bound material (``full`` purpose, as
   reading different primvars (or transforming them differently) get the first
   one's, with one warning.
 - ``primvars``: ``{input name: {"values", "indices", "interpolation"}}`` for
-  inputs fed by a ``UsdPrimvarReader_*`` whose primvar varies over the mesh.
+  inputs fed by a ``UsdPrimvarReader_*`` whose primvar varies over the mesh, and
+  ``geomprop:<name>`` for a MaterialX ``geompropvalue`` of one in a network.
 - ``displacement_texture``: a ``UsdUVTexture`` feeding ``displacement``;
   ``displacement``: the built-in procedural displacement, from the mesh's
   ``mipray:displacement:amplitude``, ``frequency``, ``octaves`` and ``gain``;
@@ -59,7 +60,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 from ..errors import PrimError
 from .assets import UDIM_TOKEN, local_file, udim_tiles
-from .materialx import mtlx_surface, read_mtlx_surface
+from .materialx import MtlxRead, mtlx_surface, read_mtlx_surface
 from .primvars import primvar_argument, read_display_primvar
 from .warn import warn_once
 
@@ -509,13 +510,42 @@ def _surface_material(
             for name, _, names in read.networks
             for varname in names
         ]
-        return _Material(read.args, textures, {})
+        return _Material(read.args, textures, _network_primvars(prim, read, time))
     if surface:
         _warn_once(
             f"{material_path}: surface shader {surface.GetPath()} ({surface.GetShaderId()}) is "
             "not a UsdPreviewSurface; rendering the mesh's display color"
         )
     return None
+
+
+def _network_primvars(
+    prim: Usd.Prim, read: MtlxRead, time: Usd.TimeCode
+) -> dict[str, dict[str, Any]]:
+    """The ``set_mesh`` ``primvars`` entries (``geomprop:<name>``) ``read``'s networks read.
+
+    Each checked against the mesh; a bad one is warned about once and its node's ``default``
+    is read instead.
+    """
+    out: dict[str, dict[str, Any]] = {}
+    mesh = UsdGeom.Mesh(prim)
+    for _, net, _ in read.networks:
+        for p in net.get("primvars", ()):
+            key = f"geomprop:{p['name']}"
+            if key in out:
+                continue
+            counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], dtype=np.int32)
+            n_points = len(mesh.GetPointsAttr().Get(time) or [])
+            try:
+                primvar = read_display_primvar(
+                    mesh, p["name"], time, counts, n_points, p["components"]
+                )
+            except PrimError as exc:
+                _warn_once(f"{exc}; {read.args['name']} reads its geompropvalue default there")
+                continue
+            if primvar is not None:
+                out[key] = primvar_argument(primvar)
+    return out
 
 
 #: A materialBind GeomSubset and its (checked) face indices.

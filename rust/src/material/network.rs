@@ -113,6 +113,43 @@ impl NetworkLookup {
     }
 }
 
+/// A primvar of the surface a network reads (MaterialX `geompropvalue` of a primvar varying
+/// over a mesh): `components` (1–4) floats from the surface's 2-float primvar channels
+/// `channels` (the first two from `channels[0]`, the rest from `channels[1]`), set by whoever
+/// knows the mesh; `None` (the mesh lacks it) reads `fallback`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetworkPrimvar {
+    /// The primvar's name, for whoever sets `channels`.
+    pub name: String,
+    pub components: u8,
+    pub channels: Option<[usize; 2]>,
+    /// MaterialX `default`.
+    pub fallback: Vec4,
+}
+
+impl NetworkPrimvar {
+    /// The value as four lanes: one component splatted, else the components and zeros.
+    /// `read(channel)`: the channel's two floats at the shading point.
+    fn eval(&self, read: &dyn Fn(usize) -> Option<[f32; 2]>) -> Vec4 {
+        let Some([c0, c1]) = self.channels else { return self.fallback };
+        let Some(a) = read(c0) else { return self.fallback };
+        let mut v = [a[0], a[1], 0.0, 0.0];
+        if self.components > 2 {
+            let Some(b) = read(c1) else { return self.fallback };
+            v[2] = b[0];
+            v[3] = b[1];
+        }
+        let n = (self.components as usize).clamp(1, 4);
+        if n == 1 {
+            return Vec4::splat(v[0]);
+        }
+        for x in &mut v[n..] {
+            *x = 0.0;
+        }
+        Vec4::from(v)
+    }
+}
+
 /// One step of an [`InputNetwork`]. Binary operators pop `in2` then `in1` and push
 /// `op(in1, in2)`, lane by lane.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -121,6 +158,8 @@ pub enum Op {
     Const([f32; 4]),
     /// Pushes lookup `i` of [`InputNetwork::lookups`].
     Texture(u16),
+    /// Pushes primvar `i` of [`InputNetwork::primvars`].
+    Primvar(u16),
     /// Pushes the surface's `st` under a transform, as (s, t, 0, 0) (a `texcoord` feeding
     /// arithmetic, a `checkerboard`); (0, 0, 0, 0) without `st`, unless the transform is
     /// constant.
@@ -220,7 +259,7 @@ impl Op {
         let want = match name {
             "const" | "swizzle" => 4,
             "coord" => 6,
-            "texture" | "dotproduct" | "normalize" | "magnitude" | "combine" => 1,
+            "texture" | "primvar" | "dotproduct" | "normalize" | "magnitude" | "combine" => 1,
             _ => 0,
         };
         if args.len() != want {
@@ -240,6 +279,7 @@ impl Op {
         Ok(match name {
             "const" => Op::Const([args[0], args[1], args[2], args[3]]),
             "texture" => Op::Texture(whole(args[0], 0, u16::MAX)?),
+            "primvar" => Op::Primvar(whole(args[0], 0, u16::MAX)?),
             "coord" => Op::Coord(StTransform([args[0], args[1], args[2], args[3], args[4], args[5]])),
             "add" => Op::Add,
             "subtract" => Op::Subtract,
@@ -278,7 +318,7 @@ impl Op {
     /// (values popped, values pushed).
     const fn arity(self) -> (usize, usize) {
         match self {
-            Op::Const(_) | Op::Texture(_) | Op::Coord(_) => (0, 1),
+            Op::Const(_) | Op::Texture(_) | Op::Primvar(_) | Op::Coord(_) => (0, 1),
             Op::Mix | Op::Clamp => (3, 1),
             Op::IfGreater | Op::IfGreaterEq | Op::IfEqual => (4, 1),
             Op::Abs | Op::Floor | Op::Ceil | Op::Unary(_) | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => (1, 1),
@@ -293,6 +333,8 @@ impl Op {
 pub struct InputNetwork {
     ops: Vec<Op>,
     pub lookups: Vec<NetworkLookup>,
+    /// The primvars [`Op::Primvar`] reads.
+    pub primvars: Vec<NetworkPrimvar>,
     /// The surface's 2-float primvar channel holding `st` (set by whoever knows the mesh).
     pub st_channel: usize,
 }
@@ -303,8 +345,32 @@ impl InputNetwork {
     /// # Errors
     /// [`InputNetwork::check`]'s reason.
     pub fn new(ops: Vec<Op>, lookups: Vec<NetworkLookup>) -> Result<Self, String> {
+        Self::with_primvars(ops, lookups, Vec::new())
+    }
+
+    /// A network of `ops` over `lookups` and `primvars`.
+    ///
+    /// # Errors
+    /// [`InputNetwork::check`]'s reason, or a primvar [`Op::Primvar`] names that is not there.
+    pub fn with_primvars(ops: Vec<Op>, lookups: Vec<NetworkLookup>, primvars: Vec<NetworkPrimvar>) -> Result<Self, String> {
         Self::check(&ops, lookups.len())?;
-        Ok(InputNetwork { ops, lookups, st_channel: 0 })
+        Self::check_primvars(&ops, primvars.len())?;
+        Ok(InputNetwork { ops, lookups, primvars, st_channel: 0 })
+    }
+
+    /// Checks that every [`Op::Primvar`] of `ops` names one of `primvars` primvars.
+    ///
+    /// # Errors
+    /// A one-line reason naming the op.
+    pub fn check_primvars(ops: &[Op], primvars: usize) -> Result<(), String> {
+        for (k, op) in ops.iter().enumerate() {
+            if let Op::Primvar(i) = op {
+                if *i as usize >= primvars {
+                    return Err(format!("op {k} reads primvar {i} of {primvars}"));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Checks an op list over `lookups` lookups.
@@ -345,12 +411,20 @@ impl InputNetwork {
     /// fallbacks, [`Op::Coord`] zero). Unclamped and possibly non-finite (`divide` by 0,
     /// `power` of a negative base): the caller clamps into the input's range.
     pub fn eval(&self, st: Option<[[f32; 2]; 3]>) -> Vec4 {
+        self.eval_with(st, &|_| None)
+    }
+
+    /// [`InputNetwork::eval`] where the surface's primvar channels are `read(channel)` (the
+    /// channel's two floats at the shading point; `None`: no such channel), for
+    /// [`Op::Primvar`].
+    pub fn eval_with(&self, st: Option<[[f32; 2]; 3]>, read: &dyn Fn(usize) -> Option<[f32; 2]>) -> Vec4 {
         let mut stack = [Vec4::ZERO; MAX_STACK];
         let mut n = 0usize;
         for op in &self.ops {
             let v = match *op {
                 Op::Const(c) => Vec4::from(c),
                 Op::Texture(i) => self.lookups[i as usize].eval(st),
+                Op::Primvar(i) => self.primvars[i as usize].eval(read),
                 Op::Coord(t) => match st.map(|s| s[0]).or(t.is_constant().then_some([0.0; 2])) {
                     Some(s) => {
                         let p = t.point(s);
@@ -619,6 +693,36 @@ mod tests {
         assert_eq!(InputNetwork::new(vec![Op::Coord(fixed)], vec![]).unwrap().eval(None), Vec4::new(0.25, 0.75, 0.0, 0.0));
         // An unreadable texture gives its fallback too.
         assert_eq!(eval(vec![Op::Texture(0)], vec![lookup(&ramp, 1, 3, tiled)]), Vec4::new(0.25, 0.5, 0.75, 1.0));
+    }
+
+    #[test]
+    fn a_primvar_is_read_from_its_channels_into_its_lanes() {
+        // Channel 3 holds (0.25, 0.5), channel 5 (0.75, 2.0); channel 9 is not there.
+        let read = |c: usize| match c {
+            3 => Some([0.25, 0.5]),
+            5 => Some([0.75, 2.0]),
+            _ => None,
+        };
+        let pv = |components: u8, channels: Option<[usize; 2]>| NetworkPrimvar {
+            name: "p".into(),
+            components,
+            channels,
+            fallback: Vec4::new(9.0, 8.0, 7.0, 6.0),
+        };
+        let value = |p: NetworkPrimvar| {
+            InputNetwork::with_primvars(vec![Op::Primvar(0), Op::Const([2.0; 4]), Op::Multiply], vec![], vec![p])
+                .unwrap()
+                .eval_with(Some(AT), &read)
+        };
+        assert_eq!(value(pv(1, Some([3, 3]))), Vec4::splat(0.5));
+        assert_eq!(value(pv(2, Some([3, 3]))), Vec4::new(0.5, 1.0, 0.0, 0.0));
+        assert_eq!(value(pv(3, Some([3, 5]))), Vec4::new(0.5, 1.0, 1.5, 0.0));
+        assert_eq!(value(pv(4, Some([3, 5]))), Vec4::new(0.5, 1.0, 1.5, 4.0));
+        // Missing: the fallback (MaterialX default).
+        assert_eq!(value(pv(3, None)), Vec4::new(18.0, 16.0, 14.0, 12.0));
+        assert_eq!(value(pv(3, Some([9, 9]))), Vec4::new(18.0, 16.0, 14.0, 12.0));
+        let err = InputNetwork::with_primvars(vec![Op::Primvar(1)], vec![], vec![pv(1, None)]).unwrap_err();
+        assert_eq!(err, "op 0 reads primvar 1 of 1");
     }
 
     #[test]
