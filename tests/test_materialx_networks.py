@@ -884,3 +884,27 @@ def test_a_custom_nodedef_built_as_a_nodegraph_renders_as_its_graph(
     assert not caplog.records, caplog.text
     truth, inside = quadrant_truth(2.0 * r.st)
     assert_albedo(r.albedo, truth * (0.5, 1.0, 0.75) * 0.5, r.on & inside)
+
+
+def test_a_custom_nodedef_implemented_by_itself_is_named_once_and_the_frame_renders(
+    fake, tmp_path, caplog
+) -> None:
+    pytest.importorskip("MaterialX")
+    defs = _CUSTOM_DEFS.replace(
+        '<texcoord name="uv" type="vector2" />',
+        '<tinted_image name="again" type="color3" />\n    <texcoord name="uv" type="vector2" />',
+    ).replace('interfacename="tint"', 'nodename="again"')
+    (tmp_path / "defs.mtlx").write_text(defs)
+    looks = _CUSTOM_LOOKS.format(include='<xi:include href="defs.mtlx" />')
+    (tmp_path / "looks.mtlx").write_text(looks)
+    stage = new_stage()
+    material = UsdShade.Material.Define(stage, "/Looks/M")
+    material.GetPrim().GetReferences().AddReference(
+        str(tmp_path / "looks.mtlx"), "/MaterialX/Materials/M"
+    )
+    bind(quad(stage, half=HALF).GetPrim(), material)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        UsdSceneDelegate(stage, fake).sync()
+    assert "diffuseColor" not in fake.meshes()["/World/Quad"]["material"]
+    named = _warnings(caplog, "MaterialX node Test:ND_tinted_image")
+    assert len(named) == 1, caplog.text

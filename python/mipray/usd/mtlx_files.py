@@ -137,22 +137,17 @@ def _translate(
 
     def shader(node: Any, prefix: str, call: _Call | None, output: str = "") -> Sdf.Path:
         custom = implementation(node)
-        if custom is not None:
+        depth = call.depth + 1 if call else 1
+        if custom is not None and depth <= _MAX_NESTING:
+            # Expanded, unless nested deeper (a nodedef implemented by itself) or the graph's
+            # output is no node's: then the node stays, warned about by its nodedef's name.
             nodedef, graph = custom
-            depth = call.depth + 1 if call else 1
-            if depth > _MAX_NESTING:
-                raise ValueError(
-                    f"custom nodes nest deeper than {_MAX_NESTING} at {node.getName()}"
-                )
             out = graph.getOutput(output) if output else None
             out = out or (graph.getOutputs() or [None])[0]
             upstream = out.getConnectedNode() if out is not None else None
-            if upstream is None:
-                raise ValueError(
-                    f"{graph.getName()}, implementing {nodedef.getName()}, has no node output"
-                )
-            inner = _Call(node, nodedef, prefix, call, depth)
-            return shader(upstream, f"{prefix}{node.getName()}_", inner)
+            if upstream is not None:
+                inner = _Call(node, nodedef, prefix, call, depth)
+                return shader(upstream, f"{prefix}{node.getName()}_", inner)
         key = prefix + node.getName()
         if key in done:
             return done[key]
