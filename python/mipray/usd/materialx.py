@@ -16,11 +16,13 @@ implementation (``genglsl/stdlib_genglsl_impl.mtlx``; ``place2d``, ``tiledimage`
 and ``checkerboard`` as their nodegraphs in ``stdlib_ng.mtlx`` build them). Texture
 coordinates (``texcoord``, ``geompropvalue`` of a vector2, ``place2d``, tiling, arithmetic with
 constants) are kept as affine maps of the ``st`` primvar, so each lookup is filtered at its own
-footprint. Any other node, a texture coordinate that is not affine in ``st``, or an input value
-of the wrong type (a string where a number goes, an image's ``file`` that is no asset) leaves
-the input at its default; the stats' ``unsupported`` list names the material and the node (and
-the input, for a wrong type), with one warning (:mod:`mipray.usd.unsupported`, row
-``MaterialX node``).
+footprint. A ``geompropvalue`` reads the shaded gprim's primvar (its ``default`` where the
+gprim has none: a constant texcoord, or value); one of another type varying over a mesh is read
+per shading point (the network's ``"primvars"``). Any other node, a texture coordinate that is
+not affine in ``st``, or an input value of the wrong type (a string where a number goes, an
+image's ``file`` that is no asset) leaves the input at its default; the stats' ``unsupported``
+list names the material and the node (and the input, for a wrong type), with one warning
+(:mod:`mipray.usd.unsupported`, row ``MaterialX node``).
 """
 
 from __future__ import annotations
