@@ -130,7 +130,8 @@ class RenderDelegate:
                 texture renders its ``fallback`` with one warning naming prim
                 and file. ``"networks": {input name: {"ops": [(name, *floats)],
                 "lookups": [UsdUVTexture + "channels" (1-4), "st_transform"
-                (6 floats)]}}``: MaterialX nodes evaluated per shading point
+                (6 floats)], "primvars": [{"name", "components" (1-4),
+                "fallback" (4 floats)}]}}``: MaterialX nodes evaluated per shading point
                 (``mipray::material::network``; docs/materials.md); an input
                 is in ``textures`` or ``networks``, not both.
             gprim: a gprim other than a mesh, intersected exactly (the mesh
@@ -161,9 +162,11 @@ class RenderDelegate:
                 role: ``"normals"`` (authored normals, (N, 3), used for
                 shading; meant for polygonal meshes) or a UsdPreviewSurface
                 input name they feed (``"diffuseColor"`` (N, 3), a float input
-                (N, 1)), each ``{"values": float32 array, "indices": int32 or
-                None, "interpolation": USD token}``; an input's primvar shades
-                the faces of the mesh's own ``material``. Face-varying and vertex
+                (N, 1)), or ``"geomprop:<name>"`` ((N, 1-4), read by the
+                ``"primvars"`` of ``material``'s networks that name it), each
+                ``{"values": float32 array, "indices": int32 or None,
+                "interpolation": USD token}``; an input's primvar shades the
+                faces of the mesh's own ``material``. Face-varying and vertex
                 primvars go through OpenSubdiv on subdivision surfaces; every
                 interpolation is linear over each face on polygonal ones.
             face_materials: materials of their own on some faces, each a dict
