@@ -531,7 +531,7 @@ impl<E: CacheEntry> GeometryCache<E> {
     ///
     /// An entry whose [`byte_size`](CacheEntry::byte_size) exceeds its shard's whole budget
     /// (the tier's budget over [`CacheConfig::shard_count`], which leaves room for at least 256
-    /// entries of the configured size), or is 4 GB or more, is returned but not stored, and
+    /// entries of the configured size), or is 2 GiB or more, is returned but not stored, and
     /// evicts nothing; so is every entry in `none` mode, and any entry of a tier without budget
     /// (coarse and medium in `single` mode).
     ///

@@ -117,7 +117,7 @@ pub(super) struct Resident<E: CacheEntry> {
     entry: E::Stored,
     key: NodeKey,
     /// In the low 31 bits `entry.byte_size()` when it was stored: exactly what evicting it
-    /// frees (entries of 2 GB or more are never stored). In the top bit ([`REFERENCED`]): a
+    /// frees (entries of 2 GiB or more are never stored). In the top bit ([`REFERENCED`]): a
     /// lookup found it since it last came to the front of the LRU order. One word for both keeps
     /// a coarse tessellation's node at 88 bytes.
     size_and_referenced: u32,
@@ -127,7 +127,7 @@ pub(super) struct Resident<E: CacheEntry> {
 const REFERENCED: u32 = 1 << 31;
 
 impl<E: CacheEntry> Resident<E> {
-    /// A new entry of `bytes` (below 2 GB), not referenced yet.
+    /// A new entry of `bytes` (below 2 GiB), not referenced yet.
     fn new(entry: E::Stored, key: NodeKey, bytes: u32) -> Self {
         debug_assert!(bytes < REFERENCED);
         Self { entry, key, size_and_referenced: bytes }
