@@ -71,6 +71,14 @@ impl<T> LruList<T> {
         self.nodes[i as usize].value.as_ref().expect("LRU node is live")
     }
 
+    /// The value at node `i`, to change.
+    ///
+    /// # Panics
+    /// If `i` is not a live node.
+    pub(crate) fn get_mut(&mut self, i: u32) -> &mut T {
+        self.nodes[i as usize].value.as_mut().expect("LRU node is live")
+    }
+
     /// Marks node `i` as the most recently used.
     pub(crate) fn touch(&mut self, i: u32) {
         if self.head != i {

@@ -17,20 +17,46 @@ use super::{CacheMode, Tier};
 
 /// The live lookup counters of one shard of a tier; a tier's figures are their sums. Each shard
 /// has its own, so threads looking up different shards do not fight over one cache line.
+///
+/// A lookup answered by a resident entry (nearly all of a render's) counts only
+/// `resident_hits`, under the shard's lock, by a plain load and store: no locked add, and on
+/// the lock's own cache line (see `tier_cache::Shard`). The others count `lookups` and their
+/// outcome with relaxed adds. So a tier's lookups are `lookups + resident_hits` and its hits
+/// `hits + resident_hits`.
 #[derive(Default, Debug)]
+#[repr(C)]
 pub(crate) struct LookupCounters {
+    /// Lookups not answered by a resident entry: builds, waits for another thread's build.
     pub(crate) lookups: AtomicU64,
+    /// Lookups that waited for another thread's build of their key.
     pub(crate) hits: AtomicU64,
     pub(crate) misses: AtomicU64,
     pub(crate) cold_tessellations: AtomicU64,
     pub(crate) cold_vertices: AtomicU64,
     pub(crate) recomputed_vertices: AtomicU64,
+    /// Lookups answered by a resident entry. Written only under the shard's lock; last, next to
+    /// the lock (`tier_cache::Shard` is `repr(C)` with these counters first).
+    resident_hits: AtomicU64,
 }
 
 impl LookupCounters {
     #[inline]
     pub(crate) fn add(counter: &AtomicU64, n: u64) {
         counter.fetch_add(n, Relaxed);
+    }
+
+    /// Where `resident_hits` lies, for the test that it shares the lock word's cache line.
+    #[cfg(test)]
+    pub(crate) fn resident_hits_addr(&self) -> usize {
+        &self.resident_hits as *const AtomicU64 as usize
+    }
+
+    /// Counts a lookup answered by a resident entry. Only while holding the shard's lock: the
+    /// lock orders the writers, so a load and a store count exactly (a locked add would cost
+    /// every hit a full barrier), and readers without the lock still see whole values.
+    #[inline]
+    pub(crate) fn count_resident_hit_locked(&self) {
+        self.resident_hits.store(self.resident_hits.load(Relaxed) + 1, Relaxed);
     }
 
     /// Counts a lookup that builds: a cold tessellation, or a miss.
@@ -70,8 +96,9 @@ pub(crate) fn tier_stats<'a>(
         cold_vertices: 0,
     };
     for c in shards {
-        t.lookups += c.lookups.load(Relaxed);
-        t.hits += c.hits.load(Relaxed);
+        let resident_hits = c.resident_hits.load(Relaxed);
+        t.lookups += c.lookups.load(Relaxed) + resident_hits;
+        t.hits += c.hits.load(Relaxed) + resident_hits;
         t.misses += c.misses.load(Relaxed);
         t.cold_tessellations += c.cold_tessellations.load(Relaxed);
         t.cold_vertices += c.cold_vertices.load(Relaxed);

@@ -1,11 +1,13 @@
-//! One tier of the cache (the paper's §5.2): an LRU of tessellations under a byte budget, with
-//! single-flight builds and the §6.1 counters.
+//! One tier of the cache (the paper's §5.2): tessellations under a byte budget, evicted in LRU
+//! order approximated by second chance (a hit marks its entry instead of moving it to the
+//! front; see the module docs of `geometry_cache`), with single-flight builds and the §6.1
+//! counters.
 //!
 //! A tier is split into shards by key, each with its own lock, LRU, budget share and counters,
-//! so threads looking up different subpatches rarely meet. Sharding turns one exact LRU into
+//! so threads looking up different subpatches rarely meet. Sharding turns one recency order into
 //! several, which evicts slightly differently; so a tier is only split while every shard still
 //! holds at least [`MIN_ENTRIES_PER_SHARD`] entries, where the approximation is close, and small
-//! caches (whose hit rates depend most on the replacement order) keep one exact LRU. See
+//! caches (whose hit rates depend most on the replacement order) keep one order. See
 //! [`CacheConfig::shard_count`].
 
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
@@ -56,11 +58,13 @@ pub(crate) struct TierCache<E: CacheEntry> {
 }
 
 // Aligned so neighbouring shards' locks and counters never share a cache line (128: the
-// adjacent-line prefetcher pairs lines).
-#[repr(align(128))]
+// adjacent-line prefetcher pairs lines). `repr(C)` with the counters first puts their last,
+// `resident_hits` (written by every hit, under the lock), on the lock word's cache line, which
+// the hit owns already: a hit writes no other line of the shard's for its count.
+#[repr(C, align(128))]
 struct Shard<E: CacheEntry> {
-    state: Mutex<ShardState<E>>,
     counters: LookupCounters,
+    state: Mutex<ShardState<E>>,
 }
 
 /// A shard's resident entries and builds in flight.
@@ -112,9 +116,41 @@ impl NodeKey {
 pub(super) struct Resident<E: CacheEntry> {
     entry: E::Stored,
     key: NodeKey,
-    /// `entry.byte_size()` when it was stored: exactly what evicting it frees. Entries of 4 GB
-    /// or more are never stored.
-    bytes: u32,
+    /// In the low 31 bits `entry.byte_size()` when it was stored: exactly what evicting it
+    /// frees (entries of 2 GiB or more are never stored). In the top bit ([`REFERENCED`]): a
+    /// lookup found it since it last came to the front of the LRU order. One word for both keeps
+    /// a coarse tessellation's node at 88 bytes.
+    size_and_referenced: u32,
+}
+
+/// The "referenced" bit of [`Resident::size_and_referenced`].
+const REFERENCED: u32 = 1 << 31;
+
+impl<E: CacheEntry> Resident<E> {
+    /// A new entry of `bytes` (below 2 GiB), not referenced yet.
+    fn new(entry: E::Stored, key: NodeKey, bytes: u32) -> Self {
+        debug_assert!(bytes < REFERENCED);
+        Self { entry, key, size_and_referenced: bytes }
+    }
+
+    #[inline]
+    fn bytes(&self) -> usize {
+        (self.size_and_referenced & !REFERENCED) as usize
+    }
+
+    #[inline]
+    fn referenced(&self) -> bool {
+        self.size_and_referenced & REFERENCED != 0
+    }
+
+    /// Marks a found entry. Writes only if it is not marked yet: a hot entry's node is then only
+    /// read, and stays in every reading thread's cache.
+    #[inline]
+    fn mark_referenced(&mut self) {
+        if !self.referenced() {
+            self.size_and_referenced |= REFERENCED;
+        }
+    }
 }
 
 /// One build in flight, which other lookups of the same key wait for.
@@ -172,7 +208,7 @@ impl<E: CacheEntry> ShardState<E> {
         let old = self.lru.remove(node);
         let found = self.index.remove(old.key.tag(), node);
         debug_assert!(found, "resident node {node} was not indexed");
-        self.resident_bytes -= old.bytes as usize;
+        self.resident_bytes -= old.bytes();
         old
     }
 }
@@ -244,9 +280,9 @@ impl<E: CacheEntry> TierCache<E> {
     /// See [`GeometryCache::get_or_build_reusing`](super::GeometryCache::get_or_build_reusing).
     pub(crate) fn get_or_build(&self, key: CacheKey, build: impl FnOnce(Option<E::Stored>) -> E) -> E {
         let shard = self.shard_of(&key);
-        LookupCounters::add(&shard.counters.lookups, 1);
 
         if !self.stores {
+            LookupCounters::add(&shard.counters.lookups, 1);
             let cold = self.first_build(&key);
             shard.counters.count_build(cold);
             let entry = build(None);
@@ -255,15 +291,19 @@ impl<E: CacheEntry> TierCache<E> {
         }
 
         let nk = NodeKey::of(&key);
+        // Counted once (a lookup that waited for an abandoned build looks up again).
+        let mut counted = false;
         loop {
             let found = {
                 let mut st = shard.state.lock();
                 if let Some(node) = st.find(&nk) {
-                    st.lru.touch(node);
-                    let entry = E::from_stored(&st.lru.get(node).entry);
-                    drop(st);
-                    LookupCounters::add(&shard.counters.hits, 1);
-                    return entry;
+                    st.lru.get_mut(node).mark_referenced();
+                    shard.counters.count_resident_hit_locked();
+                    return E::from_stored(&st.lru.get(node).entry);
+                }
+                if !counted {
+                    LookupCounters::add(&shard.counters.lookups, 1);
+                    counted = true;
                 }
                 match st.building.iter().find(|(k, _)| *k == nk) {
                     Some((_, pending)) => Err(Arc::clone(pending)),
@@ -333,15 +373,27 @@ impl<E: CacheEntry> TierCache<E> {
             return evicted;
         };
         st.building.swap_remove(i);
-        let Ok(bytes32) = u32::try_from(bytes) else { return evicted };
+        let Some(bytes32) = u32::try_from(bytes).ok().filter(|&b| b < REFERENCED) else { return evicted };
         if bytes > self.shard_budget_bytes {
             // Too large to ever fit: returned to the caller, not stored, nothing evicted for it.
             return evicted;
         }
         while st.resident_bytes.saturating_add(bytes) > self.shard_budget_bytes {
             let Some(tail) = st.lru.back() else { break };
+            // Second chance: the least recent entry, if found since it came to the front, goes
+            // to the front again, unmarked, instead of being evicted. A hit then only marks its
+            // node (relinking it to the front at every hit wrote three other nodes and the
+            // list's head, lines the other render threads' hits write too). Each pass unmarks
+            // what it passes over, so the loop ends. Eviction order is LRU's where hits are
+            // rare and close to it otherwise (CLOCK).
+            let tail_entry = st.lru.get_mut(tail);
+            if tail_entry.referenced() {
+                tail_entry.size_and_referenced &= !REFERENCED;
+                st.lru.touch(tail);
+                continue;
+            }
             let old = st.remove(tail);
-            self.resident_bytes.fetch_sub(old.bytes as usize, Relaxed);
+            self.resident_bytes.fetch_sub(old.bytes(), Relaxed);
             if st.spares.len() < MAX_SPARES {
                 st.spares.push(old.entry);
             } else {
@@ -350,7 +402,7 @@ impl<E: CacheEntry> TierCache<E> {
         }
         // `to_stored` runs the entry's code under the lock; a panic in it leaves the shard
         // consistent (the key is unregistered and not yet indexed).
-        let node = st.lru.push_front(Resident { entry: entry.to_stored(), key, bytes: bytes32 });
+        let node = st.lru.push_front(Resident::new(entry.to_stored(), key, bytes32));
         st.index.insert(key.tag(), node);
         debug_assert_eq!(st.index.len(), st.lru.len());
         st.resident_bytes += bytes;
@@ -371,7 +423,7 @@ impl<E: CacheEntry> TierCache<E> {
             let mut dropped = Vec::with_capacity(doomed.len());
             for node in doomed {
                 let old = st.remove(node);
-                self.resident_bytes.fetch_sub(old.bytes as usize, Relaxed);
+                self.resident_bytes.fetch_sub(old.bytes(), Relaxed);
                 dropped.push(old.entry);
             }
             drop(st);
@@ -421,5 +473,56 @@ impl<E: CacheEntry> TierCache<E> {
     pub(crate) fn stats(&self, tier: Tier, capacity_entries: Option<u64>) -> TierStats {
         let peak = self.peak_bytes.load(Relaxed) as u64;
         tier_stats(tier, capacity_entries, peak, self.shards.iter().map(|s| &s.counters))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry_cache::Tier;
+
+    fn key(subpatch: u32) -> CacheKey {
+        CacheKey::new(0, 0, subpatch, Tier::Fine)
+    }
+
+    /// (subpatch, referenced) from the most to the least recently used.
+    fn order(tier: &TierCache<Vec<[f32; 3]>>) -> Vec<(u32, bool)> {
+        tier.shards[0].state.lock().lru.iter().map(|r| (r.key.subpatch, r.referenced())).collect()
+    }
+
+    /// A hit writes no link of the LRU list (no other node, not its head): it marks its own
+    /// node, once. Eviction gives a marked least recent entry one more round at the front.
+    #[test]
+    fn a_hit_marks_its_node_and_eviction_gives_marked_entries_a_second_chance() {
+        let tier: TierCache<Vec<[f32; 3]>> = TierCache::new(1, Some(3 * 12), true);
+        for s in 0..3 {
+            tier.get_or_build(key(s), |_| vec![[s as f32; 3]]);
+        }
+        assert_eq!(order(&tier), [(2, false), (1, false), (0, false)]);
+        for _ in 0..2 {
+            assert_eq!(tier.get_or_build(key(0), |_| unreachable!("resident")), [[0.0; 3]]);
+        }
+        assert_eq!(tier.get_or_build(key(1), |_| unreachable!("resident")), [[1.0; 3]]);
+        assert_eq!(order(&tier), [(2, false), (1, true), (0, true)], "hits only mark");
+        // 0 and 1 were found since they came to the front: 2 is evicted, they go round unmarked.
+        tier.get_or_build(key(3), |_| vec![[3.0; 3]]);
+        assert_eq!(order(&tier), [(3, false), (1, false), (0, false)]);
+        tier.get_or_build(key(4), |_| vec![[4.0; 3]]);
+        assert_eq!(order(&tier), [(4, false), (3, false), (1, false)]);
+        let s = tier.stats(Tier::Fine, None);
+        assert_eq!((s.lookups, s.hits, s.cold_tessellations), (8, 3, 5));
+    }
+
+    /// A hit's count is written on the cache line of the shard's lock word, which the hit owns
+    /// already; no other counter line is written by hits.
+    #[test]
+    fn a_hit_counts_on_the_lock_words_cache_line() {
+        let tier: TierCache<Vec<[f32; 3]>> = TierCache::new(2, None, true);
+        for shard in tier.shards.iter() {
+            // SAFETY: only the lock word's address is taken; the lock is not used through it.
+            let lock = unsafe { shard.state.raw() } as *const _ as usize;
+            let count = shard.counters.resident_hits_addr();
+            assert_eq!(lock / 64, count / 64, "lock at {lock:#x}, hit count at {count:#x}");
+        }
     }
 }
