@@ -623,13 +623,44 @@ pub fn seam_box(tess: &Tessellation, e: usize, k: usize, stride: usize) -> Optio
     Some((SeamBox { a: f.a, axis: f.axis, e1: f.e1, e2: f.e2, len: f.len, r, below, above }, f.ng))
 }
 
+/// `intersect_seams`'s rule for rays starting inside a box: never stopped by it.
+#[inline(always)]
+pub fn never_from_inside(_ng: Vec3A) -> bool {
+    false
+}
+
+/// Whether a ray leaving its surface on the side `along_ng` of its triangle's winding normal
+/// (object-space direction `d`, `handed` −1 for a left-handed mesh) and starting inside a seam
+/// box whose boundary-quad normal is `ng` heads through the surface there: it crosses the
+/// quad's plane against the side it left on. A displaced grid's boxes are the radius on every
+/// side, and the neighbours' displaced edges leave cracks within them (filtered at different
+/// spacings); a ray leaving near the seam and heading below the surface there goes through such
+/// a crack unless the box stops it (issue 23).
+#[inline(always)]
+pub fn stop_crossing_own_box(d: Vec3A, handed: f32, along_ng: bool) -> impl Fn(Vec3A) -> bool {
+    move |ng: Vec3A| {
+        let cos = handed * d.dot(ng);
+        if along_ng {
+            cos < 0.0
+        } else {
+            cos > 0.0
+        }
+    }
+}
+
 /// The closest seam-box hit of `ray` on the `edges` of `tess` read at vertex `stride`, in
 /// (`t_min`, `t_max`): where the ray leaves the first box it passes through from outside. The
 /// hit's (u, v) is the nearest point of the chord, in the grid's [0, 1]²; its normal is the
 /// boundary quad's (the winding of [`crate::intersect`]'s triangles).
 /// Hits `accept(t, ng)` refuses are passed over inside the search (see
 /// [`crate::intersect::intersect_tessellation`]).
-pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
+///
+/// A ray that starts inside (or on) a box leaves a surface near that seam and ignores the box,
+/// unless `stops_inside(ng)` (the box's boundary-quad normal) says it heads through the surface
+/// there: then it stops where it leaves the box, as a ray from outside does (see
+/// [`stop_crossing_own_box`]). [`never_from_inside`] keeps the plain rule.
+#[allow(clippy::too_many_arguments)]
+pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool, S: Fn(Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -637,6 +668,7 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
     t_min: f32,
     t_max: f32,
     accept: &A,
+    stops_inside: &S,
 ) -> Option<GridHit> {
     let n = tess.n;
     if n < 2 || stride == 0 || (n - 1) % stride != 0 || edges == SeamEdges::NONE {
@@ -705,19 +737,21 @@ pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool>(
                 continue;
             }
             let Some((sb, ng)) = seam_box(tess, e, k, stride) else { continue };
-            // A ray that starts in (or on) the box leaves a surface near this seam: skip it.
+            // A ray that starts in (or on) the box leaves a surface near this seam: skip it,
+            // unless it heads through the surface there (`stops_inside`).
             let start_grow = 1e-3 * sb.r + origin_margin;
-            if sb.contains(ray.o, start_grow) {
+            let inside = sb.contains(ray.o, start_grow);
+            if inside && !stops_inside(ng) {
                 continue;
             }
             let Some((near, far)) = sb.slabs(ray.o, ray.d) else { continue };
-            if !(near > t_min && far < t_best && far > near) {
+            if !(far > t_min && far < t_best && (inside || (near > t_min && far > near))) {
                 continue;
             }
             let p = ray.o + ray.d * far;
             let lambda = ((p - sb.a).dot(sb.axis) / sb.len).clamp(0.0, 1.0);
             let (u, v) = edge_uv(e, (k as f32 + lambda) / q as f32);
-            if !accept(far, ng) {
+            if !inside && !accept(far, ng) {
                 continue;
             }
             t_best = far;
@@ -811,7 +845,8 @@ pub(crate) fn cull_box(tess: &Tessellation, stride: usize) -> crate::bounds::Bou
 /// its `edges` ([`SeamEdges::NONE`]: the grid alone, as without seams), in (`t_min`, `t_max`).
 /// Hits `accept(t, ng)` refuses are passed over inside the one search (see
 /// [`crate::intersect::intersect_tessellation`]).
-pub fn intersect_with_seams<A: Fn(f32, Vec3A) -> bool>(
+#[allow(clippy::too_many_arguments)]
+pub fn intersect_with_seams<A: Fn(f32, Vec3A) -> bool, S: Fn(Vec3A) -> bool>(
     ray: &WatertightRay,
     tess: &Tessellation,
     stride: usize,
@@ -819,13 +854,14 @@ pub fn intersect_with_seams<A: Fn(f32, Vec3A) -> bool>(
     t_min: f32,
     t_max: f32,
     accept: &A,
+    stops_inside: &S,
 ) -> Option<GridHit> {
     if !may_hit_grid_or_seams(ray, tess, stride, edges, t_min, t_max) {
         return None;
     }
     let grid = intersect_tessellation(ray, tess, stride, t_min, t_max, accept);
     let limit = grid.map_or(t_max, |h| h.t);
-    intersect_seams(ray, tess, stride, edges, t_min, limit, accept).or(grid)
+    intersect_seams(ray, tess, stride, edges, t_min, limit, accept, stops_inside).or(grid)
 }
 
 #[cfg(test)]
@@ -880,8 +916,9 @@ mod tests {
                         let o = Vec3A::new(1.4 * rnd() - 0.2, 1.4 * rnd() - 0.2, 1.0);
                         let target = Vec3A::new(1.4 * rnd() - 0.2, 1.4 * rnd() - 0.2, 0.2 * rnd() - 0.1);
                         let r = WatertightRay::new(o, (target - o).normalize());
-                        let search =
-                            |t: &Tessellation| intersect_with_seams(&r, t, stride, edges, 0.0, f32::INFINITY, &crate::intersect::every_hit);
+                        let search = |t: &Tessellation| {
+                            intersect_with_seams(&r, t, stride, edges, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside)
+                        };
                         let (a, b) = (search(&bare), search(&kept));
                         assert_eq!(format!("{a:?}"), format!("{b:?}"));
                         checked += usize::from(a.is_some());
@@ -918,16 +955,27 @@ mod tests {
         let t = grid(5, |u, v| [u, v, 0.0], 0.01);
         // Parallel to the plane's normal just outside the u = 1 edge, within the radius.
         let down = |x: f32| WatertightRay::new(Vec3A::new(x, 0.5, 1.0), Vec3A::NEG_Z);
-        let h = intersect_seams(&down(1.005), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit)
+        let h = intersect_seams(&down(1.005), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside)
             .expect("inside the seam box");
         assert!(h.t > 1.0 && h.t <= 1.0 + 0.01 * 1.5, "leaves the box below the plane: {h:?}");
         assert!((h.u - 1.0).abs() < 1e-6 && (h.v - 0.5).abs() < 1e-3);
         assert!(h.ng.z > 0.0);
-        assert!(intersect_seams(&down(1.02), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
+        assert!(intersect_seams(&down(1.02), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside)
+            .is_none());
         // Edge 1 left out: no seam there.
-        assert!(intersect_seams(&down(1.005), &t, 1, SeamEdges(0b1101), 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
+        assert!(intersect_seams(
+            &down(1.005),
+            &t,
+            1,
+            SeamEdges(0b1101),
+            0.0,
+            f32::INFINITY,
+            &crate::intersect::every_hit,
+            &never_from_inside
+        )
+        .is_none());
         // A grid hit closer than the box exit wins (t_max is the grid's hit).
-        assert!(intersect_seams(&down(0.995), &t, 1, SeamEdges::ALL, 0.0, 1.0, &crate::intersect::every_hit).is_none());
+        assert!(intersect_seams(&down(0.995), &t, 1, SeamEdges::ALL, 0.0, 1.0, &crate::intersect::every_hit, &never_from_inside).is_none());
     }
 
     #[test]
@@ -936,19 +984,48 @@ mod tests {
         t.domain = GridDomain::LowerTriangle;
         let down = |x: f32, y: f32| WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
         // Just beyond the diagonal, next to it: the diagonal's seam box.
-        let h = intersect_seams(&down(0.505, 0.505), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit)
-            .expect("diagonal seam");
+        let h = intersect_seams(
+            &down(0.505, 0.505),
+            &t,
+            1,
+            SeamEdges::ALL,
+            0.0,
+            f32::INFINITY,
+            &crate::intersect::every_hit,
+            &never_from_inside,
+        )
+        .expect("diagonal seam");
         assert!((h.u + h.v - 1.0).abs() < 1e-5 && h.ng.z > 0.0, "{h:?}");
         // Just beyond u = 1 at v = 0.5: outside the triangle, no seam there.
-        assert!(intersect_seams(&down(1.005, 0.5), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
-        assert!(intersect_seams(&down(0.5, -0.005), &t, 2, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_some());
+        assert!(intersect_seams(
+            &down(1.005, 0.5),
+            &t,
+            1,
+            SeamEdges::ALL,
+            0.0,
+            f32::INFINITY,
+            &crate::intersect::every_hit,
+            &never_from_inside
+        )
+        .is_none());
+        assert!(intersect_seams(
+            &down(0.5, -0.005),
+            &t,
+            2,
+            SeamEdges::ALL,
+            0.0,
+            f32::INFINITY,
+            &crate::intersect::every_hit,
+            &never_from_inside
+        )
+        .is_some());
     }
 
     #[test]
     fn rays_starting_inside_a_seam_box_ignore_it() {
         let t = grid(2, |u, v| [u, v, 0.0], 0.01);
         let r = WatertightRay::new(Vec3A::new(1.0, 0.5, 0.0), Vec3A::new(1.0, 0.0, 0.01).normalize());
-        assert!(intersect_seams(&r, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none());
+        assert!(intersect_seams(&r, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside).is_none());
     }
 
     #[test]
@@ -957,11 +1034,11 @@ mod tests {
         let t = grid(3, |u, v| [u, v, 0.2 * (0.5 - (u - 0.5).abs())], 0.0);
         let r = WatertightRay::new(Vec3A::new(0.5, -0.05, 1.0), Vec3A::NEG_Z);
         assert!(
-            intersect_seams(&r, &t, 2, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit).is_some(),
+            intersect_seams(&r, &t, 2, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside).is_some(),
             "within 0.1 of the stride-2 chord"
         );
         assert!(
-            intersect_seams(&r, &t, 1, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none(),
+            intersect_seams(&r, &t, 1, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside).is_none(),
             "stride 1 has radius 0"
         );
     }
@@ -1072,8 +1149,9 @@ mod tests {
                 crate::intersect::intersect_tessellation(&down, &t, 1, 0.0, f32::INFINITY, &crate::intersect::every_hit).is_none(),
                 "outside the grid"
             );
-            let h = intersect_with_seams(&down, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit)
-                .expect("inside the seam box");
+            let h =
+                intersect_with_seams(&down, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside)
+                    .expect("inside the seam box");
             assert!((h.t - 1.0).abs() < 1e-6, "n {n}: hit {} off the plane", h.t - 1.0);
             for stride in [2usize, 4].into_iter().filter(|s| (n - 1) % s == 0) {
                 let (sb, _) = seam_box(&t, 0, 0, stride).unwrap();

@@ -19,7 +19,7 @@ use crate::intersect::{BoxRay, WatertightRay};
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
-use crate::seam::{intersect_with_seams, SeamEdges};
+use crate::seam::{intersect_with_seams, never_from_inside, stop_crossing_own_box, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, RootSubpatch};
 use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceParams, Rate, Tessellation};
 
@@ -1023,24 +1023,36 @@ impl<'s> Tracer<'s> {
                     (Some(o), Some(window)) => !o.is_own_other_rate(t, window, sign * d.dot(ng), false),
                     _ => true,
                 };
-                intersect_with_seams(wray, tess, stride, edges, t_from, t_best, &accept).map(|h| LocalHit {
-                    t: h.t,
-                    uv: (h.u, h.v),
-                    rect: UvRect::UNIT,
-                    ng: h.ng,
-                    quads: rate.quads() as u32,
-                    chord_error,
-                })
+                // A ray leaving a displaced mesh is stopped by the seam boxes around its own
+                // origin where it heads through the surface (rule 8 of docs/cracks.md).
+                let hit = match own {
+                    Some(o) if displacement_pad > 0.0 => intersect_with_seams(
+                        wray,
+                        tess,
+                        stride,
+                        edges,
+                        t_from,
+                        t_best,
+                        &accept,
+                        &stop_crossing_own_box(d, sign, o.along_ng),
+                    ),
+                    _ => intersect_with_seams(wray, tess, stride, edges, t_from, t_best, &accept, &never_from_inside),
+                };
+                hit.map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.ng, quads: rate.quads() as u32, chord_error })
             }
         };
         let mut best: Option<(LocalHit, u32)> = None;
         let mut t_best = t_max;
         let first_si = first.as_ref().map(|(org, ..)| org.subpatch as usize);
-        // A ray leaving a displaced mesh tests the subpatch it starts on, and every subpatch
-        // whose box holds its origin, at the rate of the grid its origin lies on: the same
-        // triangles (the same displacement filtering) wherever the surface can be near the
-        // origin, so the origin is on its side of what it tests without a lift (issue 23).
-        let origin_grid = own.filter(|_| displacement_pad > 0.0).and_then(|org| Some((org.subpatch, org.depth_rate()?)));
+        // A ray leaving a displaced mesh tests every subpatch of that instance at the rate of
+        // the grid its origin lies on (rule 6 of docs/cracks.md): the same triangles and the
+        // same displacement filtering as the surface it stands on, so it starts on its side of
+        // one closed surface and leaves only by crossing it. Read at the beam's rates a
+        // neighbour is another surface (a coarse grid filters away bumps a fine one keeps, up
+        // to the whole displacement bound off it) that the ray could pass beside without
+        // crossing; reading only the subpatches whose boxes hold the origin this way left a
+        // third of the leaks (issue 23).
+        let origin_grid = own.filter(|_| displacement_pad > 0.0).and_then(|org| org.depth_rate());
         if let Some((org, depth, rate, tess)) = first {
             let wray = &*watertight.get_or_insert_with(|| WatertightRay::new(o, d));
             let si = org.subpatch as usize;
@@ -1061,7 +1073,7 @@ impl<'s> Tracer<'s> {
                 let sp_bounds = sp.bounds();
                 let (t_enter, _) = box_ray.hit_box(&sp_bounds, ray.t_min, t_best)?;
                 let (depth, rate) = match origin_grid {
-                    Some((own_si, dr)) if own_si as usize == si || sp_bounds.contains(o) => dr,
+                    Some(dr) => dr,
                     _ => self.rate_for(sp, &sp_bounds, displacement_pad, rate_floor, inst.scale, ray, t_enter),
                 };
                 let tier = if depth > 0 { Tier::Fine } else { rate.tier_and_stride().0 };
@@ -1499,7 +1511,9 @@ impl<'s> Tracer<'s> {
     ) {
         let root_rect = UvRect::UNIT;
         if u32::from(cell.depth) >= target_depth {
-            if let Some(h) = intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best, &crate::intersect::every_hit) {
+            if let Some(h) =
+                intersect_with_seams(wray, tess, 1, self.seam_edges(cell), t_min, *t_best, &crate::intersect::every_hit, &never_from_inside)
+            {
                 *t_best = h.t;
                 *best = Some(LocalHit {
                     t: h.t,
