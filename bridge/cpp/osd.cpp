@@ -280,6 +280,32 @@ void refine_adaptive(Far::TopologyRefiner& refiner, const OsdMeshDesc& d,
   capture.check("OpenSubdiv adaptive refinement");
 }
 
+// A grid's weights along s, four a column, and their derivatives: on the stack for every grid
+// the tessellation makes (at most 17 vertices a side), on the heap beyond. As two vectors they
+// were two allocations and frees in every grid built (and two more for a displaced grid's st).
+class ColumnWeights {
+ public:
+  explicit ColumnWeights(std::size_t n) {
+    if (n > kStackColumns) {
+      heap_w_.resize(4 * n);
+      heap_dw_.resize(4 * n);
+      w = heap_w_.data();
+      dw = heap_dw_.data();
+    }
+  }
+  ColumnWeights(const ColumnWeights&) = delete;
+  ColumnWeights& operator=(const ColumnWeights&) = delete;
+
+ private:
+  static constexpr std::size_t kStackColumns = 17;
+  double stack_w_[4 * kStackColumns], stack_dw_[4 * kStackColumns];
+  std::vector<double> heap_w_, heap_dw_;
+
+ public:
+  double* w = stack_w_;
+  double* dw = stack_dw_;
+};
+
 // N floats of a primvar with double accumulators, as Far::PrimvarRefiner and
 // PatchTable::ComputeLocalPointValues want them: masks around high-valence vertices have many
 // small weights.
@@ -589,7 +615,8 @@ struct OsdMesh::Impl {
     bool ends[4];
     regular_ends(patch, ends);
     const float d = float((n < 2 ? 2 : n) - 1);
-    std::vector<double> sw(4 * n), dsw(4 * n);
+    ColumnWeights columns(n);
+    double *sw = columns.w, *dsw = columns.dw;
     for (std::size_t i = 0; i < n; ++i) {
       const float u = u0 + (u1 - u0) * (float(i) / d);
       bspline(double(u), ends[0], ends[1], &sw[4 * i], &dsw[4 * i]);
@@ -682,7 +709,8 @@ struct OsdMesh::Impl {
                         float* p, float* du, float* dv, S s_weights, T t_weights) const {
     // The same (u, v) as the general path (and UvRect::grid_uv) computes, in f32.
     const float d = float((n < 2 ? 2 : n) - 1);
-    std::vector<double> sw(4 * n), dsw(4 * n);
+    ColumnWeights columns(n);
+    double *sw = columns.w, *dsw = columns.dw;
     for (std::size_t i = 0; i < n; ++i) {
       const float u = u0 + (u1 - u0) * (float(i) / d);
       s_weights(double(u), &sw[4 * i], &dsw[4 * i]);

@@ -378,6 +378,19 @@ fn fit_chord(a: Vec3A, b: Vec3A, curve: &[[f32; 3]], side: Option<Vec3A>) -> Opt
         }
         *gp = d / (tau * (1.0 - tau));
     }
+    // Without a side (a displaced grid's chords, a degenerate frame) the samples' heights are
+    // not needed: a loop of its own, the same operations for |D|².
+    let (chord_sq, low, high) = match side {
+        Some(e1) => fit_samples::<true>(&g, e1),
+        None => fit_samples::<false>(&g, Vec3A::ZERO),
+    };
+    Some((chord_sq.max_element(), low.min_element(), high.max_element()))
+}
+
+/// [`fit_chord`]'s samples of the fitted deviation D = Σ_p g_p · weight: the largest |D|² and,
+/// with `SIDE`, the lowest and highest D along `e1` (zero lanes without), four samples a lane.
+#[inline(always)]
+fn fit_samples<const SIDE: bool>(g: &[Vec3A; SEAM_PROBES], e1: Vec3A) -> (Vec4, Vec4, Vec4) {
     // The fitted deviation at every sample, four samples a lane (x, y, z apart): a grid's
     // seam extent was measured one sample at a time, and at 31 samples per chord that was
     // most of what making a coarse grid cost.
@@ -391,13 +404,13 @@ fn fit_chord(a: Vec3A, b: Vec3A, curve: &[[f32; 3]], side: Option<Vec3A>) -> Opt
         chord_sq = chord_sq.max(dx * dx + dy * dy + dz * dz);
         // Along the normal, from the chord's line: a box spans the chord's length (and `r`
         // beyond its ends) whatever the curve's position along it.
-        if let Some(e1) = side {
+        if SIDE {
             let h = dx * e1.x + dy * e1.y + dz * e1.z;
             low = low.min(h);
             high = high.max(h);
         }
     }
-    Some((chord_sq.max_element(), low.min_element(), high.max_element()))
+    (chord_sq, low, high)
 }
 
 /// Where the knots of `knots` cut the chord from patch (u, v) `pa` to `pb` (an edge runs along
