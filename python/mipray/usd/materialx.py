@@ -20,11 +20,11 @@ footprint. A ``geompropvalue`` reads the shaded gprim's primvar (its ``default``
 gprim has none: a constant texcoord, or value); one of another type varying over a mesh is read
 per shading point (the network's ``"primvars"``). ``position`` and ``normal`` are read at the
 shading point in object or world space, and the float ``noise2d``/``noise3d``/``fractal2d``/
-``fractal3d`` are the stdlib's Perlin noise (``mipray::material::noise``). Any other node, a texture coordinate that is
-not affine in ``st``, or an input value of the wrong type (a string where a number goes, an
-image's ``file`` that is no asset) leaves the input at its default; the stats' ``unsupported``
-list names the material and the node (and the input, for a wrong type), with one warning
-(:mod:`mipray.usd.unsupported`, row ``MaterialX node``).
+``fractal3d`` are the stdlib's Perlin noise (``mipray::material::noise``). Any other node, a
+texture coordinate that is not affine in ``st``, or an input value of the wrong type (a string
+where a number goes, an image's ``file`` that is no asset) leaves the input at its default; the
+stats' ``unsupported`` list names the material and the node (and the input, for a wrong type),
+with one warning (:mod:`mipray.usd.unsupported`, row ``MaterialX node``).
 """
 
 from __future__ import annotations
