@@ -1091,3 +1091,17 @@ def test_noise_renders_the_same_bits_with_any_thread_count_and_cache_mode(native
     assert images[0].std() > 0.01
     for other in images[1:]:
         np.testing.assert_array_equal(other, images[0])
+
+
+def test_a_vector_noise_is_named_once_and_the_input_keeps_its_default(fake, caplog) -> None:
+    """The color3/vector noises hash per lane (mx_hash_vec3), which is not ported: named."""
+    stage = new_stage()
+    noise = node(stage, "Noise", "ND_noise3d_color3", "color3")
+    lambertian(stage, noise)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    material = fake.meshes()["/World/Quad"]["material"]
+    assert "networks" not in material and "diffuseColor" not in material
+    named = _warnings(caplog, "ND_noise3d_color3")
+    assert len(named) == 1 and "/Looks/M/Noise" in named[0], caplog.text
