@@ -298,7 +298,9 @@ impl Unary {
 
 impl Op {
     /// The op named `name` (the scene delegate's spelling: the MaterialX node's name, or
-    /// `const`, `texture`, `coord`, `swizzle`, `combine`) with its arguments.
+    /// `const`, `texture`, `coord`, `swizzle`, `combine`) with its arguments: `position` and
+    /// `normal` take their space (0 object, 1 world), `fractal3d` and `fractal2d` their
+    /// octaves (0–[`MAX_OCTAVES`]), lacunarity and diminish.
     ///
     /// # Errors
     /// A one-line reason: an unknown name, or arguments of the wrong count or range.
