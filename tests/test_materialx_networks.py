@@ -449,7 +449,8 @@ def test_an_unsupported_node_in_a_network_is_named_once_and_the_input_keeps_its_
 ) -> None:
     stage = new_stage()
     image = node(stage, "Image", "ND_image_color3", "color3", file=str(tmp_path / "a.exr"))
-    position = node(stage, "Position", "ND_position_vector3", "color3")
+    # (ND_position_vector3 was the example here until it was evaluated.)
+    position = node(stage, "Position", "ND_tangent_vector3", "color3")
     tint = node(stage, "Tint", "ND_multiply_color3", "color3", in1=image, in2=position)
     lambertian(stage, tint)
     with caplog.at_level(logging.WARNING, logger="mipray"):
@@ -458,11 +459,11 @@ def test_an_unsupported_node_in_a_network_is_named_once_and_the_input_keeps_its_
     material = fake.meshes()["/World/Quad"]["material"]
     assert "networks" not in material and "textures" not in material
     assert "diffuseColor" not in material  # UsdPreviewSurface's fallback
-    named = _warnings(caplog, "ND_position_vector3")
+    named = _warnings(caplog, "ND_tangent_vector3")
     assert (
         len(named) == 1 and "/Looks/M/Position" in named[0] and named[0].endswith("on /Looks/M")
     ), caplog.text
-    assert any(u.what.startswith("MaterialX node ND_position_vector3") for u in scene.unsupported)
+    assert any(u.what.startswith("MaterialX node ND_tangent_vector3") for u in scene.unsupported)
 
 
 def test_an_input_of_the_wrong_type_in_a_network_is_named_once(fake, tmp_path, caplog) -> None:
@@ -512,7 +513,8 @@ def test_a_malformed_network_is_an_error_naming_the_prim(native) -> None:
     for network, words in (
         ({"ops": [("texture", 0), ("add",)], "lookups": one}, "needs 2 value"),
         ({"ops": [("texture", 1)], "lookups": one}, "reads lookup 1 of 1"),
-        ({"ops": [("noise3d",)], "lookups": []}, "noise3d"),
+        # (noise3d was the example of an unknown op until it was evaluated.)
+        ({"ops": [("worleynoise3d",)], "lookups": []}, "worleynoise3d"),
         ({"ops": [("const", math.nan, 0, 0, 0)], "lookups": []}, "non-finite"),
         ({"ops": [("texture", 0)], "lookups": [{"file": "x.exr", "channels": 5}]}, "channels"),
     ):
@@ -908,3 +910,198 @@ def test_a_custom_nodedef_implemented_by_itself_is_named_once_and_the_frame_rend
     assert "diffuseColor" not in fake.meshes()["/World/Quad"]["material"]
     named = _warnings(caplog, "MaterialX node Test:ND_tinted_image")
     assert len(named) == 1, caplog.text
+
+
+# --- position, normal and the stdlib's Perlin noise ---------------------------------------
+
+
+def _moved_quad(stage: Usd.Stage) -> Gf.Matrix4d:
+    """Moves the quad (translated, tilted, turned and shrunk) and returns its object-to-world
+    matrix (USD's row vectors: p_world = p_object · M)."""
+    prim = stage.GetPrimAtPath("/World/Quad")
+    xf = UsdGeom.Xformable(prim)
+    xf.AddTranslateOp().Set(Gf.Vec3d(0.3, -0.2, 0.4))
+    xf.AddRotateXYZOp().Set(Gf.Vec3f(20.0, 0.0, 30.0))
+    xf.AddScaleOp().Set(Gf.Vec3f(0.8, 0.8, 0.8))
+    return xf.ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+
+
+def _positions(r: dict, m: Gf.Matrix4d) -> tuple[np.ndarray, np.ndarray]:
+    """Each pixel's world and object-space hit point (from the ``position`` AOV)."""
+    world = r["position"][..., :3].astype(np.float64)
+    inv = np.array(m.GetInverse(), np.float64)
+    obj = world @ inv[:3, :3] + inv[3, :3]
+    return world, obj
+
+
+def _as_colour(stage: Usd.Stage, v: UsdShade.Shader, kind: str) -> UsdShade.Shader:
+    return node(stage, "Colour", f"ND_convert_{kind}_color3", "color3", **{"in": v})
+
+
+@pytest.mark.parametrize("space", ["object", "world", "model", None])
+def test_position_and_normal_are_the_hit_points_in_their_space(native, space) -> None:
+    """``position · 0.25 + 0.5`` is the albedo, and ``normal · 0.5 + 0.5`` the albedo of a
+    second render: the quad's own point and +Z in object space (the stdlib's default and
+    ``model``), moved by its transform in world space."""
+    for what in ("position", "normal"):
+        stage = new_stage()
+        kw = {} if space is None else {"space": space}
+        geo = UsdShade.Shader.Define(stage, "/Looks/M/Geo")
+        geo.CreateIdAttr(f"ND_{what}_vector3")
+        geo.CreateOutput("out", TYPES["vector3"])
+        for key, value in kw.items():
+            geo.CreateInput(key, Sdf.ValueTypeNames.String).Set(value)
+        k = 0.25 if what == "position" else 0.5
+        scaled = node(stage, "Scale", "ND_multiply_vector3FA", "vector3", in1=geo, in2=("float", k))
+        biased = node(stage, "Bias", "ND_add_vector3FA", "vector3", in1=scaled, in2=("float", 0.5))
+        lambertian(stage, _as_colour(stage, biased, "vector3"))
+        m = _moved_quad(stage)
+        r = mipray.render(
+            stage, width=WIDTH, aovs=("albedo", "position", "alpha"), settings={"samples": 1}
+        ).aovs
+        on = r["alpha"][..., 0] == 1.0
+        world, obj = _positions(r, m)
+        if what == "position":
+            p = world if space == "world" else obj
+        else:
+            n_obj = np.array([0.0, 0.0, 1.0])
+            n = n_obj @ np.array(m, np.float64)[:3, :3] if space == "world" else n_obj
+            p = np.broadcast_to(n / np.linalg.norm(n), world.shape)
+        truth = np.clip(p * k + 0.5, 0.0, 1.0)
+        assert_albedo(r["albedo"][..., :3], truth, on, atol=1e-4)
+        # Object and world space differ enough here for the test to tell them apart.
+        other = obj if what == "position" else np.array([0.0, 0.0, 1.0])
+        differ = np.abs(truth - np.clip(other * k + 0.5, 0.0, 1.0))[on]
+        assert (differ.mean() > 0.05) == (space == "world")
+
+
+def _bjfinal(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """mx_noise.glsl's mx_bjfinal, in uint32 (wrapping) arithmetic."""
+
+    def rot(x, k):
+        return (x << np.uint32(k)) | (x >> np.uint32(32 - k))
+
+    with np.errstate(over="ignore"):
+        for x, y, k in ((2, 1, 14), (0, 2, 11), (1, 0, 25), (2, 1, 16), (0, 2, 4), (1, 0, 14)):
+            w = [a, b, c]
+            w[x] = (w[x] ^ w[y]) - rot(w[y], k)
+            a, b, c = w
+        c = (c ^ b) - rot(b, 24)
+    return c
+
+
+def perlin3(p: np.ndarray) -> np.ndarray:
+    """mx_perlin_noise_float(vec3) of mx_noise.glsl, written out again in numpy (float32)."""
+    p = np.asarray(p, np.float32)
+    i = np.floor(p).astype(np.int32)
+    f = (p - i.astype(np.float32)).astype(np.float32)
+    fade = f * f * f * (f * (f * np.float32(6) - np.float32(15)) + np.float32(10))
+    seed = np.uint32(0xDEADBEEF + (3 << 2) + 13)
+    corners = []
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                d = np.array([dx, dy, dz], np.int32)
+                with np.errstate(over="ignore"):
+                    h = (i + d).astype(np.uint32) + seed
+                h = _bjfinal(h[..., 0], h[..., 1], h[..., 2]) & np.uint32(15)
+                x, y, z = np.moveaxis(f - d.astype(np.float32), -1, 0)
+                u = np.where(h < 8, x, y)
+                v = np.where(h < 4, y, np.where((h == 12) | (h == 14), x, z))
+                corners.append(np.where(h & 1, -u, u) + np.where(h & 2, -v, v))
+    s, t, r = np.moveaxis(fade, -1, 0)
+    one = np.float32(1)
+
+    def lerp(a, b, w):
+        return a * (one - w) + b * w
+
+    g = corners
+    x0 = (one - t) * lerp(g[0], g[1], s) + t * lerp(g[2], g[3], s)
+    x1 = (one - t) * lerp(g[4], g[5], s) + t * lerp(g[6], g[7], s)
+    return np.float32(0.982) * ((one - r) * x0 + r * x1)
+
+
+def fractal3(p: np.ndarray, octaves: int, lacunarity: float, diminish: float) -> np.ndarray:
+    """mx_fractal3d_noise_float in numpy."""
+    p = np.asarray(p, np.float32)
+    out, amp = np.zeros(p.shape[:-1], np.float32), np.float32(1)
+    for _ in range(octaves):
+        out += amp * perlin3(p)
+        amp *= np.float32(diminish)
+        p = p * np.float32(lacunarity)
+    return out
+
+
+def test_the_numpy_noise_is_zero_on_the_lattice_and_spans_about_minus_one_to_one() -> None:
+    lattice = np.array([[0, 0, 0], [3, -2, 7], [-5, 11, -1]], np.float32)
+    assert np.all(perlin3(lattice) == 0)
+    rng = np.random.default_rng(1)
+    v = perlin3(rng.uniform(-20, 20, (20000, 3)))
+    assert -1.05 < v.min() < -0.6 and 0.6 < v.max() < 1.05 and abs(v.mean()) < 0.02
+
+
+@pytest.mark.parametrize("kind", ["noise3d", "fractal3d"])
+def test_noise3d_and_fractal3d_of_the_object_position_are_the_stdlibs(native, kind) -> None:
+    """``noise3d`` (amplitude 0.5, pivot 0.5) and ``fractal3d`` (amplitude 0.4, 3 octaves,
+    lacunarity 2.5, diminish 0.6; + 0.5 after) of ``position · 3`` match mx_noise.glsl's
+    formulas evaluated again in numpy at each pixel's object-space point."""
+    stage = new_stage()
+    pos = node(stage, "Pos", "ND_position_vector3", "vector3")
+    scaled = node(stage, "Scale", "ND_multiply_vector3FA", "vector3", in1=pos, in2=("float", 3.0))
+    if kind == "noise3d":
+        noise = node(
+            stage, "Noise", "ND_noise3d_float", "float", position=scaled,
+            amplitude=("float", 0.5), pivot=("float", 0.5),
+        )  # fmt: skip
+    else:
+        fractal = node(
+            stage, "Noise", "ND_fractal3d_float", "float", position=scaled,
+            amplitude=("float", 0.4), octaves=("integer", 3), lacunarity=("float", 2.5),
+            diminish=("float", 0.6),
+        )  # fmt: skip
+        noise = node(stage, "Bias", "ND_add_float", "float", in1=fractal, in2=("float", 0.5))
+    lambertian(stage, _as_colour(stage, noise, "float"))
+    m = _moved_quad(stage)
+    r = mipray.render(
+        stage, width=WIDTH, aovs=("albedo", "position", "alpha"), settings={"samples": 1}
+    ).aovs
+    on = r["alpha"][..., 0] == 1.0
+    _, obj = _positions(r, m)
+    p = (obj * 3.0).astype(np.float32)
+    v = perlin3(p) * 0.5 + 0.5 if kind == "noise3d" else fractal3(p, 3, 2.5, 0.6) * 0.4 + 0.5
+    truth = np.clip(v, 0, 1)[..., None] * np.ones(3)
+    assert truth[on].std() > 0.05  # the noise varies over the quad
+    assert_albedo(r["albedo"][..., :3], truth, on, atol=2e-3)
+
+
+def test_noise_renders_the_same_bits_with_any_thread_count_and_cache_mode(native) -> None:
+    stage = new_stage()
+    pos = node(stage, "Pos", "ND_position_vector3", "vector3")
+    scaled = node(stage, "Scale", "ND_multiply_vector3FA", "vector3", in1=pos, in2=("float", 4.0))
+    noise = node(stage, "Noise", "ND_fractal3d_float", "float", position=scaled)
+    lambertian(stage, _as_colour(stage, noise, "float"))
+    images = [
+        mipray.render(stage, width=32, aovs=("color",), settings=settings).aovs["color"]
+        for settings in (
+            {"threads": 1, "cacheMode": "multires"},
+            {"threads": 2, "cacheMode": "none"},
+            {"threads": 2, "cacheMode": "unbounded"},
+        )
+    ]
+    assert images[0].std() > 0.01
+    for other in images[1:]:
+        np.testing.assert_array_equal(other, images[0])
+
+
+def test_a_vector_noise_is_named_once_and_the_input_keeps_its_default(fake, caplog) -> None:
+    """The color3/vector noises hash per lane (mx_hash_vec3), which is not ported: named."""
+    stage = new_stage()
+    noise = node(stage, "Noise", "ND_noise3d_color3", "color3")
+    lambertian(stage, noise)
+    with caplog.at_level(logging.WARNING, logger="mipray"):
+        scene = UsdSceneDelegate(stage, fake)
+        scene.sync()
+    material = fake.meshes()["/World/Quad"]["material"]
+    assert "networks" not in material and "diffuseColor" not in material
+    named = _warnings(caplog, "ND_noise3d_color3")
+    assert len(named) == 1 and "/Looks/M/Noise" in named[0], caplog.text

@@ -56,4 +56,10 @@ pub struct ShadingPoint {
     pub mesh: Option<u32>,
     /// The shutter time of the ray that found it (0 to 1): moving lights are posed at it.
     pub time: f32,
+    /// The point on the limit surface, in the gprim's object space (MaterialX `Pobject`; zero
+    /// at the camera).
+    pub p_object: Vec3A,
+    /// The surface's unit outward normal in object space (its authored normal where it has
+    /// one; MaterialX `Nobject`); zero where it has none.
+    pub n_object: Vec3A,
 }

@@ -5,6 +5,7 @@
 //! the scene delegate could not fold into one affine lookup).
 
 pub mod network;
+pub mod noise;
 
 use std::sync::Arc;
 
@@ -310,7 +311,7 @@ impl Material {
             let uv = UvDifferentials::from_footprint(footprint.dpdx, footprint.dpdy, sp.dpdu, sp.dpdv);
             let mut site = TextureSite { surface, hit, uv, cache: Vec::new() };
             let read = |c: usize| surface.face_varying(c, hit.patch as usize, hit.u, hit.v).map(|(v, _, _)| v);
-            opacity = unit_input(net.eval_with(site.st(net.st_channel).map(|v| [v[0], v[1], v[2]]), &read).x);
+            opacity = unit_input(net.eval_at(site.st(net.st_channel).map(|v| [v[0], v[1], v[2]]), &read, &network_geometry(sp)).x);
         }
         opacity < self.surface.opacity_threshold
     }
@@ -435,10 +436,11 @@ impl Material {
                 }
             }
         }
+        let geom = network_geometry(sp);
         for (input, net) in &self.networks {
             let st = site.st(net.st_channel);
             let read = |c: usize| surface.face_varying(c, hit.patch as usize, hit.u, hit.v).map(|(v, _, _)| v);
-            let v = net.eval_with(st.map(|v| [v[0], v[1], v[2]]), &read);
+            let v = net.eval_at(st.map(|v| [v[0], v[1], v[2]]), &read, &geom);
             match input {
                 // MaterialX's normalmap works in the frame of the surface's own texcoord (its
                 // `tangent` input defaults to Tworld), whatever place2d does to the lookup's.
@@ -452,6 +454,13 @@ impl Material {
         }
         ResolvedSurface { inputs, ns }
     }
+}
+
+/// Where a network reads `position` and `normal` at `sp` (before any normal mapping): world
+/// space is render space, the normal the outward one (`sp.ns` faces the viewer).
+fn network_geometry(sp: &ShadingPoint) -> network::NetworkGeometry {
+    let n_world = if sp.front { sp.ns } else { -sp.ns };
+    network::NetworkGeometry { p_object: sp.p_object, p_world: sp.p, n_object: sp.n_object, n_world }
 }
 
 /// The shading normal for tangent-space normal `t` at `sp` (see [`Material::resolve`]);

@@ -18,11 +18,13 @@ coordinates (``texcoord``, ``geompropvalue`` of a vector2, ``place2d``, tiling, 
 constants) are kept as affine maps of the ``st`` primvar, so each lookup is filtered at its own
 footprint. A ``geompropvalue`` reads the shaded gprim's primvar (its ``default`` where the
 gprim has none: a constant texcoord, or value); one of another type varying over a mesh is read
-per shading point (the network's ``"primvars"``). Any other node, a texture coordinate that is
-not affine in ``st``, or an input value of the wrong type (a string where a number goes, an
-image's ``file`` that is no asset) leaves the input at its default; the stats' ``unsupported``
-list names the material and the node (and the input, for a wrong type), with one warning
-(:mod:`mipray.usd.unsupported`, row ``MaterialX node``).
+per shading point (the network's ``"primvars"``). ``position`` and ``normal`` are read at the
+shading point in object or world space, and the float ``noise2d``/``noise3d``/``fractal2d``/
+``fractal3d`` are the stdlib's Perlin noise (``mipray::material::noise``). Any other node, a
+texture coordinate that is not affine in ``st``, or an input value of the wrong type (a string
+where a number goes, an image's ``file`` that is no asset) leaves the input at its default; the
+stats' ``unsupported`` list names the material and the node (and the input, for a wrong type),
+with one warning (:mod:`mipray.usd.unsupported`, row ``MaterialX node``).
 """
 
 from __future__ import annotations
@@ -63,7 +65,15 @@ EVALUATED = (
     "extract", "combine2", "combine3", "combine4", "convert", "checkerboard", "remap",
     "luminance", "sqrt", "ifgreater", "ifgreatereq", "ifequal", "separate2", "separate3",
     "separate4", "sin", "cos", "tan", "asin", "acos", "atan2", "sign", "exp", "ln",
+    "position", "normal", "noise2d", "noise3d", "fractal2d", "fractal3d",
 )  # fmt: skip
+#: The geometric nodes' ``space`` (the core's argument): ``model`` is ``object``.
+_SPACES = {"object": 0, "model": 0, "world": 1}
+#: A nodedef's ``defaultgeomprop`` read by the core's position and normal ops.
+_GEOMPROPS = {
+    "Pobject": ("position", 0), "Pworld": ("position", 1),
+    "Nobject": ("normal", 0), "Nworld": ("normal", 1),
+}  # fmt: skip
 
 _WRAPS = {"periodic": "repeat", "clamp": "clamp", "constant": "black", "mirror": "mirror"}
 _WIDTH = {
@@ -342,7 +352,8 @@ class _Eval:
         nd = _nodedef(node_id)
         default = nd[0].get(name, (None, None))[1] if nd else None
         if isinstance(default, str) and default.startswith("geomprop:"):
-            return _Coord("st")
+            geomprop = _GEOMPROPS.get(default.removeprefix("geomprop:"))
+            return _Net(geomprop, (), 3) if geomprop else _Coord("st")
         f = _floats(default)
         if f is None:
             self._skip(node, f"{node_id} input {name} (no value and no default)")
@@ -471,6 +482,33 @@ class _Eval:
         if kind == "convert":
             v = a("in")
             return self.convert(v, _width(v), width)
+        if kind in ("position", "normal"):
+            space = node.GetInput("space")
+            value = space.Get(self.time) if space else None
+            name = str(value) if value else "object"
+            if name not in _SPACES:
+                self._skip(node, f"{node_id} space {name!r}")
+            return _Net((kind, _SPACES[name]), (), 3)
+        if kind in ("noise2d", "noise3d", "fractal2d", "fractal3d"):
+            if width != 1:
+                # The vector noises hash per lane (mx_hash_vec3), which the core lacks.
+                self._skip(node, node_id)
+            where = a("position" if kind.endswith("3d") else "texcoord")
+            if kind.startswith("noise"):
+                # mx_noise3d_float: noise · amplitude + pivot.
+                v = self.op((kind,), (where,), 1)
+                amplitude, pivot = a("amplitude"), a("pivot")
+                v = v if amplitude == (1.0,) else self.binary("multiply", v, amplitude, 1)
+                return v if pivot == (0.0,) else self.binary("add", v, pivot, 1)
+            octaves = int(self.const(node, node_id, "octaves")[0])
+            lacunarity = self.const(node, node_id, "lacunarity")[0]
+            diminish = self.const(node, node_id, "diminish")[0]
+            if not 0 <= octaves <= MAX_OCTAVES:
+                self._skip(node, f"{node_id} octaves {octaves} (0–{MAX_OCTAVES} are evaluated)")
+            v = self.op((kind, octaves, lacunarity, diminish), (where,), 1)
+            # mx_fractal3d_float: fractal noise · amplitude.
+            amplitude = a("amplitude")
+            return v if amplitude == (1.0,) else self.binary("multiply", v, amplitude, 1)
         if kind == "checkerboard":
             # NG_checkerboard_color3: mix(color2, color1, mod(dot(floor(uv·tiling − offset),
             # (1, 1)), 2)).
@@ -806,6 +844,8 @@ def _lower(
 
 #: The values the core's network evaluator holds at once (``mipray::material::network::MAX_STACK``).
 MAX_STACK = 16
+#: The most octaves a fractal noise sums (``mipray::material::network::MAX_OCTAVES``).
+MAX_OCTAVES = 32
 
 
 def _depth(v: _Value) -> int:
@@ -816,7 +856,7 @@ def _depth(v: _Value) -> int:
         return 1
     if v.op[0] == "combine":
         return max([_depth(v.args[0])] + [1 + _depth(p) for p in v.args[1:]])
-    return max(i + _depth(a) for i, a in enumerate(v.args))
+    return max((i + _depth(a) for i, a in enumerate(v.args)), default=1)
 
 
 def _get(shader: UsdShade.Shader, name: str, time: Usd.TimeCode) -> Any:

@@ -290,7 +290,18 @@ impl<'a> DirectLighting<'a> {
 /// The camera ray's origin as a "shading point" for [`DirectLight::emitted`], which needs where
 /// a ray starts: lights in front of the camera are seen with full weight.
 fn eye_point(ray: &Ray) -> ShadingPoint {
-    ShadingPoint { p: ray.o, ng: ray.d, ns: ray.d, dpdu: Vec3A::ZERO, dpdv: Vec3A::ZERO, front: true, mesh: None, time: ray.time }
+    ShadingPoint {
+        p: ray.o,
+        ng: ray.d,
+        ns: ray.d,
+        dpdu: Vec3A::ZERO,
+        dpdv: Vec3A::ZERO,
+        front: true,
+        mesh: None,
+        time: ray.time,
+        p_object: Vec3A::ZERO,
+        n_object: Vec3A::ZERO,
+    }
 }
 
 impl Integrator for DirectLighting<'_> {

@@ -330,7 +330,18 @@ fn part(out: &mut SampleValue, lobe: Lobe) -> &mut Vec3A {
 /// A stand-in shading point at a camera ray's origin, for [`DirectLight::emitted`]: with no
 /// BSDF density it reads only the position.
 fn camera_point(ray: &Ray) -> ShadingPoint {
-    ShadingPoint { p: ray.o, ng: ray.d, ns: ray.d, dpdu: Vec3A::ZERO, dpdv: Vec3A::ZERO, front: true, mesh: None, time: ray.time }
+    ShadingPoint {
+        p: ray.o,
+        ng: ray.d,
+        ns: ray.d,
+        dpdu: Vec3A::ZERO,
+        dpdv: Vec3A::ZERO,
+        front: true,
+        mesh: None,
+        time: ray.time,
+        p_object: Vec3A::ZERO,
+        n_object: Vec3A::ZERO,
+    }
 }
 
 impl Integrator for PathTracer<'_> {

@@ -42,9 +42,11 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     }
     let dpdu = to_world.transform_vector3a(odpdu);
     let dpdv = to_world.transform_vector3a(odpdv);
+    let mut n_object = odpdu.cross(odpdv).normalize_or_zero();
     let mut ns = (nm * odpdu.cross(odpdv)).normalize_or_zero();
     if mesh.left_handed {
         ns = -ns;
+        n_object = -n_object;
     }
     if mesh.surface.curves().is_some_and(|c| c.is_tube() && c.is_straight(hit.patch as usize)) {
         // A straight tube's pieces (a cylinder or frustum, and the spheres at its joints and
@@ -67,13 +69,21 @@ pub fn shading_point(tracer: &Tracer<'_>, scene: &Scene, ray: &Ray, hit: &Hit) -
     if ns.dot(ng) < 0.0 {
         ns = -ns;
     }
-    if let Some(n) = authored_normal(mesh, hit).map(|n| (nm * n).normalize_or_zero()).filter(|n| *n != Vec3A::ZERO && n.is_finite()) {
+    let authored = authored_normal(mesh, hit);
+    if let Some(n) = authored.map(|n| n.normalize_or_zero()).filter(|n| *n != Vec3A::ZERO && n.is_finite()) {
+        // Outward as the surface's own normal is, as for the world-space one below.
+        n_object = if n_object != Vec3A::ZERO && n.dot(n_object) < 0.0 { -n } else { n };
+    }
+    if let Some(n) = authored.map(|n| (nm * n).normalize_or_zero()).filter(|n| *n != Vec3A::ZERO && n.is_finite()) {
         // Authored normals say which way is out only up to their author's care: take the side
         // of the surface's own outward normal, then the viewer's, as for `ns` above.
         let n = if n.dot(ng_out) < 0.0 { -n } else { n };
         ns = tilt_above(if front { n } else { -n }, ng);
     }
-    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front, mesh: Some(hit.mesh), time: hit.time }
+    if !n_object.is_finite() {
+        n_object = Vec3A::ZERO;
+    }
+    ShadingPoint { p: hit.p, ng, ns, dpdu, dpdv, front, mesh: Some(hit.mesh), time: hit.time, p_object: s.p, n_object }
 }
 
 /// The mesh's authored normal at the hit (object space, not normalized), if it has one.

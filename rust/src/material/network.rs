@@ -21,8 +21,9 @@
 
 use std::sync::Arc;
 
-use glam::Vec4;
+use glam::{Vec3A, Vec4};
 
+use super::noise;
 use crate::texture::{Lookup, TextureHandle, TextureSampler};
 
 /// The deepest stack a network may need (checked by [`InputNetwork::new`]).
@@ -210,6 +211,52 @@ pub enum Op {
     Swizzle([u8; 4]),
     /// Pops `b`, `a`: `a`'s first `n` lanes, then `b`'s first `4 − n` (`combineN`, `convert`).
     Combine(u8),
+    /// Pushes the shading point's position (`position`) in a space, as (x, y, z, 0).
+    Position(Space),
+    /// Pushes the surface's unit outward normal (`normal`) in a space, as (x, y, z, 0).
+    Normal(Space),
+    /// Pops a position (x, y, z): the stdlib's Perlin noise there (`mx_perlin_noise_float`,
+    /// [`super::noise::perlin3`]), splatted; `noise3d`'s amplitude and pivot are ops around it.
+    Noise3d,
+    /// Pops a texcoord (x, y): [`super::noise::perlin2`], splatted (`noise2d`).
+    Noise2d,
+    /// Pops a position: `mx_fractal3d_noise_float` of it with these octaves, lacunarity and
+    /// diminish (uniform in practice, so arguments), splatted (`fractal3d` before its amplitude).
+    Fractal3d(Fractal),
+    /// Pops a texcoord: `mx_fractal2d_noise_float` (`fractal2d` before its amplitude).
+    Fractal2d(Fractal),
+}
+
+/// The space [`Op::Position`] and [`Op::Normal`] read in (MaterialX `space`; `model` is
+/// `object`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Space {
+    /// The gprim's own space, before its (instance's) transform.
+    Object,
+    /// Render (world) space.
+    World,
+}
+
+/// A fractal noise's octaves, lacunarity and diminish.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fractal {
+    pub octaves: u32,
+    pub lacunarity: f32,
+    pub diminish: f32,
+}
+
+/// The most octaves a fractal noise sums: past about 24 the lattice is finer than an f32
+/// resolves and each octave is 0 again, so more is only time.
+pub const MAX_OCTAVES: u16 = 32;
+
+/// Where a network is evaluated, for [`Op::Position`] and [`Op::Normal`]: the shading point and
+/// the surface's unit outward normal, in object space and in render (world) space.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NetworkGeometry {
+    pub p_object: Vec3A,
+    pub p_world: Vec3A,
+    pub n_object: Vec3A,
+    pub n_world: Vec3A,
 }
 
 /// The one-argument functions of [`Op::Unary`].
@@ -251,7 +298,9 @@ impl Unary {
 
 impl Op {
     /// The op named `name` (the scene delegate's spelling: the MaterialX node's name, or
-    /// `const`, `texture`, `coord`, `swizzle`, `combine`) with its arguments.
+    /// `const`, `texture`, `coord`, `swizzle`, `combine`) with its arguments: `position` and
+    /// `normal` take their space (0 object, 1 world), `fractal3d` and `fractal2d` their
+    /// octaves (0–[`MAX_OCTAVES`]), lacunarity and diminish.
     ///
     /// # Errors
     /// A one-line reason: an unknown name, or arguments of the wrong count or range.
@@ -259,7 +308,8 @@ impl Op {
         let want = match name {
             "const" | "swizzle" => 4,
             "coord" => 6,
-            "texture" | "primvar" | "dotproduct" | "normalize" | "magnitude" | "combine" => 1,
+            "fractal3d" | "fractal2d" => 3,
+            "texture" | "position" | "normal" | "primvar" | "dotproduct" | "normalize" | "magnitude" | "combine" => 1,
             _ => 0,
         };
         if args.len() != want {
@@ -311,6 +361,24 @@ impl Op {
             "magnitude" => Op::Magnitude(lane(args[0], 1, 4)?),
             "swizzle" => Op::Swizzle([lane(args[0], 0, 3)?, lane(args[1], 0, 3)?, lane(args[2], 0, 3)?, lane(args[3], 0, 3)?]),
             "combine" => Op::Combine(lane(args[0], 1, 3)?),
+            "position" | "normal" => {
+                let space = if whole(args[0], 0, 1)? == 0 { Space::Object } else { Space::World };
+                if name == "position" {
+                    Op::Position(space)
+                } else {
+                    Op::Normal(space)
+                }
+            }
+            "noise3d" => Op::Noise3d,
+            "noise2d" => Op::Noise2d,
+            "fractal3d" | "fractal2d" => {
+                let f = Fractal { octaves: whole(args[0], 0, MAX_OCTAVES)? as u32, lacunarity: args[1], diminish: args[2] };
+                if name == "fractal3d" {
+                    Op::Fractal3d(f)
+                } else {
+                    Op::Fractal2d(f)
+                }
+            }
             _ => return Err(format!("'{name}' is not a network op mipray evaluates")),
         })
     }
@@ -318,10 +386,11 @@ impl Op {
     /// (values popped, values pushed).
     const fn arity(self) -> (usize, usize) {
         match self {
-            Op::Const(_) | Op::Texture(_) | Op::Primvar(_) | Op::Coord(_) => (0, 1),
+            Op::Const(_) | Op::Texture(_) | Op::Primvar(_) | Op::Coord(_) | Op::Position(_) | Op::Normal(_) => (0, 1),
             Op::Mix | Op::Clamp => (3, 1),
             Op::IfGreater | Op::IfGreaterEq | Op::IfEqual => (4, 1),
             Op::Abs | Op::Floor | Op::Ceil | Op::Unary(_) | Op::Normalize(_) | Op::Magnitude(_) | Op::Swizzle(_) => (1, 1),
+            Op::Noise3d | Op::Noise2d | Op::Fractal3d(_) | Op::Fractal2d(_) => (1, 1),
             _ => (2, 1),
         }
     }
@@ -418,6 +487,11 @@ impl InputNetwork {
     /// channel's two floats at the shading point; `None`: no such channel), for
     /// [`Op::Primvar`].
     pub fn eval_with(&self, st: Option<[[f32; 2]; 3]>, read: &dyn Fn(usize) -> Option<[f32; 2]>) -> Vec4 {
+        self.eval_at(st, read, &NetworkGeometry::default())
+    }
+
+    /// [`InputNetwork::eval_with`] at `geom`, for [`Op::Position`] and [`Op::Normal`].
+    pub fn eval_at(&self, st: Option<[[f32; 2]; 3]>, read: &dyn Fn(usize) -> Option<[f32; 2]>, geom: &NetworkGeometry) -> Vec4 {
         let mut stack = [Vec4::ZERO; MAX_STACK];
         let mut n = 0usize;
         for op in &self.ops {
@@ -432,6 +506,25 @@ impl InputNetwork {
                     }
                     None => Vec4::ZERO,
                 },
+                Op::Position(space) => match space {
+                    Space::Object => geom.p_object.extend(0.0),
+                    Space::World => geom.p_world.extend(0.0),
+                },
+                Op::Normal(space) => match space {
+                    Space::Object => geom.n_object.extend(0.0),
+                    Space::World => geom.n_world.extend(0.0),
+                },
+                Op::Noise3d | Op::Noise2d | Op::Fractal3d(_) | Op::Fractal2d(_) => {
+                    n -= 1;
+                    let a = stack[n];
+                    Vec4::splat(match *op {
+                        Op::Noise3d => noise::perlin3([a.x, a.y, a.z]),
+                        Op::Noise2d => noise::perlin2([a.x, a.y]),
+                        Op::Fractal3d(f) => noise::fractal3([a.x, a.y, a.z], f.octaves, f.lacunarity, f.diminish),
+                        Op::Fractal2d(f) => noise::fractal2([a.x, a.y], f.octaves, f.lacunarity, f.diminish),
+                        _ => unreachable!("noise ops only"),
+                    })
+                }
                 Op::Mix | Op::Clamp => {
                     let (a, b, c) = (stack[n - 3], stack[n - 2], stack[n - 1]);
                     n -= 3;
@@ -736,9 +829,39 @@ mod tests {
         assert_eq!(err(vec![Op::Texture(0); MAX_STACK + 1]), format!("the network needs more than {MAX_STACK} values at once"));
         assert_eq!(Op::parse("power", &[]), Ok(Op::Power));
         assert_eq!(Op::parse("swizzle", &[3.0, 0.0, 0.0, 1.0]), Ok(Op::Swizzle([3, 0, 0, 1])));
-        assert_eq!(Op::parse("noise3d", &[]).unwrap_err(), "'noise3d' is not a network op mipray evaluates");
+        // (noise3d was the example here until it was evaluated.)
+        assert_eq!(Op::parse("worleynoise3d", &[]).unwrap_err(), "'worleynoise3d' is not a network op mipray evaluates");
+        assert_eq!(Op::parse("position", &[2.0]).unwrap_err(), "op 'position' argument 2 is not a whole number in 0–1");
+        assert_eq!(Op::parse("fractal3d", &[33.0, 2.0, 0.5]).unwrap_err(), "op 'fractal3d' argument 33 is not a whole number in 0–32");
         assert_eq!(Op::parse("add", &[1.0]).unwrap_err(), "op 'add' takes 0 argument(s), got 1");
         assert_eq!(Op::parse("swizzle", &[4.0, 0.0, 0.0, 0.0]).unwrap_err(), "op 'swizzle' argument 4 is not a whole number in 0–3");
         assert!(Op::parse("const", &[f32::NAN, 0.0, 0.0, 0.0]).unwrap_err().contains("non-finite"));
+    }
+
+    #[test]
+    fn position_and_normal_are_read_in_their_space_and_feed_the_noise() {
+        let geom = NetworkGeometry {
+            p_object: Vec3A::new(0.25, -1.5, 2.0),
+            p_world: Vec3A::new(3.0, 4.0, 5.0),
+            n_object: Vec3A::new(0.0, 0.0, 1.0),
+            n_world: Vec3A::new(1.0, 0.0, 0.0),
+        };
+        let at = |ops: Vec<Op>| InputNetwork::new(ops, vec![]).unwrap().eval_at(None, &|_| None, &geom);
+        let op = |name: &str, args: &[f32]| Op::parse(name, args).unwrap();
+        assert_eq!(at(vec![op("position", &[0.0])]), Vec4::new(0.25, -1.5, 2.0, 0.0));
+        assert_eq!(at(vec![op("position", &[1.0])]), Vec4::new(3.0, 4.0, 5.0, 0.0));
+        assert_eq!(at(vec![op("normal", &[0.0])]), Vec4::new(0.0, 0.0, 1.0, 0.0));
+        assert_eq!(at(vec![op("normal", &[1.0])]), Vec4::new(1.0, 0.0, 0.0, 0.0));
+        let p = [0.25, -1.5, 2.0];
+        assert_eq!(at(vec![op("position", &[0.0]), op("noise3d", &[])]), Vec4::splat(noise::perlin3(p)));
+        assert_eq!(at(vec![op("position", &[0.0]), op("noise2d", &[])]), Vec4::splat(noise::perlin2([0.25, -1.5])));
+        assert_eq!(at(vec![op("position", &[0.0]), op("fractal3d", &[3.0, 2.0, 0.5])]), Vec4::splat(noise::fractal3(p, 3, 2.0, 0.5)));
+        assert_eq!(
+            at(vec![op("position", &[0.0]), op("fractal2d", &[2.0, 3.0, 0.25])]),
+            Vec4::splat(noise::fractal2([0.25, -1.5], 2, 3.0, 0.25))
+        );
+        // Without geometry (eval_with), both read zero: noise at the lattice origin is 0.
+        let net = InputNetwork::new(vec![op("position", &[0.0]), op("noise3d", &[])], vec![]).unwrap();
+        assert_eq!(net.eval_with(None, &|_| None), Vec4::ZERO);
     }
 }
