@@ -63,3 +63,23 @@ pub struct ShadingPoint {
     /// one; MaterialX `Nobject`); zero where it has none.
     pub n_object: Vec3A,
 }
+
+impl ShadingPoint {
+    /// The camera ray's origin as a "shading point", for [`crate::light`]'s emission seen
+    /// directly (which reads where a ray starts, not a BSDF): lights in front of the camera are
+    /// seen with full weight, and a dome is the background.
+    pub fn at_camera(ray: &crate::ray::Ray) -> ShadingPoint {
+        ShadingPoint {
+            p: ray.o,
+            ng: ray.d,
+            ns: ray.d,
+            dpdu: Vec3A::ZERO,
+            dpdv: Vec3A::ZERO,
+            front: true,
+            mesh: None,
+            time: ray.time,
+            p_object: Vec3A::ZERO,
+            n_object: Vec3A::ZERO,
+        }
+    }
+}

@@ -140,18 +140,7 @@ impl<'a> ColorBleeding<'a> {
     pub fn sample(&self, ray: &Ray, sampler: &mut Sampler, counters: &mut TraceCounters) -> SampleValue {
         let mut out = SampleValue::miss(self.scene.camera.clipping_range.1);
         // The camera as a "shading point" for lights seen directly (a dome is the background).
-        let eye = ShadingPoint {
-            p: ray.o,
-            ng: ray.d,
-            ns: ray.d,
-            dpdu: Vec3A::ZERO,
-            dpdv: Vec3A::ZERO,
-            front: true,
-            mesh: None,
-            time: ray.time,
-            p_object: Vec3A::ZERO,
-            n_object: Vec3A::ZERO,
-        };
+        let eye = ShadingPoint::at_camera(ray);
         let Some(v) = visible(self.tracer, self.scene, *ray, None, counters) else {
             out.emission = self.direct.seen_by_camera(self.scene, &eye, ray.d, f32::INFINITY);
             out.set_color_from_parts();

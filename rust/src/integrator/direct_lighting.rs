@@ -133,7 +133,7 @@ impl<'a> DirectLighting<'a> {
     pub fn sample(&self, ray: &Ray, sampler: &mut Sampler, counters: &mut TraceCounters) -> SampleValue {
         let far = self.scene.camera.clipping_range.1;
         let mut out = SampleValue::miss(far);
-        let eye = eye_point(ray);
+        let eye = ShadingPoint::at_camera(ray);
         let Some(v) = self.visible(*ray, None, counters) else {
             // Lights the camera looks at directly: a dome is the background.
             out.emission = self.direct.seen_by_camera(self.scene, &eye, ray.d, f32::INFINITY);
@@ -284,23 +284,6 @@ impl<'a> DirectLighting<'a> {
         let (diff, clamped) = footprint.reflect_checked(ray.d, sp.ns, dndx, dndy);
         counters.differential_clamps += u64::from(clamped);
         diff
-    }
-}
-
-/// The camera ray's origin as a "shading point" for [`DirectLight::emitted`], which needs where
-/// a ray starts: lights in front of the camera are seen with full weight.
-fn eye_point(ray: &Ray) -> ShadingPoint {
-    ShadingPoint {
-        p: ray.o,
-        ng: ray.d,
-        ns: ray.d,
-        dpdu: Vec3A::ZERO,
-        dpdv: Vec3A::ZERO,
-        front: true,
-        mesh: None,
-        time: ray.time,
-        p_object: Vec3A::ZERO,
-        n_object: Vec3A::ZERO,
     }
 }
 

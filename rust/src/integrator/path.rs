@@ -125,7 +125,7 @@ impl<'a> PathTracer<'a> {
         let mut seg = Segment {
             ray: *camera_ray,
             from: None,
-            eye: camera_point(camera_ray),
+            eye: ShadingPoint::at_camera(camera_ray),
             through: None,
             throughput: Vec3A::ONE,
             bsdf_pdf: None,
@@ -324,23 +324,6 @@ fn part(out: &mut SampleValue, lobe: Lobe) -> &mut Vec3A {
     match lobe {
         Lobe::Diffuse => &mut out.indirect_diffuse,
         Lobe::Glossy | Lobe::Specular | Lobe::Transmission => &mut out.specular,
-    }
-}
-
-/// A stand-in shading point at a camera ray's origin, for [`DirectLight::emitted`]: with no
-/// BSDF density it reads only the position.
-fn camera_point(ray: &Ray) -> ShadingPoint {
-    ShadingPoint {
-        p: ray.o,
-        ng: ray.d,
-        ns: ray.d,
-        dpdu: Vec3A::ZERO,
-        dpdv: Vec3A::ZERO,
-        front: true,
-        mesh: None,
-        time: ray.time,
-        p_object: Vec3A::ZERO,
-        n_object: Vec3A::ZERO,
     }
 }
 
