@@ -203,17 +203,7 @@ fn a_point_slid_by_its_samples_covers_what_the_moving_disc_covers_and_matches_a_
     .unwrap();
     let still = PointsSurface::new(vec![[0.0, 0.0, 0.0]], &[1.0]).unwrap();
     let moved = render(&scene(Arc::new(still), Some(slide)), &opts, &NoProgress).unwrap();
-    for y in 0..2 {
-        for x in 0..40 {
-            let expected = disc_coverage(x, y, |t| -0.5 + t, |_| 0.5);
-            let got = deformed.film.pixel("alpha", x, y)[0];
-            assert!((got - expected).abs() < 0.04, "pixel ({x}, {y}): alpha {got} vs analytic {expected}");
-            for aov in ["alpha", "color"] {
-                let (a, b) = (deformed.film.pixel(aov, x, y)[0], moved.film.pixel(aov, x, y)[0]);
-                assert!((a - b).abs() < 1e-3, "pixel ({x}, {y}) {aov}: deformed {a} vs transformed {b}");
-            }
-        }
-    }
+    matches_analytic_and_transform(&deformed, &moved, |x, y| disc_coverage(x, y, |t| -0.5 + t, |_| 0.5), 1e-3);
 }
 
 /// A point whose width grows from 0.2 to 1.8 across the shutter (radius 0.1 → 0.9) covers
@@ -296,17 +286,12 @@ fn a_curve_slid_by_its_points_covers_what_the_moving_band_covers_and_matches_a_t
     ])
     .unwrap();
     let moved = render(&scene(Arc::new(at(0.0)), Some(slide)), &opts, &NoProgress).unwrap();
-    for y in 0..2 {
-        for x in 0..40 {
-            let expected = pixel_mean(x, y, |px, _, t| if (px - (t - 0.5)).abs() < 0.2 { 1.0 } else { 0.0 });
-            let got = deformed.film.pixel("alpha", x, y)[0];
-            assert!((got - expected).abs() < 0.04, "pixel ({x}, {y}): alpha {got} vs analytic {expected}");
-            for aov in ["alpha", "color"] {
-                let (a, b) = (deformed.film.pixel(aov, x, y)[0], moved.film.pixel(aov, x, y)[0]);
-                assert!((a - b).abs() < 2e-3, "pixel ({x}, {y}) {aov}: deformed {a} vs transformed {b}");
-            }
-        }
-    }
+    matches_analytic_and_transform(
+        &deformed,
+        &moved,
+        |x, y| pixel_mean(x, y, |px, _, t| if (px - (t - 0.5)).abs() < 0.2 { 1.0 } else { 0.0 }),
+        2e-3,
+    );
 }
 
 /// A cubic curve that bends and thickens across the shutter (its control points and widths
@@ -383,4 +368,26 @@ fn thread_counts_give_bit_identical_images_of_moving_points_curves_and_implicit_
     let one = bits(1);
     assert!(one.iter().filter(|&&b| f32::from_bits(b) > 0.0).count() > 100, "the prims are in view");
     assert!(one == bits(3), "1 and 3 threads differ");
+}
+
+/// Each pixel of the 40 × 2 strip `deformed` (a deformation blur) has the analytic `coverage(x,
+/// y)` as alpha (within 0.04: 16 samples a pixel), and alpha and colour within `same` of
+/// `moved`, the same motion by transform.
+fn matches_analytic_and_transform(
+    deformed: &mipray::render::RenderOutput,
+    moved: &mipray::render::RenderOutput,
+    coverage: impl Fn(usize, usize) -> f32,
+    same: f32,
+) {
+    for y in 0..2 {
+        for x in 0..40 {
+            let expected = coverage(x, y);
+            let got = deformed.film.pixel("alpha", x, y)[0];
+            assert!((got - expected).abs() < 0.04, "pixel ({x}, {y}): alpha {got} vs analytic {expected}");
+            for aov in ["alpha", "color"] {
+                let (a, b) = (deformed.film.pixel(aov, x, y)[0], moved.film.pixel(aov, x, y)[0]);
+                assert!((a - b).abs() < same, "pixel ({x}, {y}) {aov}: deformed {a} vs transformed {b}");
+            }
+        }
+    }
 }
