@@ -538,6 +538,22 @@ def test_a_malformed_network_is_an_error_naming_the_prim(native) -> None:
     delegate.set_mesh("/World/Good", material=ok, **quad_args)
 
 
+def assert_same_bits_across_threads_and_cache_modes(stage) -> None:
+    """The stage's colour at 32 px is not flat and the same bits with one thread and the
+    multires cache, and with two threads and the `none` and `unbounded` caches."""
+    images = [
+        mipray.render(stage, width=32, aovs=("color",), settings=settings).aovs["color"]
+        for settings in (
+            {"threads": 1, "cacheMode": "multires"},
+            {"threads": 2, "cacheMode": "none"},
+            {"threads": 2, "cacheMode": "unbounded"},
+        )
+    ]
+    assert images[0].std() > 0.01
+    for other in images[1:]:
+        np.testing.assert_array_equal(other, images[0])
+
+
 def test_a_network_renders_the_same_bits_with_any_thread_count_and_cache_mode(
     native, tmp_path
 ) -> None:
@@ -551,17 +567,7 @@ def test_a_network_renders_the_same_bits_with_any_thread_count_and_cache_mode(
     lambertian(
         stage, node(stage, "Pow", "ND_power_color3FA", "color3", in1=image, in2=("float", 0.5))
     )
-    images = [
-        mipray.render(stage, width=32, aovs=("color",), settings=settings).aovs["color"]
-        for settings in (
-            {"threads": 1, "cacheMode": "multires"},
-            {"threads": 2, "cacheMode": "none"},
-            {"threads": 2, "cacheMode": "unbounded"},
-        )
-    ]
-    assert images[0].std() > 0.01
-    for other in images[1:]:
-        np.testing.assert_array_equal(other, images[0])
+    assert_same_bits_across_threads_and_cache_modes(stage)
 
 
 def test_a_cycle_of_connections_is_named_once_and_the_frame_renders(
@@ -1080,17 +1086,7 @@ def test_noise_renders_the_same_bits_with_any_thread_count_and_cache_mode(native
     scaled = node(stage, "Scale", "ND_multiply_vector3FA", "vector3", in1=pos, in2=("float", 4.0))
     noise = node(stage, "Noise", "ND_fractal3d_float", "float", position=scaled)
     lambertian(stage, _as_colour(stage, noise, "float"))
-    images = [
-        mipray.render(stage, width=32, aovs=("color",), settings=settings).aovs["color"]
-        for settings in (
-            {"threads": 1, "cacheMode": "multires"},
-            {"threads": 2, "cacheMode": "none"},
-            {"threads": 2, "cacheMode": "unbounded"},
-        )
-    ]
-    assert images[0].std() > 0.01
-    for other in images[1:]:
-        np.testing.assert_array_equal(other, images[0])
+    assert_same_bits_across_threads_and_cache_modes(stage)
 
 
 def test_a_vector_noise_is_named_once_and_the_input_keeps_its_default(fake, caplog) -> None:

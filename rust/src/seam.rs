@@ -642,25 +642,6 @@ pub fn never_from_inside(_ng: Vec3A) -> bool {
     false
 }
 
-/// Whether a ray leaving its surface on the side `along_ng` of its triangle's winding normal
-/// (object-space direction `d`, `handed` −1 for a left-handed mesh) and starting inside a seam
-/// box whose boundary-quad normal is `ng` heads through the surface there: it crosses the
-/// quad's plane against the side it left on. A displaced grid's boxes are the radius on every
-/// side, and the neighbours' displaced edges leave cracks within them (filtered at different
-/// spacings); a ray leaving near the seam and heading below the surface there goes through such
-/// a crack unless the box stops it (issue 23).
-#[inline(always)]
-pub fn stop_crossing_own_box(d: Vec3A, handed: f32, along_ng: bool) -> impl Fn(Vec3A) -> bool {
-    move |ng: Vec3A| {
-        let cos = handed * d.dot(ng);
-        if along_ng {
-            cos < 0.0
-        } else {
-            cos > 0.0
-        }
-    }
-}
-
 /// The closest seam-box hit of `ray` on the `edges` of `tess` read at vertex `stride`, in
 /// (`t_min`, `t_max`): where the ray leaves the first box it passes through from outside. The
 /// hit's (u, v) is the nearest point of the chord, in the grid's [0, 1]²; its normal is the
@@ -670,8 +651,8 @@ pub fn stop_crossing_own_box(d: Vec3A, handed: f32, along_ng: bool) -> impl Fn(V
 ///
 /// A ray that starts inside (or on) a box leaves a surface near that seam and ignores the box,
 /// unless `stops_inside(ng)` (the box's boundary-quad normal) says it heads through the surface
-/// there: then it stops where it leaves the box, as a ray from outside does (see
-/// [`stop_crossing_own_box`]). [`never_from_inside`] keeps the plain rule.
+/// there: then it stops where it leaves the box, as a ray from outside does (the tracer's rule
+/// 8 for displaced meshes, docs/cracks.md). [`never_from_inside`] keeps the plain rule.
 #[allow(clippy::too_many_arguments)]
 pub fn intersect_seams<A: Fn(f32, Vec3A) -> bool, S: Fn(Vec3A) -> bool>(
     ray: &WatertightRay,
@@ -880,6 +861,12 @@ pub fn intersect_with_seams<A: Fn(f32, Vec3A) -> bool, S: Fn(Vec3A) -> bool>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `intersect_seams` from t = 0 to `t_max`, every hit accepted, boxes the ray starts in
+    /// ignored: what most tests here ask.
+    fn seams(ray: &WatertightRay, t: &Tessellation, stride: usize, edges: SeamEdges, t_max: f32) -> Option<GridHit> {
+        intersect_seams(ray, t, stride, edges, 0.0, t_max, &crate::intersect::every_hit, &never_from_inside)
+    }
     use crate::tessellate::GridBoxes;
 
     fn grid(n: usize, f: impl Fn(f32, f32) -> [f32; 3], seam_radius: f32) -> Tessellation {
@@ -968,27 +955,15 @@ mod tests {
         let t = grid(5, |u, v| [u, v, 0.0], 0.01);
         // Parallel to the plane's normal just outside the u = 1 edge, within the radius.
         let down = |x: f32| WatertightRay::new(Vec3A::new(x, 0.5, 1.0), Vec3A::NEG_Z);
-        let h = intersect_seams(&down(1.005), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside)
-            .expect("inside the seam box");
+        let h = seams(&down(1.005), &t, 1, SeamEdges::ALL, f32::INFINITY).expect("inside the seam box");
         assert!(h.t > 1.0 && h.t <= 1.0 + 0.01 * 1.5, "leaves the box below the plane: {h:?}");
         assert!((h.u - 1.0).abs() < 1e-6 && (h.v - 0.5).abs() < 1e-3);
         assert!(h.ng.z > 0.0);
-        assert!(intersect_seams(&down(1.02), &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside)
-            .is_none());
+        assert!(seams(&down(1.02), &t, 1, SeamEdges::ALL, f32::INFINITY).is_none());
         // Edge 1 left out: no seam there.
-        assert!(intersect_seams(
-            &down(1.005),
-            &t,
-            1,
-            SeamEdges(0b1101),
-            0.0,
-            f32::INFINITY,
-            &crate::intersect::every_hit,
-            &never_from_inside
-        )
-        .is_none());
+        assert!(seams(&down(1.005), &t, 1, SeamEdges(0b1101), f32::INFINITY).is_none());
         // A grid hit closer than the box exit wins (t_max is the grid's hit).
-        assert!(intersect_seams(&down(0.995), &t, 1, SeamEdges::ALL, 0.0, 1.0, &crate::intersect::every_hit, &never_from_inside).is_none());
+        assert!(seams(&down(0.995), &t, 1, SeamEdges::ALL, 1.0).is_none());
     }
 
     #[test]
@@ -997,48 +972,18 @@ mod tests {
         t.domain = GridDomain::LowerTriangle;
         let down = |x: f32, y: f32| WatertightRay::new(Vec3A::new(x, y, 1.0), Vec3A::NEG_Z);
         // Just beyond the diagonal, next to it: the diagonal's seam box.
-        let h = intersect_seams(
-            &down(0.505, 0.505),
-            &t,
-            1,
-            SeamEdges::ALL,
-            0.0,
-            f32::INFINITY,
-            &crate::intersect::every_hit,
-            &never_from_inside,
-        )
-        .expect("diagonal seam");
+        let h = seams(&down(0.505, 0.505), &t, 1, SeamEdges::ALL, f32::INFINITY).expect("diagonal seam");
         assert!((h.u + h.v - 1.0).abs() < 1e-5 && h.ng.z > 0.0, "{h:?}");
         // Just beyond u = 1 at v = 0.5: outside the triangle, no seam there.
-        assert!(intersect_seams(
-            &down(1.005, 0.5),
-            &t,
-            1,
-            SeamEdges::ALL,
-            0.0,
-            f32::INFINITY,
-            &crate::intersect::every_hit,
-            &never_from_inside
-        )
-        .is_none());
-        assert!(intersect_seams(
-            &down(0.5, -0.005),
-            &t,
-            2,
-            SeamEdges::ALL,
-            0.0,
-            f32::INFINITY,
-            &crate::intersect::every_hit,
-            &never_from_inside
-        )
-        .is_some());
+        assert!(seams(&down(1.005, 0.5), &t, 1, SeamEdges::ALL, f32::INFINITY).is_none());
+        assert!(seams(&down(0.5, -0.005), &t, 2, SeamEdges::ALL, f32::INFINITY).is_some());
     }
 
     #[test]
     fn rays_starting_inside_a_seam_box_ignore_it() {
         let t = grid(2, |u, v| [u, v, 0.0], 0.01);
         let r = WatertightRay::new(Vec3A::new(1.0, 0.5, 0.0), Vec3A::new(1.0, 0.0, 0.01).normalize());
-        assert!(intersect_seams(&r, &t, 1, SeamEdges::ALL, 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside).is_none());
+        assert!(seams(&r, &t, 1, SeamEdges::ALL, f32::INFINITY).is_none());
     }
 
     #[test]
@@ -1046,14 +991,8 @@ mod tests {
         // A roof: the middle vertex of each u-edge is 0.1 above the chord of stride 2.
         let t = grid(3, |u, v| [u, v, 0.2 * (0.5 - (u - 0.5).abs())], 0.0);
         let r = WatertightRay::new(Vec3A::new(0.5, -0.05, 1.0), Vec3A::NEG_Z);
-        assert!(
-            intersect_seams(&r, &t, 2, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside).is_some(),
-            "within 0.1 of the stride-2 chord"
-        );
-        assert!(
-            intersect_seams(&r, &t, 1, SeamEdges(1), 0.0, f32::INFINITY, &crate::intersect::every_hit, &never_from_inside).is_none(),
-            "stride 1 has radius 0"
-        );
+        assert!(seams(&r, &t, 2, SeamEdges(1), f32::INFINITY).is_some(), "within 0.1 of the stride-2 chord");
+        assert!(seams(&r, &t, 1, SeamEdges(1), f32::INFINITY).is_none(), "stride 1 has radius 0");
     }
 
     /// One patch given by a function of (u, v), for measuring seams on known edge curves.

@@ -19,7 +19,7 @@ use crate::intersect::{BoxRay, WatertightRay};
 use crate::patch::{GridSamples, UvRect};
 use crate::ray::{gamma, next_up, Ray, RayKind};
 use crate::scene::Scene;
-use crate::seam::{intersect_with_seams, never_from_inside, stop_crossing_own_box, SeamEdges};
+use crate::seam::{intersect_with_seams, never_from_inside, SeamEdges};
 use crate::subpatch::{ChildCell, MeshGeometry, RootSubpatch};
 use crate::tessellate::{needed_quads, split_depth, tessellate_reusing, DisplaceParams, Rate, Tessellation};
 
@@ -172,6 +172,21 @@ impl Origin {
     /// ribbon has no inside.
     fn is_own_other_rate(&self, t: f32, window: f32, cos: f32, either_way: bool) -> bool {
         t < window && (either_way || if self.along_ng { cos > 0.0 } else { cos < 0.0 })
+    }
+
+    /// Whether a ray leaving here crosses, at a surface whose winding normal `n` gives `cos` =
+    /// handedness × (d · n), against the side it left on: it heads through that surface.
+    /// Rule 8 of docs/cracks.md asks it of a displaced grid's seam box the ray starts in (its
+    /// boundary quad's normal): a displaced grid's boxes are the radius on every side, and the
+    /// neighbours' displaced edges leave cracks within them (filtered at different spacings),
+    /// so a ray leaving near the seam and heading below the surface there would go through
+    /// such a crack unless the box stops it (issue 23).
+    fn heads_through(&self, cos: f32) -> bool {
+        if self.along_ng {
+            cos < 0.0
+        } else {
+            cos > 0.0
+        }
     }
 }
 
@@ -1024,21 +1039,18 @@ impl<'s> Tracer<'s> {
                     _ => true,
                 };
                 // A ray leaving a displaced mesh is stopped by the seam boxes around its own
-                // origin where it heads through the surface (rule 8 of docs/cracks.md).
-                let hit = match own {
-                    Some(o) if displacement_pad > 0.0 => intersect_with_seams(
-                        wray,
-                        tess,
-                        stride,
-                        edges,
-                        t_from,
-                        t_best,
-                        &accept,
-                        &stop_crossing_own_box(d, sign, o.along_ng),
-                    ),
-                    _ => intersect_with_seams(wray, tess, stride, edges, t_from, t_best, &accept, &never_from_inside),
-                };
-                hit.map(|h| LocalHit { t: h.t, uv: (h.u, h.v), rect: UvRect::UNIT, ng: h.ng, quads: rate.quads() as u32, chord_error })
+                // origin where it heads through the surface (rule 8 of docs/cracks.md). Asked
+                // only of a box the ray starts in.
+                let rule_8 = own.filter(|_| displacement_pad > 0.0);
+                let stops_inside = |ng: Vec3A| rule_8.is_some_and(|o| o.heads_through(sign * d.dot(ng)));
+                intersect_with_seams(wray, tess, stride, edges, t_from, t_best, &accept, &stops_inside).map(|h| LocalHit {
+                    t: h.t,
+                    uv: (h.u, h.v),
+                    rect: UvRect::UNIT,
+                    ng: h.ng,
+                    quads: rate.quads() as u32,
+                    chord_error,
+                })
             }
         };
         let mut best: Option<(LocalHit, u32)> = None;

@@ -143,6 +143,12 @@ impl<E: CacheEntry> Resident<E> {
         self.size_and_referenced & REFERENCED != 0
     }
 
+    /// Clears the mark (eviction's second chance used up).
+    #[inline]
+    fn unmark(&mut self) {
+        self.size_and_referenced &= !REFERENCED;
+    }
+
     /// Marks a found entry. Writes only if it is not marked yet: a hot entry's node is then only
     /// read, and stays in every reading thread's cache.
     #[inline]
@@ -297,9 +303,10 @@ impl<E: CacheEntry> TierCache<E> {
             let found = {
                 let mut st = shard.state.lock();
                 if let Some(node) = st.find(&nk) {
-                    st.lru.get_mut(node).mark_referenced();
+                    let resident = st.lru.get_mut(node);
+                    resident.mark_referenced();
                     shard.counters.count_resident_hit_locked();
-                    return E::from_stored(&st.lru.get(node).entry);
+                    return E::from_stored(&resident.entry);
                 }
                 if !counted {
                     LookupCounters::add(&shard.counters.lookups, 1);
@@ -388,7 +395,7 @@ impl<E: CacheEntry> TierCache<E> {
             // rare and close to it otherwise (CLOCK).
             let tail_entry = st.lru.get_mut(tail);
             if tail_entry.referenced() {
-                tail_entry.size_and_referenced &= !REFERENCED;
+                tail_entry.unmark();
                 st.lru.touch(tail);
                 continue;
             }
